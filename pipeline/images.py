@@ -1,0 +1,88 @@
+"""Image output: linear float32 OpenEXR plus an sRGB PNG preview, both written atomically."""
+from __future__ import annotations
+
+import os
+import uuid
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LoomError
+
+
+def _tmp(path: Path) -> Path:
+    return path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}{path.suffix}"
+
+
+def write_exr(path: str | Path, rgb: np.ndarray, extra: dict[str, np.ndarray] | None = None) -> Path:
+    """Linear RGB (H, W, 3) as float32 OpenEXR (ZIP); ``extra`` adds named single channels (A, depth, ...)."""
+    import OpenEXR
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    channels = {"RGB": np.ascontiguousarray(rgb, dtype=np.float32)}
+    for k, v in (extra or {}).items():
+        channels[k] = np.ascontiguousarray(v, dtype=np.float32)
+    tmp = _tmp(path)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    try:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def read_exr(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(RGB float32 (H, W, 3), other channels by name). Bad files raise a one-line LoomError."""
+    import OpenEXR
+
+    path = Path(path)
+    if not path.exists():
+        raise LoomError(path, None, "file not found")
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            ch = {k: np.array(v.pixels) for k, v in f.channels().items()}
+    except Exception as e:  # OpenEXR raises plain RuntimeError/OSError for non-EXR input
+        raise LoomError(path, None, f"not a readable OpenEXR file ({e})") from None
+    if all(k in ch for k in ("R", "G", "B")):
+        rgb = np.stack([ch.pop("R"), ch.pop("G"), ch.pop("B")], axis=-1).astype(np.float32)
+    elif "Y" in ch:
+        y = ch.pop("Y").astype(np.float32)
+        rgb = np.stack([y, y, y], axis=-1)
+    else:
+        raise LoomError(path, None, f"no R, G, B (or Y) channels; found {sorted(ch)}")
+    return rgb, ch
+
+
+def to_srgb8(rgb: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    import colour
+
+    lin = np.clip(np.nan_to_num(rgb * (2.0 ** exposure), nan=0.0, posinf=1.0), 0.0, 1.0)
+    enc = colour.cctf_encoding(lin, function="sRGB")
+    return np.round(np.clip(enc, 0, 1) * 255.0).astype(np.uint8)
+
+
+def write_png(path: str | Path, img8: np.ndarray) -> Path:
+    import matplotlib.image as mpimg
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = _tmp(path)
+    try:
+        mpimg.imsave(str(tmp), img8, format="png")
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def write_render(exr_path: str | Path, rgb: np.ndarray, extra: dict | None = None, exposure: float = 0.0) -> tuple[Path, Path]:
+    """EXR at ``exr_path`` and its sRGB preview beside it (same stem, .png)."""
+    exr_path = Path(exr_path)
+    write_exr(exr_path, rgb, extra)
+    png = write_png(exr_path.with_suffix(".png"), to_srgb8(rgb, exposure))
+    return exr_path, png

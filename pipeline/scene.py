@@ -1,0 +1,112 @@
+"""Scene files: TOML, checked against ``schemas/scene.schema.json``.
+
+An unknown or mistyped key is an error naming the key. Relative paths are resolved against the
+scene file's directory. ``load_scene`` returns a :class:`Scene` whose sections are plain dicts with
+defaults filled in; ``camera_array`` packs the camera for the render kernels.
+"""
+from __future__ import annotations
+
+import copy
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LoomError
+from .schemas import validate
+
+CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": 320, "height": 240}
+RENDER_DEFAULTS = {"spp": 16, "seed": 0, "max_depth": 32, "rr_depth": 5, "tile_size": 16}
+YARN_GROUPS = ("warp", "weft", "knit", "other")
+
+
+@dataclass
+class Scene:
+    path: Path
+    raw: dict
+    name: str
+    seed: int
+    fabric: dict
+    yarns: dict = field(default_factory=dict)
+    camera: dict | None = None
+    lights: list = field(default_factory=list)
+    render: dict = field(default_factory=dict)
+
+    def yarn_type(self, group: str) -> dict:
+        """The yarn type of a yarn group ('warp', 'weft', 'knit', 'other'), falling back to 'default'."""
+        t = dict(self.yarns.get("default", {}))
+        t.update(self.yarns.get(group, {}))
+        return t
+
+    def resolve(self, rel: str) -> Path:
+        p = Path(rel)
+        return p if p.is_absolute() else (self.path.parent / p).resolve()
+
+
+def _rgb(v) -> list[float]:
+    if isinstance(v, (int, float)):
+        return [float(v)] * 3
+    return [float(x) for x in v]
+
+
+def load_scene(path: str | Path) -> Scene:
+    path = Path(path)
+    if not path.exists():
+        raise LoomError(path, None, "scene file not found")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise LoomError(path, f"line {getattr(e, 'lineno', '?')}", f"not valid TOML: {e}") from None
+    except UnicodeDecodeError as e:
+        raise LoomError(path, f"byte {e.start}", "not a UTF-8 text file") from None
+    validate(raw, "scene", path)
+    fabric = copy.deepcopy(raw["fabric"])
+    src = fabric["source"]
+    if src in ("file", "wif") and "path" not in fabric:
+        raise LoomError(path, "fabric.path", f"source = {src!r} needs a 'path'")
+    if src == "generator" and "generator" not in fabric:
+        raise LoomError(path, "fabric.generator", "source = 'generator' needs a [fabric.generator] table")
+    if "path" in fabric:
+        fabric["path"] = str((path.parent / fabric["path"]).resolve()) if not Path(fabric["path"]).is_absolute() else fabric["path"]
+    scene_tbl = raw.get("scene", {})
+    camera = None
+    if "camera" in raw:
+        camera = {**CAMERA_DEFAULTS, **raw["camera"]}
+        o, t, u = (np.asarray(camera[k], float) for k in ("origin", "target", "up"))
+        if np.linalg.norm(t - o) == 0:
+            raise LoomError(path, "camera.target", "camera target equals its origin")
+        if np.linalg.norm(np.cross(t - o, u)) < 1e-9 * np.linalg.norm(t - o) * max(np.linalg.norm(u), 1e-30):
+            raise LoomError(path, "camera.up", "camera up vector is parallel to the viewing direction (or zero)")
+    lights = []
+    for i, light in enumerate(raw.get("lights", [])):
+        light = dict(light)
+        for k in ("irradiance", "radiance", "power"):
+            if k in light:
+                light[k] = _rgb(light[k])
+        for k in ("direction", "axis"):
+            if k in light:
+                v = np.asarray(light[k], float)
+                n = np.linalg.norm(v)
+                if n == 0:
+                    raise LoomError(path, f"lights[{i}].{k}", "zero-length vector")
+                light[k] = (v / n).tolist()
+        if light["type"] == "envmap":
+            light["path"] = str(Path(light["path"]) if Path(light["path"]).is_absolute() else (path.parent / light["path"]).resolve())
+            light.setdefault("scale", 1.0)
+        lights.append(light)
+    render = {**RENDER_DEFAULTS, **raw.get("render", {})}
+    if "ground" in render:
+        render["ground"] = {"height": 0.0, "albedo": [0.5, 0.5, 0.5], **render["ground"]}
+        render["ground"]["albedo"] = _rgb(render["ground"]["albedo"])
+    return Scene(path=path, raw=raw, name=scene_tbl.get("name", path.stem), seed=int(scene_tbl.get("seed", 0)),
+                 fabric=fabric, yarns=copy.deepcopy(raw.get("yarns", {})), camera=camera, lights=lights, render=render)
+
+
+def camera_array(camera: dict, width: int | None = None, height: int | None = None) -> np.ndarray:
+    """Pack a camera dict for ``stages.render.camera`` (see its layout)."""
+    from stages.render.camera import pack_camera
+
+    return pack_camera(np.asarray(camera["origin"], float), np.asarray(camera["target"], float),
+                       np.asarray(camera["up"], float), float(camera["fov"]),
+                       int(width or camera["width"]), int(height or camera["height"]))

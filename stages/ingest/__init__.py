@@ -1,0 +1,1 @@
+"""Ingest stage kernels: weave and knit generators, yarn-curve processing."""

@@ -1,0 +1,1 @@
+"""The renderer, one concept per module: camera, lights, media, BCSDFs, integrators."""

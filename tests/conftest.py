@@ -1,0 +1,35 @@
+"""Shared test fixtures. ../shared is reference material: tests that use it skip when it is absent."""
+import os
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+os.environ.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".numba_cache"))
+os.environ.setdefault("MPLBACKEND", "Agg")
+SHARED = ROOT.parent / "shared"
+DATA = ROOT / "data"
+
+
+def shared_file(rel: str) -> Path:
+    p = SHARED / rel
+    if not p.exists():
+        pytest.skip(f"reference file ../shared/{rel} is not present (../shared is reference material, absent on this machine)")
+    return p
+
+
+@pytest.fixture
+def cli(tmp_path):
+    """Run the loomlight CLI in-process: returns (exit code, stdout, stderr)."""
+    from pipeline.cli import main
+
+    def run(*args):
+        import contextlib
+        import io
+
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            code = main([str(a) for a in args])
+        return code, out.getvalue(), err.getvalue()
+
+    return run
