@@ -1,0 +1,198 @@
+"""Ingest runner: a curve file, WIF draft or scene → validated, splined yarn curves (``yarns`` artifact)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .artifacts import ArtifactWriter
+from .curveset import GROUPS, CurveSet
+from .errors import LoomError
+from .progress import info, warn
+from .scene import load_scene
+
+DEFAULT_COLORS = {"warp": (0.80, 0.78, 0.72), "weft": (0.25, 0.35, 0.60), "knit": (0.70, 0.25, 0.22),
+                  "other": (0.6, 0.6, 0.6)}
+
+
+def curves_from_input(path: Path, radius: float | None, scale: float | None):
+    """(CurveSet, scene or None, extra input files) for any INPUT the ingest command takes."""
+    if path.suffix.lower() == ".toml":
+        scene = load_scene(path)
+        fab = scene.fabric
+        if fab["source"] == "generator":
+            from .generators import generate
+
+            gen = fab["generator"]
+            r = gen.get("yarn_radius") or scene.yarn_type("warp").get("radius") or radius
+            cs = generate(gen, r)
+            return cs, scene, {}
+        src = Path(fab["path"])
+        if fab["source"] == "wif":
+            from .generators import from_wif
+
+            cs = from_wif(src, scale=fab.get("scale", scale or 1.0), crimp=fab.get("crimp", 1.0),
+                          max_threads=fab.get("max_threads"), repeat=fab.get("repeat"))
+        else:
+            from .io import read_curves
+
+            cs = read_curves(src)
+            s = fab.get("scale", scale)
+            if s:
+                cs.points = [p * s for p in cs.points]
+                if cs.point_radius is not None:
+                    cs.point_radius = [r * s for r in cs.point_radius]
+        return cs, scene, {"fabric": src}
+    if path.suffix.lower() == ".wif":
+        from .generators import from_wif
+
+        return from_wif(path, scale=scale or 1.0, crimp=1.0, max_threads=None, repeat=None), None, {}
+    from .io import read_curves
+
+    cs = read_curves(path)
+    if scale:
+        cs.points = [p * scale for p in cs.points]
+        if cs.point_radius is not None:
+            cs.point_radius = [r * scale for r in cs.point_radius]
+    return cs, None, {}
+
+
+def validate_curves(cs: CurveSet, file: Path, merge_duplicates: bool) -> CurveSet:
+    """NaN/inf, fewer than 2 points, repeated consecutive points (merged with a warning, or refused)."""
+    pts_out, rad_out = [], []
+    merged_total = 0
+    for c, pts in enumerate(cs.points):
+        pts = np.asarray(pts, dtype=np.float32)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise LoomError(file, f"curve {c}", f"expected (n, 3) control points, got shape {pts.shape}")
+        bad = ~np.isfinite(pts).all(axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise LoomError(file, f"curve {c}, point {k}", f"non-finite coordinate {pts[k].tolist()}")
+        rad = None if cs.point_radius is None else np.asarray(cs.point_radius[c], dtype=np.float32)
+        if rad is not None and (~np.isfinite(rad) | (rad <= 0)).any():
+            k = int(np.argmax(~np.isfinite(rad) | (rad <= 0)))
+            raise LoomError(file, f"curve {c}, point {k}", f"radius must be positive and finite, got {rad[k]}")
+        if len(pts) < 2:
+            raise LoomError(file, f"curve {c}", f"a curve needs at least 2 points, got {len(pts)}")
+        same = np.all(pts[1:] == pts[:-1], axis=1)
+        closing_dup = bool(cs.closed[c] and len(pts) > 1 and np.all(pts[0] == pts[-1]))
+        if same.any() or closing_dup:
+            k = int(np.argmax(same)) + 1 if same.any() else len(pts) - 1
+            if not merge_duplicates:
+                raise LoomError(file, f"curve {c}, point {k}", "repeated consecutive control point "
+                                "(re-run without --refuse-duplicates to merge them)")
+            keep = np.concatenate([[True], ~same])
+            if closing_dup:
+                keep[-1] = False
+            merged_total += int((~keep).sum())
+            pts = pts[keep]
+            rad = rad[keep] if rad is not None else None
+        need = 3 if cs.closed[c] else 2
+        if len(pts) < need:
+            raise LoomError(file, f"curve {c}", f"fewer than {need} distinct points after merging repeats")
+        pts_out.append(pts)
+        rad_out.append(rad)
+    if merged_total:
+        warn(f"{file}: merged {merged_total} repeated consecutive control point(s)")
+    cs.points = pts_out
+    cs.point_radius = None if cs.point_radius is None else rad_out
+    return cs
+
+
+def _estimate_radius(cs: CurveSet) -> float:
+    seg = np.concatenate([np.linalg.norm(np.diff(p, axis=0), axis=1) for p in cs.points])
+    return float(0.5 * np.median(seg)) if len(seg) else 1.0
+
+
+def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: float | None = None,
+               merge_duplicates: bool = True, force: bool = False, write: Path | None = None,
+               frame_samples: int = 4) -> dict:
+    from stages.ingest.spline_process import process_curves
+
+    input_path = Path(input_path)
+    if not input_path.exists():
+        raise LoomError(input_path, None, "input file not found")
+    cs, scene, extra_inputs = curves_from_input(input_path, radius, scale)
+    params = {"input": str(input_path), "radius": radius, "scale": scale, "merge_duplicates": merge_duplicates,
+              "frame_samples": frame_samples}
+    writer = ArtifactWriter(out, kind="yarns", stage="ingest", params=params,
+                            inputs={"input": input_path, **extra_inputs})
+    if writer.up_to_date() and not force and write is None:
+        (Path(out) / "zarr.json").touch()
+        info(f"{out} is up to date (same inputs and parameters); use --force to rebuild")
+        return {"skipped": True}
+    src_file = extra_inputs.get("fabric", input_path)
+    cs = validate_curves(cs, src_file, merge_duplicates)
+    if write is not None:
+        from .io import write_curves
+
+        write_curves(write, cs)
+        info(f"wrote {write}")
+
+    # yarn types per group (scene), radii, colours
+    ncurve = len(cs.points)
+    group_idx = np.array([GROUPS.index(g) for g in cs.group], dtype=np.int8)
+    types, type_of_group = [], {}
+    for g in GROUPS:
+        t = scene.yarn_type(g) if scene is not None else {}
+        type_of_group[g] = len(types)
+        types.append({"group": g, **t})
+    yarn_type = np.array([type_of_group[g] for g in cs.group], dtype=np.int16)
+    rad = np.empty(ncurve)
+    fallback = radius or (scene.fabric.get("radius") if scene is not None else None)
+    estimated = False
+    for c in range(ncurve):
+        if cs.point_radius is not None and cs.point_radius[c] is not None:
+            rad[c] = float(np.mean(cs.point_radius[c]))
+        elif types[yarn_type[c]].get("radius"):
+            rad[c] = types[yarn_type[c]]["radius"]
+        elif scene is not None and scene.fabric["source"] == "generator" and scene.fabric["generator"].get("yarn_radius"):
+            rad[c] = scene.fabric["generator"]["yarn_radius"]
+        elif fallback:
+            rad[c] = fallback
+        else:
+            estimated = True
+            rad[c] = np.nan
+    if estimated:
+        est = _estimate_radius(cs)
+        rad[np.isnan(rad)] = est
+        warn(f"{input_path}: no yarn radius given (--radius, fabric.radius or yarns.<group>.radius); "
+             f"using half the median control-point spacing, {est:.6g}")
+    color = np.empty((ncurve, 3), dtype=np.float32)
+    for c in range(ncurve):
+        col = cs.color[c] or types[yarn_type[c]].get("color") or DEFAULT_COLORS[cs.group[c]]
+        color[c] = col
+
+    points = np.concatenate(cs.points).astype(np.float32)
+    offsets = np.concatenate([[0], np.cumsum([len(p) for p in cs.points])]).astype(np.int64)
+    closed = np.array(cs.closed, dtype=bool)
+    proc = process_curves(points.astype(np.float64), offsets, closed, rad, frame_samples=frame_samples)
+
+    with writer as w:
+        w.write("points", points, dimension_names=("point", "xyz"))
+        w.write("curve_offsets", offsets)
+        w.write("closed", closed)
+        w.write("radius", rad.astype(np.float64))
+        w.write("group", group_idx)
+        w.write("color", color)
+        w.write("yarn_type", yarn_type)
+        for name in ("tangents", "seg_curve", "seg_length", "seg_arclen", "curve_length", "frame_s",
+                     "frame_offsets", "frame_normal", "frame_twist", "delta", "grid_lo", "grid_cell",
+                     "grid_dims", "grid_cell_start", "grid_items", "grid_pad"):
+            w.write(name, proc[name])
+        lo = points.min(axis=0)
+        hi = points.max(axis=0)
+        w.summary.update({
+            "kind": "yarns", "curves": int(ncurve), "closed_curves": int(closed.sum()),
+            "control_points": int(len(points)), "bounds": [lo.tolist(), hi.tolist()],
+            "groups": [GROUPS[g] for g in sorted(set(group_idx.tolist()))],
+            "yarn_types": types, "total_length": float(proc["curve_length"].sum()),
+            "source_format": cs.source_format, "curve_type": cs.curve_type,
+            "radius_range": [float(rad.min()), float(rad.max())],
+            "delta_max": float(proc["delta"].max()),
+            "grid": {"dims": proc["grid_dims"].tolist(), "cell": float(proc["grid_cell"][0]),
+                     "items": int(len(proc["grid_items"]))},
+            "scene": str(input_path) if scene is not None else None,
+        })
+    return {"skipped": False, "curves": ncurve}
