@@ -1,0 +1,74 @@
+"""The anisotropic micro-flake medium: what a density source must answer.
+
+Seed 000 App. A: at a point p a textile model gives a density den(p), a fibre direction dir(p), a
+roughness sigma(p) and an albedo alpha(p). The micro-flake model (Jakob et al. 2010) with a fibre-like
+SGGX distribution S(dir, sigma) (``stages.render.sggx``) turns them into
+
+    sigma_t(p, w) = den(p) * sigma_S(w)         (Jakob 2010 Eq. 8; sigma_S(w) = sqrt(w^T S w) <= 1)
+    sigma_s(p, w) = alpha(p) * sigma_t(p, w)     (RGB single-scattering albedo per yarn)
+    f_p(wi, wo)   = specular micro-flake phase function of S
+
+Extinction is grey (density times projected area) and only the albedo is RGB, so one free-flight
+distance serves all three channels. Because sigma_S(w) <= 1, den(p) itself bounds sigma_t in
+every direction: a majorant for den bounds the extinction.
+
+A *density source* is a namedtuple class whose numba implementation of
+``medium_lookup(med, x, y, z)`` is registered with ``numba.extending.overload``; it returns
+
+    (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness)
+
+with den = 0 outside every fibre (other fields then unused). The integrator
+(``stages.render.volpath``) is compiled once per source class. Sources: ``HomogeneousMedium``
+(below; a box of constant fibre material, for closed-form tests), ``stages.render.grid_medium``,
+``stages.render.procedural_medium``, ``stages.render.realized_medium``.
+"""
+from collections import namedtuple
+
+from numba import njit, types
+from numba.extending import overload
+
+from .sggx import fiber_sggx, projected_area
+
+
+def medium_lookup(med, x, y, z):
+    """(den, tx, ty, tz, ar, ag, ab, roughness) at (x, y, z); numba-only (overloaded per source)."""
+    raise TypeError("medium_lookup is only callable from numba-compiled code")
+
+
+def is_source(med, cls) -> bool:
+    """True when the numba type ``med`` is the namedtuple class ``cls`` (for overload dispatch)."""
+    return isinstance(med, types.BaseNamedTuple) and med.instance_class is cls
+
+
+@njit(cache=True)
+def extinction(den, tx, ty, tz, roughness, wx, wy, wz):
+    """sigma_t(w) = den * sigma_S(w) for the fibre-like SGGX of (t, roughness)."""
+    if den <= 0.0:
+        return 0.0
+    return den * projected_area(fiber_sggx(tx, ty, tz, roughness), wx, wy, wz)
+
+
+# ------------------------------------------------------------------------------------------------
+HomogeneousMedium = namedtuple("HomogeneousMedium", ["lo", "hi", "density", "tangent", "roughness", "albedo"])
+HomogeneousMedium.__doc__ = """A box [lo, hi] of constant density, fibre tangent, roughness and RGB albedo.
+
+lo, hi, tangent, albedo: float64[3]; density, roughness: float. With roughness = 1 the flakes are
+isotropic (sigma_t = density in every direction), the textbook homogeneous medium.
+"""
+
+
+@njit(cache=True)
+def homogeneous_lookup(med, x, y, z):
+    lo = med.lo
+    hi = med.hi
+    if x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]:
+        return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    t = med.tangent
+    a = med.albedo
+    return med.density, t[0], t[1], t[2], a[0], a[1], a[2], med.roughness
+
+
+@overload(medium_lookup)
+def _homogeneous_overload(med, x, y, z):
+    if is_source(med, HomogeneousMedium):
+        return lambda med, x, y, z: homogeneous_lookup(med, x, y, z)
