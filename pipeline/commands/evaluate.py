@@ -1,0 +1,87 @@
+"""``loomlight evaluate``: measure renders against a reference; three modes.
+
+Images
+    ``loomlight evaluate --ref REF.exr --test A.exr [--test B.exr ...] -o DIR``
+    Per test image: RMSE, relative MSE, SSIM on luminance, mean CIEDE2000, plus wall time, peak
+    memory, spp and paths/s from the render artifact ``A.zarr`` beside ``A.exr`` when it exists.
+    Writes DIR/metrics.json, error maps, crops, a summary plot, DIR/report.md, DIR/report.html and
+    the ``evaluation`` artifact DIR/evaluation.zarr.
+
+Sweep (seed 001 §6.3: Fig. 13 and Table 2)
+    ``loomlight evaluate --sweep data/sweeps/demo.toml -o DIR``
+    Renders every (configuration, method) of the sweep file that is missing or out of date under
+    DIR/renders/<config>/<method>.exr (through ``loomlight render``), then reports per method the
+    RMSE of mean image intensity against the reference method over all configurations and the time
+    per image with its speed-up over the reference. ``--no-render`` only evaluates what exists.
+
+Table 1 (seed 000 Table 1)
+    ``loomlight evaluate --table1 --scene A.toml [--scene B.toml] [--procedural P.exr --realized R.exr ...] -o DIR``
+    Data sizes from ``pipeline.memory_table`` (full realization against the procedural model) and
+    the volpath render times of the procedural and realized renders given, the i-th
+    ``--procedural``/``--realized`` pair belonging to the i-th ``--scene``.
+
+Exit code 2 with one line naming the file on bad input (missing file, not an EXR, size mismatch).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("evaluate")
+    def evaluate(
+        ref: Optional[Path] = typer.Option(None, "--ref", help="Reference image (linear EXR)."),
+        test: Optional[List[Path]] = typer.Option(None, "--test", help="Test image (EXR); repeat for several."),
+        sweep: Optional[Path] = typer.Option(None, "--sweep", help="A sweep file (TOML, schemas/sweep.schema.json)."),
+        table1: bool = typer.Option(False, "--table1", help="Build the seed 000 Table 1 form (data sizes and render times)."),
+        scene: Optional[List[Path]] = typer.Option(None, "--scene", help="--table1: a scene file; repeat for several."),
+        procedural: Optional[List[Path]] = typer.Option(None, "--procedural", help="--table1: procedural volpath render (EXR) of the matching --scene."),
+        realized: Optional[List[Path]] = typer.Option(None, "--realized", help="--table1: realized volpath render (EXR) of the matching --scene."),
+        out: Path = typer.Option(..., "-o", "--out", help="Output directory for metrics, pictures and the report."),
+        force: bool = typer.Option(False, "--force", help="Recompute even when the inputs are unchanged."),
+        no_render: bool = typer.Option(False, "--no-render", help="--sweep: do not render; evaluate the renders that exist."),
+    ):
+        """Compare renders against a reference: metrics, error maps, report (and sweeps, Table 1)."""
+        from ..errors import LoomError
+
+        modes = [m for m, on in (("--ref/--test", ref is not None or bool(test)), ("--sweep", sweep is not None),
+                                 ("--table1", table1)) if on]
+        if len(modes) != 1:
+            raise LoomError(None, "evaluate", "give exactly one of --ref/--test, --sweep or --table1"
+                            + (f" (got {', '.join(modes)})" if modes else ""))
+        if modes[0] == "--sweep":
+            from ..sweep import run_sweep
+
+            res = run_sweep(sweep, out, force=force, render=not no_render)
+            typer.echo(f"sweep: {res.configurations} configurations x {len(res.methods)} methods, "
+                       f"{res.rendered} rendered, {res.reused} reused")
+            for name, st in res.methods.items():
+                t = st.get("time_per_image_s")
+                sp = st.get("speedup")
+                typer.echo(f"  {name:20s} RMSE(mean intensity) {st['rmse_mean_intensity']:.4g}"
+                           + (f"  time/image {t:.3g} s" if t is not None else "")
+                           + (f"  speed-up {sp:.2f}x" if sp is not None else ""))
+            typer.echo(f"report: {res.report_md}")
+            return
+        if modes[0] == "--table1":
+            from ..evaluate_runner import run_table1
+
+            md = run_table1(scene or [], procedural or [], realized or [], out, force=force)
+            typer.echo(f"report: {md}")
+            return
+        if ref is None:
+            raise LoomError(None, "--ref", "give the reference image with --ref")
+        if not test:
+            raise LoomError(None, "--test", "give at least one test image with --test")
+        from ..evaluate_runner import evaluate_images
+
+        ev = evaluate_images(ref, test, out, force=force)
+        if ev.skipped:
+            typer.echo(f"{out}: up to date (inputs unchanged; --force recomputes)")
+        for name, e in ev.metrics.items():
+            typer.echo(f"  {name:24s} RMSE {e['rmse']:.4g}  relMSE {e['relmse']:.4g}  SSIM {e['ssim']:.4f}  "
+                       f"dE00 {e['delta_e2000_mean']:.3g}")
+        typer.echo(f"report: {ev.report_md}")

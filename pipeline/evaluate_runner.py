@@ -1,0 +1,257 @@
+"""Evaluate runner: test images against a reference image, metrics + pictures + report + artifact.
+
+``evaluate_images(ref, tests, out_dir)`` reads linear EXRs, computes per test image (kernels in
+``stages.evaluate.metrics``)
+
+- ``rmse``: over all pixels and channels of the linear images;
+- ``relmse``: mean of (t - r)^2 / (r^2 + 0.01) over pixels and channels;
+- ``ssim``: Wang et al. 2004 with an 11x11 Gaussian window (sigma 1.5), K1 = 0.01, K2 = 0.03, on
+  the sRGB-encoded luminance clipped to [0, 1] (what the PNG preview shows), dynamic range L = 1;
+- ``delta_e2000_mean``: mean CIEDE2000 over pixels, linear sRGB clipped to [0, 1] -> XYZ -> Lab (D65);
+- ``mean_intensity``: per-channel image mean (seed 001 §6.3),
+
+and, when a render artifact ``<image>.zarr`` lies beside an image, the render's wall time, peak
+memory, samples per pixel and paths per second from its summary (falling back to the artifact's
+provenance block), plus the speed-up over the reference where both times are known.
+
+Outputs in ``out_dir``: ``metrics.json`` ({test name: {metric: value}}), ``error_<name>.png``,
+``crops_<name>.png``, ``metrics.png``, ``report.md``, ``report.html`` and the ``evaluation``
+artifact ``evaluation.zarr`` (metrics as summary; input EXR and render artifact content hashes as
+provenance). An evaluation whose inputs are unchanged is not recomputed unless ``force``.
+"""
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .errors import LoomError
+
+METRIC_KEYS = ("rmse", "relmse", "ssim", "delta_e2000_mean")
+SSIM_NOTE = ("SSIM: Wang et al. 2004, 11x11 Gaussian window (sigma 1.5), K1 = 0.01, K2 = 0.03, on sRGB-encoded "
+             "luminance clipped to [0, 1] (dynamic range L = 1). relMSE: mean of (t - r)^2 / (r^2 + 0.01). "
+             "CIEDE2000: linear sRGB clipped to [0, 1] -> XYZ -> Lab (D65), mean over pixels.")
+
+
+# ------------------------------------------------------------------------------------------------
+# inputs
+def load_image(path: str | Path) -> np.ndarray:
+    """Linear RGB float64 (H, W, 3) from an EXR; refuses non-finite pixels."""
+    from .images import read_exr
+
+    path = Path(path)
+    if path.is_dir():
+        raise LoomError(path, None, "is a directory, expected an OpenEXR image")
+    rgb, _ = read_exr(path)
+    bad = ~np.isfinite(rgb)
+    if bad.any():
+        i, j, _ = np.argwhere(bad)[0]
+        raise LoomError(path, f"pixel (x={j}, y={i})", "not a finite number (NaN or inf)")
+    return rgb.astype(np.float64)
+
+
+def _first(d: dict, *keys):
+    for k in keys:
+        v = d.get(k)
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            return v
+    return None
+
+
+def render_stats(image: str | Path) -> dict:
+    """Timing and memory of the render that made ``image``, from ``<image stem>.zarr`` beside it.
+
+    Tolerant: a missing or incomplete artifact, or missing keys, give fewer entries (never an error).
+    Keys: wall_time_s, peak_memory_bytes, spp, paths_per_s, render_artifact.
+    """
+    from .artifacts import read_meta
+
+    art = Path(image).with_suffix(".zarr")
+    if not art.is_dir():
+        return {}
+    try:
+        meta = read_meta(art)
+        summary = json.loads((art / "zarr.json").read_text()).get("attributes", {}).get("summary", {}) or {}
+    except (LoomError, OSError, ValueError):
+        return {}
+    out: dict = {"render_artifact": str(art)}
+    t = _first(summary, "wall_time_s", "render_time_s", "time_s")
+    if t is None:
+        t = _first(meta, "wall_time_s")
+    if t is not None:
+        out["wall_time_s"] = float(t)
+    mem = _first(summary, "peak_memory_bytes", "memory_bytes")
+    if mem is None:
+        mem = _first(meta, "peak_memory_bytes")
+    if mem is not None:
+        out["peak_memory_bytes"] = int(mem)
+    spp = _first(summary, "spp")
+    if spp is not None:
+        out["spp"] = int(spp)
+    pps = _first(summary, "paths_per_s", "paths_per_second")
+    if pps is not None:
+        out["paths_per_s"] = float(pps)
+    return out
+
+
+def labels_for(paths: Sequence[Path]) -> list[str]:
+    """Test names: file names, or paths relative to their common folder where names repeat."""
+    names = [p.name for p in paths]
+    if len(set(names)) == len(names):
+        return names
+    resolved = [p.resolve() for p in paths]
+    common = Path(*[parts[0] for parts in zip(*[r.parts for r in resolved]) if len(set(parts)) == 1]) \
+        if len(resolved) > 1 else resolved[0].parent
+    labels = [str(r.relative_to(common)) if r.is_relative_to(common) else str(r) for r in resolved]
+    if len(set(labels)) != len(labels):
+        raise LoomError(None, "--test", "the same test image is given twice")
+    return labels
+
+
+def slug(label: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", label.rsplit(".", 1)[0] if label.endswith(".exr") else label)
+
+
+# ------------------------------------------------------------------------------------------------
+# metrics
+def image_metrics(test: np.ndarray, ref: np.ndarray) -> dict:
+    from stages.evaluate import metrics as m
+
+    return {
+        "rmse": m.rmse(test, ref),
+        "relmse": m.relmse(test, ref),
+        "ssim": m.ssim(m.ssim_input(test), m.ssim_input(ref)),
+        "delta_e2000_mean": float(np.mean(m.delta_e2000_map(test, ref))),
+        "mean_intensity": [float(v) for v in m.mean_intensity(test)],
+    }
+
+
+def check_pair(ref_path: Path, ref: np.ndarray, test_path: Path, test: np.ndarray) -> None:
+    from stages.evaluate.metrics import SSIM_WINDOW
+
+    if test.shape != ref.shape:
+        raise LoomError(test_path, None, f"image is {test.shape[1]}x{test.shape[0]} pixels but the reference "
+                                         f"{ref_path.name} is {ref.shape[1]}x{ref.shape[0]}")
+    if ref.shape[0] < SSIM_WINDOW or ref.shape[1] < SSIM_WINDOW:
+        raise LoomError(ref_path, None, f"image is {ref.shape[1]}x{ref.shape[0]} pixels; SSIM needs at least "
+                                        f"{SSIM_WINDOW}x{SSIM_WINDOW}")
+
+
+# ------------------------------------------------------------------------------------------------
+@dataclass
+class Evaluation:
+    out_dir: Path
+    metrics: dict
+    reference: dict
+    report_md: Path
+    report_html: Path
+    skipped: bool = False
+    pictures: list[Path] = field(default_factory=list)
+
+
+def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_dir: str | Path,
+                    force: bool = False, title: str | None = None) -> Evaluation:
+    from . import report as rp
+    from .artifacts import ArtifactWriter
+
+    ref_path = Path(ref_path)
+    test_paths = [Path(p) for p in test_paths]
+    out_dir = Path(out_dir)
+    if not test_paths:
+        raise LoomError(None, "--test", "give at least one test image")
+    if out_dir.exists() and not out_dir.is_dir():
+        raise LoomError(out_dir, None, "output path exists and is not a directory")
+    labels = labels_for(test_paths)
+    for p in [ref_path, *test_paths]:
+        if not p.exists():
+            raise LoomError(p, None, "file not found")
+
+    ref_stats = render_stats(ref_path)
+    test_stats = [render_stats(p) for p in test_paths]
+    inputs: dict[str, Path] = {"reference": ref_path}
+    if "render_artifact" in ref_stats:
+        inputs["reference_render"] = Path(ref_stats["render_artifact"])
+    for lab, p, st in zip(labels, test_paths, test_stats):
+        inputs[f"test:{lab}"] = p
+        if "render_artifact" in st:
+            inputs[f"render:{lab}"] = Path(st["render_artifact"])
+    params = {"mode": "images", "labels": labels, "relmse_eps": 0.01,
+              "ssim": {"window": 11, "sigma": 1.5, "K1": 0.01, "K2": 0.03, "on": "srgb_luminance", "L": 1.0},
+              "delta_e": {"formula": "CIE 2000", "input": "linear sRGB clipped to [0, 1]", "white": "D65"}}
+    writer = ArtifactWriter(out_dir / "evaluation.zarr", kind="evaluation", stage="evaluate",
+                            params=params, inputs=inputs)
+    md, ht = out_dir / "report.md", out_dir / "report.html"
+    if not force and writer.up_to_date() and (out_dir / "metrics.json").exists() and md.exists() and ht.exists():
+        metrics = json.loads((out_dir / "metrics.json").read_text())
+        return Evaluation(out_dir, metrics, ref_stats, md, ht, skipped=True)
+
+    ref = load_image(ref_path)
+    tests = []
+    for p in test_paths:  # every input checked before anything is written
+        tests.append(load_image(p))
+        check_pair(ref_path, ref, p, tests[-1])
+    metrics: dict[str, dict] = {}
+    rel_maps = []
+    pictures: list[Path] = []
+    rep = rp.Report(title or f"Evaluation against {ref_path.name}")
+    for lab, p, st, test in zip(labels, test_paths, test_stats, tests):
+        entry = image_metrics(test, ref)
+        entry.update({k: v for k, v in st.items() if k != "render_artifact"})
+        if "wall_time_s" in st and "wall_time_s" in ref_stats and st["wall_time_s"] > 0:
+            entry["speedup_vs_reference"] = ref_stats["wall_time_s"] / st["wall_time_s"]
+        metrics[lab] = entry
+        rel_maps.append(rp.relative_error(test, ref).astype(np.float32))
+        s = slug(lab)
+        pictures.append(rp.error_map_png(test, ref, out_dir / f"error_{s}.png", f"{lab} vs {ref_path.name}"))
+        pictures.append(rp.crops_png(ref, test, out_dir / f"crops_{s}.png", lab))
+    from stages.evaluate.metrics import mean_intensity
+
+    ref_entry = {"name": ref_path.name, "mean_intensity": [float(v) for v in mean_intensity(ref)],
+                 **{k: v for k, v in ref_stats.items() if k != "render_artifact"}}
+    pictures.append(rp.metric_bars_png(metrics, out_dir / "metrics.png", f"against {ref_path.name}"))
+
+    # metrics.json, report
+    rp.write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True) + "\n")
+    _images_report(rep, ref_path, ref_entry, metrics, labels)
+    md, ht = rep.write(out_dir)
+
+    # the evaluation artifact, last: it marks a finished evaluation
+    with writer as w:
+        w.write("mean_intensity", np.array([ref_entry["mean_intensity"]] + [metrics[l]["mean_intensity"] for l in labels]),
+                dimension_names=("image", "channel"))
+        w.write("relative_error", np.stack(rel_maps), dimension_names=("test", "y", "x"))
+        w.summary.update(kind="evaluation", mode="images", reference=ref_entry, tests=metrics,
+                         image_size=[int(ref.shape[1]), int(ref.shape[0])], metrics=list(METRIC_KEYS))
+    return Evaluation(out_dir, metrics, ref_entry, md, ht, pictures=pictures)
+
+
+def metric_row(label: str, e: dict) -> list[str]:
+    from .report import fmt_bytes, fmt_num, fmt_seconds
+
+    sp = e.get("speedup_vs_reference")
+    return [label, fmt_num(e.get("rmse")), fmt_num(e.get("relmse")), fmt_num(e.get("ssim")),
+            fmt_num(e.get("delta_e2000_mean")), fmt_seconds(e.get("wall_time_s")),
+            f"{sp:.2f}x" if sp is not None else "-", fmt_bytes(e.get("peak_memory_bytes"))]
+
+
+METRIC_HEADERS = ["image", "RMSE", "relMSE", "SSIM", "mean ΔE00", "time", "speed-up", "peak memory"]
+
+
+def _images_report(rep, ref_path: Path, ref_entry: dict, metrics: dict, labels: list[str]) -> None:
+    from .report import fmt_bytes, fmt_seconds
+
+    rep.paragraph(f"Reference: {ref_path} (render time {fmt_seconds(ref_entry.get('wall_time_s'))}, "
+                  f"peak memory {fmt_bytes(ref_entry.get('peak_memory_bytes'))}).")
+    rep.paragraph(SSIM_NOTE)
+    rep.heading("Metrics")
+    rep.table(METRIC_HEADERS, [metric_row(l, metrics[l]) for l in labels])
+    rep.image("metrics.png", "Metrics per test image")
+    rep.heading("Error maps and crops")
+    for l in labels:
+        s = slug(l)
+        rep.image(f"error_{s}.png", f"{l}: per-pixel relative squared error (log scale)")
+        rep.image(f"crops_{s}.png", f"{l}: reference | test | error, at the worst window")

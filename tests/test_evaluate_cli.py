@@ -1,0 +1,136 @@
+"""``loomlight evaluate --ref --test``: metrics.json against closed forms, render-artifact timings,
+the evaluation artifact's provenance, up-to-date skipping, and exit code 2 on bad input with the
+previous outputs left untouched.
+
+References: a constant offset c gives RMSE = |c| and relMSE = c^2 / (r^2 + 0.01) on a constant
+reference r; identical images give SSIM 1 and mean dE00 0; the content hash of an input is the
+sha256 of its bytes.
+"""
+import hashlib
+import json
+
+import numpy as np
+import pytest
+import zarr
+
+from pipeline.images import write_render
+
+
+def _scene_image(h=24, w=28, seed=0):
+    rng = np.random.default_rng(seed)
+    return (0.2 + 0.6 * rng.random((h, w, 3))).astype(np.float32)
+
+
+def _fake_render_artifact(exr_path, wall_time_s, peak_memory_bytes, spp=16, paths_per_s=1.0e6):
+    """A complete render artifact beside an EXR, written by hand (only the attributes the evaluate
+    stage reads; the render kind's schema belongs to the render stage)."""
+    g = zarr.open_group(str(exr_path.with_suffix(".zarr")), mode="w", zarr_format=3)
+    g.attrs["summary"] = {"kind": "render", "wall_time_s": wall_time_s, "peak_memory_bytes": peak_memory_bytes,
+                          "spp": spp, "paths_per_s": paths_per_s}
+    g.attrs["loomlight"] = {"kind": "render", "complete": True, "wall_time_s": wall_time_s + 1.0,
+                            "peak_memory_bytes": 1, "content_hash": hashlib.sha256(str(wall_time_s).encode()).hexdigest()}
+
+
+@pytest.fixture
+def images(tmp_path):
+    ref = np.full((16, 18, 3), 0.3, np.float32)
+    write_render(tmp_path / "ref.exr", ref)
+    write_render(tmp_path / "same.exr", ref)
+    write_render(tmp_path / "offset.exr", ref + np.float32(0.125))  # 0.125, 0.425 exact in float32
+    return tmp_path
+
+
+def test_metrics_json_closed_forms(cli, images):
+    out = images / "eval"
+    code, stdout, err = cli("evaluate", "--ref", images / "ref.exr", "--test", images / "same.exr",
+                            "--test", images / "offset.exr", "-o", out)
+    assert code == 0, err
+    m = json.loads((out / "metrics.json").read_text())
+    assert set(m) == {"same.exr", "offset.exr"}
+    assert set(m["same.exr"]) >= {"rmse", "relmse", "ssim", "delta_e2000_mean"}
+    assert m["same.exr"]["rmse"] == 0.0 and m["same.exr"]["delta_e2000_mean"] == 0.0
+    assert m["same.exr"]["ssim"] == pytest.approx(1.0, abs=1e-12)
+    assert m["offset.exr"]["rmse"] == pytest.approx(0.125, rel=1e-6)
+    assert m["offset.exr"]["relmse"] == pytest.approx(0.125 ** 2 / (0.3 ** 2 + 0.01), rel=1e-5)
+    # constant images: SSIM = (2ab + C1) / (a^2 + b^2 + C1) on the sRGB-encoded luminance
+    enc = lambda v: 1.055 * v ** (1 / 2.4) - 0.055  # noqa: E731
+    a, b, c1 = enc(0.425), enc(0.3), 1e-4
+    assert m["offset.exr"]["ssim"] == pytest.approx((2 * a * b + c1) / (a * a + b * b + c1), rel=1e-5)
+    assert m["offset.exr"]["delta_e2000_mean"] > 1.0
+    for f in ("report.md", "report.html", "metrics.png", "error_offset.png", "crops_offset.png", "error_same.png"):
+        assert (out / f).stat().st_size > 0, f
+    md = (out / "report.md").read_text()
+    assert "offset.exr" in md and "](error_offset.png)" in md
+    assert str(out / "report.md") in stdout
+
+
+def test_render_artifacts_give_time_memory_and_speedup(cli, tmp_path):
+    ref, test = _scene_image(seed=1), _scene_image(seed=2)
+    write_render(tmp_path / "ref.exr", ref)
+    write_render(tmp_path / "fast.exr", test)
+    _fake_render_artifact(tmp_path / "ref.exr", 12.0, 3_000_000)
+    _fake_render_artifact(tmp_path / "fast.exr", 3.0, 1_000_000, spp=8, paths_per_s=2.5e5)
+    out = tmp_path / "eval"
+    code, _, err = cli("evaluate", "--ref", tmp_path / "ref.exr", "--test", tmp_path / "fast.exr", "-o", out)
+    assert code == 0, err
+    e = json.loads((out / "metrics.json").read_text())["fast.exr"]
+    assert e["wall_time_s"] == 3.0 and e["peak_memory_bytes"] == 1_000_000
+    assert e["spp"] == 8 and e["paths_per_s"] == 2.5e5
+    assert e["speedup_vs_reference"] == pytest.approx(4.0)
+    assert e["rmse"] == pytest.approx(np.sqrt(np.mean((test.astype(float) - ref) ** 2)), rel=1e-9)
+
+
+def test_evaluation_artifact_provenance_and_skip(cli, images):
+    from pipeline.artifacts import Artifact
+
+    out = images / "eval"
+    args = ("evaluate", "--ref", images / "ref.exr", "--test", images / "offset.exr", "-o", out)
+    assert cli(*args)[0] == 0
+    art = Artifact(out / "evaluation.zarr", kind="evaluation")
+    m = json.loads((out / "metrics.json").read_text())
+    assert art.summary["tests"]["offset.exr"]["rmse"] == m["offset.exr"]["rmse"]
+    sha = hashlib.sha256((images / "ref.exr").read_bytes()).hexdigest()
+    assert art.meta["inputs"]["reference"]["sha256"] == sha
+    assert art["relative_error"].shape == (1, 16, 18)
+    np.testing.assert_allclose(art["mean_intensity"], [[0.3] * 3, [0.425] * 3], rtol=1e-6)
+    # unchanged inputs: skipped; a changed input: recomputed
+    code, stdout, _ = cli(*args)
+    assert code == 0 and "up to date" in stdout
+    write_render(images / "offset.exr", np.full((16, 18, 3), 0.55, np.float32))
+    code, stdout, _ = cli(*args)
+    assert code == 0 and "up to date" not in stdout
+    assert json.loads((out / "metrics.json").read_text())["offset.exr"]["rmse"] == pytest.approx(0.25, rel=1e-6)
+
+
+def test_bad_inputs_exit_2_and_leave_previous_outputs(cli, images):
+    out = images / "eval"
+    assert cli("evaluate", "--ref", images / "ref.exr", "--test", images / "offset.exr", "-o", out)[0] == 0
+    before = (out / "metrics.json").read_bytes()
+    meta_before = (out / "evaluation.zarr" / "zarr.json").read_bytes()
+
+    write_render(images / "small.exr", np.zeros((12, 18, 3), np.float32))
+    (images / "text.exr").write_text("not an image\n")
+    cases = [
+        (("--test", images / "small.exr"), "small.exr"),       # mismatched size
+        (("--test", images / "missing.exr"), "missing.exr"),   # missing file
+        (("--test", images / "text.exr"), "text.exr"),         # not an EXR
+        (("--test", images / "ref.png"), "ref.png"),           # a PNG preview, not an EXR
+    ]
+    for extra, name in cases:
+        code, _, err = cli("evaluate", "--ref", images / "ref.exr", "--test", images / "offset.exr", *extra, "-o", out)
+        assert code == 2, (name, err)
+        assert name in err and len(err.strip().splitlines()) == 1, err
+    code, _, err = cli("evaluate", "--ref", images / "ref.exr", "-o", out)  # no test image
+    assert code == 2 and "--test" in err
+    code, _, err = cli("evaluate", "--ref", images / "ref.exr", "--test", images / "offset.exr",
+                       "--sweep", images / "s.toml", "-o", out)  # two modes at once
+    assert code == 2
+    assert (out / "metrics.json").read_bytes() == before
+    assert (out / "evaluation.zarr" / "zarr.json").read_bytes() == meta_before
+
+
+def test_images_below_ssim_window_refused(cli, tmp_path):
+    write_render(tmp_path / "a.exr", np.zeros((8, 8, 3), np.float32))
+    write_render(tmp_path / "b.exr", np.zeros((8, 8, 3), np.float32))
+    code, _, err = cli("evaluate", "--ref", tmp_path / "a.exr", "--test", tmp_path / "b.exr", "-o", tmp_path / "o")
+    assert code == 2 and "11x11" in err
