@@ -37,8 +37,8 @@ def progress(description: str, total: int):
 
 
 def info(message: str) -> None:
-    _console.print(message, highlight=False)
+    _console.print(message, highlight=False, soft_wrap=True)
 
 
 def warn(message: str) -> None:
-    _console.print(f"[yellow]warning:[/yellow] {message}", highlight=False)
+    _console.print(f"[yellow]warning:[/yellow] {message}", highlight=False, soft_wrap=True)

@@ -26,8 +26,9 @@ def inspect(art, png, show=False, frames=False, yarn=-1, size=(1200, 900), **_):
         pts = sample_curve_points(cv, c, nsamp)
         if cv.closed[c]:
             pts = np.vstack([pts, pts[:1]])
-        line = pv.lines_from_points(pts)
-        tube = line.tube(radius=float(cv.radius[c]), n_sides=12)
+        line = pv.PolyData(pts)
+        line.lines = np.concatenate([[len(pts)], np.arange(len(pts))])
+        tube = line.tube(radius=float(cv.radius[c]), n_sides=16, capping=True)
         plotter.add_mesh(tube, color=tuple(float(x) for x in np.clip(color[c], 0, 1)), smooth_shading=True)
         if frames:
             L = cv.curve_length[c]
@@ -43,6 +44,7 @@ def inspect(art, png, show=False, frames=False, yarn=-1, size=(1200, 900), **_):
             plotter.add_arrows(o, np.array(bb), mag=scale, color="green")
     plotter.add_axes()
     plotter.camera_position = "iso"
+    plotter.camera.elevation = -15
     plotter.reset_camera()
     if show:
         plotter.show(screenshot=str(png) if png else None)
