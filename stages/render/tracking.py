@@ -1,0 +1,227 @@
+"""Free-flight sampling and transmittance through a majorant grid: delta and ratio tracking.
+
+Delta tracking (Woodcock et al. 1965; seed 000 §5.4) samples tentative collisions from a
+homogeneous majorant mu >= sigma_t and accepts one as real with probability sigma_t / mu; ratio
+tracking (Novak et al. 2014) multiplies the transmittance estimate by (1 - sigma_t / mu) at each
+tentative collision instead. Both are unbiased whatever mu as long as mu bounds sigma_t.
+
+Majorants are piecewise constant on a ``MajorantGrid`` (a coarse grid of cells over the medium's
+box, walked with a 3D DDA): a cell's majorant is the largest density any source can give inside it
+(per yarn: the yarn's density bound where its tube reaches the cell) and **zero where no yarn tube
+reaches**, so rays skip empty space without a single lookup, and outside the box nothing happens.
+
+MajorantGrid fields: lo, hi (float64[3], the box), res (int64[3]: nx, ny, nz), mu (float64[nz, ny, nx]).
+
+``track(med, maj, o, d, tmax, seed, index, dim, ratio)`` returns
+    (collided, t, transmittance, dim, lookups, den, tx, ty, tz, ar, ag, ab, roughness)
+Delta mode (ratio = False) stops at the first real collision before tmax (collided = True, the
+medium properties there); ratio mode runs to tmax and returns the transmittance estimate.
+Random numbers are ``uniform(seed, index, dim)`` with dim counting up: a pure function of the
+path, so results do not depend on threads.
+"""
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from ..core.rng import uniform
+from .medium import extinction, medium_lookup
+
+MajorantGrid = namedtuple("MajorantGrid", ["lo", "hi", "res", "mu"])
+
+RATIO_RR_THRESHOLD = 0.1  # ratio tracking plays Russian roulette below this transmittance
+
+
+def make_majorant_grid(lo, hi, res, mu) -> MajorantGrid:
+    return MajorantGrid(np.asarray(lo, np.float64), np.asarray(hi, np.float64),
+                        np.asarray(res, np.int64), np.ascontiguousarray(mu, np.float64))
+
+
+@njit(cache=True)
+def _seg_box_dist2(ax, ay, az, bx, by, bz, lo0, lo1, lo2, hi0, hi1, hi2):
+    """Squared distance between segment [a, b] and an axis-aligned box: the point-box distance is
+    convex along the segment, so golden-section search finds its minimum (to ~1e-8 of the length)."""
+    lo_t = 0.0
+    hi_t = 1.0
+    for _ in range(40):
+        m1 = lo_t + (hi_t - lo_t) * 0.381966
+        m2 = lo_t + (hi_t - lo_t) * 0.618034
+        d1 = _pt_box_d2(ax + m1 * (bx - ax), ay + m1 * (by - ay), az + m1 * (bz - az), lo0, lo1, lo2, hi0, hi1, hi2)
+        d2 = _pt_box_d2(ax + m2 * (bx - ax), ay + m2 * (by - ay), az + m2 * (bz - az), lo0, lo1, lo2, hi0, hi1, hi2)
+        if d1 < d2:
+            hi_t = m2
+        else:
+            lo_t = m1
+    m = 0.5 * (lo_t + hi_t)
+    return _pt_box_d2(ax + m * (bx - ax), ay + m * (by - ay), az + m * (bz - az), lo0, lo1, lo2, hi0, hi1, hi2)
+
+
+@njit(cache=True)
+def _pt_box_d2(x, y, z, lo0, lo1, lo2, hi0, hi1, hi2):
+    dx = max(lo0 - x, 0.0, x - hi0)
+    dy = max(lo1 - y, 0.0, y - hi1)
+    dz = max(lo2 - z, 0.0, z - hi2)
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True)
+def majorants_from_capsules(a, b, radius, bound, lo, hi, res):
+    """Majorant grid from capsules (segment a[k]-b[k], radius[k]) each carrying a density bound[k]:
+    a cell gets the largest bound of the capsules that reach it (distance segment-cell <= radius)."""
+    nx, ny, nz = res[0], res[1], res[2]
+    mu = np.zeros((nz, ny, nx))
+    cs = (hi - lo) / res
+    for k in range(a.shape[0]):
+        r = radius[k]
+        i0 = np.empty(3, np.int64)
+        i1 = np.empty(3, np.int64)
+        for ax in range(3):
+            mn = min(a[k, ax], b[k, ax]) - r
+            mx = max(a[k, ax], b[k, ax]) + r
+            i0[ax] = max(int(math.floor((mn - lo[ax]) / cs[ax])), 0)
+            i1[ax] = min(int(math.floor((mx - lo[ax]) / cs[ax])), res[ax] - 1)
+        for iz in range(i0[2], i1[2] + 1):
+            for iy in range(i0[1], i1[1] + 1):
+                for ix in range(i0[0], i1[0] + 1):
+                    if mu[iz, iy, ix] >= bound[k]:
+                        continue
+                    c0 = lo[0] + ix * cs[0]
+                    c1 = lo[1] + iy * cs[1]
+                    c2 = lo[2] + iz * cs[2]
+                    d2 = _seg_box_dist2(a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2],
+                                        c0, c1, c2, c0 + cs[0], c1 + cs[1], c2 + cs[2])
+                    if d2 <= (r * (1.0 + 1e-6)) ** 2 + 1e-18:
+                        mu[iz, iy, ix] = bound[k]
+    return mu
+
+
+@njit(cache=True)
+def majorants_from_voxels(density, lo, hi, res):
+    """Majorant grid for a trilinearly interpolated voxel density (Z, Y, X) with voxel centres at
+    (i + 0.5)/N of [lo, hi] and border clamping: a cell takes the maximum of every voxel whose
+    interpolation support (one voxel either side of its centre) meets the cell."""
+    vz, vy, vx = density.shape
+    nx, ny, nz = res[0], res[1], res[2]
+    mu = np.zeros((nz, ny, nx))
+    vres = np.array([vx, vy, vz])
+    for iz in range(nz):
+        for iy in range(ny):
+            for ix in range(nx):
+                idx = (ix, iy, iz)
+                j0 = np.empty(3, np.int64)
+                j1 = np.empty(3, np.int64)
+                for ax in range(3):
+                    n = res[ax]
+                    # cell [idx/n, (idx+1)/n] in unit coordinates; voxel j centred at (j+0.5)/N
+                    u0 = idx[ax] / n * vres[ax] - 0.5
+                    u1 = (idx[ax] + 1) / n * vres[ax] - 0.5
+                    j0[ax] = min(max(int(math.floor(u0)), 0), vres[ax] - 1)
+                    j1[ax] = min(max(int(math.ceil(u1)), 0), vres[ax] - 1)
+                m = 0.0
+                for kz in range(j0[2], j1[2] + 1):
+                    for ky in range(j0[1], j1[1] + 1):
+                        for kx in range(j0[0], j1[0] + 1):
+                            if density[kz, ky, kx] > m:
+                                m = density[kz, ky, kx]
+                mu[iz, iy, ix] = m
+    return mu
+
+
+@njit(cache=True)
+def ray_box(lo, hi, ox, oy, oz, dx, dy, dz):
+    """(t_near, t_far) of the ray with the box; t_near > t_far when it misses."""
+    t0 = -np.inf
+    t1 = np.inf
+    o = (ox, oy, oz)
+    d = (dx, dy, dz)
+    for ax in range(3):
+        if d[ax] != 0.0:
+            inv = 1.0 / d[ax]
+            ta = (lo[ax] - o[ax]) * inv
+            tb = (hi[ax] - o[ax]) * inv
+            if ta > tb:
+                ta, tb = tb, ta
+            t0 = max(t0, ta)
+            t1 = min(t1, tb)
+        elif o[ax] < lo[ax] or o[ax] > hi[ax]:
+            return 1.0, 0.0
+    return t0, t1
+
+
+@njit(cache=True)
+def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio):
+    """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax]."""
+    T = 1.0
+    lookups = 0
+    t_near, t_far = ray_box(maj.lo, maj.hi, ox, oy, oz, dx, dy, dz)
+    t_near = max(t_near, 0.0)
+    t_far = min(t_far, tmax)
+    if not (t_near < t_far):
+        return False, tmax, T, dim, lookups, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    lo = maj.lo
+    res = maj.res
+    cs0 = (maj.hi[0] - lo[0]) / res[0]
+    cs1 = (maj.hi[1] - lo[1]) / res[1]
+    cs2 = (maj.hi[2] - lo[2]) / res[2]
+    # entry cell
+    tm = t_near + 1e-9 * (t_far - t_near)
+    ix = min(max(int(math.floor((ox + tm * dx - lo[0]) / cs0)), 0), res[0] - 1)
+    iy = min(max(int(math.floor((oy + tm * dy - lo[1]) / cs1)), 0), res[1] - 1)
+    iz = min(max(int(math.floor((oz + tm * dz - lo[2]) / cs2)), 0), res[2] - 1)
+    big = np.inf
+    sx = 1 if dx > 0.0 else -1
+    sy = 1 if dy > 0.0 else -1
+    sz = 1 if dz > 0.0 else -1
+    tnx = (lo[0] + (ix + (1 if dx > 0.0 else 0)) * cs0 - ox) / dx if dx != 0.0 else big
+    tny = (lo[1] + (iy + (1 if dy > 0.0 else 0)) * cs1 - oy) / dy if dy != 0.0 else big
+    tnz = (lo[2] + (iz + (1 if dz > 0.0 else 0)) * cs2 - oz) / dz if dz != 0.0 else big
+    tdx = cs0 / abs(dx) if dx != 0.0 else big
+    tdy = cs1 / abs(dy) if dy != 0.0 else big
+    tdz = cs2 / abs(dz) if dz != 0.0 else big
+    t = t_near
+    while True:
+        t_exit = min(tnx, tny, tnz, t_far)
+        mu = maj.mu[iz, iy, ix]
+        if mu > 0.0:
+            while True:
+                u = uniform(seed, index, dim)
+                dim += 1
+                t -= math.log(1.0 - u) / mu
+                if t >= t_exit:
+                    break
+                den, tx, ty, tz, ar, ag, ab, rough = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz)
+                lookups += 1
+                st = extinction(den, tx, ty, tz, rough, dx, dy, dz)
+                if ratio:
+                    T *= 1.0 - st / mu
+                    if T < RATIO_RR_THRESHOLD:
+                        q = uniform(seed, index, dim)
+                        dim += 1
+                        if q >= 0.5:
+                            return False, tmax, 0.0, dim, lookups, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+                        T *= 2.0
+                else:
+                    v = uniform(seed, index, dim)
+                    dim += 1
+                    if v * mu < st:
+                        return True, t, T, dim, lookups, den, tx, ty, tz, ar, ag, ab, rough
+        t = t_exit
+        if t_exit >= t_far:
+            break
+        if tnx <= tny and tnx <= tnz:
+            ix += sx
+            tnx += tdx
+            if ix < 0 or ix >= res[0]:
+                break
+        elif tny <= tnz:
+            iy += sy
+            tny += tdy
+            if iy < 0 or iy >= res[1]:
+                break
+        else:
+            iz += sz
+            tnz += tdz
+            if iz < 0 or iz >= res[2]:
+                break
+    return False, tmax, T, dim, lookups, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
