@@ -94,6 +94,8 @@ def load_scene(path: str | Path) -> Scene:
         if light["type"] == "envmap":
             light["path"] = str(Path(light["path"]) if Path(light["path"]).is_absolute() else (path.parent / light["path"]).resolve())
             light.setdefault("scale", 1.0)
+            if not Path(light["path"]).exists():
+                raise LoomError(path, f"lights[{i}].path", f"environment map {light['path']} not found")
         lights.append(light)
     render = {**RENDER_DEFAULTS, **raw.get("render", {})}
     if "ground" in render:
