@@ -105,3 +105,24 @@ def test_repeated_points_merged_with_warning_or_refused(tmp_path, cli):
     assert json.loads(text)["control_points"] == 3
     code, _, err = cli("ingest", src, "-o", tmp_path / "r.zarr", "--radius", "0.1", "--refuse-duplicates")
     assert code == 2 and "curve 0, point 2" in err and not (tmp_path / "r.zarr").exists()
+
+
+def test_forced_rebuild_is_byte_identical(existing, cli, tmp_path):
+    """Determinism: the same input and parameters give the same content hash."""
+    out, before = existing
+    code, _, err = cli("ingest", tmp_path / "good.bcc", "-o", out, "--radius", "0.1", "--force")
+    assert code == 0, err
+    assert read_meta(out)["content_hash"] == before
+
+
+def test_demo_scene_ingests_woven_swatch(tmp_path, cli):
+    from pathlib import Path
+
+    scene = Path(__file__).resolve().parents[1] / "data" / "scenes" / "demo.toml"
+    out = tmp_path / "demo.zarr"
+    code, _, err = cli("ingest", scene, "-o", out)
+    assert code == 0, err
+    code, text, _ = cli("info", out, "--json")
+    doc = json.loads(text)
+    assert doc["curves"] == 16 and doc["groups"] == ["warp", "weft"] and doc["closed_curves"] == 0
+    assert [t["preset"] for t in doc["yarn_types"][:2]] == ["cotton1", "cotton1"]
