@@ -1,0 +1,59 @@
+"""File-format readers and writers, each ``read(path, **opts) -> CurveSet`` / ``write(path, cs)``.
+
+``read_curves(path, **opts)`` dispatches on the suffix: ``.bcc`` (bcc.py), ``.obj`` (obj.py),
+``.txt`` (polyline_txt.py), ``.wif`` (wif.py: a weaving draft woven into warp and weft curves;
+opts scale, crimp, max_threads, repeat, samples_per_cell). For curve files ``scale`` (default 1)
+multiplies coordinates and radii. An unknown suffix or a missing file raises LoomError.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..curveset import CurveSet
+from ..errors import LoomError
+
+SUFFIXES = (".bcc", ".obj", ".txt", ".wif")
+
+
+def _module(suffix: str):
+    if suffix == ".bcc":
+        from . import bcc as m
+    elif suffix == ".obj":
+        from . import obj as m
+    elif suffix == ".txt":
+        from . import polyline_txt as m
+    else:
+        from . import wif as m
+    return m
+
+
+def read_curves(path, **opts) -> CurveSet:
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise LoomError(path, None, f"unknown curve file type {path.suffix!r}: expected one of {', '.join(SUFFIXES)}")
+    if not path.is_file():
+        raise LoomError(path, None, "no such file")
+    if suffix == ".wif":
+        return _module(suffix).read(path, **opts)
+    scale = float(opts.pop("scale", 1.0) or 1.0)
+    if not scale > 0:
+        raise LoomError(path, "scale", f"scale = {scale} must be positive")
+    cs = _module(suffix).read(path, **opts)
+    if scale != 1.0:
+        cs.points = [np.asarray(p, dtype=np.float64) * scale for p in cs.points]
+        if cs.point_radius is not None:
+            cs.point_radius = [np.asarray(r, dtype=np.float64) * scale for r in cs.point_radius]
+        cs.notes["scale"] = scale
+    return cs
+
+
+def write_curves(path, cs: CurveSet, **opts) -> None:
+    """Write ``cs`` in the format of ``path``'s suffix (.bcc, .obj, .txt)."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".bcc", ".obj", ".txt"):
+        raise LoomError(path, None, f"cannot write curve file type {path.suffix!r}: expected .bcc, .obj or .txt")
+    _module(suffix).write(path, cs, **opts)

@@ -1,0 +1,294 @@
+"""WIF (Weaving Information File) drafts -> interlacement, colours and thread sizes.
+
+WIF is INI-like: ``[SECTION]`` headers and ``key=value`` lines. Section and key names are
+case-insensitive (inner whitespace collapsed), values may carry spaces, ``;`` starts a comment
+line, and sections may be missing. What loomlight uses:
+
+- ``[WEAVING]`` Shafts, Treadles, Rising Shed (yes/no/true/false/1/0; default yes). A rising
+  shed lifts the shafts of the tie-up or lift plan (their warp ends go over the pick); a
+  sinking shed lowers them (the interlacement is inverted).
+- ``[WARP]`` / ``[WEFT]`` Threads, Units, Spacing, Thickness, Color.
+- ``[THREADING]`` end = shaft[,shaft...] (required: its absence is "[THREADING]: missing").
+- ``[LIFTPLAN]`` pick = shafts lifted; used when present, else ``[TIEUP]`` treadle = shafts with
+  ``[TREADLING]`` pick = treadle[,treadle...].
+- ``[COLOR PALETTE]`` Range = lo,hi (default 0,255), ``[COLOR TABLE]`` index = r,g,b,
+  ``[WARP COLORS]`` / ``[WEFT COLORS]`` thread = colour index, falling back to ``[WARP]`` /
+  ``[WEFT]`` Color (an index, or r,g,b in the palette range), else no colour (the yarn type's).
+  WIF colours are display (sRGB-encoded) values: they are mapped to [0, 1] by the range and
+  decoded with the sRGB transfer function to linear RGB.
+
+Defaults for threads without entries: an end missing from the threading is on no shaft (never
+lifted: under every pick in a rising shed); a pick missing from the treadling / lift plan lifts
+nothing. Shaft or treadle 0 means "none". Thread counts come from Threads, else from the
+largest thread number used.
+
+Lengths: Spacing and Thickness are converted to centimetres (loomlight's scene unit for
+drafts): Units = Centimeters (default when absent), Millimeters (/10), Inches (x 2.54),
+Decipoints (1/720 inch). ``scale`` multiplies the result. Spacing missing: Thickness, else
+0.05 cm. The yarn radius is Thickness / 2; without Thickness, spacing / 4 (a radius that keeps
+crimped crossings free of interpenetration, see woven.py).
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LoomError
+
+_UNITS_CM = {"centimeters": 1.0, "centimetres": 1.0, "cm": 1.0, "millimeters": 0.1, "millimetres": 0.1,
+             "mm": 0.1, "inches": 2.54, "inch": 2.54, "in": 2.54, "decipoints": 2.54 / 720.0}
+_YES = {"yes": True, "true": True, "1": True, "on": True, "y": True,
+        "no": False, "false": False, "0": False, "off": False, "n": False}
+
+
+@dataclass
+class WifDraft:
+    over: np.ndarray                      # (ends, picks) bool, True = warp over weft
+    rising: bool
+    warp_spacing: float                   # cm
+    weft_spacing: float
+    warp_radius: float
+    weft_radius: float
+    warp_colors: list = field(default_factory=list)   # per end linear RGB or None
+    weft_colors: list = field(default_factory=list)   # per pick
+    shafts: int = 0
+    treadles: int = 0
+    notes: dict = field(default_factory=dict)
+
+
+def _norm(name: str) -> str:
+    return " ".join(name.strip().lower().split())
+
+
+def parse_sections(path) -> dict:
+    """{section: {key: (value, line number)}} plus '__line__' (header line) per section."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as e:
+        raise LoomError(path, None, f"cannot read: {e.strerror or e}") from None
+    sections: dict[str, dict] = {}
+    cur = None
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.strip()
+        if not line or line.startswith(";"):
+            continue
+        m = re.fullmatch(r"\[([^\]]*)\]", line)
+        if m:
+            name = _norm(m.group(1))
+            cur = sections.setdefault(name, {"__line__": (None, lineno)})
+            continue
+        if cur is None or "=" not in line:
+            continue  # text outside sections or free-text lines (e.g. [NOTES]) carry no draft data
+        key, value = line.split("=", 1)
+        cur[_norm(key)] = (value.strip(), lineno)
+    return sections
+
+
+class _Reader:
+    def __init__(self, path, sections):
+        self.path, self.s = path, sections
+
+    def err(self, sec, lineno, msg):
+        place = f"[{sec.upper()}]" + (f" line {lineno}" if lineno else "")
+        return LoomError(self.path, place, msg)
+
+    def get(self, sec, key, default=None):
+        return self.s.get(sec, {}).get(key, (default, None))
+
+    def number(self, sec, key, default=None, kind=float):
+        v, ln = self.get(sec, key)
+        if v is None or v == "":
+            return default
+        try:
+            x = kind(v.replace(" ", "")) if kind is int else float(v)
+        except ValueError:
+            raise self.err(sec, ln, f"{key} = {v!r} is not a number") from None
+        if not np.isfinite(x):
+            raise self.err(sec, ln, f"{key} = {v!r} is not finite")
+        return x
+
+    def int_list(self, sec, key, value, lineno):
+        if value.strip() == "":
+            return []
+        try:
+            return [int(t) for t in re.split(r"[,\s]+", value.strip()) if t]
+        except ValueError:
+            raise self.err(sec, lineno, f"{key} = {value!r}: expected integers separated by commas") from None
+
+    def table(self, sec):
+        """{thread number: (list of ints, line)} for a numbered section."""
+        out = {}
+        for key, (value, ln) in self.s.get(sec, {}).items():
+            if key == "__line__":
+                continue
+            try:
+                k = int(key)
+            except ValueError:
+                raise self.err(sec, ln, f"key {key!r} is not a thread number") from None
+            if k < 1:
+                raise self.err(sec, ln, f"thread number {k} must be >= 1")
+            out[k] = (self.int_list(sec, key, value, ln), ln)
+        return out
+
+
+def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def parse(path, scale: float = 1.0) -> WifDraft:
+    path = Path(path)
+    r = _Reader(path, parse_sections(path))
+    s = r.s
+    if "threading" not in s:
+        raise LoomError(path, "[THREADING]", "missing: the draft has no threading section")
+
+    v, ln = r.get("weaving", "rising shed", "yes")
+    if v.strip().lower() not in _YES:
+        raise r.err("weaving", ln, f"Rising Shed = {v!r}: expected yes or no")
+    rising = _YES[v.strip().lower()]
+
+    threading = r.table("threading")
+    use_lift = "liftplan" in s
+    lifts = r.table("liftplan") if use_lift else None
+    if not use_lift:
+        if "treadling" not in s:
+            raise LoomError(path, "[TREADLING]", "missing: the draft has neither a treadling nor a [LIFTPLAN]")
+        if "tieup" not in s:
+            raise LoomError(path, "[TIEUP]", "missing: a treadling needs a tie-up")
+        treadling = r.table("treadling")
+        tieup = r.table("tieup")
+
+    def count(sec, key, used, what):
+        n = r.number(sec, key, None, int)
+        top = max(used) if used else 0
+        if n is None:
+            return top
+        if n < 0:
+            raise r.err(sec, r.get(sec, key)[1], f"{key} = {n} is negative")
+        if top > n:
+            raise r.err(sec, r.get(sec, key)[1], f"{key} = {n}, but {what} {top} is used")
+        return n
+
+    ends = count("warp", "threads", list(threading), "end")
+    pick_table = lifts if use_lift else treadling
+    picks = count("weft", "threads", list(pick_table), "pick")
+    if ends < 1 or picks < 1:
+        raise LoomError(path, "[WARP]" if ends < 1 else "[WEFT]", "the draft has no threads")
+    shafts_used = [x for vals, _ in threading.values() for x in vals]
+    if use_lift:
+        shafts_used += [x for vals, _ in lifts.values() for x in vals]
+    else:
+        shafts_used += [x for vals, _ in tieup.values() for x in vals]
+    shafts = count("weaving", "shafts", shafts_used, "shaft")
+
+    def matrix(table, n_rows, n_cols, sec, what):
+        m = np.zeros((n_rows, max(n_cols, 1)), dtype=bool)
+        for k, (vals, ln) in table.items():
+            if k > n_rows:
+                raise r.err(sec, ln, f"thread {k} is beyond the {n_rows} declared")
+            for x in vals:
+                if x < 0 or x > n_cols:
+                    raise r.err(sec, ln, f"{what} {x} is outside 1..{n_cols}")
+                if x:
+                    m[k - 1, x - 1] = True
+        return m
+
+    from stages.ingest.weave import interlacement_from_draft
+
+    th = matrix(threading, ends, shafts, "threading", "shaft")
+    if use_lift:
+        over = interlacement_from_draft(th, liftplan=matrix(lifts, picks, shafts, "liftplan", "shaft"), rising=rising)
+        treadles = 0
+    else:
+        treadles = count("weaving", "treadles", list(tieup) + [x for vals, _ in treadling.values() for x in vals], "treadle")
+        tu = matrix(tieup, treadles, shafts, "tieup", "shaft")
+        tr = matrix(treadling, picks, treadles, "treadling", "treadle")
+        over = interlacement_from_draft(th, tieup=tu, treadling=tr, rising=rising)
+
+    # colours
+    lo, hi = 0.0, 255.0
+    v, ln = r.get("color palette", "range")
+    if v:
+        parts = [t for t in re.split(r"[,\s]+", v) if t]
+        try:
+            lo, hi = float(parts[0]), float(parts[1])
+        except (ValueError, IndexError):
+            raise r.err("color palette", ln, f"Range = {v!r}: expected lo,hi") from None
+        if not hi > lo:
+            raise r.err("color palette", ln, f"Range = {v!r}: hi must exceed lo")
+
+    def rgb(vals, sec, ln):
+        a = (np.asarray(vals, dtype=float) - lo) / (hi - lo)
+        if len(vals) != 3:
+            raise r.err(sec, ln, f"colour needs 3 components, got {len(vals)}")
+        return tuple(float(x) for x in _srgb_to_linear(np.clip(a, 0.0, 1.0)))
+
+    ctable = {}
+    for key, (value, ln) in s.get("color table", {}).items():
+        if key == "__line__":
+            continue
+        try:
+            ctable[int(key)] = rgb([float(t) for t in re.split(r"[,\s]+", value.strip()) if t], "color table", ln)
+        except ValueError:
+            raise r.err("color table", ln, f"{key} = {value!r}: expected r,g,b") from None
+
+    def thread_colors(sec_colors, sec_thread, n):
+        dflt = None
+        v, ln = r.get(sec_thread, "color")
+        if v:
+            vals = [t for t in re.split(r"[,\s]+", v) if t]
+            try:
+                nums = [float(t) for t in vals]
+            except ValueError:
+                raise r.err(sec_thread, ln, f"Color = {v!r}: expected a palette index or r,g,b") from None
+            if len(nums) == 1:
+                if int(nums[0]) not in ctable:
+                    raise r.err(sec_thread, ln, f"Color = {v!r}: no such entry in [COLOR TABLE]")
+                dflt = ctable[int(nums[0])]
+            else:
+                dflt = rgb(nums, sec_thread, ln)
+        out = [dflt] * n
+        for k, (vals, ln) in r.table(sec_colors).items():
+            if k > n:
+                raise r.err(sec_colors, ln, f"thread {k} is beyond the {n} declared")
+            if len(vals) != 1 or vals[0] not in ctable:
+                raise r.err(sec_colors, ln, f"colour index {vals} has no entry in [COLOR TABLE]")
+            out[k - 1] = ctable[vals[0]]
+        return out
+
+    warp_colors = thread_colors("warp colors", "warp", ends)
+    weft_colors = thread_colors("weft colors", "weft", picks)
+
+    def sizes(sec):
+        v, ln = r.get(sec, "units", "centimeters")
+        unit = _UNITS_CM.get(_norm(v))
+        if unit is None:
+            raise r.err(sec, ln, f"Units = {v!r}: expected Centimeters, Millimeters, Inches or Decipoints")
+        spacing = r.number(sec, "spacing")
+        thick = r.number(sec, "thickness")
+        for name, x in (("Spacing", spacing), ("Thickness", thick)):
+            if x is not None and x <= 0:
+                raise r.err(sec, r.get(sec, name.lower())[1], f"{name} = {x} must be positive")
+        spacing = spacing * unit if spacing is not None else (thick * unit if thick is not None else 0.05)
+        radius = thick * unit / 2.0 if thick is not None else spacing / 4.0
+        return spacing * scale, radius * scale
+
+    warp_spacing, warp_radius = sizes("warp")
+    weft_spacing, weft_radius = sizes("weft")
+    return WifDraft(over=over, rising=rising, warp_spacing=warp_spacing, weft_spacing=weft_spacing,
+                    warp_radius=warp_radius, weft_radius=weft_radius, warp_colors=warp_colors,
+                    weft_colors=weft_colors, shafts=shafts, treadles=treadles,
+                    notes={"lift": "liftplan" if use_lift else "tieup+treadling"})
+
+
+def read(path, scale: float = 1.0, crimp: float = 1.0, max_threads: int | None = None,
+         repeat=None, samples_per_cell: int = 6, **_ignored):
+    """Draft -> CurveSet of woven warp and weft yarns (see ``pipeline.generators.from_wif``)."""
+    from ..generators import from_wif
+
+    return from_wif(path, scale=scale, crimp=crimp, max_threads=max_threads, repeat=repeat,
+                    samples_per_cell=samples_per_cell)
