@@ -170,19 +170,20 @@ def sweep_rmse_png(rmse_by_method: dict[str, float], path: str | Path, reference
     return _savefig(fig, Path(path))
 
 
-def sweep_scatter_png(ref_means: np.ndarray, method_means: dict[str, np.ndarray], path: str | Path,
-                      reference: str) -> Path:
-    """ref_means (N, 3), method_means[m] (N, 3): one point per configuration and channel."""
+def sweep_scatter_png(pairs: dict[str, tuple[np.ndarray, np.ndarray]], path: str | Path, reference: str) -> Path:
+    """pairs[method] = (reference means (N, 3), method means (N, 3)): a point per configuration and channel."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(4.2, 4.0))
-    lo = float(min([ref_means.min()] + [v.min() for v in method_means.values()] + [0.0]))
-    hi = float(max([ref_means.max()] + [v.max() for v in method_means.values()] + [1e-6]))
+    vals = [np.asarray(v) for p in pairs.values() for v in p] or [np.zeros(1)]
+    lo = float(min(0.0, min(v.min() for v in vals)))
+    hi = float(max(1e-6, max(v.max() for v in vals)))
     ax.plot([lo, hi], [lo, hi], color="0.6", lw=1)
-    for name, v in method_means.items():
-        ax.scatter(ref_means.ravel(), v.ravel(), s=12, label=name)
+    for name, (r, v) in pairs.items():
+        ax.scatter(np.ravel(r), np.ravel(v), s=12, label=name)
     ax.set_xlabel(f"mean intensity, {reference}", fontsize=8)
     ax.set_ylabel("mean intensity, method", fontsize=8)
-    ax.legend(fontsize=8)
+    if pairs:
+        ax.legend(fontsize=8)
     ax.set_title("per configuration and channel", fontsize=9)
     return _savefig(fig, Path(path))
 
