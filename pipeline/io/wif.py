@@ -106,9 +106,9 @@ class _Reader:
         try:
             x = kind(v.replace(" ", "")) if kind is int else float(v)
         except ValueError:
-            raise self.err(sec, ln, f"{key} = {v!r} is not a number") from None
+            raise self.err(sec, ln, f"{key.title()} = {v!r} is not a number") from None
         if not np.isfinite(x):
-            raise self.err(sec, ln, f"{key} = {v!r} is not finite")
+            raise self.err(sec, ln, f"{key.title()} = {v!r} is not finite")
         return x
 
     def int_list(self, sec, key, value, lineno):
@@ -168,9 +168,9 @@ def parse(path, scale: float = 1.0) -> WifDraft:
         if n is None:
             return top
         if n < 0:
-            raise r.err(sec, r.get(sec, key)[1], f"{key} = {n} is negative")
+            raise r.err(sec, r.get(sec, key)[1], f"{key.title()} = {n} is negative")
         if top > n:
-            raise r.err(sec, r.get(sec, key)[1], f"{key} = {n}, but {what} {top} is used")
+            raise r.err(sec, r.get(sec, key)[1], f"{key.title()} = {n}, but {what} {top} is used")
         return n
 
     ends = count("warp", "threads", list(threading), "end")
