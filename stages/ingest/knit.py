@@ -135,10 +135,3 @@ def knit_curves(pattern: str, wales: int, courses: int, w: float, h: float, r: f
         out[:, :, 2] = z
     return out, np.full(courses, bool(tube))
 
-
-def stitch_loop(curve: np.ndarray, j: int, samples_per_stitch: int) -> np.ndarray:
-    """The control points of stitch j from neck to neck (u = 1/8 .. 7/8), as an open chain;
-    closing it with the neck-to-neck chord gives the loop whose linking is tested."""
-    s = samples_per_stitch
-    a, b = j * s + s // 8, j * s + (7 * s) // 8
-    return curve[a:b + 1]
