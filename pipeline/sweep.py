@@ -15,7 +15,7 @@ configuration against path tracing; Table 2: time per image and speed-up over pa
     name = "fiberpath"              # label: output file renders/<config>/<name>.exr
     method = "fiberpath"            # the renderer (loomlight render --method); default: name
     render = { spp = 64 }           # merged into the scene's [render] for this method only
-    args = []                       # extra command-line arguments for loomlight render
+    args = []                       # extra arguments for loomlight render ({sweep_dir}, {out} expand)
 
     [grid]                          # the product of these becomes configurations
     axes = [[0, 0, 1], [0.5, 0, 0.866]]   # SG axes (towards the light), normalised
@@ -40,6 +40,9 @@ process) to ``DIR/renders/<config>/<method>.exr`` unless that image exists and i
 ``<method>.stamp.json`` records the same scene text, method, arguments, loomlight version and
 content hashes of the files the scene refers to. Times per image come from the render artifact
 beside the image (``<method>.zarr``), else from the wall time measured around the render call.
+Method ``args`` may use ``{sweep_dir}`` (the sweep file's folder) and ``{out}`` (the output folder);
+other relative paths are relative to the working directory. An argument naming an existing file or
+artifact adds its content hash to the stamp, so a changed input (e.g. ``--fibers``) re-renders.
 It then writes ``DIR/sweep.json``, ``DIR/metrics.json`` (per image against the reference
 method's image of the same configuration), plots, ``DIR/report.md``/``.html`` and the
 ``evaluation`` artifact ``DIR/evaluation.zarr``.
@@ -271,6 +274,24 @@ class Job:
     stamp: Path
     key: str
     text: str
+    args: list[str]
+
+
+def expand_args(sweep: Sweep, out: Path, args: list[str]) -> list[str]:
+    return [a.replace("{sweep_dir}", str(sweep.path.parent.resolve())).replace("{out}", str(out.resolve())) for a in args]
+
+
+def _arg_hashes(args: list[str]) -> dict[str, str]:
+    from .artifacts import content_hash
+
+    out = {}
+    for a in args:
+        try:
+            if Path(a).exists():
+                out[a] = content_hash(a)
+        except (LoomError, OSError, ValueError):
+            continue
+    return out
 
 
 def _jobs(sweep: Sweep, out: Path) -> list[Job]:
@@ -282,11 +303,14 @@ def _jobs(sweep: Sweep, out: Path) -> list[Job]:
         for m in sweep.methods:
             raw = derived_scene(sweep, c, m)
             validate(raw, "scene", sweep.path, prefix=f"configuration {c.name!r}, method {m.name!r}: ")
-            text = dumps_toml(raw)
-            key = hashlib.sha256(_canonical({"scene": text, "method": m.method, "args": m.args, "version": __version__,
-                                             "files": _referenced_files(raw)}).encode()).hexdigest()
+            text = (f"# derived by loomlight evaluate --sweep {sweep.path.name}: scene {sweep.scene_path.name}, "
+                    f"configuration {c.name}, method {m.name}\n" + dumps_toml(raw))
+            args = expand_args(sweep, out, m.args)
+            key = hashlib.sha256(_canonical({"scene": text, "method": m.method, "args": args, "version": __version__,
+                                             "files": {**_referenced_files(raw), **_arg_hashes(args)}}).encode()).hexdigest()
             d = out / "renders" / c.name
-            jobs.append(Job(c, m, d / f"{m.name}.scene.toml", d / f"{m.name}.exr", d / f"{m.name}.stamp.json", key, text))
+            jobs.append(Job(c, m, d / f"{m.name}.scene.toml", d / f"{m.name}.exr", d / f"{m.name}.stamp.json", key, text,
+                            args))
     return jobs
 
 
@@ -340,10 +364,10 @@ def run_sweep(sweep_path: str | Path, out_dir: str | Path, force: bool = False, 
             write_text(job.scene_file, job.text)
             job.stamp.unlink(missing_ok=True)
             t0 = time.perf_counter()
-            do_render(job.scene_file, job.method.method, job.exr, list(job.method.args))
+            do_render(job.scene_file, job.method.method, job.exr, list(job.args))
             dt = time.perf_counter() - t0
             write_text(job.stamp, json.dumps({"key": job.key, "measured_wall_time_s": dt, "method": job.method.method,
-                                              "args": job.method.args}, indent=2) + "\n")
+                                              "args": job.args}, indent=2) + "\n")
             rendered += 1
             advance()
     reused = sum(1 for j in jobs if j not in todo and _stamp(j) is not None)

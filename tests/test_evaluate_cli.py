@@ -134,3 +134,64 @@ def test_images_below_ssim_window_refused(cli, tmp_path):
     write_render(tmp_path / "b.exr", np.zeros((8, 8, 3), np.float32))
     code, _, err = cli("evaluate", "--ref", tmp_path / "a.exr", "--test", tmp_path / "b.exr", "-o", tmp_path / "o")
     assert code == 2 and "11x11" in err
+
+
+# ------------------------------------------------------------------------------------------------
+# --table1: the memory-table rows come from pipeline.memory_table (another stage); a stand-in
+# module with known rows checks the table's assembly, the render-time ratio and the image agreement.
+def _fake_memory_table(monkeypatch, rows):
+    import sys
+    import types
+
+    mod = types.ModuleType("pipeline.memory_table")
+    mod.__file__ = "pipeline/memory_table.py"
+    mod.table1_rows = lambda scenes: [dict(r, scene=s.stem) for r, s in zip(rows, scenes)]
+    monkeypatch.setitem(sys.modules, "pipeline.memory_table", mod)
+
+
+def test_table1_rows_times_and_agreement(cli, tmp_path, monkeypatch):
+    rows = [{"full_total_bytes": 42_300_000_000, "full_regular_bytes": 42_200_000_000, "full_hair_bytes": 110_300_000,
+             "full_loop_bytes": 36_800_000, "ours_total_bytes": 189_700_000, "ours_regular_bytes": 150_700_000,
+             "ours_hair_bytes": 39_000_000, "ours_loop_bytes": 0},
+            {"full_total_bytes": 1_000_000, "ours_total_bytes": 10_000}]
+    _fake_memory_table(monkeypatch, rows)
+    (tmp_path / "demo.toml").write_text("# scene\n")
+    (tmp_path / "woven.toml").write_text("# scene\n")
+    img = _scene_image(seed=4)
+    write_render(tmp_path / "proc.exr", img)
+    write_render(tmp_path / "real.exr", img + np.float32(0.01))
+    _fake_render_artifact(tmp_path / "proc.exr", 5.0, 2_000_000)
+    _fake_render_artifact(tmp_path / "real.exr", 6.0, 9_000_000)
+    out = tmp_path / "t1"
+    code, stdout, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "--scene", tmp_path / "woven.toml",
+                            "--procedural", tmp_path / "proc.exr", "--realized", tmp_path / "real.exr", "-o", out)
+    assert code == 0, err
+    got = json.loads((out / "table1.json").read_text())
+    assert [r["scene"] for r in got] == ["demo", "woven"]
+    assert got[0]["saving"] == pytest.approx(42_300_000_000 / 189_700_000)    # 223.0x, as in seed 000 Table 1
+    assert got[1]["saving"] == pytest.approx(100.0)
+    assert got[0]["procedural_time_s"] == 5.0 and got[0]["realized_time_s"] == 6.0
+    assert got[0]["speed_ratio"] == pytest.approx(1.2)
+    assert got[0]["procedural_vs_realized"]["rmse"] == pytest.approx(0.01, rel=1e-4)
+    assert "procedural_time_s" not in got[1]
+    md = (out / "report.md").read_text()
+    assert "(223.0x)" in md and "42.3 GB" in md and "189.7 MB" in md and "(100.0x)" in md
+    assert str(out / "report.md") in stdout
+
+
+def test_table1_bad_inputs(cli, tmp_path, monkeypatch):
+    import sys
+
+    (tmp_path / "demo.toml").write_text("# scene\n")
+    monkeypatch.setitem(sys.modules, "pipeline.memory_table", None)      # the module is absent
+    code, _, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "-o", tmp_path / "o")
+    assert code == 2 and "pipeline.memory_table" in err
+    _fake_memory_table(monkeypatch, [{"full_total_bytes": 1, "ours_total_bytes": 1}])
+    write_render(tmp_path / "p.exr", _scene_image())
+    code, _, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "--procedural", tmp_path / "p.exr",
+                       "-o", tmp_path / "o")
+    assert code == 2 and "--realized" in err
+    code, _, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "--procedural", tmp_path / "p.exr",
+                       "--realized", tmp_path / "nope.exr", "-o", tmp_path / "o")
+    assert code == 2 and "nope.exr" in err
+    assert not (tmp_path / "o" / "report.md").exists()
