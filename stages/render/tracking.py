@@ -39,39 +39,31 @@ def make_majorant_grid(lo, hi, res, mu) -> MajorantGrid:
 
 
 @njit(cache=True)
-def _seg_box_dist2(ax, ay, az, bx, by, bz, lo0, lo1, lo2, hi0, hi1, hi2):
-    """Squared distance between segment [a, b] and an axis-aligned box: the point-box distance is
-    convex along the segment, so golden-section search finds its minimum (to ~1e-8 of the length)."""
-    lo_t = 0.0
-    hi_t = 1.0
-    for _ in range(40):
-        m1 = lo_t + (hi_t - lo_t) * 0.381966
-        m2 = lo_t + (hi_t - lo_t) * 0.618034
-        d1 = _pt_box_d2(ax + m1 * (bx - ax), ay + m1 * (by - ay), az + m1 * (bz - az), lo0, lo1, lo2, hi0, hi1, hi2)
-        d2 = _pt_box_d2(ax + m2 * (bx - ax), ay + m2 * (by - ay), az + m2 * (bz - az), lo0, lo1, lo2, hi0, hi1, hi2)
-        if d1 < d2:
-            hi_t = m2
-        else:
-            lo_t = m1
-    m = 0.5 * (lo_t + hi_t)
-    return _pt_box_d2(ax + m * (bx - ax), ay + m * (by - ay), az + m * (bz - az), lo0, lo1, lo2, hi0, hi1, hi2)
-
-
-@njit(cache=True)
-def _pt_box_d2(x, y, z, lo0, lo1, lo2, hi0, hi1, hi2):
-    dx = max(lo0 - x, 0.0, x - hi0)
-    dy = max(lo1 - y, 0.0, y - hi1)
-    dz = max(lo2 - z, 0.0, z - hi2)
+def _pt_seg_d2(px, py, pz, ax, ay, az, bx, by, bz):
+    ux = bx - ax
+    uy = by - ay
+    uz = bz - az
+    wx = px - ax
+    wy = py - ay
+    wz = pz - az
+    uu = ux * ux + uy * uy + uz * uz
+    t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
+    t = min(max(t, 0.0), 1.0)
+    dx = wx - t * ux
+    dy = wy - t * uy
+    dz = wz - t * uz
     return dx * dx + dy * dy + dz * dz
 
 
 @njit(cache=True)
 def majorants_from_capsules(a, b, radius, bound, lo, hi, res):
     """Majorant grid from capsules (segment a[k]-b[k], radius[k]) each carrying a density bound[k]:
-    a cell gets the largest bound of the capsules that reach it (distance segment-cell <= radius)."""
+    a cell gets the largest bound of the capsules that may reach it (segment within radius + half the
+    cell diagonal of the cell centre: conservative, at most one cell looser than exact)."""
     nx, ny, nz = res[0], res[1], res[2]
     mu = np.zeros((nz, ny, nx))
     cs = (hi - lo) / res
+    half_diag = 0.5 * math.sqrt(cs[0] ** 2 + cs[1] ** 2 + cs[2] ** 2) * (1.0 + 1e-9)
     for k in range(a.shape[0]):
         r = radius[k]
         i0 = np.empty(3, np.int64)
@@ -86,12 +78,12 @@ def majorants_from_capsules(a, b, radius, bound, lo, hi, res):
                 for ix in range(i0[0], i1[0] + 1):
                     if mu[iz, iy, ix] >= bound[k]:
                         continue
-                    c0 = lo[0] + ix * cs[0]
-                    c1 = lo[1] + iy * cs[1]
-                    c2 = lo[2] + iz * cs[2]
-                    d2 = _seg_box_dist2(a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2],
-                                        c0, c1, c2, c0 + cs[0], c1 + cs[1], c2 + cs[2])
-                    if d2 <= (r * (1.0 + 1e-6)) ** 2 + 1e-18:
+                    # conservative: a cell within r of the segment has its centre within r + half diagonal
+                    cx = lo[0] + (ix + 0.5) * cs[0]
+                    cy = lo[1] + (iy + 0.5) * cs[1]
+                    cz = lo[2] + (iz + 0.5) * cs[2]
+                    d2 = _pt_seg_d2(cx, cy, cz, a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2])
+                    if d2 <= (r + half_diag) ** 2:
                         mu[iz, iy, ix] = bound[k]
     return mu
 
