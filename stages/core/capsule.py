@@ -1,0 +1,106 @@
+"""Ray-capsule intersection: a fibre segment as a cylinder of radius r with spherical ends.
+
+A fibre polyline is a chain of capsules (cylinders with spherical joints and end caps), the same
+shape as Mitsuba 3's ``linearcurve``. A capsule is the union of three convex pieces (the finite
+cylinder body and the two end spheres); a ray's hit is the nearest *entering* intersection of any
+piece beyond ``tmin`` (a ray that starts inside a capsule does not report the way out).
+
+Robustness
+----------
+- Far origins: the ray origin is first moved along the ray to the point nearest the segment's
+  midpoint, so the quadratics see coordinates of the size of the segment, not of the scene
+  (no catastrophic cancellation for rays that start far away or on another fibre).
+- Grazing rays parallel to the axis: the body quadratic degenerates (a -> 0); it is skipped below a
+  relative threshold and the ray can only enter through the end spheres, which stay well conditioned.
+"""
+import math
+
+from numba import njit
+
+INF = math.inf
+
+
+@njit(cache=True)
+def _sphere_enter(ox, oy, oz, dx, dy, dz, cx, cy, cz, r):
+    """Near root of |o + t d - c| = r for unit d; inf when missed."""
+    px = ox - cx
+    py = oy - cy
+    pz = oz - cz
+    b = px * dx + py * dy + pz * dz
+    # c = |p|^2 - r^2 computed as |p - (p.d)d|^2 - r^2 + b^2 for accuracy
+    qx = px - b * dx
+    qy = py - b * dy
+    qz = pz - b * dz
+    q2 = qx * qx + qy * qy + qz * qz
+    h = r * r - q2
+    if h < 0.0:
+        return INF
+    return -b - math.sqrt(h)
+
+
+@njit(cache=True)
+def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
+    """Distance t > tmin to the first entering hit of the capsule (a, b, r) along unit direction d, or inf."""
+    # move the origin next to the segment (t0 is added back at the end)
+    mx = 0.5 * (ax + bx)
+    my = 0.5 * (ay + by)
+    mz = 0.5 * (az + bz)
+    t0 = (mx - ox) * dx + (my - oy) * dy + (mz - oz) * dz
+    px = ox + t0 * dx
+    py = oy + t0 * dy
+    pz = oz + t0 * dz
+    best = INF
+    bax = bx - ax
+    bay = by - ay
+    baz = bz - az
+    baba = bax * bax + bay * bay + baz * baz
+    if baba > 0.0:
+        oax = px - ax
+        oay = py - ay
+        oaz = pz - az
+        bard = bax * dx + bay * dy + baz * dz
+        baoa = bax * oax + bay * oay + baz * oaz
+        rdoa = dx * oax + dy * oay + dz * oaz
+        a = baba - bard * bard
+        if a > 1e-12 * baba:
+            # components of oa perpendicular to the axis, for a well-conditioned constant term
+            k = baoa / baba
+            ux = oax - k * bax
+            uy = oay - k * bay
+            uz = oaz - k * baz
+            b = baba * rdoa - baoa * bard
+            c = baba * (ux * ux + uy * uy + uz * uz - r * r)
+            h = b * b - a * c
+            if h >= 0.0:
+                t = (-b - math.sqrt(h)) / a
+                y = baoa + t * bard
+                if y > 0.0 and y < baba and t + t0 > tmin:
+                    best = t
+    ta = _sphere_enter(px, py, pz, dx, dy, dz, ax, ay, az, r)
+    if ta < best and ta + t0 > tmin:
+        best = ta
+    tb = _sphere_enter(px, py, pz, dx, dy, dz, bx, by, bz, r)
+    if tb < best and tb + t0 > tmin:
+        best = tb
+    return best + t0
+
+
+@njit(cache=True)
+def capsule_normal(px, py, pz, ax, ay, az, bx, by, bz):
+    """Outward unit normal at surface point p: from the closest axis point to p. Returns (nx, ny, nz, s)
+    with s in [0, 1] the axis parameter of that closest point."""
+    bax = bx - ax
+    bay = by - ay
+    baz = bz - az
+    baba = bax * bax + bay * bay + baz * baz
+    s = 0.0
+    if baba > 0.0:
+        s = ((px - ax) * bax + (py - ay) * bay + (pz - az) * baz) / baba
+        s = min(1.0, max(0.0, s))
+    nx = px - (ax + s * bax)
+    ny = py - (ay + s * bay)
+    nz = pz - (az + s * baz)
+    n = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if n == 0.0:
+        return 0.0, 0.0, 1.0, s
+    return nx / n, ny / n, nz / n, s
