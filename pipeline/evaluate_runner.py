@@ -271,6 +271,8 @@ TABLE1_COLUMNS = [  # (row key, header) in the order of seed 000 Table 1
     ("ours_hair_bytes", "Ours: hair"), ("ours_loop_bytes", "Ours: loop"),
     ("procedural_time_s", "Render time (procedural)"), ("realized_time_s", "Render time (realized)"),
     ("speed_ratio", "realized / procedural time"),
+    ("procedural_peak_memory_bytes", "Peak memory (procedural)"),
+    ("realized_peak_memory_bytes", "Peak memory (realized)"),
 ]
 
 

@@ -120,7 +120,8 @@ def _expected_lights(sweep_path):
         ax = (np.asarray(a, float) / np.linalg.norm(a)).tolist()
         for lam in g["sharpness"]:
             out[f"top_a{i}_l{lam:g}"] = {"type": "sg", "axis": ax, "sharpness": lam, "power": g["power"]}
-        out[f"top_a{i}_dir"] = {"type": "directional", "direction": (-np.asarray(ax)).tolist(), "irradiance": g["irradiance"]}
+        if g.get("directional"):
+            out[f"top_a{i}_dir"] = {"type": "directional", "direction": (-np.asarray(ax)).tolist(), "irradiance": g["irradiance"]}
     d = np.array([-1.0, 0.0, -0.5])
     out["grazing"] = {"type": "directional", "direction": (d / np.linalg.norm(d)).tolist(), "irradiance": 1.0}
     return out
@@ -175,21 +176,27 @@ def test_derived_scenes_carry_overrides(sweep_file, tmp_path):
     assert g.render["source"] == "procedural" and g.seed == 3
 
 
+def _small(text):
+    return text.replace("sharpness = [10, 100]", "sharpness = [10]").replace("directional = true", "directional = false")
+
+
 def test_renders_reused_when_up_to_date(sweep_file, tmp_path):
+    sweep_file.write_text(_small(SWEEP.format(fast_source="realized")))   # 3 configurations x 2 methods
     out = tmp_path / "out"
     calls = []
     sw.run_sweep(sweep_file, out, renderer=standin_render(calls))
-    assert len(calls) == 14
+    assert len(calls) == 6
     calls.clear()
     res = sw.run_sweep(sweep_file, out, renderer=standin_render(calls))
-    assert calls == [] and res.rendered == 0 and res.reused == 14
-    (out / "renders" / "grazing" / "fast.exr").unlink()                 # a missing image
-    sweep_file.write_text(SWEEP.format(fast_source="grid"))             # the fast method changed
+    assert calls == [] and res.rendered == 0 and res.reused == 6
+    (out / "renders" / "grazing" / "exact.exr").unlink()                # a missing image
+    sweep_file.write_text(_small(SWEEP.format(fast_source="grid")))     # the fast method changed
     res = sw.run_sweep(sweep_file, out, renderer=standin_render(calls))
-    assert sorted(calls) == sorted((c, "fast") for c in _expected_lights(sweep_file))
+    assert sorted(calls) == sorted([(c, "fast") for c in _expected_lights(sweep_file)] + [("grazing", "exact")])
+    assert res.methods["fast"]["speedup"] == pytest.approx(2.0)         # the grid stand-in takes 1 s
     calls.clear()
     sw.run_sweep(sweep_file, out, renderer=standin_render(calls), force=True)
-    assert len(calls) == 14
+    assert len(calls) == 6
 
 
 def test_cli_sweep_with_registered_standin(cli, sweep_file, tmp_path, monkeypatch):
