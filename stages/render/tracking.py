@@ -217,3 +217,25 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio):
             if iz < 0 or iz >= res[2]:
                 break
     return False, tmax, T, dim, lookups, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+
+
+@njit(cache=True)
+def ray_meets_majorant(maj, ox, oy, oz, dx, dy, dz):
+    """True when the ray passes through a cell with a non-zero majorant (it may meet fibres)."""
+    t_near, t_far = ray_box(maj.lo, maj.hi, ox, oy, oz, dx, dy, dz)
+    t_near = max(t_near, 0.0)
+    if not (t_near < t_far):
+        return False
+    n = 4 * (maj.res[0] + maj.res[1] + maj.res[2])
+    h = (t_far - t_near) / n
+    cs0 = (maj.hi[0] - maj.lo[0]) / maj.res[0]
+    cs1 = (maj.hi[1] - maj.lo[1]) / maj.res[1]
+    cs2 = (maj.hi[2] - maj.lo[2]) / maj.res[2]
+    for i in range(n):
+        t = t_near + (i + 0.5) * h
+        ix = min(max(int(math.floor((ox + t * dx - maj.lo[0]) / cs0)), 0), maj.res[0] - 1)
+        iy = min(max(int(math.floor((oy + t * dy - maj.lo[1]) / cs1)), 0), maj.res[1] - 1)
+        iz = min(max(int(math.floor((oz + t * dz - maj.lo[2]) / cs2)), 0), maj.res[2] - 1)
+        if maj.mu[iz, iy, ix] > 0.0:
+            return True
+    return False

@@ -14,7 +14,8 @@ max_depth = 1 shows only directly visible emitters). An optional diffuse ground 
 renders the given image tiles in parallel into ``out`` (H, W, OUT_CHANNELS):
 0-2 mean R, G, B (box filter); 3 alpha (fraction of camera paths that met fibres or ground);
 4 depth (mean distance to the first interaction, 0 where none); 5 variance of the pixel mean of
-luminance (sample variance / spp); 6 medium lookups made by the pixel's paths.
+luminance (sample variance / spp); 6 medium lookups made by the pixel's paths; 7 rays tracked
+(free-flight and shadow queries).
 Random numbers: uniform(seed, pixel * spp + sample, dim) with pixel jitter in dims 0-1, so the image
 is a pure function of the inputs, whatever the number of threads or the tiling.
 
@@ -35,7 +36,7 @@ from .lights import environment_radiance, light_eval, light_pdf, light_sample
 from .sggx import fiber_sggx, phase_eval, phase_sample
 from .tracking import track
 
-OUT_CHANNELS = 7  # r, g, b, alpha, depth, variance, lookups
+OUT_CHANNELS = 8  # r, g, b, alpha, depth, variance, lookups, rays
 
 
 @njit(cache=True)
@@ -81,7 +82,7 @@ def _escaped(lt, n, prev_pdf, dx, dy, dz):
 
 @njit(cache=True)
 def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, index, max_depth, rr_depth):
-    """Radiance along one camera ray: (r, g, b, hit, first distance, lookups)."""
+    """Radiance along one camera ray: (r, g, b, hit, first distance, lookups, rays)."""
     lights, env, marg, cond = lt
     nl = lights.shape[0]
     Lr = 0.0
@@ -92,6 +93,7 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
     bb = 1.0
     dim = 2
     lookups = 0
+    rays = 0
     n = 0
     prev_pdf = 0.0  # pdf of the direction sampled at the previous interaction
     hit = 0.0
@@ -104,6 +106,7 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
     while True:
         tg = ground_intersect(ground, ground_on, oz, dz, 1e-9)
         res = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, dim, False)
+        rays += 1
         collided = res[0]
         t = res[1]
         dim = res[3]
@@ -148,6 +151,7 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
                     tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
                                                  seed, index, dim)
                     lookups += lk
+                    rays += 1
                     if tr > 0.0:
                         c = f * tr * (1.0 if ldelta else _power(lpdf, f)) / lpdf
                         Lr += br * ler * c
@@ -171,6 +175,7 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
                     tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
                                                  seed, index, dim)
                     lookups += lk
+                    rays += 1
                     if tr > 0.0:
                         c = tr * (1.0 if ldelta else _power(lpdf, lambert_pdf(nrm, lw))) / lpdf
                         Lr += br * ler * fr * c
@@ -201,7 +206,7 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
             br /= q
             bg /= q
             bb /= q
-    return Lr, Lg, Lb, hit, first_t, lookups
+    return Lr, Lg, Lb, hit, first_t, lookups, rays
 
 
 @njit(cache=True, parallel=True)
@@ -221,10 +226,11 @@ def render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_
                 sh = 0.0
                 sd = 0.0
                 sl = 0.0
+                sn = 0.0
                 for s in range(spp):
                     index = pix * spp + s
                     o, d = camera_ray(cam, row, col, uniform(seed, index, 0), uniform(seed, index, 1))
-                    r, g, b, hit, ft, lk = trace_path(med, maj, lt, ground, ground_on, o[0], o[1], o[2],
+                    r, g, b, hit, ft, lk, nr = trace_path(med, maj, lt, ground, ground_on, o[0], o[1], o[2],
                                                       d[0], d[1], d[2], seed, index, max_depth, rr_depth)
                     sr += r
                     sg += g
@@ -235,6 +241,7 @@ def render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_
                     sh += hit
                     sd += ft
                     sl += lk
+                    sn += nr
                 out[row, col, 0] = sr / spp
                 out[row, col, 1] = sg / spp
                 out[row, col, 2] = sb / spp
@@ -243,3 +250,4 @@ def render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_
                 mean = sy / spp
                 out[row, col, 5] = max(syy / spp - mean * mean, 0.0) / (spp - 1) if spp > 1 else 0.0
                 out[row, col, 6] = sl
+                out[row, col, 7] = sn

@@ -1,0 +1,118 @@
+"""Realized-fibre density source (``--source realized``): the reference of seed 000 §6.1.
+
+All fibres are realized as polylines (a ``fibers`` artifact) and put in a SAH BVH over their
+segments (``stages.core.bvh``, capsules of the segment's radius). The density rule is the
+procedural one: p is inside a fibre when it lies in one of the fibre's capsules; then den(p) is the
+density of the fibre's yarn and dir(p) the segment's tangent. Where several fibres cover p the one
+with the lowest fibre index answers (the realization orders fibres as the lookups do: yarn, ply,
+regular before hair), so both sources describe the same medium.
+
+RealizedMedium fields: ``bvh`` (``FiberBVH``), ``fiber_yarn`` (F,) int32, ``yarn_density`` (Y,),
+``yarn_albedo`` (Y, 3), ``yarn_roughness`` (Y,) float64.
+
+``fiber_capsules(med)`` gives the capsules and density bounds for a majorant grid.
+"""
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+from numba.extending import overload
+
+from .medium import is_source, medium_lookup
+
+RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness"])
+
+
+@njit(cache=True)
+def covering_segment(bvh, x, y, z):
+    """Segment of the lowest-index fibre whose capsule contains (x, y, z), or -1."""
+    if bvh.prim.shape[0] == 0:
+        return -1
+    stack = np.empty(128, np.int64)
+    stack[0] = 0
+    sp = 1
+    best = -1
+    best_f = np.iinfo(np.int64).max
+    pts = bvh.points
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        lo = bvh.node_lo[node]
+        hi = bvh.node_hi[node]
+        if x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]:
+            continue
+        if bvh.node_left[node] < 0:
+            for j in range(bvh.node_start[node], bvh.node_start[node] + bvh.node_count[node]):
+                s = bvh.prim[j]
+                f = bvh.seg_fiber[s]
+                if f >= best_f:
+                    continue
+                i = bvh.seg_a[s]
+                ax = pts[i, 0]
+                ay = pts[i, 1]
+                az = pts[i, 2]
+                ux = pts[i + 1, 0] - ax
+                uy = pts[i + 1, 1] - ay
+                uz = pts[i + 1, 2] - az
+                wx = x - ax
+                wy = y - ay
+                wz = z - az
+                uu = ux * ux + uy * uy + uz * uz
+                t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
+                t = min(max(t, 0.0), 1.0)
+                dx = wx - t * ux
+                dy = wy - t * uy
+                dz = wz - t * uz
+                r = bvh.seg_r[s]
+                if dx * dx + dy * dy + dz * dz < r * r:
+                    best = s
+                    best_f = f
+            continue
+        stack[sp] = bvh.node_left[node]
+        stack[sp + 1] = bvh.node_right[node]
+        sp += 2
+    return best
+
+
+@njit(cache=True)
+def realized_lookup(med, x, y, z):
+    s = covering_segment(med.bvh, x, y, z)
+    if s < 0:
+        return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    pts = med.bvh.points
+    i = med.bvh.seg_a[s]
+    tx = pts[i + 1, 0] - pts[i, 0]
+    ty = pts[i + 1, 1] - pts[i, 1]
+    tz = pts[i + 1, 2] - pts[i, 2]
+    n = np.sqrt(tx * tx + ty * ty + tz * tz)
+    if n > 0.0:
+        tx /= n
+        ty /= n
+        tz /= n
+    else:
+        tx, ty, tz = 0.0, 0.0, 1.0
+    c = med.fiber_yarn[med.bvh.seg_fiber[s]]
+    a = med.yarn_albedo
+    return med.yarn_density[c], tx, ty, tz, a[c, 0], a[c, 1], a[c, 2], med.yarn_roughness[c]
+
+
+@overload(medium_lookup)
+def _realized_overload(med, x, y, z):
+    if is_source(med, RealizedMedium):
+        return lambda med, x, y, z: realized_lookup(med, x, y, z)
+
+
+@njit(cache=True)
+def fiber_capsules(med):
+    """(a, b, radius, bound) of every fibre segment, bound = its yarn's density."""
+    bvh = med.bvh
+    n = bvh.seg_a.shape[0]
+    a = np.empty((n, 3))
+    b = np.empty((n, 3))
+    bound = np.empty(n)
+    for s in range(n):
+        i = bvh.seg_a[s]
+        a[s] = bvh.points[i]
+        b[s] = bvh.points[i + 1]
+        bound[s] = med.yarn_density[med.fiber_yarn[bvh.seg_fiber[s]]]
+    return a, b, bvh.seg_r.copy(), bound
