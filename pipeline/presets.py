@@ -1,0 +1,168 @@
+"""Procedural yarn presets (``data/yarns/<name>.toml``) and the yarn types of a fabric.
+
+Keys (seed 000 §3.2; names of the original fitting tool; lengths in centimetres):
+  ply_num, fiber_num          plies per yarn, fibres per ply (>= 1)
+  yarn_radius                 ply centres sit on a circle of radius yarn_radius / 2 (0 for one ply)
+  yarn_alpha, alpha           pitch (length per turn) of the plies around the yarn axis / of the fibres
+                              around their ply centre; yarn_clock_wise, fiber_clock_wise: 1 turns the
+                              other way (negative angle per length)
+  ellipse_short, ellipse_long ply cross-section half axes, along / across the axis -> ply direction
+  epsilon, beta, R_max        p(R) = (1 - 2 eps) ((e - e^(R/R_max)) / (e - 1))^beta + eps, by rejection
+  s_i, rho_min, rho_max       migration R(z) = R_j [rho_min + (rho_max - rho_min)/2 (cos(s 2 pi z/alpha + theta0) + 1)]
+  flyaway_hair_density        hairs per unit length per ply; flyaway_hair_ze/r0/re/pe: [mu, sigma] of a hair's
+                              z extent, start radius, radius extent, azimuth extent (drawn with 0.75 sigma)
+  flyaway_loop_density        loops per unit length per ply; flyaway_loop_r1: [mu, sigma] of a loop's maximal
+                              radius (drawn with 0.5 sigma; kept where > 1.05 x the fibre's radius there)
+  use_migration, use_flyaways 0/1 switches; aabb_*, z_step_*: the fitted sample's extent (informative)
+  fiber_radius, albedo (RGB), density (extinction inside a fibre, per unit length), roughness:
+                              optical defaults chosen by loomlight (not fitted)
+
+Scaling to a yarn radius R (``scale_preset``) is a similarity transform with factor
+S = R / yarn_radius: every length is multiplied by S (yarn_radius, ellipse axes, both pitches,
+hair z extent, start radius and radius extent, loop radius, fibre radius) and every per-length
+density divided by S (counts per yarn twist stay the same); angles (azimuth extent) and the unit-disc
+parameters (epsilon, beta, R_max, rho_*) are unchanged. A scaled yarn is the fitted yarn magnified.
+
+The yarn type of a yarn: the scene's [yarns.<group>] table (preset, radius, color, fiber_radius,
+density, roughness) as recorded in the yarns artifact's ``summary.yarn_types``; on the command
+line ``--preset NAME`` and ``--radius R`` override every type. Without a radius a type is scaled to
+the median radius of its curves. A type without a preset uses ``DEFAULT_PRESET``.
+"""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LoomError
+from .schemas import validate
+
+PRESET_DIR = Path(__file__).resolve().parents[1] / "data" / "yarns"
+DEFAULT_PRESET = "cotton1"
+LENGTH_KEYS = ("yarn_radius", "ellipse_long", "ellipse_short", "yarn_alpha", "alpha", "fiber_radius")
+NORMAL_LENGTH_KEYS = ("flyaway_hair_ze", "flyaway_hair_r0", "flyaway_hair_re", "flyaway_loop_r1")
+DENSITY_KEYS = ("flyaway_hair_density", "flyaway_loop_density")
+DEFAULTS = {"R_max": 1.0, "rho_max": 1.0, "use_migration": 1, "use_flyaways": 1}
+
+
+def list_presets() -> list[str]:
+    return sorted(p.stem for p in PRESET_DIR.glob("*.toml"))
+
+
+def check_preset(d: dict, file, place_prefix: str = "") -> dict:
+    """Schema and cross-key checks; raises LoomError naming the parameter."""
+    validate(d, "yarn-preset", file, prefix=place_prefix)
+    d = {**DEFAULTS, **d}
+    if d["rho_min"] > d["rho_max"]:
+        raise LoomError(file, f"{place_prefix}rho_min", f"rho_min ({d['rho_min']}) exceeds rho_max ({d['rho_max']})")
+    return d
+
+
+def load_preset(name: str) -> dict:
+    """A bundled preset by name, checked."""
+    path = PRESET_DIR / f"{name}.toml"
+    if not path.exists():
+        raise LoomError(None, "preset", f"unknown preset {name!r} (known: {', '.join(list_presets())})")
+    try:
+        d = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise LoomError(path, None, f"not valid TOML: {e}") from None
+    return check_preset(d, path)
+
+
+def scale_preset(d: dict, radius: float) -> dict:
+    """The preset magnified to yarn radius ``radius`` (see the module doc for the rule)."""
+    if not radius > 0:
+        raise LoomError(None, "radius", f"yarn radius must be positive, got {radius}")
+    S = float(radius) / float(d["yarn_radius"])
+    out = dict(d)
+    for k in LENGTH_KEYS:
+        out[k] = d[k] * S
+    for k in NORMAL_LENGTH_KEYS:
+        out[k] = [d[k][0] * S, d[k][1] * S]
+    for k in DENSITY_KEYS:
+        out[k] = d[k] / S
+    out["scale"] = S
+    return out
+
+
+def apply_overrides(d: dict, yt: dict, file=None, place: str = "yarns") -> dict:
+    """Scene yarn-type overrides (fiber_radius, density, roughness, color -> albedo), checked."""
+    out = dict(d)
+    for k in ("fiber_radius", "density", "roughness"):
+        if k in yt:
+            out[k] = float(yt[k])
+    if "color" in yt:
+        out["albedo"] = [float(x) for x in yt["color"]]
+    if not out["fiber_radius"] > 0:
+        raise LoomError(file, f"{place}.fiber_radius", "fibre radius must be positive")
+    if out["density"] < 0:
+        raise LoomError(file, f"{place}.density", "density must not be negative")
+    return out
+
+
+def pack(d: dict) -> np.ndarray:
+    """The float64 parameter vector of stages.procedural.yarn_model (bounds filled in)."""
+    from stages.procedural import yarn_model as M
+
+    tp = np.zeros(M.NPARAM)
+    P = int(d["ply_num"])
+    tp[M.PLY_NUM] = P
+    tp[M.FIBER_NUM] = int(d["fiber_num"])
+    tp[M.PLY_RADIUS] = 0.5 * d["yarn_radius"] if P > 1 else 0.0
+    tp[M.YARN_RADIUS] = d["yarn_radius"]
+    tp[M.YARN_ALPHA] = d["yarn_alpha"]
+    tp[M.YARN_SGN] = -1.0 if d["yarn_clock_wise"] else 1.0
+    tp[M.ALPHA] = d["alpha"]
+    tp[M.FIBER_SGN] = -1.0 if d["fiber_clock_wise"] else 1.0
+    tp[M.E_LONG] = d["ellipse_long"]
+    tp[M.E_SHORT] = d["ellipse_short"]
+    tp[M.EPSILON] = d["epsilon"]
+    tp[M.BETA] = d["beta"]
+    tp[M.R_MAX] = d.get("R_max", 1.0)
+    tp[M.RHO_MIN] = d["rho_min"]
+    tp[M.RHO_MAX] = d.get("rho_max", 1.0)
+    tp[M.S_MIG] = d["s_i"]
+    tp[M.HAIR_DENSITY] = d["flyaway_hair_density"]
+    tp[M.LOOP_DENSITY] = d["flyaway_loop_density"]
+    for (mu, sig), key, f in ((M.ZE_MU, M.ZE_SIG), "flyaway_hair_ze", 0.75), ((M.R0_MU, M.R0_SIG), "flyaway_hair_r0", 0.75), \
+            ((M.RE_MU, M.RE_SIG), "flyaway_hair_re", 0.75), ((M.PE_MU, M.PE_SIG), "flyaway_hair_pe", 0.75), \
+            ((M.R1_MU, M.R1_SIG), "flyaway_loop_r1", 0.5):
+        tp[mu] = d[key][0]
+        tp[sig] = d[key][1] * f
+    tp[M.FIBER_RADIUS] = d["fiber_radius"]
+    tp[M.ALB_R:M.ALB_B + 1] = d["albedo"]
+    tp[M.DENSITY] = d["density"]
+    tp[M.ROUGHNESS] = d["roughness"]
+    tp[M.USE_MIGRATION] = float(d.get("use_migration", 1))
+    tp[M.USE_FLYAWAYS] = float(d.get("use_flyaways", 1))
+    # loops: each migration cycle (length alpha / s) mutated with p = density * alpha / (N s)
+    tp[M.P_LOOP] = min(1.0, d["flyaway_loop_density"] * d["alpha"] / (d["fiber_num"] * d["s_i"]))
+    tp[M.U_MAX] = M.loop_bound(tp)
+    tp[M.HAIR_RMAX] = M.hair_radius_bound(tp)
+    return tp
+
+
+def resolve_yarn_types(yarn_types: list[dict], type_radius: list[float], preset: str | None = None,
+                       radius: float | None = None, file=None) -> list[dict]:
+    """Checked, scaled preset dicts, one per yarn type.
+
+    yarn_types: the scene's yarn-type tables (artifact ``summary.yarn_types``), type_radius: the median
+    curve radius of each type; ``preset`` / ``radius`` (command line) override every type."""
+    if radius is not None and not radius > 0:
+        raise LoomError(file, "--radius", f"yarn radius must be positive, got {radius}")
+    out = []
+    for i, yt in enumerate(yarn_types or [{}]):
+        yt = dict(yt or {})
+        name = preset or yt.get("preset") or DEFAULT_PRESET
+        d = load_preset(name)
+        R = radius or yt.get("radius") or (type_radius[i] if i < len(type_radius) and type_radius[i] > 0 else None)
+        if R is not None:
+            d = scale_preset(d, float(R))
+        else:
+            d["scale"] = 1.0
+        d = apply_overrides(d, yt, file, place=f"yarn_types[{i}]")
+        d["name"] = name
+        out.append(d)
+    return out

@@ -1,0 +1,286 @@
+"""Point lookups without realization: seed 000 Algorithms 1-3 on the tables of tables.py.
+
+``lookup_point(cv, tab, p)`` answers, for a fabric-space point p,
+    (inside, yarn, kind, dir_x, dir_y, dir_z, density, albedo_r, albedo_g, albedo_b)
+with kind 0 none, 1 regular, 2 loop, 3 hair; direction the unit fibre tangent at the closest
+point of the covering fibre (zero outside); density the yarn type's density (0 outside).
+
+Definition (shared with the brute-force reference and the realization): p is inside fibre F when
+its fabric-space distance to F's centre curve (the yarn-space fibre mapped by Eq. 7) is below the
+fibre radius. Where several fibres cover p, the first in the order (yarn, ply, regular before
+hair, fibre index) answers (Algorithm 1 returns at the first hit; the order makes that choice
+well defined); a regular fibre's kind (1 or 2) is the kind of its cycle at the closest point.
+
+Steps (Algorithm 1): candidate yarns from the curve grid (padded by each yarn's extent bound);
+projection to yarn space (Eq. 8-9); per ply (all plies, nearest first in spirit of §4.5 but
+without dropping the others, so the answer is exact): the twist-compensated unit-disc point and
+its azimuth bin give candidate fibres (Algorithm 2); each candidate's cross-sectional distance d
+is exact in the cross-section through p and bounds the true distance D from above (D <= d) and
+below (d <= K D); candidates with d < K r_f get the true distance by Gauss-Newton along the fibre.
+Hairs: active set at z (hybrid z-bins by binary search, or Algorithm 3), a yarn-space prefilter,
+then Gauss-Newton along the hair in fabric space.
+"""
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from stages.core.curves import closest_point_on_curve, curve_frame_at, yarns_near
+
+from . import hair_free
+from .tables import hair_node_seed_nb
+from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
+                         ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, ply_frame, regular_xy)
+
+TWO_PI = 2.0 * math.pi
+MAX_YARNS = 64
+HAIR_SAMPLES = 16
+
+
+@njit(cache=True)
+def _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, z):
+    x, y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
+    pos, t, n, b = curve_frame_at(cv, c, z)
+    return pos + x * n + y * b, kind
+
+
+@njit(cache=True)
+def regular_closest(cv, c, tp, yseed, k, j, Rj, th, th0, p, z0):
+    """(distance, z*, tangent, kind at z*) of regular fibre (k, j) of yarn c to p, by Gauss-Newton from z0."""
+    L = cv.curve_length[c]
+    h = 0.25 * tp[FIBER_RADIUS]
+    z = min(max(z0, 0.0), L)
+    D = np.zeros(3)
+    for it in range(8):
+        zp = min(z + h, L)
+        zm = max(z - h, 0.0)
+        Fp, kp = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, zp)
+        Fm, km = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, zm)
+        F0, k0 = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, z)
+        D = (Fp - Fm) / (zp - zm)
+        dd = np.dot(D, D)
+        step = -np.dot(F0 - p, D) / dd
+        zn = min(max(z + step, 0.0), L)
+        if abs(zn - z) < 1e-12 * (1.0 + L):
+            break
+        z = zn
+    F, kind = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, z)
+    r = F - p
+    return math.sqrt(np.dot(r, r)), z, D / math.sqrt(np.dot(D, D)), kind
+
+
+@njit(cache=True)
+def _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t):
+    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
+    pos, tt, n, b = curve_frame_at(cv, c, z)
+    return pos + x * n + y * b
+
+
+@njit(cache=True)
+def hair_closest(cv, c, tp, k, r0, r1, th1, pe, z1, ze, p, t0):
+    """(distance, t*, tangent) of a hair to p, Gauss-Newton in t in [0, 1] from t0."""
+    t = t0
+    h = 1e-4
+    D = np.zeros(3)
+    for it in range(10):
+        tp_ = min(t + h, 1.0)
+        tm = max(t - h, 0.0)
+        Fp = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, tp_)
+        Fm = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, tm)
+        F0 = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t)
+        D = (Fp - Fm) / (tp_ - tm)
+        dd = np.dot(D, D)
+        if dd <= 0.0:
+            break
+        tn = min(max(t - np.dot(F0 - p, D) / dd, 0.0), 1.0)
+        if abs(tn - t) < 1e-12:
+            break
+        t = tn
+    F = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t)
+    r = F - p
+    nd = math.sqrt(np.dot(D, D))
+    if nd > 0.0:
+        D = D / nd
+    return math.sqrt(np.dot(r, r)), t, D
+
+
+@njit(cache=True)
+def _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, z):
+    """Yarn-space distance from (x, y, z) to the hair's sampled polyline, less the chord slack;
+    returns (lower bound of the yarn-space distance, best t)."""
+    best = 1e300
+    bt = 0.0
+    px, py, pz = hair_point(tp, k, r0, r1, th1, pe, z1, ze, 0.0)
+    for i in range(HAIR_SAMPLES + 1):
+        t = i / HAIR_SAMPLES
+        qx, qy, qz = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
+        dx = x - qx
+        dy = y - qy
+        dz = z - qz
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 < best:
+            best = d2
+            bt = t
+    # speed bound of the hair in yarn space -> arc length per sample interval
+    rm = max(r0, r1) + tp[PLY_RADIUS]
+    speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
+    return math.sqrt(best) - 0.5 * speed / HAIR_SAMPLES, bt
+
+
+@njit(cache=True)
+def _hair_active(tab, c, g, tp, z, margin, out_idx, out_z1, out_ze):
+    """Active hairs of slot g at z into the out arrays (ascending hair index); returns how many."""
+    if tab.hair_mode[0] == 0:
+        lo = tab.hb_zoff[g]
+        hi = tab.hb_zoff[g + 1]
+        nbp = hi - lo
+        if nbp < 2 or z < tab.hb_z[lo] or z >= tab.hb_z[hi - 1]:
+            return 0
+        a = lo
+        b = hi - 2
+        while a < b:  # last breakpoint <= z
+            m = (a + b + 1) // 2
+            if tab.hb_z[m] <= z:
+                a = m
+            else:
+                b = m - 1
+        gb = lo - g + (a - lo)
+        n = 0
+        base = tab.hair_off[g]
+        for q in range(tab.hb_start[gb], tab.hb_start[gb + 1]):
+            h = tab.hb_items[q]
+            out_idx[n] = h
+            out_z1[n] = tab.hair_z1[base + h]
+            out_ze[n] = tab.hair_ze[base + h]
+            n += 1
+        return n
+    nh = tab.hair_count[g]
+    k = g - tab.yarn_ply_off[c]
+    seed = hair_node_seed_nb(np.uint64(tab.yarn_seed[c]), k)
+    return hair_free.active_hairs(tab.yarn_length[c], nh, tp[ZE_MU], tp[ZE_SIG], seed, z, margin,
+                                  out_idx, out_z1, out_ze)
+
+
+@njit(cache=True)
+def lookup_point(cv, tab, p):
+    """seed 000 Algorithm 1 at fabric-space point p (float64[3]); see the module doc for the result."""
+    cand = np.empty(MAX_YARNS, np.int64)
+    n = yarns_near(cv, p, tab.max_extent[0], cand)
+    # ascending yarn index (insertion sort of a short list)
+    for i in range(1, n):
+        v = cand[i]
+        j = i - 1
+        while j >= 0 and cand[j] > v:
+            cand[j + 1] = cand[j]
+            j -= 1
+        cand[j + 1] = v
+    for ci in range(n):
+        c = cand[ci]
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        ext = tab.yarn_extent[c]
+        s, d2 = closest_point_on_curve(cv, c, p)
+        if d2 > ext * ext:
+            continue
+        pos, tan, nn, bn = curve_frame_at(cv, c, s)
+        r = p - pos
+        x = np.dot(r, nn)
+        y = np.dot(r, bn)
+        w = np.dot(r, tan)
+        rf = tp[FIBER_RADIUS]
+        K = tab.type_K[t]
+        yseed = np.uint64(tab.yarn_seed[c])
+        P = int(tp[PLY_NUM])
+        N = int(tp[FIBER_NUM])
+        B = tab.type_nbins[t]
+        es = tp[E_SHORT]
+        el = tp[E_LONG]
+        twist = fiber_twist(tp, s)
+        for k in range(P):
+            # ---- regular and loop fibres of ply k (Algorithm 2)
+            cx, cy, drx, dry = ply_frame(tp, k, s)
+            ax = x - cx
+            ay = y - cy
+            u = (ax * drx + ay * dry) / es
+            v = (-ax * dry + ay * drx) / el
+            rr = math.sqrt(u * u + v * v)
+            ang = math.atan2(v, u) - twist
+            ang = ang - TWO_PI * math.floor(ang / TWO_PI)
+            b = min(int(ang / TWO_PI * B), B - 1)
+            gb = tab.type_bin_off[t] + k * B + b
+            fo = tab.type_fib_off[t] + k * N
+            for q in range(tab.bin_start[gb], tab.bin_start[gb + 1]):
+                j = tab.bin_items[q]
+                f = fo + j
+                if rr < tab.fib_rlo[f] or rr > tab.fib_rhi[f]:
+                    continue
+                Rj = tab.fib_R[f]
+                th = tab.fib_th[f]
+                th0 = tab.fib_th0[f]
+                X, Y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, s)
+                dx = x - X
+                dy = y - Y
+                dxs = math.sqrt(dx * dx + dy * dy + w * w)
+                if dxs >= K * rf:
+                    continue
+                D, zs, T, kind = regular_closest(cv, c, tp, yseed, k, j, Rj, th, th0, p, s)
+                if D < rf:
+                    return (True, c, kind, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0],
+                            tab.yarn_albedo[c, 1], tab.yarn_albedo[c, 2])
+            # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
+            g = tab.yarn_ply_off[c] + k
+            nh = tab.hair_count[g]
+            if nh == 0:
+                continue
+            margin = tab.type_mz[t]
+            hidx = np.empty(nh, np.int64)
+            hz1 = np.empty(nh)
+            hze = np.empty(nh)
+            na = _hair_active(tab, c, g, tp, s, margin, hidx, hz1, hze)
+            limit = 1.1 * rf / tab.yarn_gmin[c]
+            for q in range(na):
+                h = hidx[q]
+                r0, r1, th1, pe = hair_params(tp, yseed, k, h)
+                lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, hz1[q], hze[q], x, y, s)
+                if lb > limit:
+                    continue
+                D, ts, T = hair_closest(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
+                if D < rf:
+                    return (True, c, 3, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0],
+                            tab.yarn_albedo[c, 1], tab.yarn_albedo[c, 2])
+    return (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@njit(cache=True)
+def yarn_bound(tab, c):
+    """(radius bound around the yarn axis, density bound) of yarn c: for tight delta tracking."""
+    return tab.yarn_extent[c], tab.tparams[tab.yarn_type[c], DENSITY]
+
+
+@njit(cache=True, parallel=True)
+def lookup_points(cv, tab, pts):
+    """Vectorised lookup_point over (N, 3) points: inside, yarn, kind, direction (N, 3), density, albedo (N, 3)."""
+    N = pts.shape[0]
+    inside = np.zeros(N, np.bool_)
+    yarn = np.full(N, -1, np.int32)
+    kind = np.zeros(N, np.int8)
+    direction = np.zeros((N, 3))
+    density = np.zeros(N)
+    albedo = np.zeros((N, 3))
+    for i in prange(N):
+        p = np.empty(3)
+        p[0] = pts[i, 0]
+        p[1] = pts[i, 1]
+        p[2] = pts[i, 2]
+        res = lookup_point(cv, tab, p)
+        inside[i] = res[0]
+        yarn[i] = res[1]
+        kind[i] = res[2]
+        direction[i, 0] = res[3]
+        direction[i, 1] = res[4]
+        direction[i, 2] = res[5]
+        density[i] = res[6]
+        albedo[i, 0] = res[7]
+        albedo[i, 1] = res[8]
+        albedo[i, 2] = res[9]
+    return inside, yarn, kind, direction, density, albedo

@@ -1,0 +1,178 @@
+"""Full realization of the procedural fibres as fabric-space polylines (seed 000 §3.2, Eq. 7).
+
+Every regular fibre of every ply of every yarn is cut into pieces at the ends of its mutated
+(loop) migration cycles: runs of regular cycles become kind-1 polylines, each mutated cycle a
+kind-2 polyline; pieces of one fibre share their end points (R = rho_min R_j there under both
+formulas). Every hair is a kind-3 polyline. A piece is sampled uniformly in its yarn-space
+parameter (z for regular and loop pieces, t for hairs) with steps no longer than ``spacing`` in
+z (hairs: in yarn-space arc length, bounded by the hair's speed), and each vertex is mapped by
+Eq. 7 with the rotation-minimising frame. The random numbers and tables are the ones the lookups
+use (tables.py), so the realized fibres and the lookups describe the same fabric.
+
+``realize_plan`` lists the pieces (no geometry) so the size is known before anything is
+allocated; ``realize_fill`` writes the vertices of a plan.
+"""
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from stages.core.curves import curve_frame_at
+
+from .yarn_model import (FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, S_MIG, ALPHA, USE_MIGRATION, TWO_PI,
+                         YARN_ALPHA, cycle_of, hair_params, hair_point, loop_unit_radius, migration_phase,
+                         regular_xy)
+
+
+@njit(cache=True)
+def _z_of_phase(tp, th0, ph):
+    return (ph - th0) * tp[ALPHA] / (tp[S_MIG] * TWO_PI)
+
+
+@njit(cache=True)
+def _fiber_pieces(tp, yseed, k, j, Rj, th, th0, L, out_z0, out_z1, out_kind, n0):
+    """Append the pieces of one fibre at n0; returns the new count."""
+    n = n0
+    if tp[USE_MIGRATION] == 0.0:
+        out_z0[n] = 0.0
+        out_z1[n] = L
+        out_kind[n] = 1
+        return n + 1
+    c0 = cycle_of(migration_phase(tp, th0, 0.0))
+    c1 = cycle_of(migration_phase(tp, th0, L))
+    zs = 0.0
+    cur = 1
+    for c in range(c0, c1 + 1):
+        U = loop_unit_radius(tp, yseed, k, j, Rj, th, th0, c)
+        kind = 2 if U > 0.0 else 1
+        if kind != cur:
+            za = max(0.0, _z_of_phase(tp, th0, TWO_PI * c - math.pi))
+            if za > zs:
+                out_z0[n] = zs
+                out_z1[n] = za
+                out_kind[n] = cur
+                n += 1
+                zs = za
+            cur = kind
+    out_z0[n] = zs
+    out_z1[n] = L
+    out_kind[n] = cur
+    return n + 1
+
+
+@njit(cache=True)
+def yarn_plan(tab, c, L, spacing):
+    """Pieces of yarn c: arrays (ply, index, kind, a0, a1, hair_z1, hair_ze, nverts)."""
+    t = tab.yarn_type[c]
+    tp = tab.tparams[t]
+    P = int(tp[PLY_NUM])
+    N = int(tp[FIBER_NUM])
+    yseed = np.uint64(tab.yarn_seed[c])
+    ncyc = 3
+    if tp[USE_MIGRATION] != 0.0:
+        ncyc = int(L * tp[S_MIG] / tp[ALPHA]) + 4
+    g0 = tab.yarn_ply_off[c]
+    nh = 0
+    for k in range(P):
+        nh += tab.hair_count[g0 + k]
+    cap = P * N * (2 * ncyc + 2) + nh + 1
+    ply = np.empty(cap, np.int16)
+    idx = np.empty(cap, np.int32)
+    kind = np.empty(cap, np.int8)
+    a0 = np.empty(cap)
+    a1 = np.empty(cap)
+    hz1 = np.zeros(cap)
+    hze = np.zeros(cap)
+    nv = np.empty(cap, np.int64)
+    n = 0
+    fo = tab.type_fib_off[t]
+    for k in range(P):
+        for j in range(N):
+            f = fo + k * N + j
+            m = _fiber_pieces(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], L, a0, a1, kind, n)
+            for q in range(n, m):
+                ply[q] = k
+                idx[q] = j
+                nv[q] = max(2, int(math.ceil((a1[q] - a0[q]) / spacing - 1e-9)) + 1)
+            n = m
+    for k in range(P):
+        g = g0 + k
+        base = tab.hair_off[g]
+        for h in range(tab.hair_count[g]):
+            z1 = tab.hair_z1[base + h]
+            ze = tab.hair_ze[base + h]
+            r0, r1, th1, pe = hair_params(tp, yseed, k, h)
+            rm = max(r0, r1) + tp[PLY_RADIUS]
+            speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
+            ply[n] = k
+            idx[n] = h
+            kind[n] = 3
+            a0[n] = 0.0
+            a1[n] = 1.0
+            hz1[n] = z1
+            hze[n] = ze
+            nv[n] = max(2, int(math.ceil(speed / spacing)) + 1)
+            n += 1
+    return ply[:n], idx[:n], kind[:n], a0[:n], a1[:n], hz1[:n], hze[:n], nv[:n]
+
+
+@njit(cache=True, parallel=True)
+def realize_fill(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, offsets, points, radius):
+    """Vertices of every planned piece (prange over pieces), fabric space via Eq. 7."""
+    F = yarn.shape[0]
+    for q in prange(F):
+        c = yarn[q]
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        yseed = np.uint64(tab.yarn_seed[c])
+        k = ply[q]
+        j = idx[q]
+        lo = offsets[q]
+        n = offsets[q + 1] - lo
+        rf = tp[FIBER_RADIUS]
+        if kind[q] == 3:
+            r0, r1, th1, pe = hair_params(tp, yseed, k, j)
+            for m in range(n):
+                u = m / (n - 1)
+                x, y, z = hair_point(tp, k, r0, r1, th1, pe, hz1[q], hze[q], u)
+                pos, tan, nn, bn = curve_frame_at(cv, c, z)
+                for d in range(3):
+                    points[lo + m, d] = pos[d] + x * nn[d] + y * bn[d]
+                radius[lo + m] = rf
+        else:
+            f = tab.type_fib_off[t] + k * int(tp[FIBER_NUM]) + j
+            for m in range(n):
+                z = a0[q] + (a1[q] - a0[q]) * (m / (n - 1))
+                x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], z)
+                pos, tan, nn, bn = curve_frame_at(cv, c, z)
+                for d in range(3):
+                    points[lo + m, d] = pos[d] + x * nn[d] + y * bn[d]
+                radius[lo + m] = rf
+
+
+def realize_plan(tab, curve_length, spacing):
+    """The pieces of all yarns (flat arrays, no geometry): yarn, ply, index, kind, a0, a1, hair z1/ze,
+    vertex counts."""
+    parts = [yarn_plan(tab, c, float(curve_length[c]), spacing) for c in range(len(tab.yarn_type))]
+    yarn = np.concatenate([np.full(len(p[0]), c, np.int32) for c, p in enumerate(parts)]) if parts else np.zeros(0, np.int32)
+    cols = [np.concatenate([p[i] for p in parts]) for i in range(8)]
+    return (yarn, *cols)
+
+
+def chord_error(points, offsets):
+    """Largest sagitta estimate l theta / 8 of the realized polylines (l: mean length of the two
+    segments at a vertex, theta: their turning angle): the distance a polyline can lie from the
+    smooth curve through its vertices (kappa l^2 / 8 with kappa = theta / l)."""
+    P = np.asarray(points, np.float64)
+    seg = P[1:] - P[:-1]
+    ln = np.linalg.norm(seg, axis=1)
+    valid = np.ones(len(seg), bool)
+    valid[offsets[1:-1] - 1] = False  # segments that straddle two polylines
+    a, b = seg[:-1], seg[1:]
+    la, lb = ln[:-1], ln[1:]
+    both = valid[:-1] & valid[1:] & (la > 0) & (lb > 0)
+    cosang = np.einsum("ij,ij->i", a[both], b[both]) / (la[both] * lb[both])
+    theta = np.arccos(np.clip(cosang, -1, 1))
+    if theta.size == 0:
+        return 0.0, 0.0
+    return float(np.max(0.5 * (la[both] + lb[both]) * theta / 8.0)), float(np.max(theta))
