@@ -76,7 +76,7 @@ def test_N_tt_integrates_to_one(gamma_deg):
     assert B.azimuthal_N_tt(math.pi, p[8], p[9]) - B.gauss(math.pi, 0.0, p[8]) == pytest.approx(tail / (2 * math.pi), rel=1e-9)
 
 
-def _sphere_integral(p, theta_i, phi_i, n_theta=4000, n_phi=720):
+def _sphere_integral(p, theta_i, phi_i, n_theta=1200, n_phi=144):
     """int S(wi, wo) cos(theta_o) d wo by a midpoint rule in (theta_o, phi_o): dwo = cos(theta) d theta d phi."""
     th = -math.pi / 2 + (np.arange(n_theta) + 0.5) * math.pi / n_theta
     ph = -math.pi + (np.arange(n_phi) + 0.5) * 2 * math.pi / n_phi
@@ -90,7 +90,8 @@ def test_energy_conservation_non_absorbing(theta_i):
     """Measure: int S(wi, wo) cos(theta_o) d wo = F_R + (1 - F_R) C_TT, = 1 for C_TT = 1.
 
     Bound: the lobes are renormalised on [-pi/2, pi/2] and on the circle, so truncation loses nothing;
-    what remains is the quadrature error of a 4000 x 720 midpoint rule, < 1e-4 here."""
+    what remains is the quadrature error of a 1200 x 144 midpoint rule (spectrally accurate for these
+    smooth periodic-in-phi integrands with >= 7 nodes per deviation), < 1e-4 here."""
     p = B.pack_bcsdf([0.3, 0.6, 0.9], [1.0, 1.0, 1.0], 4.0, 12.0, 30.0)
     e = _sphere_integral(p, theta_i, 0.3)
     np.testing.assert_allclose(e, 1.0, atol=1e-4)
