@@ -1,0 +1,179 @@
+"""Shared render plumbing: scene lights -> packed light arrays, BCSDF presets, fibres artifacts.
+
+- ``pack_lights(scene)`` -> ``LightSet(lights, env, marginal, conditional)`` in the layout of
+  ``stages.render.lights`` (at most one envmap; its EXR is read here).
+- ``load_bcsdf_preset(name)`` -> packed BCSDF (``stages.core.bcsdf``) from ``data/bcsdf/<name>.toml``
+  (or a path to a TOML file), checked against ``schemas/bcsdf-preset.schema.json``.
+- ``load_fibers(path)`` -> ``Fibers`` arrays of a ``fibers`` artifact, refusing empty or broken ones.
+- ``ground_array(scene)`` -> (float64[4] height + albedo, enabled).
+"""
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import LoomError
+from .schemas import validate
+
+BCSDF_DIR = Path(__file__).resolve().parents[1] / "data" / "bcsdf"
+GROUP_NAMES = ("warp", "weft", "knit", "other")
+
+
+@dataclass
+class LightSet:
+    lights: np.ndarray        # (NL, LIGHT_SIZE) float64
+    env: np.ndarray           # (H, W, 3) float32 (1 x 1 black when the scene has no envmap)
+    marginal: np.ndarray      # (H + 1,)
+    conditional: np.ndarray   # (H, W + 1)
+
+    def arrays(self):
+        return self.lights, self.env, self.marginal, self.conditional
+
+
+def pack_lights(lights: list[dict], scene_path: str | Path | None = None) -> LightSet:
+    """Pack ``Scene.lights`` (rgb expanded, directions normalised, envmap paths resolved)."""
+    from stages.render.lights import LIGHT_SIZE, envmap_tables, pack_light
+
+    rows = []
+    env_img = None
+    for i, light in enumerate(lights):
+        kind = light["type"]
+        place = f"lights[{i}]"
+        if kind == "directional":
+            rows.append(pack_light("directional", light["irradiance"], light["direction"]))
+        elif kind == "constant":
+            rows.append(pack_light("constant", light["radiance"]))
+        elif kind == "sg":
+            if not light["sharpness"] > 0:
+                raise LoomError(scene_path, f"{place}.sharpness", f"must be > 0, got {light['sharpness']}")
+            rows.append(pack_light("sg", light["power"], light["axis"], float(light["sharpness"])))
+        elif kind == "envmap":
+            if env_img is not None:
+                raise LoomError(scene_path, place, "only one envmap light per scene is supported")
+            from .images import read_exr
+
+            img, _ = read_exr(light["path"])
+            if img.ndim != 3 or img.shape[0] < 1 or img.shape[1] < 1:
+                raise LoomError(light["path"], None, "environment map has no pixels")
+            if not np.all(np.isfinite(img)) or np.any(img < 0):
+                raise LoomError(light["path"], None, "environment map has negative or non-finite pixels")
+            env_img = img
+            s = float(light.get("scale", 1.0))
+            rows.append(pack_light("envmap", [s, s, s]))
+        else:
+            raise LoomError(scene_path, f"{place}.type", f"unknown light type {kind!r}")
+        if np.any(rows[-1][1:4] < 0):
+            raise LoomError(scene_path, place, "light colours must be non-negative")
+    arr = np.asarray(rows, dtype=np.float64).reshape(-1, LIGHT_SIZE)
+    env, marg, cond = envmap_tables(env_img)
+    return LightSet(arr, env, marg, cond)
+
+
+# ------------------------------------------------------------------------------------------------
+def bcsdf_presets() -> list[str]:
+    return sorted(p.stem for p in BCSDF_DIR.glob("*.toml"))
+
+
+def read_bcsdf_preset(name: str) -> tuple[Path, dict]:
+    path = Path(name)
+    if path.suffix != ".toml" or not path.exists():
+        path = BCSDF_DIR / f"{name}.toml"
+    if not path.exists():
+        raise LoomError(None, "bcsdf", f"unknown BCSDF preset {name!r} (known: {', '.join(bcsdf_presets())})")
+    try:
+        doc = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as e:
+        raise LoomError(path, None, f"not valid TOML: {e}") from None
+    validate(doc, "bcsdf-preset", path)
+    return path, doc
+
+
+def load_bcsdf_preset(name: str) -> np.ndarray:
+    """Packed BCSDF parameters of preset ``name`` (a name in data/bcsdf/ or a .toml path)."""
+    from stages.core.bcsdf import pack_bcsdf
+
+    _, d = read_bcsdf_preset(name)
+    return pack_bcsdf(d["c_r"], d["c_tt"], d["beta_r"], d["beta_tt"], d["gamma_tt"])
+
+
+# ------------------------------------------------------------------------------------------------
+@dataclass
+class Fibers:
+    path: Path
+    points: np.ndarray         # (M, 3) float64
+    point_radius: np.ndarray   # (M,) float64
+    fiber_offsets: np.ndarray  # (F + 1,) int64
+    fiber_yarn: np.ndarray     # (F,) int32
+    yarn_albedo: np.ndarray    # (Y, 3) float64
+    yarn_group: np.ndarray | None  # (Y,) group index per yarn (0 warp, 1 weft, 2 knit, 3 other) when known
+
+    @property
+    def n_fibers(self) -> int:
+        return len(self.fiber_offsets) - 1
+
+
+def fibers_from_arrays(points, point_radius, fiber_offsets, fiber_yarn=None, yarn_albedo=None,
+                       yarn_group=None, path: str | Path = "<arrays>") -> Fibers:
+    """Check fibre arrays (as in a ``fibers`` artifact) and return them as ``Fibers``."""
+    path = Path(path)
+    points = np.asarray(points, np.float64).reshape(-1, 3)
+    point_radius = np.asarray(point_radius, np.float64).reshape(-1)
+    off = np.asarray(fiber_offsets, np.int64).reshape(-1)
+    F = len(off) - 1
+    if F < 1 or len(points) == 0:
+        raise LoomError(path, "fiber_offsets", "the fibers artifact is empty (no fibres)")
+    if off[0] != 0 or off[-1] != len(points) or np.any(np.diff(off) < 0):
+        raise LoomError(path, "fiber_offsets", f"offsets must rise from 0 to the point count {len(points)}")
+    if np.all(np.diff(off) < 2):
+        raise LoomError(path, "fiber_offsets", "the fibers artifact has no fibre with two points (no segments)")
+    if len(point_radius) != len(points):
+        raise LoomError(path, "point_radius", f"length {len(point_radius)} differs from the point count {len(points)}")
+    if not np.all(np.isfinite(points)):
+        i = int(np.argwhere(~np.isfinite(points))[0, 0])
+        raise LoomError(path, f"points[{i}]", "non-finite coordinate")
+    bad = ~(np.isfinite(point_radius) & (point_radius > 0))
+    if np.any(bad):
+        i = int(np.argmax(bad))
+        raise LoomError(path, f"point_radius[{i}]", f"fibre radius must be > 0, got {point_radius[i]}")
+    fiber_yarn = np.zeros(F, np.int32) if fiber_yarn is None else np.asarray(fiber_yarn, np.int32)
+    if yarn_albedo is None:
+        yarn_albedo = np.full((int(fiber_yarn.max()) + 1, 3), 0.5)
+    yarn_albedo = np.asarray(yarn_albedo, np.float64).reshape(-1, 3)
+    if len(fiber_yarn) != F or fiber_yarn.min() < 0 or fiber_yarn.max() >= len(yarn_albedo):
+        raise LoomError(path, "fiber_yarn", "yarn indices must be in [0, number of yarns)")
+    if np.any(yarn_albedo < 0) or np.any(yarn_albedo > 1):
+        raise LoomError(path, "yarn_albedo", "albedo outside [0, 1]")
+    return Fibers(path, points, point_radius, off, fiber_yarn, yarn_albedo, yarn_group)
+
+
+def load_fibers(path: str | Path) -> Fibers:
+    """Arrays of a ``fibers`` artifact (stage realize); the yarn groups come from its yarns input."""
+    from .artifacts import Artifact
+
+    path = Path(path)
+    art = Artifact(path, kind="fibers")
+    group = None
+    for name, inp in art.meta.get("inputs", {}).items():
+        try:
+            src = Artifact(inp["path"])
+        except LoomError:
+            continue
+        if src.kind == "yarns" and "group" in src:
+            group = np.asarray(src["group"], np.int64)
+            break
+    albedo = art["yarn_albedo"] if "yarn_albedo" in art else None
+    yarn = art["fiber_yarn"] if "fiber_yarn" in art else None
+    return fibers_from_arrays(art["points"], art["point_radius"], art["fiber_offsets"], yarn, albedo, group, path)
+
+
+def ground_array(render: dict) -> tuple[np.ndarray, bool]:
+    g = render.get("ground")
+    out = np.zeros(4)
+    if not g:
+        return out, False
+    out[0] = float(g.get("height", 0.0))
+    out[1:4] = g.get("albedo", [0.5, 0.5, 0.5])
+    return out, True
