@@ -302,6 +302,9 @@ def test_cli_renders_exr_png_artifact(cli, tmp_path):
     s = art.summary
     assert s["method"] == "fiberpath" and s["spp"] == 2 and s["rays"] > 16 * 12 * 2 and s["rays_per_s"] > 0
     assert s["paths_per_s"] > 0 and s["peak_memory_bytes"] > 0 and s["wall_time_s"] >= s["render_time_s"]
+    # the inspector draws the artifact
+    code, _, err = cli("inspect", out.with_suffix(".zarr"), "--png", tmp_path / "insp.png")
+    assert code == 0 and (tmp_path / "insp.png").stat().st_size > 0, err
     # same seed, same bytes
     out2 = tmp_path / "fp2.exr"
     assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", out2, "--seed", "5")[0] == 0

@@ -1,0 +1,109 @@
+"""Run every ``bench/bench_*.py`` (each defines ``run(out_dir) -> dict``) and write the results.
+
+    python bench/run.py --out bench/results [--only fiberpath,volpath]
+
+Writes ``<out>/<name>.json`` per benchmark (name = file name without ``bench_``) and
+``<out>/summary.md``: the machine, one table per benchmark, and a side-by-side table of the
+throughput numbers every renderer reports (``paths_per_s``, ``rays_per_s``, ``rays_per_s_per_core``).
+Benchmarks hold performance targets; tests never time anything.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import platform
+import sys
+import time
+import traceback
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(ROOT))
+os.environ.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".numba_cache"))
+
+COMPARE = ("paths_per_s", "rays_per_s", "rays_per_s_per_core", "primary_rays_per_s_per_core")
+
+
+def _load(path: Path):
+    spec = importlib.util.spec_from_file_location(f"bench_{path.stem}", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _fmt(v):
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, (list, dict)):
+        return json.dumps(v)
+    return str(v)
+
+
+def machine() -> dict:
+    import numba
+
+    return {"python": platform.python_version(), "platform": platform.platform(), "cpus": os.cpu_count(),
+            "numba_threads": numba.config.NUMBA_NUM_THREADS, "date": time.strftime("%Y-%m-%d %H:%M:%S")}
+
+
+def write_summary(out: Path, results: dict[str, dict], info: dict) -> Path:
+    lines = ["# loomlight benchmarks", "", "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()), ""]
+    rows = [(n, r) for n, r in sorted(results.items()) if any(k in r for k in COMPARE)]
+    if rows:
+        lines += ["## Throughput side by side", "", "| benchmark | " + " | ".join(COMPARE) + " |",
+                  "|---|" + "---|" * len(COMPARE)]
+        for n, r in rows:
+            lines.append(f"| {n} | " + " | ".join(_fmt(r[k]) if k in r else "" for k in COMPARE) + " |")
+        lines.append("")
+    for n, r in sorted(results.items()):
+        lines += [f"## {n}", "", "| quantity | value |", "|---|---|"]
+        for k, v in r.items():
+            lines.append(f"| {k} | {_fmt(v)} |")
+        lines.append("")
+    path = out / "summary.md"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(HERE / "results"))
+    ap.add_argument("--only", default="", help="comma-separated benchmark names")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    only = {s.strip() for s in args.only.split(",") if s.strip()}
+    results = {}
+    for p in sorted(out.glob("*.json")):  # keep earlier results of benchmarks not re-run
+        try:
+            results[p.stem] = json.loads(p.read_text())
+        except (OSError, json.JSONDecodeError):
+            pass
+    failed = 0
+    for path in sorted(HERE.glob("bench_*.py")):
+        name = path.stem[len("bench_"):]
+        if only and name not in only:
+            continue
+        print(f"[bench] {name} ...", flush=True)
+        t0 = time.perf_counter()
+        try:
+            mod = _load(path)
+            res = mod.run(out)
+        except Exception:
+            traceback.print_exc()
+            failed += 1
+            continue
+        res = {"bench_wall_s": time.perf_counter() - t0, **res}
+        (out / f"{name}.json").write_text(json.dumps(res, indent=2, default=float))
+        results[name] = res
+        print(f"[bench] {name}: " + ", ".join(f"{k}={_fmt(v)}" for k, v in res.items() if k in COMPARE), flush=True)
+    s = write_summary(out, results, machine())
+    print(f"[bench] summary: {s}")
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
