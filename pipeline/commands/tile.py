@@ -1,0 +1,27 @@
+"""``loomlight tile CONFIG.toml -o tiling.zarr``: exemplars, block map and shell mesh (seed 001 §2)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("tile")
+    def tile(
+        config: Path = typer.Argument(..., help="A tiling configuration (.toml, schemas/tile-config.schema.json): "
+                                                "exemplar weaves, yarn, block map, base surface, scene."),
+        out: Path = typer.Option(..., "-o", "--out", help="Output tiling artifact (directory ending in .zarr)."),
+        force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+    ):
+        """Realize periodic fibre exemplars from weave drafts, cut them into blocks, lay the blocks over the
+        cloth's (u, v) domain by the block map, and build the shell (base surface offset along its smoothed
+        normals, split into tetrahedra) that maps them onto the surface."""
+        from ..tile_runner import run_tile
+
+        res = run_tile(config, out, force=force)
+        if res["skipped"]:
+            typer.echo(f"{out} is up to date")
+        else:
+            typer.echo(f"wrote {out} ({res['exemplars']} exemplars, {res['blocks']} blocks, "
+                       f"{res['tetrahedra']} tetrahedra)")
