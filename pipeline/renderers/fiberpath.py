@@ -43,11 +43,16 @@ def fiber_materials(scene, fibers, options):
         if name:
             names[g] = name
     if fibers.yarn_group is not None:
-        yarn_group = np.asarray(fibers.yarn_group, np.int64)
+        yarn_group = np.clip(np.asarray(fibers.yarn_group, np.int64), 0, 3)
         if len(yarn_group) < len(fibers.yarn_albedo):
             yarn_group = np.concatenate([yarn_group, np.full(len(fibers.yarn_albedo) - len(yarn_group), 3)])
     else:
-        yarn_group = np.full(len(fibers.yarn_albedo), 3)  # unknown group: 'other' (falls back to 'default')
+        # the fibres' yarn groups are unknown (no yarns artifact among the fibers artifact's inputs):
+        # 'other' (falling back to yarns.default.bcsdf, then --bcsdf), else the one preset the scene names
+        yarn_group = np.full(len(fibers.yarn_albedo), 3)
+        named = sorted(set(names.values()))
+        if 3 not in names and len(named) == 1:
+            names[3] = named[0]
     used = sorted(set(int(g) for g in yarn_group[np.unique(fibers.fiber_yarn)]))
     presets = []
     index = {}
@@ -55,8 +60,10 @@ def fiber_materials(scene, fibers, options):
     for g in used:
         name = names.get(g)
         if not name:
+            known = ", ".join(f"{GROUP_NAMES[k]}={v}" for k, v in sorted(names.items())) or "none"
             raise LoomError(scene.path, f"yarns.{GROUP_NAMES[g]}.bcsdf",
-                            "no BCSDF preset for this yarn group: set it in the scene (or yarns.default.bcsdf) or pass --bcsdf NAME")
+                            f"no BCSDF preset for the fibres of yarn group {GROUP_NAMES[g]!r} (scene names: {known}); "
+                            "set it (or yarns.default.bcsdf) in the scene or pass --bcsdf NAME")
         if name not in index:
             index[name] = len(presets)
             presets.append(pack_material_bcsdf(load_bcsdf_preset(name)))
