@@ -25,7 +25,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from stages.core.curves import closest_point_on_curve, curve_frame_at, yarns_near
+from stages.core.curves import (_segment_box_dist2, closest_on_segment, curve_frame_at, nearest_segments_in_cell,
+                                segment_arclen_to)
 
 from . import hair_free
 from .tables import hair_node_seed_nb
@@ -35,73 +36,170 @@ from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_
 TWO_PI = 2.0 * math.pi
 MAX_YARNS = 64
 HAIR_SAMPLES = 16
+MODEL_SLACK = 0.1  # local-model distance error allowed before the exact check, in fibre radii
 
 
 @njit(cache=True)
-def _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, z):
-    x, y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
-    pos, t, n, b = curve_frame_at(cv, c, z)
-    return pos + x * n + y * b, kind
-
-
-@njit(cache=True)
-def regular_closest(cv, c, tp, yseed, k, j, Rj, th, th0, p, z0):
-    """(distance, z*, tangent, kind at z*) of regular fibre (k, j) of yarn c to p, by Gauss-Newton from z0."""
+def local_frames(cv, c, s, h, pos0, n0, b0):
+    """Exact frames at three arc lengths around s (window [za, zb] of half width h, clipped to the
+    curve): the local model of Eq. 7 that Gauss-Newton iterates on. Returns (za, zm, zb, M) with
+    M[i] = (position, normal, binormal) at node i."""
     L = cv.curve_length[c]
-    h = 0.25 * tp[FIBER_RADIUS]
-    z = min(max(z0, 0.0), L)
-    D = np.zeros(3)
-    for it in range(8):
-        zp = min(z + h, L)
-        zm = max(z - h, 0.0)
-        Fp, kp = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, zp)
-        Fm, km = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, zm)
-        F0, k0 = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, z)
-        D = (Fp - Fm) / (zp - zm)
-        dd = np.dot(D, D)
-        step = -np.dot(F0 - p, D) / dd
-        zn = min(max(z + step, 0.0), L)
-        if abs(zn - z) < 1e-12 * (1.0 + L):
-            break
-        z = zn
-    F, kind = _fiber_at(cv, c, tp, yseed, k, j, Rj, th, th0, z)
-    r = F - p
-    return math.sqrt(np.dot(r, r)), z, D / math.sqrt(np.dot(D, D)), kind
+    za = max(0.0, s - h)
+    zb = min(L, s + h)
+    zm = 0.5 * (za + zb)
+    M = np.empty((3, 3, 3))
+    zs = (za, zm, zb)
+    for i in range(3):
+        if zs[i] == s:
+            M[i, 0] = pos0
+            M[i, 1] = n0
+            M[i, 2] = b0
+            continue
+        pos, t, n, b = curve_frame_at(cv, c, zs[i])
+        M[i, 0] = pos
+        M[i, 1] = n
+        M[i, 2] = b
+    return za, zm, zb, M
 
 
 @njit(cache=True)
-def _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t):
-    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
-    pos, tt, n, b = curve_frame_at(cv, c, z)
+def _model_map(za, zm, zb, M, x, y, z):
+    """Eq. 7 with position and frame interpolated quadratically between the three nodes."""
+    wa = (z - zm) * (z - zb) / ((za - zm) * (za - zb))
+    wm = (z - za) * (z - zb) / ((zm - za) * (zm - zb))
+    wb = (z - za) * (z - zm) / ((zb - za) * (zb - zm))
+    out = np.empty(3)
+    for d in range(3):
+        out[d] = (wa * (M[0, 0, d] + x * M[0, 1, d] + y * M[0, 2, d])
+                  + wm * (M[1, 0, d] + x * M[1, 1, d] + y * M[1, 2, d])
+                  + wb * (M[2, 0, d] + x * M[2, 1, d] + y * M[2, 2, d]))
+    return out
+
+
+@njit(cache=True)
+def _exact_map(cv, c, x, y, z):
+    pos, t, n, b = curve_frame_at(cv, c, z)
     return pos + x * n + y * b
 
 
 @njit(cache=True)
-def hair_closest(cv, c, tp, k, r0, r1, th1, pe, z1, ze, p, t0):
-    """(distance, t*, tangent) of a hair to p, Gauss-Newton in t in [0, 1] from t0."""
-    t = t0
-    h = 1e-4
-    D = np.zeros(3)
-    for it in range(10):
-        tp_ = min(t + h, 1.0)
-        tm = max(t - h, 0.0)
-        Fp = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, tp_)
-        Fm = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, tm)
-        F0 = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t)
+def _reg_model(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, z):
+    x, y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
+    return _model_map(za, zm, zb, M, x, y, z)
+
+
+@njit(cache=True)
+def regular_closest(cv, c, za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, p, z0):
+    """(model distance, z*) of regular fibre (k, j) to p: Gauss-Newton on the local model over
+    [za, zb] from z0."""
+    h = 1e-3 * (zb - za)
+    z = min(max(z0, za), zb)
+    for it in range(12):
+        zp = min(z + h, zb)
+        zn = max(z - h, za)
+        Fp = _reg_model(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, zp)
+        Fm = _reg_model(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, zn)
+        F0 = _reg_model(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, z)
+        D = (Fp - Fm) / (zp - zn)
+        znew = min(max(z - np.dot(F0 - p, D) / np.dot(D, D), za), zb)
+        if abs(znew - z) < 1e-13 * (1.0 + zb):
+            z = znew
+            break
+        z = znew
+    F = _reg_model(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, z)
+    r = F - p
+    return math.sqrt(np.dot(r, r)), z
+
+
+@njit(cache=True)
+def regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, z):
+    """Exact (distance, kind) of regular fibre (k, j) at z."""
+    x, y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
+    F = _exact_map(cv, c, x, y, z)
+    r = F - p
+    return math.sqrt(np.dot(r, r)), kind
+
+
+@njit(cache=True)
+def regular_tangent(cv, c, tp, yseed, k, j, Rj, th, th0, z):
+    L = cv.curve_length[c]
+    h = 0.25 * tp[FIBER_RADIUS]
+    zp = min(z + h, L)
+    zn = max(z - h, 0.0)
+    x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zp)
+    Fp = _exact_map(cv, c, x, y, zp)
+    x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zn)
+    Fm = _exact_map(cv, c, x, y, zn)
+    D = Fp - Fm
+    return D / math.sqrt(np.dot(D, D))
+
+
+@njit(cache=True)
+def _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, t):
+    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
+    return _model_map(za, zm, zb, M, x, y, z)
+
+
+@njit(cache=True)
+def hair_closest(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, p, t0):
+    """(model distance, t*) of a hair to p: Gauss-Newton in t over the part of the hair whose z
+    lies in the model window [za, zb]; distance 1e300 where no part does."""
+    ta = 0.0
+    tb = 1.0
+    if ze > 0.0:
+        ta = max(ta, (za - z1) / ze)
+        tb = min(tb, (zb - z1) / ze)
+    elif ze < 0.0:
+        ta = max(ta, (zb - z1) / ze)
+        tb = min(tb, (za - z1) / ze)
+    elif z1 < za or z1 > zb:
+        return 1e300, 0.0
+    if ta > tb:
+        return 1e300, 0.0
+    t = min(max(t0, ta), tb)
+    h = max(1e-3 * (tb - ta), 1e-9)
+    for it in range(12):
+        tp_ = min(t + h, tb)
+        tm = max(t - h, ta)
+        if tp_ <= tm:
+            break
+        Fp = _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, tp_)
+        Fm = _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, tm)
+        F0 = _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, t)
         D = (Fp - Fm) / (tp_ - tm)
         dd = np.dot(D, D)
         if dd <= 0.0:
             break
-        tn = min(max(t - np.dot(F0 - p, D) / dd, 0.0), 1.0)
-        if abs(tn - t) < 1e-12:
+        tn = min(max(t - np.dot(F0 - p, D) / dd, ta), tb)
+        if abs(tn - t) < 1e-13:
+            t = tn
             break
         t = tn
-    F = _hair_at(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t)
+    F = _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, t)
     r = F - p
-    nd = math.sqrt(np.dot(D, D))
-    if nd > 0.0:
-        D = D / nd
-    return math.sqrt(np.dot(r, r)), t, D
+    return math.sqrt(np.dot(r, r)), t
+
+
+@njit(cache=True)
+def hair_exact(cv, c, tp, k, r0, r1, th1, pe, z1, ze, p, t):
+    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
+    r = _exact_map(cv, c, x, y, z) - p
+    return math.sqrt(np.dot(r, r))
+
+
+@njit(cache=True)
+def hair_tangent(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t):
+    h = 1e-4
+    ta = max(t - h, 0.0)
+    tb = min(t + h, 1.0)
+    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tb)
+    Fp = _exact_map(cv, c, x, y, z)
+    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, ta)
+    Fm = _exact_map(cv, c, x, y, z)
+    D = Fp - Fm
+    n = math.sqrt(np.dot(D, D))
+    return D / n if n > 0.0 else D
 
 
 @njit(cache=True)
@@ -162,26 +260,71 @@ def _hair_active(tab, c, g, tp, z, margin, out_idx, out_z1, out_ze):
 
 
 @njit(cache=True)
+def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
+    """Yarns whose axis passes within their extent bound of p, with the closest point (arc length s,
+    squared distance), in one pass over the segments of p's grid cell (the tables' copy of the
+    curves has its grid padded by each yarn's extent, so the cell holds every such segment).
+    Returns how many, sorted by yarn index."""
+    start, end = nearest_segments_in_cell(cv, p)
+    n = 0
+    seg = np.empty(out_c.shape[0], np.int64)
+    tt = np.empty(out_c.shape[0])
+    for q in range(start, end):
+        i = cv.grid_items[q]
+        c = cv.seg_curve[i]
+        m = 0
+        while m < n and out_c[m] != c:
+            m += 1
+        if m == n:
+            if n == out_c.shape[0]:
+                continue
+            e = tab.yarn_extent[c]
+            out_c[m] = c
+            out_d2[m] = e * e
+            seg[m] = -1
+            n += 1
+        if _segment_box_dist2(cv, i, p) >= out_d2[m]:
+            continue
+        t, d2 = closest_on_segment(cv, i, p)
+        if d2 < out_d2[m]:
+            out_d2[m] = d2
+            seg[m] = i
+            tt[m] = t
+    k = 0
+    for m in range(n):  # keep yarns that are near, with their arc length
+        if seg[m] >= 0:
+            out_c[k] = out_c[m]
+            out_d2[k] = out_d2[m]
+            out_s[k] = cv.seg_arclen[seg[m]] + segment_arclen_to(cv, seg[m], tt[m])
+            k += 1
+    for i in range(1, k):  # ascending yarn index
+        c = out_c[i]
+        sv = out_s[i]
+        dv = out_d2[i]
+        j = i - 1
+        while j >= 0 and out_c[j] > c:
+            out_c[j + 1] = out_c[j]
+            out_s[j + 1] = out_s[j]
+            out_d2[j + 1] = out_d2[j]
+            j -= 1
+        out_c[j + 1] = c
+        out_s[j + 1] = sv
+        out_d2[j + 1] = dv
+    return k
+
+
+@njit(cache=True)
 def lookup_point(cv, tab, p):
     """seed 000 Algorithm 1 at fabric-space point p (float64[3]); see the module doc for the result."""
     cand = np.empty(MAX_YARNS, np.int64)
-    n = yarns_near(cv, p, tab.max_extent[0], cand)
-    # ascending yarn index (insertion sort of a short list)
-    for i in range(1, n):
-        v = cand[i]
-        j = i - 1
-        while j >= 0 and cand[j] > v:
-            cand[j + 1] = cand[j]
-            j -= 1
-        cand[j + 1] = v
+    cs = np.empty(MAX_YARNS)
+    cd2 = np.empty(MAX_YARNS)
+    n = candidate_yarns(cv, tab, p, cand, cs, cd2)
     for ci in range(n):
         c = cand[ci]
+        s = cs[ci]
         t = tab.yarn_type[c]
         tp = tab.tparams[t]
-        ext = tab.yarn_extent[c]
-        s, d2 = closest_point_on_curve(cv, c, p)
-        if d2 > ext * ext:
-            continue
         pos, tan, nn, bn = curve_frame_at(cv, c, s)
         r = p - pos
         x = np.dot(r, nn)
@@ -196,6 +339,11 @@ def lookup_point(cv, tab, p):
         es = tp[E_SHORT]
         el = tp[E_LONG]
         twist = fiber_twist(tp, s)
+        # local model window: every fibre point within rf of p lies at |z - s| <= (1 + K) rf / g_min
+        hwin = max((1.0 + K) * rf, tab.type_mz[t]) / tab.yarn_gmin[c]
+        have_model = False
+        za = zm = zb = 0.0
+        M = np.empty((3, 3, 3))
         for k in range(P):
             # ---- regular and loop fibres of ply k (Algorithm 2)
             cx, cy, drx, dry = ply_frame(tp, k, s)
@@ -223,8 +371,15 @@ def lookup_point(cv, tab, p):
                 dxs = math.sqrt(dx * dx + dy * dy + w * w)
                 if dxs >= K * rf:
                     continue
-                D, zs, T, kind = regular_closest(cv, c, tp, yseed, k, j, Rj, th, th0, p, s)
+                if not have_model:
+                    za, zm, zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
+                    have_model = True
+                Dm, zs = regular_closest(cv, c, za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, p, s)
+                if Dm >= rf * (1.0 + MODEL_SLACK):
+                    continue
+                D, kind = regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, zs)
                 if D < rf:
+                    T = regular_tangent(cv, c, tp, yseed, k, j, Rj, th, th0, zs)
                     return (True, c, kind, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0],
                             tab.yarn_albedo[c, 1], tab.yarn_albedo[c, 2])
             # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
@@ -244,8 +399,15 @@ def lookup_point(cv, tab, p):
                 lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, hz1[q], hze[q], x, y, s)
                 if lb > limit:
                     continue
-                D, ts, T = hair_closest(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
+                if not have_model:
+                    za, zm, zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
+                    have_model = True
+                Dm, ts = hair_closest(za, zm, zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
+                if Dm >= rf * (1.0 + MODEL_SLACK):
+                    continue
+                D = hair_exact(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, ts)
                 if D < rf:
+                    T = hair_tangent(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], ts)
                     return (True, c, 3, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0],
                             tab.yarn_albedo[c, 1], tab.yarn_albedo[c, 2])
     return (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)

@@ -7,7 +7,9 @@ formulas). Every hair is a kind-3 polyline. A piece is sampled uniformly in its 
 parameter (z for regular and loop pieces, t for hairs) with steps no longer than ``spacing`` in
 z (hairs: in yarn-space arc length, bounded by the hair's speed), and each vertex is mapped by
 Eq. 7 with the rotation-minimising frame. The random numbers and tables are the ones the lookups
-use (tables.py), so the realized fibres and the lookups describe the same fabric.
+use (tables.py), so the realized fibres and the lookups describe the same fabric. Fibres are
+ordered as the lookups rank them: yarn, ply, regular/loop pieces (by fibre index) before hairs
+(by hair index), so "the lowest covering fibre" is the lookup's answer.
 
 ``realize_plan`` lists the pieces (no geometry) so the size is known before anything is
 allocated; ``realize_fill`` writes the vertices of a plan.
@@ -86,7 +88,7 @@ def yarn_plan(tab, c, L, spacing):
     nv = np.empty(cap, np.int64)
     n = 0
     fo = tab.type_fib_off[t]
-    for k in range(P):
+    for k in range(P):  # order: ply, regular (and loop) pieces before hairs, fibre index
         for j in range(N):
             f = fo + k * N + j
             m = _fiber_pieces(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], L, a0, a1, kind, n)
@@ -95,7 +97,6 @@ def yarn_plan(tab, c, L, spacing):
                 idx[q] = j
                 nv[q] = max(2, int(math.ceil((a1[q] - a0[q]) / spacing - 1e-9)) + 1)
             n = m
-    for k in range(P):
         g = g0 + k
         base = tab.hair_off[g]
         for h in range(tab.hair_count[g]):

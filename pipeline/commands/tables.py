@@ -1,0 +1,34 @@
+"""``loomlight tables yarns.zarr -o tables.zarr``: seed 000's realization-minimizing tables."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("tables")
+    def tables(
+        yarns: Path = typer.Argument(..., help="A yarns artifact (loomlight ingest)."),
+        out: Path = typer.Option(..., "-o", "--out", help="Output tables artifact (directory ending in .zarr)."),
+        preset: str = typer.Option(None, "--preset", help="Give every yarn this preset (data/yarns/NAME.toml)."),
+        radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius."),
+        seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers."),
+        bins: int = typer.Option(32, "--bins", help="Azimuth bins of the regular-fibre tables (seed 000 Fig. 7)."),
+        hair_mode: str = typer.Option("hybrid", "--hair-mode",
+                                      help="'hybrid' (stored hair z extents, z-bins) or 'free' (Algorithm 3)."),
+        force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+    ):
+        """Per yarn type and ply: fibre trajectories binned by azimuth; per yarn: hair tables (hybrid mode);
+        loops from consistent random numbers; plus a copy of the yarn curves, so renderers need only this."""
+        from ..procedural_runner import run_tables
+
+        res = run_tables(yarns, out, preset=preset, radius=radius, seed=seed, nbins=bins, hair_mode=hair_mode,
+                         force=force)
+        if res["skipped"]:
+            typer.echo(f"{out} is up to date; use --force to rebuild")
+        else:
+            typer.echo(f"wrote {out} ({res['yarns']} yarns)")
+            if res["folded"]:
+                typer.echo(f"warning: {res['folded']} yarn(s) bend more tightly than their fibre extent: "
+                           "the yarn-space map folds there and lookups are not exact", err=True)
