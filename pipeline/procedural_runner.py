@@ -27,7 +27,7 @@ def yarn_types_of(yarns: Artifact, preset: str | None, radius: float | None):
     types = yarns.summary.get("yarn_types") or [{}]
     ytype = np.asarray(yarns["yarn_type"], np.int32)
     rad = np.asarray(yarns["radius"], np.float64)
-    type_radius = [float(np.median(rad[ytype == t])) if (ytype == t).any() else 0.0 for t in range(len(types))]
+    type_radius = [float(np.median(rad[ytype == t] if (ytype == t).any() else rad)) for t in range(len(types))]
     dicts = resolve_yarn_types(types, type_radius, preset=preset, radius=radius, file=yarns.path)
     tparams = np.stack([pack(d) for d in dicts])
     albedo = np.asarray([dicts[t]["albedo"] for t in ytype], np.float64).reshape(-1, 3)
