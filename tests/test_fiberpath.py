@@ -263,8 +263,8 @@ def _fibers_artifact(path, empty=False):
         w.write("fiber_ply", np.zeros(F, np.int16))
         w.write("fiber_kind", np.ones(F, np.int8))
         w.write("yarn_albedo", np.full((1, 3), 0.6, np.float32))
-        w.summary.update(kind="fibers", fibers=F, points=len(pts), yarns=1,
-                         bounds=[[0.0] * 3, [0.0] * 3] if empty else [pts.min(0).tolist(), pts.max(0).tolist()])
+        w.summary.update(kind="fibers", fibers=F, vertices=len(pts), yarns=1, spacing=0.08, max_chord_error=0.0,
+                         bytes={"total": int(pts.nbytes), "regular": int(pts.nbytes), "loop": 0, "hair": 0})
     return path
 
 

@@ -56,7 +56,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
         "width": int(width or cam.get("width", 320)), "height": int(height or cam.get("height", 240)),
         "spp": int(spp or scene.render.get("spp", 16)),
         "seed": int(seed if seed is not None else scene.render.get("seed", scene.seed)),
-        "source": source or scene.render.get("source"), "fibers": str(fibers) if fibers else None,
+        "source": source, "fibers": str(fibers) if fibers else None,
         "bcsdf": bcsdf, "material": material, "max_depth": max_depth, "threads": threads, "extra": extra,
     }
     if threads:

@@ -3,7 +3,8 @@
     render(scene: pipeline.scene.Scene, options: dict) -> RenderResult
 
 ``options`` holds the command line's settings: ``width``, ``height``, ``spp``, ``seed`` (already resolved
-against the scene's camera and [render] table), ``source``, ``fibers``, ``bcsdf``, ``material``,
+against the scene's camera and [render] table), ``source`` (the command line's value only, None when not
+given: a method falls back to the scene's ``render.source`` where that applies), ``fibers``, ``bcsdf``, ``material``,
 ``max_depth``, ``rr_depth``, ``threads`` and any ``--set key=value`` pairs (strings) under ``extra``.
 A renderer returns linear RGB (H, W, 3) float32, optional extra channels (name -> (H, W) float32, e.g.
 ``A``, ``depth``, ``variance``) and ``stats``: at least ``rays`` (rays or ray steps traced), ``paths``

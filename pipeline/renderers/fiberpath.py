@@ -1,7 +1,8 @@
 """``--method fiberpath``: explicit fibres (capsule chains) path traced with the Khungurn 2015 BCSDF.
 
 Fibres come from a ``fibers`` artifact: ``--fibers PATH.zarr`` (``--source realized`` is accepted and
-means the same; it is the only fibre source this method has). Materials: ``--material bcsdf``
+means the same; it is the only fibre source this method has, so the scene's ``render.source``, which
+selects volpath's density source, is ignored). Materials: ``--material bcsdf``
 (default) gives every fibre the BCSDF preset of its yarn group -- scene key ``yarns.<group>.bcsdf``
 (falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).

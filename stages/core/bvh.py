@@ -284,16 +284,20 @@ def intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_w
     iy = _inv(dy)
     iz = _inv(dz)
     stack = np.empty(256, np.int64)
-    sp = 0
+    stack_t = np.empty(256)  # entry distance of each pushed node: skipped if a nearer hit was found since
     best_t = tmax
     best_s = -1
-    if _box_enter(bvh.node_lo, bvh.node_hi, 0, ox, oy, oz, ix, iy, iz, best_t) == np.inf:
+    t_root = _box_enter(bvh.node_lo, bvh.node_hi, 0, ox, oy, oz, ix, iy, iz, best_t)
+    if t_root == np.inf:
         return np.inf, -1
     stack[0] = 0
+    stack_t[0] = t_root
     sp = 1
     while sp > 0:
         sp -= 1
         node = stack[sp]
+        if stack_t[sp] > best_t:
+            continue
         if bvh.node_left[node] < 0:
             for j in range(bvh.node_start[node], bvh.node_start[node] + bvh.node_count[node]):
                 s = bvh.prim[j]
@@ -312,16 +316,20 @@ def intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_w
         if tl <= tr:
             if tr != np.inf:
                 stack[sp] = r
+                stack_t[sp] = tr
                 sp += 1
             if tl != np.inf:
                 stack[sp] = l
+                stack_t[sp] = tl
                 sp += 1
         else:
             if tl != np.inf:
                 stack[sp] = l
+                stack_t[sp] = tl
                 sp += 1
             if tr != np.inf:
                 stack[sp] = r
+                stack_t[sp] = tr
                 sp += 1
     if best_s < 0:
         return np.inf, -1
