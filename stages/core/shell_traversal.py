@@ -13,7 +13,8 @@
              ``seg_srcfiber`` (exemplar fibre id); one SAH BVH per exemplar, nodes concatenated
              (``fn_*``, ``fprim``), exemplar k's root at ``ex_root[k]``.
 
-``shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax)`` (unit d) walks the ray:
+``shell_trace(sc, start_tet, o, d, tmin, tmax, ign_fiber, ign_seg, ign_window)`` (unit d; ``shell_intersect``
+is its form for primary rays from outside the shell) walks the ray:
  1. the nearest boundary face the ray *enters* (d . n < 0) at t >= t_cur (boundary BVH);
  2. from its tetrahedron, tetrahedron to tetrahedron across shared faces: in each, the exit t is the
     nearest face plane the ray leaves through; the ray piece [t_in, t_out] is mapped into flat space by
@@ -24,9 +25,13 @@
     and the periodic copies (wrap-around) are handled by the wrapped pieces;
  4. the first hit is mapped back: t_world = t_in + (s / L)(t_out - t_in), position o + t d, tangent =
     the linear part of f2w applied to the flat segment direction; leaving the shell through a
-    boundary face resumes at 1 (a ray can cross a curved shell several times).
-Returns (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,), flat (3,)) with
-flat = the hit in the exemplar's own space; t = inf and ids -1 on a miss.
+    boundary face resumes at 1 (a ray can cross a curved shell several times). A ray that starts inside
+    the shell (a scattered or shadow ray leaving a fibre) starts at 2 in the tetrahedron it starts in.
+Returns (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,), normal (3,), flat (3,))
+with segment / fibre the exemplar's ids, normal the capsule's outward normal mapped by the inverse
+transpose of the shell map, flat the hit in the exemplar's own space; t = inf and ids -1 on a miss.
+Skipped fibre segments: every periodic copy of ``ign_fiber`` near ``ign_seg`` (copies lie at least one
+exemplar period apart, far beyond a scattering vertex's neighbourhood in practice).
 """
 import math
 from collections import namedtuple
@@ -34,7 +39,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
-from .capsule import capsule_intersect
+from .capsule import capsule_intersect, capsule_normal
 
 ShellScene = namedtuple("ShellScene", [
     "planes", "nbr", "w2f", "f2w",
@@ -152,8 +157,10 @@ def tet_exit(sc, tet, ox, oy, oz, dx, dy, dz, t_in):
 
 
 @njit(cache=True)
-def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Nearest capsule hit (t, segment) with tmin < t < tmax in the BVH rooted at ``root`` (ties: lower index)."""
+def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
+    """Nearest capsule hit (t, segment) with tmin < t < tmax in the BVH rooted at ``root`` (ties: lower
+    index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar segment
+    ``ign_seg`` (-1: test everything)."""
     ix, iy, iz = _inv(dx), _inv(dy), _inv(dz)
     stack = np.empty(256, np.int64)
     stack[0] = root
@@ -168,6 +175,8 @@ def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax):
         if sc.fn_left[node] < 0:
             for j in range(sc.fn_start[node], sc.fn_start[node] + sc.fn_count[node]):
                 s = sc.fprim[j]
+                if ign_fiber >= 0 and sc.seg_srcfiber[s] == ign_fiber and abs(sc.seg_src[s] - ign_seg) <= ign_window:
+                    continue
                 i = sc.seg_a[s]
                 P = sc.points
                 t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
@@ -190,7 +199,7 @@ def _floor_div(x, w):
 
 
 @njit(cache=True)
-def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L):
+def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window):
     """First fibre hit along the flat segment a + s u, 0 < s < L (u unit), through the block map.
     Returns (s, wrapped segment, exemplar, block i, block j, flat hit in exemplar space x, y, z)."""
     bw = sc.block_size[0]
@@ -223,7 +232,8 @@ def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L):
                 ny = sc.ex_nblocks[k, 1]
                 shx = (i - (i % nx)) * bw
                 shy = (j - (j % ny)) * bh
-                t, seg = fiber_nearest(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1)
+                t, seg = fiber_nearest(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1,
+                                        ign_fiber, ign_seg, ign_window)
                 if seg >= 0:
                     return t, seg, k, i, j, ax - shx + t * ux, ay - shy + t * uy, az + t * uz
             s = s1
@@ -239,19 +249,26 @@ def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L):
 
 
 @njit(cache=True)
-def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
-    """See the module doc."""
+def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
+    """The general query (see the module doc): a ray starting inside tetrahedron ``start_tet`` (-1: outside
+    the shell) at t = tmin; fibre segments of ``ign_fiber`` near ``ign_seg`` skipped. Returns
+    (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,), normal (3,), flat (3,))."""
     hit = np.zeros(3)
     tan = np.zeros(3)
+    nrm = np.zeros(3)
     flat = np.zeros(3)
-    tcur = 0.0
+    tcur = tmin
     w2f = sc.w2f
+    tet = start_tet
     for _entry in range(4096):
-        tb, f = enter_shell(sc, ox, oy, oz, dx, dy, dz, tcur, tmax)
-        if f < 0:
-            break
-        tet = sc.btet[f]
-        t_in = tb
+        if tet < 0:
+            tb, f = enter_shell(sc, ox, oy, oz, dx, dy, dz, tcur, tmax)
+            if f < 0:
+                break
+            tet = sc.btet[f]
+            t_in = tb
+        else:
+            t_in = tcur
         for _step in range(MAX_STEPS):
             t_out, face = tet_exit(sc, tet, ox, oy, oz, dx, dy, dz, t_in)
             if face < 0:
@@ -269,14 +286,14 @@ def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
                 ex, ey, ez = bx - ax, by - ay, bz - az
                 L = math.sqrt(ex * ex + ey * ey + ez * ez)
                 if L > 0.0:
-                    s, seg, k, bi, bj, fx, fy, fz = flat_segment_hit(sc, ax, ay, az, ex / L, ey / L, ez / L, L)
+                    s, seg, k, bi, bj, fx, fy, fz = flat_segment_hit(sc, ax, ay, az, ex / L, ey / L, ez / L, L,
+                                                                     ign_fiber, ign_seg, ign_window)
                     if seg >= 0:
                         t = t_in + (s / L) * (t_end - t_in)
                         hit[0], hit[1], hit[2] = ox + t * dx, oy + t * dy, oz + t * dz
                         a = sc.seg_a[seg]
-                        vx = sc.points[a + 1, 0] - sc.points[a, 0]
-                        vy = sc.points[a + 1, 1] - sc.points[a, 1]
-                        vz = sc.points[a + 1, 2] - sc.points[a, 2]
+                        P = sc.points
+                        vx, vy, vz = P[a + 1, 0] - P[a, 0], P[a + 1, 1] - P[a, 1], P[a + 1, 2] - P[a, 2]
                         f2w = sc.f2w
                         wx = f2w[tet, 0, 0] * vx + f2w[tet, 0, 1] * vy + f2w[tet, 0, 2] * vz
                         wy = f2w[tet, 1, 0] * vx + f2w[tet, 1, 1] * vy + f2w[tet, 1, 2] * vz
@@ -284,17 +301,35 @@ def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
                         n = math.sqrt(wx * wx + wy * wy + wz * wz)
                         if n > 0.0:
                             tan[0], tan[1], tan[2] = wx / n, wy / n, wz / n
+                        # capsule normal in flat space, carried by the inverse transpose (w2f^T)
+                        nfx, nfy, nfz, _u = capsule_normal(fx, fy, fz, P[a, 0], P[a, 1], P[a, 2],
+                                                           P[a + 1, 0], P[a + 1, 1], P[a + 1, 2])
+                        mx = w2f[tet, 0, 0] * nfx + w2f[tet, 1, 0] * nfy + w2f[tet, 2, 0] * nfz
+                        my = w2f[tet, 0, 1] * nfx + w2f[tet, 1, 1] * nfy + w2f[tet, 2, 1] * nfz
+                        mz = w2f[tet, 0, 2] * nfx + w2f[tet, 1, 2] * nfy + w2f[tet, 2, 2] * nfz
+                        n = math.sqrt(mx * mx + my * my + mz * mz)
+                        if n > 0.0:
+                            nrm[0], nrm[1], nrm[2] = mx / n, my / n, mz / n
                         flat[0], flat[1], flat[2] = fx, fy, fz
-                        return (t, tet, sc.seg_src[seg], sc.seg_srcfiber[seg], k, bi, bj, hit, tan, flat)
+                        return (t, tet, sc.seg_src[seg], sc.seg_srcfiber[seg], k, bi, bj, hit, tan, nrm, flat)
             if t_end >= tmax:
-                return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, flat)
+                return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat)
             nb = sc.nbr[tet, face] if face >= 0 else -1
             if nb < 0:
                 tcur = t_out
+                tet = -1
                 break
             tet = nb
             t_in = t_out
-    return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, flat)
+    return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat)
+
+
+@njit(cache=True)
+def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
+    """Primary rays (origin outside the shell): (t, tet, segment, fibre, exemplar, block_i, block_j,
+    hit (3,), tangent (3,), flat (3,))."""
+    t, tet, seg, fib, k, bi, bj, hit, tan, nrm, flat = shell_trace(sc, -1, ox, oy, oz, dx, dy, dz, 0.0, tmax, -1, -1, 0)
+    return t, tet, seg, fib, k, bi, bj, hit, tan, flat
 
 
 @njit(cache=True, parallel=True)
