@@ -1,0 +1,147 @@
+"""Tables (seed 000 §4.3-4.4) and the lookup command.
+
+References: brute force over every fibre trajectory for the azimuth bins (footnote 2), the artifact
+contract of ``loomlight lookup`` (keys, dtypes, shapes), the self-contained tables artifact (lookups
+from its own curve copy equal lookups from a freshly built pair), byte-identical rebuilds.
+"""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pipeline import presets
+from pipeline.procedural_runner import build, load_tables
+from stages.procedural import tables as T
+from stages.procedural import yarn_model as M
+from stages.procedural.lookup import lookup_points
+
+SCENE = """
+[fabric]
+source = "generator"
+[fabric.generator]
+kind = "woven"
+pattern = "plain"
+ends = 2
+picks = 1
+spacing = 0.25
+yarn_radius = 0.03
+crimp = 0.4
+samples_per_cell = 6
+[yarns.warp]
+preset = "silk2"
+[yarns.weft]
+preset = "rayon2"
+color = [0.2, 0.3, 0.6]
+"""
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    from pipeline.cli import main
+
+    d = tmp_path_factory.mktemp("tables")
+    (d / "s.toml").write_text(SCENE)
+    assert main(["ingest", str(d / "s.toml"), "-o", str(d / "yarns.zarr")]) == 0
+    assert main(["tables", str(d / "yarns.zarr"), "-o", str(d / "tables.zarr"), "--seed", "5"]) == 0
+    return d
+
+
+def _dist_point_segment_2d(p, a, b):
+    ab = b - a
+    t = np.clip(((p - a) @ ab) / max(ab @ ab, 1e-300), 0, 1)
+    return np.linalg.norm(p - (a + t * ab))
+
+
+@pytest.mark.parametrize("name", ["cotton1", "rayon3"])
+def test_azimuth_bins_list_every_nearby_trajectory(name):
+    """Every fibre whose trajectory comes within the margin of a unit-disc point is in that point's bin
+    with the point inside its radial interval (brute force over all fibres)."""
+    tp = presets.pack(presets.load_preset(name))
+    K, B = 2.0, 24
+    R, th, th0, rlo, rhi, start, items = T.regular_tables(tp, 99, K, B)
+    P, N = int(tp[M.PLY_NUM]), int(tp[M.FIBER_NUM])
+    m = K * tp[M.FIBER_RADIUS] / min(tp[M.E_SHORT], tp[M.E_LONG])
+    lo = tp[M.RHO_MIN] * R
+    hi = np.maximum(tp[M.RHO_MAX] * R, tp[M.U_MAX])
+    st = np.concatenate([[0], start])  # regular_tables gives each bin's end
+    rng = np.random.default_rng(0)
+    checked = 0
+    for _ in range(3000):
+        k = int(rng.integers(P))
+        r = math.sqrt(rng.uniform()) * tp[M.U_MAX] * 1.05
+        a = rng.uniform(0, 2 * math.pi)
+        p = np.array([r * math.cos(a), r * math.sin(a)])
+        b = min(int(a / (2 * math.pi) * B), B - 1)
+        g = k * B + b
+        listed = set(items[st[g]:st[g + 1]].tolist())
+        for j in range(N):
+            f = k * N + j
+            d = np.array([math.cos(th[f]), math.sin(th[f])])
+            if _dist_point_segment_2d(p, lo[f] * d, hi[f] * d) < m:
+                checked += 1
+                assert j in listed
+                assert rlo[f] <= r <= rhi[f]
+    assert checked > 1000
+
+
+def test_lookup_command_contract(built, cli):
+    d = built
+    pts = np.random.default_rng(3).uniform([-0.3, -0.2, -0.05], [0.3, 0.2, 0.05], (4000, 3))
+    np.save(d / "pts.npy", pts)
+    code, out, err = cli("lookup", d / "tables.zarr", "--points", d / "pts.npy", "-o", d / "res.npz")
+    assert code == 0, err
+    res = np.load(d / "res.npz")
+    assert res["inside"].dtype == bool and res["inside"].shape == (4000,)
+    assert res["yarn"].dtype.kind == "i" and res["kind"].dtype.kind == "i"
+    assert res["direction"].shape == (4000, 3) and res["density"].shape == (4000,)
+    ins = res["inside"]
+    assert ins.any() and (~ins).any()
+    assert np.all(res["yarn"][~ins] == -1) and np.all(res["kind"][~ins] == 0) and np.all(res["density"][~ins] == 0)
+    assert np.all(np.isin(res["kind"][ins], [1, 2, 3])) and np.all(res["density"][ins] > 0)
+    np.testing.assert_allclose(np.linalg.norm(res["direction"][ins], axis=1), 1.0, rtol=1e-9)
+    # weft (yarn type with a colour) answers with that albedo
+    cv, tab, art = load_tables(d / "tables.zarr")
+    weft = np.nonzero(tab.yarn_albedo[:, 0] == 0.2)[0]
+    assert len(weft) and np.all(np.isin(res["yarn"][ins & np.isin(res["yarn"], weft)], weft))
+
+
+def test_tables_artifact_is_self_contained_and_deterministic(built, cli):
+    d = built
+    cv, tab, art = load_tables(d / "tables.zarr")
+    cv2, tab2, _, _, _ = build(d / "yarns.zarr", seed=5)
+    pts = np.random.default_rng(4).uniform([-0.3, -0.2, -0.05], [0.3, 0.2, 0.05], (3000, 3))
+    for a, b in zip(lookup_points(cv, tab, pts), lookup_points(cv2, tab2, pts)):
+        assert np.array_equal(a, b)
+    code, out, err = cli("tables", d / "yarns.zarr", "-o", d / "again.zarr", "--seed", "5")
+    assert code == 0, err
+    code, out, err = cli("info", d / "again.zarr", "--json")
+    again = json.loads(out)
+    assert again["content_hash"] == art.meta["content_hash"]
+    b = again["bytes"]
+    assert b["tables"] == b["regular"] + b["hair"] + b["loop"] + b["per_yarn"] and b["loop"] == 0
+
+
+def test_seed_changes_the_fabric(built):
+    d = built
+    _, tab_a, _, _, _ = build(d / "yarns.zarr", seed=5)
+    _, tab_b, _, _, _ = build(d / "yarns.zarr", seed=6)
+    assert not np.array_equal(tab_a.fib_R, tab_b.fib_R)
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--preset", "nylon"], "unknown preset 'nylon'"), (["--radius", "0"], "--radius"),
+    (["--radius", "-2"], "--radius"), (["--hair-mode", "bald"], "--hair-mode"), (["--bins", "0"], "--bins"),
+])
+def test_tables_bad_options_exit_2(built, cli, args, needle):
+    d = built
+    code, out, err = cli("tables", d / "yarns.zarr", "-o", d / "bad.zarr", *args)
+    assert code == 2 and needle in err
+    assert not (d / "bad.zarr").exists()
+
+
+def test_lookup_bad_points_exit_2(built, cli):
+    d = built
+    np.save(d / "bad.npy", np.zeros((5, 2)))
+    code, out, err = cli("lookup", d / "tables.zarr", "--points", d / "bad.npy", "-o", d / "r.npz")
+    assert code == 2 and "(N, 3)" in err
