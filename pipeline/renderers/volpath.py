@@ -1,10 +1,10 @@
 """``--method volpath``: volumetric path tracing of the fibre medium (seed 000 §5.4, App. A).
 
 Sources (``--source``, default the scene's ``render.source``, else procedural):
-- ``procedural``: lookups on the fly from a ``tables`` artifact (``--set tables=PATH.zarr``);
-  the yarn curves come from the yarns artifact the tables were built from.
+- ``procedural``: lookups on the fly from a ``tables`` artifact (``--set tables=PATH.zarr``, which
+  carries its own copy of the yarn curves).
 - ``realized``: fibres of a ``fibers`` artifact (``--fibers PATH.zarr``) in a BVH; per-yarn density
-  and roughness from the tables artifact the fibres were realized from (or ``--set tables=``).
+  and roughness from the yarn types the fibres were realized with.
 - ``grid``: a ``grid`` artifact of ``loomlight voxelize`` (``--set grid=PATH.zarr``).
 
 Scene: camera, lights, ``render.max_depth``, ``render.rr_depth``, ``render.tile_size`` and the
@@ -41,32 +41,6 @@ def _artifact(path, kind, place):
     return Artifact(Path(path), kind=kind)
 
 
-def load_tables(path):
-    """(Curves, Tables, tables Artifact) of a ``tables`` artifact and the yarns artifact it was built from."""
-    from stages.procedural.tables import Tables
-
-    from ..yarns import load_curves
-
-    art = _artifact(path, "tables", "--set tables=PATH.zarr")
-    missing = [f for f in Tables._fields if f not in art]
-    if missing:
-        raise LoomError(art.path, missing[0], "array missing from the tables artifact (rebuild it with loomlight tables)")
-    tab = Tables(*[art[f] for f in Tables._fields])
-    yarns = [inp["path"] for inp in art.meta.get("inputs", {}).values() if _kind_of(inp["path"]) == "yarns"]
-    if not yarns:
-        raise LoomError(art.path, "inputs", "the tables artifact does not name the yarns artifact it was built from")
-    return load_curves(yarns[0]), tab, art
-
-
-def _kind_of(path):
-    from ..artifacts import read_meta
-
-    try:
-        return read_meta(path).get("kind")
-    except LoomError:
-        return None
-
-
 def _box_of_capsules(a, b, r):
     lo = np.minimum(a, b).min(axis=0) - r.max()
     hi = np.maximum(a, b).max(axis=0) + r.max()
@@ -84,6 +58,10 @@ def procedural_source(tables_path, cell=None):
     from stages.render.procedural_medium import ProceduralMedium, yarn_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
+    from ..procedural_runner import load_tables
+
+    if not tables_path:
+        raise LoomError(None, "--set tables=PATH.zarr", "--source procedural needs a tables artifact (loomlight tables)")
     cv, tab, _ = load_tables(tables_path)
     a, b, r, bound = yarn_capsules(cv, tab, 0.5)
     lo, hi = _box_of_capsules(a, b, r)
@@ -92,37 +70,40 @@ def procedural_source(tables_path, cell=None):
     return ProceduralMedium(cv, tab), make_majorant_grid(lo, hi, res, mu), {"yarns": int(len(tab.yarn_type))}
 
 
-def realized_source(fibers_path, tables_path=None, cell=None):
-    """(RealizedMedium, MajorantGrid, info) from a fibers artifact (+ its tables for density, roughness)."""
+def realized_source(fibers_path, cell=None):
+    """(RealizedMedium, MajorantGrid, info) from a fibers artifact; per-yarn density and roughness
+    from the yarn types the fibres were realized with (their yarns artifact and preset/radius)."""
     from stages.core.bvh import build_fiber_bvh
-    from stages.procedural.yarn_model import DENSITY, ROUGHNESS
+    from stages.procedural.yarn_model import DENSITY, ROUGHNESS, extent_bound
     from stages.render.realized_medium import RealizedMedium, fiber_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
+
+    from ..artifacts import Artifact
+    from ..procedural_runner import yarn_types_of
 
     if not fibers_path:
         raise LoomError(None, "--fibers", "--source realized needs the realized fibres: pass --fibers PATH.zarr")
     fibers = load_fibers(fibers_path)
-    if tables_path is None:
-        fart = _artifact(fibers_path, "fibers", "--fibers")
-        cands = [inp["path"] for inp in fart.meta.get("inputs", {}).values() if _kind_of(inp["path"]) == "tables"]
-        if not cands:
-            raise LoomError(fibers_path, "inputs", "cannot find the tables artifact of these fibres (yarn densities): "
-                                                  "pass --set tables=PATH.zarr")
-        tables_path = cands[0]
-    _, tab, _ = load_tables(tables_path)
-    Y = len(tab.yarn_type)
-    if len(fibers.yarn_albedo) > Y or int(fibers.fiber_yarn.max()) >= Y:
-        raise LoomError(fibers_path, "fiber_yarn", f"fibres name yarns beyond the {Y} yarns of {tables_path}")
-    tp = np.asarray(tab.tparams)[np.asarray(tab.yarn_type)]
+    fart = _artifact(fibers_path, "fibers", "--fibers")
+    yarns_in = fart.meta.get("inputs", {}).get("yarns")
+    if not yarns_in:
+        raise LoomError(fibers_path, "inputs", "the fibers artifact does not name the yarns artifact it was realized from")
+    yarns = Artifact(yarns_in["path"], kind="yarns")
+    _, tparams, ytype, _ = yarn_types_of(yarns, fart.params.get("preset"), fart.params.get("radius"))
+    Y = len(ytype)
+    if int(fibers.fiber_yarn.max()) >= Y:
+        raise LoomError(fibers_path, "fiber_yarn", f"fibres name yarns beyond the {Y} yarns of {yarns.path}")
+    tp = tparams[ytype]
     albedo = np.zeros((Y, 3))
-    albedo[: len(fibers.yarn_albedo)] = fibers.yarn_albedo
+    albedo[: min(Y, len(fibers.yarn_albedo))] = fibers.yarn_albedo[:Y]
+    extent = float(np.mean([extent_bound(t) for t in tp]))
     t0 = time.perf_counter()
     bvh, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
     med = RealizedMedium(bvh, fibers.fiber_yarn.astype(np.int32), np.ascontiguousarray(tp[:, DENSITY]),
                          albedo, np.ascontiguousarray(tp[:, ROUGHNESS]))
     a, b, r, bound = fiber_capsules(med)
     lo, hi = _box_of_capsules(a, b, r)
-    res = _majorant_res(lo, hi, cell or float(np.mean(tab.yarn_extent)))
+    res = _majorant_res(lo, hi, cell or extent)
     mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)
     info = {"fibers": fibers.n_fibers, "segments": int(len(bvh.seg_a)), "bvh_build_s": time.perf_counter() - t0}
     return med, make_majorant_grid(lo, hi, res, mu), info
@@ -158,7 +139,7 @@ def open_source(source, options):
     if source == "procedural":
         return procedural_source(tables, cell)
     if source == "realized":
-        return realized_source(options.get("fibers"), tables, cell)
+        return realized_source(options.get("fibers"), cell)
     if source == "grid":
         return grid_source(options.get("grid") or extra.get("grid"), cell)
     raise LoomError(None, "--source", f"unknown volpath source {source!r} (known: {', '.join(SOURCES)})")

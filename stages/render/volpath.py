@@ -11,7 +11,7 @@ max_depth = 1 shows only directly visible emitters). An optional diffuse ground 
 (Lambertian, RGB albedo) catches shadows.
 
 ``render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_depth, tiles, out)``
-renders the given image tiles in parallel into ``out`` (H, W, OUT_CHANNELS):
+renders the given image tiles on parallel threads into ``out`` (H, W, OUT_CHANNELS):
 0-2 mean R, G, B (box filter); 3 alpha (fraction of camera paths that met fibres or ground);
 4 depth (mean distance to the first interaction, 0 where none); 5 variance of the pixel mean of
 luminance (sample variance / spp); 6 medium lookups made by the pixel's paths; 7 rays tracked
@@ -26,7 +26,7 @@ is a pure function of the inputs, whatever the number of threads or the tiling.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..core.rng import uniform
 from .camera import camera_ray
@@ -209,45 +209,65 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
     return Lr, Lg, Lb, hit, first_t, lookups, rays
 
 
-@njit(cache=True, parallel=True)
-def render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_depth, tiles, out):
-    """Render the tiles (rows of (row0, col0, row1, col1), ``stages.render.film.tile_grid``) into
-    out (H, W, OUT_CHANNELS); see the module documentation."""
+@njit(cache=True, nogil=True)
+def render_tile(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_depth, row0, col0, row1, col1, out):
+    """Render pixels [row0, row1) x [col0, col1) into out (H, W, OUT_CHANNELS); releases the GIL."""
     W = int(cam[13])
-    for ti in prange(tiles.shape[0]):
-        for row in range(tiles[ti, 0], tiles[ti, 2]):
-            for col in range(tiles[ti, 1], tiles[ti, 3]):
-                pix = row * W + col
-                sr = 0.0
-                sg = 0.0
-                sb = 0.0
-                sy = 0.0
-                syy = 0.0
-                sh = 0.0
-                sd = 0.0
-                sl = 0.0
-                sn = 0.0
-                for s in range(spp):
-                    index = pix * spp + s
-                    o, d = camera_ray(cam, row, col, uniform(seed, index, 0), uniform(seed, index, 1))
-                    r, g, b, hit, ft, lk, nr = trace_path(med, maj, lt, ground, ground_on, o[0], o[1], o[2],
+    for row in range(row0, row1):
+        for col in range(col0, col1):
+            pix = row * W + col
+            sr = 0.0
+            sg = 0.0
+            sb = 0.0
+            sy = 0.0
+            syy = 0.0
+            sh = 0.0
+            sd = 0.0
+            sl = 0.0
+            sn = 0.0
+            for s in range(spp):
+                index = pix * spp + s
+                o, d = camera_ray(cam, row, col, uniform(seed, index, 0), uniform(seed, index, 1))
+                r, g, b, hit, ft, lk, nr = trace_path(med, maj, lt, ground, ground_on, o[0], o[1], o[2],
                                                       d[0], d[1], d[2], seed, index, max_depth, rr_depth)
-                    sr += r
-                    sg += g
-                    sb += b
-                    y = 0.2126 * r + 0.7152 * g + 0.0722 * b
-                    sy += y
-                    syy += y * y
-                    sh += hit
-                    sd += ft
-                    sl += lk
-                    sn += nr
-                out[row, col, 0] = sr / spp
-                out[row, col, 1] = sg / spp
-                out[row, col, 2] = sb / spp
-                out[row, col, 3] = sh / spp
-                out[row, col, 4] = sd / sh if sh > 0.0 else 0.0
-                mean = sy / spp
-                out[row, col, 5] = max(syy / spp - mean * mean, 0.0) / (spp - 1) if spp > 1 else 0.0
-                out[row, col, 6] = sl
-                out[row, col, 7] = sn
+                sr += r
+                sg += g
+                sb += b
+                y = 0.2126 * r + 0.7152 * g + 0.0722 * b
+                sy += y
+                syy += y * y
+                sh += hit
+                sd += ft
+                sl += lk
+                sn += nr
+            out[row, col, 0] = sr / spp
+            out[row, col, 1] = sg / spp
+            out[row, col, 2] = sb / spp
+            out[row, col, 3] = sh / spp
+            out[row, col, 4] = sd / sh if sh > 0.0 else 0.0
+            mean = sy / spp
+            out[row, col, 5] = max(syy / spp - mean * mean, 0.0) / (spp - 1) if spp > 1 else 0.0
+            out[row, col, 6] = sl
+            out[row, col, 7] = sn
+
+
+def render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_depth, tiles, out, threads=None):
+    """Render the tiles (rows of (row0, col0, row1, col1), ``stages.render.film.tile_grid``) into
+    out (H, W, OUT_CHANNELS) on ``threads`` threads (default: numba's thread count). Each tile is a
+    GIL-free numba call; pixels depend only on their own random numbers, so the result does not
+    depend on the thread count. (Threads rather than ``prange``: numba's parallel loops cannot take
+    sources nested as namedtuples of namedtuples, such as the procedural tables.)"""
+    import numba
+
+    n = int(threads or numba.get_num_threads())
+    args = (med, maj, lt, cam, ground, bool(ground_on), int(seed), int(spp), int(max_depth), int(rr_depth))
+    tiles = np.asarray(tiles, np.int64).reshape(-1, 4)
+    if n <= 1 or len(tiles) <= 1:
+        for t in tiles:
+            render_tile(*args, t[0], t[1], t[2], t[3], out)
+        return out
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=n) as ex:
+        list(ex.map(lambda t: render_tile(*args, t[0], t[1], t[2], t[3], out), tiles))
+    return out
