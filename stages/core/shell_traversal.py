@@ -252,7 +252,8 @@ def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_wind
 def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """The general query (see the module doc): a ray starting inside tetrahedron ``start_tet`` (-1: outside
     the shell) at t = tmin; fibre segments of ``ign_fiber`` near ``ign_seg`` skipped. Returns
-    (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,), normal (3,), flat (3,))."""
+    (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,), normal (3,), flat (3,),
+    radius) with radius the hit capsule's radius in flat space."""
     hit = np.zeros(3)
     tan = np.zeros(3)
     nrm = np.zeros(3)
@@ -311,9 +312,9 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                         if n > 0.0:
                             nrm[0], nrm[1], nrm[2] = mx / n, my / n, mz / n
                         flat[0], flat[1], flat[2] = fx, fy, fz
-                        return (t, tet, sc.seg_src[seg], sc.seg_srcfiber[seg], k, bi, bj, hit, tan, nrm, flat)
+                        return (t, tet, sc.seg_src[seg], sc.seg_srcfiber[seg], k, bi, bj, hit, tan, nrm, flat, sc.seg_r[seg])
             if t_end >= tmax:
-                return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat)
+                return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
             nb = sc.nbr[tet, face] if face >= 0 else -1
             if nb < 0:
                 tcur = t_out
@@ -321,14 +322,14 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                 break
             tet = nb
             t_in = t_out
-    return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat)
+    return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
 
 
 @njit(cache=True)
 def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
     """Primary rays (origin outside the shell): (t, tet, segment, fibre, exemplar, block_i, block_j,
     hit (3,), tangent (3,), flat (3,))."""
-    t, tet, seg, fib, k, bi, bj, hit, tan, nrm, flat = shell_trace(sc, -1, ox, oy, oz, dx, dy, dz, 0.0, tmax, -1, -1, 0)
+    t, tet, seg, fib, k, bi, bj, hit, tan, nrm, flat, rad = shell_trace(sc, -1, ox, oy, oz, dx, dy, dz, 0.0, tmax, -1, -1, 0)
     return t, tet, seg, fib, k, bi, bj, hit, tan, flat
 
 

@@ -110,7 +110,7 @@ def trace_path_shell(cam, sc, mat_of_fiber, mats, lights, env, marg, cond, groun
     so = np.empty(3)
     depth = 0
     while True:
-        t_hit, tet, s, fib, k, bi, bj, hp, t_tan, nrm, fl = shell_trace(
+        t_hit, tet, s, fib, k, bi, bj, hp, t_tan, nrm, fl, rad = shell_trace(
             sc, cell, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, ign_f, ign_s, ign_window)
         counters[0] += 1
         tg = ground_intersect(ground, has_ground, o[2], d[2], eps)
@@ -149,8 +149,9 @@ def trace_path_shell(cam, sc, mat_of_fiber, mats, lights, env, marg, cond, groun
             else:
                 nf = -1
                 ns = -1
+                off = 1e-3 * rad + eps  # as fiberpath: a Lambertian vertex's rays start just off the surface
                 for c in range(3):
-                    so[c] = p[c] + eps * n[c]
+                    so[c] = p[c] + off * n[c]
             galb = 0
             next_cell = tet
         else:
