@@ -10,7 +10,7 @@ Benchmarks hold performance targets; tests never time anything.
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import importlib
 import json
 import os
 import platform
@@ -28,10 +28,10 @@ COMPARE = ("paths_per_s", "rays_per_s", "rays_per_s_per_core", "primary_rays_per
 
 
 def _load(path: Path):
-    spec = importlib.util.spec_from_file_location(f"bench_{path.stem}", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    # imported by its own name from bench/ (numba's cache needs an importable module)
+    if str(path.parent) not in sys.path:
+        sys.path.insert(0, str(path.parent))
+    return importlib.import_module(path.stem)
 
 
 def _fmt(v):

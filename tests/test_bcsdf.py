@@ -145,3 +145,27 @@ def test_truncated_gauss_sampler_inverts_cdf():
             x = B.sample_truncated_gauss(u, mu, beta, a, b)
             cdf = B.gauss_mass(a, x, mu, beta) / B.gauss_mass(a, b, mu, beta)
             assert cdf == pytest.approx(u, abs=1e-9)
+
+
+@njit(cache=True)
+def _ctx_vs_world(p, t, wi, wo, us):
+    ctx = np.empty(B.CTX_SIZE)
+    B.bcsdf_context(p, t, wi, ctx)
+    f0, f1, f2, pdf = B.bcsdf_eval_pdf_ctx(p, ctx, t, wo)
+    e0, e1, e2 = B.bcsdf_eval(p, t, wi, wo)
+    ws = np.empty(3)
+    w0, w1, w2, ps = B.bcsdf_sample_ctx(p, ctx, t, us[0], us[1], us[2], ws)
+    v, x0, x1, x2, pv = B.bcsdf_sample(p, t, wi, us[0], us[1], us[2])
+    return np.array([f0, f1, f2, pdf, w0, w1, w2, ps, ws[0], ws[1], ws[2]]), \
+        np.array([e0, e1, e2, B.bcsdf_pdf(p, t, wi, wo), x0, x1, x2, pv, v[0], v[1], v[2]])
+
+
+@pytest.mark.parametrize("name", ["silk", "cotton"])
+def test_vertex_context_matches_world_interface(name):
+    """The integrator's per-vertex context path equals bcsdf_eval / bcsdf_pdf / bcsdf_sample (tested above)."""
+    p = preset(name)
+    rng = np.random.default_rng(11)
+    for _ in range(200):
+        t, wi, wo = (v / np.linalg.norm(v) for v in rng.normal(size=(3, 3)))
+        a, b = _ctx_vs_world(p, t, wi, wo, rng.random(3))
+        np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-300)

@@ -357,6 +357,90 @@ def bcsdf_sample(p, t, wi, u0, u1, u2):
     return wo, s0 * c, s1 * c, s2 * c, pdf
 
 
+# ------------------------------------------------------------------------------------------------
+# per-vertex context: everything that depends on wi only, computed once per scattering vertex
+CTX_SIZE = 16  # theta_i, phi_i, F_R (3), 1/G_R, 1/G_TT, 1/Z_R, 1/Z_TT, P_R, frame y (3), frame z (3)
+
+
+@njit(cache=True)
+def bcsdf_context(p, t, wi, ctx):
+    """Fill ``ctx`` (float64[CTX_SIZE]) for viewer direction wi at a fibre of unit tangent t."""
+    y0, y1, y2, z0, z1, z2 = fiber_frame(t)
+    sx = min(1.0, max(-1.0, wi[0] * t[0] + wi[1] * t[1] + wi[2] * t[2]))
+    ti = math.asin(sx)
+    ctx[0] = ti
+    ctx[1] = math.atan2(wi[0] * z0 + wi[1] * z1 + wi[2] * z2, wi[0] * y0 + wi[1] * y1 + wi[2] * y2)
+    for c in range(3):
+        ctx[2 + c] = fresnel_R(ti, p[c])
+    g = G_norm(-ti, p[6])
+    ctx[5] = 1.0 / g if g > 0.0 else 0.0
+    g = G_norm(-ti, p[7])
+    ctx[6] = 1.0 / g if g > 0.0 else 0.0
+    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[6])
+    ctx[7] = 1.0 / z if z > 0.0 else 0.0
+    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[7])
+    ctx[8] = 1.0 / z if z > 0.0 else 0.0
+    ctx[9] = lobe_probability_R(p, ti)
+    ctx[10] = y0
+    ctx[11] = y1
+    ctx[12] = y2
+    ctx[13] = z0
+    ctx[14] = z1
+    ctx[15] = z2
+
+
+@njit(cache=True)
+def _eval_pdf_ctx_angles(p, ctx, theta_o, phi_o):
+    co = math.cos(theta_o)
+    if co <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    ti = ctx[0]
+    g_r = gauss(theta_o, -ti, p[6])
+    g_tt = gauss(theta_o, -ti, p[7])
+    m_r = g_r * ctx[5]
+    m_tt = g_tt * ctx[6]
+    n_tt = azimuthal_N_tt(wrap_pi(phi_o - ctx[1] - math.pi), p[8], p[9])
+    n_r = 1.0 / TWO_PI
+    s0 = ctx[2] * m_r * n_r + (1.0 - ctx[2]) * p[3] * m_tt * n_tt
+    s1 = ctx[3] * m_r * n_r + (1.0 - ctx[3]) * p[4] * m_tt * n_tt
+    s2 = ctx[4] * m_r * n_r + (1.0 - ctx[4]) * p[5] * m_tt * n_tt
+    pr = ctx[9]
+    pdf = 0.0
+    if pr >= 0.0:
+        pdf = (pr * g_r * ctx[7] * n_r + (1.0 - pr) * g_tt * ctx[8] * n_tt) / co
+    return s0 * co, s1 * co, s2 * co, pdf
+
+
+@njit(cache=True)
+def bcsdf_eval_pdf_ctx(p, ctx, t, wo):
+    """(S cos(theta_o) r, g, b, pdf) at light direction wo: ``bcsdf_eval`` and ``bcsdf_pdf`` in one."""
+    sx = min(1.0, max(-1.0, wo[0] * t[0] + wo[1] * t[1] + wo[2] * t[2]))
+    wy = wo[0] * ctx[10] + wo[1] * ctx[11] + wo[2] * ctx[12]
+    wz = wo[0] * ctx[13] + wo[1] * ctx[14] + wo[2] * ctx[15]
+    return _eval_pdf_ctx_angles(p, ctx, math.asin(sx), math.atan2(wz, wy))
+
+
+@njit(cache=True)
+def bcsdf_sample_ctx(p, ctx, t, u0, u1, u2, wo):
+    """Sample into ``wo`` (float64[3]); returns (weight r, g, b = S cos / pdf, pdf), pdf 0 on failure."""
+    to, phi_o, ok = bcsdf_sample_angles(p, ctx[0], ctx[1], u0, u1, u2)
+    if not ok:
+        return 0.0, 0.0, 0.0, 0.0
+    st = math.sin(to)
+    ct = math.cos(to)
+    cp = math.cos(phi_o) * ct
+    sp = math.sin(phi_o) * ct
+    for k in range(3):
+        wo[k] = st * t[k] + cp * ctx[10 + k] + sp * ctx[13 + k]
+    n = math.sqrt(wo[0] * wo[0] + wo[1] * wo[1] + wo[2] * wo[2])
+    for k in range(3):
+        wo[k] /= n
+    f0, f1, f2, pdf = _eval_pdf_ctx_angles(p, ctx, to, phi_o)
+    if pdf <= 0.0:
+        return 0.0, 0.0, 0.0, 0.0
+    return f0 / pdf, f1 / pdf, f2 / pdf, pdf
+
+
 @njit(cache=True)
 def bcsdf_albedo(p, theta_i):
     """Closed form of int S(wi, wo) cos(theta_o) d wo = F_R + (1 - F_R) C_TT per channel."""

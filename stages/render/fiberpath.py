@@ -36,6 +36,7 @@ from ..core.capsule import capsule_normal
 from ..core.rng import uniform
 from .camera import camera_ray
 from .fiber_lambert import lambert_eval, lambert_pdf, lambert_sample
+from .film import add_sample
 from .ground import ground_intersect
 from .lights import environment_radiance, light_eval, light_pdf, light_sample
 
@@ -56,27 +57,6 @@ def pack_material_lambert(albedo):
     row[0] = MAT_LAMBERT
     row[11:14] = albedo
     return row
-
-
-@njit(cache=True)
-def _mat_eval(mats, m, kind, t, n, wi, wo):
-    if kind == MAT_BCSDF:
-        return B.bcsdf_eval(mats[m, 1:11], t, wi, wo)
-    return lambert_eval(n, mats[m, 11:14], wo)
-
-
-@njit(cache=True)
-def _mat_pdf(mats, m, kind, t, n, wi, wo):
-    if kind == MAT_BCSDF:
-        return B.bcsdf_pdf(mats[m, 1:11], t, wi, wo)
-    return lambert_pdf(n, wo)
-
-
-@njit(cache=True)
-def _mat_sample(mats, m, kind, t, n, wi, u0, u1, u2):
-    if kind == MAT_BCSDF:
-        return B.bcsdf_sample(mats[m, 1:11], t, wi, u0, u1, u2)
-    return lambert_sample(n, mats[m, 11:14], u1, u2)
 
 
 @njit(cache=True)
@@ -105,6 +85,8 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
     wi = np.empty(3)
     p = np.empty(3)
     so = np.empty(3)
+    wo = np.empty(3)
+    ctx = np.empty(B.CTX_SIZE)
     depth = 0
     while True:
         t_hit, s = intersect(bvh, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, ign_f, ign_s, ign_window)
@@ -149,6 +131,7 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
             nx, ny, nz, _ = capsule_normal(p[0], p[1], p[2], ax, ay, az, bx, by, bz)
             n[0] = nx; n[1] = ny; n[2] = nz
             if kind == MAT_BCSDF:
+                B.bcsdf_context(mats[m, 1:11], t_tan, wi, ctx)
                 nf = bvh.seg_fiber[s]
                 ns = s
                 for k in range(3):
@@ -180,9 +163,11 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
             if galb == 1:
                 f0, f1, f2 = lambert_eval(n, ground[1:4], wl)
                 pf = lambert_pdf(n, wl)
+            elif kind == MAT_BCSDF:
+                f0, f1, f2, pf = B.bcsdf_eval_pdf_ctx(mats[m, 1:11], ctx, t_tan, wl)
             else:
-                f0, f1, f2 = _mat_eval(mats, m, kind, t_tan, n, wi, wl)
-                pf = _mat_pdf(mats, m, kind, t_tan, n, wi, wl)
+                f0, f1, f2 = lambert_eval(n, mats[m, 11:14], wl)
+                pf = lambert_pdf(n, wl)
             if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                 continue
             counters[0] += 1
@@ -202,9 +187,15 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
         u1 = uniform(seed, key, base + 1)
         u2 = uniform(seed, key, base + 2)
         if galb == 1:
-            wo, w0, w1, w2, pf = lambert_sample(n, ground[1:4], u1, u2)
+            ws, w0, w1, w2, pf = lambert_sample(n, ground[1:4], u1, u2)
+            for k in range(3):
+                wo[k] = ws[k]
+        elif kind == MAT_BCSDF:
+            w0, w1, w2, pf = B.bcsdf_sample_ctx(mats[m, 1:11], ctx, t_tan, u0, u1, u2, wo)
         else:
-            wo, w0, w1, w2, pf = _mat_sample(mats, m, kind, t_tan, n, wi, u0, u1, u2)
+            ws, w0, w1, w2, pf = lambert_sample(n, mats[m, 11:14], u1, u2)
+            for k in range(3):
+                wo[k] = ws[k]
         if pf <= 0.0:
             break
         tp0 *= w0
@@ -245,12 +236,7 @@ def render_tiles(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, 
                     key = (row * W + col) * spp + s
                     r, g, b, ft = trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, has_ground,
                                              row, col, key, seed, max_depth, rr_depth, ign_window, eps, counters)
-                    film_sum[row, col, 0] += r
-                    film_sum[row, col, 1] += g
-                    film_sum[row, col, 2] += b
-                    film_sq[row, col, 0] += r * r
-                    film_sq[row, col, 1] += g * g
-                    film_sq[row, col, 2] += b * b
+                    add_sample(film_sum, film_sq, row, col, r, g, b)
                     if ft > 0.0:
                         hits[row, col] += 1.0
                         depth_sum[row, col] += ft
