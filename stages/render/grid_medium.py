@@ -20,7 +20,7 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numba.extending import overload
 
 from .medium import is_source, medium_lookup
@@ -103,17 +103,39 @@ def _principal_axis(m00, m11, m22, m01, m02, m12, gx, gy, gz):
     return vx, vy, vz
 
 
-@njit(cache=True, parallel=True)
-def voxelize(med, lo, hi, res, ss, z0, z1, density, direction, albedo, roughness):
-    """Fill voxel slices z0..z1-1 (local index 0..z1-z0-1 of the output arrays) from ``med``."""
+def voxelize(med, lo, hi, res, ss, z0, z1, density, direction, albedo, roughness, threads=None):
+    """Fill voxel slices z0..z1-1 (local index 0..z1-z0-1 of the output arrays) from ``med``, one
+    GIL-free numba call per slice on ``threads`` threads (default: numba's thread count); slices
+    write disjoint voxels, so the result does not depend on the thread count."""
+    import numba
+
+    n = int(threads or numba.get_num_threads())
+    lo = np.asarray(lo, np.float64)
+    hi = np.asarray(hi, np.float64)
+    res = np.asarray(res, np.int64)
+
+    def one(iz):
+        voxelize_slice(med, lo, hi, res, int(ss), iz, iz - z0, density, direction, albedo, roughness)
+
+    if n <= 1 or z1 - z0 <= 1:
+        for iz in range(z0, z1):
+            one(iz)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=n) as ex:
+        list(ex.map(one, range(z0, z1)))
+
+
+@njit(cache=True, nogil=True)
+def voxelize_slice(med, lo, hi, res, ss, iz, lz, density, direction, albedo, roughness):
+    """Voxels of grid slice iz into local slice lz of the output arrays."""
     nx, ny, nz = res[0], res[1], res[2]
     cx = (hi[0] - lo[0]) / nx
     cy = (hi[1] - lo[1]) / ny
     cz = (hi[2] - lo[2]) / nz
     inv = 1.0 / (ss * ss * ss)
-    for k in prange((z1 - z0) * ny):
-        iz = z0 + k // ny
-        iy = k - (k // ny) * ny
+    for iy in range(ny):
         for ix in range(nx):
             sd = 0.0
             m00 = 0.0
@@ -158,7 +180,6 @@ def voxelize(med, lo, hi, res, ss, z0, z1, density, direction, albedo, roughness
                         sg += den * ag
                         sb += den * ab
                         sro += den * rough
-            lz = iz - z0
             density[lz, iy, ix] = sd * inv
             if sd > 0.0:
                 vx, vy, vz = _principal_axis(m00, m11, m22, m01, m02, m12, gx, gy, gz)
