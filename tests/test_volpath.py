@@ -246,7 +246,32 @@ tile_size = 4
 """
 
 
-def test_procedural_and_realized_sources_agree(tmp_path, cli):
+def _cli(*args):
+    import contextlib
+    import io
+
+    from pipeline.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in args])
+    return code, out.getvalue(), err.getvalue()
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """The small two-by-two weave: scene file, yarns, tables and realized fibres."""
+    d = tmp_path_factory.mktemp("volpath_small")
+    scene_path = d / "s.toml"
+    scene_path.write_text(SMALL_SCENE)
+    for args in (("ingest", scene_path, "-o", d / "y.zarr"), ("tables", d / "y.zarr", "-o", d / "t.zarr"),
+                 ("realize", d / "y.zarr", "-o", d / "f.zarr")):
+        code, out, err = _cli(*args)
+        assert code == 0, err
+    return d
+
+
+def test_procedural_and_realized_sources_agree(small):
     """The same fabric through on-the-fly lookups and through realized fibres in a BVH: per 2 x 2
     pixel block the difference of the means over its standard error (independent seeds) is
     standard normal; the sum of squares is chi-square with one degree per block (p > 0.001)
@@ -256,16 +281,10 @@ def test_procedural_and_realized_sources_agree(tmp_path, cli):
     from pipeline.renderers.volpath import render
     from pipeline.scene import load_scene
 
-    scene_path = tmp_path / "s.toml"
-    scene_path.write_text(SMALL_SCENE)
-    for args in (("ingest", scene_path, "-o", tmp_path / "y.zarr"), ("tables", tmp_path / "y.zarr", "-o", tmp_path / "t.zarr"),
-                 ("realize", tmp_path / "y.zarr", "-o", tmp_path / "f.zarr")):
-        code, out, err = cli(*args)
-        assert code == 0, err
-    scene = load_scene(scene_path)
+    scene = load_scene(small / "s.toml")
     base = {"width": 8, "height": 8, "spp": 16, "extra": {}}
-    proc = render(scene, {**base, "seed": 1, "source": "procedural", "tables": str(tmp_path / "t.zarr")})
-    real = render(scene, {**base, "seed": 2, "source": "realized", "fibers": str(tmp_path / "f.zarr")})
+    proc = render(scene, {**base, "seed": 1, "source": "procedural", "tables": str(small / "t.zarr")})
+    real = render(scene, {**base, "seed": 2, "source": "realized", "fibers": str(small / "f.zarr")})
     assert proc.stats["medium_lookups"] > 0 and real.stats["medium_lookups"] > 0
     assert proc.extra["A"].mean() > 0.5  # the fabric fills most of the view
 
@@ -284,3 +303,62 @@ def test_procedural_and_realized_sources_agree(tmp_path, cli):
     assert np.abs(z).max() < zmax, z
     # the image is not trivially equal: both sources carry their own noise
     assert not np.array_equal(yp, yr)
+
+
+def test_render_cli_outputs_and_statistics(small, tmp_path):
+    """loomlight render --method volpath writes EXR (RGB + A, depth, variance), PNG and a render artifact
+    whose statistics include paths/s and medium lookups/s; the same seed gives the same bytes."""
+    from pipeline.artifacts import Artifact
+    from pipeline.images import read_exr
+
+    outs = []
+    for k in range(2):
+        exr = tmp_path / f"r{k}.exr"
+        code, out, err = _cli("render", small / "s.toml", "--method", "volpath", "--source", "realized",
+                              "--fibers", small / "f.zarr", "-o", exr, "--width", 6, "--height", 5, "--spp", 2,
+                              "--seed", 4, "--threads", k + 1)
+        assert code == 0, err
+        assert exr.exists() and exr.with_suffix(".png").exists()
+        rgb, ch = read_exr(exr)
+        assert rgb.shape == (5, 6, 3) and {"A", "depth", "variance"} <= set(ch)
+        outs.append(rgb.tobytes())
+    assert outs[0] == outs[1]
+    s = Artifact(tmp_path / "r0.zarr").summary
+    assert s["paths"] == 60 and s["paths_per_s"] > 0
+    assert s["method_stats"]["medium_lookups_per_s"] > 0 and s["method_stats"]["source"] == "realized"
+
+
+def test_render_bad_input(small, tmp_path):
+    """Unknown source, non-positive size or spp, missing or incomplete tables: exit 2 with the reason."""
+    import shutil
+
+    base = ("render", small / "s.toml", "--method", "volpath", "-o", tmp_path / "x.exr")
+    code, _, err = _cli(*base, "--source", "voxels")
+    assert code == 2 and "source" in err
+    code, _, err = _cli(*base, "--method", "nosuch")
+    assert code == 2 and "method" in err
+    for opt in ("--width", "--height", "--spp"):
+        code, _, err = _cli(*base, opt, 0)
+        assert code == 2 and opt in err
+    code, _, err = _cli(*base, "--source", "procedural")
+    assert code == 2 and "tables" in err
+    code, _, err = _cli(*base, "--source", "procedural", "--set", f"tables={tmp_path / 'missing.zarr'}")
+    assert code == 2 and "not found" in err
+    broken = tmp_path / "broken.zarr"
+    shutil.copytree(small / "t.zarr", broken)
+    meta = (broken / "zarr.json").read_text().replace('"complete": true', '"complete": false')
+    (broken / "zarr.json").write_text(meta)
+    code, _, err = _cli(*base, "--source", "procedural", "--set", f"tables={broken}")
+    assert code == 2 and "incomplete" in err
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_camera_seeing_no_fabric_warns_and_renders(small, tmp_path):
+    text = (small / "s.toml").read_text().replace("target = [0.0, 0.0, 0.0]", "target = [0.0, 0.0, 1.6]")
+    scene = tmp_path / "away.toml"
+    scene.write_text(text)
+    code, out, err = _cli("render", scene, "--method", "volpath", "--source", "realized", "--fibers",
+                          small / "f.zarr", "-o", tmp_path / "a.exr", "--width", 4, "--height", 4, "--spp", 1)
+    assert code == 0, err
+    assert "sees no fabric" in err
+    assert (tmp_path / "a.exr").exists()
