@@ -117,6 +117,45 @@ def yarn_plan(tab, c, L, spacing):
     return ply[:n], idx[:n], kind[:n], a0[:n], a1[:n], hz1[:n], hze[:n], nv[:n]
 
 
+@njit(cache=True)
+def yarn_counts(tab, c, L, spacing):
+    """Size of yarn c's realization without listing its pieces: (vertices, pieces) per kind 1, 2, 3
+    (as yarn_plan would count them)."""
+    t = tab.yarn_type[c]
+    tp = tab.tparams[t]
+    P = int(tp[PLY_NUM])
+    N = int(tp[FIBER_NUM])
+    yseed = np.uint64(tab.yarn_seed[c])
+    ncyc = 3
+    if tp[USE_MIGRATION] != 0.0:
+        ncyc = int(L * tp[S_MIG] / tp[ALPHA]) + 4
+    cap = 2 * ncyc + 2
+    a0 = np.empty(cap)
+    a1 = np.empty(cap)
+    kind = np.empty(cap, np.int8)
+    verts = np.zeros(4, np.int64)
+    pieces = np.zeros(4, np.int64)
+    fo = tab.type_fib_off[t]
+    g0 = tab.yarn_ply_off[c]
+    for k in range(P):
+        for j in range(N):
+            f = fo + k * N + j
+            m = _fiber_pieces(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], L, a0, a1, kind, 0)
+            for q in range(m):
+                verts[kind[q]] += max(2, int(math.ceil((a1[q] - a0[q]) / spacing - 1e-9)) + 1)
+                pieces[kind[q]] += 1
+        g = g0 + k
+        base = tab.hair_off[g]
+        for h in range(tab.hair_count[g]):
+            ze = tab.hair_ze[base + h]
+            r0, r1, th1, pe = hair_params(tp, yseed, k, h)
+            rm = max(r0, r1) + tp[PLY_RADIUS]
+            speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
+            verts[3] += max(2, int(math.ceil(speed / spacing)) + 1)
+            pieces[3] += 1
+    return verts, pieces
+
+
 @njit(cache=True, parallel=True)
 def realize_fill(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, offsets, points, radius):
     """Vertices of every planned piece (prange over pieces), fabric space via Eq. 7."""

@@ -123,13 +123,19 @@ def hybrid_hairs(tp, L: float, yarn_seed: int, k: int, margin: float):
     per_bin = np.cumsum(counts)[:nb]
     start = np.zeros(nb + 1, np.int64)
     start[1:] = np.cumsum(per_bin)
+    return z1, ze, bp, start, _hair_items(b0, b1, start)
+
+
+@njit(cache=True)
+def _hair_items(b0, b1, start):
+    """Active lists of the z-bins: hair h in bins b0[h]..b1[h], ascending hair index in every bin."""
     items = np.empty(start[-1], np.int32)
     cursor = start[:-1].copy()
-    for h in range(n):  # ascending hair index within every bin
+    for h in range(b0.shape[0]):
         for b in range(b0[h], b1[h] + 1):
             items[cursor[b]] = h
             cursor[b] += 1
-    return z1, ze, bp, start, items
+    return items
 
 
 @njit(cache=True)
