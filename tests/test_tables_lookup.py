@@ -145,3 +145,20 @@ def test_lookup_bad_points_exit_2(built, cli):
     np.save(d / "bad.npy", np.zeros((5, 2)))
     code, out, err = cli("lookup", d / "tables.zarr", "--points", d / "bad.npy", "-o", d / "r.npz")
     assert code == 2 and "(N, 3)" in err
+
+
+def test_cross_section_inspector(built, cli):
+    """The cross-section holds every regular fibre of every ply (P N centres) and the plot is written."""
+    from pipeline.inspectors.tables import cross_section
+
+    d = built
+    cv, tab, _ = load_tables(d / "tables.zarr")
+    pts, kinds, plies = cross_section(tab, 0, 0.1)
+    t = int(tab.yarn_type[0])
+    P, N = int(tab.tparams[t, M.PLY_NUM]), int(tab.tparams[t, M.FIBER_NUM])
+    assert (kinds != 3).sum() == P * N and set(np.unique(plies)) == set(range(P))
+    code, out, err = cli("inspect", d / "tables.zarr", "--png", d / "xs.png", "--z", "0.1")
+    assert code == 0, err
+    assert (d / "xs.png").stat().st_size > 10_000
+    code, out, err = cli("inspect", d / "tables.zarr", "--png", d / "xs2.png", "--z", "99")
+    assert code == 2 and "--z" in err
