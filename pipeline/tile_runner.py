@@ -17,7 +17,7 @@ Configuration (``schemas/tile-config.schema.json``; relative paths against the f
   [surface]        kind = flat | cylinder | drape | obj; size, resolution, radius, length, angle,
                    sphere_radius, folds, fold_amplitude, path (OBJ with vt), scale, offset,
                    thickness (world shell thickness, default the exemplars' thickness)
-Bad input -> LoomError naming the file and key (exit code 2), nothing written.
+Bad input -> LoomError naming the file and key (triangles by 0-based index; exit code 2), nothing written.
 """
 from __future__ import annotations
 
@@ -213,10 +213,9 @@ def block_map(cfg, file, K, nbu, nbv):
         badv = int(img.max()) if img.max() >= K else int(img.min())
         raise LoomError(file, "tiling.block_map", f"names exemplar {badv}, but only {K} exemplar(s) "
                                                   f"(0..{K - 1}) are defined")
-    R, C = img.shape
-    cols = np.minimum((np.arange(nbu) + 0.5) * C / nbu, C - 1).astype(np.int64)
-    rows = R - 1 - np.minimum((np.arange(nbv) + 0.5) * R / nbv, R - 1).astype(np.int64)
-    return np.ascontiguousarray(img[rows][:, cols].T.astype(np.int32))
+    from stages.tile.tiling import resample_block_map
+
+    return resample_block_map(img, nbu, nbv)
 
 
 # ------------------------------------------------------------------------------------------------ surfaces
@@ -297,6 +296,7 @@ def build_surface(cfg, file, flat_size):
 def run_tile(config, out, force: bool = False) -> dict:
     from stages.tile.base_surfaces import triangle_checks, vertex_normals
     from stages.tile.shell import build_shell
+    from stages.tile.tiling import block_grid
 
     from .artifacts import ArtifactWriter
 
@@ -327,8 +327,7 @@ def run_tile(config, out, force: bool = False) -> dict:
     K = len(exs_cfg)
     overs = [exemplar_interlacement(ex, config, f"exemplars[{k}]") for k, ex in enumerate(exs_cfg)]
     bcx, bcy = cfg.get("weave", {}).get("block_cells", [1, 1])
-    ru, rv = cfg.get("tiling", {}).get("repeat", [2, 2])
-    nbu, nbv = ru * (overs[0].shape[0] // bcx), rv * (overs[0].shape[1] // bcy)
+    nbu, nbv = block_grid(cfg.get("tiling", {}).get("repeat", [2, 2]), (overs[0].shape[0] // bcx, overs[0].shape[1] // bcy))
     bmap = block_map(cfg, config, K, nbu, nbv)
     sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
     bw, bh = bcx * sx, bcy * sy

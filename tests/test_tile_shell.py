@@ -12,7 +12,7 @@ from stages.core.bvh import build_fiber_bvh, intersect
 from stages.core.capsule import capsule_intersect
 from stages.core.shell_traversal import shell_intersect
 from stages.render.camera import camera_ray, pack_camera
-from stages.tile.mapping import flat_to_exemplar
+from stages.tile.mapping import flat_to_exemplar, flat_to_uvw, flat_to_world, world_to_flat
 
 TWO_SATINS = """
 seed = 3
@@ -228,13 +228,14 @@ def test_world_flat_exemplar_round_trip(flat_same, tmp_path):
     T = rng.integers(0, len(tets), 300)
     lam = rng.dirichlet(np.ones(4), 300)
     p = np.einsum("ti,tij->tj", lam, X[tets[T]])
-    w2f, f2w = art["w2f"], art["f2w"]
-    q = np.einsum("tij,tj->ti", w2f[T, :, :3], p) + w2f[T, :, 3]
-    back = np.einsum("tij,tj->ti", f2w[T, :, :3], q) + f2w[T, :, 3]
+    q = np.array([world_to_flat(sc.w2f, T[r], p[r]) for r in range(len(p))])
+    back = np.array([flat_to_world(sc.f2w, T[r], q[r]) for r in range(len(p))])
     np.testing.assert_allclose(back, p, atol=1e-12)
-    # flat position = barycentric combination of the vertices' shell texture coordinates x flat size
-    flat_v = art["shell_uvw"] * np.r_[art.summary["flat_size"], art.summary["exemplar_thickness"]]
-    np.testing.assert_allclose(q, np.einsum("ti,tij->tj", lam, flat_v[tets[T]]), atol=1e-12)
+    # flat position = the same barycentric combination of the vertices' shell texture coordinates
+    flat_size = np.asarray(art.summary["flat_size"], float)
+    Tex = art.summary["exemplar_thickness"]
+    uvw = np.array([flat_to_uvw(q[r], flat_size, Tex) for r in range(len(p))])
+    np.testing.assert_allclose(uvw, np.einsum("ti,tij->tj", lam, art["shell_uvw"][tets[T]]), atol=1e-12)
     bw, bh = art["block_size"]
     for r in range(len(q)):
         k, x, y, z = flat_to_exemplar(q[r], sc.block_size, sc.block_map, sc.ex_nblocks)

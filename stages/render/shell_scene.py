@@ -73,7 +73,9 @@ def build_shell_scene(a) -> ShellScene:
 # Path tracing a shell-mapped scene: the fiberpath estimator (stages.render.fiberpath: NEE with one
 # sample per light + BSDF sampling, power heuristic, Russian roulette, same random dimensions), with
 # the geometry queries of stages.core.shell_traversal instead of a flat fibre BVH. Materials are
+# fiberpath's packed rows (BCSDF via the public stages.core.bcsdf eval / pdf / sample, Lambert),
 # indexed by exemplar fibre id; the shading frame (tangent, normal) comes back from the shell map.
+# Once fiberpath's trace_path takes its geometry queries as arguments, this copy can go.
 import math  # noqa: E402
 
 from numba import njit, prange  # noqa: E402
@@ -83,9 +85,32 @@ from stages.core.shell_traversal import shell_trace  # noqa: E402
 
 from .camera import camera_ray  # noqa: E402
 from .fiber_lambert import lambert_eval, lambert_pdf, lambert_sample  # noqa: E402
-from .fiberpath import MAT_BCSDF, MAT_LAMBERT, _mat_eval, _mat_pdf, _mat_sample  # noqa: E402
+from stages.core import bcsdf as B  # noqa: E402
+
+from .fiberpath import MAT_BCSDF, MAT_LAMBERT  # noqa: E402
 from .ground import ground_intersect  # noqa: E402
 from .lights import light_eval, light_pdf, light_sample  # noqa: E402
+
+
+@njit(cache=True)
+def _mat_eval(mats, m, kind, t, n, wi, wo):
+    if kind == MAT_BCSDF:
+        return B.bcsdf_eval(mats[m, 1:11], t, wi, wo)
+    return lambert_eval(n, mats[m, 11:14], wo)
+
+
+@njit(cache=True)
+def _mat_pdf(mats, m, kind, t, n, wi, wo):
+    if kind == MAT_BCSDF:
+        return B.bcsdf_pdf(mats[m, 1:11], t, wi, wo)
+    return lambert_pdf(n, wo)
+
+
+@njit(cache=True)
+def _mat_sample(mats, m, kind, t, n, wi, u0, u1, u2):
+    if kind == MAT_BCSDF:
+        return B.bcsdf_sample(mats[m, 1:11], t, wi, u0, u1, u2)
+    return lambert_sample(n, mats[m, 11:14], u1, u2)
 
 
 @njit(cache=True)

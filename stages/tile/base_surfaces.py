@@ -12,9 +12,9 @@ triangles counter-clockwise in (u, v) and their geometric normals on the side th
   ``cloth_size`` centred over a sphere of radius R at the origin, draped deterministically: the
   point at distance r from the cloth centre in direction phi lands on the sphere at polar angle
   theta = r / R (lengths kept along every radial line) up to the equator, and below it hangs straight
-  down, with ``folds`` sinusoidal folds around the hanging skirt whose radial amplitude grows from 0
-  at the equator (``fold_amplitude`` x hanging length / cloth_size). The cloth rests on the sphere's
-  top hemisphere; seed 001 Fig. 14 drapes its damask the same way over a ball.
+  down, pushed outwards by ``folds`` folds around the skirt: radial offset
+  fold_amplitude h^2 / cloth_size sin^2(folds phi) at hanging length h (0 at the equator, so the
+  surface stays C1 there). Lengths are kept along every radial line of the cloth.
 
 ``vertex_normals``: smoothed (angle-weighted) vertex normals. ``triangle_checks`` finds degenerate
 triangles (3-D area or uv area <= ``rel_eps`` x the mean) and flipped triangles (uv orientation

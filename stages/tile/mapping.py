@@ -2,13 +2,12 @@
 
 Within tetrahedron ``tet`` the shell map is affine (barycentric, piecewise linear over the shell):
 - ``world_to_flat(w2f, tet, p)`` / ``flat_to_world(f2w, tet, q)``: the per-tetrahedron affine maps of
-  ``tetra.tet_geometry``; ``vector_to_world(f2w, tet, v)`` maps a direction (the linear part only), used
-  for fibre tangents;
+  ``tetra.tet_geometry`` (directions map by the linear part only: fibre tangents by f2w, normals by the
+  transpose of w2f, as in ``stages.core.shell_traversal``);
 - ``flat_to_uvw(q, flat_size, thickness)``: (X / flat_size_x, Y / flat_size_y, Z / thickness);
 - ``flat_to_exemplar(q, block, ...)``: flat point -> (exemplar, point in that exemplar) by the block map
   (``tiling``): block (i, j) = floor(X / bw), floor(Y / bh) wrapped periodically over the map; its
   exemplar k; the point shifted by whole exemplar periods into [0, W_k) x [0, H_k).
-- ``barycentric(X, tet_vertices, p)``: barycentric coordinates of p in a tetrahedron.
 """
 import math
 
@@ -24,13 +23,6 @@ def affine_apply(M, tet, x, y, z):
 
 
 @njit(cache=True)
-def linear_apply(M, tet, x, y, z):
-    return (M[tet, 0, 0] * x + M[tet, 0, 1] * y + M[tet, 0, 2] * z,
-            M[tet, 1, 0] * x + M[tet, 1, 1] * y + M[tet, 1, 2] * z,
-            M[tet, 2, 0] * x + M[tet, 2, 1] * y + M[tet, 2, 2] * z)
-
-
-@njit(cache=True)
 def world_to_flat(w2f, tet, p):
     return affine_apply(w2f, tet, p[0], p[1], p[2])
 
@@ -38,11 +30,6 @@ def world_to_flat(w2f, tet, p):
 @njit(cache=True)
 def flat_to_world(f2w, tet, q):
     return affine_apply(f2w, tet, q[0], q[1], q[2])
-
-
-@njit(cache=True)
-def vector_to_world(f2w, tet, v):
-    return linear_apply(f2w, tet, v[0], v[1], v[2])
 
 
 @njit(cache=True)
@@ -70,11 +57,3 @@ def flat_to_exemplar(q, block_size, block_map, ex_nblocks):
     bx = ri - (ri % ex_nblocks[k, 0])
     by = rj - (rj % ex_nblocks[k, 1])
     return k, q[0] - bx * block_size[0], q[1] - by * block_size[1], q[2]
-
-
-def barycentric(X, tv, p):
-    """Barycentric coordinates (4,) of p in the tetrahedron with vertex positions X[tv]."""
-    P = X[tv]
-    M = (P[1:] - P[0]).T
-    l = np.linalg.solve(M, p - P[0])
-    return np.concatenate([[1 - l.sum()], l])

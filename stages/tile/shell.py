@@ -1,12 +1,14 @@
 """The shell: a base surface offset along its smoothed vertex normals (seed 001 §2, Porumbescu et al. 2005).
 
 Given a base mesh (vertices V, texture coordinates UV, triangles F), vertex normals N and the shell
-thickness T (world units; ``flat_thickness``, the exemplar's thickness, defaults to T), the shell's vertices are the base vertices (w = 0) and V + T N (w = 1); its shell texture
-coordinates are (u, v, w). Flat (tiled exemplar) space is
+thickness T (world units; ``flat_thickness``, the exemplar's thickness, defaults to T), the shell's
+vertices are the base vertices (w = 0) and V + T N (w = 1); its shell texture coordinates are (u, v, w).
+Flat (tiled exemplar) space is
     X = u * flat_size[0],  Y = v * flat_size[1],  Z = w * flat_thickness,
-where flat_size is the size of the tiled cloth (blocks per side x block size): the shell map takes
-each tetrahedron of the shell onto the matching tetrahedron of the flat slab [0, X] x [0, Y] x [0, T]
-by its barycentric coordinates.
+where flat_size is the size of the tiled cloth (blocks per side x block size): the shell map takes each
+tetrahedron of the shell onto the tetrahedron with the same vertices in flat space, by barycentric
+coordinates (piecewise linear). ``volume`` is each tetrahedron's world volume, signed so that it is
+positive where the prism is not inverted (the offset does not fold over).
 
 ``build_shell`` returns a dict of arrays: ``vertices`` (2n, 3), ``uvw`` (2n, 3), ``flat`` (2n, 3),
 ``tets`` (3m, 4), ``neighbours``, ``planes``, ``w2f``, ``f2w``, ``volume``, and the boundary faces
