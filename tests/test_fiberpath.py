@@ -373,6 +373,20 @@ def test_cli_renders_exr_png_artifact(cli, tmp_path):
     scene.write_text(SCENE.format(bcsdf="velvet"))
     code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
     assert code == 2 and "velvet" in err and not (tmp_path / "x.exr").exists()
+    # a preset file (resolved against the scene) with a negative lobe width, then one with a colour above 1
+    (tmp_path / "bad.toml").write_text('c_r = [0.1, 0.1, 0.1]\nc_tt = [0.5, 0.5, 0.5]\nbeta_r = -3.0\nbeta_tt = 10.0\ngamma_tt = 20.0\n')
+    scene.write_text(SCENE.format(bcsdf="bad.toml"))
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
+    assert code == 2 and "beta_r" in err and "-3.0" in err and len(err.strip().splitlines()) == 1
+    (tmp_path / "bad.toml").write_text('c_r = [0.1, 0.1, 0.1]\nc_tt = [0.5, 2.5, 0.5]\nbeta_r = 3.0\nbeta_tt = 10.0\ngamma_tt = 20.0\n')
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
+    assert code == 2 and "c_tt[1]" in err and "2.5" in err and not (tmp_path / "x.exr").exists()
+    # tinting by yarn albedo: TT colour times the albedo (0.6 here) darkens the image
+    scene.write_text(SCENE.format(bcsdf="gabardine"))
+    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "g.exr")[0] == 0
+    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "gt.exr", "--set", "tint=yarn")[0] == 0
+    g, gt = read_exr(tmp_path / "g.exr")[0], read_exr(tmp_path / "gt.exr")[0]
+    assert gt.sum() < g.sum()
     # empty fibers artifact
     scene.write_text(SCENE.format(bcsdf="cotton"))
     try:

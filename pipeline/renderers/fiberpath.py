@@ -6,6 +6,9 @@ selects volpath's density source, is ignored). Materials: ``--material bcsdf``
 (default) gives every fibre the BCSDF preset of its yarn group -- scene key ``yarns.<group>.bcsdf``
 (falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).
+``--set tint=yarn`` multiplies each yarn's TT colour C_TT by the yarn's albedo (the scene's
+``yarns.<group>.color`` as realized into the fibers artifact), so dyed yarns keep their colour under a
+fitted preset. A preset given as a ``.toml`` path in the scene is resolved against the scene file.
 Lights, camera and the optional ground plane come from the scene.
 """
 from __future__ import annotations
@@ -40,7 +43,10 @@ def fiber_materials(scene, fibers, options):
         raise LoomError(None, "--material", f"unknown fibre material {material!r} (known: bcsdf, lambert)")
     names = {}
     for g, gname in enumerate(GROUP_NAMES):
-        name = scene.yarn_type(gname).get("bcsdf") or options.get("bcsdf")
+        name = scene.yarn_type(gname).get("bcsdf")
+        if name and name.endswith(".toml"):
+            name = str(scene.resolve(name))
+        name = name or options.get("bcsdf")
         if name:
             names[g] = name
     if fibers.yarn_group is not None:
@@ -72,6 +78,16 @@ def fiber_materials(scene, fibers, options):
     lut = np.zeros(len(yarn_group), np.int32)
     for y, g in enumerate(yarn_group):
         lut[y] = group_mat.get(int(g), 0)
+    tint = (options.get("extra") or {}).get("tint", "none")
+    if tint == "yarn":  # one material per yarn: its group's preset with C_TT times the yarn albedo
+        mats = []
+        for y in range(len(fibers.yarn_albedo)):
+            row = presets[lut[y]].copy() if y < len(lut) else presets[0].copy()
+            row[4:7] *= fibers.yarn_albedo[y]   # packed BCSDF starts at column 1: C_TT is 3:6 there
+            mats.append(row)
+        return fibers.fiber_yarn.astype(np.int32), np.stack(mats)
+    if tint != "none":
+        raise LoomError(None, "--set tint", f"unknown tint {tint!r} (known: none, yarn)")
     return lut[fibers.fiber_yarn], np.stack(presets)
 
 
