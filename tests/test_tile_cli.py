@@ -133,3 +133,31 @@ def test_bad_input_exit_2_and_previous_artifact_untouched(case, tmp_path, cli, e
     assert read_meta(out)["content_hash"] == before
     code, _, _ = cli("tile", cfg, "-o", tmp_path / "fresh.zarr")
     assert code == 2 and not (tmp_path / "fresh.zarr").exists()
+
+
+def test_wif_exemplar_and_its_period(tmp_path, cli):
+    """A WIF draft (data/drafts/twill_2x2.wif, 8 x 8 threads) as an exemplar: 4 x 4 is its period
+    (accepted, the exemplar is the draft's first 4 x 4 cells); 3 x 4 is not (exit 2)."""
+    from pathlib import Path
+
+    from pipeline.artifacts import Artifact
+    from pipeline.io.wif import parse
+
+    wif = Path(__file__).resolve().parents[1] / "data" / "drafts" / "twill_2x2.wif"
+    ok = config(tmp_path, "wif", pattern="wif", ex_extra=f'path = "{wif}"\nends = 4\npicks = 4',
+                block_map="[[0, 0], [0, 0]]")
+    code, _, err = cli("tile", ok, "-o", tmp_path / "wif.zarr")
+    assert code == 0, err
+    art = Artifact(tmp_path / "wif.zarr")
+    np.testing.assert_array_equal(art["ex_over"][:16].reshape(4, 4), parse(wif).over[:4, :4])
+    bad = config(tmp_path, "wif_bad", pattern="wif", ex_extra=f'path = "{wif}"\nends = 3\npicks = 4')
+    code, _, err = cli("tile", bad, "-o", tmp_path / "wif_bad.zarr")
+    assert code == 2 and "exemplars[0]" in err and "not periodic" in err
+
+
+def test_rebuild_is_byte_identical(existing, cli):
+    """Determinism: the same configuration rebuilt (--force) gives the same content hash."""
+    out, before = existing
+    code, _, err = cli("tile", out.parent / "good.toml", "-o", out, "--force")
+    assert code == 0, err
+    assert read_meta(out)["content_hash"] == before
