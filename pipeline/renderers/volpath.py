@@ -9,7 +9,7 @@ Sources (``--source``, default the scene's ``render.source``, else procedural):
 
 Scene: camera, lights, ``render.max_depth``, ``render.rr_depth``, ``render.tile_size`` and the
 optional ``render.ground``. ``--set majorant_cell=X`` sets the majorant-grid cell size (scene units;
-default: the mean yarn extent, at most 128 cells along an axis).
+default: a quarter of the mean yarn extent bound, at most 128 cells along an axis).
 Statistics: paths, rays (free-flight and shadow queries), medium lookups and lookups/s, the
 majorant grid (cells, occupied fraction), source build time.
 """
@@ -29,6 +29,7 @@ from . import RenderResult
 
 SOURCES = ("procedural", "realized", "grid")
 MAX_CELLS_PER_AXIS = 128
+CELL_FRACTION = 0.25  # default majorant cell: this fraction of the mean yarn extent bound
 
 
 # ------------------------------------------------------------------------------------------------
@@ -63,9 +64,9 @@ def procedural_source(tables_path, cell=None):
     if not tables_path:
         raise LoomError(None, "--set tables=PATH.zarr", "--source procedural needs a tables artifact (loomlight tables)")
     cv, tab, _ = load_tables(tables_path)
-    a, b, r, bound = yarn_capsules(cv, tab, 0.5)
+    a, b, r, bound = yarn_capsules(cv, tab, 0.25)
     lo, hi = _box_of_capsules(a, b, r)
-    res = _majorant_res(lo, hi, cell or float(np.mean(tab.yarn_extent)))
+    res = _majorant_res(lo, hi, cell or CELL_FRACTION * float(np.mean(tab.yarn_extent)))
     mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)
     return ProceduralMedium(cv, tab), make_majorant_grid(lo, hi, res, mu), {"yarns": int(len(tab.yarn_type))}
 
@@ -103,7 +104,7 @@ def realized_source(fibers_path, cell=None):
                          albedo, np.ascontiguousarray(tp[:, ROUGHNESS]))
     a, b, r, bound = fiber_capsules(med)
     lo, hi = _box_of_capsules(a, b, r)
-    res = _majorant_res(lo, hi, cell or extent)
+    res = _majorant_res(lo, hi, cell or CELL_FRACTION * extent)
     mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)
     info = {"fibers": fibers.n_fibers, "segments": int(len(bvh.seg_a)), "bvh_build_s": time.perf_counter() - t0}
     return med, make_majorant_grid(lo, hi, res, mu), info
