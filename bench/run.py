@@ -4,7 +4,8 @@
 
 Writes ``<out>/<name>.json`` per benchmark (name = file name without ``bench_``) and
 ``<out>/summary.md``: the machine, one table per benchmark, and a side-by-side table of the
-throughput numbers every renderer reports (``paths_per_s``, ``rays_per_s``, ``rays_per_s_per_core``).
+throughput numbers the benchmarks report (every key ending in ``paths_per_s``, ``rays_per_s`` or
+``rays_per_s_per_core``, e.g. fiberpath's next to volpath's).
 Benchmarks hold performance targets; tests never time anything.
 """
 from __future__ import annotations
@@ -24,7 +25,11 @@ ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".numba_cache"))
 
-COMPARE = ("paths_per_s", "rays_per_s", "rays_per_s_per_core", "primary_rays_per_s_per_core")
+COMPARE = ("paths_per_s", "rays_per_s", "rays_per_s_per_core")
+
+
+def _throughput_keys(r: dict) -> list[str]:
+    return [k for k in r if k.endswith(COMPARE) and isinstance(r[k], (int, float))]
 
 
 def _load(path: Path):
@@ -51,12 +56,11 @@ def machine() -> dict:
 
 def write_summary(out: Path, results: dict[str, dict], info: dict) -> Path:
     lines = ["# loomlight benchmarks", "", "Machine: " + ", ".join(f"{k} {v}" for k, v in info.items()), ""]
-    rows = [(n, r) for n, r in sorted(results.items()) if any(k in r for k in COMPARE)]
+    rows = [(n, k, r[k]) for n, r in sorted(results.items()) for k in _throughput_keys(r)]
     if rows:
-        lines += ["## Throughput side by side", "", "| benchmark | " + " | ".join(COMPARE) + " |",
-                  "|---|" + "---|" * len(COMPARE)]
-        for n, r in rows:
-            lines.append(f"| {n} | " + " | ".join(_fmt(r[k]) if k in r else "" for k in COMPARE) + " |")
+        lines += ["## Throughput side by side", "", "| benchmark | quantity | value |", "|---|---|---|"]
+        for n, k, v in rows:
+            lines.append(f"| {n} | {k} | {_fmt(v)} |")
         lines.append("")
     for n, r in sorted(results.items()):
         lines += [f"## {n}", "", "| quantity | value |", "|---|---|"]
@@ -99,7 +103,7 @@ def main(argv=None) -> int:
         res = {"bench_wall_s": time.perf_counter() - t0, **res}
         (out / f"{name}.json").write_text(json.dumps(res, indent=2, default=float))
         results[name] = res
-        print(f"[bench] {name}: " + ", ".join(f"{k}={_fmt(v)}" for k, v in res.items() if k in COMPARE), flush=True)
+        print(f"[bench] {name}: " + ", ".join(f"{k}={_fmt(res[k])}" for k in _throughput_keys(res)), flush=True)
     s = write_summary(out, results, machine())
     print(f"[bench] summary: {s}")
     return 1 if failed else 0
