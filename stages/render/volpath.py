@@ -23,7 +23,6 @@ is a pure function of the inputs, whatever the number of threads or the tiling.
 ``lt``: (lights, env, env_marginal, env_conditional) as packed by ``stages.render.lights``;
 ``ground``: float64[4] (height, albedo rgb) and ``ground_on`` as in ``stages.render.ground``.
 """
-import math
 
 import numpy as np
 from numba import njit
