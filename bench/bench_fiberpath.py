@@ -44,7 +44,7 @@ def synthetic_swatch(n_yarns=8, fibres=64, points=100, spacing=0.1, yarn_r=0.045
     return np.concatenate(pts), np.asarray(offs), np.concatenate(rad)
 
 
-@njit(cache=True, parallel=True)
+@njit(parallel=True)
 def _primary(bvh, cam, W, H, spp):
     hits = np.zeros(H, np.int64)
     for row in prange(H):

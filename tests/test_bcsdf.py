@@ -19,7 +19,7 @@ def preset(name):
     return load_bcsdf_preset(name)
 
 
-@njit(cache=True)
+@njit
 def _sample_many(p, theta_i, phi_i, n, seed):
     th = np.empty(n)
     ph = np.empty(n)
@@ -30,7 +30,7 @@ def _sample_many(p, theta_i, phi_i, n, seed):
     return th, ph
 
 
-@njit(cache=True)
+@njit
 def _pdf_theta_phi(p, theta_i, phi_i, th, ph):
     """Density with respect to (theta_o, phi_o): solid-angle pdf times cos(theta_o)."""
     out = np.empty(th.shape[0])
@@ -39,7 +39,7 @@ def _pdf_theta_phi(p, theta_i, phi_i, th, ph):
     return out
 
 
-@njit(cache=True)
+@njit
 def _S_cos(p, theta_i, phi_i, th, ph):
     """S(wi, wo) cos(theta_o) times the (theta, phi) Jacobian cos(theta_o), per channel."""
     out = np.empty((th.shape[0], 3))
@@ -147,7 +147,7 @@ def test_truncated_gauss_sampler_inverts_cdf():
             assert cdf == pytest.approx(u, abs=1e-9)
 
 
-@njit(cache=True)
+@njit
 def _ctx_vs_world(p, t, wi, wo, us):
     ctx = np.empty(B.CTX_SIZE)
     B.bcsdf_context(p, t, wi, ctx)

@@ -25,7 +25,7 @@ def random_fibres(seed, n_fibres=40, n_points=16, box=1.0, radius=0.02):
     return np.asarray(pts), np.asarray(offs), np.asarray(rad)
 
 
-@njit(cache=True)
+@njit
 def _queries(bvh, O, D, tmin, ign_f, ign_s, window):
     n = O.shape[0]
     out = np.empty((n, 5))

@@ -186,7 +186,7 @@ def test_single_fibre_constant_environment_closed_form():
         np.testing.assert_allclose(img[i, j], expect, rtol=0.03, atol=4 * math.sqrt(var[i, j]))
 
 
-@njit(cache=True)
+@njit
 def _sg_quadrature(p, t, wi, axis, lam, norm, n_theta, n_phi):
     """int S(wi, wo) cos(theta_o) L_sg(wo) dwo by a midpoint rule in the fibre frame's (theta_o, phi_o)."""
     acc = 0.0

@@ -12,7 +12,7 @@ from stages.render.fiber_lambert import lambert_eval, lambert_pdf, lambert_sampl
 from tests.chisquare import chi2_test, directions_to_xy, xy_to_directions
 
 
-@njit(cache=True)
+@njit
 def _sample(lights, k, env, marg, cond, n, seed):
     out = np.empty((n, 3))
     vals = np.empty((n, 4))
@@ -26,7 +26,7 @@ def _sample(lights, k, env, marg, cond, n, seed):
     return out, vals
 
 
-@njit(cache=True)
+@njit
 def _pdf(lights, k, env, marg, cond, W):
     out = np.empty(W.shape[0])
     for i in range(W.shape[0]):
@@ -34,7 +34,7 @@ def _pdf(lights, k, env, marg, cond, W):
     return out
 
 
-@njit(cache=True)
+@njit
 def _eval(lights, k, env, marg, cond, W):
     out = np.empty((W.shape[0], 3))
     for i in range(W.shape[0]):
@@ -144,7 +144,7 @@ def test_pack_lights_from_scene(tmp_path):
     assert _eval(ls.lights, 3, ls.env, ls.marginal, ls.conditional, w)[0, 0] == pytest.approx(0.5)
 
 
-@njit(cache=True)
+@njit
 def _lambert_samples(n_, alb, n, seed):
     out = np.empty((n, 3))
     wts = np.empty((n, 3))
