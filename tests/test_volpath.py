@@ -112,15 +112,22 @@ def _render(med, maj, lt, cam, spp, max_depth=1000, rr_depth=5, ground=None, see
     return out
 
 
-@pytest.mark.parametrize("ground", [None, [-1.2, 1.0, 1.0, 1.0]])
-def test_white_furnace(ground):
-    """Albedo 1 under a uniform environment L: every pixel's expectation is L (with a white ground too)."""
+@pytest.mark.parametrize("ground, split", [(None, False), ([-1.2, 1.0, 1.0, 1.0], False), (None, True)])
+def test_white_furnace(ground, split):
+    """Albedo 1 under a uniform environment L: every pixel's expectation is L (with a white ground too).
+    split: L is the sum of a constant light and a uniform lat-long envmap, so light selection, the
+    envmap's importance sampling and the per-light MIS weights all take part."""
     med = HomogeneousMedium(np.array([-1.0, -1.0, -1.0]), np.array([1.0, 1.0, 1.0]), 4.0,
                             np.array([0.0, 0.6, 0.8]), 0.3, np.ones(3))
     maj = make_majorant_grid(med.lo, med.hi, [3, 3, 3], np.full((3, 3, 3), 4.0))
     L = np.array([0.7, 0.5, 1.2])
+    if split:
+        img = np.broadcast_to((0.6 * L).astype(np.float32), (8, 16, 3))
+        lt = (np.array([pack_light("constant", 0.4 * L), pack_light("envmap", [1.0, 1.0, 1.0])]),) + envmap_tables(img)
+    else:
+        lt = _lights(pack_light("constant", L))
     cam = pack_camera(np.array([0.3, -4.0, 1.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 40.0, 12, 12)
-    out = _render(med, maj, _lights(pack_light("constant", L)), cam, spp=12, ground=ground)
+    out = _render(med, maj, lt, cam, spp=12, ground=ground)
     assert out[..., 3].mean() > 0.5  # the medium (or ground) covers most pixels
     X = out[..., :3].mean(axis=(0, 1)) / L  # every channel is L_c times the same path weight
     Y = float(L @ [0.2126, 0.7152, 0.0722])
