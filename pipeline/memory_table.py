@@ -6,7 +6,8 @@ regular/loop piece and hair with its vertex count at the realization's sample sp
 (``stages.procedural.realize.yarn_counts``, the same rule as ``loomlight realize``), 16 bytes a
 vertex (float32 xyz + radius) and 19 bytes a fibre (offset, yarn, ply, kind, index).
 
-Ours: the tables' bytes -- regular (fibre trajectories, azimuth bins, packed yarn types), hair
+Ours: the tables' bytes -- regular (fibre trajectories, azimuth bins, packed yarn types, and the
+sampled yarn frames of stages/procedural/frame_samples.py, also listed alone), hair
 (hybrid z extents, z-bins and active lists), loop (nothing is stored: loops come from consistent
 random numbers) and the per-yarn records (type, seed, bounds, albedo, ply offsets, counted with
 regular). The yarn curves are input to both representations and are reported separately
@@ -78,7 +79,7 @@ def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
         pieces += p
     full = {k: int(verts[i] * FIBER_VERTEX_BYTES + pieces[i] * FIBER_BYTES) for i, k in ((1, "regular"), (2, "loop"), (3, "hair"))}
     parts = table_bytes(tab)
-    ours_regular = parts["regular"] + parts["per_yarn"]
+    ours_regular = parts["regular"] + parts["per_yarn"] + parts["frames"]
     ours_total = ours_regular + parts["hair"] + parts["loop"]
     curves = int(sum(np.asarray(a).nbytes for a in cv))
     full_total = sum(full.values())
@@ -91,6 +92,7 @@ def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
         "full_hair_bytes": full["hair"], "full_loop_bytes": full["loop"],
         "ours_total_bytes": int(ours_total), "ours_regular_bytes": int(ours_regular),
         "ours_hair_bytes": int(parts["hair"]), "ours_loop_bytes": int(parts["loop"]),
+        "ours_frame_samples_bytes": int(parts["frames"]),
         "saving": float(full_total / max(ours_total, 1)),
         "curves_bytes": curves, "saving_with_curves": float(full_total / max(ours_total + curves, 1)),
         "build_s": time.perf_counter() - t0,

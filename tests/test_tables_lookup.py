@@ -119,7 +119,7 @@ def test_tables_artifact_is_self_contained_and_deterministic(built, cli):
     again = json.loads(out)
     assert again["content_hash"] == art.meta["content_hash"]
     b = again["bytes"]
-    assert b["tables"] == b["regular"] + b["hair"] + b["loop"] + b["per_yarn"] and b["loop"] == 0
+    assert b["tables"] == b["regular"] + b["hair"] + b["loop"] + b["per_yarn"] + b["frames"] and b["loop"] == 0
 
 
 def test_seed_changes_the_fabric(built):

@@ -25,10 +25,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from stages.core.curves import (_segment_box_dist2, closest_on_segment, curve_frame_at, nearest_segments_in_cell,
-                                segment_arclen_to)
+from stages.core.curves import _segment_box_dist2, curve_frame_at, nearest_segments_in_cell
 
 from . import hair_free
+from .frame_samples import project_on_samples, sampled_frame
 from .tables import hair_node_seed_nb
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
                          ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, ply_frame, regular_xy)
@@ -36,7 +36,6 @@ from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_
 TWO_PI = 2.0 * math.pi
 MAX_YARNS = 64
 HAIR_SAMPLES = 16
-MODEL_SLACK = 0.1  # local-model distance error allowed before the exact check, in fibre radii
 
 
 @njit(cache=True)
@@ -122,20 +121,6 @@ def regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, z):
 
 
 @njit(cache=True)
-def regular_tangent(cv, c, tp, yseed, k, j, Rj, th, th0, z):
-    L = cv.curve_length[c]
-    h = 0.25 * tp[FIBER_RADIUS]
-    zp = min(z + h, L)
-    zn = max(z - h, 0.0)
-    x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zp)
-    Fp = _exact_map(cv, c, x, y, zp)
-    x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zn)
-    Fm = _exact_map(cv, c, x, y, zn)
-    D = Fp - Fm
-    return D / math.sqrt(np.dot(D, D))
-
-
-@njit(cache=True)
 def _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, t):
     x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
     return _model_map(za, zm, zb, M, x, y, z)
@@ -186,20 +171,6 @@ def hair_exact(cv, c, tp, k, r0, r1, th1, pe, z1, ze, p, t):
     x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
     r = _exact_map(cv, c, x, y, z) - p
     return math.sqrt(np.dot(r, r))
-
-
-@njit(cache=True)
-def hair_tangent(cv, c, tp, k, r0, r1, th1, pe, z1, ze, t):
-    h = 1e-4
-    ta = max(t - h, 0.0)
-    tb = min(t + h, 1.0)
-    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tb)
-    Fp = _exact_map(cv, c, x, y, z)
-    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, ta)
-    Fm = _exact_map(cv, c, x, y, z)
-    D = Fp - Fm
-    n = math.sqrt(np.dot(D, D))
-    return D / n if n > 0.0 else D
 
 
 @njit(cache=True)
@@ -261,14 +232,13 @@ def _hair_active(tab, c, g, tp, z, margin, out_idx, out_z1, out_ze):
 
 @njit(cache=True)
 def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
-    """Yarns whose axis passes within their extent bound of p, with the closest point (arc length s,
-    squared distance), in one pass over the segments of p's grid cell (the tables' copy of the
-    curves has its grid padded by each yarn's extent, so the cell holds every such segment).
-    Returns how many, sorted by yarn index."""
+    """Yarns whose axis passes within their extent bound (+ sampling error) of p, with p's closest
+    point on the chords of the yarn's frame samples (arc length s', squared distance), in one pass
+    over the spline segments of p's grid cell (the tables' copy of the curves pads the grid by each
+    yarn's extent, so the cell holds every such segment). Returns how many, by yarn index."""
     start, end = nearest_segments_in_cell(cv, p)
     n = 0
-    seg = np.empty(out_c.shape[0], np.int64)
-    tt = np.empty(out_c.shape[0])
+    found = np.empty(out_c.shape[0], np.bool_)
     for q in range(start, end):
         i = cv.grid_items[q]
         c = cv.seg_curve[i]
@@ -278,24 +248,24 @@ def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
         if m == n:
             if n == out_c.shape[0]:
                 continue
-            e = tab.yarn_extent[c]
+            e = tab.yarn_extent[c] + 2.0 * tab.yarn_eps[c]
             out_c[m] = c
             out_d2[m] = e * e
-            seg[m] = -1
+            found[m] = False
             n += 1
         if _segment_box_dist2(cv, i, p) >= out_d2[m]:
             continue
-        t, d2 = closest_on_segment(cv, i, p)
+        sp, d2 = project_on_samples(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
         if d2 < out_d2[m]:
             out_d2[m] = d2
-            seg[m] = i
-            tt[m] = t
+            out_s[m] = sp
+            found[m] = True
     k = 0
-    for m in range(n):  # keep yarns that are near, with their arc length
-        if seg[m] >= 0:
+    for m in range(n):
+        if found[m]:
             out_c[k] = out_c[m]
             out_d2[k] = out_d2[m]
-            out_s[k] = cv.seg_arclen[seg[m]] + segment_arclen_to(cv, seg[m], tt[m])
+            out_s[k] = out_s[m]
             k += 1
     for i in range(1, k):  # ascending yarn index
         c = out_c[i]
@@ -314,6 +284,89 @@ def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
 
 
 @njit(cache=True)
+def _smap(tab, lo, hi, x, y, z):
+    """Eq. 7 with the sampled frames."""
+    pos, t, n, b = sampled_frame(tab.fs_s, tab.fs_frame, lo, hi, z)
+    return pos + x * n + y * b
+
+
+@njit(cache=True)
+def regular_closest_s(tab, lo, hi, za, zb, tp, yseed, k, j, Rj, th, th0, p, z0):
+    """(distance, z*, tangent, kind) of regular fibre (k, j) to p under the sampled frames:
+    Gauss-Newton over [za, zb] from z0."""
+    h = 1e-4 * (zb - za)
+    z = min(max(z0, za), zb)
+    D = np.zeros(3)
+    for it in range(12):
+        zp = min(z + h, zb)
+        zn = max(z - h, za)
+        x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zp)
+        Fp = _smap(tab, lo, hi, x, y, zp)
+        x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zn)
+        Fm = _smap(tab, lo, hi, x, y, zn)
+        x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
+        F0 = _smap(tab, lo, hi, x, y, z)
+        D = (Fp - Fm) / (zp - zn)
+        znew = min(max(z - np.dot(F0 - p, D) / np.dot(D, D), za), zb)
+        if abs(znew - z) < 1e-13 * (1.0 + zb):
+            z = znew
+            break
+        z = znew
+    x, y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
+    r = _smap(tab, lo, hi, x, y, z) - p
+    return math.sqrt(np.dot(r, r)), z, D / math.sqrt(np.dot(D, D)), kind
+
+
+@njit(cache=True)
+def hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, p, t0):
+    """(distance, t*, tangent) of a hair to p under the sampled frames, over the part of the hair
+    whose z lies in [za, zb]; distance 1e300 where no part does."""
+    ta = 0.0
+    tb = 1.0
+    if ze > 0.0:
+        ta = max(ta, (za - z1) / ze)
+        tb = min(tb, (zb - z1) / ze)
+    elif ze < 0.0:
+        ta = max(ta, (zb - z1) / ze)
+        tb = min(tb, (za - z1) / ze)
+    elif z1 < za or z1 > zb:
+        return 1e300, 0.0, np.zeros(3)
+    if ta > tb:
+        return 1e300, 0.0, np.zeros(3)
+    t = min(max(t0, ta), tb)
+    h = max(1e-4 * (tb - ta), 1e-9)
+    D = np.zeros(3)
+    for it in range(12):
+        tp_ = min(t + h, 1.0)
+        tm = max(t - h, 0.0)
+        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tp_)
+        Fp = _smap(tab, lo, hi, x, y, z)
+        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tm)
+        Fm = _smap(tab, lo, hi, x, y, z)
+        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
+        F0 = _smap(tab, lo, hi, x, y, z)
+        D = (Fp - Fm) / (tp_ - tm)
+        dd = np.dot(D, D)
+        if dd <= 0.0:
+            break
+        tn = min(max(t - np.dot(F0 - p, D) / dd, ta), tb)
+        if abs(tn - t) < 1e-13:
+            t = tn
+            break
+        t = tn
+    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
+    r = _smap(tab, lo, hi, x, y, z) - p
+    nd = math.sqrt(np.dot(D, D))
+    return math.sqrt(np.dot(r, r)), t, (D / nd if nd > 0.0 else D)
+
+
+@njit(cache=True)
+def _answer(c, kind, T, tp, tab):
+    return (True, c, kind, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0], tab.yarn_albedo[c, 1],
+            tab.yarn_albedo[c, 2])
+
+
+@njit(cache=True)
 def lookup_point(cv, tab, p):
     """seed 000 Algorithm 1 at fabric-space point p (float64[3]); see the module doc for the result."""
     cand = np.empty(MAX_YARNS, np.int64)
@@ -325,12 +378,17 @@ def lookup_point(cv, tab, p):
         s = cs[ci]
         t = tab.yarn_type[c]
         tp = tab.tparams[t]
-        pos, tan, nn, bn = curve_frame_at(cv, c, s)
+        lo = tab.fs_off[c]
+        hi = tab.fs_off[c + 1]
+        pos, tan, nn, bn = sampled_frame(tab.fs_s, tab.fs_frame, lo, hi, s)
         r = p - pos
         x = np.dot(r, nn)
         y = np.dot(r, bn)
-        w = np.dot(r, tan)
+        w = abs(np.dot(r, tan))
         rf = tp[FIBER_RADIUS]
+        eps = tab.yarn_eps[c]
+        if w >= rf + 2.0 * eps:
+            continue  # beyond an end of the yarn by more than any fibre's cap reaches
         K = tab.type_K[t]
         yseed = np.uint64(tab.yarn_seed[c])
         P = int(tp[PLY_NUM])
@@ -339,11 +397,13 @@ def lookup_point(cv, tab, p):
         es = tp[E_SHORT]
         el = tp[E_LONG]
         twist = fiber_twist(tp, s)
-        # local model window: every fibre point within rf of p lies at |z - s| <= (1 + K) rf / g_min
-        hwin = max((1.0 + K) * rf, tab.type_mz[t]) / tab.yarn_gmin[c]
-        have_model = False
-        za = zm = zb = 0.0
-        M = np.empty((3, 3, 3))
+        gmin = tab.yarn_gmin[c]
+        # window holding every fibre point within rf of p (|z - s| <= yarn-space distance / g_min)
+        L = tab.yarn_length[c]
+        hwin = (max((1.0 + K) * (rf + w + eps), tab.type_mz[t]) + w + 2.0 * eps) / gmin
+        za = max(0.0, s - hwin)
+        zb = min(L, s + hwin)
+        reach = K * (rf + w + eps)
         for k in range(P):
             # ---- regular and loop fibres of ply k (Algorithm 2)
             cx, cy, drx, dry = ply_frame(tp, k, s)
@@ -368,48 +428,50 @@ def lookup_point(cv, tab, p):
                 X, Y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, s)
                 dx = x - X
                 dy = y - Y
-                dxs = math.sqrt(dx * dx + dy * dy + w * w)
-                if dxs >= K * rf:
+                if dx * dx + dy * dy >= reach * reach:
                     continue
-                if not have_model:
-                    za, zm, zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
-                    have_model = True
-                Dm, zs = regular_closest(cv, c, za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, p, s)
-                if Dm >= rf * (1.0 + MODEL_SLACK):
+                Dm, zs, T, kind = regular_closest_s(tab, lo, hi, za, zb, tp, yseed, k, j, Rj, th, th0, p, s)
+                if Dm >= rf + eps:
                     continue
-                D, kind = regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, zs)
-                if D < rf:
-                    T = regular_tangent(cv, c, tp, yseed, k, j, Rj, th, th0, zs)
-                    return (True, c, kind, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0],
-                            tab.yarn_albedo[c, 1], tab.yarn_albedo[c, 2])
+                if Dm > rf - eps:  # too close to the surface to decide with the sampled frames
+                    h = max(4.0 * (rf + eps), 1e-6)
+                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, zs)
+                    Za, Zm, Zb, M = local_frames(cv, c, zs, h, pe_, ne_, be_)
+                    De, ze_ = regular_closest(cv, c, Za, Zm, Zb, M, tp, yseed, k, j, Rj, th, th0, p, zs)
+                    D, kind = regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, ze_)
+                    if D >= rf:
+                        continue
+                return _answer(c, kind, T, tp, tab)
             # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
             g = tab.yarn_ply_off[c] + k
             nh = tab.hair_count[g]
             if nh == 0:
                 continue
-            margin = tab.type_mz[t]
+            margin = tab.type_mz[t] + (w + 2.0 * eps) / gmin
             hidx = np.empty(nh, np.int64)
             hz1 = np.empty(nh)
             hze = np.empty(nh)
             na = _hair_active(tab, c, g, tp, s, margin, hidx, hz1, hze)
-            limit = 1.1 * rf / tab.yarn_gmin[c]
+            limit = 1.1 * (rf + w + 2.0 * eps) / gmin
             for q in range(na):
                 h = hidx[q]
                 r0, r1, th1, pe = hair_params(tp, yseed, k, h)
                 lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, hz1[q], hze[q], x, y, s)
                 if lb > limit:
                     continue
-                if not have_model:
-                    za, zm, zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
-                    have_model = True
-                Dm, ts = hair_closest(za, zm, zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
-                if Dm >= rf * (1.0 + MODEL_SLACK):
+                Dm, ts, T = hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
+                if Dm >= rf + eps:
                     continue
-                D = hair_exact(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, ts)
-                if D < rf:
-                    T = hair_tangent(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], ts)
-                    return (True, c, 3, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0],
-                            tab.yarn_albedo[c, 1], tab.yarn_albedo[c, 2])
+                if Dm > rf - eps:
+                    hx, hy, hz = hair_point(tp, k, r0, r1, th1, pe, hz1[q], hze[q], ts)
+                    hh = max(4.0 * (rf + eps), 1e-6)
+                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, hz)
+                    Za, Zm, Zb, M = local_frames(cv, c, hz, hh, pe_, ne_, be_)
+                    De, te = hair_closest(Za, Zm, Zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, ts)
+                    D = hair_exact(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, te)
+                    if D >= rf:
+                        continue
+                return _answer(c, 3, T, tp, tab)
     return (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 

@@ -27,6 +27,7 @@ from numba import njit
 from stages.core.rng import hash_u64
 
 from . import hair_free
+from .frame_samples import sample_error, sample_yarn
 from stages.core.curves import curve_frame_at
 
 from .yarn_model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, PLY_NUM, RHO_MAX,
@@ -59,6 +60,12 @@ Tables = namedtuple("Tables", [
     "hair_mode",        # (1,) int64: 0 hybrid, 1 realization-free
     "yarn_length",      # (Y,) float64 arc length of each yarn curve (yarn-space z range)
     "max_extent",       # (1,) float64 largest yarn_extent (candidate-yarn search radius)
+    "fs_off",           # (Y+1,) int64: frame samples of yarn c at fs_off[c]:fs_off[c+1] (frame_samples.py)
+    "fs_s",             # float64 arc length of each frame sample
+    "fs_frame",         # (M, 12) float32 position, tangent, normal, binormal
+    "seg_fs",           # int64 per spline segment (global index): its first frame sample
+    "seg_fs_end",       # int64 per spline segment: its last frame sample (the next knot)
+    "yarn_eps",         # (Y,) float64 bound of |Eq. 7 with sampled frames - Eq. 7| within the extent
 ])
 
 
@@ -70,11 +77,12 @@ def yarn_key(seed: int, c: int) -> int:
     return int(hash_u64(seed, 104729, c) >> np.uint64(1))  # fits int64
 
 
-def regular_tables(tp: np.ndarray, type_seed: int, K: float, nbins: int):
-    """Per-type fibres and azimuth bins: (R, th, th0, rlo, rhi) flat (P N,), bin_start, bin_items."""
+def regular_tables(tp: np.ndarray, type_seed: int, K: float, nbins: int, pad: float = 0.0):
+    """Per-type fibres and azimuth bins: (R, th, th0, rlo, rhi) flat (P N,), bin ends, bin_items.
+    The margin is K (r_fibre + pad) in cross-section lengths (pad: the lookups' frame-sampling slack)."""
     R, th, th0 = sample_regular_fibers(tp, np.uint64(type_seed))
     P, N = R.shape
-    m = K * tp[FIBER_RADIUS] / min(tp[E_SHORT], tp[E_LONG])
+    m = K * (tp[FIBER_RADIUS] + pad) / min(tp[E_SHORT], tp[E_LONG])
     lo = (tp[RHO_MIN] if tp[USE_MIGRATION] else 1.0) * R
     hi_reg = (tp[RHO_MAX] if tp[USE_MIGRATION] else 1.0) * R
     loops = tp[USE_FLYAWAYS] and tp[P_LOOP] > 0 and tp[USE_MIGRATION]
@@ -155,8 +163,10 @@ def table_bytes(tab: Tables) -> dict:
     hair = sum(getattr(tab, n).nbytes for n in ("hair_count", "hair_off", "hair_z1", "hair_ze", "hb_zoff",
                                                  "hb_z", "hb_start", "hb_items"))
     yarn = sum(getattr(tab, n).nbytes for n in ("yarn_type", "yarn_seed", "yarn_extent", "yarn_gmin",
-                                                 "yarn_albedo", "yarn_ply_off"))
-    return {"regular": int(reg), "hair": int(hair), "loop": 0, "per_yarn": int(yarn)}
+                                                 "yarn_albedo", "yarn_ply_off", "yarn_length", "max_extent",
+                                                 "yarn_eps", "hair_mode"))
+    frames = sum(getattr(tab, n).nbytes for n in ("fs_off", "fs_s", "fs_frame", "seg_fs", "seg_fs_end"))
+    return {"regular": int(reg), "hair": int(hair), "loop": 0, "per_yarn": int(yarn), "frames": int(frames)}
 
 
 @njit(cache=True)
@@ -177,9 +187,12 @@ def curvature_max(cv, c, step):
     return 1.25 * best
 
 
-def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=0, fold_cap=0.5):
+def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=0, fold_cap=0.5,
+                 frame_tolerance=0.1):
     """Tables for all yarns. tparams (T, NPARAM) packed types (U_MAX, HAIR_RMAX filled in),
-    yarn_type (Y,), yarn_albedo (Y, 3). Returns (Tables, info dict with per-yarn diagnostics)."""
+    yarn_type (Y,), yarn_albedo (Y, 3); frame_tolerance: the sampled frames' error bound aimed at,
+    in fibre radii (smaller: more samples, fewer exact fall-backs in the lookups).
+    Returns (Tables, info dict with per-yarn diagnostics)."""
     T = tparams.shape[0]
     Y = len(yarn_type)
     ext = np.array([extent_bound(tparams[yarn_type[c]]) for c in range(Y)])
@@ -202,7 +215,39 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         K = (1.0 + np.sqrt(gmax[sel] ** 2 + v * v) / gmin[sel]).max() * 1.05
         type_K[t] = K
         type_mz[t] = 1.1 * tparams[t, FIBER_RADIUS] / gmin[sel].min()
-    fib = [regular_tables(tparams[t], type_key(seed, t), type_K[t], nbins) for t in range(T)]
+    # frame samples: step from the curvature so the sampling error stays near 0.1 fibre radius
+    fs_s, fs_fr, fs_off, seg_fs, seg_fs_end, yeps = [], [], np.zeros(Y + 1, np.int64), \
+        np.zeros(len(cv.points), np.int64), np.zeros(len(cv.points), np.int64), np.zeros(Y)
+    for c in range(Y):
+        tp = tparams[yarn_type[c]]
+        rf = tp[FIBER_RADIUS]
+        target = frame_tolerance * rf
+        k2 = kap[c] * kap[c] * ext[c] + kap[c]
+        delta = min(0.5 * float(cv.radius[c]), math.sqrt(8.0 * target / max(k2, 1e-12)))
+        for attempt in range(3):  # the error is second order in the step: rescale the step to the target
+            s_c, fr_c, first = sample_yarn(cv, c, delta)
+            err = sample_error(cv, c, s_c, fr_c, ext[c])
+            scale = float(np.abs(fr_c[:, :3]).max()) + ext[c]
+            eps_c = 2.0 * err + 1.25 * kap[c] * delta * delta / 8.0 + 8.0 * np.finfo(np.float32).eps * scale
+            if eps_c <= target or delta <= 1e-3 * float(cv.radius[c]):
+                break
+            delta = max(0.9 * delta * math.sqrt(target / eps_c), 1e-3 * float(cv.radius[c]))
+        yeps[c] = eps_c
+        base = fs_off[c]
+        fs_off[c + 1] = base + len(s_c)
+        lo = cv.offsets[c]
+        for i in range(len(first)):
+            seg_fs[lo + i] = base + first[i]
+            seg_fs_end[lo + i] = base + (first[i + 1] if i + 1 < len(first) else len(s_c) - 1)
+        for i in range(len(first), cv.offsets[c + 1] - lo):
+            seg_fs[lo + i] = seg_fs_end[lo + i] = base + len(s_c) - 1
+        fs_s.append(s_c)
+        fs_fr.append(fr_c)
+    fib = []
+    for t in range(T):
+        sel = yarn_type == t
+        pad = 2.0 * tparams[t, FIBER_RADIUS] + 3.0 * float(yeps[sel].max()) if sel.any() else tparams[t, FIBER_RADIUS]
+        fib.append(regular_tables(tparams[t], type_key(seed, t), type_K[t], nbins, pad - tparams[t, FIBER_RADIUS]))
     type_fib_off = np.zeros(T + 1, np.int64)
     type_bin_off = np.zeros(T + 1, np.int64)
     starts = [np.zeros(1, np.int64)]
@@ -255,6 +300,9 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         np.ascontiguousarray(yarn_type, np.int32), ykeys, ext, gmin, np.ascontiguousarray(yarn_albedo, np.float64),
         ply_off, hcount, hoff, cat(z1s, np.float64), cat(zes, np.float64), hzoff, cat(bps, np.float64),
         cat(hstarts, np.int64), cat(hitems, np.int32), np.array([hair_mode], np.int64),
-        np.ascontiguousarray(cv.curve_length[:Y], np.float64), np.array([ext.max() if Y else 0.0]))
-    info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap}
+        np.ascontiguousarray(cv.curve_length[:Y], np.float64), np.array([ext.max() if Y else 0.0]),
+        fs_off, cat(fs_s, np.float64), np.ascontiguousarray(np.concatenate(fs_fr) if fs_fr else np.zeros((0, 12)),
+                                                           dtype=np.float32),
+        seg_fs, seg_fs_end, yeps)
+    info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap, "eps": yeps}
     return tab, info
