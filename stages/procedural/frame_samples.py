@@ -167,6 +167,61 @@ def sample_error(cv, c, s_arr, fr, rho):
 
 
 @njit(cache=True)
+def _chord(s_arr, fr, i, p):
+    """(s, distance^2) of p's closest point on the chord between samples i and i + 1."""
+    ax = np.float64(fr[i, 0])
+    ay = np.float64(fr[i, 1])
+    az = np.float64(fr[i, 2])
+    ux = np.float64(fr[i + 1, 0]) - ax
+    uy = np.float64(fr[i + 1, 1]) - ay
+    uz = np.float64(fr[i + 1, 2]) - az
+    wx = p[0] - ax
+    wy = p[1] - ay
+    wz = p[2] - az
+    uu = ux * ux + uy * uy + uz * uz
+    t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
+    t = min(max(t, 0.0), 1.0)
+    dx = wx - t * ux
+    dy = wy - t * uy
+    dz = wz - t * uz
+    return s_arr[i] + t * (s_arr[i + 1] - s_arr[i]), dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True)
+def project_local(s_arr, fr, a, b, p):
+    """A local closest chord point of samples a..b to p: start at the chord nearest to p's projection
+    on the line through samples a and b, walk to neighbouring chords while the distance drops.
+    Within a yarn's extent of a curve that does not fold there (curvature x extent < 1) the foot
+    point is unique, so the local minimum is the closest point."""
+    if b - a <= 3:
+        return project_on_samples(s_arr, fr, a, b, p)
+    ux = np.float64(fr[b, 0]) - np.float64(fr[a, 0])
+    uy = np.float64(fr[b, 1]) - np.float64(fr[a, 1])
+    uz = np.float64(fr[b, 2]) - np.float64(fr[a, 2])
+    uu = ux * ux + uy * uy + uz * uz
+    u = 0.0
+    if uu > 0.0:
+        u = ((p[0] - fr[a, 0]) * ux + (p[1] - fr[a, 1]) * uy + (p[2] - fr[a, 2]) * uz) / uu
+    j = min(max(a + int(u * (b - a)), a), b - 1)
+    bs, best = _chord(s_arr, fr, j, p)
+    while j > a:
+        s2, d2 = _chord(s_arr, fr, j - 1, p)
+        if d2 >= best:
+            break
+        best = d2
+        bs = s2
+        j -= 1
+    while j < b - 1:
+        s2, d2 = _chord(s_arr, fr, j + 1, p)
+        if d2 >= best:
+            break
+        best = d2
+        bs = s2
+        j += 1
+    return bs, best
+
+
+@njit(cache=True)
 def project_on_samples(s_arr, fr, a, b, p):
     """Closest point of the chords between samples a..b (inclusive) to p: (s, distance^2)."""
     best = 1e300

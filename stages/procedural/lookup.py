@@ -28,7 +28,7 @@ from numba import njit, prange
 from stages.core.curves import _segment_box_dist2, curve_frame_at, nearest_segments_in_cell
 
 from . import hair_free
-from .frame_samples import project_on_samples, sampled_frame
+from .frame_samples import project_local, sampled_frame
 from .tables import hair_node_seed_nb
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
                          ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, ply_frame, regular_xy)
@@ -174,6 +174,28 @@ def hair_exact(cv, c, tp, k, r0, r1, th1, pe, z1, ze, p, t):
 
 
 @njit(cache=True)
+def _hair_quick_reject(tp, r0, r1, z1, ze, rho_k, s, limit):
+    """True when no point of the hair can lie within yarn-space distance ``limit`` of a point at
+    distance rho_k from ply k's centre in the cross-section at s: the hair's z must come within
+    limit of s, and its radius R(t) within limit (+ the ply centre's drift over limit in z) of rho_k."""
+    ta = 0.0
+    tb = 1.0
+    if ze != 0.0:
+        t1 = (s - limit - z1) / ze
+        t2 = (s + limit - z1) / ze
+        ta = max(ta, min(t1, t2))
+        tb = min(tb, max(t1, t2))
+        if ta > tb:
+            return True
+    elif abs(z1 - s) > limit:
+        return True
+    Ra = r0 + (r1 - r0) * ta
+    Rb = r0 + (r1 - r0) * tb
+    m = limit * (1.0 + TWO_PI * tp[PLY_RADIUS] / tp[YARN_ALPHA])
+    return rho_k < min(Ra, Rb) - m or rho_k > max(Ra, Rb) + m
+
+
+@njit(cache=True)
 def _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, z):
     """Yarn-space distance from (x, y, z) to the hair's sampled polyline, less the chord slack;
     returns (lower bound of the yarn-space distance, best t)."""
@@ -239,6 +261,12 @@ def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
     start, end = nearest_segments_in_cell(cv, p)
     n = 0
     found = np.empty(out_c.shape[0], np.bool_)
+    first = np.empty(out_c.shape[0], np.int64)
+    firstd = np.empty(out_c.shape[0])
+    slot = np.empty(end - start, np.int64)
+    bd = np.empty(end - start)
+    # pass 1: box distances; per yarn the segment with the nearest box (projected first, so that
+    # the boxes of the others are pruned against a good distance)
     for q in range(start, end):
         i = cv.grid_items[q]
         c = cv.seg_curve[i]
@@ -247,15 +275,36 @@ def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
             m += 1
         if m == n:
             if n == out_c.shape[0]:
+                slot[q - start] = -1
                 continue
             e = tab.yarn_extent[c] + 2.0 * tab.yarn_eps[c]
             out_c[m] = c
             out_d2[m] = e * e
             found[m] = False
+            first[m] = -1
+            firstd[m] = 1e300
             n += 1
-        if _segment_box_dist2(cv, i, p) >= out_d2[m]:
+        slot[q - start] = m
+        d = _segment_box_dist2(cv, i, p)
+        bd[q - start] = d
+        if d < out_d2[m] and d < firstd[m]:
+            firstd[m] = d
+            first[m] = q
+    for m in range(n):
+        q = first[m]
+        if q >= 0:
+            i = cv.grid_items[q]
+            sp, d2 = project_local(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
+            if d2 < out_d2[m]:
+                out_d2[m] = d2
+                out_s[m] = sp
+                found[m] = True
+    for q in range(start, end):
+        m = slot[q - start]
+        if m < 0 or q == first[m] or bd[q - start] >= out_d2[m]:
             continue
-        sp, d2 = project_on_samples(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
+        i = cv.grid_items[q]
+        sp, d2 = project_local(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
         if d2 < out_d2[m]:
             out_d2[m] = d2
             out_s[m] = sp
@@ -417,10 +466,13 @@ def lookup_point(cv, tab, p):
             b = min(int(ang / TWO_PI * B), B - 1)
             gb = tab.type_bin_off[t] + k * B + b
             fo = tab.type_fib_off[t] + k * N
-            for q in range(tab.bin_start[gb], tab.bin_start[gb + 1]):
-                j = tab.bin_items[q]
+            binned = w + eps <= tab.type_pad[t]  # else (beyond a yarn end) every fibre of the ply
+            q0 = tab.bin_start[gb] if binned else 0
+            q1 = tab.bin_start[gb + 1] if binned else N
+            for q in range(q0, q1):
+                j = tab.bin_items[q] if binned else q
                 f = fo + j
-                if rr < tab.fib_rlo[f] or rr > tab.fib_rhi[f]:
+                if binned and (rr < tab.fib_rlo[f] or rr > tab.fib_rhi[f]):
                     continue
                 Rj = tab.fib_R[f]
                 th = tab.fib_th[f]
@@ -453,9 +505,12 @@ def lookup_point(cv, tab, p):
             hze = np.empty(nh)
             na = _hair_active(tab, c, g, tp, s, margin, hidx, hz1, hze)
             limit = 1.1 * (rf + w + 2.0 * eps) / gmin
+            rho_k = math.sqrt(ax * ax + ay * ay)
             for q in range(na):
                 h = hidx[q]
                 r0, r1, th1, pe = hair_params(tp, yseed, k, h)
+                if _hair_quick_reject(tp, r0, r1, hz1[q], hze[q], rho_k, s, limit):
+                    continue
                 lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, hz1[q], hze[q], x, y, s)
                 if lb > limit:
                     continue

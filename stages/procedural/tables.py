@@ -5,8 +5,9 @@ twist-compensated unit disc, T_j = {R (cos theta_j, sin theta_j): R in [rho_min 
 (R_hi = rho_max R_j, or the loop bound when loops can occur), stored as (R_j, theta_j, theta0_j)
 plus the radial interval [r_lo, r_hi] grown by the fibre-radius margin m; the azimuth [0, 2 pi) is
 cut into B equal bins and bin b lists (CSR, ascending fibre index) every fibre whose trajectory
-comes within m of the bin's wedge. m = K r_fibre / min(e_short, e_long) in unit-disc units, with K
-bounding the ratio between a point's cross-sectional distance to a fibre and its true distance.
+comes within m of the bin's wedge. m = K (r_fibre + pad) / min(e_short, e_long) in unit-disc units,
+with K bounding the ratio between a point's cross-sectional distance to a fibre and its true
+distance and pad (``type_pad``) the slack of the lookups' sampled frames.
 
 Loops (§4.4.1, §5.3) need no storage: every migration cycle's mutation is a consistent random
 number of (yarn, ply, fibre, cycle) evaluated on the fly (yarn_model.loop_unit_radius).
@@ -66,6 +67,7 @@ Tables = namedtuple("Tables", [
     "seg_fs",           # int64 per spline segment (global index): its first frame sample
     "seg_fs_end",       # int64 per spline segment: its last frame sample (the next knot)
     "yarn_eps",         # (Y,) float64 bound of |Eq. 7 with sampled frames - Eq. 7| within the extent
+    "type_pad",         # (T,) float64 slack (beyond the fibre radius) the azimuth bins' margin allows for
 ])
 
 
@@ -244,10 +246,11 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         fs_s.append(s_c)
         fs_fr.append(fr_c)
     fib = []
+    type_pad = np.zeros(T)
     for t in range(T):
         sel = yarn_type == t
-        pad = 2.0 * tparams[t, FIBER_RADIUS] + 3.0 * float(yeps[sel].max()) if sel.any() else tparams[t, FIBER_RADIUS]
-        fib.append(regular_tables(tparams[t], type_key(seed, t), type_K[t], nbins, pad - tparams[t, FIBER_RADIUS]))
+        type_pad[t] = 3.0 * float(yeps[sel].max()) if sel.any() else 0.0
+        fib.append(regular_tables(tparams[t], type_key(seed, t), type_K[t], nbins, type_pad[t]))
     type_fib_off = np.zeros(T + 1, np.int64)
     type_bin_off = np.zeros(T + 1, np.int64)
     starts = [np.zeros(1, np.int64)]
@@ -303,6 +306,6 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         np.ascontiguousarray(cv.curve_length[:Y], np.float64), np.array([ext.max() if Y else 0.0]),
         fs_off, cat(fs_s, np.float64), np.ascontiguousarray(np.concatenate(fs_fr) if fs_fr else np.zeros((0, 12)),
                                                            dtype=np.float32),
-        seg_fs, seg_fs_end, yeps)
+        seg_fs, seg_fs_end, yeps, type_pad)
     info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap, "eps": yeps}
     return tab, info
