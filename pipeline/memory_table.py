@@ -60,23 +60,17 @@ def generated_scene(ends: int, picks: int, directory) -> Path:
 
 
 def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
-    from stages.procedural.realize import yarn_counts
     from stages.procedural.tables import table_bytes
 
     from .ingest_runner import run_ingest
-    from .procedural_runner import build
+    from .procedural_runner import build, realized_size
 
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="loomlight-table1-") as tmp:
         yarns = Path(tmp) / "yarns.zarr"
         run_ingest(Path(scene), yarns)
         cv, tab, info, dicts, _ = build(yarns, seed=seed, hair_mode="hybrid")
-    verts = np.zeros(4, np.int64)
-    pieces = np.zeros(4, np.int64)
-    for c in range(len(tab.yarn_type)):
-        v, p = yarn_counts(tab, c, float(cv.curve_length[c]), float(spacing))
-        verts += v
-        pieces += p
+    _, nverts, nfib, verts, pieces = realized_size(tab, cv.curve_length, spacing)
     full = {k: int(verts[i] * FIBER_VERTEX_BYTES + pieces[i] * FIBER_BYTES) for i, k in ((1, "regular"), (2, "loop"), (3, "hair"))}
     parts = table_bytes(tab)
     ours_regular = parts["regular"] + parts["per_yarn"] + parts["frames"]
@@ -85,7 +79,7 @@ def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
     full_total = sum(full.values())
     return {
         "scene": Path(scene).stem, "yarns": int(len(tab.yarn_type)),
-        "fibers": int(pieces[1] + pieces[2] + pieces[3]), "vertices": int(verts.sum()),
+        "fibers": int(nfib), "vertices": int(nverts),
         "regular_fibers": int(len(tab.yarn_type) and sum(int(tab.tparams[t, 0] * tab.tparams[t, 1]) for t in tab.yarn_type)),
         "hairs": int(pieces[3]), "loops": int(pieces[2]), "spacing": float(spacing),
         "full_total_bytes": int(full_total), "full_regular_bytes": full["regular"],

@@ -135,16 +135,20 @@ def load_tables(path):
 # ------------------------------------------------------------------------------------------------
 # realization
 def realized_size(tab, curve_length, spacing):
-    """(bytes, vertices, fibres, per-kind vertex counts {1, 2, 3}) of the full realization (no geometry)."""
-    from stages.procedural.realize import realize_plan
+    """(bytes, vertices, fibres, vertices by kind {1, 2, 3}, fibres by kind) of the full realization,
+    counted yarn by yarn without listing pieces or building geometry."""
+    from stages.procedural.realize import yarn_counts
 
-    plan = realize_plan(tab, curve_length, spacing)
-    kind, nv = plan[3], plan[8]
-    per_kind = {int(k): int(nv[kind == k].sum()) for k in (1, 2, 3)}
-    fibres_kind = {int(k): int((kind == k).sum()) for k in (1, 2, 3)}
-    verts = int(nv.sum())
-    nbytes = verts * FIBER_VERTEX_BYTES + len(nv) * FIBER_BYTES
-    return nbytes, verts, len(nv), per_kind, fibres_kind, plan
+    verts = np.zeros(4, np.int64)
+    pieces = np.zeros(4, np.int64)
+    for c in range(len(tab.yarn_type)):
+        v, p = yarn_counts(tab, c, float(curve_length[c]), float(spacing))
+        verts += v
+        pieces += p
+    per_kind = {k: int(verts[k]) for k in (1, 2, 3)}
+    fibres_kind = {k: int(pieces[k]) for k in (1, 2, 3)}
+    nv, nf = int(verts.sum()), int(pieces.sum())
+    return nv * FIBER_VERTEX_BYTES + nf * FIBER_BYTES, nv, nf, per_kind, fibres_kind
 
 
 def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAULT_SPACING,
@@ -157,11 +161,14 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
     if w.up_to_date() and not force:
         return {"skipped": True}
     cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, hair_mode="hybrid")
-    nbytes, verts, nfib, per_kind, fib_kind, plan = realized_size(tab, cv.curve_length, spacing)
+    nbytes, verts, nfib, per_kind, fib_kind = realized_size(tab, cv.curve_length, spacing)
     if nbytes > budget:
         raise LoomError(out, "--budget", f"the realization would take {nbytes / 2**20:.1f} MiB ({verts} vertices, "
                         f"{nfib} fibres), over the budget of {budget / 2**20:.1f} MiB; raise --budget or --spacing")
-    yarn, ply, idx, kind, a0, a1, hz1, hze, nv = plan
+    from stages.procedural.realize import realize_plan
+
+    yarn, ply, idx, kind, a0, a1, hz1, hze, nv = realize_plan(tab, cv.curve_length, spacing)
+    assert int(nv.sum()) == verts and len(nv) == nfib
     offsets = np.zeros(len(nv) + 1, np.int64)
     np.cumsum(nv, out=offsets[1:])
     pts = np.empty((verts, 3))

@@ -11,14 +11,21 @@ fibre radius. Where several fibres cover p, the first in the order (yarn, ply, r
 hair, fibre index) answers (Algorithm 1 returns at the first hit; the order makes that choice
 well defined); a regular fibre's kind (1 or 2) is the kind of its cycle at the closest point.
 
-Steps (Algorithm 1): candidate yarns from the curve grid (padded by each yarn's extent bound);
-projection to yarn space (Eq. 8-9); per ply (all plies, nearest first in spirit of §4.5 but
-without dropping the others, so the answer is exact): the twist-compensated unit-disc point and
-its azimuth bin give candidate fibres (Algorithm 2); each candidate's cross-sectional distance d
-is exact in the cross-section through p and bounds the true distance D from above (D <= d) and
-below (d <= K D); candidates with d < K r_f get the true distance by Gauss-Newton along the fibre.
-Hairs: active set at z (hybrid z-bins by binary search, or Algorithm 3), a yarn-space prefilter,
-then Gauss-Newton along the hair in fabric space.
+Steps (Algorithm 1):
+1. Candidate yarns: the spline segments of p's cell in the tables' curve grid (padded by each
+   yarn's extent bound), nearest box first; p is projected onto the chords of the yarn's sampled
+   frames (frame_samples.py) by local descent -> arc length s' (seed 000 §5.2's role).
+2. Yarn space (Eq. 8-9) with the sampled frame at s': (x, y) and the tangential residual w.
+3. Per ply (all plies, not only the nearest of §4.5, so that the answer is exact): the twist-
+   compensated unit-disc point and its azimuth bin give candidate fibres (Algorithm 2, footnote
+   2); a candidate's cross-sectional distance d bounds its true distance D (D >= d / K - slack);
+   candidates that may cover p get D by Gauss-Newton along the fibre (loops included: a cycle's
+   mutation is a consistent random number, §4.4.1) under the sampled frames.
+4. Hairs of the ply active at s' (hybrid z-bins by binary search, or Algorithm 3), a quick z and
+   radius reject, a yarn-space polyline prefilter, then Gauss-Newton along the hair.
+The sampled frames differ from Eq. 7 by at most eps_c (``yarn_eps``, measured when the tables are
+built); a distance within eps_c of the fibre radius is re-decided with the exact frames
+(stages/core/curves.py), so inside/outside, yarn and kind are those of the exact model.
 """
 import math
 
