@@ -26,7 +26,7 @@ def _unit(v):
     return v / np.linalg.norm(v)
 
 
-@njit(cache=True)
+@njit
 def _sample_many(S, wi, u):
     out = np.empty((u.shape[0], 4))
     for k in range(u.shape[0]):
@@ -38,7 +38,7 @@ def _sample_many(S, wi, u):
     return out
 
 
-@njit(cache=True)
+@njit
 def _eval_many(S, wi, wo):
     out = np.empty(wo.shape[0])
     for k in range(wo.shape[0]):
@@ -46,7 +46,7 @@ def _eval_many(S, wi, wo):
     return out
 
 
-@njit(cache=True)
+@njit
 def _ndf_many(S, m):
     out = np.empty(m.shape[0])
     for k in range(m.shape[0]):

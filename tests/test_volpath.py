@@ -26,7 +26,7 @@ from stages.render.volpath import OUT_CHANNELS, render_tiles
 Z = 5.0  # standard errors allowed
 
 
-@njit(cache=True)
+@njit
 def _track_many(med, maj, o, d, tmax, n, seed):
     """(escape indicator of delta tracking, ratio-tracking estimate) for n independent paths."""
     esc = np.empty(n)
@@ -39,7 +39,7 @@ def _track_many(med, maj, o, d, tmax, n, seed):
     return esc, rat
 
 
-@njit(cache=True)
+@njit
 def _optical_depth_grid(med, o, d, t0, t1, m):
     h = (t1 - t0) / m
     tau = 0.0

@@ -25,52 +25,54 @@ RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_densit
 
 @njit(cache=True)
 def covering_segment(bvh, x, y, z):
-    """Segment of the lowest-index fibre whose capsule contains (x, y, z), or -1."""
-    if bvh.prim.shape[0] == 0:
+    """Segment of the lowest-index fibre whose capsule contains (x, y, z), or -1. Walks the BVH's
+    cache-line packed ``nodes`` / ``prims`` (see ``stages.core.bvh``)."""
+    nodes = bvh.nodes
+    prims = bvh.prims
+    if prims.shape[0] == 0:
         return -1
     stack = np.empty(128, np.int64)
     stack[0] = 0
     sp = 1
     best = -1
     best_f = np.iinfo(np.int64).max
-    pts = bvh.points
     while sp > 0:
         sp -= 1
-        node = stack[sp]
-        lo = bvh.node_lo[node]
-        hi = bvh.node_hi[node]
-        if x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]:
+        nd = stack[sp]
+        if (x < nodes[nd, 0] or x > nodes[nd, 3] or y < nodes[nd, 1] or y > nodes[nd, 4]
+                or z < nodes[nd, 2] or z > nodes[nd, 5]):
             continue
-        if bvh.node_left[node] < 0:
-            for j in range(bvh.node_start[node], bvh.node_start[node] + bvh.node_count[node]):
-                s = bvh.prim[j]
-                f = bvh.seg_fiber[s]
-                if f >= best_f:
-                    continue
-                i = bvh.seg_a[s]
-                ax = pts[i, 0]
-                ay = pts[i, 1]
-                az = pts[i, 2]
-                ux = pts[i + 1, 0] - ax
-                uy = pts[i + 1, 1] - ay
-                uz = pts[i + 1, 2] - az
-                wx = x - ax
-                wy = y - ay
-                wz = z - az
-                uu = ux * ux + uy * uy + uz * uz
-                t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
-                t = min(max(t, 0.0), 1.0)
-                dx = wx - t * ux
-                dy = wy - t * uy
-                dz = wz - t * uz
-                r = bvh.seg_r[s]
-                if dx * dx + dy * dy + dz * dz < r * r:
-                    best = s
-                    best_f = f
+        a = int(nodes[nd, 6])
+        if a >= 0:
+            stack[sp] = a
+            stack[sp + 1] = int(nodes[nd, 7])
+            sp += 2
             continue
-        stack[sp] = bvh.node_left[node]
-        stack[sp + 1] = bvh.node_right[node]
-        sp += 2
+        start = -1 - a
+        for q in range(start, start + int(nodes[nd, 7])):
+            s = int(prims[q, 7])
+            f = bvh.seg_fiber[s]
+            if f >= best_f:
+                continue
+            ax = prims[q, 0]
+            ay = prims[q, 1]
+            az = prims[q, 2]
+            ux = prims[q, 3] - ax
+            uy = prims[q, 4] - ay
+            uz = prims[q, 5] - az
+            wx = x - ax
+            wy = y - ay
+            wz = z - az
+            uu = ux * ux + uy * uy + uz * uz
+            t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            dx = wx - t * ux
+            dy = wy - t * uy
+            dz = wz - t * uz
+            r = prims[q, 6]
+            if dx * dx + dy * dy + dz * dz < r * r:
+                best = s
+                best_f = f
     return best
 
 
