@@ -28,8 +28,8 @@ def _artifacts(out_dir: Path):
     work = Path(out_dir) / "volpath_artifacts"
     work.mkdir(parents=True, exist_ok=True)
     run_ingest(SCENE, work / "yarns.zarr")
-    run_tables(work / "yarns.zarr", work / "tables.zarr")
-    run_realize(work / "yarns.zarr", work / "fibers.zarr")
+    run_tables(work / "yarns.zarr", work / "tables.zarr", force=True)  # the table layout may have changed
+    run_realize(work / "yarns.zarr", work / "fibers.zarr", force=True)
     return work / "tables.zarr", work / "fibers.zarr", str(work)
 
 
