@@ -22,7 +22,7 @@ Kernels:
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from stages.core.curves import curve_frame_at
 
@@ -148,22 +148,60 @@ def sampled_frame(s_arr, fr, lo, hi, z):
 
 
 @njit(cache=True)
-def sample_error(cv, c, s_arr, fr, rho):
-    """Largest |pos_s - pos| + rho max(|n_s - n|, |b_s - b|) at the quarter points of every step."""
-    n = s_arr.shape[0]
+def sample_error(cv, c, s_arr, fr, rho, lo=0, hi=-1):
+    """Largest |pos_s - pos| + rho max(|n_s - n|, |b_s - b|) at the midpoint of every step of
+    samples lo..hi-1 (where the second-order interpolation errors peak)."""
+    if hi < 0:
+        hi = s_arr.shape[0]
     worst = 0.0
-    for i in range(n - 1):
-        for q in range(1, 4):
-            z = s_arr[i] + (s_arr[i + 1] - s_arr[i]) * q / 4.0
-            pa, ta, na, ba = _interp(s_arr, fr, i, z)
-            pos, t, nn, b = curve_frame_at(cv, c, z)
-            ep = math.sqrt(np.sum((pa - pos) ** 2))
-            en = math.sqrt(np.sum((na - nn) ** 2))
-            eb = math.sqrt(np.sum((ba - b) ** 2))
-            e = ep + rho * max(en, eb)
-            if e > worst:
-                worst = e
+    for i in range(lo, hi - 1):
+        z = 0.5 * (s_arr[i] + s_arr[i + 1])
+        pa, ta, na, ba = _interp(s_arr, fr, i, z)
+        pos, t, nn, b = curve_frame_at(cv, c, z)
+        ep = math.sqrt(np.sum((pa - pos) ** 2))
+        en = math.sqrt(np.sum((na - nn) ** 2))
+        eb = math.sqrt(np.sum((ba - b) ** 2))
+        e = ep + rho * max(en, eb)
+        if e > worst:
+            worst = e
     return worst
+
+
+@njit(cache=True)
+def _n_samples(bp, delta):
+    n = 1
+    for i in range(bp.shape[0] - 1):
+        n += max(1, int(math.ceil((bp[i + 1] - bp[i]) / delta)))
+    return n
+
+
+@njit(cache=True, parallel=True)
+def sample_all(cv, deltas, rho):
+    """Frame samples of every yarn (prange over yarns): (offsets (Y+1,), s, frames, seg_first (per
+    spline segment, global sample index of its first sample; -1 for unused slots), errors (Y,))."""
+    Y = deltas.shape[0]
+    counts = np.zeros(Y, np.int64)
+    for c in prange(Y):
+        counts[c] = _n_samples(_breakpoints(cv, c), deltas[c])
+    off = np.zeros(Y + 1, np.int64)
+    for c in range(Y):
+        off[c + 1] = off[c] + counts[c]
+    s_all = np.empty(off[Y])
+    fr_all = np.empty((off[Y], 12), np.float32)
+    seg_first = np.full(cv.points.shape[0], -1, np.int64)
+    err = np.zeros(Y)
+    for c in prange(Y):
+        s, fr, first = sample_yarn(cv, c, deltas[c])
+        base = off[c]
+        for q in range(s.shape[0]):
+            s_all[base + q] = s[q]
+            for d in range(12):
+                fr_all[base + q, d] = fr[q, d]
+        lo = cv.offsets[c]
+        for i in range(first.shape[0]):
+            seg_first[lo + i] = base + first[i]
+        err[c] = sample_error(cv, c, s, fr, rho[c])
+    return off, s_all, fr_all, seg_first, err
 
 
 @njit(cache=True)

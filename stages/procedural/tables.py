@@ -28,7 +28,7 @@ from numba import njit
 from stages.core.rng import hash_u64
 
 from . import hair_free
-from .frame_samples import sample_error, sample_yarn
+from .frame_samples import sample_all
 from stages.core.curves import curve_frame_at
 
 from .yarn_model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, PLY_NUM, RHO_MAX,
@@ -217,34 +217,31 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         K = (1.0 + np.sqrt(gmax[sel] ** 2 + v * v) / gmin[sel]).max() * 1.05
         type_K[t] = K
         type_mz[t] = 1.1 * tparams[t, FIBER_RADIUS] / gmin[sel].min()
-    # frame samples: step from the curvature so the sampling error stays near 0.1 fibre radius
-    fs_s, fs_fr, fs_off, seg_fs, seg_fs_end, yeps = [], [], np.zeros(Y + 1, np.int64), \
-        np.zeros(len(cv.points), np.int64), np.zeros(len(cv.points), np.int64), np.zeros(Y)
+    # frame samples: step from the curvature so the sampling error stays near frame_tolerance fibre
+    # radii; the error is second order in the step, so steps are rescaled to the target (<= 3 rounds)
+    rf_y = np.array([tparams[yarn_type[c], FIBER_RADIUS] for c in range(Y)])
+    target = frame_tolerance * rf_y
+    k2 = kap * kap * ext + kap
+    rmin = 1e-3 * np.asarray(cv.radius[:Y], np.float64)
+    deltas = np.maximum(np.minimum(0.5 * np.asarray(cv.radius[:Y], np.float64),
+                                   np.sqrt(8.0 * target / np.maximum(k2, 1e-12))), rmin)
+    for attempt in range(3):
+        fs_off, fs_s, fs_fr, seg_fs, err = sample_all(cv, deltas, ext)
+        scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
+        yeps = 2.0 * err + 1.25 * kap * deltas * deltas / 8.0 + 8.0 * np.finfo(np.float32).eps * scale
+        over = (yeps > target) & (deltas > rmin)
+        if not over.any():
+            break
+        deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
+    seg_fs_end = np.zeros_like(seg_fs)
     for c in range(Y):
-        tp = tparams[yarn_type[c]]
-        rf = tp[FIBER_RADIUS]
-        target = frame_tolerance * rf
-        k2 = kap[c] * kap[c] * ext[c] + kap[c]
-        delta = min(0.5 * float(cv.radius[c]), math.sqrt(8.0 * target / max(k2, 1e-12)))
-        for attempt in range(3):  # the error is second order in the step: rescale the step to the target
-            s_c, fr_c, first = sample_yarn(cv, c, delta)
-            err = sample_error(cv, c, s_c, fr_c, ext[c])
-            scale = float(np.abs(fr_c[:, :3]).max()) + ext[c]
-            eps_c = 2.0 * err + 1.25 * kap[c] * delta * delta / 8.0 + 8.0 * np.finfo(np.float32).eps * scale
-            if eps_c <= target or delta <= 1e-3 * float(cv.radius[c]):
-                break
-            delta = max(0.9 * delta * math.sqrt(target / eps_c), 1e-3 * float(cv.radius[c]))
-        yeps[c] = eps_c
-        base = fs_off[c]
-        fs_off[c + 1] = base + len(s_c)
-        lo = cv.offsets[c]
-        for i in range(len(first)):
-            seg_fs[lo + i] = base + first[i]
-            seg_fs_end[lo + i] = base + (first[i + 1] if i + 1 < len(first) else len(s_c) - 1)
-        for i in range(len(first), cv.offsets[c + 1] - lo):
-            seg_fs[lo + i] = seg_fs_end[lo + i] = base + len(s_c) - 1
-        fs_s.append(s_c)
-        fs_fr.append(fr_c)
+        lo, hi = cv.offsets[c], cv.offsets[c + 1]
+        first = seg_fs[lo:hi]
+        used = first >= 0
+        nxt = np.concatenate([first[1:], [-1]])
+        end = np.where(nxt >= 0, nxt, fs_off[c + 1] - 1)
+        seg_fs[lo:hi] = np.where(used, first, fs_off[c + 1] - 1)
+        seg_fs_end[lo:hi] = np.where(used, end, fs_off[c + 1] - 1)
     fib = []
     type_pad = np.zeros(T)
     for t in range(T):
@@ -304,8 +301,6 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         ply_off, hcount, hoff, cat(z1s, np.float64), cat(zes, np.float64), hzoff, cat(bps, np.float64),
         cat(hstarts, np.int64), cat(hitems, np.int32), np.array([hair_mode], np.int64),
         np.ascontiguousarray(cv.curve_length[:Y], np.float64), np.array([ext.max() if Y else 0.0]),
-        fs_off, cat(fs_s, np.float64), np.ascontiguousarray(np.concatenate(fs_fr) if fs_fr else np.zeros((0, 12)),
-                                                           dtype=np.float32),
-        seg_fs, seg_fs_end, yeps, type_pad)
+        fs_off, fs_s, fs_fr, seg_fs, seg_fs_end, yeps, type_pad)
     info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap, "eps": yeps}
     return tab, info
