@@ -123,3 +123,24 @@ def test_realization_is_deterministic(realized, cli):
     a = Artifact(d / "fibers.zarr").meta["content_hash"]
     b = Artifact(d / "again.zarr").meta["content_hash"]
     assert a == b
+
+
+def test_fibers_inspector_png(realized, cli, tmp_path):
+    """The realized fibres of a yarn stretch render to a non-blank PNG (skips without off-screen OpenGL)."""
+    import subprocess
+    import sys
+
+    probe = subprocess.run([sys.executable, "-c", "import os; os.environ.setdefault('VTK_DEFAULT_OPENGL_WINDOW','vtkEGLRenderWindow');"
+                            "import pyvista as pv; p = pv.Plotter(off_screen=True); p.add_mesh(pv.Sphere()); p.screenshot('/dev/null')"],
+                           capture_output=True)
+    if probe.returncode != 0:
+        pytest.skip("no off-screen OpenGL for pyvista on this machine")
+    png = tmp_path / "fibers.png"
+    code, _, err = cli("inspect", realized / "fibers.zarr", "--png", png, "--yarn", "1", "--width", "400", "--height", "300")
+    assert code == 0, err
+    from PIL import Image
+
+    img = np.asarray(Image.open(png))
+    assert img.shape[:2] == (300, 400) and img.std() > 5
+    code, _, err = cli("inspect", realized / "fibers.zarr", "--png", png, "--yarn", "7")
+    assert code == 2 and "--yarn" in err
