@@ -46,8 +46,8 @@ def padded_curves(get, extent):
                        grid_items=np.asarray(gitems, np.int32), grid_pad=pad)
 
 
-def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid"):
-    """(cv, tab, info, type dicts) for a yarns artifact."""
+def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", frame_samples=False):
+    """(cv, tab, info, type dicts, yarns artifact) for a yarns artifact."""
     from stages.procedural.tables import build_tables
     from stages.procedural.yarn_model import extent_bound
 
@@ -56,7 +56,8 @@ def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hyb
     ext = np.array([extent_bound(tparams[t]) for t in ytype])
     cv = padded_curves(lambda n: yarns[n], ext)
     mode = {"hybrid": 0, "free": 1}[hair_mode]
-    tab, info = build_tables(cv, tparams, ytype, albedo, int(seed), nbins=int(nbins), hair_mode=mode)
+    tab, info = build_tables(cv, tparams, ytype, albedo, int(seed), nbins=int(nbins), hair_mode=mode,
+                             frame_samples=bool(frame_samples))
     return cv, tab, info, dicts, yarns
 
 
@@ -80,17 +81,19 @@ def _type_summary(dicts):
     return [{k: d[k] for k in keep if k in d} for d in dicts]
 
 
-def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False):
+def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False,
+               frame_samples=False):
     from stages.procedural.tables import Tables, table_bytes
 
     check_options(preset, radius, nbins)
     if hair_mode not in ("hybrid", "free"):
         raise LoomError(None, "--hair-mode", f"must be 'hybrid' or 'free', got {hair_mode!r}")
-    params = {"preset": preset, "radius": radius, "seed": int(seed), "bins": int(nbins), "hair_mode": hair_mode}
+    params = {"preset": preset, "radius": radius, "seed": int(seed), "bins": int(nbins), "hair_mode": hair_mode,
+              "frame_samples": bool(frame_samples)}
     w = ArtifactWriter(out, kind="tables", stage="tables", params=params, inputs={"yarns": yarns_path})
     if w.up_to_date() and not force:
         return {"skipped": True}
-    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode)
+    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode, frame_samples)
     parts = table_bytes(tab)
     with w:
         for name in Tables._fields:
@@ -102,7 +105,7 @@ def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair
         folded = int(np.sum(info["folded"]))
         w.summary.update({
             "kind": "tables", "yarns": int(len(tab.yarn_type)), "yarn_types": _type_summary(dicts),
-            "hair_mode": hair_mode, "bins": int(nbins), "seed": int(seed),
+            "hair_mode": hair_mode, "bins": int(nbins), "seed": int(seed), "frame_samples_enabled": bool(frame_samples),
             "regular_fibers": int(len(tab.fib_R)), "hairs": int(tab.hair_count.sum()),
             "bytes": {"tables": int(sum(parts.values())), "regular": parts["regular"], "hair": parts["hair"],
                       "loop": 0, "per_yarn": parts["per_yarn"], "frames": parts["frames"], "curves": curve_bytes},

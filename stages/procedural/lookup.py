@@ -32,7 +32,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from stages.core.curves import _segment_box_dist2, curve_frame_at, nearest_segments_in_cell
+from stages.core.curves import (_segment_box_dist2, closest_on_segment, curve_frame_at, nearest_segments_in_cell,
+                                segment_arclen_to)
 
 from . import hair_free
 from .frame_samples import project_local, sampled_frame
@@ -41,6 +42,7 @@ from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_
                          ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, ply_frame, regular_xy)
 
 TWO_PI = 2.0 * math.pi
+MODEL_SLACK = 0.1  # exact-frame local model: distance error allowed before the exact check, in fibre radii
 MAX_YARNS = 64
 HAIR_SAMPLES = 16
 
@@ -260,11 +262,21 @@ def _hair_active(tab, c, g, tp, z, margin, out_idx, out_z1, out_ze):
 
 
 @njit(cache=True)
-def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
-    """Yarns whose axis passes within their extent bound (+ sampling error) of p, with p's closest
-    point on the chords of the yarn's frame samples (arc length s', squared distance), in one pass
-    over the spline segments of p's grid cell (the tables' copy of the curves pads the grid by each
-    yarn's extent, so the cell holds every such segment). Returns how many, by yarn index."""
+def _project(cv, tab, i, p, fast):
+    """(arc length, squared distance) of p's foot point on spline segment i: on the chords of the
+    frame samples (fast) or exactly (root isolation of stages/core/curves.py)."""
+    if fast:
+        return project_local(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
+    t, d2 = closest_on_segment(cv, i, p)
+    return cv.seg_arclen[i] + segment_arclen_to(cv, i, t), d2
+
+
+@njit(cache=True)
+def candidate_yarns(cv, tab, p, out_c, out_s, out_d2, fast):
+    """Yarns whose axis passes within their extent bound (+ sampling error) of p, with p's foot
+    point (arc length s, squared distance; see _project), in one pass over the spline segments of
+    p's grid cell (the tables' copy of the curves pads the grid by each yarn's extent, so the cell
+    holds every such segment). Returns how many, by yarn index."""
     start, end = nearest_segments_in_cell(cv, p)
     n = 0
     found = np.empty(out_c.shape[0], np.bool_)
@@ -284,7 +296,7 @@ def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
             if n == out_c.shape[0]:
                 slot[q - start] = -1
                 continue
-            e = tab.yarn_extent[c] + 2.0 * tab.yarn_eps[c]
+            e = tab.yarn_extent[c] + (2.0 * tab.yarn_eps[c] if fast else 0.0)
             out_c[m] = c
             out_d2[m] = e * e
             found[m] = False
@@ -300,8 +312,7 @@ def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
     for m in range(n):
         q = first[m]
         if q >= 0:
-            i = cv.grid_items[q]
-            sp, d2 = project_local(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
+            sp, d2 = _project(cv, tab, cv.grid_items[q], p, fast)
             if d2 < out_d2[m]:
                 out_d2[m] = d2
                 out_s[m] = sp
@@ -310,8 +321,7 @@ def candidate_yarns(cv, tab, p, out_c, out_s, out_d2):
         m = slot[q - start]
         if m < 0 or q == first[m] or bd[q - start] >= out_d2[m]:
             continue
-        i = cv.grid_items[q]
-        sp, d2 = project_local(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
+        sp, d2 = _project(cv, tab, cv.grid_items[q], p, fast)
         if d2 < out_d2[m]:
             out_d2[m] = d2
             out_s[m] = sp
@@ -417,6 +427,26 @@ def hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, p, t0):
 
 
 @njit(cache=True)
+def _model_tangent_regular(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, z):
+    h = 1e-4 * (zb - za)
+    a = max(z - h, za)
+    b = min(z + h, zb)
+    D = _reg_model(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, b) - _reg_model(za, zm, zb, M, tp, yseed, k, j,
+                                                                                 Rj, th, th0, a)
+    return D / math.sqrt(np.dot(D, D))
+
+
+@njit(cache=True)
+def _model_tangent_hair(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, t):
+    a = max(t - 1e-4, 0.0)
+    b = min(t + 1e-4, 1.0)
+    D = _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, b) - _hair_model(za, zm, zb, M, tp, k, r0, r1,
+                                                                                     th1, pe, z1, ze, a)
+    n = math.sqrt(np.dot(D, D))
+    return D / n if n > 0.0 else D
+
+
+@njit(cache=True)
 def _answer(c, kind, T, tp, tab):
     return (True, c, kind, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0], tab.yarn_albedo[c, 1],
             tab.yarn_albedo[c, 2])
@@ -428,7 +458,8 @@ def lookup_point(cv, tab, p):
     cand = np.empty(MAX_YARNS, np.int64)
     cs = np.empty(MAX_YARNS)
     cd2 = np.empty(MAX_YARNS)
-    n = candidate_yarns(cv, tab, p, cand, cs, cd2)
+    fast = tab.fs_s.shape[0] > 0  # sampled frames present: pre-classify with them
+    n = candidate_yarns(cv, tab, p, cand, cs, cd2, fast)
     for ci in range(n):
         c = cand[ci]
         s = cs[ci]
@@ -436,13 +467,17 @@ def lookup_point(cv, tab, p):
         tp = tab.tparams[t]
         lo = tab.fs_off[c]
         hi = tab.fs_off[c + 1]
-        pos, tan, nn, bn = sampled_frame(tab.fs_s, tab.fs_frame, lo, hi, s)
+        if fast:
+            pos, tan, nn, bn = sampled_frame(tab.fs_s, tab.fs_frame, lo, hi, s)
+            eps = tab.yarn_eps[c]
+        else:
+            pos, tan, nn, bn = curve_frame_at(cv, c, s)
+            eps = 0.0
         r = p - pos
         x = np.dot(r, nn)
         y = np.dot(r, bn)
         w = abs(np.dot(r, tan))
         rf = tp[FIBER_RADIUS]
-        eps = tab.yarn_eps[c]
         if w >= rf + 2.0 * eps:
             continue  # beyond an end of the yarn by more than any fibre's cap reaches
         K = tab.type_K[t]
@@ -460,6 +495,9 @@ def lookup_point(cv, tab, p):
         za = max(0.0, s - hwin)
         zb = min(L, s + hwin)
         reach = K * (rf + w + eps)
+        have_model = False  # exact mode: one local model of Eq. 7 around s for the whole yarn
+        Za = Zm = Zb = 0.0
+        M = np.empty((3, 3, 3))
         for k in range(P):
             # ---- regular and loop fibres of ply k (Algorithm 2)
             cx, cy, drx, dry = ply_frame(tp, k, s)
@@ -489,17 +527,28 @@ def lookup_point(cv, tab, p):
                 dy = y - Y
                 if dx * dx + dy * dy >= reach * reach:
                     continue
-                Dm, zs, T, kind = regular_closest_s(tab, lo, hi, za, zb, tp, yseed, k, j, Rj, th, th0, p, s)
-                if Dm >= rf + eps:
-                    continue
-                if Dm > rf - eps:  # too close to the surface to decide with the sampled frames
-                    h = max(4.0 * (rf + eps), 1e-6)
-                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, zs)
-                    Za, Zm, Zb, M = local_frames(cv, c, zs, h, pe_, ne_, be_)
-                    De, ze_ = regular_closest(cv, c, Za, Zm, Zb, M, tp, yseed, k, j, Rj, th, th0, p, zs)
-                    D, kind = regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, ze_)
-                    if D >= rf:
+                if fast:
+                    Dm, zs, T, kind = regular_closest_s(tab, lo, hi, za, zb, tp, yseed, k, j, Rj, th, th0, p, s)
+                    if Dm >= rf + eps:
                         continue
+                    if Dm <= rf - eps:
+                        return _answer(c, kind, T, tp, tab)
+                    # too close to the surface to decide with the sampled frames: exact frames
+                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, zs)
+                    Za, Zm, Zb, M = local_frames(cv, c, zs, max(4.0 * (rf + eps), 1e-6), pe_, ne_, be_)
+                else:
+                    zs = s
+                    if not have_model:
+                        Za, Zm, Zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
+                        have_model = True
+                De, ze_ = regular_closest(cv, c, Za, Zm, Zb, M, tp, yseed, k, j, Rj, th, th0, p, zs)
+                if De >= rf * (1.0 + MODEL_SLACK):
+                    continue
+                D, kind = regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, ze_)
+                if D >= rf:
+                    continue
+                if not fast:
+                    T = _model_tangent_regular(Za, Zm, Zb, M, tp, yseed, k, j, Rj, th, th0, ze_)
                 return _answer(c, kind, T, tp, tab)
             # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
             g = tab.yarn_ply_off[c] + k
@@ -521,18 +570,29 @@ def lookup_point(cv, tab, p):
                 lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, hz1[q], hze[q], x, y, s)
                 if lb > limit:
                     continue
-                Dm, ts, T = hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
-                if Dm >= rf + eps:
-                    continue
-                if Dm > rf - eps:
-                    hx, hy, hz = hair_point(tp, k, r0, r1, th1, pe, hz1[q], hze[q], ts)
-                    hh = max(4.0 * (rf + eps), 1e-6)
-                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, hz)
-                    Za, Zm, Zb, M = local_frames(cv, c, hz, hh, pe_, ne_, be_)
-                    De, te = hair_closest(Za, Zm, Zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, ts)
-                    D = hair_exact(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, te)
-                    if D >= rf:
+                if fast:
+                    Dm, ts, T = hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
+                    if Dm >= rf + eps:
                         continue
+                    if Dm <= rf - eps:
+                        return _answer(c, 3, T, tp, tab)
+                    hx, hy, hz = hair_point(tp, k, r0, r1, th1, pe, hz1[q], hze[q], ts)
+                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, hz)
+                    Za, Zm, Zb, M = local_frames(cv, c, hz, max(4.0 * (rf + eps), 1e-6), pe_, ne_, be_)
+                    have_model = False  # the model now sits around this hair, not around s
+                else:
+                    ts = bt
+                    if not have_model:
+                        Za, Zm, Zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
+                        have_model = True
+                De, te = hair_closest(Za, Zm, Zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, ts)
+                if De >= rf * (1.0 + MODEL_SLACK):
+                    continue
+                D = hair_exact(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, te)
+                if D >= rf:
+                    continue
+                if not fast:
+                    T = _model_tangent_hair(Za, Zm, Zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], te)
                 return _answer(c, 3, T, tp, tab)
     return (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 

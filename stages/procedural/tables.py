@@ -190,9 +190,10 @@ def curvature_max(cv, c, step):
 
 
 def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=0, fold_cap=0.5,
-                 frame_tolerance=0.1):
+                 frame_samples=False, frame_tolerance=0.1):
     """Tables for all yarns. tparams (T, NPARAM) packed types (U_MAX, HAIR_RMAX filled in),
-    yarn_type (Y,), yarn_albedo (Y, 3); frame_tolerance: the sampled frames' error bound aimed at,
+    yarn_type (Y,), yarn_albedo (Y, 3); frame_samples: also store sampled yarn frames
+    (frame_samples.py; faster lookups, more memory) with the error bound frame_tolerance aimed at,
     in fibre radii (smaller: more samples, fewer exact fall-backs in the lookups).
     Returns (Tables, info dict with per-yarn diagnostics)."""
     T = tparams.shape[0]
@@ -225,14 +226,18 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
     rmin = 1e-3 * np.asarray(cv.radius[:Y], np.float64)
     deltas = np.maximum(np.minimum(0.5 * np.asarray(cv.radius[:Y], np.float64),
                                    np.sqrt(8.0 * target / np.maximum(k2, 1e-12))), rmin)
-    for attempt in range(3):
-        fs_off, fs_s, fs_fr, seg_fs, err = sample_all(cv, deltas, ext)
-        scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
-        yeps = 2.0 * err + 1.25 * kap * deltas * deltas / 8.0 + 8.0 * np.finfo(np.float32).eps * scale
-        over = (yeps > target) & (deltas > rmin)
-        if not over.any():
-            break
-        deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
+    if frame_samples:
+        for attempt in range(3):
+            fs_off, fs_s, fs_fr, seg_fs, err = sample_all(cv, deltas, ext)
+            scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
+            yeps = 2.0 * err + 1.25 * kap * deltas * deltas / 8.0 + 8.0 * np.finfo(np.float32).eps * scale
+            over = (yeps > target) & (deltas > rmin)
+            if not over.any():
+                break
+            deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
+    else:
+        fs_off, fs_s, fs_fr = np.zeros(Y + 1, np.int64), np.zeros(0), np.zeros((0, 12), np.float32)
+        seg_fs, yeps = np.full(len(cv.points), -1, np.int64), np.zeros(Y)
     seg_fs_end = np.zeros_like(seg_fs)
     for c in range(Y):
         lo, hi = cv.offsets[c], cv.offsets[c + 1]
@@ -246,7 +251,7 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
     type_pad = np.zeros(T)
     for t in range(T):
         sel = yarn_type == t
-        type_pad[t] = 3.0 * float(yeps[sel].max()) if sel.any() else 0.0
+        type_pad[t] = (3.0 * float(yeps[sel].max()) if sel.any() else 0.0) + 0.01 * tparams[t, FIBER_RADIUS]
         fib.append(regular_tables(tparams[t], type_key(seed, t), type_K[t], nbins, type_pad[t]))
     type_fib_off = np.zeros(T + 1, np.int64)
     type_bin_off = np.zeros(T + 1, np.int64)
