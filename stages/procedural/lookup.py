@@ -13,9 +13,10 @@ well defined); a regular fibre's kind (1 or 2) is the kind of its cycle at the c
 
 Steps (Algorithm 1):
 1. Candidate yarns: the spline segments of p's cell in the tables' curve grid (padded by each
-   yarn's extent bound), nearest box first; p is projected onto the chords of the yarn's sampled
-   frames (frame_samples.py) by local descent -> arc length s' (seed 000 §5.2's role).
-2. Yarn space (Eq. 8-9) with the sampled frame at s': (x, y) and the tangential residual w.
+   yarn's extent bound), nearest box first; p's foot point on the yarn (seed 000 §5.2): exact
+   (root isolation, stages/core/curves.py), or, when the tables carry sampled frames
+   (``loomlight tables --frame-samples``), on the chords of the samples by local descent.
+2. Yarn space (Eq. 8-9) with the frame at the foot point s: (x, y) and the tangential residual w.
 3. Per ply (all plies, not only the nearest of §4.5, so that the answer is exact): the twist-
    compensated unit-disc point and its azimuth bin give candidate fibres (Algorithm 2, footnote
    2); a candidate's cross-sectional distance d bounds its true distance D (D >= d / K - slack);
@@ -23,9 +24,12 @@ Steps (Algorithm 1):
    mutation is a consistent random number, §4.4.1) under the sampled frames.
 4. Hairs of the ply active at s' (hybrid z-bins by binary search, or Algorithm 3), a quick z and
    radius reject, a yarn-space polyline prefilter, then Gauss-Newton along the hair.
-The sampled frames differ from Eq. 7 by at most eps_c (``yarn_eps``, measured when the tables are
-built); a distance within eps_c of the fibre radius is re-decided with the exact frames
-(stages/core/curves.py), so inside/outside, yarn and kind are those of the exact model.
+Without sampled frames the distances come from a local model of Eq. 7 (exact frames at three arc
+lengths around s, quadratic interpolation), and every fibre the model puts within 10 % of the
+radius is re-measured with the exact frames. With sampled frames (which differ from Eq. 7 by at
+most eps_c, ``yarn_eps``, measured when the tables are built) a distance farther than eps_c from
+the radius is decided at once and the rest with the exact frames. Either way inside/outside, yarn
+and kind are those of the exact model.
 """
 import math
 
