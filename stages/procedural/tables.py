@@ -237,9 +237,9 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
             deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
     else:
         fs_off, fs_s, fs_fr = np.zeros(Y + 1, np.int64), np.zeros(0), np.zeros((0, 12), np.float32)
-        seg_fs, yeps = np.full(len(cv.points), -1, np.int64), np.zeros(Y)
+        seg_fs, yeps = np.zeros(0, np.int64), np.zeros(Y)
     seg_fs_end = np.zeros_like(seg_fs)
-    for c in range(Y):
+    for c in range(Y if frame_samples else 0):
         lo, hi = cv.offsets[c], cv.offsets[c + 1]
         first = seg_fs[lo:hi]
         used = first >= 0
