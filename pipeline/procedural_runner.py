@@ -7,7 +7,6 @@ segment grid is padded by each yarn's fibre-extent bound (hairs reach beyond the
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 

@@ -31,7 +31,7 @@ from . import hair_free
 from .frame_samples import sample_all
 from stages.core.curves import curve_frame_at
 
-from .yarn_model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, PLY_NUM, RHO_MAX,
+from .yarn_model import (E_LONG, E_SHORT, FIBER_RADIUS, HAIR_DENSITY, PLY_NUM, RHO_MAX,
                          RHO_MIN, U_MAX, USE_FLYAWAYS, USE_MIGRATION, P_LOOP, ZE_MU, ZE_SIG, extent_bound,
                          sample_regular_fibers, transverse_speed_bound)
 
@@ -151,10 +151,6 @@ def _hair_items(b0, b1, start):
 @njit(cache=True)
 def hair_node_seed_nb(yarn_seed, k):
     return hash_u64(yarn_seed, k, 31)
-
-
-def fibers_per_yarn(tp) -> int:
-    return int(tp[PLY_NUM] * tp[FIBER_NUM])
 
 
 def table_bytes(tab: Tables) -> dict:
