@@ -9,8 +9,8 @@ Publishing is atomic: an artifact is built in a hidden sibling directory, its at
 schema-checked and marked complete, then it is exchanged with the previous one in one
 ``renameat2(RENAME_EXCHANGE)`` (two renames where the kernel lacks it). A stage killed at any
 moment leaves no partial artifact at the output path and the previous artifact untouched.
-A stage whose inputs, parameters and loomlight version are unchanged is not re-run: its build
-key matches the one recorded in the existing artifact.
+A stage whose inputs, parameters and code (loomlight's own source files) are unchanged is not re-run:
+its build key matches the one recorded in the existing artifact.
 """
 from __future__ import annotations
 
@@ -76,8 +76,27 @@ def jsonable(obj: Any) -> Any:
     return json.loads(_canonical(obj))
 
 
+_CODE_HASH: str | None = None
+
+
+def code_hash() -> str:
+    """sha256 over loomlight's own source (pipeline/, stages/, schemas/): an artifact built by other code
+    (a changed kernel or layout) is never taken as up to date."""
+    global _CODE_HASH
+    if _CODE_HASH is None:
+        root = Path(__file__).resolve().parents[1]
+        h = hashlib.sha256()
+        for sub, pattern in (("pipeline", "*.py"), ("stages", "*.py"), ("schemas", "*.json")):
+            for f in sorted((root / sub).rglob(pattern)):
+                h.update(str(f.relative_to(root)).encode())
+                h.update(f.read_bytes())
+        _CODE_HASH = h.hexdigest()
+    return _CODE_HASH
+
+
 def build_key(kind: str, stage: str, params: Mapping, input_hashes: Mapping[str, str]) -> str:
-    doc = {"kind": kind, "stage": stage, "params": params, "inputs": dict(input_hashes), "version": __version__}
+    doc = {"kind": kind, "stage": stage, "params": params, "inputs": dict(input_hashes), "version": __version__,
+           "code": code_hash()}
     return hashlib.sha256(_canonical(doc).encode()).hexdigest()
 
 

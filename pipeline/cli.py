@@ -58,10 +58,10 @@ def main(argv: list[str] | None = None) -> int:
     except typer.Abort:
         typer.echo("aborted", err=True)
         return 1
-    except Exception as e:  # click usage errors carry their own exit code
-        import click
-
-        if isinstance(e, click.exceptions.ClickException):
+    except Exception as e:
+        # usage errors (missing argument, unknown option, bad value) from typer's bundled click:
+        # they can show themselves; report them as bad input (exit code 2), anything else is a bug
+        if hasattr(e, "show") and hasattr(e, "exit_code"):
             e.show()
             return 2
         raise

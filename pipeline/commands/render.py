@@ -23,7 +23,7 @@ def _positive(value, name):
 
 
 def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
-               fibers=None, bcsdf=None, material=None, max_depth=None, threads=None, exposure=0.0, settings=()):
+               fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None, exposure=0.0, settings=()):
     """Render and publish; returns the lines to print (output paths and statistics)."""
     import numpy as np
 
@@ -57,6 +57,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
         "spp": int(spp or scene.render.get("spp", 16)),
         "seed": int(seed if seed is not None else scene.render.get("seed", scene.seed)),
         "source": source, "fibers": str(fibers) if fibers else None,
+        "tables": str(tables) if tables else extra.get("tables"), "grid": str(grid) if grid else extra.get("grid"),
         "bcsdf": bcsdf, "material": material, "max_depth": max_depth, "threads": threads, "extra": extra,
     }
     if threads:
@@ -86,8 +87,9 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     stats["rays_per_s"] = stats["rays"] / render_s
     stats["method_stats"] = {k: v for k, v in st.items() if k not in ("rays", "paths", "render_s")}
     inputs = {"scene": scene.path}
-    if options["fibers"]:
-        inputs["fibers"] = options["fibers"]
+    for key in ("fibers", "tables", "grid"):
+        if options[key]:
+            inputs[key] = options[key]
     params = {k: v for k, v in options.items() if k != "threads"}
     params["method"] = method
     exr, png = write_render(out, rgb, result.extra, exposure=exposure)
@@ -115,7 +117,9 @@ def register(app: typer.Typer) -> None:
                spp: int = typer.Option(None, "--spp", help="Samples per pixel (default: render.spp)."),
                seed: int = typer.Option(None, "--seed", help="Random seed (default: render.seed)."),
                source: str = typer.Option(None, "--source", help="Where the method takes its geometry from (method-specific, e.g. realized, procedural)."),
-               fibers: Path = typer.Option(None, "--fibers", help="A fibers artifact (realized fibres) for fibre renderers."),
+               fibers: Path = typer.Option(None, "--fibers", help="A fibers artifact (realized fibres) for fibre renderers, or a tiling artifact (shell-mapped exemplars)."),
+               tables: Path = typer.Option(None, "--tables", help="volpath --source procedural: the procedural tables artifact."),
+               grid: Path = typer.Option(None, "--grid", help="volpath --source grid: the voxel grid artifact."),
                bcsdf: str = typer.Option(None, "--bcsdf", help="BCSDF preset for yarn groups whose scene entry names none (data/bcsdf/)."),
                material: str = typer.Option(None, "--material", help="fiberpath: bcsdf (default) or lambert."),
                max_depth: int = typer.Option(None, "--max-depth", help="Maximum scattering events per path (default: render.max_depth)."),
@@ -124,7 +128,7 @@ def register(app: typer.Typer) -> None:
                set_: list[str] = typer.Option(None, "--set", help="Method-specific setting KEY=VALUE (repeatable).")):
         """Render SCENE to an EXR + PNG preview + render artifact with statistics."""
         result = run_render(scene, method=method, out=out, width=width, height=height, spp=spp, seed=seed,
-                            source=source, fibers=fibers, bcsdf=bcsdf, material=material, max_depth=max_depth,
+                            source=source, fibers=fibers, tables=tables, grid=grid, bcsdf=bcsdf, material=material, max_depth=max_depth,
                             threads=threads, exposure=exposure, settings=set_ or [])
         for line in result:
             typer.echo(line)

@@ -102,6 +102,12 @@ def render(scene, options: dict) -> RenderResult:
         raise LoomError(None, "--source", f"fiberpath renders realized fibres only (got {source!r}); pass --fibers PATH.zarr")
     if not path:
         raise LoomError(None, "--fibers", "fiberpath needs the realized fibres: pass --fibers PATH.zarr")
+    from ..artifacts import read_meta
+
+    if read_meta(path).get("kind") == "tiling":  # shell-mapped exemplars (stage tile)
+        from .fiberpath_shell import render as render_shell
+
+        return render_shell(scene, options)
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
     fibers = load_fibers(path)
