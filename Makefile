@@ -9,14 +9,24 @@ export MPLBACKEND := Agg
 export PYTHONHASHSEED := 0
 OUT ?= out/demo
 SCENE ?= data/scenes/demo.toml
+LARGE_SCENE ?= data/scenes/woven_large.toml
+TILING ?= data/tilings/damask.toml
+DAMASK_SCENE ?= data/scenes/draped_damask.toml
+# main demo pictures; the evaluation set is smaller because procedural volpath is slow (README: Status)
+SPP ?= 8
+EVAL_W ?= 64
+EVAL_H ?= 48
+EVAL_SPP ?= 4
 
-.PHONY: setup demo test bench clean help
+.PHONY: setup demo test bench table1 sweep clean help
 
 help:
-	@echo "make demo   - set up .venv if needed, run the demo scene end to end, print output paths"
-	@echo "make test   - set up .venv if needed, run the test suite"
-	@echo "make bench  - run the benchmarks, write bench/results/*.json and bench/results/summary.md"
-	@echo "make setup  - create .venv and install loomlight with its test dependencies"
+	@echo "make demo    - set up .venv if needed, run the demo scene end to end, print output paths"
+	@echo "make test    - set up .venv if needed, run the test suite"
+	@echo "make bench   - benchmarks -> bench/results/*.json and bench/results/summary.md"
+	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time) -> out/table1/report.md"
+	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
+	@echo "make setup   - create .venv and install loomlight with its test dependencies"
 
 $(VENV)/.installed: pyproject.toml
 	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -26,18 +36,70 @@ $(VENV)/.installed: pyproject.toml
 
 setup: $(VENV)/.installed
 
-# --- demo: one rule per stage artifact; the CLI itself skips a stage whose inputs are unchanged ---
+# --- one rule per stage artifact; the CLI itself skips a stage whose inputs and code are unchanged ---
 $(OUT)/yarns.zarr/zarr.json: $(SCENE) $(VENV)/.installed
 	$(LL) ingest $(SCENE) -o $(OUT)/yarns.zarr
 
-$(OUT)/yarns.png: $(OUT)/yarns.zarr/zarr.json
-	$(LL) inspect $(OUT)/yarns.zarr --png $@
+$(OUT)/tables.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json
+	$(LL) tables $(OUT)/yarns.zarr -o $(OUT)/tables.zarr
 
-demo: $(OUT)/yarns.zarr/zarr.json $(OUT)/yarns.png
-	@$(LL) info $(OUT)/yarns.zarr
+$(OUT)/fibers.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json
+	$(LL) realize $(OUT)/yarns.zarr -o $(OUT)/fibers.zarr
+
+$(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed
+	$(LL) tile $(TILING) -o $(OUT)/damask_tiling.zarr
+
+# --- pictures of intermediate artifacts ---
+$(OUT)/yarns.png: $(OUT)/yarns.zarr/zarr.json
+	$(LL) inspect $(OUT)/yarns.zarr --png $@ --frames
+
+$(OUT)/cross_section.png: $(OUT)/tables.zarr/zarr.json
+	$(LL) inspect $(OUT)/tables.zarr --png $@
+
+$(OUT)/fibers.png: $(OUT)/fibers.zarr/zarr.json
+	$(LL) inspect $(OUT)/fibers.zarr --png $@ --yarn 0
+
+$(OUT)/damask_tiling.png: $(OUT)/damask_tiling.zarr/zarr.json
+	$(LL) inspect $(OUT)/damask_tiling.zarr --png $@ --width 1200 --height 600
+
+# --- renders (EXR + PNG preview + render artifact with statistics) ---
+$(OUT)/volpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
+	$(LL) render $(SCENE) --method volpath --source realized --fibers $(OUT)/fibers.zarr --spp $(SPP) -o $@
+
+$(OUT)/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
+	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --set tint=yarn --spp $(SPP) -o $@
+
+$(OUT)/damask.exr: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE)
+	$(LL) render $(DAMASK_SCENE) --method fiberpath --fibers $(OUT)/damask_tiling.zarr --spp $(SPP) -o $@
+
+# --- evaluation set: the same view, small, procedural vs realized volpath and fiberpath ---
+EVAL_ARGS = --width $(EVAL_W) --height $(EVAL_H) --spp $(EVAL_SPP)
+$(OUT)/eval/volpath-procedural.exr: $(OUT)/tables.zarr/zarr.json $(SCENE)
+	$(LL) render $(SCENE) --method volpath --source procedural --tables $(OUT)/tables.zarr $(EVAL_ARGS) -o $@
+
+$(OUT)/eval/volpath-realized.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
+	$(LL) render $(SCENE) --method volpath --source realized --fibers $(OUT)/fibers.zarr $(EVAL_ARGS) -o $@
+
+$(OUT)/eval/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
+	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --set tint=yarn $(EVAL_ARGS) -o $@
+
+$(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(OUT)/eval/fiberpath.exr
+	$(LL) evaluate --ref $(OUT)/eval/volpath-realized.exr --test $(OUT)/eval/volpath-procedural.exr \
+	    --test $(OUT)/eval/fiberpath.exr -o $(OUT)/eval/report
+
+DEMO_OUTPUTS = $(OUT)/yarns.png $(OUT)/cross_section.png $(OUT)/fibers.png $(OUT)/damask_tiling.png \
+	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr $(OUT)/eval/report/report.md
+
+demo: $(DEMO_OUTPUTS)
 	@echo "demo outputs:"
-	@echo "  yarn curves artifact : $(OUT)/yarns.zarr"
-	@echo "  yarn curves picture  : $(OUT)/yarns.png"
+	@echo "  yarn curves          : $(OUT)/yarns.zarr ($(OUT)/yarns.png)"
+	@echo "  procedural tables    : $(OUT)/tables.zarr (cross-section $(OUT)/cross_section.png)"
+	@echo "  realized fibres      : $(OUT)/fibers.zarr ($(OUT)/fibers.png)"
+	@echo "  volpath render       : $(OUT)/volpath.exr ($(OUT)/volpath.png)"
+	@echo "  fiberpath render     : $(OUT)/fiberpath.exr ($(OUT)/fiberpath.png)"
+	@echo "  damask tiling        : $(OUT)/damask_tiling.zarr ($(OUT)/damask_tiling.png)"
+	@echo "  draped damask render : $(OUT)/damask.exr ($(OUT)/damask.png)"
+	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
 test: $(VENV)/.installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
@@ -45,6 +107,15 @@ test: $(VENV)/.installed
 bench: $(VENV)/.installed
 	@mkdir -p bench/results
 	$(BIN)/python bench/run.py --out bench/results
+
+table1: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr
+	$(LL) evaluate --table1 --scene $(SCENE) --scene $(LARGE_SCENE) \
+	    --procedural $(OUT)/eval/volpath-procedural.exr --realized $(OUT)/eval/volpath-realized.exr -o out/table1
+	@echo "report: out/table1/report.md"
+
+sweep: $(OUT)/fibers.zarr/zarr.json
+	$(LL) evaluate --sweep data/sweeps/demo.toml -o $(OUT)/sweep
+	@echo "report: $(OUT)/sweep/report.md"
 
 clean:
 	rm -rf out .numba_cache .pytest_cache
