@@ -33,3 +33,24 @@ def cli(tmp_path):
         return code, out.getvalue(), err.getvalue()
 
     return run
+
+
+_GL = None
+
+
+@pytest.fixture
+def offscreen_gl():
+    """Skip (with the reason) where pyvista cannot render off-screen; probed once in a subprocess,
+    since forcing a missing OpenGL backend kills the process instead of raising."""
+    global _GL
+    if _GL is None:
+        import subprocess
+        import sys
+
+        probe = subprocess.run([sys.executable, "-c",
+                                "import os; os.environ.setdefault('VTK_DEFAULT_OPENGL_WINDOW','vtkEGLRenderWindow');"
+                                "import pyvista as pv; p = pv.Plotter(off_screen=True); p.add_mesh(pv.Sphere());"
+                                "p.screenshot('/dev/null')"], capture_output=True)
+        _GL = probe.returncode == 0
+    if not _GL:
+        pytest.skip("no off-screen OpenGL for pyvista on this machine (EGL/OSMesa missing)")

@@ -126,3 +126,17 @@ def test_demo_scene_ingests_woven_swatch(tmp_path, cli):
     doc = json.loads(text)
     assert doc["curves"] == 16 and doc["groups"] == ["warp", "weft"] and doc["closed_curves"] == 0
     assert [t["preset"] for t in doc["yarn_types"][:2]] == ["cotton1", "cotton1"]
+
+
+def test_inspect_draws_yarn_tubes(existing, cli, tmp_path, offscreen_gl):
+    """`inspect yarns.zarr --png` writes a non-blank picture of the requested size (with frame glyphs)."""
+    from PIL import Image
+
+    out, _ = existing
+    png = tmp_path / "yarns.png"
+    code, _, err = cli("inspect", out, "--png", png, "--frames", "--width", "320", "--height", "200")
+    assert code == 0, err
+    img = np.asarray(Image.open(png))
+    assert img.shape[:2] == (200, 320) and img.std() > 5
+    code, _, err = cli("inspect", out)
+    assert code == 2 and "--png" in err

@@ -125,16 +125,8 @@ def test_realization_is_deterministic(realized, cli):
     assert a == b
 
 
-def test_fibers_inspector_png(realized, cli, tmp_path):
+def test_fibers_inspector_png(realized, cli, tmp_path, offscreen_gl):
     """The realized fibres of a yarn stretch render to a non-blank PNG (skips without off-screen OpenGL)."""
-    import subprocess
-    import sys
-
-    probe = subprocess.run([sys.executable, "-c", "import os; os.environ.setdefault('VTK_DEFAULT_OPENGL_WINDOW','vtkEGLRenderWindow');"
-                            "import pyvista as pv; p = pv.Plotter(off_screen=True); p.add_mesh(pv.Sphere()); p.screenshot('/dev/null')"],
-                           capture_output=True)
-    if probe.returncode != 0:
-        pytest.skip("no off-screen OpenGL for pyvista on this machine")
     png = tmp_path / "fibers.png"
     code, _, err = cli("inspect", realized / "fibers.zarr", "--png", png, "--yarn", "1", "--width", "400", "--height", "300")
     assert code == 0, err

@@ -87,15 +87,7 @@ def test_obj_base_mesh_with_uv(tmp_path, cli):
     np.testing.assert_allclose(art["base_uv"][:, 0] * 1.0, art["base_vertices"][:, 0])
 
 
-def test_inspect_png(existing, cli, tmp_path):
-    import subprocess
-    import sys
-
-    probe = subprocess.run([sys.executable, "-c", "import os; os.environ.setdefault('VTK_DEFAULT_OPENGL_WINDOW','vtkEGLRenderWindow');"
-                            "import pyvista as pv; p = pv.Plotter(off_screen=True); p.add_mesh(pv.Sphere()); p.screenshot('/dev/null')"],
-                           capture_output=True)
-    if probe.returncode != 0:
-        pytest.skip("no off-screen OpenGL for pyvista on this machine")
+def test_inspect_png(existing, cli, tmp_path, offscreen_gl):
     png = tmp_path / "tiling.png"
     code, _, err = cli("inspect", existing[0], "--png", png, "--width", "600", "--height", "300")
     assert code == 0, err
