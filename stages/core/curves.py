@@ -14,6 +14,9 @@ segment_arclen_to(cv, i, t)     arc length from the segment start to t (Gauss-Le
 locate(cv, c, s)                (segment, t) at arc length s
 curve_point_at(cv, c, s)        position at arc length s
 curve_frame_at(cv, c, s)        (position, tangent, normal, binormal): RMF, b = t x n
+frame_at_segment(cv, c, i, t)   the same frame at segment i, parameter t (no arc-length inversion:
+                                the stored RMF sample before it is found from (i, t) directly)
+curve_frame_at_s / frame_at_segment_s   allocation-free forms (12 scalars) for hot loops
 closest_on_segment(cv, i, p)    (t, distance^2): global minimum over t in [0, 1], exact root
                                 isolation of the quintic d/dt |P(t) - p|^2 (never a local minimum)
 closest_point_on_curve(cv,c,p)  (s, distance^2) over all segments of curve c near p
@@ -40,13 +43,80 @@ _GL_W = np.array([0.05061426814518813, 0.11119051722668724, 0.15685332293894363,
                   0.18134189168918100, 0.15685332293894363, 0.11119051722668724, 0.05061426814518813])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _next_index(cv, i):
+    # a plain call (LLVM inlines it): numba IR inlining (inline="always") of a function taking the
+    # Curves tuple copies the tuple at every call, which made each caller ~20x slower
     c = cv.seg_curve[i]
     j = i + 1
     if j == cv.offsets[c + 1]:
         j = cv.offsets[c]
     return j
+
+
+@njit(cache=True)
+def _coeffs_s(cv, i):
+    """Segment i's power-basis coefficients as 12 scalars (ax, ay, az, bx, ..., dz): the
+    allocation-free form the hot kernels use."""
+    c = cv.seg_curve[i]
+    j = i + 1
+    if j == cv.offsets[c + 1]:
+        j = cv.offsets[c]
+    P = cv.points
+    M = cv.tangents
+    ax = 2.0 * P[i, 0] - 2.0 * P[j, 0] + M[i, 0] + M[j, 0]
+    ay = 2.0 * P[i, 1] - 2.0 * P[j, 1] + M[i, 1] + M[j, 1]
+    az = 2.0 * P[i, 2] - 2.0 * P[j, 2] + M[i, 2] + M[j, 2]
+    bx = -3.0 * P[i, 0] + 3.0 * P[j, 0] - 2.0 * M[i, 0] - M[j, 0]
+    by = -3.0 * P[i, 1] + 3.0 * P[j, 1] - 2.0 * M[i, 1] - M[j, 1]
+    bz = -3.0 * P[i, 2] + 3.0 * P[j, 2] - 2.0 * M[i, 2] - M[j, 2]
+    return ax, ay, az, bx, by, bz, M[i, 0], M[i, 1], M[i, 2], P[i, 0], P[i, 1], P[i, 2]
+
+
+@njit(cache=True)
+def _speed_s(ax, ay, az, bx, by, bz, cx, cy, cz, t):
+    x = (3.0 * ax * t + 2.0 * bx) * t + cx
+    y = (3.0 * ay * t + 2.0 * by) * t + cy
+    z = (3.0 * az * t + 2.0 * bz) * t + cz
+    return math.sqrt(x * x + y * y + z * z)
+
+
+@njit(cache=True)
+def _arclen_s(ax, ay, az, bx, by, bz, cx, cy, cz, t0, t1):
+    """_arclen_coeffs on scalar coefficients (same quadrature, same operations)."""
+    total = 0.0
+    h = 0.5 * (t1 - t0)
+    for panel in range(2):
+        lo = t0 + panel * h
+        for k in range(8):
+            total += _GL_W[k] * _speed_s(ax, ay, az, bx, by, bz, cx, cy, cz, lo + h * _GL_X[k])
+    return total * h
+
+
+@njit(cache=True)
+def _t_at_length_s(ax, ay, az, bx, by, bz, cx, cy, cz, seglen, target):
+    """Invert arc length within a segment: safeguarded Newton on L(t) - target."""
+    if target <= 0.0:
+        return 0.0
+    if target >= seglen:
+        return 1.0
+    lo = 0.0
+    hi = 1.0
+    t = target / seglen
+    for _ in range(30):
+        f = _arclen_s(ax, ay, az, bx, by, bz, cx, cy, cz, 0.0, t) - target
+        if abs(f) < 1e-13 * max(seglen, 1e-30):
+            break
+        if f > 0.0:
+            hi = t
+        else:
+            lo = t
+        sp = _speed_s(ax, ay, az, bx, by, bz, cx, cy, cz, t)
+        tn = t - f / sp if sp > 0.0 else 0.5 * (lo + hi)
+        if not (lo < tn < hi):
+            tn = 0.5 * (lo + hi)
+        t = tn
+    return t
 
 
 @njit(cache=True)
@@ -96,34 +166,8 @@ def _arclen_coeffs(a, b, c, t0, t1):
 
 @njit(cache=True)
 def segment_arclen_to(cv, i, t):
-    a, b, c, d = segment_coeffs(cv, i)
-    return _arclen_coeffs(a, b, c, 0.0, t)
-
-
-@njit(cache=True)
-def _t_at_length(a, b, c, seglen, target):
-    """Invert arc length within a segment: safeguarded Newton on L(t) - target."""
-    if target <= 0.0:
-        return 0.0
-    if target >= seglen:
-        return 1.0
-    lo = 0.0
-    hi = 1.0
-    t = target / seglen
-    for _ in range(30):
-        f = _arclen_coeffs(a, b, c, 0.0, t) - target
-        if abs(f) < 1e-13 * max(seglen, 1e-30):
-            break
-        if f > 0.0:
-            hi = t
-        else:
-            lo = t
-        sp = _speed(a, b, c, t)
-        tn = t - f / sp if sp > 0.0 else 0.5 * (lo + hi)
-        if not (lo < tn < hi):
-            tn = 0.5 * (lo + hi)
-        t = tn
-    return t
+    ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = _coeffs_s(cv, i)
+    return _arclen_s(ax, ay, az, bx, by, bz, cx, cy, cz, 0.0, t)
 
 
 @njit(cache=True)
@@ -156,8 +200,8 @@ def locate(cv, c, s):
         else:
             b = m - 1
     i = a
-    ca, cb, cc, cd = segment_coeffs(cv, i)
-    t = _t_at_length(ca, cb, cc, cv.seg_length[i], s - cv.seg_arclen[i])
+    ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = _coeffs_s(cv, i)
+    t = _t_at_length_s(ax, ay, az, bx, by, bz, cx, cy, cz, cv.seg_length[i], s - cv.seg_arclen[i])
     return i, t
 
 
@@ -205,11 +249,161 @@ def double_reflection(x0, t0, r0, x1, t1):
 
 
 @njit(cache=True)
-def _rotate_about(v, axis, angle):
-    """Rodrigues rotation of v about unit axis."""
-    ca = math.cos(angle)
-    sa = math.sin(angle)
-    return v * ca + _cross(axis, v) * sa + axis * np.dot(axis, v) * (1.0 - ca)
+def _frame_sample_index(cv, c, i, t, s):
+    """Index of the stored RMF sample at or before (segment i, t) = arc length s on curve c, and that
+    sample's (segment, t). Samples sit at t = q/K of every segment (stages/ingest/spline_process.py
+    rotation_minimising_frames: curve c's sample frame_offsets[c] + (i - offsets[c]) K + q is segment
+    i at t = q/K), so no arc length is inverted; a frame table of another layout is searched by s."""
+    lo = cv.offsets[c]
+    fo = cv.frame_offsets[c]
+    nf = cv.frame_offsets[c + 1] - fo
+    nseg = cv.offsets[c + 1] - lo - (0 if cv.closed[c] else 1)
+    K = (nf - 1) // nseg if nseg > 0 else 0
+    if K >= 1 and K * nseg == nf - 1:
+        q = int(math.floor(t * K))
+        if q < 0:
+            q = 0
+        elif q > K:
+            q = K
+        return fo + (i - lo) * K + q, i, q / K
+    a = fo
+    b = fo + nf - 1
+    while a < b:
+        m = (a + b + 1) // 2
+        if cv.frame_s[m] <= s:
+            a = m
+        else:
+            b = m - 1
+    j, t0 = locate(cv, c, cv.frame_s[a])
+    return a, j, t0
+
+
+@njit(cache=True)
+def _frame_s(cv, c, i, t, s):
+    """The RMF at (segment i, t) = arc length s (s already wrapped) as 12 scalars: position, unit
+    tangent, normal, binormal (double reflection from the stored sample at or before it, closed
+    curves' holonomy spread along the length). Allocation free."""
+    ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = _coeffs_s(cv, i)
+    px = ((ax * t + bx) * t + cx) * t + dx
+    py = ((ay * t + by) * t + cy) * t + dy
+    pz = ((az * t + bz) * t + cz) * t + dz
+    tx = (3.0 * ax * t + 2.0 * bx) * t + cx
+    ty = (3.0 * ay * t + 2.0 * by) * t + cy
+    tz = (3.0 * az * t + 2.0 * bz) * t + cz
+    nt = math.sqrt(tx * tx + ty * ty + tz * tz)
+    tx /= nt
+    ty /= nt
+    tz /= nt
+    a, j, t0 = _frame_sample_index(cv, c, i, t, s)
+    if j != i:
+        ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = _coeffs_s(cv, j)
+    x0 = ((ax * t0 + bx) * t0 + cx) * t0 + dx
+    y0 = ((ay * t0 + by) * t0 + cy) * t0 + dy
+    z0 = ((az * t0 + bz) * t0 + cz) * t0 + dz
+    ux = (3.0 * ax * t0 + 2.0 * bx) * t0 + cx
+    uy = (3.0 * ay * t0 + 2.0 * by) * t0 + cy
+    uz = (3.0 * az * t0 + 2.0 * bz) * t0 + cz
+    nu = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux /= nu
+    uy /= nu
+    uz /= nu
+    # double reflection (Wang et al. 2008) of the stored normal r0 from (x0, u) to (p, t)
+    rx = cv.frame_normal[a, 0]
+    ry = cv.frame_normal[a, 1]
+    rz = cv.frame_normal[a, 2]
+    vx = px - x0
+    vy = py - y0
+    vz = pz - z0
+    c1 = vx * vx + vy * vy + vz * vz
+    # at the sample itself (up to rounding: p and x0 come from t and q/K, which may differ in the
+    # last bits) the chord direction is noise and the two reflections could compose to a half turn
+    # about t: take the stored normal, as the reflections would at the exact same point
+    if c1 > 1e-24 * (1.0 + px * px + py * py + pz * pz):
+        f = (2.0 / c1) * (vx * rx + vy * ry + vz * rz)
+        rx -= f * vx
+        ry -= f * vy
+        rz -= f * vz
+        f = (2.0 / c1) * (vx * ux + vy * uy + vz * uz)
+        ux -= f * vx
+        uy -= f * vy
+        uz -= f * vz
+        vx = tx - ux
+        vy = ty - uy
+        vz = tz - uz
+        c2 = vx * vx + vy * vy + vz * vz
+        if c2 >= 1e-300:
+            f = (2.0 / c2) * (vx * rx + vy * ry + vz * rz)
+            rx -= f * vx
+            ry -= f * vy
+            rz -= f * vz
+    f = rx * tx + ry * ty + rz * tz
+    rx -= f * tx
+    ry -= f * ty
+    rz -= f * tz
+    nr = math.sqrt(rx * rx + ry * ry + rz * rz)
+    rx /= nr
+    ry /= nr
+    rz /= nr
+    tw = cv.frame_twist[c]
+    if tw != 0.0:  # Rodrigues rotation about t by -tw s / L
+        ang = -tw * s / cv.curve_length[c]
+        ca = math.cos(ang)
+        sa = math.sin(ang)
+        kx = ty * rz - tz * ry
+        ky = tz * rx - tx * rz
+        kz = tx * ry - ty * rx
+        f = (tx * rx + ty * ry + tz * rz) * (1.0 - ca)
+        rx = rx * ca + kx * sa + tx * f
+        ry = ry * ca + ky * sa + ty * f
+        rz = rz * ca + kz * sa + tz * f
+    f = rx * tx + ry * ty + rz * tz
+    rx -= f * tx
+    ry -= f * ty
+    rz -= f * tz
+    nr = math.sqrt(rx * rx + ry * ry + rz * rz)
+    rx /= nr
+    ry /= nr
+    rz /= nr
+    return (px, py, pz, tx, ty, tz, rx, ry, rz,
+            ty * rz - tz * ry, tz * rx - tx * rz, tx * ry - ty * rx)
+
+
+@njit(cache=True)
+def _frame_arrays(f):
+    pos = np.empty(3)
+    tan = np.empty(3)
+    n = np.empty(3)
+    bn = np.empty(3)
+    for k in range(3):
+        pos[k] = f[k]
+        tan[k] = f[3 + k]
+        n[k] = f[6 + k]
+        bn[k] = f[9 + k]
+    return pos, tan, n, bn
+
+
+@njit(cache=True)
+def curve_frame_at_s(cv, c, s):
+    """curve_frame_at as 12 scalars (px, py, pz, tx, ty, tz, nx, ny, nz, bx, by, bz)."""
+    s = _wrap_s(cv, c, s)
+    i, t = locate(cv, c, s)
+    return _frame_s(cv, c, i, t, s)
+
+
+@njit(cache=True)
+def frame_at_segment_s(cv, c, i, t):
+    """The frame at segment i, parameter t (no arc-length inversion) as 12 scalars, and its arc
+    length s: (frame tuple, s)."""
+    s = cv.seg_arclen[i] + segment_arclen_to(cv, i, t)
+    return _frame_s(cv, c, i, t, s), s
+
+
+@njit(cache=True)
+def frame_at_segment(cv, c, i, t):
+    """(position, unit tangent, normal, binormal) at segment i of curve c, parameter t: the same
+    frame as curve_frame_at at that point's arc length, without inverting the arc length."""
+    f, s = frame_at_segment_s(cv, c, i, t)
+    return _frame_arrays(f)
 
 
 @njit(cache=True)
@@ -217,31 +411,7 @@ def curve_frame_at(cv, c, s):
     """(position, unit tangent, normal, binormal) at arc length s: the rotation-minimising frame
     (double reflection from the nearest stored sample), closed curves with their holonomy
     spread evenly along the length so the frame closes up."""
-    s = _wrap_s(cv, c, s)
-    i, t = locate(cv, c, s)
-    pos = segment_point(cv, i, t)
-    tan = _normalize(segment_deriv(cv, i, t))
-    lo = cv.frame_offsets[c]
-    hi = cv.frame_offsets[c + 1] - 1
-    a = lo
-    b = hi
-    while a < b:
-        m = (a + b + 1) // 2
-        if cv.frame_s[m] <= s:
-            a = m
-        else:
-            b = m - 1
-    s0 = cv.frame_s[a]
-    j, t0 = locate(cv, c, s0)
-    x0 = segment_point(cv, j, t0)
-    tan0 = _normalize(segment_deriv(cv, j, t0))
-    n = double_reflection(x0, tan0, cv.frame_normal[a], pos, tan)
-    tw = cv.frame_twist[c]
-    if tw != 0.0:
-        n = _rotate_about(n, tan, -tw * s / cv.curve_length[c])
-    n = _normalize(n - np.dot(n, tan) * tan)
-    bn = _cross(tan, n)
-    return pos, tan, n, bn
+    return _frame_arrays(curve_frame_at_s(cv, c, s))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -354,10 +524,15 @@ def closest_on_segment(cv, i, p):
     return best_t, best
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _segment_box_dist2(cv, i, p):
-    """Squared distance from p to the box of segment i's Bezier control points (a lower bound)."""
-    j = _next_index(cv, i)
+    """Squared distance from p to the box of segment i's Bezier control points (a lower bound).
+    Inlined into its callers (it runs over every segment of a grid cell): as a separate call taking
+    the Curves tuple it cost ~20x its arithmetic."""
+    c = cv.seg_curve[i]
+    j = i + 1
+    if j == cv.offsets[c + 1]:
+        j = cv.offsets[c]
     d2 = 0.0
     for k in range(3):
         b0 = cv.points[i, k]
