@@ -4,7 +4,8 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 LL := $(BIN)/loomlight
-export NUMBA_CACHE_DIR := $(CURDIR)/.numba_cache
+# numba cache root; stages/__init__.py keys it by a hash of the kernel sources
+export LOOMLIGHT_NUMBA_CACHE_ROOT := $(CURDIR)/.numba_cache
 export MPLBACKEND := Agg
 export PYTHONHASHSEED := 0
 OUT ?= out/demo
@@ -14,9 +15,9 @@ TILING ?= data/tilings/damask.toml
 DAMASK_SCENE ?= data/scenes/draped_damask.toml
 # main demo pictures; the evaluation set is smaller because procedural volpath is slow (README: Status)
 SPP ?= 8
-EVAL_W ?= 64
-EVAL_H ?= 48
-EVAL_SPP ?= 4
+EVAL_W ?= 40
+EVAL_H ?= 30
+EVAL_SPP ?= 2
 
 .PHONY: setup demo test bench table1 sweep clean help
 

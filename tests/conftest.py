@@ -5,7 +5,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-os.environ.setdefault("NUMBA_CACHE_DIR", str(ROOT / ".numba_cache"))
+os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
+import stages  # noqa: E402,F401  (sets NUMBA_CACHE_DIR, keyed by the kernel sources, before numba loads)
 os.environ.setdefault("MPLBACKEND", "Agg")
 SHARED = ROOT.parent / "shared"
 DATA = ROOT / "data"
