@@ -94,7 +94,7 @@ def fiber_materials(scene, fibers, options):
 def render(scene, options: dict) -> RenderResult:
     from stages.core.bvh import build_fiber_bvh
     from stages.render.fiberpath import render_tiles
-    from stages.render.film import finalize, tile_grid
+    from stages.render.film import tile_grid
 
     path = options.get("fibers")
     source = options.get("source")
@@ -131,6 +131,25 @@ def render(scene, options: dict) -> RenderResult:
     eps = 1e-7 * max(extent, 1e-12)
 
     tiles = tile_grid(W, H, tile)
+    def batch(b0, b1, film_sum, film_sq, hits, depth_sum, tile_rays):
+        render_tiles(cam, bvh, mat_of_fiber, mats, *lights.arrays(), ground, has_ground,
+                     tiles, b0, b1, spp, seed, max_depth, rr_depth, SELF_WINDOW, eps,
+                     film_sum, film_sq, hits, depth_sum, tile_rays)
+
+    rgb, extra, rays, render_s = trace_film("fiberpath", W, H, spp, tiles, batch)
+    stats = {"rays": rays, "paths": W * H * spp, "render_s": render_s, "bvh_build_s": build_s,
+             "segments": int(len(bvh.seg_a)), "fibers": fibers.n_fibers, "bvh_nodes": int(len(bvh.node_left)),
+             "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
+    return RenderResult(rgb, extra, stats)
+
+
+def trace_film(label, W, H, spp, tiles, render_batch):
+    """Run a tile kernel over the image in batches with a progress bar and finish the film.
+
+    ``render_batch(b0, b1, film_sum, film_sq, hits, depth_sum, tile_rays)`` renders tiles b0..b1-1.
+    Returns (rgb, extra channels A/depth/variance, rays, render seconds)."""
+    from stages.render.film import finalize
+
     film_sum = np.zeros((H, W, 3))
     film_sq = np.zeros((H, W, 3))
     hits = np.zeros((H, W))
@@ -138,18 +157,13 @@ def render(scene, options: dict) -> RenderResult:
     tile_rays = np.zeros(len(tiles), np.int64)
     batch = max(1, 4 * (os.cpu_count() or 1))
     t1 = time.perf_counter()
-    with progress(f"fiberpath {W}x{H} @ {spp} spp", len(tiles)) as advance:
+    with progress(f"{label} {W}x{H} @ {spp} spp", len(tiles)) as advance:
         for b0 in range(0, len(tiles), batch):
             b1 = min(b0 + batch, len(tiles))
-            render_tiles(cam, bvh, mat_of_fiber, mats, *lights.arrays(), ground, has_ground,
-                         tiles, b0, b1, spp, seed, max_depth, rr_depth, SELF_WINDOW, eps,
-                         film_sum, film_sq, hits, depth_sum, tile_rays)
+            render_batch(b0, b1, film_sum, film_sq, hits, depth_sum, tile_rays)
             advance(b1 - b0)
     render_s = time.perf_counter() - t1
     rgb, var = finalize(film_sum, film_sq, spp)
     alpha = (hits / spp).astype(np.float32)
     depth = np.where(hits > 0, depth_sum / np.maximum(hits, 1), 0.0).astype(np.float32)
-    stats = {"rays": int(tile_rays.sum()), "paths": W * H * spp, "render_s": render_s, "bvh_build_s": build_s,
-             "segments": int(len(bvh.seg_a)), "fibers": fibers.n_fibers, "bvh_nodes": int(len(bvh.node_left)),
-             "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
-    return RenderResult(rgb, {"A": alpha, "depth": depth, "variance": var}, stats)
+    return rgb, {"A": alpha, "depth": depth, "variance": var}, int(tile_rays.sum()), render_s

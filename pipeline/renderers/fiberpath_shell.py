@@ -11,13 +11,11 @@ yarn preset's albedo). ``pipeline/renderers/fiberpath.py`` hands tiling artifact
 """
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
 
 from ..errors import LoomError
-from ..progress import progress
 from ..render_setup import GROUP_NAMES, Fibers, ground_array, pack_lights
 from ..scene import camera_array
 from . import RenderResult
@@ -53,11 +51,11 @@ def tiling_fibers(scene, art) -> Fibers:
 
 
 def render(scene, options: dict) -> RenderResult:
-    from stages.render.film import finalize, tile_grid
+    from stages.render.film import tile_grid
     from stages.render.shell_scene import render_tiles_shell
 
     from ..tile_runner import load_tiling
-    from .fiberpath import SELF_WINDOW, fiber_materials
+    from .fiberpath import SELF_WINDOW, fiber_materials, trace_film
 
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
@@ -77,27 +75,16 @@ def render(scene, options: dict) -> RenderResult:
     lo, hi = np.asarray(art.summary["bounds"][0]), np.asarray(art.summary["bounds"][1])
     eps = 1e-7 * max(float(np.linalg.norm(hi - lo) + np.abs(np.concatenate([lo, hi])).max()), 1e-12)
     tiles = tile_grid(W, H, int(scene.render.get("tile_size", 16)))
-    film_sum = np.zeros((H, W, 3))
-    film_sq = np.zeros((H, W, 3))
-    hits = np.zeros((H, W))
-    depth_sum = np.zeros((H, W))
-    tile_rays = np.zeros(len(tiles), np.int64)
-    batch = max(1, 4 * (os.cpu_count() or 1))
-    t1 = time.perf_counter()
     window = SELF_WINDOW  # BCSDF vertices skip their whole fibre, as in fiberpath
-    with progress(f"fiberpath (shell) {W}x{H} @ {spp} spp", len(tiles)) as advance:
-        for b0 in range(0, len(tiles), batch):
-            b1 = min(b0 + batch, len(tiles))
-            render_tiles_shell(cam, sc, mat_of_fiber, mats, *lights.arrays(), ground, has_ground,
-                               tiles, b0, b1, spp, seed, max_depth, rr_depth, window, eps,
-                               film_sum, film_sq, hits, depth_sum, tile_rays)
-            advance(b1 - b0)
-    render_s = time.perf_counter() - t1
-    rgb, var = finalize(film_sum, film_sq, spp)
-    alpha = (hits / spp).astype(np.float32)
-    depth = np.where(hits > 0, depth_sum / np.maximum(hits, 1), 0.0).astype(np.float32)
-    stats = {"rays": int(tile_rays.sum()), "paths": W * H * spp, "render_s": render_s, "scene_build_s": build_s,
+
+    def batch(b0, b1, film_sum, film_sq, hits, depth_sum, tile_rays):
+        render_tiles_shell(cam, sc, mat_of_fiber, mats, *lights.arrays(), ground, has_ground,
+                           tiles, b0, b1, spp, seed, max_depth, rr_depth, window, eps,
+                           film_sum, film_sq, hits, depth_sum, tile_rays)
+
+    rgb, extra, rays, render_s = trace_film("fiberpath (shell)", W, H, spp, tiles, batch)
+    stats = {"rays": rays, "paths": W * H * spp, "render_s": render_s, "scene_build_s": build_s,
              "tetrahedra": int(art.summary["tetrahedra"]), "exemplars": int(art.summary["exemplars"]),
              "blocks": int(art.summary["blocks"]), "segments": int(len(sc.seg_a)), "fibers": fibers.n_fibers,
              "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
-    return RenderResult(rgb, {"A": alpha, "depth": depth, "variance": var}, stats)
+    return RenderResult(rgb, extra, stats)
