@@ -41,10 +41,10 @@ setup: $(VENV)/.installed
 $(OUT)/yarns.zarr/zarr.json: $(SCENE) $(VENV)/.installed
 	$(LL) ingest $(SCENE) -o $(OUT)/yarns.zarr
 
-$(OUT)/tables.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json
+$(OUT)/tables.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) tables $(OUT)/yarns.zarr -o $(OUT)/tables.zarr
 
-$(OUT)/fibers.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json
+$(OUT)/fibers.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/yarns.zarr -o $(OUT)/fibers.zarr
 
 $(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed

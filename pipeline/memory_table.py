@@ -6,12 +6,12 @@ regular/loop piece and hair with its vertex count at the realization's sample sp
 (``stages.procedural.realize.yarn_counts``, the same rule as ``loomlight realize``), 16 bytes a
 vertex (float32 xyz + radius) and 19 bytes a fibre (offset, yarn, ply, kind, index).
 
-Ours: the tables' bytes -- regular (fibre trajectories, azimuth bins, packed yarn types, and the
-sampled yarn frames of stages/procedural/frame_samples.py, also listed alone), hair
+Ours: the tables' bytes -- regular (fibre trajectories, azimuth bins, packed yarn types), hair
 (hybrid z extents, z-bins and active lists), loop (nothing is stored: loops come from consistent
 random numbers) and the per-yarn records (type, seed, bounds, albedo, ply offsets, counted with
 regular). The yarn curves are input to both representations and are reported separately
-(``curves_bytes``, ``saving_with_curves``).
+(``curves_bytes``, ``saving_with_curves``). Neither side counts its acceleration structure (the
+realized fibres' BVH; the lookups' frame samples and chord grid, derived when tables are loaded).
 
 ``table1_rows(scenes, spacing=...) -> list[dict]`` (used by ``loomlight evaluate --table1``);
 command line: ``python -m pipeline.memory_table SCENE.toml ... [--generated 500x500] [--spacing S]``
@@ -69,11 +69,11 @@ def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
     with tempfile.TemporaryDirectory(prefix="loomlight-table1-") as tmp:
         yarns = Path(tmp) / "yarns.zarr"
         run_ingest(Path(scene), yarns)
-        cv, tab, info, dicts, _ = build(yarns, seed=seed, hair_mode="hybrid")
+        cv, tab, info, dicts, _ = build(yarns, seed=seed, hair_mode="hybrid", derive=False)
     _, nverts, nfib, verts, pieces = realized_size(tab, cv.curve_length, spacing)
     full = {k: int(verts[i] * FIBER_VERTEX_BYTES + pieces[i] * FIBER_BYTES) for i, k in ((1, "regular"), (2, "loop"), (3, "hair"))}
     parts = table_bytes(tab)
-    ours_regular = parts["regular"] + parts["per_yarn"] + parts["frames"]
+    ours_regular = parts["regular"] + parts["per_yarn"]
     ours_total = ours_regular + parts["hair"] + parts["loop"]
     curves = int(sum(np.asarray(a).nbytes for a in cv))
     full_total = sum(full.values())
@@ -86,7 +86,6 @@ def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
         "full_hair_bytes": full["hair"], "full_loop_bytes": full["loop"],
         "ours_total_bytes": int(ours_total), "ours_regular_bytes": int(ours_regular),
         "ours_hair_bytes": int(parts["hair"]), "ours_loop_bytes": int(parts["loop"]),
-        "ours_frame_samples_bytes": int(parts["frames"]),
         "saving": float(full_total / max(ours_total, 1)),
         "curves_bytes": curves, "saving_with_curves": float(full_total / max(ours_total + curves, 1)),
         "build_s": time.perf_counter() - t0,

@@ -45,9 +45,10 @@ def padded_curves(get, extent):
                        grid_items=np.asarray(gitems, np.int32), grid_pad=pad)
 
 
-def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", frame_samples=False):
-    """(cv, tab, info, type dicts, yarns artifact) for a yarns artifact."""
-    from stages.procedural.tables import build_tables
+def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", derive=True):
+    """(cv, tab, info, type dicts, yarns artifact) for a yarns artifact; derive: also the lookups'
+    load-time structures (tables.derive_lookup_accel)."""
+    from stages.procedural.tables import build_tables, derive_lookup_accel
     from stages.procedural.yarn_model import extent_bound
 
     yarns = Artifact(yarns_path, kind="yarns")
@@ -55,8 +56,9 @@ def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hyb
     ext = np.array([extent_bound(tparams[t]) for t in ytype])
     cv = padded_curves(lambda n: yarns[n], ext)
     mode = {"hybrid": 0, "free": 1}[hair_mode]
-    tab, info = build_tables(cv, tparams, ytype, albedo, int(seed), nbins=int(nbins), hair_mode=mode,
-                             frame_samples=bool(frame_samples))
+    tab, info = build_tables(cv, tparams, ytype, albedo, int(seed), nbins=int(nbins), hair_mode=mode)
+    if derive:
+        tab = derive_lookup_accel(cv, tab)
     return cv, tab, info, dicts, yarns
 
 
@@ -80,22 +82,20 @@ def _type_summary(dicts):
     return [{k: d[k] for k in keep if k in d} for d in dicts]
 
 
-def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False,
-               frame_samples=False):
-    from stages.procedural.tables import Tables, table_bytes
+def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False):
+    from stages.procedural.tables import STORED_FIELDS, table_bytes
 
     check_options(preset, radius, nbins)
     if hair_mode not in ("hybrid", "free"):
         raise LoomError(None, "--hair-mode", f"must be 'hybrid' or 'free', got {hair_mode!r}")
-    params = {"preset": preset, "radius": radius, "seed": int(seed), "bins": int(nbins), "hair_mode": hair_mode,
-              "frame_samples": bool(frame_samples)}
+    params = {"preset": preset, "radius": radius, "seed": int(seed), "bins": int(nbins), "hair_mode": hair_mode}
     w = ArtifactWriter(out, kind="tables", stage="tables", params=params, inputs={"yarns": yarns_path})
     if w.up_to_date() and not force:
         return {"skipped": True}
-    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode, frame_samples)
+    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode, derive=False)
     parts = table_bytes(tab)
     with w:
-        for name in Tables._fields:
+        for name in STORED_FIELDS:
             w.write(name, np.asarray(getattr(tab, name)))
         w.group.create_group("curves")
         for name in CURVE_ARRAYS:
@@ -104,12 +104,10 @@ def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair
         folded = int(np.sum(info["folded"]))
         w.summary.update({
             "kind": "tables", "yarns": int(len(tab.yarn_type)), "yarn_types": _type_summary(dicts),
-            "hair_mode": hair_mode, "bins": int(nbins), "seed": int(seed), "frame_samples_enabled": bool(frame_samples),
+            "hair_mode": hair_mode, "bins": int(nbins), "seed": int(seed),
             "regular_fibers": int(len(tab.fib_R)), "hairs": int(tab.hair_count.sum()),
             "bytes": {"tables": int(sum(parts.values())), "regular": parts["regular"], "hair": parts["hair"],
-                      "loop": 0, "per_yarn": parts["per_yarn"], "frames": parts["frames"], "curves": curve_bytes},
-            "frame_samples": int(len(tab.fs_s)),
-            "frame_sample_error_max": float(np.max(tab.yarn_eps)) if len(tab.yarn_eps) else 0.0,
+                      "loop": parts["loop"], "per_yarn": parts["per_yarn"], "curves": curve_bytes},
             "folded_yarns": folded,
             "curvature_max": float(np.max(info["curvature_max"])) if len(info["curvature_max"]) else 0.0,
             "exact": folded == 0,
@@ -123,15 +121,17 @@ def _cv_field(name):
 
 def load_tables(path):
     """(Curves, Tables, Artifact) of a tables artifact (self-contained: curves from its copy)."""
-    from stages.procedural.tables import Tables
+    from stages.procedural.tables import STORED_FIELDS, Tables, _empty_accel, derive_lookup_accel
 
     art = Artifact(path, kind="tables")
-    missing = [f for f in Tables._fields if f not in art]
+    missing = [f for f in STORED_FIELDS if f not in art]
     if missing:
         raise LoomError(art.path, missing[0], "array missing from the tables artifact (rebuild it with loomlight tables)")
-    tab = Tables(*[np.ascontiguousarray(art[f]) for f in Tables._fields])
+    stored = {f: np.ascontiguousarray(art[f]) for f in STORED_FIELDS}
+    tab = Tables(**stored, **dict(zip([f for f in Tables._fields if f not in stored],
+                                      _empty_accel(len(stored["yarn_type"])))))
     cv = curves_from_group(lambda n: art[f"curves/{n}"])
-    return cv, tab, art
+    return cv, derive_lookup_accel(cv, tab), art
 
 
 # ------------------------------------------------------------------------------------------------

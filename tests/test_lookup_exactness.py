@@ -54,9 +54,8 @@ def swatch(tmp_path_factory):
     fib = Artifact(d / "fibers.zarr", kind="fibers")
     cv, tab, info, _, _ = build(d / "yarns.zarr", seed=3, hair_mode="hybrid")
     cv2, tab_free, _, _, _ = build(d / "yarns.zarr", seed=3, hair_mode="free")
-    cv3, tab_fast, _, _, _ = build(d / "yarns.zarr", seed=3, hair_mode="hybrid", frame_samples=True)
     assert not info["folded"].any()
-    return d, fib, cv, {"exact": tab, "free": tab_free, "fast": tab_fast}
+    return d, fib, cv, {"hybrid": tab, "free": tab_free}
 
 
 def _points(fib, n_uniform=30000, n_near=90000, seed=0):
@@ -69,11 +68,9 @@ def _points(fib, n_uniform=30000, n_near=90000, seed=0):
     return np.concatenate([q1, q2])
 
 
-@pytest.mark.parametrize("mode", ["exact", "fast"])
-def test_lookup_equals_brute_force_on_realized_fibres(swatch, mode):
-    """Both table flavours: exact frames only (default) and with sampled frames (--frame-samples)."""
+def test_lookup_equals_brute_force_on_realized_fibres(swatch):
     d, fib, cv, tabs = swatch
-    tab = tabs[mode]
+    tab = tabs["hybrid"]
     pts32 = np.asarray(fib["points"])
     rad = np.asarray(fib["point_radius"])
     off = np.asarray(fib["fiber_offsets"])
@@ -105,7 +102,7 @@ def test_lookup_equals_brute_force_on_realized_fibres(swatch, mode):
 
 def test_hybrid_and_realization_free_hairs_agree(swatch):
     d, fib, cv, tabs = swatch
-    tab, tab_free = tabs["exact"], tabs["free"]
+    tab, tab_free = tabs["hybrid"], tabs["free"]
     assert len(tab_free.hair_z1) == 0 and len(tab.hair_z1) > 0  # the free mode stores no hair data
     Q = _points(fib, 5000, 25000, seed=1)
     a = lookup_points(cv, tab, Q)

@@ -59,17 +59,22 @@ def test_azimuth_bins_list_every_nearby_trajectory(name):
     with the point inside its radial interval (brute force over all fibres)."""
     tp = presets.pack(presets.load_preset(name))
     K, B = 2.0, 24
-    R, th, th0, rlo, rhi, start, items = T.regular_tables(tp, 99, K, B)
+    R, th, th0, rlo, rhi, start, items, mask = T.regular_tables(tp, 99, K, B)
     P, N = int(tp[M.PLY_NUM]), int(tp[M.FIBER_NUM])
     m = K * tp[M.FIBER_RADIUS] / min(tp[M.E_SHORT], tp[M.E_LONG])
     lo = tp[M.RHO_MIN] * R
-    hi = np.maximum(tp[M.RHO_MAX] * R, tp[M.U_MAX])
+    hi = tp[M.RHO_MAX] * R  # loops beyond it are listed per yarn (test_loop_lists_hold_every_mutated_cycle)
     st = np.concatenate([[0], start])  # regular_tables gives each bin's end
+    for k in range(P):  # the bit masks say the same as the bin lists
+        for b in range(B):
+            g = k * B + b
+            bits = {j for j in range(N) if int(mask[k * N + j]) >> b & 1}
+            assert bits == set(items[st[g]:st[g + 1]].tolist())
     rng = np.random.default_rng(0)
     checked = 0
     for _ in range(3000):
         k = int(rng.integers(P))
-        r = math.sqrt(rng.uniform()) * tp[M.U_MAX] * 1.05
+        r = math.sqrt(rng.uniform()) * tp[M.RHO_MAX] * tp[M.R_MAX] * 1.05
         a = rng.uniform(0, 2 * math.pi)
         p = np.array([r * math.cos(a), r * math.sin(a)])
         b = min(int(a / (2 * math.pi) * B), B - 1)
@@ -83,6 +88,35 @@ def test_azimuth_bins_list_every_nearby_trajectory(name):
                 assert j in listed
                 assert rlo[f] <= r <= rhi[f]
     assert checked > 1000
+
+
+def test_loop_lists_hold_every_mutated_cycle():
+    """tables.yarn_loops against brute force: every (fibre, migration cycle) of a ply whose
+    yarn_model.loop_unit_radius says 'mutated' anywhere along the yarn, with its z range, once;
+    and the fixed-width z-bins list every loop whose (grown) range meets them."""
+    tp = presets.pack(presets.load_preset("cotton1"))
+    R, th, th0, *_ = T.regular_tables(tp, 5, 2.0, 16)
+    N = int(tp[M.FIBER_NUM])
+    L, seed, k = 1.7, np.uint64(987654321), 1
+    fib, U, z0, z1, cyc = T.yarn_loops(tp, seed, k, R[k * N:(k + 1) * N], th[k * N:(k + 1) * N], th0[k * N:(k + 1) * N], L)
+    w = tp[M.S_MIG] * 2 * math.pi / tp[M.ALPHA]
+    ref = []
+    for j in range(N):
+        f = k * N + j
+        for c in range(-2, int(w * L / (2 * math.pi)) + 3):
+            a, b = (2 * math.pi * c - math.pi - th0[f]) / w, (2 * math.pi * c + math.pi - th0[f]) / w
+            if b <= 0 or a >= L:
+                continue
+            u = M.loop_unit_radius(tp, seed, k, j, R[f], th[f], th0[f], c)
+            if u > 0:
+                ref.append((j, u, max(a, 0.0), min(b, L), c))
+    assert len(ref) > 10
+    assert [(int(a), float(b), int(c)) for a, b, c in zip(fib, U, cyc)] == [(r[0], r[1], r[4]) for r in ref]
+    np.testing.assert_allclose(np.c_[z0, z1], [(r[2], r[3]) for r in ref], rtol=0, atol=1e-12)
+    nb, start, items = T.uniform_zbins(z0 - 0.01, z1 + 0.01, L, 0.1)
+    for b in range(nb):
+        meets = {i for i in range(len(fib)) if z0[i] - 0.01 <= (b + 1) * 0.1 and z1[i] + 0.01 >= b * 0.1}
+        assert set(items[start[b]:start[b + 1]].tolist()) >= meets
 
 
 def test_lookup_command_contract(built, cli):
@@ -119,7 +153,7 @@ def test_tables_artifact_is_self_contained_and_deterministic(built, cli):
     again = json.loads(out)
     assert again["content_hash"] == art.meta["content_hash"]
     b = again["bytes"]
-    assert b["tables"] == b["regular"] + b["hair"] + b["loop"] + b["per_yarn"] + b["frames"] and b["loop"] == 0
+    assert b["tables"] == b["regular"] + b["hair"] + b["loop"] + b["per_yarn"] and b["loop"] > 0
 
 
 def test_seed_changes_the_fabric(built):

@@ -17,9 +17,6 @@ def register(app: typer.Typer) -> None:
         bins: int = typer.Option(32, "--bins", help="Azimuth bins of the regular-fibre tables (seed 000 Fig. 7)."),
         hair_mode: str = typer.Option("hybrid", "--hair-mode",
                                       help="'hybrid' (stored hair z extents, z-bins) or 'free' (Algorithm 3)."),
-        frame_samples: bool = typer.Option(False, "--frame-samples",
-                                           help="Also store error-bounded sampled yarn frames: several times faster "
-                                                "lookups for several times the memory (answers unchanged)."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
     ):
         """Per yarn type and ply: fibre trajectories binned by azimuth; per yarn: hair tables (hybrid mode);
@@ -27,7 +24,7 @@ def register(app: typer.Typer) -> None:
         from ..procedural_runner import run_tables
 
         res = run_tables(yarns, out, preset=preset, radius=radius, seed=seed, nbins=bins, hair_mode=hair_mode,
-                         force=force, frame_samples=frame_samples)
+                         force=force)
         if res["skipped"]:
             typer.echo(f"{out} is up to date; use --force to rebuild")
         else:

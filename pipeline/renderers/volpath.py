@@ -56,7 +56,7 @@ def _majorant_res(lo, hi, cell):
 
 def procedural_source(tables_path, cell=None):
     """(ProceduralMedium, MajorantGrid, info) from a tables artifact."""
-    from stages.render.procedural_medium import ProceduralMedium, yarn_capsules
+    from stages.render.procedural_medium import ProceduralMedium, fiber_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
     from ..procedural_runner import load_tables
@@ -64,7 +64,7 @@ def procedural_source(tables_path, cell=None):
     if not tables_path:
         raise LoomError(None, "--set tables=PATH.zarr", "--source procedural needs a tables artifact (loomlight tables)")
     cv, tab, _ = load_tables(tables_path)
-    a, b, r, bound = yarn_capsules(cv, tab, 0.25)
+    a, b, r, bound = fiber_capsules(cv, tab, 0.25)
     lo, hi = _box_of_capsules(a, b, r)
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * float(np.mean(tab.yarn_extent)))
     mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)

@@ -26,7 +26,7 @@ def _mix(z):
     return z ^ (z >> uint64(31))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def hash_u64(a, b, c):
     h = _mix(uint64(a) + _GOLD)
     h = _mix(h ^ (uint64(b) + _GOLD * uint64(2)))
@@ -34,13 +34,13 @@ def hash_u64(a, b, c):
     return h
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def uniform(seed, index, dim):
     """Uniform double in [0, 1), a pure function of (seed, index, dim)."""
     return float(hash_u64(seed, index, dim) >> uint64(11)) * (1.0 / 9007199254740992.0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def normal(seed, index, dim):
     """Standard normal variate from (seed, index, dim) and (seed, index, dim + 1)."""
     u1 = uniform(seed, index, dim)

@@ -1,9 +1,10 @@
 """Point lookups without realization: seed 000 Algorithms 1-3 on the tables of tables.py.
 
-``lookup_point(cv, tab, p)`` answers, for a fabric-space point p,
+``lookup_point(cv, tab, px, py, pz)`` answers, for a fabric-space point p,
     (inside, yarn, kind, dir_x, dir_y, dir_z, density, albedo_r, albedo_g, albedo_b)
 with kind 0 none, 1 regular, 2 loop, 3 hair; direction the unit fibre tangent at the closest
 point of the covering fibre (zero outside); density the yarn type's density (0 outside).
+``tab`` must carry its derived fields (``tables.derive_lookup_accel``; ``load_tables`` does it).
 
 Definition (shared with the brute-force reference and the realization): p is inside fibre F when
 its fabric-space distance to F's centre curve (the yarn-space fibre mapped by Eq. 7) is below the
@@ -11,44 +12,43 @@ fibre radius. Where several fibres cover p, the first in the order (yarn, ply, r
 hair, fibre index) answers (Algorithm 1 returns at the first hit; the order makes that choice
 well defined); a regular fibre's kind (1 or 2) is the kind of its cycle at the closest point.
 
-Steps (Algorithm 1):
-1. Candidate yarns: the spline segments of p's cell in the tables' curve grid (padded by each
-   yarn's extent bound), nearest box first; p's foot point on the yarn (seed 000 §5.2): exact
-   (root isolation, stages/core/curves.py), or, when the tables carry sampled frames
-   (``loomlight tables --frame-samples``), on the chords of the samples by local descent.
-2. Yarn space (Eq. 8-9) with the frame at the foot point s: (x, y) and the tangential residual w.
+Steps (Algorithm 1), allocation-free:
+1. Candidate yarns: the runs of coarse chords in p's cell of the chord grid (frame_samples.py),
+   yarn by yarn in ascending order; the nearest chord bounds p's distance to the axis from below
+   (a yarn farther than its extent bound + eps_c is skipped) and seeds Newton for the foot point
+   s on the sampled (Hermite) axis (seed 000 §5.2).
+2. Yarn space (Eq. 8-9) with the sampled frame at s: (x, y) and the tangential residual w.
 3. Per ply (all plies, not only the nearest of §4.5, so that the answer is exact): the twist-
    compensated unit-disc point and its azimuth bin give candidate fibres (Algorithm 2, footnote
    2); a candidate's cross-sectional distance d bounds its true distance D (D >= d / K - slack);
    candidates that may cover p get D by Gauss-Newton along the fibre (loops included: a cycle's
    mutation is a consistent random number, §4.4.1) under the sampled frames.
-4. Hairs of the ply active at s' (hybrid z-bins by binary search, or Algorithm 3), a quick z and
+4. Hairs of the ply active at s (hybrid z-bins by binary search, or Algorithm 3), a quick z and
    radius reject, a yarn-space polyline prefilter, then Gauss-Newton along the hair.
-Without sampled frames the distances come from a local model of Eq. 7 (exact frames at three arc
-lengths around s, quadratic interpolation), and every fibre the model puts within 10 % of the
-radius is re-measured with the exact frames. With sampled frames (which differ from Eq. 7 by at
-most eps_c, ``yarn_eps``, measured when the tables are built) a distance farther than eps_c from
-the radius is decided at once and the rest with the exact frames. Either way inside/outside, yarn
-and kind are those of the exact model.
+The sampled frames differ from Eq. 7's exact frames by at most eps_c (``yarn_eps``, measured when
+the tables are loaded): a distance farther than eps_c from the radius is decided at once, the rest
+(rare: eps_c is about 1 % of the fibre radius) with the exact frames (a local model of Eq. 7 from
+exact frames at three arc lengths, then the exact map). Inside/outside, yarn and kind are those
+of the exact model.
 """
 import math
 
 import numpy as np
 from numba import njit, prange
 
-from stages.core.curves import (_segment_box_dist2, closest_on_segment, curve_frame_at, nearest_segments_in_cell,
-                                segment_arclen_to)
+from stages.core.curves import curve_frame_at
 
 from . import hair_free
-from .frame_samples import project_local, sampled_frame
+from .frame_samples import chord_lower_bound, eq7, foot_point, frame_at
 from .tables import hair_node_seed_nb
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
                          ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, ply_frame, regular_xy)
 
 TWO_PI = 2.0 * math.pi
 MODEL_SLACK = 0.1  # exact-frame local model: distance error allowed before the exact check, in fibre radii
-MAX_YARNS = 64
 HAIR_SAMPLES = 16
+GN_TOL = 1e-5  # Gauss-Newton stops when a step moves the fibre point by less than this x the fibre radius
+OUTSIDE = (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @njit(cache=True)
@@ -209,14 +209,24 @@ def _hair_quick_reject(tp, r0, r1, z1, ze, rho_k, s, limit):
 
 
 @njit(cache=True)
-def _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, z):
-    """Yarn-space distance from (x, y, z) to the hair's sampled polyline, less the chord slack;
-    returns (lower bound of the yarn-space distance, best t)."""
+def _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, z, limit):
+    """Yarn-space distance from (x, y, z) to the hair's polyline sampled over the part of the hair
+    whose z lies within ``limit`` of z (the only part that can come within limit), less the chord
+    slack; returns (lower bound of that distance, best t)."""
+    ta = 0.0
+    tb = 1.0
+    if ze != 0.0:
+        t1 = (z - limit - z1) / ze
+        t2 = (z + limit - z1) / ze
+        ta = max(ta, min(t1, t2))
+        tb = min(tb, max(t1, t2))
+        if ta > tb:
+            return 1e300, 0.0
+    n = min(HAIR_SAMPLES, max(1, int(math.ceil((tb - ta) * HAIR_SAMPLES))))
     best = 1e300
-    bt = 0.0
-    px, py, pz = hair_point(tp, k, r0, r1, th1, pe, z1, ze, 0.0)
-    for i in range(HAIR_SAMPLES + 1):
-        t = i / HAIR_SAMPLES
+    bt = ta
+    for i in range(n + 1):
+        t = ta + (tb - ta) * i / n
         qx, qy, qz = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
         dx = x - qx
         dy = y - qy
@@ -228,169 +238,61 @@ def _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, z):
     # speed bound of the hair in yarn space -> arc length per sample interval
     rm = max(r0, r1) + tp[PLY_RADIUS]
     speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
-    return math.sqrt(best) - 0.5 * speed / HAIR_SAMPLES, bt
+    return math.sqrt(best) - 0.5 * speed * (tb - ta) / n, bt
+
+
+# ------------------------------------------------------------------------------------------------
+# distances under the sampled frames (scalar, allocation-free)
+@njit(cache=True, inline="always")
+def _reg_at(fs, fr, lo, hi, i, tp, yseed, k, j, Rj, th, th0, z):
+    """(step, F(z), kind) of regular fibre (k, j) under the sampled frames (fs, fr)."""
+    x, y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
+    i, f = frame_at(fs, fr, lo, hi, i, z)
+    X, Y, Z = eq7(f, x, y)
+    return i, X, Y, Z, kind
 
 
 @njit(cache=True)
-def _hair_active(tab, c, g, tp, z, margin, out_idx, out_z1, out_ze):
-    """Active hairs of slot g at z into the out arrays (ascending hair index); returns how many."""
-    if tab.hair_mode[0] == 0:
-        lo = tab.hb_zoff[g]
-        hi = tab.hb_zoff[g + 1]
-        nbp = hi - lo
-        if nbp < 2 or z < tab.hb_z[lo] or z >= tab.hb_z[hi - 1]:
-            return 0
-        a = lo
-        b = hi - 2
-        while a < b:  # last breakpoint <= z
-            m = (a + b + 1) // 2
-            if tab.hb_z[m] <= z:
-                a = m
-            else:
-                b = m - 1
-        gb = lo - g + (a - lo)
-        n = 0
-        base = tab.hair_off[g]
-        for q in range(tab.hb_start[gb], tab.hb_start[gb + 1]):
-            h = tab.hb_items[q]
-            out_idx[n] = h
-            out_z1[n] = tab.hair_z1[base + h]
-            out_ze[n] = tab.hair_ze[base + h]
-            n += 1
-        return n
-    nh = tab.hair_count[g]
-    k = g - tab.yarn_ply_off[c]
-    seed = hair_node_seed_nb(np.uint64(tab.yarn_seed[c]), k)
-    return hair_free.active_hairs(tab.yarn_length[c], nh, tp[ZE_MU], tp[ZE_SIG], seed, z, margin,
-                                  out_idx, out_z1, out_ze)
-
-
-@njit(cache=True)
-def _project(cv, tab, i, p, fast):
-    """(arc length, squared distance) of p's foot point on spline segment i: on the chords of the
-    frame samples (fast) or exactly (root isolation of stages/core/curves.py)."""
-    if fast:
-        return project_local(tab.fs_s, tab.fs_frame, tab.seg_fs[i], tab.seg_fs_end[i], p)
-    t, d2 = closest_on_segment(cv, i, p)
-    return cv.seg_arclen[i] + segment_arclen_to(cv, i, t), d2
-
-
-@njit(cache=True)
-def candidate_yarns(cv, tab, p, out_c, out_s, out_d2, fast):
-    """Yarns whose axis passes within their extent bound (+ sampling error) of p, with p's foot
-    point (arc length s, squared distance; see _project), in one pass over the spline segments of
-    p's grid cell (the tables' copy of the curves pads the grid by each yarn's extent, so the cell
-    holds every such segment). Returns how many, by yarn index."""
-    start, end = nearest_segments_in_cell(cv, p)
-    n = 0
-    found = np.empty(out_c.shape[0], np.bool_)
-    first = np.empty(out_c.shape[0], np.int64)
-    firstd = np.empty(out_c.shape[0])
-    slot = np.empty(end - start, np.int64)
-    bd = np.empty(end - start)
-    # pass 1: box distances; per yarn the segment with the nearest box (projected first, so that
-    # the boxes of the others are pruned against a good distance)
-    for q in range(start, end):
-        i = cv.grid_items[q]
-        c = cv.seg_curve[i]
-        m = 0
-        while m < n and out_c[m] != c:
-            m += 1
-        if m == n:
-            if n == out_c.shape[0]:
-                slot[q - start] = -1
-                continue
-            e = tab.yarn_extent[c] + (2.0 * tab.yarn_eps[c] if fast else 0.0)
-            out_c[m] = c
-            out_d2[m] = e * e
-            found[m] = False
-            first[m] = -1
-            firstd[m] = 1e300
-            n += 1
-        slot[q - start] = m
-        d = _segment_box_dist2(cv, i, p)
-        bd[q - start] = d
-        if d < out_d2[m] and d < firstd[m]:
-            firstd[m] = d
-            first[m] = q
-    for m in range(n):
-        q = first[m]
-        if q >= 0:
-            sp, d2 = _project(cv, tab, cv.grid_items[q], p, fast)
-            if d2 < out_d2[m]:
-                out_d2[m] = d2
-                out_s[m] = sp
-                found[m] = True
-    for q in range(start, end):
-        m = slot[q - start]
-        if m < 0 or q == first[m] or bd[q - start] >= out_d2[m]:
-            continue
-        sp, d2 = _project(cv, tab, cv.grid_items[q], p, fast)
-        if d2 < out_d2[m]:
-            out_d2[m] = d2
-            out_s[m] = sp
-            found[m] = True
-    k = 0
-    for m in range(n):
-        if found[m]:
-            out_c[k] = out_c[m]
-            out_d2[k] = out_d2[m]
-            out_s[k] = out_s[m]
-            k += 1
-    for i in range(1, k):  # ascending yarn index
-        c = out_c[i]
-        sv = out_s[i]
-        dv = out_d2[i]
-        j = i - 1
-        while j >= 0 and out_c[j] > c:
-            out_c[j + 1] = out_c[j]
-            out_s[j + 1] = out_s[j]
-            out_d2[j + 1] = out_d2[j]
-            j -= 1
-        out_c[j + 1] = c
-        out_s[j + 1] = sv
-        out_d2[j + 1] = dv
-    return k
-
-
-@njit(cache=True)
-def _smap(tab, lo, hi, x, y, z):
-    """Eq. 7 with the sampled frames."""
-    pos, t, n, b = sampled_frame(tab.fs_s, tab.fs_frame, lo, hi, z)
-    return pos + x * n + y * b
-
-
-@njit(cache=True)
-def regular_closest_s(tab, lo, hi, za, zb, tp, yseed, k, j, Rj, th, th0, p, z0):
-    """(distance, z*, tangent, kind) of regular fibre (k, j) to p under the sampled frames:
-    Gauss-Newton over [za, zb] from z0."""
-    h = 1e-4 * (zb - za)
+def regular_closest_s(fs, fr, lo, hi, i, za, zb, tp, yseed, k, j, Rj, th, th0, px, py, pz, z0, tol):
+    """(distance, z*, unit tangent (3 scalars), kind) of regular fibre (k, j) to p under the
+    sampled frames: Gauss-Newton over [za, zb] from z0 (forward differences), until a step moves
+    the fibre point by less than tol (the distance then errs by O(tol^2 / distance))."""
+    h = 1e-5 * (zb - za)
     z = min(max(z0, za), zb)
-    D = np.zeros(3)
-    for it in range(12):
-        zp = min(z + h, zb)
-        zn = max(z - h, za)
-        x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zp)
-        Fp = _smap(tab, lo, hi, x, y, zp)
-        x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, zn)
-        Fm = _smap(tab, lo, hi, x, y, zn)
-        x, y, kd = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
-        F0 = _smap(tab, lo, hi, x, y, z)
-        D = (Fp - Fm) / (zp - zn)
-        znew = min(max(z - np.dot(F0 - p, D) / np.dot(D, D), za), zb)
-        if abs(znew - z) < 1e-13 * (1.0 + zb):
-            z = znew
+    Dx = Dy = Dz = 0.0
+    fx = fy = fz = 0.0
+    kind = 1
+    for it in range(16):
+        i, fx, fy, fz, kind = _reg_at(fs, fr, lo, hi, i, tp, yseed, k, j, Rj, th, th0, z)
+        zh = z + h if z + h <= zb else z - h
+        i, ax, ay, az, kd = _reg_at(fs, fr, lo, hi, i, tp, yseed, k, j, Rj, th, th0, zh)
+        inv = 1.0 / (zh - z)
+        Dx = (ax - fx) * inv
+        Dy = (ay - fy) * inv
+        Dz = (az - fz) * inv
+        dd = Dx * Dx + Dy * Dy + Dz * Dz
+        znew = min(max(z - ((fx - px) * Dx + (fy - py) * Dy + (fz - pz) * Dz) / dd, za), zb)
+        if abs(znew - z) * math.sqrt(dd) < tol:
             break
         z = znew
-    x, y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, z)
-    r = _smap(tab, lo, hi, x, y, z) - p
-    return math.sqrt(np.dot(r, r)), z, D / math.sqrt(np.dot(D, D)), kind
+    rx, ry, rz = fx - px, fy - py, fz - pz
+    n = math.sqrt(Dx * Dx + Dy * Dy + Dz * Dz)
+    return math.sqrt(rx * rx + ry * ry + rz * rz), z, Dx / n, Dy / n, Dz / n, kind
+
+
+@njit(cache=True, inline="always")
+def _hair_at(fs, fr, lo, hi, i, tp, k, r0, r1, th1, pe, z1, ze, t):
+    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
+    i, f = frame_at(fs, fr, lo, hi, i, z)
+    X, Y, Z = eq7(f, x, y)
+    return i, X, Y, Z
 
 
 @njit(cache=True)
-def hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, p, t0):
-    """(distance, t*, tangent) of a hair to p under the sampled frames, over the part of the hair
-    whose z lies in [za, zb]; distance 1e300 where no part does."""
+def hair_closest_s(fs, fr, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, px, py, pz, t0, tol):
+    """(distance, t*, unit tangent (3 scalars)) of a hair to p under the sampled frames, over the
+    part of the hair whose z lies in [za, zb] (distance 1e300 where no part does): Gauss-Newton in
+    t with forward differences, until a step moves the hair point by less than tol."""
     ta = 0.0
     tb = 1.0
     if ze > 0.0:
@@ -400,211 +302,289 @@ def hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, p, t0):
         ta = max(ta, (zb - z1) / ze)
         tb = min(tb, (za - z1) / ze)
     elif z1 < za or z1 > zb:
-        return 1e300, 0.0, np.zeros(3)
+        return 1e300, 0.0, 0.0, 0.0, 0.0
     if ta > tb:
-        return 1e300, 0.0, np.zeros(3)
+        return 1e300, 0.0, 0.0, 0.0, 0.0
     t = min(max(t0, ta), tb)
-    h = max(1e-4 * (tb - ta), 1e-9)
-    D = np.zeros(3)
-    for it in range(12):
-        tp_ = min(t + h, 1.0)
-        tm = max(t - h, 0.0)
-        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tp_)
-        Fp = _smap(tab, lo, hi, x, y, z)
-        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tm)
-        Fm = _smap(tab, lo, hi, x, y, z)
-        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
-        F0 = _smap(tab, lo, hi, x, y, z)
-        D = (Fp - Fm) / (tp_ - tm)
-        dd = np.dot(D, D)
+    h = max(1e-5 * (tb - ta), 1e-10)
+    Dx = Dy = Dz = 0.0
+    fx = fy = fz = 0.0
+    i = lo
+    for it in range(16):
+        i, fx, fy, fz = _hair_at(fs, fr, lo, hi, i, tp, k, r0, r1, th1, pe, z1, ze, t)
+        th_ = t + h if t + h <= 1.0 else t - h
+        i, ax, ay, az = _hair_at(fs, fr, lo, hi, i, tp, k, r0, r1, th1, pe, z1, ze, th_)
+        inv = 1.0 / (th_ - t)
+        Dx = (ax - fx) * inv
+        Dy = (ay - fy) * inv
+        Dz = (az - fz) * inv
+        dd = Dx * Dx + Dy * Dy + Dz * Dz
         if dd <= 0.0:
             break
-        tn = min(max(t - np.dot(F0 - p, D) / dd, ta), tb)
-        if abs(tn - t) < 1e-13:
-            t = tn
+        tn = min(max(t - ((fx - px) * Dx + (fy - py) * Dy + (fz - pz) * Dz) / dd, ta), tb)
+        if abs(tn - t) * math.sqrt(dd) < tol:
             break
         t = tn
-    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, t)
-    r = _smap(tab, lo, hi, x, y, z) - p
-    nd = math.sqrt(np.dot(D, D))
-    return math.sqrt(np.dot(r, r)), t, (D / nd if nd > 0.0 else D)
+    rx, ry, rz = fx - px, fy - py, fz - pz
+    n = math.sqrt(Dx * Dx + Dy * Dy + Dz * Dz)
+    if n > 0.0:
+        Dx /= n
+        Dy /= n
+        Dz /= n
+    return math.sqrt(rx * rx + ry * ry + rz * rz), t, Dx, Dy, Dz
+
+
+# ------------------------------------------------------------------------------------------------
+# exact-frame decisions (within eps_c of a fibre surface)
+@njit(cache=True)
+def _exact_regular(cv, c, tp, yseed, k, j, Rj, th, th0, rf, eps, px, py, pz, zs):
+    """(covered, kind) of regular fibre (k, j) under the exact frames, near z*."""
+    p = np.array([px, py, pz])
+    pe_, te_, ne_, be_ = curve_frame_at(cv, c, zs)
+    Za, Zm, Zb, M = local_frames(cv, c, zs, max(4.0 * (rf + eps), 1e-6), pe_, ne_, be_)
+    De, ze_ = regular_closest(cv, c, Za, Zm, Zb, M, tp, yseed, k, j, Rj, th, th0, p, zs)
+    if De >= rf * (1.0 + MODEL_SLACK):
+        return False, 0
+    D, kind = regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, ze_)
+    return D < rf, kind
 
 
 @njit(cache=True)
-def _model_tangent_regular(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, z):
-    h = 1e-4 * (zb - za)
-    a = max(z - h, za)
-    b = min(z + h, zb)
-    D = _reg_model(za, zm, zb, M, tp, yseed, k, j, Rj, th, th0, b) - _reg_model(za, zm, zb, M, tp, yseed, k, j,
-                                                                                 Rj, th, th0, a)
-    return D / math.sqrt(np.dot(D, D))
+def _exact_hair(cv, c, tp, k, r0, r1, th1, pe, z1, ze, rf, eps, px, py, pz, ts):
+    p = np.array([px, py, pz])
+    hx, hy, hz = hair_point(tp, k, r0, r1, th1, pe, z1, ze, ts)
+    pe_, te_, ne_, be_ = curve_frame_at(cv, c, hz)
+    Za, Zm, Zb, M = local_frames(cv, c, hz, max(4.0 * (rf + eps), 1e-6), pe_, ne_, be_)
+    De, te = hair_closest(Za, Zm, Zb, M, tp, k, r0, r1, th1, pe, z1, ze, p, ts)
+    if De >= rf * (1.0 + MODEL_SLACK):
+        return False
+    return hair_exact(cv, c, tp, k, r0, r1, th1, pe, z1, ze, p, te) < rf
 
 
-@njit(cache=True)
-def _model_tangent_hair(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, t):
-    a = max(t - 1e-4, 0.0)
-    b = min(t + 1e-4, 1.0)
-    D = _hair_model(za, zm, zb, M, tp, k, r0, r1, th1, pe, z1, ze, b) - _hair_model(za, zm, zb, M, tp, k, r0, r1,
-                                                                                     th1, pe, z1, ze, a)
-    n = math.sqrt(np.dot(D, D))
-    return D / n if n > 0.0 else D
-
-
-@njit(cache=True)
-def _answer(c, kind, T, tp, tab):
-    return (True, c, kind, T[0], T[1], T[2], tp[DENSITY], tab.yarn_albedo[c, 0], tab.yarn_albedo[c, 1],
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _answer(c, kind, tx, ty, tz, tp, tab):
+    return (True, c, kind, tx, ty, tz, tp[DENSITY], tab.yarn_albedo[c, 0], tab.yarn_albedo[c, 1],
             tab.yarn_albedo[c, 2])
 
 
-@njit(cache=True)
-def lookup_point(cv, tab, p):
-    """seed 000 Algorithm 1 at fabric-space point p (float64[3]); see the module doc for the result."""
-    cand = np.empty(MAX_YARNS, np.int64)
-    cs = np.empty(MAX_YARNS)
-    cd2 = np.empty(MAX_YARNS)
-    fast = tab.fs_s.shape[0] > 0  # sampled frames present: pre-classify with them
-    n = candidate_yarns(cv, tab, p, cand, cs, cd2, fast)
-    for ci in range(n):
-        c = cand[ci]
-        s = cs[ci]
-        t = tab.yarn_type[c]
-        tp = tab.tparams[t]
-        lo = tab.fs_off[c]
-        hi = tab.fs_off[c + 1]
-        if fast:
-            pos, tan, nn, bn = sampled_frame(tab.fs_s, tab.fs_frame, lo, hi, s)
-            eps = tab.yarn_eps[c]
-        else:
-            pos, tan, nn, bn = curve_frame_at(cv, c, s)
-            eps = 0.0
-        r = p - pos
-        x = np.dot(r, nn)
-        y = np.dot(r, bn)
-        w = abs(np.dot(r, tan))
-        rf = tp[FIBER_RADIUS]
-        if w >= rf + 2.0 * eps:
-            continue  # beyond an end of the yarn by more than any fibre's cap reaches
-        K = tab.type_K[t]
-        yseed = np.uint64(tab.yarn_seed[c])
-        P = int(tp[PLY_NUM])
-        N = int(tp[FIBER_NUM])
-        B = tab.type_nbins[t]
-        es = tp[E_SHORT]
-        el = tp[E_LONG]
-        twist = fiber_twist(tp, s)
-        gmin = tab.yarn_gmin[c]
-        # window holding every fibre point within rf of p (|z - s| <= yarn-space distance / g_min)
-        L = tab.yarn_length[c]
-        hwin = (max((1.0 + K) * (rf + w + eps), tab.type_mz[t]) + w + 2.0 * eps) / gmin
-        za = max(0.0, s - hwin)
-        zb = min(L, s + hwin)
-        reach = K * (rf + w + eps)
-        have_model = False  # exact mode: one local model of Eq. 7 around s for the whole yarn
-        Za = Zm = Zb = 0.0
-        M = np.empty((3, 3, 3))
-        for k in range(P):
-            # ---- regular and loop fibres of ply k (Algorithm 2)
-            cx, cy, drx, dry = ply_frame(tp, k, s)
-            ax = x - cx
-            ay = y - cy
-            u = (ax * drx + ay * dry) / es
-            v = (-ax * dry + ay * drx) / el
-            rr = math.sqrt(u * u + v * v)
-            ang = math.atan2(v, u) - twist
-            ang = ang - TWO_PI * math.floor(ang / TWO_PI)
-            b = min(int(ang / TWO_PI * B), B - 1)
-            gb = tab.type_bin_off[t] + k * B + b
-            fo = tab.type_fib_off[t] + k * N
-            binned = w + eps <= tab.type_pad[t]  # else (beyond a yarn end) every fibre of the ply
-            q0 = tab.bin_start[gb] if binned else 0
-            q1 = tab.bin_start[gb + 1] if binned else N
-            for q in range(q0, q1):
-                j = tab.bin_items[q] if binned else q
-                f = fo + j
-                if binned and (rr < tab.fib_rlo[f] or rr > tab.fib_rhi[f]):
-                    continue
-                Rj = tab.fib_R[f]
-                th = tab.fib_th[f]
-                th0 = tab.fib_th0[f]
-                X, Y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, s)
-                dx = x - X
-                dy = y - Y
-                if dx * dx + dy * dy >= reach * reach:
-                    continue
-                if fast:
-                    Dm, zs, T, kind = regular_closest_s(tab, lo, hi, za, zb, tp, yseed, k, j, Rj, th, th0, p, s)
-                    if Dm >= rf + eps:
-                        continue
-                    if Dm <= rf - eps:
-                        return _answer(c, kind, T, tp, tab)
-                    # too close to the surface to decide with the sampled frames: exact frames
-                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, zs)
-                    Za, Zm, Zb, M = local_frames(cv, c, zs, max(4.0 * (rf + eps), 1e-6), pe_, ne_, be_)
-                else:
-                    zs = s
-                    if not have_model:
-                        Za, Zm, Zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
-                        have_model = True
-                De, ze_ = regular_closest(cv, c, Za, Zm, Zb, M, tp, yseed, k, j, Rj, th, th0, p, zs)
-                if De >= rf * (1.0 + MODEL_SLACK):
-                    continue
-                D, kind = regular_exact(cv, c, tp, yseed, k, j, Rj, th, th0, p, ze_)
-                if D >= rf:
-                    continue
-                if not fast:
-                    T = _model_tangent_regular(Za, Zm, Zb, M, tp, yseed, k, j, Rj, th, th0, ze_)
-                return _answer(c, kind, T, tp, tab)
-            # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
-            g = tab.yarn_ply_off[c] + k
-            nh = tab.hair_count[g]
-            if nh == 0:
+@njit(cache=True, inline="always")
+def yarn_lookup(cv, tab, c, s, i, px, py, pz):
+    """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i)."""
+    t = tab.yarn_type[c]
+    tp = tab.tparams[t]
+    lo = tab.fs_off[c]
+    hi = tab.fs_off[c + 1]
+    i, f = frame_at(tab.fs_s, tab.fs_frame, lo, hi, i, s)
+    eps = tab.yarn_eps[c]
+    rx, ry, rz = px - f[0], py - f[1], pz - f[2]
+    x = rx * f[6] + ry * f[7] + rz * f[8]
+    y = rx * f[9] + ry * f[10] + rz * f[11]
+    w = abs(rx * f[3] + ry * f[4] + rz * f[5])
+    rf = tp[FIBER_RADIUS]
+    if w >= rf + 2.0 * eps:
+        return OUTSIDE  # beyond an end of the yarn by more than any fibre's cap reaches
+    K = tab.type_K[t]
+    yseed = np.uint64(tab.yarn_seed[c])
+    P = int(tp[PLY_NUM])
+    N = int(tp[FIBER_NUM])
+    B = tab.type_nbins[t]
+    es = tp[E_SHORT]
+    el = tp[E_LONG]
+    twist = fiber_twist(tp, s)
+    gmin = tab.yarn_gmin[c]
+    # window holding every fibre point within rf of p (|z - s| <= yarn-space distance / g_min)
+    L = tab.yarn_length[c]
+    hwin = (max((1.0 + K) * (rf + w + eps), tab.type_mz[t]) + w + 2.0 * eps) / gmin
+    za = max(0.0, s - hwin)
+    zb = min(L, s + hwin)
+    reach = K * (rf + w + eps)
+    binned = w + eps <= tab.type_pad[t]  # else (beyond a yarn end) every fibre of the ply
+    munit = K * (rf + tab.type_pad[t]) / min(es, el)  # the bins' margin in unit-disc units
+    for k in range(P):
+        # ---- regular and loop fibres of ply k (Algorithm 2)
+        cx, cy, drx, dry = ply_frame(tp, k, s)
+        ax = x - cx
+        ay = y - cy
+        u = (ax * drx + ay * dry) / es
+        v = (-ax * dry + ay * drx) / el
+        rr = math.sqrt(u * u + v * v)
+        ang = math.atan2(v, u) - twist
+        ang = ang - TWO_PI * math.floor(ang / TWO_PI)
+        b = min(int(ang / TWO_PI * B), B - 1)
+        gb = tab.type_bin_off[t] + k * B + b
+        fo = tab.type_fib_off[t] + k * N
+        q0 = tab.bin_start[gb] if binned else 0
+        q1 = tab.bin_start[gb + 1] if binned else N
+        jbest = N  # first covering regular or loop fibre of the ply (lowest index)
+        kbest = 0
+        tbx = tby = tbz = 0.0
+        for q in range(q0, q1):
+            j = tab.bin_items[q] if binned else q
+            fi = fo + j
+            if binned and (rr < tab.fib_rlo[fi] or rr > tab.fib_rhi[fi]):
                 continue
+            hit, kind, tx, ty, tz = _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach, i, lo, hi, za, zb,
+                                                  rf, eps, px, py, pz)
+            if hit:
+                jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
+                break
+        g = tab.yarn_ply_off[c] + k
+        if binned and tab.lp_off[g + 1] > tab.lp_off[g]:
+            # loops: mutated cycles active in s's z-bin whose fibre is in the azimuth bin
+            nzb = tab.lz_off[g + 1] - tab.lz_off[g]
+            zbin = tab.lz_off[g] + min(max(int(s / tab.lz_h[g]), 0), nzb - 1)
+            bit = np.uint64(1) << np.uint64(b % 64)
+            lbase = tab.lp_off[g]
+            for qq in range(tab.lz_start[zbin], tab.lz_start[zbin + 1]):
+                le = lbase + tab.lz_items[qq]
+                j = tab.lp_fib[le]
+                if j >= jbest:
+                    break
+                fi = fo + j
+                if (tab.fib_mask[fi] & bit) == 0 or rr < tab.fib_rlo[fi] or rr > tab.lp_U[le] + munit:
+                    continue
+                hit, kind, tx, ty, tz = _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach, i, lo, hi, za,
+                                                      zb, rf, eps, px, py, pz)
+                if hit:
+                    jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
+                    break
+        if jbest < N:
+            return _answer(c, kbest, tbx, tby, tbz, tp, tab)
+        # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
+        nh = tab.hair_count[g]
+        if nh == 0:
+            continue
+        limit = 1.1 * (rf + w + 2.0 * eps) / gmin
+        rho_k = math.sqrt(ax * ax + ay * ay)
+        if tab.hair_mode[0] == 0:
+            # hybrid: the z-bin holding s by binary search, its active list in place
+            hlo = tab.hb_zoff[g]
+            hhi = tab.hb_zoff[g + 1]
+            if hhi - hlo < 2 or s < tab.hb_z[hlo] or s >= tab.hb_z[hhi - 1]:
+                continue
+            a_ = hlo
+            b_ = hhi - 2
+            while a_ < b_:  # last breakpoint <= s
+                m = (a_ + b_ + 1) // 2
+                if tab.hb_z[m] <= s:
+                    a_ = m
+                else:
+                    b_ = m - 1
+            zbin = a_ - g
+            base = tab.hair_off[g]
+            for qq in range(tab.hb_start[zbin], tab.hb_start[zbin + 1]):
+                hh = base + tab.hb_items[qq]
+                res = _hair_test(cv, tab, c, tp, k, tab.hair_r0[hh], tab.hair_r1[hh], tab.hair_th1[hh],
+                                 tab.hair_pe[hh], tab.hair_z1[hh], tab.hair_ze[hh], x, y, s, rho_k, limit, lo, hi, za,
+                                 zb, rf, eps, px, py, pz)
+                if res[0]:
+                    return _answer(c, 3, res[1], res[2], res[3], tp, tab)
+        else:
             margin = tab.type_mz[t] + (w + 2.0 * eps) / gmin
             hidx = np.empty(nh, np.int64)
             hz1 = np.empty(nh)
             hze = np.empty(nh)
-            na = _hair_active(tab, c, g, tp, s, margin, hidx, hz1, hze)
-            limit = 1.1 * (rf + w + 2.0 * eps) / gmin
-            rho_k = math.sqrt(ax * ax + ay * ay)
-            for q in range(na):
-                h = hidx[q]
-                r0, r1, th1, pe = hair_params(tp, yseed, k, h)
-                if _hair_quick_reject(tp, r0, r1, hz1[q], hze[q], rho_k, s, limit):
-                    continue
-                lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, hz1[q], hze[q], x, y, s)
-                if lb > limit:
-                    continue
-                if fast:
-                    Dm, ts, T = hair_closest_s(tab, lo, hi, za, zb, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, bt)
-                    if Dm >= rf + eps:
-                        continue
-                    if Dm <= rf - eps:
-                        return _answer(c, 3, T, tp, tab)
-                    hx, hy, hz = hair_point(tp, k, r0, r1, th1, pe, hz1[q], hze[q], ts)
-                    pe_, te_, ne_, be_ = curve_frame_at(cv, c, hz)
-                    Za, Zm, Zb, M = local_frames(cv, c, hz, max(4.0 * (rf + eps), 1e-6), pe_, ne_, be_)
-                    have_model = False  # the model now sits around this hair, not around s
-                else:
-                    ts = bt
-                    if not have_model:
-                        Za, Zm, Zb, M = local_frames(cv, c, s, hwin, pos, nn, bn)
-                        have_model = True
-                De, te = hair_closest(Za, Zm, Zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, ts)
-                if De >= rf * (1.0 + MODEL_SLACK):
-                    continue
-                D = hair_exact(cv, c, tp, k, r0, r1, th1, pe, hz1[q], hze[q], p, te)
-                if D >= rf:
-                    continue
-                if not fast:
-                    T = _model_tangent_hair(Za, Zm, Zb, M, tp, k, r0, r1, th1, pe, hz1[q], hze[q], te)
-                return _answer(c, 3, T, tp, tab)
-    return (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+            seed = hair_node_seed_nb(np.uint64(tab.yarn_seed[c]), k)
+            na = hair_free.active_hairs(L, nh, tp[ZE_MU], tp[ZE_SIG], seed, s, margin, hidx, hz1, hze)
+            for qq in range(na):
+                r0, r1, th1, pe = hair_params(tp, yseed, k, hidx[qq])
+                res = _hair_test(cv, tab, c, tp, k, r0, r1, th1, pe, hz1[qq], hze[qq], x, y, s, rho_k, limit, lo,
+                                 hi, za, zb, rf, eps, px, py, pz)
+                if res[0]:
+                    return _answer(c, 3, res[1], res[2], res[3], tp, tab)
+    return OUTSIDE
+
+
+@njit(cache=True, inline="always")
+def _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach, i, lo, hi, za, zb, rf, eps, px, py, pz):
+    """(covered, kind, tangent) of regular fibre (k, j) (fi its global index): cross-section reach
+    test at s, Gauss-Newton under the sampled frames, exact frames within eps_c of the surface."""
+    Rj = tab.fib_R[fi]
+    th = tab.fib_th[fi]
+    th0 = tab.fib_th0[fi]
+    X, Y, kind = regular_xy(tp, yseed, k, j, Rj, th, th0, s)
+    dx = x - X
+    dy = y - Y
+    if dx * dx + dy * dy >= reach * reach:
+        return False, 0, 0.0, 0.0, 0.0
+    Dm, zs, tx, ty, tz, kind = regular_closest_s(tab.fs_s, tab.fs_frame, lo, hi, i, za, zb, tp, yseed, k, j, Rj, th, th0, px, py, pz, s,
+                                                 GN_TOL * rf)
+    if Dm >= rf + eps:
+        return False, 0, 0.0, 0.0, 0.0
+    if Dm > rf - eps:  # too close to the surface to decide with the sampled frames
+        inside, kind = _exact_regular(cv, c, tp, yseed, k, j, Rj, th, th0, rf, eps, px, py, pz, zs)
+        if not inside:
+            return False, 0, 0.0, 0.0, 0.0
+    return True, kind, tx, ty, tz
+
+
+@njit(cache=True, inline="always")
+def _hair_test(cv, tab, c, tp, k, r0, r1, th1, pe, z1, ze, x, y, s, rho_k, limit, lo, hi, za, zb, rf, eps, px, py,
+               pz):
+    """(covered, tangent) of a hair of ply k with shape (r0, r1, th1, pe) and z extent (z1, ze)."""
+    if _hair_quick_reject(tp, r0, r1, z1, ze, rho_k, s, limit):
+        return False, 0.0, 0.0, 0.0
+    lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, s, limit)
+    if lb > limit:
+        return False, 0.0, 0.0, 0.0
+    Dm, ts, tx, ty, tz = hair_closest_s(tab.fs_s, tab.fs_frame, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, px, py, pz, bt,
+                                     GN_TOL * rf)
+    if Dm >= rf + eps:
+        return False, 0.0, 0.0, 0.0
+    if Dm > rf - eps and not _exact_hair(cv, c, tp, k, r0, r1, th1, pe, z1, ze, rf, eps, px, py, pz, ts):
+        return False, 0.0, 0.0, 0.0
+    return True, tx, ty, tz
 
 
 @njit(cache=True)
-def yarn_bound(tab, c):
-    """(radius bound around the yarn axis, density bound) of yarn c: for tight delta tracking."""
-    return tab.yarn_extent[c], tab.tparams[tab.yarn_type[c], DENSITY]
+def lookup_point(cv, tab, px, py, pz):
+    """seed 000 Algorithm 1 at fabric-space point p; see the module doc for the result."""
+    lo3 = tab.fg_lo
+    cell = tab.fg_cell[0]
+    dims = tab.fg_dims
+    fx = (px - lo3[0]) / cell
+    fy = (py - lo3[1]) / cell
+    fz = (pz - lo3[2]) / cell
+    if not (0.0 <= fx < dims[0] and 0.0 <= fy < dims[1] and 0.0 <= fz < dims[2]):
+        return OUTSIDE  # the grid covers every yarn's extent
+    g = (int(fz) * dims[1] + int(fy)) * dims[0] + int(fx)
+    q = tab.fg_start[g]
+    qe = tab.fg_start[g + 1]
+    fr = tab.fs_frame
+    while q < qe:
+        c = tab.fg_yarn[q]
+        best = 1e300
+        bq = -1
+        bt = 0.0
+        while q < qe and tab.fg_yarn[q] == c:  # every run of yarn c in the cell
+            for ch in range(tab.fg_a[q], tab.fg_b[q]):
+                lb, t = chord_lower_bound(fr, tab.kn_idx, tab.kn_sag, ch, px, py, pz)
+                if lb < best:
+                    best = lb
+                    bq = ch
+                    bt = t
+            q += 1
+        eps = tab.yarn_eps[c]
+        bound = tab.yarn_extent[c] + 2.0 * eps
+        if best >= bound:
+            continue
+        # foot point: Newton from the nearest chord, bracketed by its neighbours
+        k0 = tab.kn_off[c]
+        k1 = tab.kn_off[c + 1] - 1
+        ia = tab.kn_idx[bq]
+        ib = tab.kn_idx[bq + 1]
+        s0 = tab.fs_s[ia] + bt * (tab.fs_s[ib] - tab.fs_s[ia])
+        sa = tab.fs_s[tab.kn_idx[max(bq - 1, k0)]]
+        sb = tab.fs_s[tab.kn_idx[min(bq + 2, k1)]]
+        s, i, d2 = foot_point(tab.fs_s, fr, tab.fs_off[c], tab.fs_off[c + 1], s0, sa, sb, px, py, pz,
+                              1e-6 * tab.yarn_eps[c] + 1e-12 * bound)
+        if d2 >= bound * bound:
+            continue
+        res = yarn_lookup(cv, tab, c, s, i, px, py, pz)
+        if res[0]:
+            return res
+    return OUTSIDE
 
 
 @njit(cache=True, parallel=True)
@@ -618,11 +598,7 @@ def lookup_points(cv, tab, pts):
     density = np.zeros(N)
     albedo = np.zeros((N, 3))
     for i in prange(N):
-        p = np.empty(3)
-        p[0] = pts[i, 0]
-        p[1] = pts[i, 1]
-        p[2] = pts[i, 2]
-        res = lookup_point(cv, tab, p)
+        res = lookup_point(cv, tab, pts[i, 0], pts[i, 1], pts[i, 2])
         inside[i] = res[0]
         yarn[i] = res[1]
         kind[i] = res[2]

@@ -1,20 +1,23 @@
 """Realization-minimizing tables (seed 000 §4): what a lookup needs besides the yarn curves.
 
 Regular fibres (§4.3, Fig. 7, footnote 2), per yarn type and ply: each fibre's trajectory in the
-twist-compensated unit disc, T_j = {R (cos theta_j, sin theta_j): R in [rho_min R_j, R_hi]}
-(R_hi = rho_max R_j, or the loop bound when loops can occur), stored as (R_j, theta_j, theta0_j)
-plus the radial interval [r_lo, r_hi] grown by the fibre-radius margin m; the azimuth [0, 2 pi) is
-cut into B equal bins and bin b lists (CSR, ascending fibre index) every fibre whose trajectory
-comes within m of the bin's wedge. m = K (r_fibre + pad) / min(e_short, e_long) in unit-disc units,
-with K bounding the ratio between a point's cross-sectional distance to a fibre and its true
-distance and pad (``type_pad``) the slack of the lookups' sampled frames.
+twist-compensated unit disc, T_j = {R (cos theta_j, sin theta_j): R in [rho_min R_j, rho_max R_j]},
+stored as (R_j, theta_j, theta0_j) plus the radial interval [r_lo, r_hi] grown by the fibre-radius
+margin m; the azimuth [0, 2 pi) is cut into B equal bins and bin b lists (CSR, ascending fibre
+index; also as a bit mask per fibre) every fibre whose trajectory comes within m of the bin's
+wedge. m = K (r_fibre + pad) / min(e_short, e_long) in unit-disc units, with K bounding the ratio
+between a point's cross-sectional distance to a fibre and its true distance and pad
+(``type_pad``) the slack of the lookups' sampled frames.
 
-Loops (§4.4.1, §5.3) need no storage: every migration cycle's mutation is a consistent random
-number of (yarn, ply, fibre, cycle) evaluated on the fly (yarn_model.loop_unit_radius).
+Loops (§4.4.1, §5.3): every migration cycle's mutation is a consistent random number of (yarn,
+ply, fibre, cycle) (yarn_model.loop_unit_radius). A loop leaves its fibre's [r_lo, r_hi], so per
+yarn and ply the mutated cycles are listed (fibre, U_loop; ascending fibre) in fixed-width z-bins
+(half a migration cycle) holding every loop whose cycle, grown by the lookups' z window, meets
+the bin: a lookup tests the loops of its z-bin whose fibre is in its azimuth bin.
 
-Hairs (§4.4.2), per yarn and ply: hybrid mode stores (z1, ze) of every hair and cuts z at the ends
-min(z1, z2) - m_z, max(z1, z2) + m_z of every hair; each z-bin lists (ascending hair index) the
-hairs active across the whole bin. The realization-free mode stores nothing per hair
+Hairs (§4.4.2), per yarn and ply: hybrid mode stores (z1, ze) and the shape (r0, r1, theta1,
+pe) of every hair and cuts z at the ends min(z1, z2) - m_z, max(z1, z2) + m_z of every hair; each
+z-bin lists (ascending hair index) the hairs active across the whole bin. The realization-free mode stores nothing per hair
 (hair_free.active_hairs). Both come from the same quad-tree, so they hold the same hairs.
 
 ``Tables`` is a namedtuple of flat arrays usable inside numba kernels (see lookup.py).
@@ -27,13 +30,12 @@ from numba import njit
 
 from stages.core.rng import hash_u64
 
-from . import hair_free
-from .frame_samples import sample_all
 from stages.core.curves import curve_frame_at
 
-from .yarn_model import (E_LONG, E_SHORT, FIBER_RADIUS, HAIR_DENSITY, PLY_NUM, RHO_MAX,
-                         RHO_MIN, U_MAX, USE_FLYAWAYS, USE_MIGRATION, P_LOOP, ZE_MU, ZE_SIG, extent_bound,
-                         sample_regular_fibers, transverse_speed_bound)
+from . import hair_free
+from .yarn_model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, P_LOOP, PLY_NUM, RHO_MAX,
+                         RHO_MIN, S_MIG, USE_FLYAWAYS, USE_MIGRATION, ZE_MU, ZE_SIG, cycle_of, extent_bound,
+                         hair_params, loop_unit_radius, sample_regular_fibers, transverse_speed_bound)
 
 Tables = namedtuple("Tables", [
     "tparams",          # (T, NPARAM) float64 packed yarn types (yarn_model indices)
@@ -54,6 +56,7 @@ Tables = namedtuple("Tables", [
     "hair_count",       # (S,) int64 hairs of slot g
     "hair_off",         # (S+1,) int64 hybrid: hair h of slot g at hair_off[g] + h
     "hair_z1", "hair_ze",   # float64 hybrid: pre-generated z extents
+    "hair_r0", "hair_r1", "hair_th1", "hair_pe",   # float64 hybrid: pre-generated shape (yarn_model.hair_params)
     "hb_zoff",          # (S+1,) int64: breakpoints of slot g at hb_z[hb_zoff[g]:hb_zoff[g+1]]
     "hb_z",             # float64 breakpoints
     "hb_start",         # CSR over bins (bin (g, b) at hb_zoff[g] - g + b), into hb_items
@@ -61,14 +64,33 @@ Tables = namedtuple("Tables", [
     "hair_mode",        # (1,) int64: 0 hybrid, 1 realization-free
     "yarn_length",      # (Y,) float64 arc length of each yarn curve (yarn-space z range)
     "max_extent",       # (1,) float64 largest yarn_extent (candidate-yarn search radius)
+    "fib_mask",         # (F,) uint64 bit b set when the fibre is listed in azimuth bin b (all set for > 64 bins)
+    "lp_off",           # (S+1,) int64: loops (mutated migration cycles) of slot g at lp_off[g]:lp_off[g+1]
+    "lp_fib", "lp_U",   # int32 fibre index within the ply, float64 the cycle's U_loop (ascending fibre, cycle)
+    "lp_cyc",           # int32 the loop's migration cycle
+    "lz_off",           # (S+1,) int64: loop z-bins of slot g are lz_off[g] .. lz_off[g+1]-1
+    "lz_h",             # (S,) float64 z-bin width of slot g
+    "lz_start",         # CSR over loop z-bins (global bin index), into lz_items
+    "lz_items",         # int32 loop index within the slot (ascending)
+    "type_pad",         # (T,) float64 slack (beyond the fibre radius) the azimuth bins' margin allows for
+    "yarn_kappa",       # (Y,) float64 curvature bound of each yarn curve (x 1.25 margin)
+    # ---- derived when loaded (derive_lookup_accel; never stored): frame samples and chord grid
     "fs_off",           # (Y+1,) int64: frame samples of yarn c at fs_off[c]:fs_off[c+1] (frame_samples.py)
     "fs_s",             # float64 arc length of each frame sample
-    "fs_frame",         # (M, 12) float32 position, tangent, normal, binormal
-    "seg_fs",           # int64 per spline segment (global index): its first frame sample
-    "seg_fs_end",       # int64 per spline segment: its last frame sample (the next knot)
+    "fs_frame",         # (M, 12) float64 position, tangent, normal, binormal
     "yarn_eps",         # (Y,) float64 bound of |Eq. 7 with sampled frames - Eq. 7| within the extent
-    "type_pad",         # (T,) float64 slack (beyond the fibre radius) the azimuth bins' margin allows for
+    "kn_off",           # (Y+1,) int64: coarse knots of yarn c at kn_off[c]:kn_off[c+1]
+    "kn_idx",           # int64 frame-sample index of each coarse knot
+    "kn_sag",           # float64 sag bound of the coarse chord starting at each knot
+    "fg_lo", "fg_cell", "fg_dims",   # (3,), (1,), (3,) chord grid geometry
+    "fg_start",         # (cells+1,) int64 CSR into the runs
+    "fg_yarn", "fg_a", "fg_b",       # runs: yarn, coarse chords [a, b)
 ])
+DERIVED_FIELDS = ("fs_off", "fs_s", "fs_frame", "yarn_eps", "kn_off", "kn_idx", "kn_sag", "fg_lo", "fg_cell",
+                  "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b")
+STORED_FIELDS = tuple(f for f in Tables._fields if f not in DERIVED_FIELDS)
+PAD_FRACTION = 0.05      # type_pad in fibre radii: the bins' slack for the sampled frames' error
+FRAME_TOLERANCE = 0.01   # frame-sample error aimed at, in fibre radii (<= PAD_FRACTION / 3 keeps lookups binned)
 
 
 def type_key(seed: int, t: int) -> int:
@@ -87,13 +109,13 @@ def regular_tables(tp: np.ndarray, type_seed: int, K: float, nbins: int, pad: fl
     m = K * (tp[FIBER_RADIUS] + pad) / min(tp[E_SHORT], tp[E_LONG])
     lo = (tp[RHO_MIN] if tp[USE_MIGRATION] else 1.0) * R
     hi_reg = (tp[RHO_MAX] if tp[USE_MIGRATION] else 1.0) * R
-    loops = tp[USE_FLYAWAYS] and tp[P_LOOP] > 0 and tp[USE_MIGRATION]
-    hi = np.maximum(hi_reg, tp[U_MAX]) if loops else hi_reg
+    hi = hi_reg  # loops (beyond R_hi) are found through the per-yarn loop lists
     reach = np.where(lo > m, np.arcsin(np.minimum(1.0, m / np.maximum(lo, 1e-300))), np.pi)
     width = 2 * np.pi / nbins
     centers = (np.arange(nbins) + 0.5) * width
     starts = [0]
     items = []
+    mask = np.zeros((P, N), np.uint64)
     for k in range(P):
         # circular distance from theta_j to the wedge of bin b
         d = np.abs((th[k][None, :] - centers[:, None] + np.pi) % (2 * np.pi) - np.pi) - 0.5 * width
@@ -102,8 +124,12 @@ def regular_tables(tp: np.ndarray, type_seed: int, K: float, nbins: int, pad: fl
             js = np.nonzero(inc[b])[0]
             items.append(js.astype(np.int32))
             starts.append(starts[-1] + len(js))
+            if nbins <= 64:
+                mask[k, js] |= np.uint64(1) << np.uint64(b)
+    if nbins > 64:
+        mask[:] = np.uint64(0xFFFFFFFFFFFFFFFF)
     return (R.ravel(), th.ravel(), th0.ravel(), (lo - m).ravel(), (hi + m).ravel(),
-            np.asarray(starts[1:], np.int64), np.concatenate(items) if items else np.zeros(0, np.int32))
+            np.asarray(starts[1:], np.int64), np.concatenate(items) if items else np.zeros(0, np.int32), mask.ravel())
 
 
 def hair_count(tp, L: float) -> int:
@@ -149,22 +175,91 @@ def _hair_items(b0, b1, start):
 
 
 @njit(cache=True)
+def yarn_loops(tp, yarn_seed, k, R, th, th0, L):
+    """Every mutated migration cycle (loop, §4.4.1) of ply k along a yarn of length L, ascending by
+    (fibre, cycle): (fibre (n,), U_loop (n,), z0 (n,), z1 (n,), cycle (n,)) with [z0, z1] the cycle's z range
+    clipped to [0, L]. Same random numbers as yarn_model.loop_unit_radius, so lookups and
+    realization see the same loops."""
+    N = R.shape[0]
+    cap = 16
+    fib = np.empty(cap, np.int32)
+    cy = np.empty(cap, np.int32)
+    U = np.empty(cap)
+    z0 = np.empty(cap)
+    z1 = np.empty(cap)
+    n = 0
+    if tp[USE_FLYAWAYS] == 0.0 or tp[P_LOOP] <= 0.0 or tp[USE_MIGRATION] == 0.0:
+        return fib[:0], U[:0], z0[:0], z1[:0], cy[:0]
+    w = tp[S_MIG] * 2.0 * math.pi / tp[ALPHA]  # migration phase per unit z
+    for j in range(N):
+        c0 = cycle_of(th0[j])
+        c1 = cycle_of(w * L + th0[j])
+        for cyc in range(c0, c1 + 1):
+            u = loop_unit_radius(tp, yarn_seed, k, j, R[j], th[j], th0[j], cyc)
+            if u <= 0.0:
+                continue
+            if n == cap:
+                cap *= 2
+                fib = _grow(fib, cap)
+                cy = _grow(cy, cap)
+                U = _grow(U, cap)
+                z0 = _grow(z0, cap)
+                z1 = _grow(z1, cap)
+            fib[n] = j
+            cy[n] = cyc
+            U[n] = u
+            z0[n] = max(0.0, (2.0 * math.pi * cyc - math.pi - th0[j]) / w)
+            z1[n] = min(L, (2.0 * math.pi * cyc + math.pi - th0[j]) / w)
+            n += 1
+    return fib[:n], U[:n], z0[:n], z1[:n], cy[:n]
+
+
+@njit(cache=True)
+def _grow(a, cap):
+    b = np.empty(cap, a.dtype)
+    b[:a.shape[0]] = a
+    return b
+
+
+def uniform_zbins(lo, hi, L, h):
+    """Fixed-width z-bins [b h, (b+1) h) over [0, L]; bin b lists (CSR, ascending) every entry whose
+    [lo, hi] meets it. Returns (nbins, start (nbins+1,), items int32)."""
+    nb = max(1, int(math.ceil(L / h)))
+    b0 = np.clip(np.floor(lo / h).astype(np.int64), 0, nb - 1)
+    b1 = np.clip(np.floor(hi / h).astype(np.int64), 0, nb - 1)
+    counts = np.zeros(nb + 1, np.int64)
+    np.add.at(counts, b0, 1)
+    np.add.at(counts, b1 + 1, -1)
+    per_bin = np.cumsum(counts)[:nb]
+    start = np.zeros(nb + 1, np.int64)
+    start[1:] = np.cumsum(per_bin)
+    return nb, start, _hair_items(b0, b1, start)
+
+
+@njit(cache=True)
 def hair_node_seed_nb(yarn_seed, k):
     return hash_u64(yarn_seed, k, 31)
 
 
 def table_bytes(tab: Tables) -> dict:
     """Bytes of the tables by part: regular (fibre trajectories and bins), hair, loop (none)."""
-    reg = sum(getattr(tab, n).nbytes for n in ("fib_R", "fib_th", "fib_th0", "fib_rlo", "fib_rhi",
+    reg = sum(getattr(tab, n).nbytes for n in ("fib_R", "fib_th", "fib_th0", "fib_rlo", "fib_rhi", "fib_mask",
                                                 "bin_start", "bin_items", "tparams", "type_K", "type_mz",
                                                 "type_fib_off", "type_nbins", "type_bin_off"))
     hair = sum(getattr(tab, n).nbytes for n in ("hair_count", "hair_off", "hair_z1", "hair_ze", "hb_zoff",
-                                                 "hb_z", "hb_start", "hb_items"))
+                                                 "hb_z", "hb_start", "hb_items", "hair_r0", "hair_r1", "hair_th1",
+                                                 "hair_pe"))
+    loop = sum(getattr(tab, n).nbytes for n in ("lp_off", "lp_fib", "lp_U", "lp_cyc", "lz_off", "lz_h", "lz_start",
+                                                 "lz_items"))
     yarn = sum(getattr(tab, n).nbytes for n in ("yarn_type", "yarn_seed", "yarn_extent", "yarn_gmin",
                                                  "yarn_albedo", "yarn_ply_off", "yarn_length", "max_extent",
-                                                 "yarn_eps", "hair_mode"))
-    frames = sum(getattr(tab, n).nbytes for n in ("fs_off", "fs_s", "fs_frame", "seg_fs", "seg_fs_end"))
-    return {"regular": int(reg), "hair": int(hair), "loop": 0, "per_yarn": int(yarn), "frames": int(frames)}
+                                                 "yarn_kappa", "hair_mode", "type_pad"))
+    return {"regular": int(reg), "hair": int(hair), "loop": int(loop), "per_yarn": int(yarn)}
+
+
+def accel_bytes(tab: Tables) -> int:
+    """Bytes of the structures derived at load time (frame samples, coarse knots, chord grid)."""
+    return int(sum(getattr(tab, n).nbytes for n in DERIVED_FIELDS))
 
 
 @njit(cache=True)
@@ -185,12 +280,10 @@ def curvature_max(cv, c, step):
     return 1.25 * best
 
 
-def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=0, fold_cap=0.5,
-                 frame_samples=False, frame_tolerance=0.1):
+def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=0, fold_cap=0.5):
     """Tables for all yarns. tparams (T, NPARAM) packed types (U_MAX, HAIR_RMAX filled in),
-    yarn_type (Y,), yarn_albedo (Y, 3); frame_samples: also store sampled yarn frames
-    (frame_samples.py; faster lookups, more memory) with the error bound frame_tolerance aimed at,
-    in fibre radii (smaller: more samples, fewer exact fall-backs in the lookups).
+    yarn_type (Y,), yarn_albedo (Y, 3). The derived fields (DERIVED_FIELDS) are empty: fill them
+    with derive_lookup_accel before looking anything up.
     Returns (Tables, info dict with per-yarn diagnostics)."""
     T = tparams.shape[0]
     Y = len(yarn_type)
@@ -214,41 +307,16 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         K = (1.0 + np.sqrt(gmax[sel] ** 2 + v * v) / gmin[sel]).max() * 1.05
         type_K[t] = K
         type_mz[t] = 1.1 * tparams[t, FIBER_RADIUS] / gmin[sel].min()
-    # frame samples: step from the curvature so the sampling error stays near frame_tolerance fibre
-    # radii; the error is second order in the step, so steps are rescaled to the target (<= 3 rounds)
-    rf_y = np.array([tparams[yarn_type[c], FIBER_RADIUS] for c in range(Y)])
-    target = frame_tolerance * rf_y
-    k2 = kap * kap * ext + kap
-    rmin = 1e-3 * np.asarray(cv.radius[:Y], np.float64)
-    deltas = np.maximum(np.minimum(0.5 * np.asarray(cv.radius[:Y], np.float64),
-                                   np.sqrt(8.0 * target / np.maximum(k2, 1e-12))), rmin)
-    if frame_samples:
-        for attempt in range(3):
-            fs_off, fs_s, fs_fr, seg_fs, err = sample_all(cv, deltas, ext)
-            scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
-            yeps = 2.0 * err + 1.25 * kap * deltas * deltas / 8.0 + 8.0 * np.finfo(np.float32).eps * scale
-            over = (yeps > target) & (deltas > rmin)
-            if not over.any():
-                break
-            deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
-    else:
-        fs_off, fs_s, fs_fr = np.zeros(Y + 1, np.int64), np.zeros(0), np.zeros((0, 12), np.float32)
-        seg_fs, yeps = np.zeros(0, np.int64), np.zeros(Y)
-    seg_fs_end = np.zeros_like(seg_fs)
-    for c in range(Y if frame_samples else 0):
-        lo, hi = cv.offsets[c], cv.offsets[c + 1]
-        first = seg_fs[lo:hi]
-        used = first >= 0
-        nxt = np.concatenate([first[1:], [-1]])
-        end = np.where(nxt >= 0, nxt, fs_off[c + 1] - 1)
-        seg_fs[lo:hi] = np.where(used, first, fs_off[c + 1] - 1)
-        seg_fs_end[lo:hi] = np.where(used, end, fs_off[c + 1] - 1)
     fib = []
     type_pad = np.zeros(T)
     for t in range(T):
         sel = yarn_type == t
-        type_pad[t] = (3.0 * float(yeps[sel].max()) if sel.any() else 0.0) + 0.01 * tparams[t, FIBER_RADIUS]
+        type_pad[t] = PAD_FRACTION * tparams[t, FIBER_RADIUS]
         fib.append(regular_tables(tparams[t], type_key(seed, t), type_K[t], nbins, type_pad[t]))
+    # z margin of loop activity: with w + eps <= pad (binned lookups) every fibre point within the
+    # fibre radius of p has |z - s| <= hwin <= (max((1 + K)(rf + pad), m_z) + 2 pad) / g_min
+    loop_margin = np.array([(max((1.0 + type_K[t]) * (tparams[t, FIBER_RADIUS] + type_pad[t]), type_mz[t])
+                             + 2.0 * type_pad[t]) / gmin[c] for c, t in enumerate(yarn_type)])
     type_fib_off = np.zeros(T + 1, np.int64)
     type_bin_off = np.zeros(T + 1, np.int64)
     starts = [np.zeros(1, np.int64)]
@@ -270,6 +338,12 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
     hoff = np.zeros(S + 1, np.int64)
     hzoff = np.zeros(S + 1, np.int64)
     z1s, zes, bps, hstarts, hitems = [], [], [], [np.zeros(1, np.int64)], []
+    hshape = [np.zeros((0, 4))]
+    lp_off = np.zeros(S + 1, np.int64)
+    lz_off = np.zeros(S + 1, np.int64)
+    lz_h = np.zeros(S)
+    lfib, lU, lcyc, lstarts, litems = [], [], [], [np.zeros(1, np.int64)], []
+    litem_base = 0
     hitem_base = 0
     for c in range(Y):
         tp = tparams[yarn_type[c]]
@@ -283,6 +357,25 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
                 z1 = ze = bp = np.zeros(0)
                 st, it = np.zeros(1, np.int64), np.zeros(0, np.int32)
             hoff[g + 1] = hoff[g] + len(z1)
+            if len(z1):
+                hshape.append(np.array([hair_params(tp, np.uint64(ykeys[c]), k, h) for h in range(len(z1))]))
+            # loops of ply k, binned in z (fixed width: half a migration cycle)
+            t = yarn_type[c]
+            N = int(tp[FIBER_NUM])
+            fl = fib[t]
+            lf, lu, lz0, lz1, lcy = yarn_loops(tp, np.uint64(ykeys[c]), k, fl[0][k * N:(k + 1) * N],
+                                          fl[1][k * N:(k + 1) * N], fl[2][k * N:(k + 1) * N], L)
+            hz = 0.5 * tp[ALPHA] / max(tp[S_MIG], 1e-12)
+            lnb, lst, lit = uniform_zbins(lz0 - loop_margin[c], lz1 + loop_margin[c], L, hz)
+            lp_off[g + 1] = lp_off[g] + len(lf)
+            lz_off[g + 1] = lz_off[g] + lnb
+            lz_h[g] = hz
+            lfib.append(lf)
+            lU.append(lu)
+            lcyc.append(lcy)
+            lstarts.append(lst[1:] + litem_base)
+            litems.append(lit)
+            litem_base += len(lit)
             hzoff[g + 1] = hzoff[g] + len(bp) if len(bp) else hzoff[g] + 1
             if not len(bp):
                 bp = np.zeros(1)  # one breakpoint, no bins
@@ -293,15 +386,70 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
             hitems.append(it)
             hitem_base += len(it)
     cat = lambda xs, dt: np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(0), dtype=dt)
-    tab = Tables(
-        np.ascontiguousarray(tparams, np.float64), type_K, type_mz, type_fib_off,
-        cat([f[0] for f in fib], np.float64), cat([f[1] for f in fib], np.float64), cat([f[2] for f in fib], np.float64),
-        cat([f[3] for f in fib], np.float64), cat([f[4] for f in fib], np.float64),
-        np.full(T, nbins, np.int64), type_bin_off, cat(starts, np.int64), cat(items, np.int32),
-        np.ascontiguousarray(yarn_type, np.int32), ykeys, ext, gmin, np.ascontiguousarray(yarn_albedo, np.float64),
-        ply_off, hcount, hoff, cat(z1s, np.float64), cat(zes, np.float64), hzoff, cat(bps, np.float64),
-        cat(hstarts, np.int64), cat(hitems, np.int32), np.array([hair_mode], np.int64),
-        np.ascontiguousarray(cv.curve_length[:Y], np.float64), np.array([ext.max() if Y else 0.0]),
-        fs_off, fs_s, fs_fr, seg_fs, seg_fs_end, yeps, type_pad)
-    info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap, "eps": yeps}
+    shape = np.ascontiguousarray(np.concatenate(hshape), np.float64)
+    stored = dict(
+        tparams=np.ascontiguousarray(tparams, np.float64), type_K=type_K, type_mz=type_mz, type_fib_off=type_fib_off,
+        fib_R=cat([f[0] for f in fib], np.float64), fib_th=cat([f[1] for f in fib], np.float64),
+        fib_th0=cat([f[2] for f in fib], np.float64), fib_rlo=cat([f[3] for f in fib], np.float64),
+        fib_rhi=cat([f[4] for f in fib], np.float64), type_nbins=np.full(T, nbins, np.int64),
+        type_bin_off=type_bin_off, bin_start=cat(starts, np.int64), bin_items=cat(items, np.int32),
+        yarn_type=np.ascontiguousarray(yarn_type, np.int32), yarn_seed=ykeys, yarn_extent=ext, yarn_gmin=gmin,
+        yarn_albedo=np.ascontiguousarray(yarn_albedo, np.float64), yarn_ply_off=ply_off, hair_count=hcount,
+        hair_off=hoff, hair_z1=cat(z1s, np.float64), hair_ze=cat(zes, np.float64),
+        hair_r0=np.ascontiguousarray(shape[:, 0]), hair_r1=np.ascontiguousarray(shape[:, 1]),
+        hair_th1=np.ascontiguousarray(shape[:, 2]), hair_pe=np.ascontiguousarray(shape[:, 3]),
+        hb_zoff=hzoff, hb_z=cat(bps, np.float64), hb_start=cat(hstarts, np.int64), hb_items=cat(hitems, np.int32),
+        hair_mode=np.array([hair_mode], np.int64), yarn_length=np.ascontiguousarray(cv.curve_length[:Y], np.float64),
+        max_extent=np.array([ext.max() if Y else 0.0]), fib_mask=cat([f[7] for f in fib], np.uint64),
+        lp_off=lp_off, lp_fib=cat(lfib, np.int32), lp_U=cat(lU, np.float64), lp_cyc=cat(lcyc, np.int32), lz_off=lz_off, lz_h=lz_h,
+        lz_start=cat(lstarts, np.int64), lz_items=cat(litems, np.int32),
+        type_pad=type_pad, yarn_kappa=np.ascontiguousarray(kap, np.float64))
+    tab = Tables(**stored, **dict(zip(DERIVED_FIELDS, _empty_accel(Y))))
+    info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap}
     return tab, info
+
+
+def _empty_accel(Y):
+    z, zi = np.zeros(0), np.zeros(0, np.int64)
+    return (np.zeros(Y + 1, np.int64), z, np.zeros((0, 12)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
+            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi)
+
+
+def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
+    """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
+    eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
+    measured error, <= 3 rounds; the error is second order in the step), coarse knots about half
+    an extent apart, and the chord grid (cells half the largest extent, grown to stay under
+    max_cells). Deterministic: depends on the curves and the stored tables only."""
+    from .frame_samples import chord_grid, coarse_knots, sample_all
+
+    Y = len(tab.yarn_type)
+    if Y == 0:
+        return tab
+    ext = np.asarray(tab.yarn_extent, np.float64)
+    kap = np.asarray(tab.yarn_kappa, np.float64)
+    rf_y = tab.tparams[tab.yarn_type, FIBER_RADIUS]
+    target = tolerance * rf_y
+    k2 = kap * kap * ext + kap
+    radius = np.asarray(cv.radius[:Y], np.float64)
+    rmin = 1e-3 * radius
+    deltas = np.maximum(np.minimum(0.5 * radius, np.sqrt(8.0 * target / np.maximum(k2, 1e-12))), rmin)
+    for attempt in range(3):
+        fs_off, fs_s, fs_fr, err = sample_all(cv, deltas, ext)
+        scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
+        yeps = 2.0 * err + 1e-12 * scale
+        over = (yeps > target) & (deltas > rmin)
+        if not over.any():
+            break
+        deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
+    mean_step = float(np.mean(deltas))
+    stride = max(1, int(0.5 * float(ext.min()) / mean_step))
+    kn_off, kn_idx, kn_sag = coarse_knots(fs_s, fs_fr, fs_off, stride)
+    lo, hi = fs_fr[:, :3].min(0) - ext.max(), fs_fr[:, :3].max(0) + ext.max()
+    cell = 0.5 * float(ext.max())
+    while np.prod(np.ceil((hi - lo) / cell)) > max_cells:
+        cell *= 1.25
+    glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
+    return tab._replace(fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
+                        kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
+                        fg_yarn=gyarn, fg_a=ga, fg_b=gb)

@@ -7,11 +7,16 @@ albedo; the yarn type gives the SGGX roughness. Nothing is realized.
 ProceduralMedium fields: ``cv`` (``stages.core.curves.Curves`` of the yarns artifact) and ``tab``
 (``stages.procedural.tables.Tables``).
 
-Majorants: ``yarn_capsules(cv, tab, step_frac)`` covers each yarn's tube (every fibre surface lies
-within ``yarn_extent`` of the axis) with capsules between axis points spaced at most
-step_frac x extent in arc length; a capsule's radius is extent + half the spacing (any curve point
-between two samples lies within half the arc length of one of them), its majorant the yarn's
-density bound (``lookup.yarn_bound``). Outside every tube the majorant is zero.
+Majorants: ``fiber_capsules(cv, tab, step_frac)`` gives capsules that hold every fibre surface,
+each carrying its yarn's density (the majorant grid takes the largest bound of the capsules that
+reach a cell; zero elsewhere): the *core* tube of the regular fibres (radius ply_radius + rho_max
+R_max max(e_short, e_long) + the fibre radius, far inside the hair extent) as capsules between axis
+points spaced step_frac x that radius apart (radius + half the spacing: any curve point between
+two samples lies within half the arc length of one), plus every loop cycle and every stored hair
+(hybrid mode) as a chain of capsules along its centre curve (Eq. 7 with the sampled frames;
+radius: fibre radius + half a sample step times the curve's fabric-space speed bound + 2 eps_c).
+In the realization-free hair mode (nothing stored per hair) the yarn's full extent tube
+(``yarn_extent``, hairs included) stands in for the core tube.
 """
 from collections import namedtuple
 
@@ -19,9 +24,14 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
+import math
+
 from stages.core.curves import curve_point_at
-from stages.procedural.lookup import lookup_point, yarn_bound
-from stages.procedural.yarn_model import ROUGHNESS
+from stages.procedural.frame_samples import eq7, frame_at
+from stages.procedural.lookup import lookup_point
+from stages.procedural.yarn_model import (ALPHA, DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM,
+                                          PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, S_MIG, U_MAX, USE_MIGRATION, YARN_ALPHA,
+                                          hair_point, regular_xy)
 
 from .medium import is_source, medium_lookup
 
@@ -30,11 +40,7 @@ ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
 @njit(cache=True)
 def procedural_lookup(med, x, y, z):
-    p = np.empty(3)
-    p[0] = x
-    p[1] = y
-    p[2] = z
-    r = lookup_point(med.cv, med.tab, p)
+    r = lookup_point(med.cv, med.tab, x, y, z)
     if not r[0]:
         return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
     rough = med.tab.tparams[med.tab.yarn_type[r[1]], ROUGHNESS]
@@ -48,36 +54,148 @@ def _procedural_overload(med, x, y, z):
 
 
 @njit(cache=True)
-def _count_pieces(cv, tab, step_frac):
-    n = 0
-    for c in range(cv.curve_length.shape[0]):
-        ext, _ = yarn_bound(tab, c)
-        step = max(step_frac * ext, 1e-12)
-        n += max(1, int(np.ceil(cv.curve_length[c] / step)))
-    return n
+def _core_radius(tp):
+    U = tp[R_MAX] * (tp[RHO_MAX] if tp[USE_MIGRATION] != 0.0 else 1.0)
+    return tp[PLY_RADIUS] + U * max(tp[E_SHORT], tp[E_LONG]) + tp[FIBER_RADIUS]
 
 
 @njit(cache=True)
-def yarn_capsules(cv, tab, step_frac):
-    """(a (K, 3), b (K, 3), radius (K,), bound (K,)) capsules covering every yarn tube."""
-    n = _count_pieces(cv, tab, step_frac)
-    a = np.empty((n, 3))
-    b = np.empty((n, 3))
-    rad = np.empty(n)
-    bound = np.empty(n)
-    k = 0
-    for c in range(cv.curve_length.shape[0]):
-        ext, den = yarn_bound(tab, c)
+def _fabric_point(tab, lo, hi, i, x, y, z):
+    i, f = frame_at(tab.fs_s, tab.fs_frame, lo, hi, i, z)
+    X, Y, Z = eq7(f, x, y)
+    return i, X, Y, Z
+
+
+@njit(cache=True)
+def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
+    """(a (K, 3), b (K, 3), radius (K,), bound (K,)) capsules covering every fibre surface: core
+    tubes, loop cycles and (hybrid mode) hairs; in the realization-free mode each yarn's full
+    extent tube stands in for its hairs. Needs the tables' derived frame samples."""
+    ncap = 0
+    Y = cv.curve_length.shape[0]
+    # count
+    for c in range(Y):
+        tp = tab.tparams[tab.yarn_type[c]]
+        core = _core_radius(tp)
+        ext = tab.yarn_extent[c]
+        hair_tube = tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0
+        r_tube = ext if hair_tube else core
+        ncap += max(1, int(np.ceil(cv.curve_length[c] / max(step_frac * r_tube, 1e-12))))
+        rf = tp[FIBER_RADIUS]
+        N = int(tp[FIBER_NUM])
+        for k in range(int(tp[PLY_NUM])):
+            g = tab.yarn_ply_off[c] + k
+            for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
+                ncap += 1 + _loop_steps(tab, tp, c, e, tab.type_fib_off[tab.yarn_type[c]] + k * N + tab.lp_fib[e],
+                                        rf * loop_step_fibers)
+            if tab.hair_mode[0] == 0:
+                ncap += tab.hair_count[g] * (hair_samples - 1)
+    a = np.empty((ncap, 3))
+    b = np.empty((ncap, 3))
+    rad = np.empty(ncap)
+    bound = np.empty(ncap)
+    m = 0
+    for c in range(Y):
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        den = tp[DENSITY]
+        eps = tab.yarn_eps[c]
+        rf = tp[FIBER_RADIUS]
+        gmax = 2.0 - tab.yarn_gmin[c]
+        lo = tab.fs_off[c]
+        hi = tab.fs_off[c + 1]
         L = cv.curve_length[c]
-        m = max(1, int(np.ceil(L / max(step_frac * ext, 1e-12))))
-        h = L / m
+        core = _core_radius(tp)
+        hair_tube = tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0
+        r_tube = tab.yarn_extent[c] if hair_tube else core
+        nt = max(1, int(np.ceil(L / max(step_frac * r_tube, 1e-12))))
+        h = L / nt
         prev = curve_point_at(cv, c, 0.0)
-        for i in range(m):
-            nxt = curve_point_at(cv, c, min((i + 1) * h, L))
-            a[k] = prev
-            b[k] = nxt
-            rad[k] = ext + 0.5 * h
-            bound[k] = den
+        for q in range(nt):
+            nxt = curve_point_at(cv, c, min((q + 1) * h, L))
+            a[m] = prev
+            b[m] = nxt
+            rad[m] = r_tube + 0.5 * h + eps
+            bound[m] = den
             prev = nxt
-            k += 1
-    return a, b, rad, bound
+            m += 1
+        yseed = np.uint64(tab.yarn_seed[c])
+        N = int(tp[FIBER_NUM])
+        # fabric-space speed of a regular/loop fibre: g_max (axial) + its yarn-space transverse speed
+        vfib = gmax + _transverse_speed(tp)
+        fo = tab.type_fib_off[t]
+        for k in range(int(tp[PLY_NUM])):
+            g = tab.yarn_ply_off[c] + k
+            for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
+                j = tab.lp_fib[e]
+                fi = fo + k * N + j
+                z0, z1 = _loop_range(tab, tp, c, e, fi)
+                ns = _loop_steps(tab, tp, c, e, fi, rf * loop_step_fibers)
+                dz = (z1 - z0) / ns
+                x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z0)
+                i = lo
+                i, px, py, pz = _fabric_point(tab, lo, hi, i, x, y, z0)
+                for q in range(ns):
+                    z = min(z0 + (q + 1) * dz, z1)
+                    x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
+                    i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
+                    a[m, 0], a[m, 1], a[m, 2] = px, py, pz
+                    b[m, 0], b[m, 1], b[m, 2] = qx, qy, qz
+                    rad[m] = rf + 0.5 * vfib * dz + 2.0 * eps
+                    bound[m] = den
+                    px, py, pz = qx, qy, qz
+                    m += 1
+            if tab.hair_mode[0] == 0:
+                base = tab.hair_off[g]
+                for hh in range(base, base + tab.hair_count[g]):
+                    r0 = tab.hair_r0[hh]
+                    r1 = tab.hair_r1[hh]
+                    th1 = tab.hair_th1[hh]
+                    pe = tab.hair_pe[hh]
+                    z1 = tab.hair_z1[hh]
+                    ze = tab.hair_ze[hh]
+                    rm = max(r0, r1) + tp[PLY_RADIUS]
+                    speed = (abs(ze) * (1.0 + rm * 2.0 * math.pi / tp[YARN_ALPHA]) + abs(r1 - r0)
+                             + max(r0, r1) * abs(pe)) * max(gmax, 1.0)
+                    dt = 1.0 / (hair_samples - 1)
+                    i = lo
+                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, 0.0)
+                    i, px, py, pz = _fabric_point(tab, lo, hi, i, x, y, z)
+                    for q in range(hair_samples - 1):
+                        tq = min((q + 1) * dt, 1.0)
+                        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tq)
+                        i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
+                        a[m, 0], a[m, 1], a[m, 2] = px, py, pz
+                        b[m, 0], b[m, 1], b[m, 2] = qx, qy, qz
+                        rad[m] = rf + 0.5 * speed * dt + 2.0 * eps
+                        bound[m] = den
+                        px, py, pz = qx, qy, qz
+                        m += 1
+    return a[:m], b[:m], rad[:m], bound[:m]
+
+
+@njit(cache=True)
+def _transverse_speed(tp):
+    """yarn_model.transverse_speed_bound in numba: |d(x, y)/dz| of any regular or loop fibre."""
+    w_y = 2.0 * math.pi / tp[YARN_ALPHA]
+    w_f = 2.0 * math.pi / tp[ALPHA]
+    rmax = tp[U_MAX] * tp[E_LONG]
+    mig = 0.5 * tp[U_MAX] * tp[S_MIG] * w_f * tp[E_LONG] if tp[USE_MIGRATION] != 0.0 else 0.0
+    return w_y * tp[PLY_RADIUS] + (w_y + w_f) * rmax + mig
+
+
+@njit(cache=True)
+def _loop_range(tab, tp, c, e, fi):
+    """z range [z0, z1] of loop e (its migration cycle lp_cyc[e], clipped to the yarn)."""
+    w = tp[S_MIG] * 2.0 * math.pi / tp[ALPHA]  # migration phase per unit z
+    cyc = tab.lp_cyc[e]
+    th0 = tab.fib_th0[fi]
+    z0 = max(0.0, (2.0 * math.pi * cyc - math.pi - th0) / w)
+    z1 = min(tab.yarn_length[c], (2.0 * math.pi * cyc + math.pi - th0) / w)
+    return z0, z1
+
+
+@njit(cache=True)
+def _loop_steps(tab, tp, c, e, fi, step):
+    z0, z1 = _loop_range(tab, tp, c, e, fi)
+    return max(1, int(math.ceil((z1 - z0) / step)))
