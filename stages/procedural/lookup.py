@@ -47,6 +47,7 @@ from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_
 TWO_PI = 2.0 * math.pi
 MODEL_SLACK = 0.1  # exact-frame local model: distance error allowed before the exact check, in fibre radii
 HAIR_SAMPLES = 16
+FOOT_TOL = 1e-4  # foot-point Newton stops at steps below this x the fibre radius (w absorbs the rest)
 GN_TOL = 1e-5  # Gauss-Newton stops when a step moves the fibre point by less than this x the fibre radius
 OUTSIDE = (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
@@ -368,7 +369,7 @@ def _answer(c, kind, tx, ty, tz, tp, tab):
             tab.yarn_albedo[c, 2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i)."""
     t = tab.yarn_type[c]
@@ -475,24 +476,18 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
             base = tab.hair_off[g]
             for qq in range(tab.hb_start[zbin], tab.hb_start[zbin + 1]):
                 hh = base + tab.hb_items[qq]
-                res = _hair_test(cv, tab, c, tp, k, tab.hair_r0[hh], tab.hair_r1[hh], tab.hair_th1[hh],
+                res = _hair_test(cv, tab.fs_s, tab.fs_frame, c, tp, k, tab.hair_r0[hh], tab.hair_r1[hh], tab.hair_th1[hh],
                                  tab.hair_pe[hh], tab.hair_z1[hh], tab.hair_ze[hh], x, y, s, rho_k, limit, lo, hi, za,
                                  zb, rf, eps, px, py, pz)
                 if res[0]:
                     return _answer(c, 3, res[1], res[2], res[3], tp, tab)
         else:
-            margin = tab.type_mz[t] + (w + 2.0 * eps) / gmin
-            hidx = np.empty(nh, np.int64)
-            hz1 = np.empty(nh)
-            hze = np.empty(nh)
             seed = hair_node_seed_nb(np.uint64(tab.yarn_seed[c]), k)
-            na = hair_free.active_hairs(L, nh, tp[ZE_MU], tp[ZE_SIG], seed, s, margin, hidx, hz1, hze)
-            for qq in range(na):
-                r0, r1, th1, pe = hair_params(tp, yseed, k, hidx[qq])
-                res = _hair_test(cv, tab, c, tp, k, r0, r1, th1, pe, hz1[qq], hze[qq], x, y, s, rho_k, limit, lo,
-                                 hi, za, zb, rf, eps, px, py, pz)
-                if res[0]:
-                    return _answer(c, 3, res[1], res[2], res[3], tp, tab)
+            margin = tab.type_mz[t] + (w + 2.0 * eps) / gmin
+            res = _free_mode_hairs(cv, tab.fs_s, tab.fs_frame, c, tp, k, nh, yseed, seed, L, margin, x, y, s, rho_k,
+                                   limit, lo, hi, za, zb, rf, eps, px, py, pz)
+            if res[0]:
+                return _answer(c, 3, res[1], res[2], res[3], tp, tab)
     return OUTSIDE
 
 
@@ -520,7 +515,7 @@ def _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach, i, lo, hi, za
 
 
 @njit(cache=True, inline="always")
-def _hair_test(cv, tab, c, tp, k, r0, r1, th1, pe, z1, ze, x, y, s, rho_k, limit, lo, hi, za, zb, rf, eps, px, py,
+def _hair_test(cv, fs, fr, c, tp, k, r0, r1, th1, pe, z1, ze, x, y, s, rho_k, limit, lo, hi, za, zb, rf, eps, px, py,
                pz):
     """(covered, tangent) of a hair of ply k with shape (r0, r1, th1, pe) and z extent (z1, ze)."""
     if _hair_quick_reject(tp, r0, r1, z1, ze, rho_k, s, limit):
@@ -528,13 +523,32 @@ def _hair_test(cv, tab, c, tp, k, r0, r1, th1, pe, z1, ze, x, y, s, rho_k, limit
     lb, bt = _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, s, limit)
     if lb > limit:
         return False, 0.0, 0.0, 0.0
-    Dm, ts, tx, ty, tz = hair_closest_s(tab.fs_s, tab.fs_frame, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, px, py, pz, bt,
+    Dm, ts, tx, ty, tz = hair_closest_s(fs, fr, lo, hi, za, zb, tp, k, r0, r1, th1, pe, z1, ze, px, py, pz, bt,
                                      GN_TOL * rf)
     if Dm >= rf + eps:
         return False, 0.0, 0.0, 0.0
     if Dm > rf - eps and not _exact_hair(cv, c, tp, k, r0, r1, th1, pe, z1, ze, rf, eps, px, py, pz, ts):
         return False, 0.0, 0.0, 0.0
     return True, tx, ty, tz
+
+
+@njit(cache=True)
+def _free_mode_hairs(cv, fs, fr, c, tp, k, nh, yseed, seed, L, margin, x, y, s, rho_k, limit, lo, hi, za, zb, rf, eps,
+                     px, py, pz):
+    """Realization-free hair mode (Algorithm 3): the active hairs of ply k at s from the implicit
+    quad-tree (scratch arrays of the ply's hair count), then the same tests as the hybrid mode.
+    A function of its own so that yarn_lookup allocates nothing."""
+    hidx = np.empty(nh, np.int64)
+    hz1 = np.empty(nh)
+    hze = np.empty(nh)
+    na = hair_free.active_hairs(L, nh, tp[ZE_MU], tp[ZE_SIG], seed, s, margin, hidx, hz1, hze)
+    for qq in range(na):
+        r0, r1, th1, pe = hair_params(tp, yseed, k, hidx[qq])
+        res = _hair_test(cv, fs, fr, c, tp, k, r0, r1, th1, pe, hz1[qq], hze[qq], x, y, s, rho_k, limit, lo, hi, za, zb,
+                         rf, eps, px, py, pz)
+        if res[0]:
+            return res
+    return False, 0.0, 0.0, 0.0
 
 
 @njit(cache=True)
@@ -578,7 +592,7 @@ def lookup_point(cv, tab, px, py, pz):
         sa = tab.fs_s[tab.kn_idx[max(bq - 1, k0)]]
         sb = tab.fs_s[tab.kn_idx[min(bq + 2, k1)]]
         s, i, d2 = foot_point(tab.fs_s, fr, tab.fs_off[c], tab.fs_off[c + 1], s0, sa, sb, px, py, pz,
-                              1e-6 * tab.yarn_eps[c] + 1e-12 * bound)
+                              FOOT_TOL * tab.tparams[tab.yarn_type[c], FIBER_RADIUS])
         if d2 >= bound * bound:
             continue
         res = yarn_lookup(cv, tab, c, s, i, px, py, pz)
