@@ -42,7 +42,7 @@ from . import hair_free
 from .frame_samples import chord_lower_bound, eq7, foot_point, frame_at
 from .tables import hair_node_seed_nb
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
-                         ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, ply_frame, regular_xy)
+                         ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, hair_speed_bound, ply_frame, regular_xy)
 
 TWO_PI = 2.0 * math.pi
 MODEL_SLACK = 0.1  # exact-frame local model: distance error allowed before the exact check, in fibre radii
@@ -237,9 +237,7 @@ def _hair_prefilter(tp, k, r0, r1, th1, pe, z1, ze, x, y, z, limit):
             best = d2
             bt = t
     # speed bound of the hair in yarn space -> arc length per sample interval
-    rm = max(r0, r1) + tp[PLY_RADIUS]
-    speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
-    return math.sqrt(best) - 0.5 * speed * (tb - ta) / n, bt
+    return math.sqrt(best) - 0.5 * hair_speed_bound(tp, r0, r1, pe, ze) * (tb - ta) / n, bt
 
 
 # ------------------------------------------------------------------------------------------------

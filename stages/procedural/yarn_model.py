@@ -219,13 +219,21 @@ def hair_radius_bound(tp) -> float:
     return float(max(r0, r0 + re, 0.0))
 
 
-def transverse_speed_bound(tp) -> float:
+@njit(cache=True)
+def transverse_speed_bound(tp):
     """Upper bound of |d(x, y)/dz| of any regular or loop fibre in yarn space."""
-    w_y = 2 * math.pi / tp[YARN_ALPHA]
-    w_f = 2 * math.pi / tp[ALPHA]
+    w_y = 2.0 * math.pi / tp[YARN_ALPHA]
+    w_f = 2.0 * math.pi / tp[ALPHA]
     rmax = tp[U_MAX] * tp[E_LONG]
-    mig = 0.5 * tp[U_MAX] * tp[S_MIG] * w_f * tp[E_LONG] if tp[USE_MIGRATION] else 0.0
-    return float(w_y * tp[PLY_RADIUS] + (w_y + w_f) * rmax + mig)
+    mig = 0.5 * tp[U_MAX] * tp[S_MIG] * w_f * tp[E_LONG] if tp[USE_MIGRATION] != 0.0 else 0.0
+    return w_y * tp[PLY_RADIUS] + (w_y + w_f) * rmax + mig
+
+
+@njit(cache=True, inline="always")
+def hair_speed_bound(tp, r0, r1, pe, ze):
+    """Upper bound of the yarn-space speed |d(x, y, z)/dt| of a hair (Eq. 4 in the rotating ply frame)."""
+    rm = max(r0, r1) + tp[PLY_RADIUS]
+    return abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
 
 
 def extent_bound(tp) -> float:

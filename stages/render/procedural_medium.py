@@ -30,8 +30,8 @@ from stages.core.curves import curve_point_at
 from stages.procedural.frame_samples import eq7, frame_at
 from stages.procedural.lookup import lookup_point
 from stages.procedural.yarn_model import (ALPHA, DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM,
-                                          PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, S_MIG, U_MAX, USE_MIGRATION, YARN_ALPHA,
-                                          hair_point, regular_xy)
+                                          PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, S_MIG, USE_MIGRATION, hair_point,
+                                          hair_speed_bound, regular_xy, transverse_speed_bound)
 
 from .medium import is_source, medium_lookup
 
@@ -122,7 +122,7 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
         yseed = np.uint64(tab.yarn_seed[c])
         N = int(tp[FIBER_NUM])
         # fabric-space speed of a regular/loop fibre: g_max (axial) + its yarn-space transverse speed
-        vfib = gmax + _transverse_speed(tp)
+        vfib = gmax + transverse_speed_bound(tp)
         fo = tab.type_fib_off[t]
         for k in range(int(tp[PLY_NUM])):
             g = tab.yarn_ply_off[c] + k
@@ -154,9 +154,7 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
                     pe = tab.hair_pe[hh]
                     z1 = tab.hair_z1[hh]
                     ze = tab.hair_ze[hh]
-                    rm = max(r0, r1) + tp[PLY_RADIUS]
-                    speed = (abs(ze) * (1.0 + rm * 2.0 * math.pi / tp[YARN_ALPHA]) + abs(r1 - r0)
-                             + max(r0, r1) * abs(pe)) * max(gmax, 1.0)
+                    speed = hair_speed_bound(tp, r0, r1, pe, ze) * max(gmax, 1.0)
                     dt = 1.0 / (hair_samples - 1)
                     i = lo
                     x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, 0.0)
@@ -172,16 +170,6 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
                         px, py, pz = qx, qy, qz
                         m += 1
     return a[:m], b[:m], rad[:m], bound[:m]
-
-
-@njit(cache=True)
-def _transverse_speed(tp):
-    """yarn_model.transverse_speed_bound in numba: |d(x, y)/dz| of any regular or loop fibre."""
-    w_y = 2.0 * math.pi / tp[YARN_ALPHA]
-    w_f = 2.0 * math.pi / tp[ALPHA]
-    rmax = tp[U_MAX] * tp[E_LONG]
-    mig = 0.5 * tp[U_MAX] * tp[S_MIG] * w_f * tp[E_LONG] if tp[USE_MIGRATION] != 0.0 else 0.0
-    return w_y * tp[PLY_RADIUS] + (w_y + w_f) * rmax + mig
 
 
 @njit(cache=True)
