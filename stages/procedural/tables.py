@@ -153,13 +153,8 @@ def hybrid_hairs(tp, L: float, yarn_seed: int, k: int, margin: float):
     # hair h is active over bin b when lo_h <= bp[b] and hi_h >= bp[b + 1]
     b0 = np.searchsorted(bp, lo)            # first bin starting at lo
     b1 = np.searchsorted(bp, hi) - 1        # last bin ending at hi
-    counts = np.zeros(nb + 1, np.int64)
-    np.add.at(counts, b0, 1)
-    np.add.at(counts, b1 + 1, -1)
-    per_bin = np.cumsum(counts)[:nb]
-    start = np.zeros(nb + 1, np.int64)
-    start[1:] = np.cumsum(per_bin)
-    return z1, ze, bp, start, _hair_items(b0, b1, start)
+    start, items = _bin_ranges_csr(b0, b1, nb)
+    return z1, ze, bp, start, items
 
 
 @njit(cache=True)
@@ -227,13 +222,18 @@ def uniform_zbins(lo, hi, L, h):
     nb = max(1, int(math.ceil(L / h)))
     b0 = np.clip(np.floor(lo / h).astype(np.int64), 0, nb - 1)
     b1 = np.clip(np.floor(hi / h).astype(np.int64), 0, nb - 1)
+    start, items = _bin_ranges_csr(b0, b1, nb)
+    return nb, start, items
+
+
+def _bin_ranges_csr(b0, b1, nb):
+    """CSR (start (nb+1,), items int32) of entries listed in every bin b0[e]..b1[e], ascending."""
     counts = np.zeros(nb + 1, np.int64)
     np.add.at(counts, b0, 1)
     np.add.at(counts, b1 + 1, -1)
-    per_bin = np.cumsum(counts)[:nb]
     start = np.zeros(nb + 1, np.int64)
-    start[1:] = np.cumsum(per_bin)
-    return nb, start, _hair_items(b0, b1, start)
+    start[1:] = np.cumsum(np.cumsum(counts)[:nb])
+    return start, _hair_items(b0, b1, start)
 
 
 @njit(cache=True)
