@@ -59,6 +59,16 @@ def _core_radius(tp):
     return tp[PLY_RADIUS] + U * max(tp[E_SHORT], tp[E_LONG]) + tp[FIBER_RADIUS]
 
 
+@njit(cache=True, inline="always")
+def _put_capsule(a, b, rad, bound, m, px, py, pz, qx, qy, qz, r, den):
+    """Write capsule m (segment p-q, radius r, majorant den); returns m + 1."""
+    a[m, 0], a[m, 1], a[m, 2] = px, py, pz
+    b[m, 0], b[m, 1], b[m, 2] = qx, qy, qz
+    rad[m] = r
+    bound[m] = den
+    return m + 1
+
+
 @njit(cache=True)
 def _fabric_point(tab, lo, hi, i, x, y, z):
     i, f = frame_at(tab.fs_s, tab.fs_frame, lo, hi, i, z)
@@ -139,12 +149,8 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
                     z = min(z0 + (q + 1) * dz, z1)
                     x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
                     i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
-                    a[m, 0], a[m, 1], a[m, 2] = px, py, pz
-                    b[m, 0], b[m, 1], b[m, 2] = qx, qy, qz
-                    rad[m] = rf + 0.5 * vfib * dz + 2.0 * eps
-                    bound[m] = den
+                    m = _put_capsule(a, b, rad, bound, m, px, py, pz, qx, qy, qz, rf + 0.5 * vfib * dz + 2.0 * eps, den)
                     px, py, pz = qx, qy, qz
-                    m += 1
             if tab.hair_mode[0] == 0:
                 base = tab.hair_off[g]
                 for hh in range(base, base + tab.hair_count[g]):
@@ -163,12 +169,9 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
                         tq = min((q + 1) * dt, 1.0)
                         x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tq)
                         i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
-                        a[m, 0], a[m, 1], a[m, 2] = px, py, pz
-                        b[m, 0], b[m, 1], b[m, 2] = qx, qy, qz
-                        rad[m] = rf + 0.5 * speed * dt + 2.0 * eps
-                        bound[m] = den
+                        m = _put_capsule(a, b, rad, bound, m, px, py, pz, qx, qy, qz,
+                                         rf + 0.5 * speed * dt + 2.0 * eps, den)
                         px, py, pz = qx, qy, qz
-                        m += 1
     return a[:m], b[:m], rad[:m], bound[:m]
 
 
