@@ -119,6 +119,55 @@ def test_loop_lists_hold_every_mutated_cycle():
         assert set(items[start[b]:start[b + 1]].tolist()) >= meets
 
 
+def test_scan_bounds_hold_their_items(built):
+    """The lookups' derived shortcuts (tables.scan_bounds, hair_box) against the items they
+    summarise: each ply's radius range holds every fibre's [r_lo, r_hi], each loop z-bin's range
+    every listed loop's (r_lo, U_loop), each hair's box its sampled z and radius; and fib_v bounds
+    the transverse speed of regular_xy, finite differences along each fibre's regular cycles."""
+    cv, tab, _ = load_tables(built / "tables.zarr")
+    for t in range(len(tab.type_K)):
+        P, N = int(tab.tparams[t, M.PLY_NUM]), int(tab.tparams[t, M.FIBER_NUM])
+        for k in range(P):
+            f = slice(tab.type_fib_off[t] + k * N, tab.type_fib_off[t] + (k + 1) * N)
+            assert tab.ply_rr[t, k, 0] <= tab.fib_rlo[f].min() and tab.fib_rhi[f].max() <= tab.ply_rr[t, k, 1]
+    nloops = 0
+    for c in range(len(tab.yarn_type)):
+        t = tab.yarn_type[c]
+        N = int(tab.tparams[t, M.FIBER_NUM])
+        for k in range(int(tab.tparams[t, M.PLY_NUM])):
+            g = tab.yarn_ply_off[c] + k
+            for zb in range(tab.lz_off[g], tab.lz_off[g + 1]):
+                le = tab.lp_off[g] + tab.lz_items[tab.lz_start[zb]:tab.lz_start[zb + 1]]
+                nloops += len(le)
+                fi = tab.type_fib_off[t] + k * N + tab.lp_fib[le]
+                assert np.all(tab.lz_rr[zb, 0] <= tab.fib_rlo[fi]) and np.all(tab.lp_U[le] <= tab.lz_rr[zb, 1])
+    assert nloops > 0
+    ts = np.linspace(0.0, 1.0, 33)
+    assert len(tab.hair_box) == len(tab.hair_z1) > 0
+    for h in range(0, len(tab.hair_z1), 7):
+        z = tab.hair_z1[h] + tab.hair_ze[h] * ts
+        R = tab.hair_r0[h] + (tab.hair_r1[h] - tab.hair_r0[h]) * ts
+        lo, hi, rlo, rhi = tab.hair_box[h]
+        assert lo <= z.min() + 1e-12 and z.max() <= hi + 1e-12 and rlo <= R.min() + 1e-12 and R.max() <= rhi + 1e-12
+    c = 0
+    t = tab.yarn_type[c]
+    tp = tab.tparams[t]
+    N = int(tp[M.FIBER_NUM])
+    zs = np.linspace(0.0, tab.yarn_length[c], 4001)
+    hz = zs[1] - zs[0]
+    worst, checked = 0.0, 0
+    for j in range(0, N, 5):
+        fi = tab.type_fib_off[t] + j
+        xy = np.array([M.regular_xy(tp, np.uint64(tab.yarn_seed[c]), 0, j, tab.fib_R[fi], tab.fib_th[fi],
+                                    tab.fib_th0[fi], z) for z in zs])
+        regular = (xy[1:, 2] == 1) & (xy[:-1, 2] == 1)
+        speed = np.hypot(*np.diff(xy[:, :2], axis=0).T)[regular] / hz
+        if len(speed):
+            checked += len(speed)
+            worst = max(worst, float((speed / tab.fib_v[fi]).max()))
+    assert checked > 10000 and 0.3 < worst <= 1.0
+
+
 def test_lookup_command_contract(built, cli):
     d = built
     pts = np.random.default_rng(3).uniform([-0.3, -0.2, -0.05], [0.3, 0.2, 0.05], (4000, 3))

@@ -20,7 +20,10 @@ Steps (Algorithm 1), allocation-free:
 2. Yarn space (Eq. 8-9) with the sampled frame at s: (x, y) and the tangential residual w.
 3. Per ply (all plies, not only the nearest of §4.5, so that the answer is exact): the twist-
    compensated unit-disc point and its azimuth bin give candidate fibres (Algorithm 2, footnote
-   2); a candidate's cross-sectional distance d bounds its true distance D (D >= d / K - slack);
+   2), skipped at once where p's unit-disc radius lies outside the ply's (or the loop z-bin's)
+   radius range; a candidate's cross-sectional distance d bounds its true distance D
+   (D >= d / K - slack, yarn_model.reach_factor; in the bin scan with the fibre's own speed bound,
+   since a fibre with a loop cycle near s is also tested by the loop scan with the type's K);
    candidates that may cover p get D by Gauss-Newton along the fibre (loops included: a cycle's
    mutation is a consistent random number, §4.4.1) under the sampled frames.
 4. Hairs of the ply active at s (hybrid z-bins by binary search, or Algorithm 3), a quick z and
@@ -42,7 +45,8 @@ from . import hair_free
 from .frame_samples import chord_lower_bound, eq7, foot_point, frame_at
 from .tables import hair_node_seed_nb
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
-                         ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, hair_speed_bound, ply_frame, regular_xy)
+                         ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, hair_speed_bound, ply_frame, reach_factor,
+                         regular_xy)
 
 TWO_PI = 2.0 * math.pi
 MODEL_SLACK = 0.1  # exact-frame local model: distance error allowed before the exact check, in fibre radii
@@ -408,46 +412,60 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
         u = (ax * drx + ay * dry) / es
         v = (-ax * dry + ay * drx) / el
         rr = math.sqrt(u * u + v * v)
-        ang = math.atan2(v, u) - twist
-        ang = ang - TWO_PI * math.floor(ang / TWO_PI)
-        b = min(int(ang / TWO_PI * B), B - 1)
-        gb = tab.type_bin_off[t] + k * B + b
-        fo = tab.type_fib_off[t] + k * N
-        q0 = tab.bin_start[gb] if binned else 0
-        q1 = tab.bin_start[gb + 1] if binned else N
+        g = tab.yarn_ply_off[c] + k
+        # the ply's fibres, and the loops of s's z-bin, cover unit-disc radii in ply_rr / lz_rr only
+        scan_reg = not binned or tab.ply_rr[t, k, 0] <= rr <= tab.ply_rr[t, k, 1]
+        zbin = -1
+        if binned and tab.lp_off[g + 1] > tab.lp_off[g]:
+            nzb = tab.lz_off[g + 1] - tab.lz_off[g]
+            zbin = tab.lz_off[g] + min(max(int(s / tab.lz_h[g]), 0), nzb - 1)
+            if not (tab.lz_rr[zbin, 0] <= rr <= tab.lz_rr[zbin, 1] + munit):
+                zbin = -1
         jbest = N  # first covering regular or loop fibre of the ply (lowest index)
         kbest = 0
         tbx = tby = tbz = 0.0
-        for q in range(q0, q1):
-            j = tab.bin_items[q] if binned else q
-            fi = fo + j
-            if binned and (rr < tab.fib_rlo[fi] or rr > tab.fib_rhi[fi]):
-                continue
-            hit, kind, tx, ty, tz = _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach, i, lo, hi, za, zb,
-                                                  rf, eps, px, py, pz)
-            if hit:
-                jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
-                break
-        g = tab.yarn_ply_off[c] + k
-        if binned and tab.lp_off[g + 1] > tab.lp_off[g]:
-            # loops: mutated cycles active in s's z-bin whose fibre is in the azimuth bin
-            nzb = tab.lz_off[g + 1] - tab.lz_off[g]
-            zbin = tab.lz_off[g] + min(max(int(s / tab.lz_h[g]), 0), nzb - 1)
-            bit = np.uint64(1) << np.uint64(b % 64)
-            lbase = tab.lp_off[g]
-            for qq in range(tab.lz_start[zbin], tab.lz_start[zbin + 1]):
-                le = lbase + tab.lz_items[qq]
-                j = tab.lp_fib[le]
-                if j >= jbest:
-                    break
+        if scan_reg or zbin >= 0:
+            ang = math.atan2(v, u) - twist
+            ang = ang - TWO_PI * math.floor(ang / TWO_PI)
+            b = min(int(ang / TWO_PI * B), B - 1)
+            gb = tab.type_bin_off[t] + k * B + b
+            fo = tab.type_fib_off[t] + k * N
+            q0 = tab.bin_start[gb] if binned else 0
+            q1 = tab.bin_start[gb + 1] if binned else N
+            if not scan_reg:
+                q1 = q0
+            for q in range(q0, q1):
+                j = tab.bin_items[q] if binned else q
                 fi = fo + j
-                if (tab.fib_mask[fi] & bit) == 0 or rr < tab.fib_rlo[fi] or rr > tab.lp_U[le] + munit:
-                    continue
-                hit, kind, tx, ty, tz = _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach, i, lo, hi, za,
-                                                      zb, rf, eps, px, py, pz)
+                reach_j = reach
+                if binned:
+                    if rr < tab.fib_rlo[fi] or rr > tab.fib_rhi[fi]:
+                        continue
+                    # the fibre's own reach factor: a fibre whose cycles near s include a loop is
+                    # also in the loop scan below, with the yarn type's factor K
+                    reach_j = reach_factor(tab.fib_v[fi], gmin) * (rf + w + eps)
+                hit, kind, tx, ty, tz = _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach_j, i, lo, hi,
+                                                      za, zb, rf, eps, px, py, pz)
                 if hit:
                     jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
                     break
+            if zbin >= 0:
+                # loops: mutated cycles active in s's z-bin whose fibre is in the azimuth bin
+                bit = np.uint64(1) << np.uint64(b % 64)
+                lbase = tab.lp_off[g]
+                for qq in range(tab.lz_start[zbin], tab.lz_start[zbin + 1]):
+                    le = lbase + tab.lz_items[qq]
+                    j = tab.lp_fib[le]
+                    if j >= jbest:
+                        break
+                    fi = fo + j
+                    if (tab.fib_mask[fi] & bit) == 0 or rr < tab.fib_rlo[fi] or rr > tab.lp_U[le] + munit:
+                        continue
+                    hit, kind, tx, ty, tz = _regular_test(cv, tab, c, tp, yseed, k, j, fi, x, y, s, reach, i, lo, hi,
+                                                          za, zb, rf, eps, px, py, pz)
+                    if hit:
+                        jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
+                        break
         if jbest < N:
             return _answer(c, kbest, tbx, tby, tbz, tp, tab)
         # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
@@ -472,8 +490,13 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                     b_ = m - 1
             zbin = a_ - g
             base = tab.hair_off[g]
+            mr = limit * (1.0 + TWO_PI * tp[PLY_RADIUS] / tp[YARN_ALPHA])
             for qq in range(tab.hb_start[zbin], tab.hb_start[zbin + 1]):
                 hh = base + tab.hb_items[qq]
+                # the hair's z and radius ranges (one row): a looser _hair_quick_reject
+                if (s < tab.hair_box[hh, 0] - limit or s > tab.hair_box[hh, 1] + limit
+                        or rho_k < tab.hair_box[hh, 2] - mr or rho_k > tab.hair_box[hh, 3] + mr):
+                    continue
                 res = _hair_test(cv, tab.fs_s, tab.fs_frame, c, tp, k, tab.hair_r0[hh], tab.hair_r1[hh], tab.hair_th1[hh],
                                  tab.hair_pe[hh], tab.hair_z1[hh], tab.hair_ze[hh], x, y, s, rho_k, limit, lo, hi, za,
                                  zb, rf, eps, px, py, pz)

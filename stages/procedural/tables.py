@@ -35,7 +35,8 @@ from stages.core.curves import curve_frame_at
 from . import hair_free
 from .yarn_model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, P_LOOP, PLY_NUM, RHO_MAX,
                          RHO_MIN, S_MIG, USE_FLYAWAYS, USE_MIGRATION, ZE_MU, ZE_SIG, cycle_of, extent_bound,
-                         hair_params, loop_unit_radius, sample_regular_fibers, transverse_speed_bound)
+                         hair_params, loop_unit_radius, reach_factor, sample_regular_fibers, transverse_speed,
+                         transverse_speed_bound)
 
 Tables = namedtuple("Tables", [
     "tparams",          # (T, NPARAM) float64 packed yarn types (yarn_model indices)
@@ -85,9 +86,13 @@ Tables = namedtuple("Tables", [
     "fg_lo", "fg_cell", "fg_dims",   # (3,), (1,), (3,) chord grid geometry
     "fg_start",         # (cells+1,) int64 CSR into the runs
     "fg_yarn", "fg_a", "fg_b",       # runs: yarn, coarse chords [a, b)
+    "ply_rr",           # (T, max plies, 2) float64 (min r_lo, max r_hi) over the ply's fibres (unit disc)
+    "fib_v",            # (F,) float64 transverse speed bound of each fibre outside loop cycles
+    "hair_box",         # (H, 4) float64 hybrid: each hair's z range and radius range (zlo, zhi, Rlo, Rhi)
+    "lz_rr",            # (loop z-bins, 2) float64 (min r_lo, max U_loop) over each loop z-bin's loops
 ])
 DERIVED_FIELDS = ("fs_off", "fs_s", "fs_frame", "yarn_eps", "kn_off", "kn_idx", "kn_sag", "fg_lo", "fg_cell",
-                  "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b")
+                  "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b", "ply_rr", "fib_v", "hair_box", "lz_rr")
 STORED_FIELDS = tuple(f for f in Tables._fields if f not in DERIVED_FIELDS)
 PAD_FRACTION = 0.05      # type_pad in fibre radii: the bins' slack for the sampled frames' error
 FRAME_TOLERANCE = 0.01   # frame-sample error aimed at, in fibre radii (<= PAD_FRACTION / 3 keeps lookups binned)
@@ -304,7 +309,7 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
             type_mz[t] = tparams[t, FIBER_RADIUS]
             continue
         v = transverse_speed_bound(tparams[t])
-        K = (1.0 + np.sqrt(gmax[sel] ** 2 + v * v) / gmin[sel]).max() * 1.05
+        K = max(reach_factor(v, g) for g in gmin[sel])
         type_K[t] = K
         type_mz[t] = 1.1 * tparams[t, FIBER_RADIUS] / gmin[sel].min()
     fib = []
@@ -412,7 +417,48 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
 def _empty_accel(Y):
     z, zi = np.zeros(0), np.zeros(0, np.int64)
     return (np.zeros(Y + 1, np.int64), z, np.zeros((0, 12)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
-            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi)
+            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi,
+            np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)))
+
+
+def scan_bounds(tab: Tables):
+    """(ply_rr, fib_v, lz_rr): the unit-disc radius range any fibre of a ply, or any loop of a loop
+    z-bin, can cover (its items' [r_lo, r_hi] and [r_lo, U_loop] joined; empty: (inf, -inf)): a
+    point outside the range skips the ply's bin scan or the z-bin's loop scan at once; and each
+    fibre's transverse speed bound outside loop cycles (radius in [rho_min R_j, rho_max R_j]),
+    for its own reach factor (reach_factor) in the bin scan."""
+    T = len(tab.type_K)
+    P = tab.tparams[:, PLY_NUM].astype(np.int64)
+    N = tab.tparams[:, FIBER_NUM].astype(np.int64)
+    ply_rr = np.empty((T, max(1, int(P.max(initial=1))), 2))
+    ply_rr[..., 0] = np.inf
+    ply_rr[..., 1] = -np.inf
+    fib_v = np.zeros(len(tab.fib_R))
+    for t in range(T):
+        tp = tab.tparams[t]
+        mig = tp[USE_MIGRATION] != 0.0
+        for k in range(P[t]):
+            f = slice(tab.type_fib_off[t] + k * N[t], tab.type_fib_off[t] + (k + 1) * N[t])
+            if N[t] > 0:
+                ply_rr[t, k] = tab.fib_rlo[f].min(), tab.fib_rhi[f].max()
+            R = tab.fib_R[f]
+            hi = R * tp[RHO_MAX] if mig else R
+            lo = R * tp[RHO_MIN] if mig else R
+            fib_v[f] = [transverse_speed(tp, a, b) for a, b in zip(hi, lo)]
+    nz = len(tab.lz_start) - 1
+    lz_rr = np.empty((max(nz, 0), 2))
+    lz_rr[:, 0] = np.inf
+    lz_rr[:, 1] = -np.inf
+    S = len(tab.lp_off) - 1
+    for g in range(S):
+        c = int(np.searchsorted(tab.yarn_ply_off, g, side="right")) - 1
+        t = tab.yarn_type[c]
+        fo = tab.type_fib_off[t] + (g - tab.yarn_ply_off[c]) * N[t]
+        for zb in range(tab.lz_off[g], tab.lz_off[g + 1]):
+            le = tab.lp_off[g] + tab.lz_items[tab.lz_start[zb]:tab.lz_start[zb + 1]]
+            if len(le):
+                lz_rr[zb] = tab.fib_rlo[fo + tab.lp_fib[le]].min(), tab.lp_U[le].max()
+    return ply_rr, fib_v, lz_rr
 
 
 def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
@@ -450,6 +496,10 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
     while np.prod(np.ceil((hi - lo) / cell)) > max_cells:
         cell *= 1.25
     glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
-    return tab._replace(fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
+    ply_rr, fib_v, lz_rr = scan_bounds(tab)
+    z2 = tab.hair_z1 + tab.hair_ze
+    hair_box = np.stack([np.minimum(tab.hair_z1, z2), np.maximum(tab.hair_z1, z2),
+                         np.minimum(tab.hair_r0, tab.hair_r1), np.maximum(tab.hair_r0, tab.hair_r1)], axis=1)
+    return tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=np.ascontiguousarray(hair_box), lz_rr=lz_rr, fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
                         kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
                         fg_yarn=gyarn, fg_a=ga, fg_b=gb)

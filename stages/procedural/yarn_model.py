@@ -219,14 +219,33 @@ def hair_radius_bound(tp) -> float:
     return float(max(r0, r0 + re, 0.0))
 
 
+@njit(cache=True, inline="always")
+def transverse_speed(tp, u_hi, u_lo):
+    """Upper bound of |d(x, y)/dz| in yarn space of a fibre whose unit-disc radius stays in
+    [u_lo, u_hi]: the ply centre's turn, the offset's turn (ply and fibre twist) and migration."""
+    w_y = 2.0 * math.pi / tp[YARN_ALPHA]
+    w_f = 2.0 * math.pi / tp[ALPHA]
+    e = max(tp[E_SHORT], tp[E_LONG])
+    mig = 0.5 * (u_hi - u_lo) * tp[S_MIG] * w_f * e if tp[USE_MIGRATION] != 0.0 else 0.0
+    return w_y * tp[PLY_RADIUS] + (w_y + w_f) * u_hi * e + mig
+
+
+@njit(cache=True, inline="always")
+def reach_factor(v, gmin):
+    """K: a fibre point within fabric distance D of p lies within K D of p in the cross-section at
+    p's foot point s. Eq. 7 with rotation-minimising frames has the yarn-space metric
+    dx^2 + dy^2 + g^2 dz^2 (g = 1 - kappa . (x, y) >= g_min), so a path of length D moves the
+    cross-section by a and z by b with a^2 + g_min^2 b^2 <= D^2; the fibre moves by at most v b
+    across the cross-section (v its transverse speed), so d <= a + v b <= sqrt(1 + v^2 / g_min^2) D
+    (Cauchy-Schwarz). 5 % margin for the curvature estimate."""
+    q = v / gmin
+    return 1.05 * math.sqrt(1.0 + q * q)
+
+
 @njit(cache=True)
 def transverse_speed_bound(tp):
     """Upper bound of |d(x, y)/dz| of any regular or loop fibre in yarn space."""
-    w_y = 2.0 * math.pi / tp[YARN_ALPHA]
-    w_f = 2.0 * math.pi / tp[ALPHA]
-    rmax = tp[U_MAX] * tp[E_LONG]
-    mig = 0.5 * tp[U_MAX] * tp[S_MIG] * w_f * tp[E_LONG] if tp[USE_MIGRATION] != 0.0 else 0.0
-    return w_y * tp[PLY_RADIUS] + (w_y + w_f) * rmax + mig
+    return transverse_speed(tp, tp[U_MAX], 0.0)
 
 
 @njit(cache=True, inline="always")
