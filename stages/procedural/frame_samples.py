@@ -357,14 +357,15 @@ def chord_lower_bound(fr, kidx, sag, q, px, py, pz):
 
 
 @njit(cache=True)
-def foot_point(s_arr, fr, lo, hi, s0, sa, sb, px, py, pz, tol):
-    """(s, step, squared distance) of p's foot point on the Hermite curve of samples lo..hi-1:
-    Newton on g(s) = (P(s) - p) . P'(s) from s0, safeguarded by bisection on the bracket [sa, sb],
-    until a step is below tol (the lookups account for the tangential residual it leaves)."""
+def foot_point(s_arr, fr, lo, hi, i, s0, sa, sb, px, py, pz, tol):
+    """(s, step, squared distance) of p's foot point on the Hermite curve of samples lo..hi-1
+    (samples s_arr[lo] <= sa and s_arr[hi - 1] >= sb: the steps are searched there only; i a
+    hint step): Newton on g(s) = (P(s) - p) . P'(s) from s0, safeguarded by bisection on the
+    bracket [sa, sb], until a step is below tol (the lookups account for the tangential residual
+    it leaves)."""
     s = min(max(s0, sa), sb)
     a = sa
     b = sb
-    i = lo
     for it in range(40):
         i, f = frame_at(s_arr, fr, lo, hi, i, s)
         rx, ry, rz = f[0] - px, f[1] - py, f[2] - pz

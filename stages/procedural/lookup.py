@@ -612,8 +612,9 @@ def lookup_point(cv, tab, px, py, pz):
         s0 = tab.fs_s[ia] + bt * (tab.fs_s[ib] - tab.fs_s[ia])
         sa = tab.fs_s[tab.kn_idx[max(bq - 1, k0)]]
         sb = tab.fs_s[tab.kn_idx[min(bq + 2, k1)]]
-        s, i, d2 = foot_point(tab.fs_s, fr, tab.fs_off[c], tab.fs_off[c + 1], s0, sa, sb, px, py, pz,
-                              FOOT_TOL * tab.tparams[tab.yarn_type[c], FIBER_RADIUS])
+        # the bracket's frame samples (kn_idx: coarse knots are frame-sample indices)
+        s, i, d2 = foot_point(tab.fs_s, fr, tab.kn_idx[max(bq - 1, k0)], tab.kn_idx[min(bq + 2, k1)] + 1, ia, s0, sa,
+                              sb, px, py, pz, FOOT_TOL * tab.tparams[tab.yarn_type[c], FIBER_RADIUS])
         if d2 >= bound * bound:
             continue
         res = yarn_lookup(cv, tab, c, s, i, px, py, pz)
