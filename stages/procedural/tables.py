@@ -6,8 +6,9 @@ stored as (R_j, theta_j, theta0_j) plus the radial interval [r_lo, r_hi] grown b
 margin m; the azimuth [0, 2 pi) is cut into B equal bins and bin b lists (CSR, ascending fibre
 index; also as a bit mask per fibre) every fibre whose trajectory comes within m of the bin's
 wedge. m = K (r_fibre + pad) / min(e_short, e_long) in unit-disc units, with K bounding the ratio
-between a point's cross-sectional distance to a fibre and its true distance and pad
-(``type_pad``) the slack of the lookups' sampled frames.
+between a point's cross-sectional distance to a fibre and its true distance
+(yarn_model.reach_factor, from the largest transverse fibre speed and the yarn's smallest axial
+stretch g_min) and pad (``type_pad``) the slack of the lookups' sampled frames.
 
 Loops (§4.4.1, §5.3): every migration cycle's mutation is a consistent random number of (yarn,
 ply, fibre, cycle) (yarn_model.loop_unit_radius). A loop leaves its fibre's [r_lo, r_hi], so per
