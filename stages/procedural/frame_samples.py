@@ -123,6 +123,23 @@ def _interp(s_arr, fr, i, z):
 
 
 @njit(cache=True, inline="always")
+def _hermite_second(s_arr, fr, i, z):
+    """Second derivative P'' of the Hermite position interpolant on step [i, i+1] at z."""
+    s0 = s_arr[i]
+    h = s_arr[i + 1] - s0
+    if h <= 0.0:
+        return 0.0, 0.0, 0.0
+    u = (z - s0) / h
+    e00 = (12.0 * u - 6.0) / (h * h)
+    e10 = (6.0 * u - 4.0) / h
+    e11 = (6.0 * u - 2.0) / h
+    a = fr[i]
+    b = fr[i + 1]
+    return (e00 * (a[0] - b[0]) + e10 * a[3] + e11 * b[3], e00 * (a[1] - b[1]) + e10 * a[4] + e11 * b[4],
+            e00 * (a[2] - b[2]) + e10 * a[5] + e11 * b[5])
+
+
+@njit(cache=True, inline="always")
 def locate_step(s_arr, lo, hi, i, z):
     """Step index in [lo, hi - 2] whose interval holds z (clamped), walking from the hint i when it
     is close, else by bisection."""
@@ -374,11 +391,8 @@ def foot_point(s_arr, fr, lo, hi, i, s0, sa, sb, px, py, pz, tol):
             b = s
         else:
             a = s
-        # g'(s) = |P'|^2 + (P - p) . P'' with P'' from the tangent's change over the step
-        h = s_arr[i + 1] - s_arr[i]
-        kx = (fr[i + 1, 3] - fr[i, 3]) / h if h > 0.0 else 0.0
-        ky = (fr[i + 1, 4] - fr[i, 4]) / h if h > 0.0 else 0.0
-        kz = (fr[i + 1, 5] - fr[i, 5]) / h if h > 0.0 else 0.0
+        # g'(s) = |P'|^2 + (P - p) . P'' with P'' of the Hermite cubic (Newton converges quadratically)
+        kx, ky, kz = _hermite_second(s_arr, fr, i, s)
         gp = f[3] * f[3] + f[4] * f[4] + f[5] * f[5] + rx * kx + ry * ky + rz * kz
         sn = s - g / gp if gp > 0.0 else 0.5 * (a + b)
         if not (a < sn < b):
