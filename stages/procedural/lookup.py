@@ -404,9 +404,16 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     reach = K * (rf + w + eps)
     binned = w + eps <= tab.type_pad[t]  # else (beyond a yarn end) every fibre of the ply
     munit = K * (rf + tab.type_pad[t]) / min(es, el)  # the bins' margin in unit-disc units
+    # ply centres: ply 0's frame, then turns by 2 pi / P (ply_frame without a sine per ply)
+    _, _, drx, dry = ply_frame(tp, 0, s)
+    rot_c = math.cos(TWO_PI / P)
+    rot_s = math.sin(TWO_PI / P)
     for k in range(P):
         # ---- regular and loop fibres of ply k (Algorithm 2)
-        cx, cy, drx, dry = ply_frame(tp, k, s)
+        if k > 0:
+            drx, dry = drx * rot_c - dry * rot_s, dry * rot_c + drx * rot_s
+        cx = tp[PLY_RADIUS] * drx
+        cy = tp[PLY_RADIUS] * dry
         ax = x - cx
         ay = y - cy
         u = (ax * drx + ay * dry) / es
