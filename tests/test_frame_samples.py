@@ -6,32 +6,17 @@
    the yarn's extent.
 2. Foot point: ``foot_point`` (safeguarded Newton on the Hermite axis) against brute force, the
    nearest of 20,000 samples of the same Hermite axis refined by golden-section search.
-Scene: a 2 x 2 plain weave with gentle crimp (not folded).
+Scene: conftest.EXACTNESS_SWATCH (gentle crimp, not folded).
 """
 import math
 
 import numpy as np
 import pytest
 
+from conftest import EXACTNESS_SWATCH as SCENE
 from pipeline.procedural_runner import build
 from stages.core.curves import curve_frame_at
 from stages.procedural.frame_samples import eq7, foot_point, frame_at
-
-SCENE = """
-[fabric]
-source = "generator"
-[fabric.generator]
-kind = "woven"
-pattern = "plain"
-ends = 2
-picks = 2
-spacing = 0.3
-yarn_radius = 0.03
-crimp = 0.5
-samples_per_cell = 8
-[yarns.default]
-preset = "cotton2"
-"""
 
 
 @pytest.fixture(scope="module")

@@ -19,28 +19,11 @@ theta / 2, reported by the realization as ``max_turn_rad``).
 import numpy as np
 import pytest
 
+from conftest import EXACTNESS_SWATCH as SCENE
 from pipeline.artifacts import Artifact
 from pipeline.procedural_runner import build, run_realize
 from stages.procedural.lookup import lookup_points
 from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
-
-SCENE = """
-[scene]
-name = "exactness"
-[fabric]
-source = "generator"
-[fabric.generator]
-kind = "woven"
-pattern = "plain"
-ends = 2
-picks = 2
-spacing = 0.3
-yarn_radius = 0.03
-crimp = 0.5
-samples_per_cell = 8
-[yarns.default]
-preset = "cotton2"
-"""
 
 
 @pytest.fixture(scope="module")
