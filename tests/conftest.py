@@ -11,25 +11,8 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 SHARED = ROOT.parent / "shared"
 DATA = ROOT / "data"
 
-# a 2 x 2 plain weave of cotton2 with gentle crimp (every fibre kind, yarn-space map not folded):
-# the scene of the lookups' exactness test and of the frame-sample tests
-EXACTNESS_SWATCH = """
-[scene]
-name = "exactness"
-[fabric]
-source = "generator"
-[fabric.generator]
-kind = "woven"
-pattern = "plain"
-ends = 2
-picks = 2
-spacing = 0.3
-yarn_radius = 0.03
-crimp = 0.5
-samples_per_cell = 8
-[yarns.default]
-preset = "cotton2"
-"""
+# the gentle swatch (exact lookups): scene text of the lookups' exactness and frame-sample tests
+EXACTNESS_SWATCH = (DATA / "scenes" / "gentle_swatch.toml").read_text()
 
 
 def shared_file(rel: str) -> Path:
