@@ -168,6 +168,60 @@ def test_scan_bounds_hold_their_items(built):
     assert checked > 10000 and 0.3 < worst <= 1.0
 
 
+def test_fringe_occupancy_covers_loops_and_hairs(built):
+    """tables.fringe_occupancy against brute force: every point within fringe_reach (yarn space) of
+    a loop's fibre (densely sampled over the loop's cycle grown by fringe_window) has its loop bit
+    set, of a hair (densely sampled) its hair bit; and beyond type_rcore from the axis every ply's
+    unit-disc radius exceeds its ply_rr (no regular fibre of any ply is in reach)."""
+    cv, tab, _ = load_tables(built / "tables.zarr")
+    rng = np.random.default_rng(3)
+    checked = {"loop": 0, "hair": 0}
+
+    def probe(c, kind, x, y, z, r):
+        d = rng.normal(size=(8, 3))
+        d *= (r * 0.999 * rng.uniform(0, 1, (8, 1)) ** (1 / 3)) / np.linalg.norm(d, axis=1, keepdims=True)
+        for px, py, pz in np.array([x, y, z]) + d:
+            pz = min(max(pz, 0.0), tab.yarn_length[c])
+            lb, hb = T.fringe_bits(tab, c, pz, px, py, math.hypot(px, py))
+            assert (lb if kind == "loop" else hb), (c, kind, px, py, pz)
+            checked[kind] += 1
+
+    for c in range(len(tab.yarn_type)):
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        rf, eps, gmin = tp[M.FIBER_RADIUS], tab.yarn_eps[c], tab.yarn_gmin[c]
+        r = T.fringe_reach(rf, eps, gmin)
+        win = T.fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, gmin)
+        N = int(tp[M.FIBER_NUM])
+        ys = np.uint64(tab.yarn_seed[c])
+        for k in range(int(tp[M.PLY_NUM])):
+            g = tab.yarn_ply_off[c] + k
+            for e in range(tab.lp_off[g], tab.lp_off[g + 1], 3):
+                j = int(tab.lp_fib[e])
+                fi = tab.type_fib_off[t] + k * N + j
+                z0, z1 = T.loop_z_range(tab, tp, c, e, fi)
+                for z in np.linspace(max(0.0, z0 - win), min(tab.yarn_length[c], z1 + win), 97):
+                    x, y, _ = M.regular_xy(tp, ys, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
+                    probe(c, "loop", x, y, z, r)
+            for h in range(tab.hair_off[g], tab.hair_off[g] + tab.hair_count[g], 5):
+                for u in np.linspace(0.0, 1.0, 41):
+                    x, y, z = M.hair_point(tp, k, tab.hair_r0[h], tab.hair_r1[h], tab.hair_th1[h], tab.hair_pe[h],
+                                           tab.hair_z1[h], tab.hair_ze[h], u)
+                    probe(c, "hair", x, y, z, r)
+        # the core radius: any point beyond it is outside every ply's radius range
+        for _ in range(200):
+            a = rng.uniform(0, 2 * np.pi)
+            rho = tab.type_rcore[t] * (1.0 + 1e-9) + rng.exponential(tab.type_rcore[t] * 0.2)
+            z = rng.uniform(0, tab.yarn_length[c])
+            x, y = rho * np.cos(a), rho * np.sin(a)
+            for k in range(int(tp[M.PLY_NUM])):
+                cx, cy, drx, dry = M.ply_frame(tp, k, z)
+                u = ((x - cx) * drx + (y - cy) * dry) / tp[M.E_SHORT]
+                v = (-(x - cx) * dry + (y - cy) * drx) / tp[M.E_LONG]
+                assert math.hypot(u, v) > tab.ply_rr[t, k, 1]
+    assert checked["loop"] > 1000 and checked["hair"] > 1000, checked
+
+
 def test_lookup_command_contract(built, cli):
     d = built
     pts = np.random.default_rng(3).uniform([-0.3, -0.2, -0.05], [0.3, 0.2, 0.05], (4000, 3))

@@ -378,11 +378,12 @@ def foot_point(s_arr, fr, lo, hi, i, s0, sa, sb, px, py, pz, tol):
     """(s, step, squared distance) of p's foot point on the Hermite curve of samples lo..hi-1
     (samples s_arr[lo] <= sa and s_arr[hi - 1] >= sb: the steps are searched there only; i a
     hint step): Newton on g(s) = (P(s) - p) . P'(s) from s0, safeguarded by bisection on the
-    bracket [sa, sb], until a step is below tol (the lookups account for the tangential residual
-    it leaves)."""
+    bracket [sa, sb], until the next step is below tol; returns the last evaluated s (the lookups
+    account for the tangential residual it leaves)."""
     s = min(max(s0, sa), sb)
     a = sa
     b = sb
+    rx = ry = rz = 0.0
     for it in range(40):
         i, f = frame_at(s_arr, fr, lo, hi, i, s)
         rx, ry, rz = f[0] - px, f[1] - py, f[2] - pz
@@ -398,9 +399,6 @@ def foot_point(s_arr, fr, lo, hi, i, s0, sa, sb, px, py, pz, tol):
         if not (a < sn < b):
             sn = 0.5 * (a + b)
         if abs(sn - s) <= tol or b - a <= tol:
-            s = sn
-            break
+            break  # s is within tol of the foot point: keep the evaluated s (no extra evaluation)
         s = sn
-    i, f = frame_at(s_arr, fr, lo, hi, i, s)
-    rx, ry, rz = f[0] - px, f[1] - py, f[2] - pz
     return s, i, rx * rx + ry * ry + rz * rz

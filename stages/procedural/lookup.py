@@ -17,7 +17,11 @@ Steps (Algorithm 1), allocation-free:
    yarn by yarn in ascending order; the nearest chord bounds p's distance to the axis from below
    (a yarn farther than its extent bound + eps_c is skipped) and seeds Newton for the foot point
    s on the sampled (Hermite) axis (seed 000 §5.2).
-2. Yarn space (Eq. 8-9) with the sampled frame at s: (x, y) and the tangential residual w.
+2. Yarn space (Eq. 8-9) with the sampled frame at s: (x, y) and the tangential residual w. The
+   derived fringe occupancy (tables.fringe_occupancy: bits per yarn z-bin, radial shell and
+   azimuth sector, one set for loops and one for hairs) and the core radius type_rcore decide
+   which of the regular, loop and hair tests below can find anything: a point beyond the core
+   in no set cell leaves the yarn at once.
 3. Per ply (all plies, not only the nearest of §4.5, so that the answer is exact): the twist-
    compensated unit-disc point and its azimuth bin give candidate fibres (Algorithm 2, footnote
    2), skipped at once where p's unit-disc radius lies outside the ply's (or the loop z-bin's)
@@ -43,7 +47,7 @@ from stages.core.curves import curve_frame_at
 
 from . import hair_free
 from .frame_samples import chord_lower_bound, eq7, foot_point, frame_at
-from .tables import hair_node_seed_nb
+from .tables import fringe_bits, hair_node_seed_nb
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
                          ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, hair_speed_bound, ply_frame, reach_factor,
                          regular_xy)
@@ -404,6 +408,18 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     reach = K * (rf + w + eps)
     binned = w + eps <= tab.type_pad[t]  # else (beyond a yarn end) every fibre of the ply
     munit = K * (rf + tab.type_pad[t]) / min(es, el)  # the bins' margin in unit-disc units
+    # the fringe occupancy and the core radius gate whole parts of the visit (tables.fringe_occupancy)
+    hybrid = tab.hair_mode[0] == 0
+    core = True
+    loops = True
+    hairs = True
+    if binned:
+        rho = math.sqrt(x * x + y * y)
+        core = rho <= tab.type_rcore[t]
+        loops, hairs = fringe_bits(tab, c, s, x, y, rho)
+        hairs = hairs or not hybrid  # the realization-free mode stores no hairs to mark
+        if not (core or loops or hairs):
+            return OUTSIDE
     # ply centres: ply 0's frame, then turns by 2 pi / P (ply_frame without a sine per ply)
     _, _, drx, dry = ply_frame(tp, 0, s)
     rot_c = math.cos(TWO_PI / P)
@@ -421,9 +437,9 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
         rr = math.sqrt(u * u + v * v)
         g = tab.yarn_ply_off[c] + k
         # the ply's fibres, and the loops of s's z-bin, cover unit-disc radii in ply_rr / lz_rr only
-        scan_reg = not binned or tab.ply_rr[t, k, 0] <= rr <= tab.ply_rr[t, k, 1]
+        scan_reg = not binned or (core and tab.ply_rr[t, k, 0] <= rr <= tab.ply_rr[t, k, 1])
         zbin = -1
-        if binned and tab.lp_off[g + 1] > tab.lp_off[g]:
+        if binned and loops and tab.lp_off[g + 1] > tab.lp_off[g]:
             nzb = tab.lz_off[g + 1] - tab.lz_off[g]
             zbin = tab.lz_off[g] + min(max(int(s / tab.lz_h[g]), 0), nzb - 1)
             if not (tab.lz_rr[zbin, 0] <= rr <= tab.lz_rr[zbin, 1] + munit):
@@ -477,11 +493,11 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
             return _answer(c, kbest, tbx, tby, tbz, tp, tab)
         # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
         nh = tab.hair_count[g]
-        if nh == 0:
+        if nh == 0 or not hairs:
             continue
         limit = 1.1 * (rf + w + 2.0 * eps) / gmin
         rho_k = math.sqrt(ax * ax + ay * ay)
-        if tab.hair_mode[0] == 0:
+        if hybrid:
             # hybrid: the z-bin holding s by binary search, its active list in place
             hlo = tab.hb_zoff[g]
             hhi = tab.hb_zoff[g + 1]

@@ -21,6 +21,12 @@ pe) of every hair and cuts z at the ends min(z1, z2) - m_z, max(z1, z2) + m_z of
 z-bin lists (ascending hair index) the hairs active across the whole bin. The realization-free mode stores nothing per hair
 (hair_free.active_hairs). Both come from the same quad-tree, so they hold the same hairs.
 
+Derived when loaded (never stored, ``derive_lookup_accel``): frame samples and the chord grid
+(frame_samples.py), the scan bounds (``scan_bounds``) and the fringe occupancy
+(``fringe_occupancy``): per yarn, bits over (z-bin, radial shell, azimuth sector) of yarn space
+marking where a loop or a stored hair can come close enough to cover a point, so that lookups
+far from every loop and hair skip those tests, and lookups beyond the core skip the yarn.
+
 ``Tables`` is a namedtuple of flat arrays usable inside numba kernels (see lookup.py).
 """
 import math
@@ -34,10 +40,10 @@ from stages.core.rng import hash_u64
 from stages.core.curves import curve_frame_at
 
 from . import hair_free
-from .yarn_model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, P_LOOP, PLY_NUM, RHO_MAX,
-                         RHO_MIN, S_MIG, USE_FLYAWAYS, USE_MIGRATION, ZE_MU, ZE_SIG, cycle_of, extent_bound,
-                         hair_params, loop_unit_radius, reach_factor, sample_regular_fibers, transverse_speed,
-                         transverse_speed_bound)
+from .yarn_model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, P_LOOP, PLY_NUM, PLY_RADIUS,
+                         RHO_MAX, RHO_MIN, S_MIG, USE_FLYAWAYS, USE_MIGRATION, ZE_MU, ZE_SIG, cycle_of, extent_bound,
+                         hair_params, hair_point, hair_speed_bound, loop_unit_radius, reach_factor, regular_xy,
+                         sample_regular_fibers, transverse_speed, transverse_speed_bound)
 
 Tables = namedtuple("Tables", [
     "tparams",          # (T, NPARAM) float64 packed yarn types (yarn_model indices)
@@ -91,12 +97,21 @@ Tables = namedtuple("Tables", [
     "fib_v",            # (F,) float64 transverse speed bound of each fibre outside loop cycles
     "hair_box",         # (H, 4) float64 hybrid: each hair's z range and radius range (zlo, zhi, Rlo, Rhi)
     "lz_rr",            # (loop z-bins, 2) float64 (min r_lo, max U_loop) over each loop z-bin's loops
+    "type_rcore",       # (T,) float64 yarn-space radius beyond which no regular (non-loop) fibre is in reach
+    "fo_off",           # (Y+1,) int64: fringe z-bins of yarn c at fo_off[c]:fo_off[c+1]
+    "fo_geom",          # (Y, 2) float64 fringe z-bin width and shell width of yarn c
+    "fo_bits",          # (fringe z-bins, 2 FO_WORDS) uint64 fringe occupancy of loops, then hairs (fringe_occupancy)
 ])
 DERIVED_FIELDS = ("fs_off", "fs_s", "fs_frame", "yarn_eps", "kn_off", "kn_idx", "kn_sag", "fg_lo", "fg_cell",
-                  "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b", "ply_rr", "fib_v", "hair_box", "lz_rr")
+                  "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b", "ply_rr", "fib_v", "hair_box", "lz_rr",
+                  "type_rcore", "fo_off", "fo_geom", "fo_bits")
 STORED_FIELDS = tuple(f for f in Tables._fields if f not in DERIVED_FIELDS)
 PAD_FRACTION = 0.05      # type_pad in fibre radii: the bins' slack for the sampled frames' error
 FRAME_TOLERANCE = 0.01   # frame-sample error aimed at, in fibre radii (<= PAD_FRACTION / 3 keeps lookups binned)
+FO_SECTORS = 32          # fringe occupancy: azimuth sectors around the yarn axis
+FO_SHELLS = 8            # fringe occupancy: radial shells (the last one open-ended)
+FO_WORDS = FO_SECTORS * FO_SHELLS // 64
+FO_ZBIN_EXTENTS = 0.25   # fringe z-bin width in yarn extents
 
 
 def type_key(seed: int, t: int) -> int:
@@ -300,7 +315,6 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
     # the bounds below are capped there and lookups are no longer exact (reported as 'folded')
     kr = np.minimum(kap * ext, fold_cap)
     gmin = 1.0 - kr
-    gmax = 1.0 + kr
     type_K = np.ones(T)
     type_mz = np.zeros(T)
     for t in range(T):
@@ -419,7 +433,8 @@ def _empty_accel(Y):
     z, zi = np.zeros(0), np.zeros(0, np.int64)
     return (np.zeros(Y + 1, np.int64), z, np.zeros((0, 12)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
             np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi,
-            np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)))
+            np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0),
+            np.zeros(Y + 1, np.int64), np.ones((Y, 2)), np.zeros((0, 2 * FO_WORDS), np.uint64))
 
 
 def scan_bounds(tab: Tables):
@@ -462,6 +477,148 @@ def scan_bounds(tab: Tables):
     return ply_rr, fib_v, lz_rr
 
 
+@njit(cache=True)
+def loop_z_range(tab, tp, c, e, fi):
+    """z range [z0, z1] of loop e (its migration cycle lp_cyc[e], clipped to the yarn); fi its fibre."""
+    w = tp[S_MIG] * 2.0 * math.pi / tp[ALPHA]  # migration phase per unit z
+    cyc = tab.lp_cyc[e]
+    th0 = tab.fib_th0[fi]
+    z0 = max(0.0, (2.0 * math.pi * cyc - math.pi - th0) / w)
+    z1 = min(tab.yarn_length[c], (2.0 * math.pi * cyc + math.pi - th0) / w)
+    return z0, z1
+
+
+@njit(cache=True, inline="always")
+def fringe_reach(rf, eps, gmin):
+    """Yarn-space distance within which a loop or hair point must lie to cover a lookup point: the
+    hair tests' limit 1.1 (r_f + w + 2 eps_c) / g_min at the largest tangential residual w a yarn
+    visit goes on with (w < r_f + 2 eps_c)."""
+    return 1.1 * (2.0 * rf + 4.0 * eps) / gmin
+
+
+@njit(cache=True, inline="always")
+def fringe_window(K, mz, rf, eps, gmin):
+    """Largest half width of a yarn visit's z window (lookup.yarn_lookup's hwin at w < r_f + 2 eps_c)."""
+    return (max((1.0 + K) * (2.0 * rf + 3.0 * eps), mz) + rf + 4.0 * eps) / gmin
+
+
+@njit(cache=True, inline="always")
+def fringe_bits(tab, c, s, x, y, rho):
+    """(loop bit, hair bit) of the fringe cell of yarn-space point (x, y, s) in yarn c."""
+    base = tab.fo_off[c]
+    nb = tab.fo_off[c + 1] - base
+    zb = min(max(int(s / tab.fo_geom[c, 0]), 0), nb - 1)
+    sh = min(int(rho / tab.fo_geom[c, 1]), FO_SHELLS - 1)
+    q = min(int((math.atan2(y, x) + math.pi) * (FO_SECTORS / (2.0 * math.pi))), FO_SECTORS - 1)
+    idx = sh * FO_SECTORS + q
+    w = idx >> 6
+    b = np.uint64(idx & 63)
+    one = np.uint64(1)
+    return ((tab.fo_bits[base + zb, w] >> b) & one) != 0, ((tab.fo_bits[base + zb, FO_WORDS + w] >> b) & one) != 0
+
+
+@njit(cache=True)
+def _mark_ball(bits, base, nb, h, rw, x, y, z, r, w0):
+    """Set every fringe cell (z-bin, shell, sector) that meets the yarn-space ball of radius r at
+    (x, y, z) (in the words from w0 on); balls beyond a yarn end mark the end bin."""
+    b0 = min(max(int(math.floor((z - r) / h)), 0), nb - 1)
+    b1 = max(min(int(math.floor((z + r) / h)), nb - 1), 0)
+    rho = math.sqrt(x * x + y * y)
+    s0 = min(int(max(rho - r, 0.0) / rw), FO_SHELLS - 1)
+    s1 = min(int((rho + r) / rw), FO_SHELLS - 1)
+    q0 = 0
+    q1 = FO_SECTORS - 1
+    if rho > r:
+        half = math.asin(min(1.0, r / rho)) + 1e-9  # the ball's half angle seen from the axis
+        phi = math.atan2(y, x) + math.pi
+        a = int(math.floor((phi - half) * FO_SECTORS / (2.0 * math.pi)))
+        b = int(math.floor((phi + half) * FO_SECTORS / (2.0 * math.pi)))
+        if b - a + 1 < FO_SECTORS:
+            q0, q1 = a, b
+    for zb in range(b0, b1 + 1):
+        for sh in range(s0, s1 + 1):
+            for qq in range(q0, q1 + 1):
+                idx = sh * FO_SECTORS + qq % FO_SECTORS
+                bits[base + zb, w0 + (idx >> 6)] |= np.uint64(1) << np.uint64(idx & 63)
+
+
+@njit(cache=True)
+def fringe_occupancy(tab, fo_off, fo_geom):
+    """Fringe occupancy bits of every yarn, one set for loops and one for hairs: cell (z-bin, shell,
+    sector) of yarn c is set when a loop (its fibre's trajectory over the loop's cycle grown by the
+    largest z window, fringe_window) or a stored hair (hybrid mode) comes within fringe_reach of
+    the cell in yarn space. Each curve is sampled at steps of at most fringe_reach of yarn-space
+    arc (its speed bound), and every sample marks the cells within fringe_reach plus half a step.
+    A lookup point in no set loop cell needs no loop scan, one in no set hair cell no hair test;
+    one in neither, farther than type_rcore from the axis, is covered by no fibre of the yarn."""
+    bits = np.zeros((fo_off[-1], 2 * FO_WORDS), np.uint64)
+    for c in range(tab.yarn_type.shape[0]):
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        base = fo_off[c]
+        nb = fo_off[c + 1] - base
+        h = fo_geom[c, 0]
+        rw = fo_geom[c, 1]
+        rf = tp[FIBER_RADIUS]
+        eps = tab.yarn_eps[c]
+        gmin = tab.yarn_gmin[c]
+        r = fringe_reach(rf, eps, gmin)
+        win = fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, gmin)
+        L = tab.yarn_length[c]
+        N = int(tp[FIBER_NUM])
+        fo = tab.type_fib_off[t]
+        yseed = np.uint64(tab.yarn_seed[c])
+        v = math.sqrt(1.0 + transverse_speed_bound(tp) ** 2)  # yarn-space speed per unit z
+        for k in range(int(tp[PLY_NUM])):
+            g = tab.yarn_ply_off[c] + k
+            for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
+                j = tab.lp_fib[e]
+                fi = fo + k * N + j
+                z0, z1 = loop_z_range(tab, tp, c, e, fi)
+                z0 = max(0.0, z0 - win)
+                z1 = min(L, z1 + win)
+                n = max(1, int(math.ceil((z1 - z0) * v / r)))
+                dz = (z1 - z0) / n
+                for q in range(n + 1):
+                    z = min(z0 + q * dz, z1)
+                    x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
+                    _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * dz * v, 0)
+            if tab.hair_mode[0] != 0:
+                continue
+            for hh in range(tab.hair_off[g], tab.hair_off[g] + tab.hair_count[g]):
+                r0 = tab.hair_r0[hh]
+                r1 = tab.hair_r1[hh]
+                th1 = tab.hair_th1[hh]
+                pe = tab.hair_pe[hh]
+                z1_ = tab.hair_z1[hh]
+                ze = tab.hair_ze[hh]
+                speed = hair_speed_bound(tp, r0, r1, pe, ze)
+                n = max(1, int(math.ceil(speed / r)))
+                for q in range(n + 1):
+                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1_, ze, q / n)
+                    _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * speed / n, FO_WORDS)
+    return bits
+
+
+def fringe_tables(tab: Tables):
+    """(type_rcore, fo_off, fo_geom, fo_bits): see fringe_occupancy. type_rcore: a point farther than
+    this from the axis is outside every ply's unit-disc radius range (ply_rr) whatever its ply."""
+    T = len(tab.type_K)
+    rcore = np.empty(T)
+    for t in range(T):
+        tp = tab.tparams[t]
+        P = int(tp[PLY_NUM])
+        hi = float(tab.ply_rr[t, :P, 1].max()) if P else -np.inf
+        rcore[t] = tp[PLY_RADIUS] + max(hi, 0.0) * max(tp[E_SHORT], tp[E_LONG])
+    ext = np.asarray(tab.yarn_extent, np.float64)
+    L = np.asarray(tab.yarn_length, np.float64)
+    h = np.maximum(FO_ZBIN_EXTENTS * ext, 1e-12)
+    nb = np.maximum(1, np.ceil(L / h)).astype(np.int64)
+    fo_off = np.concatenate([[0], np.cumsum(nb)]).astype(np.int64)
+    fo_geom = np.ascontiguousarray(np.stack([h, np.maximum(ext / FO_SHELLS, 1e-12)], axis=1))
+    return rcore, fo_off, fo_geom, fringe_occupancy(tab, fo_off, fo_geom)
+
+
 def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
     """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
     eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
@@ -501,6 +658,9 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
     z2 = tab.hair_z1 + tab.hair_ze
     hair_box = np.stack([np.minimum(tab.hair_z1, z2), np.maximum(tab.hair_z1, z2),
                          np.minimum(tab.hair_r0, tab.hair_r1), np.maximum(tab.hair_r0, tab.hair_r1)], axis=1)
-    return tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=np.ascontiguousarray(hair_box), lz_rr=lz_rr, fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
-                        kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
-                        fg_yarn=gyarn, fg_a=ga, fg_b=gb)
+    tab = tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=np.ascontiguousarray(hair_box), lz_rr=lz_rr,
+                       fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
+                       kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
+                       fg_yarn=gyarn, fg_a=ga, fg_b=gb)
+    rcore, fo_off, fo_geom, fo_bits = fringe_tables(tab)
+    return tab._replace(type_rcore=rcore, fo_off=fo_off, fo_geom=fo_geom, fo_bits=fo_bits)

@@ -29,8 +29,9 @@ import math
 from stages.core.curves import curve_point_at
 from stages.procedural.frame_samples import eq7, frame_at
 from stages.procedural.lookup import lookup_point
-from stages.procedural.yarn_model import (ALPHA, DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM,
-                                          PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, S_MIG, USE_MIGRATION, hair_point,
+from stages.procedural.tables import loop_z_range
+from stages.procedural.yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM,
+                                          PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point,
                                           hair_speed_bound, regular_xy, transverse_speed_bound)
 
 from .medium import is_source, medium_lookup
@@ -139,7 +140,7 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
             for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
                 j = tab.lp_fib[e]
                 fi = fo + k * N + j
-                z0, z1 = _loop_range(tab, tp, c, e, fi)
+                z0, z1 = loop_z_range(tab, tp, c, e, fi)
                 ns = _loop_steps(tab, tp, c, e, fi, rf * loop_step_fibers)
                 dz = (z1 - z0) / ns
                 x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z0)
@@ -176,17 +177,6 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
 
 
 @njit(cache=True)
-def _loop_range(tab, tp, c, e, fi):
-    """z range [z0, z1] of loop e (its migration cycle lp_cyc[e], clipped to the yarn)."""
-    w = tp[S_MIG] * 2.0 * math.pi / tp[ALPHA]  # migration phase per unit z
-    cyc = tab.lp_cyc[e]
-    th0 = tab.fib_th0[fi]
-    z0 = max(0.0, (2.0 * math.pi * cyc - math.pi - th0) / w)
-    z1 = min(tab.yarn_length[c], (2.0 * math.pi * cyc + math.pi - th0) / w)
-    return z0, z1
-
-
-@njit(cache=True)
 def _loop_steps(tab, tp, c, e, fi, step):
-    z0, z1 = _loop_range(tab, tp, c, e, fi)
+    z0, z1 = loop_z_range(tab, tp, c, e, fi)
     return max(1, int(math.ceil((z1 - z0) / step)))
