@@ -409,17 +409,16 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     binned = w + eps <= tab.type_pad[t]  # else (beyond a yarn end) every fibre of the ply
     munit = K * (rf + tab.type_pad[t]) / min(es, el)  # the bins' margin in unit-disc units
     # the fringe occupancy and the core radius gate whole parts of the visit (tables.fringe_occupancy)
+    # (the bits hold for any w a visit goes on with; the core radius only for binned visits, an
+    # unbinned one widens each ply's radius range by the margin its larger w needs)
     hybrid = tab.hair_mode[0] == 0
-    core = True
-    loops = True
-    hairs = True
-    if binned:
-        rho = math.sqrt(x * x + y * y)
-        core = rho <= tab.type_rcore[t]
-        loops, hairs = fringe_bits(tab, c, s, x, y, rho)
-        hairs = hairs or not hybrid  # the realization-free mode stores no hairs to mark
-        if not (core or loops or hairs):
-            return OUTSIDE
+    rho = math.sqrt(x * x + y * y)
+    loops, hairs = fringe_bits(tab, c, s, x, y, rho)
+    hairs = hairs or not hybrid  # the realization-free mode stores no hairs to mark
+    core = rho <= tab.type_rcore[t]
+    wide = 0.0 if binned else K * (w + eps - tab.type_pad[t]) / min(es, el)
+    if binned and not (core or loops or hairs):
+        return OUTSIDE
     # ply centres: ply 0's frame, then turns by 2 pi / P (ply_frame without a sine per ply)
     _, _, drx, dry = ply_frame(tp, 0, s)
     rot_c = math.cos(TWO_PI / P)
@@ -437,7 +436,10 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
         rr = math.sqrt(u * u + v * v)
         g = tab.yarn_ply_off[c] + k
         # the ply's fibres, and the loops of s's z-bin, cover unit-disc radii in ply_rr / lz_rr only
-        scan_reg = not binned or (core and tab.ply_rr[t, k, 0] <= rr <= tab.ply_rr[t, k, 1])
+        if binned:
+            scan_reg = core and tab.ply_rr[t, k, 0] <= rr <= tab.ply_rr[t, k, 1]
+        else:  # every fibre of the ply, loops included, where a regular stretch or a loop may reach
+            scan_reg = rr <= tab.ply_rr[t, k, 1] + wide or loops
         zbin = -1
         if binned and loops and tab.lp_off[g + 1] > tab.lp_off[g]:
             nzb = tab.lz_off[g + 1] - tab.lz_off[g]
