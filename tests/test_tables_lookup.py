@@ -171,7 +171,8 @@ def test_scan_bounds_hold_their_items(built):
 def test_fringe_occupancy_covers_loops_and_hairs(built):
     """tables.fringe_occupancy against brute force: every point within fringe_reach (yarn space) of
     a loop's fibre (densely sampled over the loop's cycle grown by fringe_window) has its loop bit
-    set, of a hair (densely sampled) its hair bit; and beyond type_rcore from the axis every ply's
+    set, of a hair (densely sampled) its hair bit, and lies inside the gate (tables.chord_gates) of
+    every chord whose lookup bracket holds it; and beyond type_rcore from the axis every ply's
     unit-disc radius exceeds its ply_rr (no regular fibre of any ply is in reach)."""
     cv, tab, _ = load_tables(built / "tables.zarr")
     rng = np.random.default_rng(3)
@@ -184,6 +185,11 @@ def test_fringe_occupancy_covers_loops_and_hairs(built):
             pz = min(max(pz, 0.0), tab.yarn_length[c])
             lb, hb = T.fringe_bits(tab, c, pz, px, py, math.hypot(px, py))
             assert (lb if kind == "loop" else hb), (c, kind, px, py, pz)
+            # and inside the gate of every chord whose lookup bracket holds pz (chord_gates)
+            k0, k1 = tab.kn_off[c], tab.kn_off[c + 1]
+            for q in range(k0, k1 - 1):
+                if tab.fs_s[tab.kn_idx[max(q - 1, k0)]] <= pz <= tab.fs_s[tab.kn_idx[min(q + 2, k1 - 1)]]:
+                    assert math.hypot(px, py) < tab.kn_rgate[q], (c, q, kind)
             checked[kind] += 1
 
     for c in range(len(tab.yarn_type)):

@@ -629,6 +629,12 @@ def lookup_point(cv, tab, px, py, pz):
         bound = tab.yarn_extent[c] + 2.0 * eps
         if best >= bound:
             continue
+        # beyond the chord's gate (tables.chord_gates) nothing of the yarn can cover p; p's axis
+        # distance is at least sqrt(best^2 - w^2) with w < r_f + 2 eps_c for a visit that goes on
+        gate = tab.kn_rgate[bq]
+        m = tab.tparams[tab.yarn_type[c], FIBER_RADIUS] + 2.0 * eps
+        if best > 0.0 and best * best >= gate * gate + m * m:
+            continue
         # foot point: Newton from the nearest chord, bracketed by its neighbours
         k0 = tab.kn_off[c]
         k1 = tab.kn_off[c + 1] - 1

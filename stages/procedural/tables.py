@@ -101,10 +101,11 @@ Tables = namedtuple("Tables", [
     "fo_off",           # (Y+1,) int64: fringe z-bins of yarn c at fo_off[c]:fo_off[c+1]
     "fo_geom",          # (Y, 2) float64 fringe z-bin width and shell width of yarn c
     "fo_bits",          # (fringe z-bins, 2 FO_WORDS) uint64 fringe occupancy of loops, then hairs (fringe_occupancy)
+    "kn_rgate",         # (coarse knots,) float64 axis distance beyond which a visit near the chord finds nothing
 ])
 DERIVED_FIELDS = ("fs_off", "fs_s", "fs_frame", "yarn_eps", "kn_off", "kn_idx", "kn_sag", "fg_lo", "fg_cell",
                   "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b", "ply_rr", "fib_v", "hair_box", "lz_rr",
-                  "type_rcore", "fo_off", "fo_geom", "fo_bits")
+                  "type_rcore", "fo_off", "fo_geom", "fo_bits", "kn_rgate")
 STORED_FIELDS = tuple(f for f in Tables._fields if f not in DERIVED_FIELDS)
 PAD_FRACTION = 0.05      # type_pad in fibre radii: the bins' slack for the sampled frames' error
 FRAME_TOLERANCE = 0.01   # frame-sample error aimed at, in fibre radii (<= PAD_FRACTION / 3 keeps lookups binned)
@@ -434,7 +435,7 @@ def _empty_accel(Y):
     return (np.zeros(Y + 1, np.int64), z, np.zeros((0, 12)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
             np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi,
             np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0),
-            np.zeros(Y + 1, np.int64), np.ones((Y, 2)), np.zeros((0, 2 * FO_WORDS), np.uint64))
+            np.zeros(Y + 1, np.int64), np.ones((Y, 2)), np.zeros((0, 2 * FO_WORDS), np.uint64), np.zeros(0))
 
 
 def scan_bounds(tab: Tables):
@@ -619,6 +620,39 @@ def fringe_tables(tab: Tables):
     return rcore, fo_off, fo_geom, fringe_occupancy(tab, fo_off, fo_geom)
 
 
+def chord_gates(tab: Tables):
+    """Per coarse chord q (from knot q to q + 1) of yarn c: an axis distance R such that a point whose
+    foot point lies on chords q-1 .. q+2 (the lookups' bracket) and whose distance from the axis
+    exceeds R is covered by no fibre of c: the largest of type_rcore widened by the margin of an
+    unbinned visit (K (r_f + 2 eps_c) max(e) / min(e)) and the outer radius of the set fringe
+    shells over the bracket's z-bins (infinite where the last, open shell is set or, in the
+    realization-free mode, where hairs are not stored). Lookups skip such a yarn before its foot
+    point: p's axis distance is at least sqrt(lb^2 - w^2) for the chord lower bound lb."""
+    gate = np.full(len(tab.kn_idx), np.inf)
+    bits = np.unpackbits(tab.fo_bits.view(np.uint8), axis=1, bitorder="little")
+    bits = bits.reshape(len(tab.fo_bits), 2, FO_SHELLS, FO_SECTORS).any(axis=(1, 3))  # (bins, shells)
+    top = np.where(bits.any(axis=1), FO_SHELLS - 1 - np.argmax(bits[:, ::-1], axis=1), -1)
+    for c in range(len(tab.yarn_type)):
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        if tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0:
+            continue
+        es, el = tp[E_SHORT], tp[E_LONG]
+        rcore = tab.type_rcore[t] + tab.type_K[t] * (tp[FIBER_RADIUS] + 2.0 * tab.yarn_eps[c]) * max(es, el) / min(es, el)
+        k0, k1 = tab.kn_off[c], tab.kn_off[c + 1]
+        base, nb = tab.fo_off[c], tab.fo_off[c + 1] - tab.fo_off[c]
+        h, rw = tab.fo_geom[c]
+        for q in range(k0, k1 - 1):
+            sa = tab.fs_s[tab.kn_idx[max(q - 1, k0)]]
+            sb = tab.fs_s[tab.kn_idx[min(q + 2, k1 - 1)]]
+            b0 = min(max(int(math.floor(sa / h)), 0), nb - 1)
+            b1 = min(max(int(math.floor(sb / h)), 0), nb - 1)
+            sh = int(top[base + b0:base + b1 + 1].max())
+            rf_ = np.inf if sh == FO_SHELLS - 1 else (sh + 1) * rw
+            gate[q] = max(rcore, rf_)
+    return gate
+
+
 def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
     """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
     eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
@@ -663,4 +697,5 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
                        kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
                        fg_yarn=gyarn, fg_a=ga, fg_b=gb)
     rcore, fo_off, fo_geom, fo_bits = fringe_tables(tab)
-    return tab._replace(type_rcore=rcore, fo_off=fo_off, fo_geom=fo_geom, fo_bits=fo_bits)
+    tab = tab._replace(type_rcore=rcore, fo_off=fo_off, fo_geom=fo_geom, fo_bits=fo_bits)
+    return tab._replace(kn_rgate=chord_gates(tab))
