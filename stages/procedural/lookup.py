@@ -47,7 +47,7 @@ from stages.core.curves import curve_frame_at
 
 from . import hair_free
 from .frame_samples import chord_lower_bound, eq7, foot_point, frame_at
-from .tables import fringe_bits, hair_node_seed_nb
+from .tables import fringe_bits, hair_node_seed_nb, yarn_space_limit, z_window
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
                          ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, hair_speed_bound, ply_frame, reach_factor,
                          regular_xy)
@@ -402,7 +402,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     gmin = tab.yarn_gmin[c]
     # window holding every fibre point within rf of p (|z - s| <= yarn-space distance / g_min)
     L = tab.yarn_length[c]
-    hwin = (max((1.0 + K) * (rf + w + eps), tab.type_mz[t]) + w + 2.0 * eps) / gmin
+    hwin = z_window(K, tab.type_mz[t], rf, w, eps, gmin)
     za = max(0.0, s - hwin)
     zb = min(L, s + hwin)
     reach = K * (rf + w + eps)
@@ -497,7 +497,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
         nh = tab.hair_count[g]
         if nh == 0 or not hairs:
             continue
-        limit = 1.1 * (rf + w + 2.0 * eps) / gmin
+        limit = yarn_space_limit(rf, w, eps, gmin)
         rho_k = math.sqrt(ax * ax + ay * ay)
         if hybrid:
             # hybrid: the z-bin holding s by binary search, its active list in place

@@ -490,17 +490,29 @@ def loop_z_range(tab, tp, c, e, fi):
 
 
 @njit(cache=True, inline="always")
+def yarn_space_limit(rf, w, eps, gmin):
+    """Yarn-space distance within which a fibre point must lie to cover a point with tangential
+    residual w (1.1 (r_f + w + 2 eps_c) / g_min; the lookups' hair and loop limit)."""
+    return 1.1 * (rf + w + 2.0 * eps) / gmin
+
+
+@njit(cache=True, inline="always")
+def z_window(K, mz, rf, w, eps, gmin):
+    """Half width of a yarn visit's z window: every fibre point within r_f of a point with tangential
+    residual w lies within it of the foot point s (|z - s| <= yarn-space distance / g_min)."""
+    return (max((1.0 + K) * (rf + w + eps), mz) + w + 2.0 * eps) / gmin
+
+
+@njit(cache=True, inline="always")
 def fringe_reach(rf, eps, gmin):
-    """Yarn-space distance within which a loop or hair point must lie to cover a lookup point: the
-    hair tests' limit 1.1 (r_f + w + 2 eps_c) / g_min at the largest tangential residual w a yarn
-    visit goes on with (w < r_f + 2 eps_c)."""
-    return 1.1 * (2.0 * rf + 4.0 * eps) / gmin
+    """yarn_space_limit at the largest tangential residual a yarn visit goes on with (w < r_f + 2 eps_c)."""
+    return yarn_space_limit(rf, rf + 2.0 * eps, eps, gmin)
 
 
 @njit(cache=True, inline="always")
 def fringe_window(K, mz, rf, eps, gmin):
-    """Largest half width of a yarn visit's z window (lookup.yarn_lookup's hwin at w < r_f + 2 eps_c)."""
-    return (max((1.0 + K) * (2.0 * rf + 3.0 * eps), mz) + rf + 4.0 * eps) / gmin
+    """z_window at the largest tangential residual a yarn visit goes on with (w < r_f + 2 eps_c)."""
+    return z_window(K, mz, rf, rf + 2.0 * eps, eps, gmin)
 
 
 @njit(cache=True, inline="always")
