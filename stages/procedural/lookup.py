@@ -16,7 +16,9 @@ Steps (Algorithm 1), allocation-free:
 1. Candidate yarns: the runs of coarse chords in p's cell of the chord grid (frame_samples.py),
    yarn by yarn in ascending order; the nearest chord bounds p's distance to the axis from below
    (a yarn farther than its extent bound + eps_c is skipped) and seeds Newton for the foot point
-   s on the sampled (Hermite) axis (seed 000 §5.2).
+   s on the sampled (Hermite) axis (seed 000 §5.2). A closed yarn's fibres run from s = 0 to its
+   length L and do not join at the seam: near the seam both end pieces are visited, each as an
+   open yarn's end, and the covering fibre first in the order below answers.
 2. Yarn space (Eq. 8-9) with the sampled frame at s: (x, y) and the tangential residual w. The
    derived fringe occupancy (tables.fringe_occupancy: bits per yarn z-bin, radial shell and
    azimuth sector, one set for loops and one for hairs) and the core radius type_rcore decide
@@ -47,7 +49,7 @@ from stages.core.curves import curve_frame_at
 
 from . import hair_free
 from .frame_samples import chord_lower_bound, eq7, foot_point, frame_at
-from .tables import fringe_bits, hair_node_seed_nb, yarn_space_limit, z_window
+from .tables import fringe_bits, fringe_window, hair_node_seed_nb, yarn_space_limit, z_window
 from .yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
                          ZE_MU, ZE_SIG, fiber_twist, hair_params, hair_point, hair_speed_bound, ply_frame, reach_factor,
                          regular_xy)
@@ -58,6 +60,8 @@ HAIR_SAMPLES = 16
 FOOT_TOL = 1e-4  # foot-point Newton stops at steps below this x the fibre radius (w absorbs the rest)
 GN_TOL = 1e-5  # Gauss-Newton stops when a step moves the fibre point by less than this x the fibre radius
 OUTSIDE = (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+NO_FIBRE = 1 << 62  # yarn_lookup's order key when nothing covers p
+ORDER_STRIDE = 1 << 32  # order key of a hit: (2 ply + is_hair) * ORDER_STRIDE + fibre index
 
 
 @njit(cache=True)
@@ -375,9 +379,16 @@ def _answer(c, kind, tx, ty, tz, tp, tab):
             tab.yarn_albedo[c, 2])
 
 
+@njit(cache=True, inline="always")
+def _order_key(k, is_hair, j):
+    """Where a hit stands in the covering order (ply, regular before hair, fibre index) of one yarn."""
+    return (2 * k + (1 if is_hair else 0)) * ORDER_STRIDE + j
+
+
 @njit(cache=True)
 def yarn_lookup(cv, tab, c, s, i, px, py, pz):
-    """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i)."""
+    """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i):
+    (result as lookup_point's, order key of the covering fibre: _order_key, NO_FIBRE outside)."""
     t = tab.yarn_type[c]
     tp = tab.tparams[t]
     lo = tab.fs_off[c]
@@ -390,7 +401,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     w = abs(rx * f[3] + ry * f[4] + rz * f[5])
     rf = tp[FIBER_RADIUS]
     if w >= rf + 2.0 * eps:
-        return OUTSIDE  # beyond an end of the yarn by more than any fibre's cap reaches
+        return OUTSIDE, NO_FIBRE  # beyond an end of the yarn by more than any fibre's cap reaches
     K = tab.type_K[t]
     yseed = np.uint64(tab.yarn_seed[c])
     P = int(tp[PLY_NUM])
@@ -418,7 +429,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     core = rho <= tab.type_rcore[t]
     wide = 0.0 if binned else K * (w + eps - tab.type_pad[t]) / min(es, el)
     if binned and not (core or loops or hairs):
-        return OUTSIDE
+        return OUTSIDE, NO_FIBRE
     # ply centres: ply 0's frame, then turns by 2 pi / P (ply_frame without a sine per ply)
     _, _, drx, dry = ply_frame(tp, 0, s)
     rot_c = math.cos(TWO_PI / P)
@@ -492,7 +503,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                         jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
                         break
         if jbest < N:
-            return _answer(c, kbest, tbx, tby, tbz, tp, tab)
+            return _answer(c, kbest, tbx, tby, tbz, tp, tab), _order_key(k, False, jbest)
         # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
         nh = tab.hair_count[g]
         if nh == 0 or not hairs:
@@ -526,15 +537,15 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                                  tab.hair_pe[hh], tab.hair_z1[hh], tab.hair_ze[hh], x, y, s, rho_k, limit, lo, hi, za,
                                  zb, rf, eps, px, py, pz)
                 if res[0]:
-                    return _answer(c, 3, res[1], res[2], res[3], tp, tab)
+                    return _answer(c, 3, res[1], res[2], res[3], tp, tab), _order_key(k, True, tab.hb_items[qq])
         else:
             seed = hair_node_seed_nb(np.uint64(tab.yarn_seed[c]), k)
             margin = tab.type_mz[t] + (w + 2.0 * eps) / gmin
             res = _free_mode_hairs(cv, tab.fs_s, tab.fs_frame, c, tp, k, nh, yseed, seed, L, margin, x, y, s, rho_k,
                                    limit, lo, hi, za, zb, rf, eps, px, py, pz)
             if res[0]:
-                return _answer(c, 3, res[1], res[2], res[3], tp, tab)
-    return OUTSIDE
+                return _answer(c, 3, res[1], res[2], res[3], tp, tab), _order_key(k, True, res[4])
+    return OUTSIDE, NO_FIBRE
 
 
 @njit(cache=True, inline="always")
@@ -582,7 +593,8 @@ def _hair_test(cv, fs, fr, c, tp, k, r0, r1, th1, pe, z1, ze, x, y, s, rho_k, li
 def _free_mode_hairs(cv, fs, fr, c, tp, k, nh, yseed, seed, L, margin, x, y, s, rho_k, limit, lo, hi, za, zb, rf, eps,
                      px, py, pz):
     """Realization-free hair mode (Algorithm 3): the active hairs of ply k at s from the implicit
-    quad-tree (scratch arrays of the ply's hair count), then the same tests as the hybrid mode.
+    quad-tree (scratch arrays of the ply's hair count), then the same tests as the hybrid mode:
+    (covered, tangent, hair index).
     A function of its own so that yarn_lookup allocates nothing."""
     hidx = np.empty(nh, np.int64)
     hz1 = np.empty(nh)
@@ -593,8 +605,8 @@ def _free_mode_hairs(cv, fs, fr, c, tp, k, nh, yseed, seed, L, margin, x, y, s, 
         res = _hair_test(cv, fs, fr, c, tp, k, r0, r1, th1, pe, hz1[qq], hze[qq], x, y, s, rho_k, limit, lo, hi, za, zb,
                          rf, eps, px, py, pz)
         if res[0]:
-            return res
-    return False, 0.0, 0.0, 0.0
+            return True, res[1], res[2], res[3], hidx[qq]
+    return False, 0.0, 0.0, 0.0, 0
 
 
 @njit(cache=True)
@@ -629,29 +641,67 @@ def lookup_point(cv, tab, px, py, pz):
         bound = tab.yarn_extent[c] + 2.0 * eps
         if best >= bound:
             continue
-        # beyond the chord's gate (tables.chord_gates) nothing of the yarn can cover p; p's axis
-        # distance is at least sqrt(best^2 - w^2) with w < r_f + 2 eps_c for a visit that goes on
+        # beyond the chord's gate (tables.chord_gates) nothing of the yarn near that chord can cover p;
+        # p's axis distance is at least sqrt(best^2 - w^2) with w < r_f + 2 eps_c for a visit that goes on
         gate = tab.kn_rgate[bq]
-        m = tab.tparams[tab.yarn_type[c], FIBER_RADIUS] + 2.0 * eps
-        if best > 0.0 and best * best >= gate * gate + m * m:
-            continue
-        # foot point: Newton from the nearest chord, bracketed by its neighbours
+        rf = tab.tparams[tab.yarn_type[c], FIBER_RADIUS]
+        m = rf + 2.0 * eps
+        gated = best > 0.0 and best * best >= gate * gate + m * m
+        # a closed yarn's fibres run from s = 0 to L and meet at the seam: near it, the pieces at
+        # both ends are visited (as an open yarn's ends) and the first in the covering order answers
         k0 = tab.kn_off[c]
         k1 = tab.kn_off[c + 1] - 1
-        ia = tab.kn_idx[bq]
-        ib = tab.kn_idx[bq + 1]
-        s0 = tab.fs_s[ia] + bt * (tab.fs_s[ib] - tab.fs_s[ia])
-        sa = tab.fs_s[tab.kn_idx[max(bq - 1, k0)]]
-        sb = tab.fs_s[tab.kn_idx[min(bq + 2, k1)]]
-        # the bracket's frame samples (kn_idx: coarse knots are frame-sample indices)
-        s, i, d2 = foot_point(tab.fs_s, fr, tab.kn_idx[max(bq - 1, k0)], tab.kn_idx[min(bq + 2, k1)] + 1, ia, s0, sa,
-                              sb, px, py, pz, FOOT_TOL * tab.tparams[tab.yarn_type[c], FIBER_RADIUS])
-        if d2 >= bound * bound:
+        seam = cv.closed[c] and _near_seam(tab, c, k0, bound, rf, eps, px, py, pz)
+        if gated and not seam:
             continue
-        res = yarn_lookup(cv, tab, c, s, i, px, py, pz)
+        res, key = OUTSIDE, NO_FIBRE
+        ka = max(bq - 1, k0)
+        kb = min(bq + 2, k1)
+        if not gated:  # foot point: Newton from the nearest chord, bracketed by its neighbours
+            ia = tab.kn_idx[bq]
+            s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
+            res, key = _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz)
+        if seam:
+            if ka > k0:  # the start of the yarn
+                r2, k2 = _visit(cv, tab, c, k0, min(k0 + 2, k1), tab.kn_idx[k0], 0.0, bound, rf, px, py, pz)
+                if k2 < key:
+                    res, key = r2, k2
+            if kb < k1:  # its end
+                r2, k2 = _visit(cv, tab, c, max(k1 - 2, k0), k1, tab.kn_idx[k1 - 1], tab.yarn_length[c], bound, rf,
+                                px, py, pz)
+                if k2 < key:
+                    res, key = r2, k2
         if res[0]:
             return res
     return OUTSIDE
+
+
+@njit(cache=True, inline="always")
+def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz):
+    """yarn_lookup at p's foot point on yarn c between coarse knots ka and kb (frame-sample hint ia,
+    Newton from s0); (OUTSIDE, NO_FIBRE) when the foot point is farther than bound."""
+    fa = tab.kn_idx[ka]
+    fb = tab.kn_idx[kb]
+    s, i, d2 = foot_point(tab.fs_s, tab.fs_frame, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz,
+                          FOOT_TOL * rf)
+    if d2 >= bound * bound:
+        return OUTSIDE, NO_FIBRE
+    return yarn_lookup(cv, tab, c, s, i, px, py, pz)
+
+
+@njit(cache=True, inline="always")
+def _near_seam(tab, c, k0, bound, rf, eps, px, py, pz):
+    """Whether fibres of closed yarn c within its largest z window of the seam may reach p (p within
+    bound + that window of the seam point: a fibre point at arc length z lies within the extent of
+    the axis at z, and the axis within |z - seam| of the seam point)."""
+    t = tab.yarn_type[c]
+    zw = fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, tab.yarn_gmin[c])
+    a = tab.kn_idx[k0]
+    dx = px - tab.fs_frame[a, 0]
+    dy = py - tab.fs_frame[a, 1]
+    dz = pz - tab.fs_frame[a, 2]
+    r = bound + zw
+    return dx * dx + dy * dy + dz * dz < r * r
 
 
 @njit(cache=True, parallel=True)
