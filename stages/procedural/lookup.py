@@ -61,6 +61,7 @@ FOOT_TOL = 1e-4  # foot-point Newton stops at steps below this x the fibre radiu
 GN_TOL = 1e-5  # Gauss-Newton stops when a step moves the fibre point by less than this x the fibre radius
 OUTSIDE = (False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 NO_FIBRE = 1 << 62  # yarn_lookup's order key when nothing covers p
+OUTSIDE_KEYED = OUTSIDE + (NO_FIBRE,)
 ORDER_STRIDE = 1 << 32  # order key of a hit: (2 ply + is_hair) * ORDER_STRIDE + fibre index
 
 
@@ -374,9 +375,9 @@ def _exact_hair(cv, c, tp, k, r0, r1, th1, pe, z1, ze, rf, eps, px, py, pz, ts):
 
 # ------------------------------------------------------------------------------------------------
 @njit(cache=True, inline="always")
-def _answer(c, kind, tx, ty, tz, tp, tab):
+def _answer(c, kind, tx, ty, tz, tp, tab, key):
     return (True, c, kind, tx, ty, tz, tp[DENSITY], tab.yarn_albedo[c, 0], tab.yarn_albedo[c, 1],
-            tab.yarn_albedo[c, 2])
+            tab.yarn_albedo[c, 2], key)
 
 
 @njit(cache=True, inline="always")
@@ -388,7 +389,8 @@ def _order_key(k, is_hair, j):
 @njit(cache=True)
 def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i):
-    (result as lookup_point's, order key of the covering fibre: _order_key, NO_FIBRE outside)."""
+    lookup_point's result followed by the order key of the covering fibre (_order_key; NO_FIBRE
+    outside)."""
     t = tab.yarn_type[c]
     tp = tab.tparams[t]
     lo = tab.fs_off[c]
@@ -401,7 +403,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     w = abs(rx * f[3] + ry * f[4] + rz * f[5])
     rf = tp[FIBER_RADIUS]
     if w >= rf + 2.0 * eps:
-        return OUTSIDE, NO_FIBRE  # beyond an end of the yarn by more than any fibre's cap reaches
+        return OUTSIDE_KEYED  # beyond an end of the yarn by more than any fibre's cap reaches
     K = tab.type_K[t]
     yseed = np.uint64(tab.yarn_seed[c])
     P = int(tp[PLY_NUM])
@@ -429,7 +431,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
     core = rho <= tab.type_rcore[t]
     wide = 0.0 if binned else K * (w + eps - tab.type_pad[t]) / min(es, el)
     if binned and not (core or loops or hairs):
-        return OUTSIDE, NO_FIBRE
+        return OUTSIDE_KEYED
     # ply centres: ply 0's frame, then turns by 2 pi / P (ply_frame without a sine per ply)
     _, _, drx, dry = ply_frame(tp, 0, s)
     rot_c = math.cos(TWO_PI / P)
@@ -503,7 +505,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                         jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
                         break
         if jbest < N:
-            return _answer(c, kbest, tbx, tby, tbz, tp, tab), _order_key(k, False, jbest)
+            return _answer(c, kbest, tbx, tby, tbz, tp, tab, _order_key(k, False, jbest))
         # ---- hair fibres of ply k (hybrid z-bins or Algorithm 3)
         nh = tab.hair_count[g]
         if nh == 0 or not hairs:
@@ -537,15 +539,15 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                                  tab.hair_pe[hh], tab.hair_z1[hh], tab.hair_ze[hh], x, y, s, rho_k, limit, lo, hi, za,
                                  zb, rf, eps, px, py, pz)
                 if res[0]:
-                    return _answer(c, 3, res[1], res[2], res[3], tp, tab), _order_key(k, True, tab.hb_items[qq])
+                    return _answer(c, 3, res[1], res[2], res[3], tp, tab, _order_key(k, True, tab.hb_items[qq]))
         else:
             seed = hair_node_seed_nb(np.uint64(tab.yarn_seed[c]), k)
             margin = tab.type_mz[t] + (w + 2.0 * eps) / gmin
             res = _free_mode_hairs(cv, tab.fs_s, tab.fs_frame, c, tp, k, nh, yseed, seed, L, margin, x, y, s, rho_k,
                                    limit, lo, hi, za, zb, rf, eps, px, py, pz)
             if res[0]:
-                return _answer(c, 3, res[1], res[2], res[3], tp, tab), _order_key(k, True, res[4])
-    return OUTSIDE, NO_FIBRE
+                return _answer(c, 3, res[1], res[2], res[3], tp, tab, _order_key(k, True, res[4]))
+    return OUTSIDE_KEYED
 
 
 @njit(cache=True, inline="always")
@@ -647,56 +649,76 @@ def lookup_point(cv, tab, px, py, pz):
         rf = tab.tparams[tab.yarn_type[c], FIBER_RADIUS]
         m = rf + 2.0 * eps
         gated = best > 0.0 and best * best >= gate * gate + m * m
-        # a closed yarn's fibres run from s = 0 to L and meet at the seam: near it, the pieces at
-        # both ends are visited (as an open yarn's ends) and the first in the covering order answers
+        if cv.closed[c] and _near_seam(tab, c, bound, rf, eps, px, py, pz):
+            res = _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz)
+            if res[0]:
+                return res[:10]
+            continue
+        if gated:
+            continue
+        # foot point: Newton from the nearest chord, bracketed by its neighbours
         k0 = tab.kn_off[c]
         k1 = tab.kn_off[c + 1] - 1
-        seam = cv.closed[c] and _near_seam(tab, c, k0, bound, rf, eps, px, py, pz)
-        if gated and not seam:
+        ia = tab.kn_idx[bq]
+        s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
+        fa = tab.kn_idx[max(bq - 1, k0)]
+        fb = tab.kn_idx[min(bq + 2, k1)]
+        s, i, d2 = foot_point(tab.fs_s, fr, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz, FOOT_TOL * rf)
+        if d2 >= bound * bound:
             continue
-        res, key = OUTSIDE, NO_FIBRE
-        ka = max(bq - 1, k0)
-        kb = min(bq + 2, k1)
-        if not gated:  # foot point: Newton from the nearest chord, bracketed by its neighbours
-            ia = tab.kn_idx[bq]
-            s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
-            res, key = _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz)
-        if seam:
-            if ka > k0:  # the start of the yarn
-                r2, k2 = _visit(cv, tab, c, k0, min(k0 + 2, k1), tab.kn_idx[k0], 0.0, bound, rf, px, py, pz)
-                if k2 < key:
-                    res, key = r2, k2
-            if kb < k1:  # its end
-                r2, k2 = _visit(cv, tab, c, max(k1 - 2, k0), k1, tab.kn_idx[k1 - 1], tab.yarn_length[c], bound, rf,
-                                px, py, pz)
-                if k2 < key:
-                    res, key = r2, k2
+        res = yarn_lookup(cv, tab, c, s, i, px, py, pz)
         if res[0]:
-            return res
+            return res[:10]
     return OUTSIDE
 
 
 @njit(cache=True, inline="always")
 def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz):
     """yarn_lookup at p's foot point on yarn c between coarse knots ka and kb (frame-sample hint ia,
-    Newton from s0); (OUTSIDE, NO_FIBRE) when the foot point is farther than bound."""
+    Newton from s0); OUTSIDE_KEYED when the foot point is farther than bound. (lookup_point's main
+    visit spells this out: returning the constant from an inlined call costs it ~20 %.)"""
     fa = tab.kn_idx[ka]
     fb = tab.kn_idx[kb]
     s, i, d2 = foot_point(tab.fs_s, tab.fs_frame, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz,
                           FOOT_TOL * rf)
     if d2 >= bound * bound:
-        return OUTSIDE, NO_FIBRE
+        return OUTSIDE_KEYED
     return yarn_lookup(cv, tab, c, s, i, px, py, pz)
 
 
+@njit(cache=True)
+def _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz):
+    """Closed yarn c near its seam (a closed yarn's fibres run from s = 0 to L and meet at the seam
+    without joining): the main visit at the nearest chord bq unless gated, and each end piece it
+    does not cover, visited as an open yarn's end; the first answer in the covering order."""
+    k0 = tab.kn_off[c]
+    k1 = tab.kn_off[c + 1] - 1
+    ka = max(bq - 1, k0)
+    kb = min(bq + 2, k1)
+    res = OUTSIDE_KEYED
+    if not gated:
+        ia = tab.kn_idx[bq]
+        s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
+        res = _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz)
+    if ka > k0:  # the start of the yarn
+        r2 = _visit(cv, tab, c, k0, min(k0 + 2, k1), tab.kn_idx[k0], 0.0, bound, rf, px, py, pz)
+        if r2[10] < res[10]:
+            res = r2
+    if kb < k1:  # its end
+        r2 = _visit(cv, tab, c, max(k1 - 2, k0), k1, tab.kn_idx[k1 - 1], tab.yarn_length[c], bound, rf, px, py, pz)
+        if r2[10] < res[10]:
+            res = r2
+    return res
+
+
 @njit(cache=True, inline="always")
-def _near_seam(tab, c, k0, bound, rf, eps, px, py, pz):
+def _near_seam(tab, c, bound, rf, eps, px, py, pz):
     """Whether fibres of closed yarn c within its largest z window of the seam may reach p (p within
     bound + that window of the seam point: a fibre point at arc length z lies within the extent of
     the axis at z, and the axis within |z - seam| of the seam point)."""
     t = tab.yarn_type[c]
     zw = fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, tab.yarn_gmin[c])
-    a = tab.kn_idx[k0]
+    a = tab.kn_idx[tab.kn_off[c]]
     dx = px - tab.fs_frame[a, 0]
     dy = py - tab.fs_frame[a, 1]
     dz = pz - tab.fs_frame[a, 2]
