@@ -198,14 +198,11 @@ def test_fringe_occupancy_covers_loops_and_hairs(built):
         rf, eps, gmin = tp[M.FIBER_RADIUS], tab.yarn_eps[c], tab.yarn_gmin[c]
         r = T.fringe_reach(rf, eps, gmin)
         win = T.fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, gmin)
-        N = int(tp[M.FIBER_NUM])
         ys = np.uint64(tab.yarn_seed[c])
         for k in range(int(tp[M.PLY_NUM])):
             g = tab.yarn_ply_off[c] + k
             for e in range(tab.lp_off[g], tab.lp_off[g + 1], 3):
-                j = int(tab.lp_fib[e])
-                fi = tab.type_fib_off[t] + k * N + j
-                z0, z1 = T.loop_z_range(tab, tp, c, e, fi)
+                j, fi, z0, z1 = T.loop_fibre(tab, tp, c, k, e)
                 for z in np.linspace(max(0.0, z0 - win), min(tab.yarn_length[c], z1 + win), 97):
                     x, y, _ = M.regular_xy(tp, ys, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
                     probe(c, "loop", x, y, z, r)

@@ -479,14 +479,18 @@ def scan_bounds(tab: Tables):
 
 
 @njit(cache=True)
-def loop_z_range(tab, tp, c, e, fi):
-    """z range [z0, z1] of loop e (its migration cycle lp_cyc[e], clipped to the yarn); fi its fibre."""
+def loop_fibre(tab, tp, c, k, e):
+    """Loop e of ply k of yarn c (tp its type's parameters): (j its fibre's index in the ply, fi that
+    fibre's row in the type's fibre tables, [z0, z1] the z range of its migration cycle lp_cyc[e],
+    clipped to the yarn)."""
+    j = tab.lp_fib[e]
+    fi = tab.type_fib_off[tab.yarn_type[c]] + k * int(tp[FIBER_NUM]) + j
     w = tp[S_MIG] * 2.0 * math.pi / tp[ALPHA]  # migration phase per unit z
     cyc = tab.lp_cyc[e]
     th0 = tab.fib_th0[fi]
     z0 = max(0.0, (2.0 * math.pi * cyc - math.pi - th0) / w)
     z1 = min(tab.yarn_length[c], (2.0 * math.pi * cyc + math.pi - th0) / w)
-    return z0, z1
+    return j, fi, z0, z1
 
 
 @njit(cache=True, inline="always")
@@ -578,16 +582,12 @@ def fringe_occupancy(tab, fo_off, fo_geom):
         r = fringe_reach(rf, eps, gmin)
         win = fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, gmin)
         L = tab.yarn_length[c]
-        N = int(tp[FIBER_NUM])
-        fo = tab.type_fib_off[t]
         yseed = np.uint64(tab.yarn_seed[c])
         v = math.sqrt(1.0 + transverse_speed_bound(tp) ** 2)  # yarn-space speed per unit z
         for k in range(int(tp[PLY_NUM])):
             g = tab.yarn_ply_off[c] + k
             for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
-                j = tab.lp_fib[e]
-                fi = fo + k * N + j
-                z0, z1 = loop_z_range(tab, tp, c, e, fi)
+                j, fi, z0, z1 = loop_fibre(tab, tp, c, k, e)
                 z0 = max(0.0, z0 - win)
                 z1 = min(L, z1 + win)
                 n = max(1, int(math.ceil((z1 - z0) * v / r)))

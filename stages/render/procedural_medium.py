@@ -29,8 +29,8 @@ import math
 from stages.core.curves import curve_point_at
 from stages.procedural.frame_samples import eq7, frame_at
 from stages.procedural.lookup import lookup_point
-from stages.procedural.tables import loop_z_range
-from stages.procedural.yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM,
+from stages.procedural.tables import loop_fibre
+from stages.procedural.yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM,
                                           PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point,
                                           hair_speed_bound, regular_xy, transverse_speed_bound)
 
@@ -93,12 +93,10 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
         r_tube = ext if hair_tube else core
         ncap += max(1, int(np.ceil(cv.curve_length[c] / max(step_frac * r_tube, 1e-12))))
         rf = tp[FIBER_RADIUS]
-        N = int(tp[FIBER_NUM])
         for k in range(int(tp[PLY_NUM])):
             g = tab.yarn_ply_off[c] + k
             for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
-                ncap += 1 + _loop_steps(tab, tp, c, e, tab.type_fib_off[tab.yarn_type[c]] + k * N + tab.lp_fib[e],
-                                        rf * loop_step_fibers)
+                ncap += 1 + _loop_steps(tab, tp, c, k, e, rf * loop_step_fibers)
             if tab.hair_mode[0] == 0:
                 ncap += tab.hair_count[g] * (hair_samples - 1)
     a = np.empty((ncap, 3))
@@ -131,17 +129,13 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
             prev = nxt
             m += 1
         yseed = np.uint64(tab.yarn_seed[c])
-        N = int(tp[FIBER_NUM])
         # fabric-space speed of a regular/loop fibre: g_max (axial) + its yarn-space transverse speed
         vfib = gmax + transverse_speed_bound(tp)
-        fo = tab.type_fib_off[t]
         for k in range(int(tp[PLY_NUM])):
             g = tab.yarn_ply_off[c] + k
             for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
-                j = tab.lp_fib[e]
-                fi = fo + k * N + j
-                z0, z1 = loop_z_range(tab, tp, c, e, fi)
-                ns = _loop_steps(tab, tp, c, e, fi, rf * loop_step_fibers)
+                j, fi, z0, z1 = loop_fibre(tab, tp, c, k, e)
+                ns = _loop_steps(tab, tp, c, k, e, rf * loop_step_fibers)
                 dz = (z1 - z0) / ns
                 x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z0)
                 i = lo
@@ -177,6 +171,6 @@ def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
 
 
 @njit(cache=True)
-def _loop_steps(tab, tp, c, e, fi, step):
-    z0, z1 = loop_z_range(tab, tp, c, e, fi)
+def _loop_steps(tab, tp, c, k, e, step):
+    _, _, z0, z1 = loop_fibre(tab, tp, c, k, e)
     return max(1, int(math.ceil((z1 - z0) / step)))
