@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from numba import njit, prange
 
-from stages.core.bvh import intersect
+from stages.core.geometry.bvh import intersect
 from stages.render.camera import camera_ray
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -64,9 +64,11 @@ def run(out_dir) -> dict:
 
     from pipeline.render_setup import ground_array, load_bcsdf_preset, load_fibers, pack_lights
     from pipeline.scene import camera_array, load_scene
-    from stages.core.bvh import build_fiber_bvh
-    from stages.render.fiberpath import pack_material_bcsdf, render_tiles
-    from stages.render.film import tile_grid
+    from stages.core.geometry.bvh import build_fiber_bvh
+    from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
+    from stages.render.fiberpath import FiberpathIntegrator
+    from stages.render.film import F_HIT, finalize, new_film, tile_grid
+    from stages.render.tiles import render_tiles
 
     src = Path(os.environ.get("LOOMLIGHT_BENCH_FIBERS", ROOT / "out" / "demo" / "fibers.zarr"))
     if (src / "zarr.json").exists():
@@ -104,14 +106,15 @@ def run(out_dir) -> dict:
     tiles = tile_grid(PW, PH, 16)
     extent = float(np.linalg.norm(pts.max(0) - pts.min(0)))
 
+    integ = FiberpathIntegrator(bvh, mof, mats, pack_material_lambert(ground[1:4]), lights.table(), ground, has_ground,
+                                int(scene.render.get("max_depth", 16)), int(scene.render.get("rr_depth", 5)), 1 << 40,
+                                1e-7 * extent)
+
     def render(spp_):
-        fs = np.zeros((PH, PW, 3)); fq = np.zeros((PH, PW, 3)); hit = np.zeros((PH, PW)); dep = np.zeros((PH, PW))
-        rays = np.zeros(len(tiles), np.int64)
         t = time.perf_counter()
-        render_tiles(pcam, bvh, mof, mats, *lights.arrays(), ground, has_ground, tiles, 0, len(tiles), spp_, 1,
-                     int(scene.render.get("max_depth", 16)), int(scene.render.get("rr_depth", 5)), 1 << 40,
-                     1e-7 * extent, fs, fq, hit, dep, rays)
-        return time.perf_counter() - t, int(rays.sum()), float(hit.mean() / spp_)
+        film = render_tiles(integ, pcam, 1, spp_, tiles, new_film(PW, PH))
+        dt = time.perf_counter() - t
+        return dt, finalize(film, spp_).rays, float(film[..., F_HIT].mean() / spp_)
 
     render(1)  # compile
     dt, rays, coverage = render(spp)

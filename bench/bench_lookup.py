@@ -4,11 +4,11 @@ Scenes: the demo scene (data/scenes/demo.toml, 16 cotton1 yarns) and the exactne
 (data/scenes/gentle_swatch.toml: 2 x 2 cotton2 plain weave with gentle crimp). Each is ingested,
 tabled (hybrid hairs) and realized (spacing 0.002) into a temporary directory.
 Methods, on the same points:
-  procedural   stages.procedural.lookup.lookup_points (the realization-minimizing tables, hybrid
+  procedural   stages.core.yarn.lookup.lookup_points (the realization-minimizing tables, hybrid
                hairs; frame samples and chord grid derived at load, ``tables.derive_lookup_accel``)
   procedural_free   the same with realization-free hairs (Algorithm 3)
   realized_bvh the renderers' realized reference: SAH BVH over the realized segments
-               (stages.core.bvh + stages.render.realized_medium.covering_segment)
+               (stages.core.geometry.bvh + stages.render.realized_medium.covering_segment)
   realized_grid a uniform grid over the realized segments (stages.procedural.realized_reference)
   procedural_floor  step 1 of Algorithm 1 alone (the part no procedural lookup can skip: p's
                candidate yarns from the chord grid, the chord gates, and p's foot point on every yarn
@@ -34,9 +34,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 import stages  # noqa: E402,F401  (numba's cache folder, before any kernel)
-from stages.procedural.frame_samples import chord_lower_bound, foot_point  # noqa: E402
-from stages.procedural.lookup import FOOT_TOL  # noqa: E402
-from stages.procedural.yarn_model import FIBER_RADIUS  # noqa: E402
+from stages.core.yarn.frame_samples import chord_lower_bound, foot_point  # noqa: E402
+from stages.core.yarn.lookup import FOOT_TOL  # noqa: E402
+from stages.core.yarn.model import FIBER_RADIUS  # noqa: E402
 
 SWATCH = ROOT / "data" / "scenes" / "gentle_swatch.toml"
 
@@ -103,8 +103,8 @@ def _scene(path: Path, tmp: Path, spacing: float):
 
 
 def bench_scene(path: Path, n_points=100_000, spacing=0.002) -> dict:
-    from stages.core.bvh import build_fiber_bvh
-    from stages.procedural.lookup import lookup_points
+    from stages.core.geometry.bvh import build_fiber_bvh
+    from stages.core.yarn.lookup import lookup_points
     from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
     from stages.render.realized_medium import covering_segment
 
@@ -134,7 +134,8 @@ def bench_scene(path: Path, n_points=100_000, spacing=0.002) -> dict:
             out[i] = covering_segment(b, pts[i, 0], pts[i, 1], pts[i, 2])
         return out
 
-    from stages.procedural.tables import accel_bytes, derive_lookup_accel, table_bytes
+    from stages.core.yarn.tables import accel_bytes, table_bytes
+    from stages.core.yarn.accel import derive_lookup_accel
 
     t0 = time.perf_counter()
     derive_lookup_accel(cv, tab)

@@ -34,7 +34,7 @@ KNIT = ("stockinette", "garter", "rib1x1")
 
 def woven_curveset(over, spacing_x, spacing_y, radius_warp, radius_weft, crimp=1.0, samples_per_cell=6,
                    warp_colors=None, weft_colors=None, source="woven", notes=None) -> CurveSet:
-    from stages.ingest.woven import woven_curves
+    from stages.core.curves.woven import woven_curves
 
     warp, weft = woven_curves(over, spacing_x, spacing_y, radius_warp, radius_weft, crimp, samples_per_cell)
     E, P = over.shape

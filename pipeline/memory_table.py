@@ -60,7 +60,7 @@ def generated_scene(ends: int, picks: int, directory) -> Path:
 
 
 def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
-    from stages.procedural.tables import table_bytes
+    from stages.core.yarn.tables import table_bytes
 
     from .ingest_runner import run_ingest
     from .procedural_runner import build, realized_size

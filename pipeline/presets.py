@@ -103,8 +103,8 @@ def apply_overrides(d: dict, yt: dict, file=None, place: str = "yarns") -> dict:
 
 
 def pack(d: dict) -> np.ndarray:
-    """The float64 parameter vector of stages.procedural.yarn_model (bounds filled in)."""
-    from stages.procedural import yarn_model as M
+    """The float64 parameter vector of stages.core.yarn.model (bounds filled in)."""
+    from stages.core.yarn import model as M
 
     tp = np.zeros(M.NPARAM)
     P = int(d["ply_num"])

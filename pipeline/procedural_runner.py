@@ -48,8 +48,9 @@ def padded_curves(get, extent):
 def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", derive=True):
     """(cv, tab, info, type dicts, yarns artifact) for a yarns artifact; derive: also the lookups'
     load-time structures (tables.derive_lookup_accel)."""
-    from stages.procedural.tables import build_tables, derive_lookup_accel
-    from stages.procedural.yarn_model import extent_bound
+    from stages.procedural.tables import build_tables
+    from stages.core.yarn.accel import derive_lookup_accel
+    from stages.core.yarn.model import extent_bound
 
     yarns = Artifact(yarns_path, kind="yarns")
     dicts, tparams, ytype, albedo = yarn_types_of(yarns, preset, radius)
@@ -83,7 +84,7 @@ def _type_summary(dicts):
 
 
 def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False):
-    from stages.procedural.tables import STORED_FIELDS, table_bytes
+    from stages.core.yarn.tables import STORED_FIELDS, table_bytes
 
     check_options(preset, radius, nbins)
     if hair_mode not in ("hybrid", "free"):
@@ -121,7 +122,8 @@ def _cv_field(name):
 
 def load_tables(path):
     """(Curves, Tables, Artifact) of a tables artifact (self-contained: curves from its copy)."""
-    from stages.procedural.tables import STORED_FIELDS, Tables, _empty_accel, derive_lookup_accel
+    from stages.core.yarn.tables import STORED_FIELDS, Tables, empty_accel
+    from stages.core.yarn.accel import derive_lookup_accel
 
     art = Artifact(path, kind="tables")
     missing = [f for f in STORED_FIELDS if f not in art]
@@ -129,7 +131,7 @@ def load_tables(path):
         raise LoomError(art.path, missing[0], "array missing from the tables artifact (rebuild it with loomlight tables)")
     stored = {f: np.ascontiguousarray(art[f]) for f in STORED_FIELDS}
     tab = Tables(**stored, **dict(zip([f for f in Tables._fields if f not in stored],
-                                      _empty_accel(len(stored["yarn_type"])))))
+                                      empty_accel(len(stored["yarn_type"])))))
     cv = curves_from_group(lambda n: art[f"curves/{n}"])
     return cv, derive_lookup_accel(cv, tab), art
 

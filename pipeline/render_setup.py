@@ -2,7 +2,7 @@
 
 - ``pack_lights(scene)`` -> ``LightSet(lights, env, marginal, conditional)`` in the layout of
   ``stages.render.lights`` (at most one envmap; its EXR is read here).
-- ``load_bcsdf_preset(name)`` -> packed BCSDF (``stages.core.bcsdf``) from ``data/bcsdf/<name>.toml``
+- ``load_bcsdf_preset(name)`` -> packed BCSDF (``stages.core.shading.bcsdf``) from ``data/bcsdf/<name>.toml``
   (or a path to a TOML file), checked against ``schemas/bcsdf-preset.schema.json``.
 - ``load_fibers(path)`` -> ``Fibers`` arrays of a ``fibers`` artifact, refusing empty or broken ones.
 - ``ground_array(scene)`` -> (float64[4] height + albedo, enabled).
@@ -31,6 +31,12 @@ class LightSet:
 
     def arrays(self):
         return self.lights, self.env, self.marginal, self.conditional
+
+    def table(self):
+        """The ``LightTable`` integrators take (``stages.render.lights``)."""
+        from stages.render.lights import LightTable
+
+        return LightTable(self.lights, self.env, self.marginal, self.conditional)
 
 
 def pack_lights(lights: list[dict], scene_path: str | Path | None = None) -> LightSet:
@@ -93,7 +99,7 @@ def read_bcsdf_preset(name: str) -> tuple[Path, dict]:
 
 def load_bcsdf_preset(name: str) -> np.ndarray:
     """Packed BCSDF parameters of preset ``name`` (a name in data/bcsdf/ or a .toml path)."""
-    from stages.core.bcsdf import pack_bcsdf
+    from stages.core.shading.bcsdf import pack_bcsdf
 
     _, d = read_bcsdf_preset(name)
     return pack_bcsdf(d["c_r"], d["c_tt"], d["beta_r"], d["beta_tt"], d["gamma_tt"])

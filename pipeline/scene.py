@@ -14,10 +14,11 @@ from pathlib import Path
 import numpy as np
 
 from .errors import LoomError
+from .renderers import COMMON_DEFAULTS
 from .schemas import validate
 
-CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": 320, "height": 240}
-RENDER_DEFAULTS = {"spp": 16, "seed": 0, "max_depth": 32, "rr_depth": 5, "tile_size": 16}
+CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": COMMON_DEFAULTS["width"], "height": COMMON_DEFAULTS["height"]}
+RENDER_DEFAULTS = {k: COMMON_DEFAULTS[k] for k in ("spp", "seed", "max_depth", "rr_depth", "tile_size")}
 YARN_GROUPS = ("warp", "weft", "knit", "other")
 
 

@@ -18,6 +18,10 @@ def load_schema(name: str) -> dict:
     if not path.exists():
         raise LoomError(path, None, f"no schema named {name!r} in {SCHEMA_DIR}")
     schema = json.loads(path.read_text())
+    if name == "scene":  # the [render] table is declared by the renderer registry
+        from .renderers import render_schema
+
+        schema["properties"]["render"] = render_schema()
     jsonschema.Draft202012Validator.check_schema(schema)
     return schema
 

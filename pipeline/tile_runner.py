@@ -114,7 +114,7 @@ def exemplar_interlacement(ex, file, place):
 
 # ------------------------------------------------------------------------------------------------ exemplars
 def yarn_params(cfg, file):
-    from stages.procedural import yarn_model as M
+    from stages.core.yarn import model as M
 
     from .presets import load_preset, pack, scale_preset
 
@@ -408,8 +408,8 @@ def run_tile(config, out, force: bool = False) -> dict:
 
 
 def load_tiling(path):
-    """(ShellScene, Artifact) of a tiling artifact, ready for ``stages.core.shell_traversal``."""
-    from stages.render.shell_scene import build_shell_scene
+    """(ShellScene, Artifact) of a tiling artifact, ready for ``stages.core.shell.traversal``."""
+    from stages.core.shell.scene import build_shell_scene
 
     from .artifacts import Artifact
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.core.curves import Curves
+from stages.core.curves.spline import Curves
 
 from .artifacts import Artifact
 

@@ -1,25 +1,15 @@
-"""Shared test fixtures. ../shared is reference material: tests that use it skip when it is absent."""
+"""Shared test fixtures (paths and reference data: ``tests/helpers.py``). Tests mirror the code:
+``tests/core/<subject>``, ``tests/<stage>``, ``tests/pipeline``; every sampling routine goes through
+``tests/chisquare.py``."""
 import os
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import ROOT
+
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 import stages  # noqa: E402,F401  (sets NUMBA_CACHE_DIR, keyed by the kernel sources, before numba loads)
 os.environ.setdefault("MPLBACKEND", "Agg")
-SHARED = ROOT.parent / "shared"
-DATA = ROOT / "data"
-
-# the gentle swatch (exact lookups): scene text of the lookups' exactness and frame-sample tests
-EXACTNESS_SWATCH = (DATA / "scenes" / "gentle_swatch.toml").read_text()
-
-
-def shared_file(rel: str) -> Path:
-    p = SHARED / rel
-    if not p.exists():
-        pytest.skip(f"reference file ../shared/{rel} is not present (../shared is reference material, absent on this machine)")
-    return p
 
 
 @pytest.fixture

@@ -19,7 +19,7 @@ def register(app: typer.Typer) -> None:
 
         from ..errors import LoomError
         from ..procedural_runner import load_tables
-        from stages.procedural.lookup import lookup_points
+        from stages.core.yarn.lookup import lookup_points
 
         if not points.exists():
             raise LoomError(points, None, "file not found")

@@ -10,7 +10,7 @@ import numpy as np
 
 def cross_section(tab, c, z):
     """(centres (n, 2), kinds (n,), plies (n,)) of the fibres of yarn c crossing yarn-space z."""
-    from stages.procedural import yarn_model as M
+    from stages.core.yarn import model as M
 
     t = int(tab.yarn_type[c])
     tp = tab.tparams[t]
@@ -43,7 +43,7 @@ def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
     import matplotlib.pyplot as plt
     from matplotlib.patches import Circle, Ellipse
 
-    from stages.procedural import yarn_model as M
+    from stages.core.yarn import model as M
 
     from ..errors import LoomError
     from ..procedural_runner import load_tables

@@ -8,7 +8,7 @@ from . import pyvista_setup
 
 def inspect(art, png, show=False, frames=False, yarn=-1, size=(1200, 900), **_):
     from stages.ingest.spline_process import sample_curve_points
-    from stages.core.curves import curve_frame_at
+    from stages.core.curves.frames import curve_frame_at
 
     from ..yarns import load_curves
 

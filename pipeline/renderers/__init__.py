@@ -1,20 +1,32 @@
-"""Render methods: one module per method (``<method>.py``), each defining
+"""The renderer registry: every render method declares here, once, what it reads and what it accepts.
 
-    render(scene: pipeline.scene.Scene, options: dict) -> RenderResult
+A method (``RenderMethod``) names the module that sets it up (``pipeline/renderers/<module>.py``,
+defining ``render(scene, options) -> RenderResult``), its geometry sources (``Source``: a name for
+``--source`` and the artifacts it reads, ``ArtifactInput``), its method-specific settings
+(``Setting``: ``--set KEY=VALUE`` pairs) and whether it takes ``--material`` / ``--bcsdf``.
+Everything else derives from this table: ``loomlight render --help`` (method, source and setting
+lists), the ``[render]`` table of the scene schema (``render_schema``), which inputs a render
+artifact records as provenance, and the messages for unknown methods, sources and settings.
+``COMMON_DEFAULTS`` are the defaults of the settings every method shares (scene key
+``render.<name>`` or its command-line option); nothing else in loomlight states them.
 
-``options`` holds the command line's settings: ``width``, ``height``, ``spp``, ``seed`` (already resolved
-against the scene's camera and [render] table), ``source`` (the command line's value only, None when not
-given: a method falls back to the scene's ``render.source`` where that applies), ``fibers``, ``bcsdf``, ``material``,
-``max_depth``, ``rr_depth``, ``threads`` and any ``--set key=value`` pairs (strings) under ``extra``.
-A renderer returns linear RGB (H, W, 3) float32, optional extra channels (name -> (H, W) float32, e.g.
-``A``, ``depth``, ``variance``) and ``stats``: at least ``rays`` (rays or ray steps traced), ``paths``
-(camera samples), ``render_s`` (seconds spent in the kernels). ``loomlight render`` turns these into
-the EXR, the PNG preview and the ``render`` artifact.
+``options`` (what ``render`` receives; ``pipeline.runners.render`` fills it): ``width``, ``height``,
+``spp``, ``seed``, ``max_depth``, ``rr_depth``, ``tile_size`` (resolved: command line, else the
+scene's [render] / [camera] table, else ``COMMON_DEFAULTS``), ``source`` (the command line's value
+only, None when not given: a method falls back to the scene's ``render.source``), the artifact paths
+``fibers``, ``tables``, ``grid`` (None when not given), ``bcsdf``, ``material``, ``threads`` and the
+``--set`` pairs (strings) under ``extra``. A renderer returns linear RGB (H, W, 3) float32, extra
+channels (name -> (H, W) float32: ``A``, ``depth``, ``variance``) and ``stats``: at least ``rays``,
+``paths`` and ``render_s`` (seconds in the kernels); ``loomlight render`` writes the EXR, the PNG
+preview and the ``render`` artifact.
+
+To add a method: its integrator (``stages/render/<method>.py``), its setup module here, one
+``RenderMethod`` entry in ``METHODS``, its tests.
 """
 from __future__ import annotations
 
+import difflib
 import importlib
-import pkgutil
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -29,13 +41,155 @@ class RenderResult:
     stats: dict = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class ArtifactInput:
+    """An artifact a source reads: ``option`` on the command line (``--<option> PATH.zarr``), also
+    accepted as ``--set <option>=PATH.zarr``; ``kinds`` the artifact kinds it may be."""
+    option: str
+    kinds: tuple[str, ...]
+    what: str
+
+
+@dataclass(frozen=True)
+class Source:
+    name: str
+    inputs: tuple[ArtifactInput, ...]
+    help: str
+
+
+@dataclass(frozen=True)
+class Setting:
+    """A method-specific ``--set KEY=VALUE``."""
+    key: str
+    help: str
+    choices: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class RenderMethod:
+    name: str
+    summary: str
+    module: str
+    sources: tuple[Source, ...]
+    default_source: str
+    settings: tuple[Setting, ...] = ()
+    materials: tuple[str, ...] = ()
+
+    def source(self, name: str | None) -> Source:
+        name = name or self.default_source
+        for s in self.sources:
+            if s.name == name:
+                return s
+        raise LoomError(None, "--source", f"{self.name} has no source {name!r} (known: {', '.join(self.source_names)})"
+                        + did_you_mean(name, self.source_names))
+
+    @property
+    def source_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.sources)
+
+    def run(self, scene, options) -> RenderResult:
+        return importlib.import_module(f"{__name__}.{self.module}").render(scene, options)
+
+
+# settings every method shares: scene key render.<name> (camera.<name> for the image size), or the option
+COMMON_DEFAULTS = {"width": 320, "height": 240, "spp": 16, "seed": 0, "max_depth": 32, "rr_depth": 5, "tile_size": 16}
+
+FIBERS = ArtifactInput("fibers", ("fibers",), "the realized fibres (loomlight realize)")
+TILING = ArtifactInput("fibers", ("tiling",), "a tiling artifact (loomlight tile)")
+TABLES = ArtifactInput("tables", ("tables",), "the procedural tables (loomlight tables)")
+GRID = ArtifactInput("grid", ("grid",), "a voxel grid (loomlight voxelize)")
+
+_FIBERPATH_SETTINGS = (
+    Setting("tint", "yarn: multiply each yarn's BCSDF transmission colour C_TT by the yarn's colour", ("none", "yarn")),
+    Setting("tiling", "a tiling artifact (same as --fibers TILING.zarr)"),
+)
+_FIBERPATH_SOURCES = (
+    Source("realized", (FIBERS,), "explicit fibres of a fibers artifact, or of a tiling artifact's exemplars "
+                                  "under its shell map (both through --fibers)"),
+)
+
+METHODS = {m.name: m for m in (
+    RenderMethod(
+        "volpath", "procedural fibres as an anisotropic micro-flake volume (seed 000)", "volpath",
+        sources=(Source("procedural", (TABLES,), "lookups on the fly from procedural tables (--tables)"),
+                 Source("realized", (FIBERS,), "the realized fibres in a BVH (--fibers)"),
+                 Source("grid", (GRID,), "a voxelized medium (--grid)")),
+        default_source="procedural",
+        settings=(Setting("majorant_cell", "majorant grid cell size in scene units (default: a quarter of the "
+                                           "mean yarn extent bound)"),
+                  Setting("tables", "the tables artifact (same as --tables)"),
+                  Setting("grid", "the grid artifact (same as --grid)"))),
+    RenderMethod(
+        "fiberpath", "explicit fibres path traced with the fibre BCSDF (Khungurn et al. 2015)", "fiberpath",
+        sources=_FIBERPATH_SOURCES, default_source="realized", settings=_FIBERPATH_SETTINGS,
+        materials=("bcsdf", "lambert")),
+    RenderMethod(
+        "fiberpath_shell", "fiberpath on a tiling artifact (the same as fiberpath --fibers TILING.zarr)",
+        "fiberpath", sources=(Source("realized", (TILING,), "a tiling artifact's exemplars under its shell map"),),
+        default_source="realized", settings=_FIBERPATH_SETTINGS, materials=("bcsdf", "lambert")),
+)}
+
+
+def did_you_mean(name, known) -> str:
+    close = difflib.get_close_matches(str(name), list(known), n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
 def known_methods() -> list[str]:
-    return sorted(m.name for m in pkgutil.iter_modules(__path__) if not m.name.startswith("_"))
+    return sorted(METHODS)
 
 
-def renderer(method: str):
-    """The module implementing ``method``; unknown methods raise a LoomError listing the known ones."""
-    known = known_methods()
-    if method not in known:
-        raise LoomError(None, "--method", f"unknown render method {method!r} (known: {', '.join(known)})")
-    return importlib.import_module(f"{__name__}.{method}")
+def method(name: str) -> RenderMethod:
+    """The registered method ``name``; unknown names raise a LoomError listing the known ones."""
+    if name not in METHODS:
+        raise LoomError(None, "--method", f"unknown render method {name!r} (known: {', '.join(known_methods())})"
+                        + did_you_mean(name, METHODS))
+    return METHODS[name]
+
+
+def all_sources() -> list[str]:
+    return sorted({s.name for m in METHODS.values() for s in m.sources})
+
+
+def method_help() -> str:
+    return "Render method: " + "; ".join(f"{m.name} ({m.summary})" for m in METHODS.values()) + \
+        ". Default: the scene's render.method."
+
+
+def source_help() -> str:
+    parts = [f"{m.name}: {', '.join(m.source_names)} (default {m.default_source})" for m in METHODS.values()]
+    return "Where the method takes its geometry from -- " + "; ".join(parts) + ". Default: the scene's render.source."
+
+
+def settings_help() -> str:
+    parts = []
+    for m in METHODS.values():
+        if m.settings and m.module == m.name:
+            parts.append(f"{m.name}: " + ", ".join(s.key + (f"={'|'.join(s.choices)}" if s.choices else "")
+                                                    for s in m.settings))
+    return "Method-specific setting KEY=VALUE (repeatable) -- " + "; ".join(parts) + "."
+
+
+def render_schema() -> dict:
+    """The JSON Schema of a scene's [render] table (``schemas/scene.schema.json`` takes it from here)."""
+    positive = {"type": "integer", "minimum": 1}
+    return {
+        "type": "object",
+        "additionalProperties": False,
+        "description": "render settings; defaults: " + ", ".join(f"{k} {v}" for k, v in COMMON_DEFAULTS.items()
+                                                                 if k not in ("width", "height")),
+        "properties": {
+            "method": {"enum": known_methods()},
+            "spp": positive,
+            "seed": {"type": "integer", "minimum": 0},
+            "max_depth": positive,
+            "rr_depth": positive,
+            "source": {"enum": all_sources()},
+            "tile_size": {"type": "integer", "minimum": 4},
+            "ground": {
+                "type": "object",
+                "additionalProperties": False,
+                "properties": {"height": {"type": "number"}, "albedo": {"$ref": "#/$defs/rgb"}},
+            },
+        },
+    }

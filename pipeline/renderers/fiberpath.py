@@ -1,26 +1,28 @@
 """``--method fiberpath``: explicit fibres (capsule chains) path traced with the Khungurn 2015 BCSDF.
 
-Fibres come from a ``fibers`` artifact: ``--fibers PATH.zarr`` (``--source realized`` is accepted and
-means the same; it is the only fibre source this method has, so the scene's ``render.source``, which
-selects volpath's density source, is ignored). Materials: ``--material bcsdf``
+Fibres come from ``--fibers PATH.zarr``: a ``fibers`` artifact (realized fibres, one SAH BVH) or a
+``tiling`` artifact (``loomlight tile``: exemplar fibres under a shell map, rays walking the shell's
+tetrahedra; ``--method fiberpath_shell`` and ``--set tiling=PATH`` are the same). ``--source
+realized`` is accepted and means the same; it is the only fibre source this method has, so the
+scene's ``render.source``, which selects volpath's density source, is ignored. The estimator is one
+(``stages.render.fiberpath``) for both geometries. Materials: ``--material bcsdf``
 (default) gives every fibre the BCSDF preset of its yarn group -- scene key ``yarns.<group>.bcsdf``
 (falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).
 ``--set tint=yarn`` multiplies each yarn's TT colour C_TT by the yarn's albedo (the scene's
 ``yarns.<group>.color`` as realized into the fibers artifact), so dyed yarns keep their colour under a
 fitted preset. A preset given as a ``.toml`` path in the scene is resolved against the scene file.
+On a tiling, each yarn group's albedo is the scene's ``yarns.<group>.color``, else the yarn preset's.
 Lights, camera and the optional ground plane come from the scene.
 """
 from __future__ import annotations
 
-import os
 import time
 
 import numpy as np
 
 from ..errors import LoomError
-from ..progress import progress
-from ..render_setup import GROUP_NAMES, ground_array, load_bcsdf_preset, load_fibers, pack_lights
+from ..render_setup import GROUP_NAMES, Fibers, ground_array, load_bcsdf_preset, load_fibers, pack_lights
 from ..scene import camera_array
 from . import RenderResult
 
@@ -33,7 +35,7 @@ SELF_WINDOW = 1 << 40
 
 def fiber_materials(scene, fibers, options):
     """(mat_of_fiber (F,) int32, materials (NM, MAT_SIZE)) for the chosen material model."""
-    from stages.render.fiberpath import pack_material_bcsdf, pack_material_lambert
+    from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
 
     material = options.get("material") or "bcsdf"
     if material == "lambert":
@@ -91,79 +93,92 @@ def fiber_materials(scene, fibers, options):
     return lut[fibers.fiber_yarn], np.stack(presets)
 
 
-def render(scene, options: dict) -> RenderResult:
-    from stages.core.bvh import build_fiber_bvh
-    from stages.render.fiberpath import render_tiles
-    from stages.render.film import tile_grid
+def tiling_fibers(scene, art) -> Fibers:
+    """``Fibers``-like view of a tiling's exemplar fibres (per fibre: a global yarn index, its group and albedo)."""
+    sizes = art.summary["exemplar_sizes"]
+    ex_fibers = art["ex_fibers"]
+    fy = art["ex_fiber_yarn"].astype(np.int64)
+    yarn_off = np.cumsum([0] + [e + p for e, p in sizes])
+    for k in range(len(sizes)):
+        fy[ex_fibers[k]:ex_fibers[k + 1]] += yarn_off[k]
+    group = art["ex_yarn_group"].astype(np.int64)
+    albedo = np.empty((len(group), 3))
+    for g in (0, 1):
+        yt = scene.yarn_type(GROUP_NAMES[g])
+        col = yt.get("color")
+        if col is None:
+            from ..presets import load_preset
 
-    path = options.get("fibers")
+            col = load_preset(yt.get("preset") or (art.params["config"].get("yarn", {}).get("preset", "cotton1")))["albedo"]
+        albedo[group == g] = np.broadcast_to(np.asarray(col, float), 3)
+    return Fibers(art.path, art["ex_points"], art["ex_radius"], art["ex_offsets"], fy.astype(np.int32),
+                  albedo, group)
+
+
+def _ray_eps(lo, hi):
+    """Ray offset: 1e-7 of the scene's size (its diagonal plus its largest coordinate)."""
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    return 1e-7 * max(float(np.linalg.norm(hi - lo) + np.abs(np.concatenate([lo, hi])).max()), 1e-12)
+
+
+def _realized_scene(path):
+    """(FiberBVH, Fibers, eps, label, stats) of a fibers artifact."""
+    from stages.core.geometry.bvh import build_fiber_bvh
+
+    fibers = load_fibers(path)
+    t0 = time.perf_counter()
+    bvh, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
+    stats = {"bvh_build_s": time.perf_counter() - t0, "segments": int(len(bvh.seg_a)), "fibers": fibers.n_fibers,
+             "bvh_nodes": int(len(bvh.node_left))}
+    return bvh, fibers, _ray_eps(fibers.points.min(axis=0), fibers.points.max(axis=0)), "fiberpath", stats
+
+
+def _tiling_scene(scene, path):
+    """(ShellScene, Fibers, eps, label, stats) of a tiling artifact."""
+    from ..runners.tile import load_tiling
+
+    t0 = time.perf_counter()
+    sc, art = load_tiling(path)
+    build_s = time.perf_counter() - t0
+    fibers = tiling_fibers(scene, art)
+    stats = {"scene_build_s": build_s, "tetrahedra": int(art.summary["tetrahedra"]),
+             "exemplars": int(art.summary["exemplars"]), "blocks": int(art.summary["blocks"]),
+             "segments": int(len(sc.seg_a)), "fibers": fibers.n_fibers}
+    return sc, fibers, _ray_eps(*art.summary["bounds"]), "fiberpath (shell)", stats
+
+
+def render(scene, options: dict) -> RenderResult:
+    from stages.core.shading.material import pack_material_lambert
+    from stages.render.fiberpath import FiberpathIntegrator
+    from stages.render.film import VARIANCE_CHANNELS
+
+    from ..artifacts import read_meta
+    from .film import render_film
+
+    path = options.get("fibers") or (options.get("extra") or {}).get("tiling")
     source = options.get("source")
     if source not in (None, "realized"):
         raise LoomError(None, "--source", f"fiberpath renders realized fibres only (got {source!r}); pass --fibers PATH.zarr")
     if not path:
         raise LoomError(None, "--fibers", "fiberpath needs the realized fibres: pass --fibers PATH.zarr")
-    from ..artifacts import read_meta
-
-    if read_meta(path).get("kind") == "tiling":  # shell-mapped exemplars (stage tile)
-        from .fiberpath_shell import render as render_shell
-
-        return render_shell(scene, options)
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
-    fibers = load_fibers(path)
-    mat_of_fiber, mats = fiber_materials(scene, fibers, options)
     lights = pack_lights(scene.lights, scene.path)
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
+    if read_meta(path).get("kind") == "tiling":  # shell-mapped exemplars (stage tile)
+        geometry, fibers, eps, label, stats = _tiling_scene(scene, path)
+    else:
+        geometry, fibers, eps, label, stats = _realized_scene(path)
+    mat_of_fiber, mats = fiber_materials(scene, fibers, options)
     ground, has_ground = ground_array(scene.render)
     W, H, spp, seed = options["width"], options["height"], options["spp"], options["seed"]
-    max_depth = int(options.get("max_depth") or scene.render.get("max_depth", 32))
-    rr_depth = int(options.get("rr_depth") or scene.render.get("rr_depth", 5))
-    tile = int(scene.render.get("tile_size", 16))
+    max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
     cam = camera_array(scene.camera, W, H)
-
-    t0 = time.perf_counter()
-    bvh, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
-    build_s = time.perf_counter() - t0
-    lo = fibers.points.min(axis=0)
-    hi = fibers.points.max(axis=0)
-    extent = float(np.linalg.norm(hi - lo) + np.abs(np.concatenate([lo, hi])).max())
-    eps = 1e-7 * max(extent, 1e-12)
-
-    tiles = tile_grid(W, H, tile)
-    def batch(b0, b1, film_sum, film_sq, hits, depth_sum, tile_rays):
-        render_tiles(cam, bvh, mat_of_fiber, mats, *lights.arrays(), ground, has_ground,
-                     tiles, b0, b1, spp, seed, max_depth, rr_depth, SELF_WINDOW, eps,
-                     film_sum, film_sq, hits, depth_sum, tile_rays)
-
-    rgb, extra, rays, render_s = trace_film("fiberpath", W, H, spp, tiles, batch)
-    stats = {"rays": rays, "paths": W * H * spp, "render_s": render_s, "bvh_build_s": build_s,
-             "segments": int(len(bvh.seg_a)), "fibers": fibers.n_fibers, "bvh_nodes": int(len(bvh.node_left)),
+    integ = FiberpathIntegrator(geometry, mat_of_fiber, mats, pack_material_lambert(ground[1:4]), lights.table(),
+                                ground, has_ground, max_depth, rr_depth, SELF_WINDOW, eps)
+    rgb, extra, img, render_s = render_film(label, integ, cam, W, H, spp, seed, options["tile_size"],
+                                           VARIANCE_CHANNELS, options.get("threads"))
+    stats = {"rays": img.rays, "paths": W * H * spp, "render_s": render_s, **stats,
              "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
     return RenderResult(rgb, extra, stats)
-
-
-def trace_film(label, W, H, spp, tiles, render_batch):
-    """Run a tile kernel over the image in batches with a progress bar and finish the film.
-
-    ``render_batch(b0, b1, film_sum, film_sq, hits, depth_sum, tile_rays)`` renders tiles b0..b1-1.
-    Returns (rgb, extra channels A/depth/variance, rays, render seconds)."""
-    from stages.render.film import finalize
-
-    film_sum = np.zeros((H, W, 3))
-    film_sq = np.zeros((H, W, 3))
-    hits = np.zeros((H, W))
-    depth_sum = np.zeros((H, W))
-    tile_rays = np.zeros(len(tiles), np.int64)
-    batch = max(1, 4 * (os.cpu_count() or 1))
-    t1 = time.perf_counter()
-    with progress(f"{label} {W}x{H} @ {spp} spp", len(tiles)) as advance:
-        for b0 in range(0, len(tiles), batch):
-            b1 = min(b0 + batch, len(tiles))
-            render_batch(b0, b1, film_sum, film_sq, hits, depth_sum, tile_rays)
-            advance(b1 - b0)
-    render_s = time.perf_counter() - t1
-    rgb, var = finalize(film_sum, film_sq, spp)
-    alpha = (hits / spp).astype(np.float32)
-    depth = np.where(hits > 0, depth_sum / np.maximum(hits, 1), 0.0).astype(np.float32)
-    return rgb, {"A": alpha, "depth": depth, "variance": var}, int(tile_rays.sum()), render_s

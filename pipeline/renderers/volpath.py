@@ -15,14 +15,13 @@ majorant grid (cells, occupied fraction), source build time.
 """
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import LoomError
-from ..progress import progress, warn
+from ..progress import warn
 from ..render_setup import ground_array, load_fibers, pack_lights
 from ..scene import camera_array
 from . import RenderResult
@@ -74,8 +73,8 @@ def procedural_source(tables_path, cell=None):
 def realized_source(fibers_path, cell=None):
     """(RealizedMedium, MajorantGrid, info) from a fibers artifact; per-yarn density and roughness
     from the yarn types the fibres were realized with (their yarns artifact and preset/radius)."""
-    from stages.core.bvh import build_fiber_bvh
-    from stages.procedural.yarn_model import DENSITY, ROUGHNESS, extent_bound
+    from stages.core.geometry.bvh import build_fiber_bvh
+    from stages.core.yarn.model import DENSITY, ROUGHNESS, extent_bound
     from stages.render.realized_medium import RealizedMedium, fiber_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
@@ -160,8 +159,10 @@ def _sees_fabric(maj, cam, W, H, n=24):
 
 
 def render(scene, options: dict) -> RenderResult:
-    from stages.render.film import tile_grid
-    from stages.render.volpath import OUT_CHANNELS, render_tiles
+    from stages.render.film import VARIANCE_LUMINANCE
+    from stages.render.volpath import VolpathIntegrator
+
+    from .film import render_film
 
     source = options.get("source") or scene.render.get("source") or "procedural"
     if source not in SOURCES:
@@ -172,12 +173,7 @@ def render(scene, options: dict) -> RenderResult:
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
     W, H, spp, seed = options["width"], options["height"], options["spp"], options["seed"]
-    for v, name in ((W, "--width"), (H, "--height"), (spp, "--spp")):
-        if int(v) <= 0:
-            raise LoomError(None, name, f"must be a positive integer, got {v}")
-    max_depth = int(options.get("max_depth") or scene.render.get("max_depth", 32))
-    rr_depth = int(options.get("rr_depth") or scene.render.get("rr_depth", 5))
-    tile = int(scene.render.get("tile_size", 16))
+    max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
     ground, has_ground = ground_array(scene.render)
     cam = camera_array(scene.camera, W, H)
 
@@ -186,23 +182,11 @@ def render(scene, options: dict) -> RenderResult:
     build_s = time.perf_counter() - t0
     if not _sees_fabric(maj, cam, W, H):
         warn(f"the camera of {scene.path} sees no fabric (source {source}); rendering anyway")
-
-    tiles = tile_grid(W, H, tile)
-    out = np.zeros((H, W, OUT_CHANNELS))
-    batch = max(1, 4 * (os.cpu_count() or 1))
-    lt = lights.arrays()
-    t1 = time.perf_counter()
-    with progress(f"volpath ({source}) {W}x{H} @ {spp} spp", len(tiles)) as advance:
-        for b0 in range(0, len(tiles), batch):
-            b1 = min(b0 + batch, len(tiles))
-            render_tiles(med, maj, lt, cam, ground, has_ground, seed, spp, max_depth, rr_depth, tiles[b0:b1], out)
-            advance(b1 - b0)
-    render_s = time.perf_counter() - t1
-    lookups = int(out[..., 6].sum())
-    stats = {"rays": int(out[..., 7].sum()), "paths": W * H * spp, "render_s": render_s, "source": source,
-             "medium_lookups": lookups, "medium_lookups_per_s": lookups / max(render_s, 1e-12),
+    integ = VolpathIntegrator(med, maj, lights.table(), ground, bool(has_ground), max_depth, rr_depth)
+    rgb, extra, img, render_s = render_film(f"volpath ({source})", integ, cam, W, H, spp, seed, options["tile_size"],
+                                           VARIANCE_LUMINANCE, options.get("threads"))
+    stats = {"rays": img.rays, "paths": W * H * spp, "render_s": render_s, "source": source,
+             "medium_lookups": img.lookups, "medium_lookups_per_s": img.lookups / max(render_s, 1e-12),
              "source_build_s": build_s, "majorant_cells": [int(x) for x in maj.res],
              "majorant_occupied": float(np.mean(maj.mu > 0)), "max_depth": max_depth, "rr_depth": rr_depth, **info}
-    extra = {"A": out[..., 3].astype(np.float32), "depth": out[..., 4].astype(np.float32),
-             "variance": out[..., 5].astype(np.float32)}
-    return RenderResult(out[..., :3].astype(np.float32), extra, stats)
+    return RenderResult(rgb, extra, stats)

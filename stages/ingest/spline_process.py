@@ -17,8 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
-from stages.core.curves import (Curves, _arclen_coeffs, _cross, _normalize, curve_point_at, double_reflection,
-                                segment_coeffs, segment_deriv)
+from stages.core.curves.spline import (Curves, arclen_coeffs, cross3, normalize3, curve_point_at, segment_coeffs, segment_deriv)
+from stages.core.curves.frames import double_reflection
 
 
 @njit(cache=True)
@@ -76,7 +76,7 @@ def arc_lengths(cv):
         for i in range(lo, lo + _nseg(cv, c)):
             a, b, cc, d = segment_coeffs(cv, i)
             seg_arclen[i] = acc
-            seg_length[i] = _arclen_coeffs(a, b, cc, 0.0, 1.0)
+            seg_length[i] = arclen_coeffs(a, b, cc, 0.0, 1.0)
             acc += seg_length[i]
         if not cv.closed[c]:
             seg_arclen[lo + _nseg(cv, c)] = acc
@@ -99,11 +99,11 @@ def rotation_minimising_frames(cv, samples_per_segment):
         lo = cv.offsets[c]
         k = counts[c]
         x_prev = cv.points[lo].copy()
-        t_prev = _normalize(segment_deriv(cv, lo, 0.0))
+        t_prev = normalize3(segment_deriv(cv, lo, 0.0))
         up = np.array([0.0, 0.0, 1.0])
         if abs(t_prev[2]) > 0.99:
             up = np.array([1.0, 0.0, 0.0])
-        n0 = _normalize(up - np.dot(up, t_prev) * t_prev)
+        n0 = normalize3(up - np.dot(up, t_prev) * t_prev)
         r = n0.copy()
         frame_s[k] = 0.0
         frame_normal[k] = r
@@ -113,16 +113,16 @@ def rotation_minimising_frames(cv, samples_per_segment):
             for q in range(1, samples_per_segment + 1):
                 t = q / samples_per_segment
                 x = ((a * t + b) * t + cc) * t + d
-                tan = _normalize((3.0 * a * t + 2.0 * b) * t + cc)
+                tan = normalize3((3.0 * a * t + 2.0 * b) * t + cc)
                 r = double_reflection(x_prev, t_prev, r, x, tan)
-                frame_s[k] = cv.seg_arclen[i] + _arclen_coeffs(a, b, cc, 0.0, t)
+                frame_s[k] = cv.seg_arclen[i] + arclen_coeffs(a, b, cc, 0.0, t)
                 frame_normal[k] = r
                 x_prev = x
                 t_prev = tan
                 k += 1
         if cv.closed[c]:
-            t0 = _normalize(segment_deriv(cv, lo, 0.0))
-            twist[c] = math.atan2(np.dot(_cross(n0, r), t0), np.dot(n0, r))
+            t0 = normalize3(segment_deriv(cv, lo, 0.0))
+            twist[c] = math.atan2(np.dot(cross3(n0, r), t0), np.dot(n0, r))
     return frame_s, counts, frame_normal, twist
 
 

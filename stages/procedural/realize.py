@@ -19,11 +19,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from stages.core.curves import curve_frame_at
+from stages.core.curves.frames import curve_frame_at
 
-from .yarn_model import (FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, S_MIG, ALPHA, USE_MIGRATION, TWO_PI,
-                         YARN_ALPHA, cycle_of, hair_params, hair_point, loop_unit_radius, migration_phase,
-                         regular_xy)
+from stages.core.yarn.model import (FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, S_MIG, ALPHA, USE_MIGRATION, TWO_PI, YARN_ALPHA, cycle_of, hair_params, hair_point, loop_unit_radius, migration_phase, regular_xy)
 
 
 @njit(cache=True)

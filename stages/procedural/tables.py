@@ -7,11 +7,11 @@ margin m; the azimuth [0, 2 pi) is cut into B equal bins and bin b lists (CSR, a
 index; also as a bit mask per fibre) every fibre whose trajectory comes within m of the bin's
 wedge. m = K (r_fibre + pad) / min(e_short, e_long) in unit-disc units, with K bounding the ratio
 between a point's cross-sectional distance to a fibre and its true distance
-(yarn_model.reach_factor, from the largest transverse fibre speed and the yarn's smallest axial
+(model.reach_factor, from the largest transverse fibre speed and the yarn's smallest axial
 stretch g_min) and pad (``type_pad``) the slack of the lookups' sampled frames.
 
 Loops (§4.4.1, §5.3): every migration cycle's mutation is a consistent random number of (yarn,
-ply, fibre, cycle) (yarn_model.loop_unit_radius). A loop leaves its fibre's [r_lo, r_hi], so per
+ply, fibre, cycle) (model.loop_unit_radius). A loop leaves its fibre's [r_lo, r_hi], so per
 yarn and ply the mutated cycles are listed (fibre, U_loop; ascending fibre) in fixed-width z-bins
 (half a migration cycle) holding every loop whose cycle, grown by the lookups' z window, meets
 the bin: a lookup tests the loops of its z-bin whose fibre is in its azimuth bin.
@@ -21,98 +21,22 @@ pe) of every hair and cuts z at the ends min(z1, z2) - m_z, max(z1, z2) + m_z of
 z-bin lists (ascending hair index) the hairs active across the whole bin. The realization-free mode stores nothing per hair
 (hair_free.active_hairs). Both come from the same quad-tree, so they hold the same hairs.
 
-Derived when loaded (never stored, ``derive_lookup_accel``): frame samples and the chord grid
-(frame_samples.py), the scan bounds (``scan_bounds``) and the fringe occupancy
-(``fringe_occupancy``): per yarn, bits over (z-bin, radial shell, azimuth sector) of yarn space
-marking where a loop or a stored hair can come close enough to cover a point, so that lookups
-far from every loop and hair skip those tests, and lookups beyond the core skip the yarn.
-
-``Tables`` is a namedtuple of flat arrays usable inside numba kernels (see lookup.py).
+The layout (``Tables``, stored and derived fields) is ``stages.core.yarn.tables``; the derived
+fields are filled at load by ``stages.core.yarn.accel.derive_lookup_accel``.
 """
 import math
-from collections import namedtuple
 
 import numpy as np
 from numba import njit
 
+from stages.core.curves.frames import curve_frame_at
 from stages.core.rng import hash_u64
-
-from stages.core.curves import curve_frame_at
-
-from . import hair_free
-from .yarn_model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, P_LOOP, PLY_NUM, PLY_RADIUS,
-                         RHO_MAX, RHO_MIN, S_MIG, USE_FLYAWAYS, USE_MIGRATION, ZE_MU, ZE_SIG, cycle_of, extent_bound,
-                         hair_params, hair_point, hair_speed_bound, loop_unit_radius, reach_factor, regular_xy,
-                         sample_regular_fibers, transverse_speed, transverse_speed_bound)
-
-Tables = namedtuple("Tables", [
-    "tparams",          # (T, NPARAM) float64 packed yarn types (yarn_model indices)
-    "type_K",           # (T,) cross-section distance / true distance bound
-    "type_mz",          # (T,) yarn-space z margin of hair activity (>= fibre radius / g_min)
-    "type_fib_off",     # (T+1,) int64: fibres of type t, ply k, fibre j at type_fib_off[t] + k N + j
-    "fib_R", "fib_th", "fib_th0", "fib_rlo", "fib_rhi",   # float64 per fibre
-    "type_nbins",       # (T,) int64 azimuth bins B_t
-    "type_bin_off",     # (T+1,) int64: bin (t, k, b) at type_bin_off[t] + k B_t + b
-    "bin_start",        # (nbins_total+1,) int64 CSR into bin_items
-    "bin_items",        # int32 fibre index within the ply
-    "yarn_type",        # (Y,) int32
-    "yarn_seed",        # (Y,) int64 per-yarn random key
-    "yarn_extent",      # (Y,) float64 radius bound of all fibre surfaces around the yarn axis
-    "yarn_gmin",        # (Y,) float64 smallest axial stretch 1 - kappa rho of the yarn-space map
-    "yarn_albedo",      # (Y, 3) float64
-    "yarn_ply_off",     # (Y+1,) int64 slot g = yarn_ply_off[c] + k
-    "hair_count",       # (S,) int64 hairs of slot g
-    "hair_off",         # (S+1,) int64 hybrid: hair h of slot g at hair_off[g] + h
-    "hair_z1", "hair_ze",   # float64 hybrid: pre-generated z extents
-    "hair_r0", "hair_r1", "hair_th1", "hair_pe",   # float64 hybrid: pre-generated shape (yarn_model.hair_params)
-    "hb_zoff",          # (S+1,) int64: breakpoints of slot g at hb_z[hb_zoff[g]:hb_zoff[g+1]]
-    "hb_z",             # float64 breakpoints
-    "hb_start",         # CSR over bins (bin (g, b) at hb_zoff[g] - g + b), into hb_items
-    "hb_items",         # int32 hair index
-    "hair_mode",        # (1,) int64: 0 hybrid, 1 realization-free
-    "yarn_length",      # (Y,) float64 arc length of each yarn curve (yarn-space z range)
-    "max_extent",       # (1,) float64 largest yarn_extent (candidate-yarn search radius)
-    "fib_mask",         # (F,) uint64 bit b set when the fibre is listed in azimuth bin b (all set for > 64 bins)
-    "lp_off",           # (S+1,) int64: loops (mutated migration cycles) of slot g at lp_off[g]:lp_off[g+1]
-    "lp_fib", "lp_U",   # int32 fibre index within the ply, float64 the cycle's U_loop (ascending fibre, cycle)
-    "lp_cyc",           # int32 the loop's migration cycle
-    "lz_off",           # (S+1,) int64: loop z-bins of slot g are lz_off[g] .. lz_off[g+1]-1
-    "lz_h",             # (S,) float64 z-bin width of slot g
-    "lz_start",         # CSR over loop z-bins (global bin index), into lz_items
-    "lz_items",         # int32 loop index within the slot (ascending)
-    "type_pad",         # (T,) float64 slack (beyond the fibre radius) the azimuth bins' margin allows for
-    "yarn_kappa",       # (Y,) float64 curvature bound of each yarn curve (x 1.25 margin)
-    # ---- derived when loaded (derive_lookup_accel; never stored): frame samples and chord grid
-    "fs_off",           # (Y+1,) int64: frame samples of yarn c at fs_off[c]:fs_off[c+1] (frame_samples.py)
-    "fs_s",             # float64 arc length of each frame sample
-    "fs_frame",         # (M, 12) float64 position, tangent, normal, binormal
-    "yarn_eps",         # (Y,) float64 bound of |Eq. 7 with sampled frames - Eq. 7| within the extent
-    "kn_off",           # (Y+1,) int64: coarse knots of yarn c at kn_off[c]:kn_off[c+1]
-    "kn_idx",           # int64 frame-sample index of each coarse knot
-    "kn_sag",           # float64 sag bound of the coarse chord starting at each knot
-    "fg_lo", "fg_cell", "fg_dims",   # (3,), (1,), (3,) chord grid geometry
-    "fg_start",         # (cells+1,) int64 CSR into the runs
-    "fg_yarn", "fg_a", "fg_b",       # runs: yarn, coarse chords [a, b)
-    "ply_rr",           # (T, max plies, 2) float64 (min r_lo, max r_hi) over the ply's fibres (unit disc)
-    "fib_v",            # (F,) float64 transverse speed bound of each fibre outside loop cycles
-    "hair_box",         # (H, 4) float64 hybrid: each hair's z range and radius range (zlo, zhi, Rlo, Rhi)
-    "lz_rr",            # (loop z-bins, 2) float64 (min r_lo, max U_loop) over each loop z-bin's loops
-    "type_rcore",       # (T,) float64 yarn-space radius beyond which no regular (non-loop) fibre is in reach
-    "fo_off",           # (Y+1,) int64: fringe z-bins of yarn c at fo_off[c]:fo_off[c+1]
-    "fo_geom",          # (Y, 2) float64 fringe z-bin width and shell width of yarn c
-    "fo_bits",          # (fringe z-bins, 2 FO_WORDS) uint64 fringe occupancy of loops, then hairs (fringe_occupancy)
-    "kn_rgate",         # (coarse knots,) float64 axis distance beyond which a visit near the chord finds nothing
-])
-DERIVED_FIELDS = ("fs_off", "fs_s", "fs_frame", "yarn_eps", "kn_off", "kn_idx", "kn_sag", "fg_lo", "fg_cell",
-                  "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b", "ply_rr", "fib_v", "hair_box", "lz_rr",
-                  "type_rcore", "fo_off", "fo_geom", "fo_bits", "kn_rgate")
-STORED_FIELDS = tuple(f for f in Tables._fields if f not in DERIVED_FIELDS)
-PAD_FRACTION = 0.05      # type_pad in fibre radii: the bins' slack for the sampled frames' error
-FRAME_TOLERANCE = 0.01   # frame-sample error aimed at, in fibre radii (<= PAD_FRACTION / 3 keeps lookups binned)
-FO_SECTORS = 32          # fringe occupancy: azimuth sectors around the yarn axis
-FO_SHELLS = 8            # fringe occupancy: radial shells (the last one open-ended)
-FO_WORDS = FO_SECTORS * FO_SHELLS // 64
-FO_ZBIN_EXTENTS = 0.25   # fringe z-bin width in yarn extents
+from stages.core.yarn import hair_free
+from stages.core.yarn.model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, P_LOOP, PLY_NUM,
+                                    S_MIG, USE_FLYAWAYS, USE_MIGRATION, ZE_MU, ZE_SIG, RHO_MAX, RHO_MIN, cycle_of,
+                                    extent_bound, hair_params, loop_unit_radius, reach_factor, sample_regular_fibers,
+                                    transverse_speed_bound)
+from stages.core.yarn.tables import DERIVED_FIELDS, PAD_FRACTION, Tables, empty_accel, hair_node_seed_nb
 
 
 def type_key(seed: int, t: int) -> int:
@@ -195,7 +119,7 @@ def _hair_items(b0, b1, start):
 def yarn_loops(tp, yarn_seed, k, R, th, th0, L):
     """Every mutated migration cycle (loop, §4.4.1) of ply k along a yarn of length L, ascending by
     (fibre, cycle): (fibre (n,), U_loop (n,), z0 (n,), z1 (n,), cycle (n,)) with [z0, z1] the cycle's z range
-    clipped to [0, L]. Same random numbers as yarn_model.loop_unit_radius, so lookups and
+    clipped to [0, L]. Same random numbers as model.loop_unit_radius, so lookups and
     realization see the same loops."""
     N = R.shape[0]
     cap = 16
@@ -256,32 +180,6 @@ def _bin_ranges_csr(b0, b1, nb):
     start = np.zeros(nb + 1, np.int64)
     start[1:] = np.cumsum(np.cumsum(counts)[:nb])
     return start, _hair_items(b0, b1, start)
-
-
-@njit(cache=True)
-def hair_node_seed_nb(yarn_seed, k):
-    return hash_u64(yarn_seed, k, 31)
-
-
-def table_bytes(tab: Tables) -> dict:
-    """Bytes of the tables by part: regular (fibre trajectories and bins), hair, loop (none)."""
-    reg = sum(getattr(tab, n).nbytes for n in ("fib_R", "fib_th", "fib_th0", "fib_rlo", "fib_rhi", "fib_mask",
-                                                "bin_start", "bin_items", "tparams", "type_K", "type_mz",
-                                                "type_fib_off", "type_nbins", "type_bin_off"))
-    hair = sum(getattr(tab, n).nbytes for n in ("hair_count", "hair_off", "hair_z1", "hair_ze", "hb_zoff",
-                                                 "hb_z", "hb_start", "hb_items", "hair_r0", "hair_r1", "hair_th1",
-                                                 "hair_pe"))
-    loop = sum(getattr(tab, n).nbytes for n in ("lp_off", "lp_fib", "lp_U", "lp_cyc", "lz_off", "lz_h", "lz_start",
-                                                 "lz_items"))
-    yarn = sum(getattr(tab, n).nbytes for n in ("yarn_type", "yarn_seed", "yarn_extent", "yarn_gmin",
-                                                 "yarn_albedo", "yarn_ply_off", "yarn_length", "max_extent",
-                                                 "yarn_kappa", "hair_mode", "type_pad"))
-    return {"regular": int(reg), "hair": int(hair), "loop": int(loop), "per_yarn": int(yarn)}
-
-
-def accel_bytes(tab: Tables) -> int:
-    """Bytes of the structures derived at load time (frame samples, coarse knots, chord grid)."""
-    return int(sum(getattr(tab, n).nbytes for n in DERIVED_FIELDS))
 
 
 @njit(cache=True)
@@ -425,289 +323,6 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         lp_off=lp_off, lp_fib=cat(lfib, np.int32), lp_U=cat(lU, np.float64), lp_cyc=cat(lcyc, np.int32), lz_off=lz_off, lz_h=lz_h,
         lz_start=cat(lstarts, np.int64), lz_items=cat(litems, np.int32),
         type_pad=type_pad, yarn_kappa=np.ascontiguousarray(kap, np.float64))
-    tab = Tables(**stored, **dict(zip(DERIVED_FIELDS, _empty_accel(Y))))
+    tab = Tables(**stored, **dict(zip(DERIVED_FIELDS, empty_accel(Y))))
     info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap}
     return tab, info
-
-
-def _empty_accel(Y):
-    z, zi = np.zeros(0), np.zeros(0, np.int64)
-    return (np.zeros(Y + 1, np.int64), z, np.zeros((0, 12)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
-            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi,
-            np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0),
-            np.zeros(Y + 1, np.int64), np.ones((Y, 2)), np.zeros((0, 2 * FO_WORDS), np.uint64), np.zeros(0))
-
-
-def scan_bounds(tab: Tables):
-    """(ply_rr, fib_v, lz_rr): the unit-disc radius range any fibre of a ply, or any loop of a loop
-    z-bin, can cover (its items' [r_lo, r_hi] and [r_lo, U_loop] joined; empty: (inf, -inf)): a
-    point outside the range skips the ply's bin scan or the z-bin's loop scan at once; and each
-    fibre's transverse speed bound outside loop cycles (radius in [rho_min R_j, rho_max R_j]),
-    for its own reach factor (reach_factor) in the bin scan."""
-    T = len(tab.type_K)
-    P = tab.tparams[:, PLY_NUM].astype(np.int64)
-    N = tab.tparams[:, FIBER_NUM].astype(np.int64)
-    ply_rr = np.empty((T, max(1, int(P.max(initial=1))), 2))
-    ply_rr[..., 0] = np.inf
-    ply_rr[..., 1] = -np.inf
-    fib_v = np.zeros(len(tab.fib_R))
-    for t in range(T):
-        tp = tab.tparams[t]
-        mig = tp[USE_MIGRATION] != 0.0
-        for k in range(P[t]):
-            f = slice(tab.type_fib_off[t] + k * N[t], tab.type_fib_off[t] + (k + 1) * N[t])
-            if N[t] > 0:
-                ply_rr[t, k] = tab.fib_rlo[f].min(), tab.fib_rhi[f].max()
-            R = tab.fib_R[f]
-            hi = R * tp[RHO_MAX] if mig else R
-            lo = R * tp[RHO_MIN] if mig else R
-            fib_v[f] = [transverse_speed(tp, a, b) for a, b in zip(hi, lo)]
-    nz = len(tab.lz_start) - 1
-    lz_rr = np.empty((max(nz, 0), 2))
-    lz_rr[:, 0] = np.inf
-    lz_rr[:, 1] = -np.inf
-    S = len(tab.lp_off) - 1
-    for g in range(S):
-        c = int(np.searchsorted(tab.yarn_ply_off, g, side="right")) - 1
-        t = tab.yarn_type[c]
-        fo = tab.type_fib_off[t] + (g - tab.yarn_ply_off[c]) * N[t]
-        for zb in range(tab.lz_off[g], tab.lz_off[g + 1]):
-            le = tab.lp_off[g] + tab.lz_items[tab.lz_start[zb]:tab.lz_start[zb + 1]]
-            if len(le):
-                lz_rr[zb] = tab.fib_rlo[fo + tab.lp_fib[le]].min(), tab.lp_U[le].max()
-    return ply_rr, fib_v, lz_rr
-
-
-@njit(cache=True)
-def loop_fibre(tab, tp, c, k, e):
-    """Loop e of ply k of yarn c (tp its type's parameters): (j its fibre's index in the ply, fi that
-    fibre's row in the type's fibre tables, [z0, z1] the z range of its migration cycle lp_cyc[e],
-    clipped to the yarn)."""
-    j = tab.lp_fib[e]
-    fi = tab.type_fib_off[tab.yarn_type[c]] + k * int(tp[FIBER_NUM]) + j
-    w = tp[S_MIG] * 2.0 * math.pi / tp[ALPHA]  # migration phase per unit z
-    cyc = tab.lp_cyc[e]
-    th0 = tab.fib_th0[fi]
-    z0 = max(0.0, (2.0 * math.pi * cyc - math.pi - th0) / w)
-    z1 = min(tab.yarn_length[c], (2.0 * math.pi * cyc + math.pi - th0) / w)
-    return j, fi, z0, z1
-
-
-@njit(cache=True, inline="always")
-def yarn_space_limit(rf, w, eps, gmin):
-    """Yarn-space distance within which a fibre point must lie to cover a point with tangential
-    residual w (1.1 (r_f + w + 2 eps_c) / g_min; the lookups' hair and loop limit)."""
-    return 1.1 * (rf + w + 2.0 * eps) / gmin
-
-
-@njit(cache=True, inline="always")
-def z_window(K, mz, rf, w, eps, gmin):
-    """Half width of a yarn visit's z window: every fibre point within r_f of a point with tangential
-    residual w lies within it of the foot point s (|z - s| <= yarn-space distance / g_min)."""
-    return (max((1.0 + K) * (rf + w + eps), mz) + w + 2.0 * eps) / gmin
-
-
-@njit(cache=True, inline="always")
-def fringe_reach(rf, eps, gmin):
-    """yarn_space_limit at the largest tangential residual a yarn visit goes on with (w < r_f + 2 eps_c)."""
-    return yarn_space_limit(rf, rf + 2.0 * eps, eps, gmin)
-
-
-@njit(cache=True, inline="always")
-def fringe_window(K, mz, rf, eps, gmin):
-    """z_window at the largest tangential residual a yarn visit goes on with (w < r_f + 2 eps_c)."""
-    return z_window(K, mz, rf, rf + 2.0 * eps, eps, gmin)
-
-
-@njit(cache=True, inline="always")
-def fringe_bits(tab, c, s, x, y, rho):
-    """(loop bit, hair bit) of the fringe cell of yarn-space point (x, y, s) in yarn c."""
-    base = tab.fo_off[c]
-    nb = tab.fo_off[c + 1] - base
-    zb = min(max(int(s / tab.fo_geom[c, 0]), 0), nb - 1)
-    sh = min(int(rho / tab.fo_geom[c, 1]), FO_SHELLS - 1)
-    q = min(int((math.atan2(y, x) + math.pi) * (FO_SECTORS / (2.0 * math.pi))), FO_SECTORS - 1)
-    idx = sh * FO_SECTORS + q
-    w = idx >> 6
-    b = np.uint64(idx & 63)
-    one = np.uint64(1)
-    return ((tab.fo_bits[base + zb, w] >> b) & one) != 0, ((tab.fo_bits[base + zb, FO_WORDS + w] >> b) & one) != 0
-
-
-@njit(cache=True)
-def _mark_ball(bits, base, nb, h, rw, x, y, z, r, w0):
-    """Set every fringe cell (z-bin, shell, sector) that meets the yarn-space ball of radius r at
-    (x, y, z) (in the words from w0 on); balls beyond a yarn end mark the end bin."""
-    b0 = min(max(int(math.floor((z - r) / h)), 0), nb - 1)
-    b1 = max(min(int(math.floor((z + r) / h)), nb - 1), 0)
-    rho = math.sqrt(x * x + y * y)
-    s0 = min(int(max(rho - r, 0.0) / rw), FO_SHELLS - 1)
-    s1 = min(int((rho + r) / rw), FO_SHELLS - 1)
-    q0 = 0
-    q1 = FO_SECTORS - 1
-    if rho > r:
-        half = math.asin(min(1.0, r / rho)) + 1e-9  # the ball's half angle seen from the axis
-        phi = math.atan2(y, x) + math.pi
-        a = int(math.floor((phi - half) * FO_SECTORS / (2.0 * math.pi)))
-        b = int(math.floor((phi + half) * FO_SECTORS / (2.0 * math.pi)))
-        if b - a + 1 < FO_SECTORS:
-            q0, q1 = a, b
-    for zb in range(b0, b1 + 1):
-        for sh in range(s0, s1 + 1):
-            for qq in range(q0, q1 + 1):
-                idx = sh * FO_SECTORS + qq % FO_SECTORS
-                bits[base + zb, w0 + (idx >> 6)] |= np.uint64(1) << np.uint64(idx & 63)
-
-
-@njit(cache=True)
-def fringe_occupancy(tab, fo_off, fo_geom):
-    """Fringe occupancy bits of every yarn, one set for loops and one for hairs: cell (z-bin, shell,
-    sector) of yarn c is set when a loop (its fibre's trajectory over the loop's cycle grown by the
-    largest z window, fringe_window) or a stored hair (hybrid mode) comes within fringe_reach of
-    the cell in yarn space. Each curve is sampled at steps of at most fringe_reach of yarn-space
-    arc (its speed bound), and every sample marks the cells within fringe_reach plus half a step.
-    A lookup point in no set loop cell needs no loop scan, one in no set hair cell no hair test;
-    one in neither, farther than type_rcore from the axis, is covered by no fibre of the yarn."""
-    bits = np.zeros((fo_off[-1], 2 * FO_WORDS), np.uint64)
-    for c in range(tab.yarn_type.shape[0]):
-        t = tab.yarn_type[c]
-        tp = tab.tparams[t]
-        base = fo_off[c]
-        nb = fo_off[c + 1] - base
-        h = fo_geom[c, 0]
-        rw = fo_geom[c, 1]
-        rf = tp[FIBER_RADIUS]
-        eps = tab.yarn_eps[c]
-        gmin = tab.yarn_gmin[c]
-        r = fringe_reach(rf, eps, gmin)
-        win = fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, gmin)
-        L = tab.yarn_length[c]
-        yseed = np.uint64(tab.yarn_seed[c])
-        v = math.sqrt(1.0 + transverse_speed_bound(tp) ** 2)  # yarn-space speed per unit z
-        for k in range(int(tp[PLY_NUM])):
-            g = tab.yarn_ply_off[c] + k
-            for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
-                j, fi, z0, z1 = loop_fibre(tab, tp, c, k, e)
-                z0 = max(0.0, z0 - win)
-                z1 = min(L, z1 + win)
-                n = max(1, int(math.ceil((z1 - z0) * v / r)))
-                dz = (z1 - z0) / n
-                for q in range(n + 1):
-                    z = min(z0 + q * dz, z1)
-                    x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
-                    _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * dz * v, 0)
-            if tab.hair_mode[0] != 0:
-                continue
-            for hh in range(tab.hair_off[g], tab.hair_off[g] + tab.hair_count[g]):
-                r0 = tab.hair_r0[hh]
-                r1 = tab.hair_r1[hh]
-                th1 = tab.hair_th1[hh]
-                pe = tab.hair_pe[hh]
-                z1_ = tab.hair_z1[hh]
-                ze = tab.hair_ze[hh]
-                speed = hair_speed_bound(tp, r0, r1, pe, ze)
-                n = max(1, int(math.ceil(speed / r)))
-                for q in range(n + 1):
-                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1_, ze, q / n)
-                    _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * speed / n, FO_WORDS)
-    return bits
-
-
-def fringe_tables(tab: Tables):
-    """(type_rcore, fo_off, fo_geom, fo_bits): see fringe_occupancy. type_rcore: a point farther than
-    this from the axis is outside every ply's unit-disc radius range (ply_rr) whatever its ply."""
-    T = len(tab.type_K)
-    rcore = np.empty(T)
-    for t in range(T):
-        tp = tab.tparams[t]
-        P = int(tp[PLY_NUM])
-        hi = float(tab.ply_rr[t, :P, 1].max()) if P else -np.inf
-        rcore[t] = tp[PLY_RADIUS] + max(hi, 0.0) * max(tp[E_SHORT], tp[E_LONG])
-    ext = np.asarray(tab.yarn_extent, np.float64)
-    L = np.asarray(tab.yarn_length, np.float64)
-    h = np.maximum(FO_ZBIN_EXTENTS * ext, 1e-12)
-    nb = np.maximum(1, np.ceil(L / h)).astype(np.int64)
-    fo_off = np.concatenate([[0], np.cumsum(nb)]).astype(np.int64)
-    fo_geom = np.ascontiguousarray(np.stack([h, np.maximum(ext / FO_SHELLS, 1e-12)], axis=1))
-    return rcore, fo_off, fo_geom, fringe_occupancy(tab, fo_off, fo_geom)
-
-
-def chord_gates(tab: Tables):
-    """Per coarse chord q (from knot q to q + 1) of yarn c: an axis distance R such that a point whose
-    foot point lies on chords q-1 .. q+2 (the lookups' bracket) and whose distance from the axis
-    exceeds R is covered by no fibre of c: the largest of type_rcore widened by the margin of an
-    unbinned visit (K (r_f + 2 eps_c) max(e) / min(e)) and the outer radius of the set fringe
-    shells over the bracket's z-bins (infinite where the last, open shell is set or, in the
-    realization-free mode, where hairs are not stored). Lookups skip such a yarn before its foot
-    point: p's axis distance is at least sqrt(lb^2 - w^2) for the chord lower bound lb."""
-    gate = np.full(len(tab.kn_idx), np.inf)
-    bits = np.unpackbits(tab.fo_bits.view(np.uint8), axis=1, bitorder="little")
-    bits = bits.reshape(len(tab.fo_bits), 2, FO_SHELLS, FO_SECTORS).any(axis=(1, 3))  # (bins, shells)
-    top = np.where(bits.any(axis=1), FO_SHELLS - 1 - np.argmax(bits[:, ::-1], axis=1), -1)
-    for c in range(len(tab.yarn_type)):
-        t = tab.yarn_type[c]
-        tp = tab.tparams[t]
-        if tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0:
-            continue
-        es, el = tp[E_SHORT], tp[E_LONG]
-        rcore = tab.type_rcore[t] + tab.type_K[t] * (tp[FIBER_RADIUS] + 2.0 * tab.yarn_eps[c]) * max(es, el) / min(es, el)
-        k0, k1 = tab.kn_off[c], tab.kn_off[c + 1]
-        base, nb = tab.fo_off[c], tab.fo_off[c + 1] - tab.fo_off[c]
-        h, rw = tab.fo_geom[c]
-        for q in range(k0, k1 - 1):
-            sa = tab.fs_s[tab.kn_idx[max(q - 1, k0)]]
-            sb = tab.fs_s[tab.kn_idx[min(q + 2, k1 - 1)]]
-            b0 = min(max(int(math.floor(sa / h)), 0), nb - 1)
-            b1 = min(max(int(math.floor(sb / h)), 0), nb - 1)
-            sh = int(top[base + b0:base + b1 + 1].max())
-            rf_ = np.inf if sh == FO_SHELLS - 1 else (sh + 1) * rw
-            gate[q] = max(rcore, rf_)
-    return gate
-
-
-def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
-    """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
-    eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
-    measured error, <= 3 rounds; the error is second order in the step), coarse knots about half
-    an extent apart, and the chord grid (cells half the largest extent, grown to stay under
-    max_cells). Deterministic: depends on the curves and the stored tables only."""
-    from .frame_samples import chord_grid, coarse_knots, sample_all
-
-    Y = len(tab.yarn_type)
-    if Y == 0:
-        return tab
-    ext = np.asarray(tab.yarn_extent, np.float64)
-    kap = np.asarray(tab.yarn_kappa, np.float64)
-    rf_y = tab.tparams[tab.yarn_type, FIBER_RADIUS]
-    target = tolerance * rf_y
-    k2 = kap * kap * ext + kap
-    radius = np.asarray(cv.radius[:Y], np.float64)
-    rmin = 1e-3 * radius
-    deltas = np.maximum(np.minimum(0.5 * radius, np.sqrt(8.0 * target / np.maximum(k2, 1e-12))), rmin)
-    for attempt in range(3):
-        fs_off, fs_s, fs_fr, err = sample_all(cv, deltas, ext)
-        scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
-        yeps = 2.0 * err + 1e-12 * scale
-        over = (yeps > target) & (deltas > rmin)
-        if not over.any():
-            break
-        deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
-    mean_step = float(np.mean(deltas))
-    stride = max(1, int(0.5 * float(ext.min()) / mean_step))
-    kn_off, kn_idx, kn_sag = coarse_knots(fs_s, fs_fr, fs_off, stride)
-    lo, hi = fs_fr[:, :3].min(0) - ext.max(), fs_fr[:, :3].max(0) + ext.max()
-    cell = 0.5 * float(ext.max())
-    while np.prod(np.ceil((hi - lo) / cell)) > max_cells:
-        cell *= 1.25
-    glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
-    ply_rr, fib_v, lz_rr = scan_bounds(tab)
-    z2 = tab.hair_z1 + tab.hair_ze
-    hair_box = np.stack([np.minimum(tab.hair_z1, z2), np.maximum(tab.hair_z1, z2),
-                         np.minimum(tab.hair_r0, tab.hair_r1), np.maximum(tab.hair_r0, tab.hair_r1)], axis=1)
-    tab = tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=np.ascontiguousarray(hair_box), lz_rr=lz_rr,
-                       fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
-                       kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
-                       fg_yarn=gyarn, fg_a=ga, fg_b=gb)
-    rcore, fo_off, fo_geom, fo_bits = fringe_tables(tab)
-    tab = tab._replace(type_rcore=rcore, fo_off=fo_off, fo_geom=fo_geom, fo_bits=fo_bits)
-    return tab._replace(kn_rgate=chord_gates(tab))

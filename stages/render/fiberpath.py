@@ -1,10 +1,16 @@
 """Explicit-fibre unidirectional path tracer (``--method fiberpath``).
 
-Geometry: fibres as chains of capsules in a SAH BVH (``stages.core.bvh``), optional ground plane
-(``stages.render.ground``). Materials per fibre (``materials`` rows, MAT_SIZE floats):
-    0 type (0 = BCSDF of Khungurn et al. 2015, 1 = Lambertian surface), 1:11 packed BCSDF
-    (``stages.core.bcsdf``), 11:14 Lambertian albedo.
-Lights: ``stages.render.lights`` (all distant).
+Geometry: a surface scene (``stages.core.geometry.surface``): realized fibres as chains of capsules
+in a SAH BVH (``FiberBVH``) or tiled exemplars under a shell map (``ShellScene``); the same estimator
+runs on both. Optional ground plane (``stages.render.ground``). Materials: packed rows
+(``stages.core.shading.material``: the BCSDF of Khungurn et al. 2015 or a Lambertian surface), one
+per fibre through ``mat_of_fiber``, and a Lambertian row for the ground. Lights: ``stages.render.lights``
+(all distant).
+
+``FiberpathIntegrator`` fields: ``scene`` (FiberBVH | ShellScene), ``mat_of_fiber`` (F,) int32 row of
+each fibre, ``mats`` (NM, MAT_SIZE), ``ground_mat`` (MAT_SIZE,) the ground's Lambertian row,
+``lights`` (``LightTable``), ``ground`` float64[4] and ``has_ground`` (``stages.render.ground``),
+``max_depth``, ``rr_depth``, ``ign_window``, ``eps`` (ray offset, scene units).
 
 Estimator
 ---------
@@ -16,58 +22,45 @@ lights) unweighted. ``max_depth`` is the largest number of scattering events on 
 lighting only); Russian roulette from scattering event ``rr_depth`` on, survival probability
 min(0.95, max channel of the throughput).
 
-BCSDF vertices: the scattered and shadow rays start on the fibre surface and skip the segments of
-the same fibre within ``ign_window`` along the chain (a curve BCSDF does not self-shadow; see
-``stages.core.bcsdf`` "Measure"); the renderer passes a window wider than any fibre, i.e. the whole
-fibre is skipped. Lambertian and ground vertices: rays start offset along the normal
-and test everything.
+BCSDF vertices (curve materials): the scattered and shadow rays start on the fibre surface and skip
+the segments of the same fibre within ``ign_window`` along the chain (a curve BCSDF does not
+self-shadow; see ``stages.core.shading.bcsdf`` "Measure"); the renderer passes a window wider than
+any fibre, i.e. the whole fibre is skipped. Lambertian and ground vertices: rays start offset along
+the normal and test everything. Rays leaving a fibre of a shell scene start in the tetrahedron of
+the hit.
 
-Random numbers: ``uniform(seed, (row * W + col) * spp + s, dim)`` with fixed dimensions per bounce,
-so the image is identical for any thread count and tile order.
+Random numbers: ``uniform(seed, index, dim)`` for camera sample ``index`` (``stages.render.tiles``):
+dimensions 0-1 place the sample in its pixel, then 4 + 2 NL per scattering event (lobe, direction,
+roulette, one pair per light), so the image is identical for any thread count and tile order.
 """
-import math
+from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
+from numba.extending import overload
 
-from ..core import bcsdf as B
-from ..core.bvh import intersect, occluded
-from ..core.capsule import capsule_normal
-from ..core.rng import uniform
-from .camera import camera_ray
-from .fiber_lambert import lambert_eval, lambert_pdf, lambert_sample
-from .film import add_sample
-from .ground import ground_intersect
-from .lights import environment_radiance, light_eval, light_pdf, light_sample
+from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.surface import surface_hit, surface_occluded
+from stages.core.rng import uniform
+from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_is_curve, material_prepare,
+                                          material_sample)
+from stages.render.ground import ground_intersect
+from stages.render.integrator import PathSample, radiance
+from stages.render.lights import light_eval, light_pdf, light_sample
 
-MAT_SIZE = 14
-MAT_BCSDF = 0
-MAT_LAMBERT = 1
-
-
-def pack_material_bcsdf(bcsdf_params):
-    row = np.zeros(MAT_SIZE)
-    row[0] = MAT_BCSDF
-    row[1:11] = bcsdf_params
-    return row
-
-
-def pack_material_lambert(albedo):
-    row = np.zeros(MAT_SIZE)
-    row[0] = MAT_LAMBERT
-    row[11:14] = albedo
-    return row
+FiberpathIntegrator = namedtuple("FiberpathIntegrator", [
+    "scene", "mat_of_fiber", "mats", "ground_mat", "lights", "ground", "has_ground",
+    "max_depth", "rr_depth", "ign_window", "eps"])
 
 
 @njit(cache=True)
-def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, has_ground,
-               row, col, key, seed, max_depth, rr_depth, ign_window, eps, counters):
-    """Radiance (r, g, b), first-hit distance (0 on a miss) of one camera sample.
-
-    counters[0] += rays traced (camera, scattered and shadow rays)."""
-    u = uniform(seed, key, 0)
-    v = uniform(seed, key, 1)
-    o, d = camera_ray(cam, row, col, u, v)
+def trace_path(it, o, d, seed, key):
+    """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
+    lights = it.lights.lights
+    env = it.lights.env
+    marg = it.lights.marginal
+    cond = it.lights.conditional
+    eps = it.eps
     nl = lights.shape[0]
     dims_per_bounce = 4 + 2 * nl
     tp0 = 1.0
@@ -77,8 +70,10 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
     L1 = 0.0
     L2 = 0.0
     first_t = 0.0
+    rays = 0
     ign_f = -1
     ign_s = -1
+    cell = -1
     pdf_prev = 0.0
     t_tan = np.zeros(3)
     n = np.zeros(3)
@@ -86,16 +81,19 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
     p = np.empty(3)
     so = np.empty(3)
     wo = np.empty(3)
-    ctx = np.empty(B.CTX_SIZE)
+    ctx = np.empty(CTX_SIZE)
     depth = 0
     while True:
-        t_hit, s = intersect(bvh, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, ign_f, ign_s, ign_window)
-        counters[0] += 1
-        tg = ground_intersect(ground, has_ground, o[2], d[2], eps)
+        h = surface_hit(it.scene, cell, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, ign_f, ign_s,
+                        it.ign_window)
+        t_hit = h.t
+        rays += 1
+        on_ground = False
+        tg = ground_intersect(it.ground, it.has_ground, o[2], d[2], eps)
         if tg < t_hit:
             t_hit = tg
-            s = -2
-        if s == -1:  # escaped: environment radiance, MIS-weighted against the previous NEE
+            on_ground = True
+        if h.prim < 0 and not on_ground:  # escaped: environment radiance, MIS-weighted against the previous NEE
             for k in range(nl):
                 lr, lg, lb = light_eval(lights, k, env, marg, cond, d)
                 if lr == 0.0 and lg == 0.0 and lb == 0.0:
@@ -110,48 +108,37 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
             break
         if depth == 0:
             first_t = t_hit
-        if depth >= max_depth:
+        if depth >= it.max_depth:
             break
         for k in range(3):
             p[k] = o[k] + t_hit * d[k]
             wi[k] = -d[k]
-        # shading frame
-        if s >= 0:
-            m = mat_of_fiber[bvh.seg_fiber[s]]
-            kind = int(mats[m, 0])
-            ia = bvh.seg_a[s]
-            P = bvh.points
-            ax = P[ia, 0]; ay = P[ia, 1]; az = P[ia, 2]
-            bx = P[ia + 1, 0]; by = P[ia + 1, 1]; bz = P[ia + 1, 2]
-            tl = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
-            if tl > 0.0:
-                t_tan[0] = (bx - ax) / tl; t_tan[1] = (by - ay) / tl; t_tan[2] = (bz - az) / tl
-            else:
-                t_tan[0] = 1.0; t_tan[1] = 0.0; t_tan[2] = 0.0
-            nx, ny, nz, _ = capsule_normal(p[0], p[1], p[2], ax, ay, az, bx, by, bz)
-            n[0] = nx; n[1] = ny; n[2] = nz
-            if kind == MAT_BCSDF:
-                B.bcsdf_context(mats[m, 1:11], t_tan, wi, ctx)
-                nf = bvh.seg_fiber[s]
-                ns = s
+        # the vertex: its material, shading frame and where continuation rays start
+        if not on_ground:
+            mat = it.mats[it.mat_of_fiber[h.fiber]]
+            t_tan[0] = h.tx; t_tan[1] = h.ty; t_tan[2] = h.tz
+            n[0] = h.nx; n[1] = h.ny; n[2] = h.nz
+            if material_is_curve(mat):
+                nf = h.fiber
+                ns = h.prim
                 for k in range(3):
                     so[k] = p[k]
             else:
                 nf = -1
                 ns = -1
-                off = 1e-3 * bvh.seg_r[s] + eps
+                off = 1e-3 * h.radius + eps
                 for k in range(3):
                     so[k] = p[k] + off * n[k]
-            galb = 0
+            next_cell = h.cell
         else:
-            m = -1
-            kind = MAT_LAMBERT
+            mat = it.ground_mat
             n[0] = 0.0; n[1] = 0.0; n[2] = 1.0 if d[2] < 0.0 else -1.0
             nf = -1
             ns = -1
             for k in range(3):
                 so[k] = p[k] + eps * n[k]
-            galb = 1
+            next_cell = -1
+        material_prepare(mat, t_tan, n, wi, ctx)
         base = 2 + depth * dims_per_bounce
         # next-event estimation: one sample per light
         for k in range(nl):
@@ -160,20 +147,14 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
                                                      uniform(seed, key, base + 5 + 2 * k))
             if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                 continue
-            if galb == 1:
-                f0, f1, f2 = lambert_eval(n, ground[1:4], wl)
-                pf = lambert_pdf(n, wl)
-            elif kind == MAT_BCSDF:
-                f0, f1, f2, pf = B.bcsdf_eval_pdf_ctx(mats[m, 1:11], ctx, t_tan, wl)
-            else:
-                f0, f1, f2 = lambert_eval(n, mats[m, 11:14], wl)
-                pf = lambert_pdf(n, wl)
+            f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
             if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                 continue
-            counters[0] += 1
-            if occluded(bvh, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, np.inf, nf, ns, ign_window):
+            rays += 1
+            if surface_occluded(it.scene, next_cell, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, np.inf, nf, ns,
+                                it.ign_window):
                 continue
-            if ground_intersect(ground, has_ground, so[2], wl[2], eps) < np.inf:
+            if ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < np.inf:
                 continue
             if delta:
                 w = 1.0
@@ -186,23 +167,14 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
         u0 = uniform(seed, key, base + 0)
         u1 = uniform(seed, key, base + 1)
         u2 = uniform(seed, key, base + 2)
-        if galb == 1:
-            ws, w0, w1, w2, pf = lambert_sample(n, ground[1:4], u1, u2)
-            for k in range(3):
-                wo[k] = ws[k]
-        elif kind == MAT_BCSDF:
-            w0, w1, w2, pf = B.bcsdf_sample_ctx(mats[m, 1:11], ctx, t_tan, u0, u1, u2, wo)
-        else:
-            ws, w0, w1, w2, pf = lambert_sample(n, mats[m, 11:14], u1, u2)
-            for k in range(3):
-                wo[k] = ws[k]
+        w0, w1, w2, pf = material_sample(mat, ctx, t_tan, n, wi, u0, u1, u2, wo)
         if pf <= 0.0:
             break
         tp0 *= w0
         tp1 *= w1
         tp2 *= w2
         depth += 1
-        if depth >= rr_depth:
+        if depth >= it.rr_depth:
             q = min(0.95, max(tp0, max(tp1, tp2)))
             if uniform(seed, key, base + 3) >= q:
                 break
@@ -215,29 +187,11 @@ def trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, ha
             d[k] = wo[k]
         ign_f = nf
         ign_s = ns
-    return L0, L1, L2, first_t
+        cell = next_cell
+    return PathSample(L0, L1, L2, 1.0 if first_t > 0.0 else 0.0, first_t, 0, rays)
 
 
-@njit(cache=True, parallel=True)
-def render_tiles(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, has_ground,
-                 tiles, t_begin, t_end, spp, seed, max_depth, rr_depth, ign_window, eps,
-                 film_sum, film_sq, hits, depth_sum, tile_rays):
-    """Render tiles [t_begin, t_end) into the film arrays; tile_rays[t] = rays traced for tile t."""
-    W = int(cam[13])
-    for ti in prange(t_begin, t_end):
-        r0 = tiles[ti, 0]
-        c0 = tiles[ti, 1]
-        r1 = tiles[ti, 2]
-        c1 = tiles[ti, 3]
-        counters = np.zeros(1, np.int64)
-        for row in range(r0, r1):
-            for col in range(c0, c1):
-                for s in range(spp):
-                    key = (row * W + col) * spp + s
-                    r, g, b, ft = trace_path(cam, bvh, mat_of_fiber, mats, lights, env, marg, cond, ground, has_ground,
-                                             row, col, key, seed, max_depth, rr_depth, ign_window, eps, counters)
-                    add_sample(film_sum, film_sq, row, col, r, g, b)
-                    if ft > 0.0:
-                        hits[row, col] += 1.0
-                        depth_sum[row, col] += ft
-        tile_rays[ti] = counters[0]
+@overload(radiance)
+def _fiberpath_radiance(integ, o, d, seed, index):
+    if is_tuple_class(integ, FiberpathIntegrator):
+        return lambda integ, o, d, seed, index: trace_path(integ, o, d, seed, index)

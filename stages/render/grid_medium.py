@@ -23,7 +23,8 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from .medium import is_source, medium_lookup
+from stages.core.dispatch import is_tuple_class
+from stages.render.medium import medium_lookup
 
 GridMedium = namedtuple("GridMedium", ["lo", "hi", "density", "direction", "albedo", "roughness"])
 
@@ -76,7 +77,7 @@ def grid_lookup(med, x, y, z):
 
 @overload(medium_lookup)
 def _grid_overload(med, x, y, z):
-    if is_source(med, GridMedium):
+    if is_tuple_class(med, GridMedium):
         return lambda med, x, y, z: grid_lookup(med, x, y, z)
 
 

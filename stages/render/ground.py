@@ -1,7 +1,7 @@
 """Optional ground plane: the infinite plane z = height, Lambertian with RGB albedo, seen from both sides.
 
 The plane's shading normal faces the side the ray came from, so a camera below the plane sees its
-underside lit the same way. Materials on it use ``stages.render.fiber_lambert`` (the Lambertian kernels
+underside lit the same way. Materials on it use ``stages.core.shading.lambert`` (the Lambertian kernels
 take any normal). Packed as float64[4]: height, albedo rgb; ``ground_intersect`` returns inf when the
 scene has no ground (pass ``enabled`` False).
 """

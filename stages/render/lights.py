@@ -31,12 +31,15 @@ Packed layout
     8 1 / M(lambda).
 ``env`` float32 (H, W, 3), ``env_marginal`` float64 (H + 1,) row CDF, ``env_conditional`` float64
 (H, W + 1) column CDFs: at most one envmap per scene; scenes without one pass a 1 x 1 black map
-(``envmap_tables``).
+(``envmap_tables``). Integrators take the four together as a ``LightTable``.
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
+
+LightTable = namedtuple("LightTable", ["lights", "env", "marginal", "conditional"])
 
 LIGHT_SIZE = 9
 DIRECTIONAL = 0

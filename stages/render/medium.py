@@ -2,7 +2,7 @@
 
 Seed 000 App. A: at a point p a textile model gives a density den(p), a fibre direction dir(p), a
 roughness sigma(p) and an albedo alpha(p). The micro-flake model (Jakob et al. 2010) with a fibre-like
-SGGX distribution S(dir, sigma) (``stages.render.sggx``) turns them into
+SGGX distribution S(dir, sigma) (``stages.core.shading.sggx``) turns them into
 
     sigma_t(p, w) = den(p) * sigma_S(w)         (Jakob 2010 Eq. 8; sigma_S(w) = sqrt(w^T S w) <= 1)
     sigma_s(p, w) = alpha(p) * sigma_t(p, w)     (RGB single-scattering albedo per yarn)
@@ -24,20 +24,16 @@ with den = 0 outside every fibre (other fields then unused). The integrator
 """
 from collections import namedtuple
 
-from numba import njit, types
+from numba import njit
 from numba.extending import overload
 
-from .sggx import fiber_sggx, projected_area
+from stages.core.dispatch import is_tuple_class
+from stages.core.shading.sggx import fiber_sggx, projected_area
 
 
 def medium_lookup(med, x, y, z):
     """(den, tx, ty, tz, ar, ag, ab, roughness) at (x, y, z); numba-only (overloaded per source)."""
     raise TypeError("medium_lookup is only callable from numba-compiled code")
-
-
-def is_source(med, cls) -> bool:
-    """True when the numba type ``med`` is the namedtuple class ``cls`` (for overload dispatch)."""
-    return isinstance(med, types.BaseNamedTuple) and med.instance_class is cls
 
 
 @njit(cache=True)
@@ -70,5 +66,5 @@ def homogeneous_lookup(med, x, y, z):
 
 @overload(medium_lookup)
 def _homogeneous_overload(med, x, y, z):
-    if is_source(med, HomogeneousMedium):
+    if is_tuple_class(med, HomogeneousMedium):
         return lambda med, x, y, z: homogeneous_lookup(med, x, y, z)

@@ -1,11 +1,11 @@
 """Procedural density source (``--source procedural``): seed 000's realization-minimizing lookups.
 
-At a point p the procedural tables answer Algorithm 1 on the fly (``stages.procedural.lookup``):
+At a point p the procedural tables answer Algorithm 1 on the fly (``stages.core.yarn.lookup``):
 inside a fibre (regular, loop or hair) or not, the covering fibre's tangent, its yarn's density and
 albedo; the yarn type gives the SGGX roughness. Nothing is realized.
 
-ProceduralMedium fields: ``cv`` (``stages.core.curves.Curves`` of the yarns artifact) and ``tab``
-(``stages.procedural.tables.Tables``).
+ProceduralMedium fields: ``cv`` (``stages.core.curves.spline.Curves`` of the yarns artifact) and ``tab``
+(``stages.core.yarn.tables.Tables``).
 
 Majorants: ``fiber_capsules(cv, tab, step_frac)`` gives capsules that hold every fibre surface,
 each carrying its yarn's density (the majorant grid takes the largest bound of the capsules that
@@ -26,15 +26,14 @@ from numba.extending import overload
 
 import math
 
-from stages.core.curves import curve_point_at
-from stages.procedural.frame_samples import eq7, frame_at
-from stages.procedural.lookup import lookup_point
-from stages.procedural.tables import loop_fibre
-from stages.procedural.yarn_model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM,
-                                          PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point,
-                                          hair_speed_bound, regular_xy, transverse_speed_bound)
+from stages.core.curves.spline import curve_point_at
+from stages.core.yarn.frame_samples import eq7, frame_at
+from stages.core.yarn.lookup import lookup_point
+from stages.core.yarn.tables import loop_fibre
+from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point, hair_speed_bound, regular_xy, transverse_speed_bound)
 
-from .medium import is_source, medium_lookup
+from stages.core.dispatch import is_tuple_class
+from stages.render.medium import medium_lookup
 
 ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
@@ -50,7 +49,7 @@ def procedural_lookup(med, x, y, z):
 
 @overload(medium_lookup)
 def _procedural_overload(med, x, y, z):
-    if is_source(med, ProceduralMedium):
+    if is_tuple_class(med, ProceduralMedium):
         return lambda med, x, y, z: procedural_lookup(med, x, y, z)
 
 

@@ -1,7 +1,7 @@
 """Realized-fibre density source (``--source realized``): the reference of seed 000 §6.1.
 
 All fibres are realized as polylines (a ``fibers`` artifact) and put in a SAH BVH over their
-segments (``stages.core.bvh``, capsules of the segment's radius). The density rule is the
+segments (``stages.core.geometry.bvh``, capsules of the segment's radius). The density rule is the
 procedural one: p is inside a fibre when it lies in one of the fibre's capsules; then den(p) is the
 density of the fibre's yarn and dir(p) the segment's tangent. Where several fibres cover p the one
 with the lowest fibre index answers (the realization orders fibres as the lookups do: yarn, ply,
@@ -18,7 +18,8 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from .medium import is_source, medium_lookup
+from stages.core.dispatch import is_tuple_class
+from stages.render.medium import medium_lookup
 
 RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness"])
 
@@ -26,7 +27,7 @@ RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_densit
 @njit(cache=True)
 def covering_segment(bvh, x, y, z):
     """Segment of the lowest-index fibre whose capsule contains (x, y, z), or -1. Walks the BVH's
-    cache-line packed ``nodes`` / ``prims`` (see ``stages.core.bvh``)."""
+    cache-line packed ``nodes`` / ``prims`` (see ``stages.core.geometry.bvh``)."""
     nodes = bvh.nodes
     prims = bvh.prims
     if prims.shape[0] == 0:
@@ -100,7 +101,7 @@ def realized_lookup(med, x, y, z):
 
 @overload(medium_lookup)
 def _realized_overload(med, x, y, z):
-    if is_source(med, RealizedMedium):
+    if is_tuple_class(med, RealizedMedium):
         return lambda med, x, y, z: realized_lookup(med, x, y, z)
 
 

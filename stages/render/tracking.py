@@ -25,8 +25,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from ..core.rng import uniform
-from .medium import extinction, medium_lookup
+from stages.core.rng import uniform
+from stages.render.medium import extinction, medium_lookup
 
 MajorantGrid = namedtuple("MajorantGrid", ["lo", "hi", "res", "mu"])
 

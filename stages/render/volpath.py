@@ -10,32 +10,33 @@ after ``rr_depth`` interactions, and at most ``max_depth`` path segments (Mitsub
 max_depth = 1 shows only directly visible emitters). An optional diffuse ground plane z = height
 (Lambertian, RGB albedo) catches shadows.
 
-``render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_depth, tiles, out)``
-renders the given image tiles on parallel threads into ``out`` (H, W, OUT_CHANNELS):
-0-2 mean R, G, B (box filter); 3 alpha (fraction of camera paths that met fibres or ground);
-4 depth (mean distance to the first interaction, 0 where none); 5 variance of the pixel mean of
-luminance (sample variance / spp); 6 medium lookups made by the pixel's paths; 7 rays tracked
-(free-flight and shadow queries).
+``VolpathIntegrator`` fields: ``medium`` (a density source, ``stages.render.medium``), ``majorant``
+(its ``MajorantGrid``), ``lights`` (``LightTable``, ``stages.render.lights``), ``ground`` float64[4]
+and ``has_ground`` (``stages.render.ground``), ``max_depth``, ``rr_depth``. Its ``radiance``
+(``stages.render.integrator``) reports the medium lookups and rays (free-flight and shadow queries)
+of each path; the tile loop is ``stages.render.tiles``.
 Random numbers: uniform(seed, pixel * spp + sample, dim) with pixel jitter in dims 0-1, so the image
 is a pure function of the inputs, whatever the number of threads or the tiling.
 
-``med``: a density source (``stages.render.medium``); ``maj``: its ``MajorantGrid``;
-``lt``: (lights, env, env_marginal, env_conditional) as packed by ``stages.render.lights``;
-``ground``: float64[4] (height, albedo rgb) and ``ground_on`` as in ``stages.render.ground``.
 """
+
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
-from ..core.rng import uniform
-from .camera import camera_ray
-from .fiber_lambert import lambert_eval, lambert_pdf, lambert_sample
-from .ground import ground_intersect
-from .lights import environment_radiance, light_eval, light_pdf, light_sample
-from .sggx import fiber_sggx, phase_eval, phase_sample
-from .tracking import track
+from stages.core.dispatch import is_tuple_class
+from stages.core.rng import uniform
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample
+from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample
+from stages.render.ground import ground_intersect
+from stages.render.integrator import PathSample, radiance
+from stages.render.lights import environment_radiance, light_eval, light_pdf, light_sample
+from stages.render.tracking import track
 
-OUT_CHANNELS = 8  # r, g, b, alpha, depth, variance, lookups, rays
+VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
+                                                     "max_depth", "rr_depth"])
 
 
 @njit(cache=True)
@@ -98,6 +99,7 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
     hit = 0.0
     first_t = 0.0
     nrm = np.zeros(3)
+    wi = np.empty(3)
     alb = np.empty(3)
     alb[0] = ground[1]
     alb[1] = ground[2]
@@ -165,22 +167,25 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
             nrm[0] = 0.0
             nrm[1] = 0.0
             nrm[2] = 1.0 if dz < 0.0 else -1.0
+            wi[0] = -dx
+            wi[1] = -dy
+            wi[2] = -dz
             px = ox + tg * dx
             py = oy + tg * dy
             pz = ground[0] + nrm[2] * 1e-7 * (1.0 + abs(ground[0]))
             if lpdf > 0.0:
-                fr, fg, fb = lambert_eval(nrm, alb, lw)
+                fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
                 if fr > 0.0 or fg > 0.0 or fb > 0.0:
                     tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
                                                  seed, index, dim)
                     lookups += lk
                     rays += 1
                     if tr > 0.0:
-                        c = tr * (1.0 if ldelta else _power(lpdf, lambert_pdf(nrm, lw))) / lpdf
+                        c = tr * (1.0 if ldelta else _power(lpdf, lambert_pdf(alb, nrm, wi, lw))) / lpdf
                         Lr += br * ler * fr * c
                         Lg += bg * leg * fg * c
                         Lb += bb * leb * fb * c
-            wo, wr, wg, wb, pdf = lambert_sample(nrm, alb, u4, u5)
+            wo, wr, wg, wb, pdf = lambert_sample(alb, nrm, wi, 0.0, u4, u5)
             if pdf <= 0.0:
                 break
             br *= wr
@@ -208,65 +213,12 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
     return Lr, Lg, Lb, hit, first_t, lookups, rays
 
 
-@njit(cache=True, nogil=True)
-def render_tile(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_depth, row0, col0, row1, col1, out):
-    """Render pixels [row0, row1) x [col0, col1) into out (H, W, OUT_CHANNELS); releases the GIL."""
-    W = int(cam[13])
-    for row in range(row0, row1):
-        for col in range(col0, col1):
-            pix = row * W + col
-            sr = 0.0
-            sg = 0.0
-            sb = 0.0
-            sy = 0.0
-            syy = 0.0
-            sh = 0.0
-            sd = 0.0
-            sl = 0.0
-            sn = 0.0
-            for s in range(spp):
-                index = pix * spp + s
-                o, d = camera_ray(cam, row, col, uniform(seed, index, 0), uniform(seed, index, 1))
-                r, g, b, hit, ft, lk, nr = trace_path(med, maj, lt, ground, ground_on, o[0], o[1], o[2],
-                                                      d[0], d[1], d[2], seed, index, max_depth, rr_depth)
-                sr += r
-                sg += g
-                sb += b
-                y = 0.2126 * r + 0.7152 * g + 0.0722 * b
-                sy += y
-                syy += y * y
-                sh += hit
-                sd += ft
-                sl += lk
-                sn += nr
-            out[row, col, 0] = sr / spp
-            out[row, col, 1] = sg / spp
-            out[row, col, 2] = sb / spp
-            out[row, col, 3] = sh / spp
-            out[row, col, 4] = sd / sh if sh > 0.0 else 0.0
-            mean = sy / spp
-            out[row, col, 5] = max(syy / spp - mean * mean, 0.0) / (spp - 1) if spp > 1 else 0.0
-            out[row, col, 6] = sl
-            out[row, col, 7] = sn
-
-
-def render_tiles(med, maj, lt, cam, ground, ground_on, seed, spp, max_depth, rr_depth, tiles, out, threads=None):
-    """Render the tiles (rows of (row0, col0, row1, col1), ``stages.render.film.tile_grid``) into
-    out (H, W, OUT_CHANNELS) on ``threads`` threads (default: numba's thread count). Each tile is a
-    GIL-free numba call; pixels depend only on their own random numbers, so the result does not
-    depend on the thread count. (Threads rather than ``prange``: numba's parallel loops cannot take
-    sources nested as namedtuples of namedtuples, such as the procedural tables.)"""
-    import numba
-
-    n = int(threads or numba.get_num_threads())
-    args = (med, maj, lt, cam, ground, bool(ground_on), int(seed), int(spp), int(max_depth), int(rr_depth))
-    tiles = np.asarray(tiles, np.int64).reshape(-1, 4)
-    if n <= 1 or len(tiles) <= 1:
-        for t in tiles:
-            render_tile(*args, t[0], t[1], t[2], t[3], out)
-        return out
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(max_workers=n) as ex:
-        list(ex.map(lambda t: render_tile(*args, t[0], t[1], t[2], t[3], out), tiles))
-    return out
+@overload(radiance)
+def _volpath_radiance(integ, o, d, seed, index):
+    if is_tuple_class(integ, VolpathIntegrator):
+        def impl(integ, o, d, seed, index):
+            r, g, b, hit, ft, lk, nr = trace_path(integ.medium, integ.majorant, integ.lights, integ.ground,
+                                                  integ.has_ground, o[0], o[1], o[2], d[0], d[1], d[2], seed, index,
+                                                  integ.max_depth, integ.rr_depth)
+            return PathSample(r, g, b, hit, ft, lk, nr)
+        return impl

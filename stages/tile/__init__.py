@@ -6,5 +6,5 @@
 ``tetra``          one shell prism -> three tetrahedra; per-tetrahedron affine maps and face planes
 ``shell``          the shell: base surface offset along its normals, tetrahedra, adjacency, boundary faces
 ``mapping``        world <-> shell texture coordinates (u, v, w) <-> flat exemplar space
-The ray traversal through the shell lives in ``stages.core.shell_traversal`` (precompute reuses it).
+The ray traversal through the shell lives in ``stages.core.shell.traversal`` (precompute reuses it).
 """

@@ -7,7 +7,7 @@ at y = (p + 1/2) sy. The exemplar is periodic in x and y: a copy shifted by (W, 
 without a seam, fibre for fibre.
 
 Periodic yarn centrelines
-    ``periodic_centreline``: the ingest stage's woven centrelines (``stages.ingest.woven``, half-cosine
+    ``periodic_centreline``: the ingest stage's woven centrelines (``stages.core.curves.woven``, half-cosine
     crimp) of the repeat tiled 3 x 3, shifted so that the middle repeat covers the exemplar box; the
     middle repeat's yarns are then exactly periodic along their length (c(s + L) = c(s) + (0, H, 0) for a
     warp end, + (W, 0, 0) for a weft pick, L the yarn's arc length over one repeat). Frame: n is the
@@ -15,7 +15,7 @@ Periodic yarn centrelines
     the rotation-minimising one and it is periodic too.
 
 Periodic fibres
-    The procedural yarn model of seed 000 §3.2 (``stages.procedural.yarn_model.regular_xy``, the
+    The procedural yarn model of seed 000 §3.2 (``stages.core.yarn.model.regular_xy``, the
     procedural engineer's kernel) gives each regular fibre's yarn-space offset (x, y) at arc length z.
     To make the fibres periodic over one repeat, the pitches are snapped (``snap_periodic``): the ply
     pitch and the fibre pitch become L / round(L / pitch) and the migration frequency s becomes
@@ -42,9 +42,8 @@ import math
 import numpy as np
 from numba import njit
 
-from stages.ingest.woven import woven_curves
-from stages.procedural.yarn_model import (ALPHA, FIBER_NUM, FIBER_RADIUS, PLY_NUM, S_MIG, USE_FLYAWAYS,
-                                          YARN_ALPHA, regular_xy, sample_regular_fibers)
+from stages.core.curves.woven import woven_curves
+from stages.core.yarn.model import (ALPHA, FIBER_NUM, FIBER_RADIUS, PLY_NUM, S_MIG, USE_FLYAWAYS, YARN_ALPHA, regular_xy, sample_regular_fibers)
 from stages.core.rng import hash_u64
 
 DENSE = 32  # centreline samples per weave cell

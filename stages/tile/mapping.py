@@ -3,7 +3,7 @@
 Within tetrahedron ``tet`` the shell map is affine (barycentric, piecewise linear over the shell):
 - ``world_to_flat(w2f, tet, p)`` / ``flat_to_world(f2w, tet, q)``: the per-tetrahedron affine maps of
   ``tetra.tet_geometry`` (directions map by the linear part only: fibre tangents by f2w, normals by the
-  transpose of w2f, as in ``stages.core.shell_traversal``);
+  transpose of w2f, as in ``stages.core.shell.traversal``);
 - ``flat_to_uvw(q, flat_size, thickness)``: (X / flat_size_x, Y / flat_size_y, Z / thickness);
 - ``flat_to_exemplar(q, block, ...)``: flat point -> (exemplar, point in that exemplar) by the block map
   (``tiling``): block (i, j) = floor(X / bw), floor(Y / bh) wrapped periodically over the map; its

@@ -1,0 +1,157 @@
+"""Render runner: resolve the options of a registered method, render, publish EXR + PNG + artifact.
+
+``run_render`` takes the command line's values (None where not given), resolves them against the
+scene (``[camera]``, ``[render]``) and the registry's ``COMMON_DEFAULTS`` (``pipeline.renderers``),
+checks the ``--set`` keys and the artifact inputs against the method's declaration, runs the method
+and writes the linear float32 EXR (RGB plus the extra channels), an sRGB PNG preview beside it and
+a ``render`` artifact ``<out stem>.zarr`` holding the image (chunked) and the statistics: wall time,
+render time, spp, paths/s, rays/s, peak memory, thread count. The artifact's inputs are the scene and
+every artifact the method's source read.
+"""
+from __future__ import annotations
+
+import resource
+import time
+from pathlib import Path
+
+from ..errors import LoomError
+
+
+def _positive(value, name):
+    if value is not None and value <= 0:
+        raise LoomError(None, name, f"must be a positive integer, got {value}")
+
+
+def parse_settings(settings, m) -> dict:
+    """``--set KEY=VALUE`` pairs checked against the method's declared settings."""
+    from ..renderers import did_you_mean
+
+    extra = {}
+    known = [s.key for s in m.settings]
+    for kv in settings:
+        if "=" not in kv:
+            raise LoomError(None, "--set", f"expected KEY=VALUE, got {kv!r}")
+        k, v = kv.split("=", 1)
+        k, v = k.strip(), v.strip()
+        if k not in known:
+            raise LoomError(None, f"--set {k}", f"{m.name} has no setting {k!r} (known: {', '.join(known) or 'none'})"
+                            + did_you_mean(k, known))
+        extra[k] = v
+    return extra
+
+
+def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, source=None, fibers=None, tables=None,
+                    grid=None, bcsdf=None, material=None, max_depth=None, threads=None, extra=None) -> dict:
+    from ..renderers import COMMON_DEFAULTS
+
+    extra = extra or {}
+    cam = scene.camera or {}
+    rs = scene.render
+
+    def pick(cli, table, key):
+        v = cli if cli is not None else table.get(key)
+        return int(v if v is not None else COMMON_DEFAULTS[key])
+
+    options = {
+        "width": pick(width, cam, "width"), "height": pick(height, cam, "height"), "spp": pick(spp, rs, "spp"),
+        "seed": int(seed if seed is not None else rs.get("seed", scene.seed)),
+        "max_depth": pick(max_depth, rs, "max_depth"), "rr_depth": pick(None, rs, "rr_depth"),
+        "tile_size": pick(None, rs, "tile_size"),
+        "source": source, "fibers": str(fibers) if fibers else extra.get("tiling"),
+        "tables": str(tables) if tables else extra.get("tables"), "grid": str(grid) if grid else extra.get("grid"),
+        "bcsdf": bcsdf, "material": material, "threads": threads, "extra": extra,
+    }
+    for key, name in (("width", "--width"), ("height", "--height"), ("spp", "--spp")):
+        _positive(options[key], name)
+    if material is not None and m.materials and material not in m.materials:
+        from ..renderers import did_you_mean
+
+        raise LoomError(None, "--material", f"unknown fibre material {material!r} (known: {', '.join(m.materials)})"
+                        + did_you_mean(material, m.materials))
+    return options
+
+
+def check_inputs(scene, m, options) -> None:
+    """The method's source exists and every artifact it reads was given."""
+    scene_source = scene.render.get("source")
+    src = m.source(options["source"] or (scene_source if scene_source in m.source_names else None))
+    for inp in src.inputs:
+        if not options.get(inp.option):
+            via = f"{m.name} --source {src.name}" if len(m.sources) > 1 else m.name
+            raise LoomError(None, f"--{inp.option}", f"{via} needs {inp.what}: pass --{inp.option} PATH.zarr")
+
+
+def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
+               fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None,
+               exposure=0.0, settings=()):
+    """Render and publish; returns the lines to print (output paths and statistics)."""
+    import numpy as np
+
+    from ..artifacts import ArtifactWriter
+    from ..images import write_render
+    from ..renderers import RenderResult
+    from ..renderers import method as registered
+    from ..scene import load_scene
+
+    for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (max_depth, "--max-depth"),
+                    (threads, "--threads")):
+        _positive(v, name)
+    if seed is not None and seed < 0:
+        raise LoomError(None, "--seed", f"must be >= 0, got {seed}")
+    out = Path(out)
+    if out.suffix.lower() != ".exr":
+        raise LoomError(out, "-o", "the output image must end in .exr")
+    scene = load_scene(scene_path)
+    method = method or scene.render.get("method")
+    if not method:
+        raise LoomError(scene.path, "render.method", "no render method: pass --method")
+    m = registered(method)
+    extra = parse_settings(settings, m)
+    options = resolve_options(scene, m, width, height, spp, seed, source, fibers, tables, grid, bcsdf, material,
+                              max_depth, threads, extra)
+    check_inputs(scene, m, options)
+    if threads:
+        import numba
+
+        numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    t0 = time.perf_counter()
+    result: RenderResult = m.run(scene, options)
+    wall = time.perf_counter() - t0
+    rgb = np.ascontiguousarray(result.rgb, dtype=np.float32)
+    if rgb.shape != (options["height"], options["width"], 3):
+        raise RuntimeError(f"renderer {method} returned an image of shape {rgb.shape}")
+    st = dict(result.stats)
+    render_s = float(st.get("render_s", wall)) or wall
+    import numba
+
+    stats = {
+        "kind": "render", "method": method, "width": options["width"], "height": options["height"],
+        "spp": options["spp"], "seed": options["seed"], "wall_time_s": wall, "render_time_s": render_s,
+        "paths": int(st.get("paths", rgb.shape[0] * rgb.shape[1] * options["spp"])),
+        "rays": int(st.get("rays", 0)), "threads": int(numba.get_num_threads()),
+        "peak_memory_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        "mean_rgb": [float(x) for x in rgb.reshape(-1, 3).mean(axis=0)],
+        "exr": str(out), "png": str(out.with_suffix(".png")),
+    }
+    stats["paths_per_s"] = stats["paths"] / render_s
+    stats["rays_per_s"] = stats["rays"] / render_s
+    stats["method_stats"] = {k: v for k, v in st.items() if k not in ("rays", "paths", "render_s")}
+    inputs = {"scene": scene.path}
+    for key in sorted({inp.option for src in m.sources for inp in src.inputs}):
+        if options[key]:
+            inputs[key] = options[key]
+    params = {k: v for k, v in options.items() if k != "threads"}
+    params["method"] = method
+    exr, png = write_render(out, rgb, result.extra, exposure=exposure)
+    art_path = out.with_suffix(".zarr")
+    with ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs) as w:
+        H, W = rgb.shape[:2]
+        w.write("image", rgb, chunks=(min(H, 128), min(W, 128), 3), dimension_names=("y", "x", "c"))
+        for name, ch in result.extra.items():
+            w.write(f"channels/{name}", np.ascontiguousarray(ch, dtype=np.float32), chunks=(min(H, 128), min(W, 128)),
+                    dimension_names=("y", "x"))
+        w.summary.update(stats)
+    return [f"image    : {exr}", f"preview  : {png}", f"artifact : {art_path}",
+            f"{method}: {stats['width']}x{stats['height']} @ {stats['spp']} spp in {wall:.2f} s "
+            f"(render {render_s:.2f} s, {stats['paths_per_s']:.3g} paths/s, {stats['rays_per_s']:.3g} rays/s, "
+            f"{stats['threads']} threads, peak {stats['peak_memory_bytes'] / 2**20:.0f} MiB)"]

@@ -1,0 +1,80 @@
+"""Ray queries of an explicit-fibre scene, whatever holds the fibres.
+
+Integrators that shade fibre surfaces (``stages.render.fiberpath``, and the precomputes after it)
+ask a *surface scene* two things, each a generic kernel answered per scene class (dispatch:
+``stages.core.dispatch``):
+
+    surface_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+        -> SurfaceHit, the nearest fibre hit along the ray (unit d) in (tmin, tmax)
+    surface_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+        -> True when any fibre lies along the ray in (tmin, tmax)
+
+``SurfaceHit`` fields: ``t`` (inf on a miss), ``prim`` (the hit capsule segment, -1 on a miss),
+``fiber`` (its fibre: the material index), ``cell`` (where a continuation ray starts: the shell
+tetrahedron, -1 for flat scenes), ``tx, ty, tz`` the unit fibre tangent, ``nx, ny, nz`` the capsule's
+outward normal at the hit, ``radius`` the capsule radius. Segments of fibre ``ign_fiber`` within
+``ign_window`` of segment ``ign_prim`` are skipped (a ray leaving a fibre through its BCSDF);
+``cell`` is the ray's starting cell (-1: outside / unknown).
+
+Scene classes: ``FiberBVH`` (``stages.core.geometry.bvh``: realized fibres in one SAH BVH; below) and
+``ShellScene`` (``stages.core.shell.traversal``: tiled exemplars under a shell map).
+"""
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+from numba.extending import overload
+
+from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.bvh import FiberBVH, intersect, occluded
+from stages.core.geometry.capsule import capsule_normal
+
+SurfaceHit = namedtuple("SurfaceHit", ["t", "prim", "fiber", "cell", "tx", "ty", "tz", "nx", "ny", "nz", "radius"])
+
+
+def surface_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    """The nearest fibre hit (``SurfaceHit``); numba-only (overloaded per scene class)."""
+    raise TypeError("surface_hit is only callable from numba-compiled code")
+
+
+def surface_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    """Any fibre along the ray; numba-only (overloaded per scene class)."""
+    raise TypeError("surface_occluded is only callable from numba-compiled code")
+
+
+# ------------------------------------------------------------------------------------------------
+# realized fibres in one BVH
+@njit(cache=True)
+def bvh_surface_hit(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    t, s = intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+    if s < 0:
+        return SurfaceHit(t, -1, -1, -1, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
+    ia = bvh.seg_a[s]
+    P = bvh.points
+    ax = P[ia, 0]; ay = P[ia, 1]; az = P[ia, 2]
+    bx = P[ia + 1, 0]; by = P[ia + 1, 1]; bz = P[ia + 1, 2]
+    tl = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
+    if tl > 0.0:
+        tx = (bx - ax) / tl; ty = (by - ay) / tl; tz = (bz - az) / tl
+    else:
+        tx = 1.0; ty = 0.0; tz = 0.0
+    nx, ny, nz, _ = capsule_normal(ox + t * dx, oy + t * dy, oz + t * dz, ax, ay, az, bx, by, bz)
+    return SurfaceHit(t, s, np.int64(bvh.seg_fiber[s]), -1, tx, ty, tz, nx, ny, nz, np.float64(bvh.seg_r[s]))
+
+
+@overload(surface_hit)
+def _bvh_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    if is_tuple_class(scene, FiberBVH):
+        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+            return bvh_surface_hit(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+        return impl
+
+
+@overload(surface_occluded)
+def _bvh_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    if is_tuple_class(scene, FiberBVH):
+        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+            return occluded(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+        return impl
+

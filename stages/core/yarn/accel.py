@@ -1,0 +1,238 @@
+"""Lookup acceleration derived whenever procedural tables are loaded (never stored).
+
+``derive_lookup_accel(cv, tab)`` fills ``Tables``' derived fields (``stages.core.yarn.tables``):
+frame samples, coarse knots and the chord grid (``frame_samples``), the scan bounds
+(``scan_bounds``: per-ply and per-loop-z-bin unit-disc radius ranges, per-fibre speed bounds), the
+per-hair z/radius boxes, the fringe occupancy (``fringe_occupancy``): per yarn, bits over (z-bin,
+radial shell, azimuth sector) of yarn space marking where a loop or a stored hair can come close
+enough to cover a point, so that lookups far from every loop and hair skip those tests, and lookups
+beyond the core skip the yarn) and the chord gates (``chord_gates``). Everything here is a
+deterministic function of the curves and the stored tables.
+"""
+import math
+
+import numpy as np
+from numba import njit
+
+from .frame_samples import chord_grid, coarse_knots, sample_all
+from .model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, RHO_MAX, RHO_MIN, USE_MIGRATION,
+                    hair_point, hair_speed_bound, regular_xy, transverse_speed, transverse_speed_bound)
+from .tables import (FO_SECTORS, FO_SHELLS, FO_WORDS, FO_ZBIN_EXTENTS, FRAME_TOLERANCE, Tables, fringe_reach,
+                     fringe_window, loop_fibre)
+
+
+def scan_bounds(tab: Tables):
+    """(ply_rr, fib_v, lz_rr): the unit-disc radius range any fibre of a ply, or any loop of a loop
+    z-bin, can cover (its items' [r_lo, r_hi] and [r_lo, U_loop] joined; empty: (inf, -inf)): a
+    point outside the range skips the ply's bin scan or the z-bin's loop scan at once; and each
+    fibre's transverse speed bound outside loop cycles (radius in [rho_min R_j, rho_max R_j]),
+    for its own reach factor (reach_factor) in the bin scan."""
+    T = len(tab.type_K)
+    P = tab.tparams[:, PLY_NUM].astype(np.int64)
+    N = tab.tparams[:, FIBER_NUM].astype(np.int64)
+    ply_rr = np.empty((T, max(1, int(P.max(initial=1))), 2))
+    ply_rr[..., 0] = np.inf
+    ply_rr[..., 1] = -np.inf
+    fib_v = np.zeros(len(tab.fib_R))
+    for t in range(T):
+        tp = tab.tparams[t]
+        mig = tp[USE_MIGRATION] != 0.0
+        for k in range(P[t]):
+            f = slice(tab.type_fib_off[t] + k * N[t], tab.type_fib_off[t] + (k + 1) * N[t])
+            if N[t] > 0:
+                ply_rr[t, k] = tab.fib_rlo[f].min(), tab.fib_rhi[f].max()
+            R = tab.fib_R[f]
+            hi = R * tp[RHO_MAX] if mig else R
+            lo = R * tp[RHO_MIN] if mig else R
+            fib_v[f] = [transverse_speed(tp, a, b) for a, b in zip(hi, lo)]
+    nz = len(tab.lz_start) - 1
+    lz_rr = np.empty((max(nz, 0), 2))
+    lz_rr[:, 0] = np.inf
+    lz_rr[:, 1] = -np.inf
+    S = len(tab.lp_off) - 1
+    for g in range(S):
+        c = int(np.searchsorted(tab.yarn_ply_off, g, side="right")) - 1
+        t = tab.yarn_type[c]
+        fo = tab.type_fib_off[t] + (g - tab.yarn_ply_off[c]) * N[t]
+        for zb in range(tab.lz_off[g], tab.lz_off[g + 1]):
+            le = tab.lp_off[g] + tab.lz_items[tab.lz_start[zb]:tab.lz_start[zb + 1]]
+            if len(le):
+                lz_rr[zb] = tab.fib_rlo[fo + tab.lp_fib[le]].min(), tab.lp_U[le].max()
+    return ply_rr, fib_v, lz_rr
+
+
+@njit(cache=True)
+def _mark_ball(bits, base, nb, h, rw, x, y, z, r, w0):
+    """Set every fringe cell (z-bin, shell, sector) that meets the yarn-space ball of radius r at
+    (x, y, z) (in the words from w0 on); balls beyond a yarn end mark the end bin."""
+    b0 = min(max(int(math.floor((z - r) / h)), 0), nb - 1)
+    b1 = max(min(int(math.floor((z + r) / h)), nb - 1), 0)
+    rho = math.sqrt(x * x + y * y)
+    s0 = min(int(max(rho - r, 0.0) / rw), FO_SHELLS - 1)
+    s1 = min(int((rho + r) / rw), FO_SHELLS - 1)
+    q0 = 0
+    q1 = FO_SECTORS - 1
+    if rho > r:
+        half = math.asin(min(1.0, r / rho)) + 1e-9  # the ball's half angle seen from the axis
+        phi = math.atan2(y, x) + math.pi
+        a = int(math.floor((phi - half) * FO_SECTORS / (2.0 * math.pi)))
+        b = int(math.floor((phi + half) * FO_SECTORS / (2.0 * math.pi)))
+        if b - a + 1 < FO_SECTORS:
+            q0, q1 = a, b
+    for zb in range(b0, b1 + 1):
+        for sh in range(s0, s1 + 1):
+            for qq in range(q0, q1 + 1):
+                idx = sh * FO_SECTORS + qq % FO_SECTORS
+                bits[base + zb, w0 + (idx >> 6)] |= np.uint64(1) << np.uint64(idx & 63)
+
+
+@njit(cache=True)
+def fringe_occupancy(tab, fo_off, fo_geom):
+    """Fringe occupancy bits of every yarn, one set for loops and one for hairs: cell (z-bin, shell,
+    sector) of yarn c is set when a loop (its fibre's trajectory over the loop's cycle grown by the
+    largest z window, fringe_window) or a stored hair (hybrid mode) comes within fringe_reach of
+    the cell in yarn space. Each curve is sampled at steps of at most fringe_reach of yarn-space
+    arc (its speed bound), and every sample marks the cells within fringe_reach plus half a step.
+    A lookup point in no set loop cell needs no loop scan, one in no set hair cell no hair test;
+    one in neither, farther than type_rcore from the axis, is covered by no fibre of the yarn."""
+    bits = np.zeros((fo_off[-1], 2 * FO_WORDS), np.uint64)
+    for c in range(tab.yarn_type.shape[0]):
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        base = fo_off[c]
+        nb = fo_off[c + 1] - base
+        h = fo_geom[c, 0]
+        rw = fo_geom[c, 1]
+        rf = tp[FIBER_RADIUS]
+        eps = tab.yarn_eps[c]
+        gmin = tab.yarn_gmin[c]
+        r = fringe_reach(rf, eps, gmin)
+        win = fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, gmin)
+        L = tab.yarn_length[c]
+        yseed = np.uint64(tab.yarn_seed[c])
+        v = math.sqrt(1.0 + transverse_speed_bound(tp) ** 2)  # yarn-space speed per unit z
+        for k in range(int(tp[PLY_NUM])):
+            g = tab.yarn_ply_off[c] + k
+            for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
+                j, fi, z0, z1 = loop_fibre(tab, tp, c, k, e)
+                z0 = max(0.0, z0 - win)
+                z1 = min(L, z1 + win)
+                n = max(1, int(math.ceil((z1 - z0) * v / r)))
+                dz = (z1 - z0) / n
+                for q in range(n + 1):
+                    z = min(z0 + q * dz, z1)
+                    x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
+                    _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * dz * v, 0)
+            if tab.hair_mode[0] != 0:
+                continue
+            for hh in range(tab.hair_off[g], tab.hair_off[g] + tab.hair_count[g]):
+                r0 = tab.hair_r0[hh]
+                r1 = tab.hair_r1[hh]
+                th1 = tab.hair_th1[hh]
+                pe = tab.hair_pe[hh]
+                z1_ = tab.hair_z1[hh]
+                ze = tab.hair_ze[hh]
+                speed = hair_speed_bound(tp, r0, r1, pe, ze)
+                n = max(1, int(math.ceil(speed / r)))
+                for q in range(n + 1):
+                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1_, ze, q / n)
+                    _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * speed / n, FO_WORDS)
+    return bits
+
+
+def fringe_tables(tab: Tables):
+    """(type_rcore, fo_off, fo_geom, fo_bits): see fringe_occupancy. type_rcore: a point farther than
+    this from the axis is outside every ply's unit-disc radius range (ply_rr) whatever its ply."""
+    T = len(tab.type_K)
+    rcore = np.empty(T)
+    for t in range(T):
+        tp = tab.tparams[t]
+        P = int(tp[PLY_NUM])
+        hi = float(tab.ply_rr[t, :P, 1].max()) if P else -np.inf
+        rcore[t] = tp[PLY_RADIUS] + max(hi, 0.0) * max(tp[E_SHORT], tp[E_LONG])
+    ext = np.asarray(tab.yarn_extent, np.float64)
+    L = np.asarray(tab.yarn_length, np.float64)
+    h = np.maximum(FO_ZBIN_EXTENTS * ext, 1e-12)
+    nb = np.maximum(1, np.ceil(L / h)).astype(np.int64)
+    fo_off = np.concatenate([[0], np.cumsum(nb)]).astype(np.int64)
+    fo_geom = np.ascontiguousarray(np.stack([h, np.maximum(ext / FO_SHELLS, 1e-12)], axis=1))
+    return rcore, fo_off, fo_geom, fringe_occupancy(tab, fo_off, fo_geom)
+
+
+def chord_gates(tab: Tables):
+    """Per coarse chord q (from knot q to q + 1) of yarn c: an axis distance R such that a point whose
+    foot point lies on chords q-1 .. q+2 (the lookups' bracket) and whose distance from the axis
+    exceeds R is covered by no fibre of c: the largest of type_rcore widened by the margin of an
+    unbinned visit (K (r_f + 2 eps_c) max(e) / min(e)) and the outer radius of the set fringe
+    shells over the bracket's z-bins (infinite where the last, open shell is set or, in the
+    realization-free mode, where hairs are not stored). Lookups skip such a yarn before its foot
+    point: p's axis distance is at least sqrt(lb^2 - w^2) for the chord lower bound lb."""
+    gate = np.full(len(tab.kn_idx), np.inf)
+    bits = np.unpackbits(tab.fo_bits.view(np.uint8), axis=1, bitorder="little")
+    bits = bits.reshape(len(tab.fo_bits), 2, FO_SHELLS, FO_SECTORS).any(axis=(1, 3))  # (bins, shells)
+    top = np.where(bits.any(axis=1), FO_SHELLS - 1 - np.argmax(bits[:, ::-1], axis=1), -1)
+    for c in range(len(tab.yarn_type)):
+        t = tab.yarn_type[c]
+        tp = tab.tparams[t]
+        if tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0:
+            continue
+        es, el = tp[E_SHORT], tp[E_LONG]
+        rcore = tab.type_rcore[t] + tab.type_K[t] * (tp[FIBER_RADIUS] + 2.0 * tab.yarn_eps[c]) * max(es, el) / min(es, el)
+        k0, k1 = tab.kn_off[c], tab.kn_off[c + 1]
+        base, nb = tab.fo_off[c], tab.fo_off[c + 1] - tab.fo_off[c]
+        h, rw = tab.fo_geom[c]
+        for q in range(k0, k1 - 1):
+            sa = tab.fs_s[tab.kn_idx[max(q - 1, k0)]]
+            sb = tab.fs_s[tab.kn_idx[min(q + 2, k1 - 1)]]
+            b0 = min(max(int(math.floor(sa / h)), 0), nb - 1)
+            b1 = min(max(int(math.floor(sb / h)), 0), nb - 1)
+            sh = int(top[base + b0:base + b1 + 1].max())
+            rf_ = np.inf if sh == FO_SHELLS - 1 else (sh + 1) * rw
+            gate[q] = max(rcore, rf_)
+    return gate
+
+
+def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
+    """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
+    eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
+    measured error, <= 3 rounds; the error is second order in the step), coarse knots about half
+    an extent apart, and the chord grid (cells half the largest extent, grown to stay under
+    max_cells). Deterministic: depends on the curves and the stored tables only."""
+    Y = len(tab.yarn_type)
+    if Y == 0:
+        return tab
+    ext = np.asarray(tab.yarn_extent, np.float64)
+    kap = np.asarray(tab.yarn_kappa, np.float64)
+    rf_y = tab.tparams[tab.yarn_type, FIBER_RADIUS]
+    target = tolerance * rf_y
+    k2 = kap * kap * ext + kap
+    radius = np.asarray(cv.radius[:Y], np.float64)
+    rmin = 1e-3 * radius
+    deltas = np.maximum(np.minimum(0.5 * radius, np.sqrt(8.0 * target / np.maximum(k2, 1e-12))), rmin)
+    for attempt in range(3):
+        fs_off, fs_s, fs_fr, err = sample_all(cv, deltas, ext)
+        scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
+        yeps = 2.0 * err + 1e-12 * scale
+        over = (yeps > target) & (deltas > rmin)
+        if not over.any():
+            break
+        deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
+    mean_step = float(np.mean(deltas))
+    stride = max(1, int(0.5 * float(ext.min()) / mean_step))
+    kn_off, kn_idx, kn_sag = coarse_knots(fs_s, fs_fr, fs_off, stride)
+    lo, hi = fs_fr[:, :3].min(0) - ext.max(), fs_fr[:, :3].max(0) + ext.max()
+    cell = 0.5 * float(ext.max())
+    while np.prod(np.ceil((hi - lo) / cell)) > max_cells:
+        cell *= 1.25
+    glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
+    ply_rr, fib_v, lz_rr = scan_bounds(tab)
+    z2 = tab.hair_z1 + tab.hair_ze
+    hair_box = np.stack([np.minimum(tab.hair_z1, z2), np.maximum(tab.hair_z1, z2),
+                         np.minimum(tab.hair_r0, tab.hair_r1), np.maximum(tab.hair_r0, tab.hair_r1)], axis=1)
+    tab = tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=np.ascontiguousarray(hair_box), lz_rr=lz_rr,
+                       fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
+                       kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
+                       fg_yarn=gyarn, fg_a=ga, fg_b=gb)
+    rcore, fo_off, fo_geom, fo_bits = fringe_tables(tab)
+    tab = tab._replace(type_rcore=rcore, fo_off=fo_off, fo_geom=fo_geom, fo_bits=fo_bits)
+    return tab._replace(kn_rgate=chord_gates(tab))

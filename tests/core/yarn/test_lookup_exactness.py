@@ -1,0 +1,130 @@
+"""Exactness of the realization-minimizing lookups (seed 000 §4) against brute force on the realized fibres.
+
+Swatch: a 2 x 2 plain weave of cotton2 yarns (all three fibre kinds), realized at spacing 0.001.
+Reference: ``stages.procedural.realized_reference`` -- the distance from every point to every realized
+segment of its grid cell (chains of capsules), the same covering rule (first fibre in the order
+yarn, ply, regular/loop before hair, index).
+
+Tolerance. The realized polylines join points that lie exactly on the fibre centre curves (up to
+float32 rounding), so a polyline strays from its curve by at most the sagitta of a chord,
+kappa l^2 / 8 for a chord of length l on a curve of curvature kappa. The realization measures it
+(``max_chord_error``: l theta / 8 at every vertex, theta the turning angle between its segments,
+i.e. kappa l^2 / 8 with kappa = theta / l). tol = 2 x max_chord_error (margin for the discrete
+curvature estimate) + float32 rounding of the vertices (4 ulp of the largest coordinate). Points
+within tol of any fibre surface, and points where a fibre's regular and loop pieces are within tol
+of each other (a kind tie at a piece joint), are not compared; all others must agree exactly in
+inside/outside, yarn and kind, and in direction to 1 degree (chord vs tangent: at most
+theta / 2, reported by the realization as ``max_turn_rad``).
+"""
+import numpy as np
+import pytest
+
+from tests.helpers import EXACTNESS_SWATCH as SCENE
+from pipeline.artifacts import Artifact
+from pipeline.procedural_runner import build, run_realize
+from stages.core.yarn.lookup import lookup_points
+from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
+
+
+@pytest.fixture(scope="module")
+def swatch(tmp_path_factory):
+    from pipeline.cli import main
+
+    d = tmp_path_factory.mktemp("exact")
+    (d / "s.toml").write_text(SCENE)
+    assert main(["ingest", str(d / "s.toml"), "-o", str(d / "yarns.zarr")]) == 0
+    run_realize(d / "yarns.zarr", d / "fibers.zarr", seed=3, spacing=0.001)
+    fib = Artifact(d / "fibers.zarr", kind="fibers")
+    cv, tab, info, _, _ = build(d / "yarns.zarr", seed=3, hair_mode="hybrid")
+    cv2, tab_free, _, _, _ = build(d / "yarns.zarr", seed=3, hair_mode="free")
+    assert not info["folded"].any()
+    return d, fib, cv, {"hybrid": tab, "free": tab_free}
+
+
+def _points(fib, n_uniform=30000, n_near=90000, seed=0):
+    pts = np.asarray(fib["points"], np.float64)
+    rng = np.random.default_rng(seed)
+    lo, hi = pts.min(0) - 0.01, pts.max(0) + 0.01
+    rf = float(np.max(fib["point_radius"]))
+    q1 = rng.uniform(lo, hi, (n_uniform, 3))
+    q2 = pts[rng.integers(0, len(pts), n_near)] + rng.normal(0.0, 1.5 * rf, (n_near, 3))
+    return np.concatenate([q1, q2])
+
+
+def _assert_exact(fib, cv, tab, Q, min_inside):
+    """lookup_points(Q) against the brute-force reference on the realized fibres (module doc)."""
+    pts32 = np.asarray(fib["points"])
+    rad = np.asarray(fib["point_radius"])
+    off = np.asarray(fib["fiber_offsets"])
+    kinds = np.asarray(fib["fiber_kind"])
+    chord = fib.summary["max_chord_error"]
+    tol = 2.0 * chord + 4 * np.finfo(np.float32).eps * float(np.abs(pts32).max())
+    assert tol < 0.05 * float(rad.max())  # the band is thin next to the fibre radius
+    lo, cell, dims, start, items = build_segment_grid(pts32, off, rad, tol)
+    ref = query_realized(pts32, rad, segment_fiber(off), np.asarray(fib["fiber_yarn"]), np.asarray(fib["fiber_ply"]),
+                         kinds, np.asarray(fib["fiber_index"]), lo, cell, dims, start, items, Q, tol)
+    got = lookup_points(cv, tab, Q)
+    clear = (ref[4] > tol) & ~ref[5]
+    assert clear.mean() > 0.95
+    inside_ref = ref[0][clear]
+    assert inside_ref.sum() > min_inside  # many points inside fibres take part
+    assert np.array_equal(got[0][clear], inside_ref)
+    both = clear & ref[0]
+    assert np.array_equal(got[1][both], ref[1][both])
+    assert np.array_equal(got[2][both], ref[2][both])
+    cosang = np.einsum("ij,ij->i", got[3][both], ref[3][both])
+    assert np.degrees(np.arccos(np.clip(cosang, -1, 1))).max() < 1.0
+    assert np.all(got[1][~got[0]] == -1) and np.all(got[2][~got[0]] == 0)
+    np.testing.assert_allclose(np.linalg.norm(got[3][got[0]], axis=1), 1.0, rtol=1e-9)
+    return got, both
+
+
+def test_lookup_equals_brute_force_on_realized_fibres(swatch):
+    d, fib, cv, tabs = swatch
+    assert set(np.unique(np.asarray(fib["fiber_kind"]))) == {1, 2, 3}
+    Q = _points(fib)
+    assert len(Q) >= 100_000
+    got, both = _assert_exact(fib, cv, tabs["hybrid"], Q, 5000)
+    assert set(np.unique(got[2][both])) == {1, 2, 3}
+
+
+def test_closed_yarn_seam_is_exact(tmp_path):
+    """A closed yarn (a gently waved ring, BCC negative count): its fibres run from s = 0 to L and
+    meet at the seam without joining; points around the seam are covered by the pieces at both
+    ends. Same brute-force reference and tolerance as above, points concentrated at the seam."""
+    from pipeline.cli import main
+    from pipeline.curveset import CurveSet
+    from pipeline.io import bcc
+
+    th = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
+    ring = np.c_[0.6 * np.cos(th), 0.6 * np.sin(th), 0.02 * np.sin(3.0 * th)]
+    bcc.write(tmp_path / "ring.bcc", CurveSet(points=[ring], closed=[True], group=["other"],
+                                               point_radius=[np.full(len(ring), 0.03)], curve_type="catmull-rom",
+                                               source_format="bcc", notes={}))
+    (tmp_path / "s.toml").write_text('[scene]\nname = "ring"\n[fabric]\nsource = "file"\n'
+                                     f'path = "{tmp_path / "ring.bcc"}"\nradius = 0.03\n'
+                                     '[yarns.default]\npreset = "cotton2"\n')
+    assert main(["ingest", str(tmp_path / "s.toml"), "-o", str(tmp_path / "yarns.zarr")]) == 0
+    run_realize(tmp_path / "yarns.zarr", tmp_path / "fibers.zarr", seed=3, spacing=0.001)
+    fib = Artifact(tmp_path / "fibers.zarr", kind="fibers")
+    cv, tab, info, _, _ = build(tmp_path / "yarns.zarr", seed=3, hair_mode="hybrid")
+    assert bool(cv.closed[0]) and not info["folded"].any()
+    pts = np.asarray(fib["points"], np.float64)
+    rf = float(np.max(fib["point_radius"]))
+    rng = np.random.default_rng(0)
+    seam = pts[np.linalg.norm(pts - ring[0], axis=1) < 0.08]
+    Q = np.concatenate([seam[rng.integers(0, len(seam), 60000)], pts[rng.integers(0, len(pts), 20000)]])
+    Q = Q + rng.normal(0.0, 1.5 * rf, Q.shape)
+    _assert_exact(fib, cv, tab, Q, 10000)
+
+
+def test_hybrid_and_realization_free_hairs_agree(swatch):
+    d, fib, cv, tabs = swatch
+    tab, tab_free = tabs["hybrid"], tabs["free"]
+    assert len(tab_free.hair_z1) == 0 and len(tab.hair_z1) > 0  # the free mode stores no hair data
+    Q = _points(fib, 5000, 25000, seed=1)
+    a = lookup_points(cv, tab, Q)
+    b = lookup_points(cv, tab_free, Q)
+    assert (a[2] == 3).sum() > 100
+    for x, y in zip(a, b):
+        assert np.array_equal(x, y)
