@@ -30,13 +30,13 @@ the median radius of its curves. A type without a preset uses ``DEFAULT_PRESET``
 """
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
 import numpy as np
 
 from .errors import LoomError
 from .schemas import validate
+from .toml_file import read_toml
 
 PRESET_DIR = Path(__file__).resolve().parents[1] / "data" / "yarns"
 DEFAULT_PRESET = "cotton1"
@@ -64,10 +64,7 @@ def load_preset(name: str) -> dict:
     path = PRESET_DIR / f"{name}.toml"
     if not path.exists():
         raise LoomError(None, "preset", f"unknown preset {name!r} (known: {', '.join(list_presets())})")
-    try:
-        d = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise LoomError(path, None, f"not valid TOML: {e}") from None
+    d = read_toml(path, what="yarn preset")
     return check_preset(d, path)
 
 

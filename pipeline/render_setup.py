@@ -9,7 +9,6 @@
 """
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import numpy as np
 
 from .errors import LoomError
 from .schemas import validate
+from .toml_file import read_toml
 
 BCSDF_DIR = Path(__file__).resolve().parents[1] / "data" / "bcsdf"
 GROUP_NAMES = ("warp", "weft", "knit", "other")
@@ -89,10 +89,7 @@ def read_bcsdf_preset(name: str) -> tuple[Path, dict]:
         path = BCSDF_DIR / f"{name}.toml"
     if not path.exists():
         raise LoomError(None, "bcsdf", f"unknown BCSDF preset {name!r} (known: {', '.join(bcsdf_presets())})")
-    try:
-        doc = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise LoomError(path, None, f"not valid TOML: {e}") from None
+    doc = read_toml(path, what="BCSDF preset")
     validate(doc, "bcsdf-preset", path)
     return path, doc
 

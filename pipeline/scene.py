@@ -7,7 +7,6 @@ defaults filled in; ``camera_array`` packs the camera for the render kernels.
 from __future__ import annotations
 
 import copy
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -16,6 +15,7 @@ import numpy as np
 from .errors import LoomError
 from .renderers import COMMON_DEFAULTS
 from .schemas import validate
+from .toml_file import read_toml
 
 CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": COMMON_DEFAULTS["width"], "height": COMMON_DEFAULTS["height"]}
 RENDER_DEFAULTS = {k: COMMON_DEFAULTS[k] for k in ("spp", "seed", "max_depth", "rr_depth", "tile_size")}
@@ -53,14 +53,7 @@ def _rgb(v) -> list[float]:
 
 def load_scene(path: str | Path) -> Scene:
     path = Path(path)
-    if not path.exists():
-        raise LoomError(path, None, "scene file not found")
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as e:
-        raise LoomError(path, f"line {getattr(e, 'lineno', '?')}", f"not valid TOML: {e}") from None
-    except UnicodeDecodeError as e:
-        raise LoomError(path, f"byte {e.start}", "not a UTF-8 text file") from None
+    raw = read_toml(path, what="scene file")
     validate(raw, "scene", path)
     fabric = copy.deepcopy(raw["fabric"])
     src = fabric["source"]

@@ -53,7 +53,7 @@ def register(app: typer.Typer) -> None:
             raise LoomError(None, "evaluate", "give exactly one of --ref/--test, --sweep or --table1"
                             + (f" (got {', '.join(modes)})" if modes else ""))
         if modes[0] == "--sweep":
-            from ..sweep import run_sweep
+            from ..runners.sweep import run_sweep
 
             res = run_sweep(sweep, out, force=force, render=not no_render)
             typer.echo(f"sweep: {res.configurations} configurations x {len(res.methods)} methods, "
@@ -67,7 +67,7 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"report: {res.report_md}")
             return
         if modes[0] == "--table1":
-            from ..evaluate_runner import run_table1
+            from ..runners.table1 import run_table1
 
             md = run_table1(scene or [], procedural or [], realized or [], out, force=force)
             typer.echo(f"report: {md}")
@@ -76,7 +76,7 @@ def register(app: typer.Typer) -> None:
             raise LoomError(None, "--ref", "give the reference image with --ref")
         if not test:
             raise LoomError(None, "--test", "give at least one test image with --test")
-        from ..evaluate_runner import evaluate_images
+        from ..runners.evaluate import evaluate_images
 
         ev = evaluate_images(ref, test, out, force=force)
         if ev.skipped:

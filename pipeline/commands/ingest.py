@@ -23,7 +23,7 @@ def register(app: typer.Typer) -> None:
         """Read, validate and spline yarn curves (C1 Catmull-Rom, arc length, rotation-minimising frames,
         seed 000 δ_i bound, segment grid) and publish them as a yarns artifact."""
         from ..errors import LoomError
-        from ..ingest_runner import run_ingest
+        from ..runners.ingest import run_ingest
 
         if radius is not None and radius <= 0:
             raise LoomError(None, "--radius", f"must be positive, got {radius}")

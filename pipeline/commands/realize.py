@@ -21,7 +21,7 @@ def register(app: typer.Typer) -> None:
         """Full realization (seed 000 Eq. 1-4 and 7): regular, loop and hair fibres with radius, yarn, ply and
         kind. The same random numbers as `loomlight tables`, so both describe one fabric."""
         from ..errors import LoomError
-        from ..procedural_runner import run_realize
+        from ..runners.realize import run_realize
 
         if not budget_mib > 0:
             raise LoomError(None, "--budget", f"memory budget must be positive, got {budget_mib}")

@@ -21,7 +21,7 @@ def register(app: typer.Typer) -> None:
     ):
         """Per yarn type and ply: fibre trajectories binned by azimuth; per yarn: hair tables (hybrid mode);
         loops from consistent random numbers; plus a copy of the yarn curves, so renderers need only this."""
-        from ..procedural_runner import run_tables
+        from ..runners.tables import run_tables
 
         res = run_tables(yarns, out, preset=preset, radius=radius, seed=seed, nbins=bins, hair_mode=hair_mode,
                          force=force)

@@ -17,7 +17,7 @@ def register(app: typer.Typer) -> None:
         """Realize periodic fibre exemplars from weave drafts, cut them into blocks, lay the blocks over the
         cloth's (u, v) domain by the block map, and build the shell (base surface offset along its smoothed
         normals, split into tetrahedra) that maps them onto the surface."""
-        from ..tile_runner import run_tile
+        from ..runners.tile import run_tile
 
         res = run_tile(config, out, force=force)
         if res["skipped"]:

@@ -46,7 +46,7 @@ def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
     from stages.core.yarn import model as M
 
     from ..errors import LoomError
-    from ..procedural_runner import load_tables
+    from ..runners.tables import load_tables
 
     cv, tab, _ = load_tables(art.path)
     c = max(int(yarn), 0)

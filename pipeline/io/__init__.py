@@ -4,6 +4,9 @@
 ``.txt`` (polyline_txt.py), ``.wif`` (wif.py: a weaving draft woven into warp and weft curves;
 opts scale, crimp, max_threads, repeat, samples_per_cell). For curve files ``scale`` (default 1)
 multiplies coordinates and radii. An unknown suffix or a missing file raises LoomError.
+
+Beside the curve formats: ``obj_mesh.py`` (an OBJ triangle mesh with uv, the tile stage's base
+surface) and ``mitsuba_txt.py`` (realized fibres as Mitsuba 3 curve text, ``loomlight export``).
 """
 from __future__ import annotations
 

@@ -179,7 +179,8 @@ def render_schema() -> dict:
         "description": "render settings; defaults: " + ", ".join(f"{k} {v}" for k, v in COMMON_DEFAULTS.items()
                                                                  if k not in ("width", "height")),
         "properties": {
-            "method": {"enum": known_methods()},
+            "method": {"type": "string", "description": "a registered method: " + ", ".join(known_methods())
+                       + " (checked against the registry when rendering)"},
             "spp": positive,
             "seed": {"type": "integer", "minimum": 0},
             "max_depth": positive,

@@ -58,7 +58,7 @@ def procedural_source(tables_path, cell=None):
     from stages.render.procedural_medium import ProceduralMedium, fiber_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
-    from ..procedural_runner import load_tables
+    from ..runners.tables import load_tables
 
     if not tables_path:
         raise LoomError(None, "--set tables=PATH.zarr", "--source procedural needs a tables artifact (loomlight tables)")
@@ -79,7 +79,7 @@ def realized_source(fibers_path, cell=None):
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
     from ..artifacts import Artifact
-    from ..procedural_runner import yarn_types_of
+    from ..runners.yarn_types import yarn_types_of
 
     if not fibers_path:
         raise LoomError(None, "--fibers", "--source realized needs the realized fibres: pass --fibers PATH.zarr")

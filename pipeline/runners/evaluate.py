@@ -18,6 +18,9 @@ Outputs in ``out_dir``: ``metrics.json`` ({test name: {metric: value}}), ``error
 ``crops_<name>.png``, ``metrics.png``, ``report.md``, ``report.html`` and the ``evaluation``
 artifact ``evaluation.zarr`` (metrics as summary; input EXR and render artifact content hashes as
 provenance). An evaluation whose inputs are unchanged is not recomputed unless ``force``.
+
+The pieces (``load_image``, ``render_stats``, ``image_metrics``, ``check_pair``, ``metric_row``) serve
+the other evaluate modes too: Table 1 (``pipeline.runners.table1``) and sweeps (``pipeline.runners.sweep``).
 """
 from __future__ import annotations
 
@@ -29,7 +32,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import LoomError
+from ..errors import LoomError
 
 METRIC_KEYS = ("rmse", "relmse", "ssim", "delta_e2000_mean")
 SSIM_NOTE = ("SSIM: Wang et al. 2004, 11x11 Gaussian window (sigma 1.5), K1 = 0.01, K2 = 0.03, on sRGB-encoded "
@@ -41,7 +44,7 @@ SSIM_NOTE = ("SSIM: Wang et al. 2004, 11x11 Gaussian window (sigma 1.5), K1 = 0.
 # inputs
 def load_image(path: str | Path) -> np.ndarray:
     """Linear RGB float64 (H, W, 3) from an EXR; refuses non-finite pixels."""
-    from .images import read_exr
+    from ..images import read_exr
 
     path = Path(path)
     if path.is_dir():
@@ -69,7 +72,7 @@ def render_stats(image: str | Path) -> dict:
     Keys: wall_time_s (the render command's wall time), render_time_s (time in the render kernels),
     peak_memory_bytes, spp, paths_per_s, render_artifact.
     """
-    from .artifacts import read_meta
+    from ..artifacts import read_meta
 
     art = Path(image).with_suffix(".zarr")
     if not art.is_dir():
@@ -159,8 +162,8 @@ class Evaluation:
 
 def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_dir: str | Path,
                     force: bool = False, title: str | None = None) -> Evaluation:
-    from . import report as rp
-    from .artifacts import ArtifactWriter
+    from .. import report as rp
+    from ..artifacts import ArtifactWriter
 
     ref_path = Path(ref_path)
     test_paths = [Path(p) for p in test_paths]
@@ -234,7 +237,7 @@ def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_
 
 
 def metric_row(label: str, e: dict) -> list[str]:
-    from .report import fmt_bytes, fmt_num, fmt_seconds
+    from ..report import fmt_bytes, fmt_num, fmt_seconds
 
     sp = e.get("speedup_vs_reference")
     return [label, fmt_num(e.get("rmse")), fmt_num(e.get("relmse")), fmt_num(e.get("ssim")),
@@ -246,7 +249,7 @@ METRIC_HEADERS = ["image", "RMSE", "relMSE", "SSIM", "mean ΔE00", "time", "spee
 
 
 def _images_report(rep, ref_path: Path, ref_entry: dict, metrics: dict, labels: list[str]) -> None:
-    from .report import fmt_bytes, fmt_seconds
+    from ..report import fmt_bytes, fmt_seconds
 
     rep.paragraph(f"Reference: {ref_path} (render time {fmt_seconds(ref_entry.get('wall_time_s'))}, "
                   f"peak memory {fmt_bytes(ref_entry.get('peak_memory_bytes'))}).")
@@ -259,135 +262,3 @@ def _images_report(rep, ref_path: Path, ref_entry: dict, metrics: dict, labels: 
         s = slug(l)
         rep.image(f"error_{s}.png", f"{l}: per-pixel relative squared error (log scale)")
         rep.image(f"crops_{s}.png", f"{l}: reference | test | error, at the worst window")
-
-
-# ------------------------------------------------------------------------------------------------
-# seed 000 Table 1: data size of the full realization against the procedural model, render times
-TABLE1_COLUMNS = [  # (row key, header) in the order of seed 000 Table 1
-    ("scene", "Scene"),
-    ("full_total_bytes", "Full: total"), ("full_regular_bytes", "Full: regular"),
-    ("full_hair_bytes", "Full: hair"), ("full_loop_bytes", "Full: loop"),
-    ("ours_total_bytes", "Ours: total"), ("saving", "(saving)"), ("ours_regular_bytes", "Ours: regular"),
-    ("ours_hair_bytes", "Ours: hair"), ("ours_loop_bytes", "Ours: loop"),
-    ("procedural_time_s", "Render time (procedural)"), ("realized_time_s", "Render time (realized)"),
-    ("speed_ratio", "realized / procedural time"),
-    ("procedural_peak_memory_bytes", "Peak memory (procedural)"),
-    ("realized_peak_memory_bytes", "Peak memory (realized)"),
-]
-
-
-def load_memory_table():
-    """``pipeline.memory_table`` (the procedural stage's Table-1 data sizes), imported on demand."""
-    import importlib
-
-    try:
-        mod = importlib.import_module("pipeline.memory_table")
-    except ModuleNotFoundError as e:
-        if e.name in ("pipeline.memory_table", None):
-            raise LoomError(None, "--table1", "pipeline.memory_table is not installed: the data-size rows of "
-                            "Table 1 come from the procedural-yarns stage, which this loomlight lacks") from None
-        raise
-    if not callable(getattr(mod, "table1_rows", None)):
-        raise LoomError(mod.__file__, None, "pipeline.memory_table defines no table1_rows(scenes) function")
-    return mod
-
-
-def _table1_cell(key: str, v) -> str:
-    from .report import fmt_bytes, fmt_num, fmt_seconds
-
-    if v is None:
-        return "-"
-    if key.endswith("_bytes"):
-        return fmt_bytes(v)
-    if key == "saving":
-        return f"({float(v):.1f}x)"
-    if key.endswith("_time_s"):
-        return fmt_seconds(v)
-    if key == "speed_ratio":
-        return f"{float(v):.2f}"
-    return fmt_num(v) if isinstance(v, (int, float)) else str(v)
-
-
-def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], realized: Sequence[str | Path],
-               out_dir: str | Path, force: bool = False) -> Path:
-    """Seed 000 Table 1 for ``scenes``: data sizes from ``pipeline.memory_table.table1_rows(scenes)``
-    and the render times of the i-th procedural and realized volpath renders for the i-th scene,
-    with the image difference between the two (they render the same fibres)."""
-    from . import report as rp
-    from .artifacts import ArtifactWriter
-
-    scenes = [Path(s) for s in scenes]
-    procedural = [Path(p) for p in procedural]
-    realized = [Path(p) for p in realized]
-    out = Path(out_dir)
-    if not scenes:
-        raise LoomError(None, "--scene", "--table1 needs at least one --scene")
-    if len(procedural) != len(realized):
-        raise LoomError(None, "--procedural", f"{len(procedural)} --procedural renders but {len(realized)} --realized; "
-                        "give them in pairs, one pair per --scene in order")
-    if len(procedural) > len(scenes):
-        raise LoomError(None, "--procedural", f"{len(procedural)} render pairs for {len(scenes)} scenes")
-    for p in [*scenes, *procedural, *realized]:
-        if not p.exists():
-            raise LoomError(p, None, "file not found")
-    mt = load_memory_table()
-    rows = [dict(r) for r in mt.table1_rows(scenes)]
-    if len(rows) != len(scenes):
-        raise LoomError(mt.__file__, "table1_rows", f"returned {len(rows)} rows for {len(scenes)} scenes")
-    inputs: dict[str, Path] = {f"scene:{i}:{s.name}": s for i, s in enumerate(scenes)}
-    times = np.full((len(scenes), 2), np.nan)
-    for i, row in enumerate(rows):
-        row.setdefault("scene", scenes[i].stem)
-        if "saving" not in row and row.get("full_total_bytes") and row.get("ours_total_bytes"):
-            row["saving"] = row["full_total_bytes"] / row["ours_total_bytes"]
-        if i >= len(procedural):
-            continue
-        pp, rr = procedural[i], realized[i]
-        sp, sr = render_stats(pp), render_stats(rr)
-        inputs[f"procedural:{i}"] = pp
-        inputs[f"realized:{i}"] = rr
-        for k, st in (("procedural", sp), ("realized", sr)):
-            if "render_artifact" in st:
-                inputs[f"{k}_render:{i}"] = Path(st["render_artifact"])
-        a, b = load_image(pp), load_image(rr)
-        check_pair(rr, b, pp, a)
-        agree = image_metrics(a, b)
-        row["procedural_time_s"] = sp.get("wall_time_s")
-        row["realized_time_s"] = sr.get("wall_time_s")
-        if row["procedural_time_s"] and row["realized_time_s"]:
-            row["speed_ratio"] = row["realized_time_s"] / row["procedural_time_s"]
-            times[i] = [row["procedural_time_s"], row["realized_time_s"]]
-        row["procedural_peak_memory_bytes"] = sp.get("peak_memory_bytes")
-        row["realized_peak_memory_bytes"] = sr.get("peak_memory_bytes")
-        row["procedural_vs_realized"] = {k: agree[k] for k in METRIC_KEYS}
-    from .artifacts import jsonable
-
-    rows = jsonable(rows)
-    writer = ArtifactWriter(out / "evaluation.zarr", kind="evaluation", stage="evaluate",
-                            params={"mode": "table1", "rows": rows}, inputs=inputs)
-    md = out / "report.md"
-    if not force and writer.up_to_date() and md.exists() and (out / "table1.json").exists():
-        return md
-    rp.write_text(out / "table1.json", json.dumps(rows, indent=2) + "\n")
-    keys = [k for k, _ in TABLE1_COLUMNS if any(r.get(k) is not None for r in rows)]
-    extra = [k for r in rows for k in r if k not in dict(TABLE1_COLUMNS) and k != "procedural_vs_realized"]
-    extra = list(dict.fromkeys(extra))
-    headers = [dict(TABLE1_COLUMNS)[k] for k in keys] + extra
-    rep = rp.Report("Data size and render time (seed 000 Table 1 form)")
-    rep.paragraph("Data size of the fully realized fibre model (regular, hair and loop fibres) against the "
-                  "procedural model the renderer reads on the fly (seed 000 Table 1), and the wall time of the "
-                  "volumetric path tracer on the procedural model against the same tracer on the fully realized "
-                  "fibres. Seed 000 §6 reports the two run at approximately the same speed.")
-    rep.table(headers, [[_table1_cell(k, r.get(k)) for k in keys + extra] for r in rows])
-    agree_rows = [[r["scene"]] + [rp.fmt_num(r["procedural_vs_realized"][k]) for k in METRIC_KEYS]
-                  for r in rows if "procedural_vs_realized" in r]
-    if agree_rows:
-        rep.heading("Procedural against realized renders")
-        rep.paragraph("Both renders trace the same fibres, so their images agree up to Monte Carlo noise; "
-                      "metrics of the procedural render with the realized one as reference. " + SSIM_NOTE)
-        rep.table(["scene", "RMSE", "relMSE", "SSIM", "mean ΔE00"], agree_rows)
-    md, _ = rep.write(out)
-    with writer as w:
-        w.write("render_time_s", times, dimension_names=("scene", "procedural_realized"))
-        w.summary.update(kind="evaluation", mode="table1", rows=rows, metrics=[k for k, _ in TABLE1_COLUMNS])
-    return md

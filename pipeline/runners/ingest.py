@@ -1,15 +1,21 @@
-"""Ingest runner: a curve file, WIF draft or scene → validated, splined yarn curves (``yarns`` artifact)."""
+"""Ingest runner: a curve file, WIF draft or scene → validated, splined yarn curves (``yarns`` artifact).
+
+``run_ingest`` reads the input (``curves_from_input``: curve files through ``pipeline.io``, WIF drafts
+and scene generators through ``pipeline.generators``), checks the curves (``validate_curves``), gives
+every curve a yarn type, radius and colour, splines them (``stages.ingest.spline_process``) and
+publishes the ``yarns`` artifact.
+"""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-from .artifacts import ArtifactWriter
-from .curveset import GROUPS, CurveSet
-from .errors import LoomError
-from .progress import info, warn
-from .scene import load_scene
+from ..artifacts import ArtifactWriter
+from ..curveset import GROUPS, CurveSet
+from ..errors import LoomError
+from ..progress import info, warn
+from ..scene import load_scene
 
 DEFAULT_COLORS = {"warp": (0.80, 0.78, 0.72), "weft": (0.25, 0.35, 0.60), "knit": (0.70, 0.25, 0.22),
                   "other": (0.6, 0.6, 0.6)}
@@ -21,7 +27,7 @@ def curves_from_input(path: Path, radius: float | None, scale: float | None):
         scene = load_scene(path)
         fab = scene.fabric
         if fab["source"] == "generator":
-            from .generators import generate
+            from ..generators import generate
 
             gen = fab["generator"]
             r = gen.get("yarn_radius") or scene.yarn_type("warp").get("radius") or radius
@@ -29,12 +35,12 @@ def curves_from_input(path: Path, radius: float | None, scale: float | None):
             return cs, scene, {}
         src = Path(fab["path"])
         if fab["source"] == "wif":
-            from .generators import from_wif
+            from ..generators import from_wif
 
             cs = from_wif(src, scale=fab.get("scale", scale or 1.0), crimp=fab.get("crimp", 1.0),
                           max_threads=fab.get("max_threads"), repeat=fab.get("repeat"))
         else:
-            from .io import read_curves
+            from ..io import read_curves
 
             cs = read_curves(src)
             s = fab.get("scale", scale)
@@ -44,10 +50,10 @@ def curves_from_input(path: Path, radius: float | None, scale: float | None):
                     cs.point_radius = [r * s for r in cs.point_radius]
         return cs, scene, {"fabric": src}
     if path.suffix.lower() == ".wif":
-        from .generators import from_wif
+        from ..generators import from_wif
 
         return from_wif(path, scale=scale or 1.0, crimp=1.0, max_threads=None, repeat=None), None, {}
-    from .io import read_curves
+    from ..io import read_curves
 
     cs = read_curves(path)
     if scale:
@@ -125,7 +131,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
     src_file = extra_inputs.get("fabric", input_path)
     cs = validate_curves(cs, src_file, merge_duplicates)
     if write is not None:
-        from .io import write_curves
+        from ..io import write_curves
 
         write_curves(write, cs)
         info(f"wrote {write}")

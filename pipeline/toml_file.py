@@ -1,0 +1,75 @@
+"""TOML files: one reader with one error path, and a writer for plain data.
+
+``read_toml(path, what="file")`` returns the document as a dict. Every way a file can fail to be
+TOML is one ``LoomError`` line naming the file (exit code 2): ``<what> not found``,
+``is a directory, not a <what>``, ``byte N: not a UTF-8 text file``,
+``line N: not valid TOML: ...``. Callers check the document itself (``pipeline.schemas.validate``).
+
+``dumps_toml(doc)`` writes a document of plain data (tables, arrays, strings, numbers, booleans)
+as top-level ``key = value`` lines, tables inline; ``tomllib.loads`` reads it back unchanged
+(the sweep's derived scene files).
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+import tomllib
+from pathlib import Path
+
+from .errors import LoomError
+
+
+def read_toml(path, what: str = "file") -> dict:
+    """The TOML document at ``path``; ``what`` names the file in the not-found and directory errors."""
+    path = Path(path)
+    if not path.exists():
+        raise LoomError(path, None, f"{what} not found")
+    if path.is_dir():
+        raise LoomError(path, None, f"is a directory, not a {what}")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as e:
+        raise LoomError(path, f"byte {e.start}", "not a UTF-8 text file") from None
+    except OSError as e:
+        raise LoomError(path, None, f"cannot read the {what}: {e.strerror or e}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise LoomError(path, f"line {_line_of(e)}", f"not valid TOML: {e}") from None
+
+
+def _line_of(e: tomllib.TOMLDecodeError):
+    """The line of a TOML error (``lineno`` from Python 3.14, else parsed from the message)."""
+    line = getattr(e, "lineno", None)
+    if line is None:
+        m = re.search(r"at line (\d+)", str(e))
+        line = int(m.group(1)) if m else "?"
+    return line
+
+
+# ------------------------------------------------------------------------------------------------
+# TOML output (the scene files we derive are plain data: tables, arrays, strings, numbers, booleans)
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml_value(x)}" for k, x in v.items()) + " }" if v else "{}"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def dumps_toml(doc: dict) -> str:
+    """A TOML document of top-level ``key = value`` lines (tables as inline tables)."""
+    return "".join(f"{json.dumps(str(k))} = {_toml_value(v)}\n" for k, v in doc.items())
