@@ -107,7 +107,7 @@ def run(out_dir) -> dict:
     extent = float(np.linalg.norm(pts.max(0) - pts.min(0)))
 
     integ = FiberpathIntegrator(bvh, mof, mats, pack_material_lambert(ground[1:4]), lights.table(), ground, has_ground,
-                                int(scene.render.get("max_depth", 16)), int(scene.render.get("rr_depth", 5)), 1 << 40,
+                                int(scene.render["max_depth"]), int(scene.render["rr_depth"]), 1 << 40,
                                 1e-7 * extent)
 
     def render(spp_):

@@ -92,8 +92,9 @@ def axis_projection(tab, pts):
 
 def _scene(path: Path, tmp: Path, spacing: float):
     from pipeline.artifacts import Artifact
-    from pipeline.ingest_runner import run_ingest
-    from pipeline.procedural_runner import build, run_realize
+    from pipeline.runners.ingest import run_ingest
+    from pipeline.runners.realize import run_realize
+    from pipeline.runners.tables import build
 
     run_ingest(path, tmp / "yarns.zarr")
     run_realize(tmp / "yarns.zarr", tmp / "fibers.zarr", spacing=spacing)
@@ -155,7 +156,7 @@ def bench_scene(path: Path, n_points=100_000, spacing=0.002) -> dict:
         feet = axis_projection(tab, Q)
         t_bvh = _best(lambda: bvh_points(bvh, Q))
         t_grid = _best(lambda: query_realized(pts32, rad, sf, yarn, ply, kind, idx, glo, cell, dims, start, items, Q, 0.0))
-        a = lookup_points(cv, tab, Q)[0]
+        a = lookup_points(cv, tab, Q).inside
         b = bvh_points(bvh, Q) >= 0
         res[name] = {"procedural_per_s": n_points / t_proc,
                      "procedural_free_per_s": n_points / t_free,

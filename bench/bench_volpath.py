@@ -18,8 +18,9 @@ SCENE = ROOT / "data" / "scenes" / "demo.toml"
 
 
 def _artifacts(out_dir: Path):
-    from pipeline.ingest_runner import run_ingest
-    from pipeline.procedural_runner import run_realize, run_tables
+    from pipeline.runners.ingest import run_ingest
+    from pipeline.runners.realize import run_realize
+    from pipeline.runners.tables import run_tables
 
     demo = ROOT / "out" / "demo"
     t, f = demo / "tables.zarr", demo / "fibers.zarr"

@@ -1,1 +1,4 @@
-"""Ingest stage kernels: weave and knit generators, yarn-curve processing."""
+"""The ingest stage: yarn-curve processing (``spline_process``: tangents, arc length, frames, the
+per-yarn bound delta, the segment grid) and curve generators from weave drafts (``weave``) and knit
+patterns (``knit``). Woven centrelines from an interlacement (also used by the tile stage) are in
+``stages.core.curves.woven``."""

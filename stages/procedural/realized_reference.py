@@ -11,9 +11,17 @@ winning fibre's nearest regular and loop pieces are within ``pad`` of each other
 Used by the exactness test (reference) and the lookup benchmark (realized baseline).
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
+
+ReferenceLookup = namedtuple("ReferenceLookup", ["inside", "yarn", "kind", "dir_x", "dir_y", "dir_z", "surface_gap",
+                                                 "kind_tie"])
+ReferenceLookup.__doc__ = """query_one's answer at p (module doc); surface_gap 1e300 outside the grid."""
+ReferenceLookups = namedtuple("ReferenceLookups", ["inside", "yarn", "kind", "direction", "surface_gap", "kind_tie"])
+ReferenceLookups.__doc__ = """query_realized's answers: inside, yarn (int32), kind (int8), direction (N, 3), surface_gap,
+kind_tie."""
 
 
 def build_segment_grid(points, offsets, radius, pad, target_per_cell=8.0):
@@ -71,12 +79,12 @@ def _seg_dist(p, a, b):
 @njit(cache=True)
 def query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fiber_index,
               lo, cell, dims, start, items, p, pad):
-    """(inside, yarn, kind, dx, dy, dz, surface_gap, kind_tie) for one point."""
+    """``ReferenceLookup`` (inside, yarn, kind, dir_x, dir_y, dir_z, surface_gap, kind_tie) for one point."""
     ijk = np.empty(3, np.int64)
     for d in range(3):
         g = int(math.floor((p[d] - lo[d]) / cell))
         if g < 0 or g >= dims[d]:
-            return False, -1, 0, 0.0, 0.0, 0.0, 1e300, False
+            return ReferenceLookup(False, -1, 0, 0.0, 0.0, 0.0, 1e300, False)
         ijk[d] = g
     c = (ijk[0] * dims[1] + ijk[1]) * dims[2] + ijk[2]
     gap = 1e300
@@ -116,13 +124,13 @@ def query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fibe
                 bseg = s
                 bk = fiber_kind[f]
     if bseg < 0:
-        return False, -1, 0, 0.0, 0.0, 0.0, gap, False
+        return ReferenceLookup(False, -1, 0, 0.0, 0.0, 0.0, gap, False)
     a = points[bseg].astype(np.float64)
     b = points[bseg + 1].astype(np.float64)
     t = b - a
     t = t / math.sqrt(np.dot(t, t))
     tie = d_reg < 1e299 and d_loop < 1e299 and abs(d_reg - d_loop) < pad
-    return True, fiber_yarn[seg_fiber[bseg]], bk, t[0], t[1], t[2], gap, tie
+    return ReferenceLookup(True, np.int64(fiber_yarn[seg_fiber[bseg]]), np.int64(bk), t[0], t[1], t[2], gap, tie)
 
 
 @njit(cache=True, parallel=True)
@@ -139,15 +147,15 @@ def query_realized(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind,
         p = pts[i].astype(np.float64)
         res = query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fiber_index,
                         lo, cell, dims, start, items, p, pad)
-        inside[i] = res[0]
-        yarn[i] = res[1]
-        kind[i] = res[2]
-        direction[i, 0] = res[3]
-        direction[i, 1] = res[4]
-        direction[i, 2] = res[5]
-        gap[i] = res[6]
-        tie[i] = res[7]
-    return inside, yarn, kind, direction, gap, tie
+        inside[i] = res.inside
+        yarn[i] = res.yarn
+        kind[i] = res.kind
+        direction[i, 0] = res.dir_x
+        direction[i, 1] = res.dir_y
+        direction[i, 2] = res.dir_z
+        gap[i] = res.surface_gap
+        tie[i] = res.kind_tie
+    return ReferenceLookups(inside, yarn, kind, direction, gap, tie)
 
 
 def segment_fiber(offsets):

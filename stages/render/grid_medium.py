@@ -24,7 +24,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.render.medium import medium_lookup
+from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 GridMedium = namedtuple("GridMedium", ["lo", "hi", "density", "direction", "albedo", "roughness"])
 
@@ -34,7 +34,7 @@ def grid_lookup(med, x, y, z):
     lo = med.lo
     hi = med.hi
     if x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]:
-        return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        return NO_MEDIUM
     nz, ny, nx = med.density.shape
     ux = (x - lo[0]) / (hi[0] - lo[0]) * nx - 0.5
     uy = (y - lo[1]) / (hi[1] - lo[1]) * ny - 0.5
@@ -69,10 +69,12 @@ def grid_lookup(med, x, y, z):
             by = jy
             bz = jz
     if den <= 0.0:
-        return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        return NO_MEDIUM
     d = med.direction[bz, by, bx]
     a = med.albedo[bz, by, bx]
-    return den, float(d[0]), float(d[1]), float(d[2]), float(a[0]), float(a[1]), float(a[2]), float(med.roughness[bz, by, bx])
+    # the stored arrays may be float32: every field is float64 (MediumPoint)
+    return MediumPoint(np.float64(den), np.float64(d[0]), np.float64(d[1]), np.float64(d[2]), np.float64(a[0]),
+                       np.float64(a[1]), np.float64(a[2]), np.float64(med.roughness[bz, by, bx]))
 
 
 @overload(medium_lookup)
@@ -158,9 +160,11 @@ def voxelize_slice(med, lo, hi, res, ss, iz, lz, density, direction, albedo, rou
                         x = lo[0] + (ix + (a + 0.5) / ss) * cx
                         y = lo[1] + (iy + (b + 0.5) / ss) * cy
                         z = lo[2] + (iz + (c + 0.5) / ss) * cz
-                        den, tx, ty, tz, ar, ag, ab, rough = medium_lookup(med, x, y, z)
+                        m = medium_lookup(med, x, y, z)
+                        den = m.den
                         if den <= 0.0:
                             continue
+                        tx, ty, tz = m.tx, m.ty, m.tz
                         sd += den
                         m00 += den * tx * tx
                         m11 += den * ty * ty
@@ -177,10 +181,10 @@ def voxelize_slice(med, lo, hi, res, ss, iz, lz, density, direction, albedo, rou
                             gx += den * tx
                             gy += den * ty
                             gz += den * tz
-                        sr += den * ar
-                        sg += den * ag
-                        sb += den * ab
-                        sro += den * rough
+                        sr += den * m.albedo_r
+                        sg += den * m.albedo_g
+                        sb += den * m.albedo_b
+                        sro += den * m.roughness
             density[lz, iy, ix] = sd * inv
             if sd > 0.0:
                 vx, vy, vz = _principal_axis(m00, m11, m22, m01, m02, m12, gx, gy, gz)

@@ -39,6 +39,8 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from stages.core.geometry.frames import orthonormal_basis
+
 LightTable = namedtuple("LightTable", ["lights", "env", "marginal", "conditional"])
 
 LIGHT_SIZE = 9
@@ -91,14 +93,6 @@ def envmap_tables(img=None):
 
 
 # ------------------------------------------------------------------------------------------------
-@njit(cache=True)
-def _frame(a0, a1, a2):
-    sign = 1.0 if a2 >= 0.0 else -1.0
-    a = -1.0 / (sign + a2)
-    b = a0 * a1 * a
-    return (1.0 + sign * a0 * a0 * a, sign * b, -sign * a0), (b, sign + a1 * a1 * a, -a1)
-
-
 @njit(cache=True)
 def env_uv(w):
     """(u, v) in [0, 1)^2 of a world direction (see the orientation above)."""
@@ -203,7 +197,7 @@ def light_sample(lights, k, env, marg, cond, u1, u2):
         a0 = lights[k, 4]
         a1 = lights[k, 5]
         a2 = lights[k, 6]
-        (x0, x1, x2), (y0, y1, y2) = _frame(a0, a1, a2)
+        (x0, x1, x2), (y0, y1, y2) = orthonormal_basis(a0, a1, a2)
         cp = s * math.cos(ph)
         sp = s * math.sin(ph)
         w[0] = cp * x0 + sp * y0 + c * a0

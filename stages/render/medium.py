@@ -13,26 +13,32 @@ distance serves all three channels. Because sigma_S(w) <= 1, den(p) itself bound
 every direction: a majorant for den bounds the extinction.
 
 A *density source* is a namedtuple class whose numba implementation of
-``medium_lookup(med, x, y, z)`` is registered with ``numba.extending.overload``; it returns
+``medium_lookup(med, x, y, z)`` is registered with ``numba.extending.overload``; it returns a
+``MediumPoint`` (all fields float64)
 
     (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness)
 
-with den = 0 outside every fibre (other fields then unused). The integrator
+with den = 0 outside every fibre (``NO_MEDIUM``; other fields then unused). The integrator
 (``stages.render.volpath``) is compiled once per source class. Sources: ``HomogeneousMedium``
 (below; a box of constant fibre material, for closed-form tests), ``stages.render.grid_medium``,
 ``stages.render.procedural_medium``, ``stages.render.realized_medium``.
 """
 from collections import namedtuple
 
+import numpy as np
 from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.shading.sggx import fiber_sggx, projected_area
 
+MediumPoint = namedtuple("MediumPoint", ["den", "tx", "ty", "tz", "albedo_r", "albedo_g", "albedo_b", "roughness"])
+MediumPoint.__doc__ = """A density source's answer at a point: density, unit fibre tangent, RGB albedo, SGGX roughness."""
+NO_MEDIUM = MediumPoint(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # outside every fibre
+
 
 def medium_lookup(med, x, y, z):
-    """(den, tx, ty, tz, ar, ag, ab, roughness) at (x, y, z); numba-only (overloaded per source)."""
+    """``MediumPoint`` at (x, y, z); numba-only (overloaded per source)."""
     raise TypeError("medium_lookup is only callable from numba-compiled code")
 
 
@@ -58,10 +64,11 @@ def homogeneous_lookup(med, x, y, z):
     lo = med.lo
     hi = med.hi
     if x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]:
-        return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        return NO_MEDIUM
     t = med.tangent
     a = med.albedo
-    return med.density, t[0], t[1], t[2], a[0], a[1], a[2], med.roughness
+    return MediumPoint(np.float64(med.density), np.float64(t[0]), np.float64(t[1]), np.float64(t[2]),
+                       np.float64(a[0]), np.float64(a[1]), np.float64(a[2]), np.float64(med.roughness))
 
 
 @overload(medium_lookup)

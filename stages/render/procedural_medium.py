@@ -33,7 +33,7 @@ from stages.core.yarn.tables import loop_fibre
 from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point, hair_speed_bound, regular_xy, transverse_speed_bound)
 
 from stages.core.dispatch import is_tuple_class
-from stages.render.medium import medium_lookup
+from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
@@ -41,10 +41,10 @@ ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 @njit(cache=True)
 def procedural_lookup(med, x, y, z):
     r = lookup_point(med.cv, med.tab, x, y, z)
-    if not r[0]:
-        return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
-    rough = med.tab.tparams[med.tab.yarn_type[r[1]], ROUGHNESS]
-    return r[6], r[3], r[4], r[5], r[7], r[8], r[9], rough
+    if not r.inside:
+        return NO_MEDIUM
+    rough = med.tab.tparams[med.tab.yarn_type[r.yarn], ROUGHNESS]
+    return MediumPoint(r.density, r.dir_x, r.dir_y, r.dir_z, r.albedo_r, r.albedo_g, r.albedo_b, rough)
 
 
 @overload(medium_lookup)

@@ -19,7 +19,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.render.medium import medium_lookup
+from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness"])
 
@@ -81,7 +81,7 @@ def covering_segment(bvh, x, y, z):
 def realized_lookup(med, x, y, z):
     s = covering_segment(med.bvh, x, y, z)
     if s < 0:
-        return 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        return NO_MEDIUM
     pts = med.bvh.points
     i = med.bvh.seg_a[s]
     tx = pts[i + 1, 0] - pts[i, 0]
@@ -96,7 +96,8 @@ def realized_lookup(med, x, y, z):
         tx, ty, tz = 0.0, 0.0, 1.0
     c = med.fiber_yarn[med.bvh.seg_fiber[s]]
     a = med.yarn_albedo
-    return med.yarn_density[c], tx, ty, tz, a[c, 0], a[c, 1], a[c, 2], med.yarn_roughness[c]
+    return MediumPoint(np.float64(med.yarn_density[c]), tx, ty, tz, np.float64(a[c, 0]), np.float64(a[c, 1]),
+                       np.float64(a[c, 2]), np.float64(med.yarn_roughness[c]))
 
 
 @overload(medium_lookup)

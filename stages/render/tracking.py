@@ -12,10 +12,12 @@ reaches**, so rays skip empty space without a single lookup, and outside the box
 
 MajorantGrid fields: lo, hi (float64[3], the box), res (int64[3]: nx, ny, nz), mu (float64[nz, ny, nx]).
 
-``track(med, maj, o, d, tmax, seed, index, dim, ratio)`` returns
-    (collided, t, transmittance, dim, lookups, den, tx, ty, tz, ar, ag, ab, roughness)
-Delta mode (ratio = False) stops at the first real collision before tmax (collided = True, the
-medium properties there); ratio mode runs to tmax and returns the transmittance estimate.
+``track(med, maj, o, d, tmax, seed, index, dim, ratio)`` returns a ``Flight``
+    (collided, t, transmittance, dim, lookups, point)
+with dim the next random-number dimension, lookups the medium lookups made and point the
+``MediumPoint`` at the collision (``NO_MEDIUM`` without one). Delta mode (ratio = False) stops at
+the first real collision before tmax (collided = True, t there); ratio mode runs to tmax (t = tmax)
+and returns the transmittance estimate.
 Random numbers are ``uniform(seed, index, dim)`` with dim counting up: a pure function of the
 path, so results do not depend on threads.
 """
@@ -26,9 +28,11 @@ import numpy as np
 from numba import njit
 
 from stages.core.rng import uniform
-from stages.render.medium import extinction, medium_lookup
+from stages.render.medium import NO_MEDIUM, extinction, medium_lookup
 
 MajorantGrid = namedtuple("MajorantGrid", ["lo", "hi", "res", "mu"])
+Flight = namedtuple("Flight", ["collided", "t", "transmittance", "dim", "lookups", "point"])
+Flight.__doc__ = """track's result (module doc)."""
 
 RATIO_RR_THRESHOLD = 0.1  # ratio tracking plays Russian roulette below this transmittance
 
@@ -150,7 +154,7 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio):
     t_near = max(t_near, 0.0)
     t_far = min(t_far, tmax)
     if not (t_near < t_far):
-        return False, tmax, T, dim, lookups, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        return Flight(False, tmax, T, dim, lookups, NO_MEDIUM)
     lo = maj.lo
     res = maj.res
     cs0 = (maj.hi[0] - lo[0]) / res[0]
@@ -182,22 +186,22 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio):
                 t -= math.log(1.0 - u) / mu
                 if t >= t_exit:
                     break
-                den, tx, ty, tz, ar, ag, ab, rough = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz)
+                m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz)
                 lookups += 1
-                st = extinction(den, tx, ty, tz, rough, dx, dy, dz)
+                st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
                 if ratio:
                     T *= 1.0 - st / mu
                     if T < RATIO_RR_THRESHOLD:
                         q = uniform(seed, index, dim)
                         dim += 1
                         if q >= 0.5:
-                            return False, tmax, 0.0, dim, lookups, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+                            return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
                         T *= 2.0
                 else:
                     v = uniform(seed, index, dim)
                     dim += 1
                     if v * mu < st:
-                        return True, t, T, dim, lookups, den, tx, ty, tz, ar, ag, ab, rough
+                        return Flight(True, t, T, dim, lookups, m)
         t = t_exit
         if t_exit >= t_far:
             break
@@ -216,7 +220,7 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio):
             tnz += tdz
             if iz < 0 or iz >= res[2]:
                 break
-    return False, tmax, T, dim, lookups, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    return Flight(False, tmax, T, dim, lookups, NO_MEDIUM)
 
 
 @njit(cache=True)

@@ -50,8 +50,8 @@ def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, in
     """Ratio-tracked transmittance toward direction w (an infinitely far light); the ground occludes."""
     if ground_intersect(ground, ground_on, pz, wz, 0.0) < np.inf:
         return 0.0, dim, 0
-    res = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, dim, True)
-    return res[2], res[3], res[4]
+    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, dim, True)
+    return fl.transmittance, fl.dim, fl.lookups
 
 
 @njit(cache=True)
@@ -106,12 +106,12 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
     alb[2] = ground[3]
     while True:
         tg = ground_intersect(ground, ground_on, oz, dz, 1e-9)
-        res = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, dim, False)
+        fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, dim, False)
         rays += 1
-        collided = res[0]
-        t = res[1]
-        dim = res[3]
-        lookups += res[4]
+        collided = fl.collided
+        t = fl.t
+        dim = fl.dim
+        lookups += fl.lookups
         if not collided and tg == np.inf:
             er, eg, eb = _escaped(lt, n, prev_pdf, dx, dy, dz)
             Lr += br * er
@@ -142,10 +142,11 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
             px = ox + t * dx
             py = oy + t * dy
             pz = oz + t * dz
-            br *= res[9]
-            bg *= res[10]
-            bb *= res[11]
-            S = fiber_sggx(res[6], res[7], res[8], res[12])
+            m = fl.point
+            br *= m.albedo_r
+            bg *= m.albedo_g
+            bb *= m.albedo_b
+            S = fiber_sggx(m.tx, m.ty, m.tz, m.roughness)
             if lpdf > 0.0:
                 f = phase_eval(S, -dx, -dy, -dz, lw[0], lw[1], lw[2])
                 if f > 0.0:

@@ -1,4 +1,4 @@
-"""Sweeps (pipeline/sweep.py, ``loomlight evaluate --sweep``) with a stand-in render method.
+"""Sweeps (pipeline/runners/sweep.py, ``loomlight evaluate --sweep``) with a stand-in render method.
 
 The stand-in, registered only inside these tests (monkeypatch), renders a checkerboard whose mean
 is known in closed form from the derived scene (light kind, SG axis and sharpness, directional
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import zarr
 
-from pipeline import sweep as sw
+from pipeline.runners import sweep as sw
 from pipeline.images import write_render
 from pipeline.scene import load_scene
 

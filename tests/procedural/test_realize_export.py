@@ -10,7 +10,7 @@ import pytest
 
 from pipeline.artifacts import Artifact
 from pipeline.io import bcc
-from pipeline.procedural_runner import build
+from pipeline.runners.tables import build
 from stages.core.curves.closest import closest_point_on_curve
 
 SCENE = """

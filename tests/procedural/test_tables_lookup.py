@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from pipeline import presets
-from pipeline.procedural_runner import build, load_tables
+from pipeline.runners.tables import build, load_tables
 from stages.core.yarn import tables as layout
 from stages.procedural import tables as T
 from stages.core.yarn import model as M

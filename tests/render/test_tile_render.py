@@ -5,7 +5,7 @@ in one flat BVH -- with the same seed: same camera samples, same hits, same shad
 import numpy as np
 
 from pipeline.render_setup import pack_lights
-from pipeline.tile_runner import load_tiling, run_tile
+from pipeline.runners.tile import load_tiling, run_tile
 from stages.core.geometry.bvh import build_fiber_bvh
 from stages.render.camera import pack_camera
 from stages.core.shading.material import pack_material_lambert

@@ -35,9 +35,9 @@ def _track_many(med, maj, o, d, tmax, n, seed):
     rat = np.empty(n)
     for k in range(n):
         r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed, k, 0, False)
-        esc[k] = 0.0 if r[0] else 1.0
+        esc[k] = 0.0 if r.collided else 1.0
         r2 = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed + 1, k, 0, True)
-        rat[k] = r2[2]
+        rat[k] = r2.transmittance
     return esc, rat
 
 
@@ -47,8 +47,8 @@ def _optical_depth_grid(med, o, d, t0, t1, m):
     tau = 0.0
     for i in range(m):
         t = t0 + (i + 0.5) * h
-        den, tx, ty, tz, ar, ag, ab, rough = grid_lookup(med, o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
-        tau += extinction(den, tx, ty, tz, rough, d[0], d[1], d[2]) * h
+        m = grid_lookup(med, o[0] + t * d[0], o[1] + t * d[1], o[2] + t * d[2])
+        tau += extinction(m.den, m.tx, m.ty, m.tz, m.roughness, d[0], d[1], d[2]) * h
     return tau
 
 
@@ -289,14 +289,14 @@ def test_procedural_and_realized_sources_agree(small):
     """The same fabric through on-the-fly lookups and through realized fibres in a BVH: per 2 x 2
     pixel block the difference of the means over its standard error (independent seeds) is
     standard normal; the sum of squares is chi-square with one degree per block (p > 0.001)
-    and no block deviates by more than the Sidak-corrected 0.001 two-sided normal quantile."""
-    from scipy import stats
-
+    and no block deviates by more than the Sidak-corrected 0.001 two-sided normal quantile
+    (tests/chisquare.py: z_score_test)."""
     from pipeline.renderers.volpath import render
+    from tests.chisquare import z_score_test
     from pipeline.scene import load_scene
 
     scene = load_scene(small / "s.toml")
-    base = {"width": 8, "height": 8, "spp": 16, "extra": {}}
+    base = {"width": 8, "height": 8, "spp": 16, "max_depth": 4, "rr_depth": 3, "tile_size": 4, "extra": {}}
     proc = render(scene, {**base, "seed": 1, "source": "procedural", "tables": str(small / "t.zarr")})
     real = render(scene, {**base, "seed": 2, "source": "realized", "fibers": str(small / "f.zarr")})
     assert proc.stats["medium_lookups"] > 0 and real.stats["medium_lookups"] > 0
@@ -311,12 +311,22 @@ def test_procedural_and_realized_sources_agree(small):
     se = np.sqrt(blocks(proc.extra["variance"]) + blocks(real.extra["variance"])) / 4.0
     assert np.all(se > 0)
     z = (d / se).ravel()
-    p = stats.chi2.sf(float(np.sum(z * z)), z.size)
-    zmax = stats.norm.isf(0.5 * (1.0 - (1.0 - 1e-3) ** (1.0 / z.size)))
-    assert p > 1e-3, (p, z)
-    assert np.abs(z).max() < zmax, z
+    res = z_score_test(z, alpha=1e-3)
+    assert res.passed, (res.message, z)
     # the image is not trivially equal: both sources carry their own noise
     assert not np.array_equal(yp, yr)
+
+
+def test_z_score_harness_rejects_biased_blocks():
+    """The z-score test above must be able to fail: 16 standard normal scores pass (seeded), the same scores
+    shifted by 1.5 standard errors fail the sum of squares, and one block 5 errors off fails the maximum."""
+    from tests.chisquare import z_score_test
+
+    z = np.random.default_rng(4).normal(size=16)
+    assert z_score_test(z, alpha=1e-3).passed
+    assert not z_score_test(z + 1.5, alpha=1e-3).passed
+    z[3] = 5.0
+    assert not z_score_test(z, alpha=1e-3).passed
 
 
 def test_procedural_majorant_covers_every_fibre(small):
@@ -334,7 +344,8 @@ def test_procedural_majorant_covers_every_fibre(small):
     rf = float(np.max(fib["point_radius"]))
     rng = np.random.default_rng(11)
     Q = pts[rng.integers(0, len(pts), 60000)] + rng.normal(0, 1.5 * rf, (60000, 3))
-    inside, yarn, kind, _, den, _ = lookup_points(med.cv, med.tab, Q)
+    r = lookup_points(med.cv, med.tab, Q)
+    inside, kind, den = r.inside, r.kind, r.density
     assert inside.sum() > 5000 and set(np.unique(kind[inside])) == {1, 2, 3}
     ijk = np.floor((Q - maj.lo) / (maj.hi - maj.lo) * maj.res).astype(int)
     ok = np.all((ijk >= 0) & (ijk < maj.res), axis=1)

@@ -48,14 +48,14 @@ def test_grid_lookup_voxel_centres_and_trilinear():
     for (k, j, i) in [(0, 0, 0), (2, 3, 4), (1, 2, 3)]:
         c = lo + (np.array([i, j, k]) + 0.5) / np.array([5, 4, 3]) * (hi - lo)
         r = grid_lookup(g, *c)
-        assert r[0] == pytest.approx(den[k, j, i], rel=1e-6)
-        np.testing.assert_allclose(r[1:4], g.direction[k, j, i], rtol=1e-6)
-        np.testing.assert_allclose(r[4:7], g.albedo[k, j, i], rtol=1e-6)
+        assert r.den == pytest.approx(den[k, j, i], rel=1e-6)
+        np.testing.assert_allclose([r.tx, r.ty, r.tz], g.direction[k, j, i], rtol=1e-6)
+        np.testing.assert_allclose([r.albedo_r, r.albedo_g, r.albedo_b], g.albedo[k, j, i], rtol=1e-6)
     # anywhere in the box (including the clamped border half-voxels): the trilinear closed form
     for p in lo + rng.random((200, 3)) * (hi - lo):
-        assert grid_lookup(g, *p)[0] == pytest.approx(_trilinear_reference(den, lo, hi, p), rel=1e-6, abs=1e-9)
+        assert grid_lookup(g, *p).den == pytest.approx(_trilinear_reference(den, lo, hi, p), rel=1e-6, abs=1e-9)
     # outside the box there is no medium
-    assert grid_lookup(g, 1.01, 1.0, 2.2)[0] == 0.0
+    assert grid_lookup(g, 1.01, 1.0, 2.2).den == 0.0
 
 
 def test_voxel_majorants_bound_every_lookup():
@@ -70,7 +70,7 @@ def test_voxel_majorants_bound_every_lookup():
     pts = lo + rng.random((4000, 3)) * (hi - lo)
     for p in pts:
         c = np.minimum(((p - lo) / cs).astype(int), res - 1)
-        assert grid_lookup(g, *p)[0] <= mu[c[2], c[1], c[0]] + 1e-6
+        assert grid_lookup(g, *p).den <= mu[c[2], c[1], c[0]] + 1e-6
     # and it is zero only where the whole cell is empty
     assert mu.max() == pytest.approx(den.max())
 
@@ -129,7 +129,7 @@ def test_voxelize_cli_grid_artifact_export_and_render(tmp_path, cli):
     lookups (brute-force recomputation of a few voxels), raw numpy volumes identical to it, a skip
     when unchanged, exit 2 on bad input; the grid renders with --source grid."""
     from pipeline.artifacts import Artifact
-    from pipeline.procedural_runner import load_tables
+    from pipeline.runners.tables import load_tables
     from stages.render.procedural_medium import ProceduralMedium, procedural_lookup
 
     scene = tmp_path / "s.toml"
@@ -151,7 +151,7 @@ def test_voxelize_cli_grid_artifact_export_and_render(tmp_path, cli):
     med = ProceduralMedium(cv, tab)
     k, j, i = np.unravel_index(np.argmax(den), den.shape)
     cs = (hi - lo) / np.array([6, 5, 4])
-    vals = [procedural_lookup(med, *(lo + (np.array([i, j, k]) + (np.array([a, b, c]) + 0.5) / 3) * cs))[0]
+    vals = [procedural_lookup(med, *(lo + (np.array([i, j, k]) + (np.array([a, b, c]) + 0.5) / 3) * cs)).den
             for a in range(3) for b in range(3) for c in range(3)]
     assert den[k, j, i] == pytest.approx(np.mean(vals), rel=1e-6)
     # unchanged inputs: skipped

@@ -58,6 +58,8 @@ import math
 import numpy as np
 from numba import njit
 
+from stages.core.geometry.frames import orthonormal_basis
+
 BCSDF_SIZE = 10
 SQRT2 = math.sqrt(2.0)
 INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
@@ -219,12 +221,8 @@ def fresnel_R(theta_i, c):
 # frame helpers: (theta, phi) of a world direction about tangent t
 @njit(cache=True)
 def fiber_frame(t):
-    """An orthonormal (y, z) completing x = t (Duff et al. 2017 branchless basis)."""
-    sign = 1.0 if t[2] >= 0.0 else -1.0
-    a = -1.0 / (sign + t[2])
-    b = t[0] * t[1] * a
-    y0, y1, y2 = 1.0 + sign * t[0] * t[0] * a, sign * b, -sign * t[0]
-    z0, z1, z2 = b, sign + t[1] * t[1] * a, -t[1]
+    """An orthonormal (y, z) completing x = t (stages.core.geometry.frames)."""
+    (y0, y1, y2), (z0, z1, z2) = orthonormal_basis(t[0], t[1], t[2])
     return y0, y1, y2, z0, z1, z2
 
 

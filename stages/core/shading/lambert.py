@@ -21,13 +21,7 @@ import math
 import numpy as np
 from numba import njit
 
-
-@njit(cache=True)
-def _frame(n0, n1, n2):
-    sign = 1.0 if n2 >= 0.0 else -1.0
-    a = -1.0 / (sign + n2)
-    b = n0 * n1 * a
-    return (1.0 + sign * n0 * n0 * a, sign * b, -sign * n0), (b, sign + n1 * n1 * a, -n1)
+from stages.core.geometry.frames import orthonormal_basis
 
 
 @njit(cache=True)
@@ -54,7 +48,7 @@ def lambert_sample(albedo, n, wi, u0, u1, u2):
     x = r * math.cos(ph)
     y = r * math.sin(ph)
     z = math.sqrt(max(0.0, 1.0 - u1))
-    (t0, t1, t2), (b0, b1, b2) = _frame(n[0], n[1], n[2])
+    (t0, t1, t2), (b0, b1, b2) = orthonormal_basis(n[0], n[1], n[2])
     wo = np.empty(3)
     wo[0] = x * t0 + y * b0 + z * n[0]
     wo[1] = x * t1 + y * b1 + z * n[1]

@@ -39,6 +39,8 @@ import math
 import numpy as np
 from numba import njit
 
+from stages.core.geometry.frames import orthonormal_basis
+
 INV_PI = 1.0 / math.pi
 
 
@@ -105,20 +107,10 @@ def phase_eval(S, wix, wiy, wiz, wox, woy, woz):
 
 
 @njit(cache=True)
-def _basis(x, y, z):
-    """Two unit vectors completing z-axis (x, y, z) to an orthonormal frame (Duff et al. 2017)."""
-    sign = 1.0 if z >= 0.0 else -1.0
-    a = -1.0 / (sign + z)
-    b = x * y * a
-    return (1.0 + sign * x * x * a, sign * b, -sign * x), (b, sign + y * y * a, -y)
-
-
-@njit(cache=True)
 def sample_visible_normal(S, wix, wiy, wiz, u1, u2):
     """A flake normal drawn from D_wi(m) = <wi, m>^+ D(m) / sigma(wi) (Heitz 2015 App. C)."""
-    wk, wj = _basis(wix, wiy, wiz)
+    wk, wj = orthonormal_basis(wix, wiy, wiz)
     # S expressed in the frame (wk, wj, wi)
-    s_kk = _quad(S, wk[0], wk[1], wk[2])
     s_jj = _quad(S, wj[0], wj[1], wj[2])
     s_ii = _quad(S, wix, wiy, wiz)
     s_kj = (S[0] * wk[0] * wj[0] + S[1] * wk[1] * wj[1] + S[2] * wk[2] * wj[2]

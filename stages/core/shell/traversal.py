@@ -27,9 +27,10 @@ is its form for primary rays from outside the shell) walks the ray:
     the linear part of f2w applied to the flat segment direction; leaving the shell through a
     boundary face resumes at 1 (a ray can cross a curved shell several times). A ray that starts inside
     the shell (a scattered or shadow ray leaving a fibre) starts at 2 in the tetrahedron it starts in.
-Returns (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,), normal (3,), flat (3,))
-with segment / fibre the exemplar's ids, normal the capsule's outward normal mapped by the inverse
-transpose of the shell map, flat the hit in the exemplar's own space; t = inf and ids -1 on a miss.
+Returns a ``ShellHit`` (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,),
+normal (3,), flat (3,), radius) with segment / fibre the exemplar's ids, normal the capsule's outward
+normal mapped by the inverse transpose of the shell map, flat the hit in the exemplar's own space,
+radius the hit capsule's radius in flat space; t = inf and ids -1 on a miss.
 Skipped fibre segments: every periodic copy of ``ign_fiber`` near ``ign_seg`` (copies lie at least one
 exemplar period apart, far beyond a scattering vertex's neighbourhood in practice).
 """
@@ -51,6 +52,10 @@ ShellScene = namedtuple("ShellScene", [
     "block_size", "block_map", "ex_nblocks",
     "points", "seg_a", "seg_r", "seg_src", "seg_srcfiber",
     "fn_lo", "fn_hi", "fn_left", "fn_right", "fn_start", "fn_count", "fprim", "ex_root"])
+
+ShellHit = namedtuple("ShellHit", ["t", "tet", "segment", "fibre", "exemplar", "block_i", "block_j", "hit",
+                                   "tangent", "normal", "flat", "radius"])
+ShellHit.__doc__ = """shell_trace's result (module doc): ids int64, t and radius float64, the vectors float64[3]."""
 
 MAX_STEPS = 1 << 20
 
@@ -255,9 +260,8 @@ def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_wind
 @njit(cache=True)
 def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """The general query (see the module doc): a ray starting inside tetrahedron ``start_tet`` (-1: outside
-    the shell) at t = tmin; fibre segments of ``ign_fiber`` near ``ign_seg`` skipped. Returns
-    (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,), normal (3,), flat (3,),
-    radius) with radius the hit capsule's radius in flat space."""
+    the shell) at t = tmin; fibre segments of ``ign_fiber`` near ``ign_seg`` skipped. Returns a
+    ``ShellHit``."""
     hit = np.zeros(3)
     tan = np.zeros(3)
     nrm = np.zeros(3)
@@ -316,9 +320,11 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                         if n > 0.0:
                             nrm[0], nrm[1], nrm[2] = mx / n, my / n, mz / n
                         flat[0], flat[1], flat[2] = fx, fy, fz
-                        return (t, tet, sc.seg_src[seg], sc.seg_srcfiber[seg], k, bi, bj, hit, tan, nrm, flat, sc.seg_r[seg])
+                        return ShellHit(t, np.int64(tet), np.int64(sc.seg_src[seg]), np.int64(sc.seg_srcfiber[seg]),
+                                        np.int64(k), np.int64(bi), np.int64(bj), hit, tan, nrm, flat,
+                                        np.float64(sc.seg_r[seg]))
             if t_end >= tmax:
-                return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
+                return ShellHit(np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
             nb = sc.nbr[tet, face] if face >= 0 else -1
             if nb < 0:
                 tcur = t_out
@@ -326,15 +332,13 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                 break
             tet = nb
             t_in = t_out
-    return (np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
+    return ShellHit(np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
 
 
 @njit(cache=True)
 def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
-    """Primary rays (origin outside the shell): (t, tet, segment, fibre, exemplar, block_i, block_j,
-    hit (3,), tangent (3,), flat (3,))."""
-    t, tet, seg, fib, k, bi, bj, hit, tan, nrm, flat, rad = shell_trace(sc, -1, ox, oy, oz, dx, dy, dz, 0.0, tmax, -1, -1, 0)
-    return t, tet, seg, fib, k, bi, bj, hit, tan, flat
+    """Primary rays (origin outside the shell): the ``ShellHit`` of shell_trace from t = 0."""
+    return shell_trace(sc, -1, ox, oy, oz, dx, dy, dz, 0.0, tmax, -1, -1, 0)
 
 
 @njit(cache=True, parallel=True)
@@ -348,13 +352,12 @@ def trace_primary(sc, cam_o, dirs, tmax):
     tets = np.full(R, -1, np.int64)
     tan = np.zeros((R, 3))
     for r in prange(R):
-        t, tet, s, fib, k, bi, bj, h, tg, fl = shell_intersect(sc, cam_o[0], cam_o[1], cam_o[2],
-                                                             dirs[r, 0], dirs[r, 1], dirs[r, 2], tmax)
-        t_out[r] = t
-        seg[r] = s
-        ex[r] = k
-        tets[r] = tet
-        tan[r, 0], tan[r, 1], tan[r, 2] = tg[0], tg[1], tg[2]
+        h = shell_intersect(sc, cam_o[0], cam_o[1], cam_o[2], dirs[r, 0], dirs[r, 1], dirs[r, 2], tmax)
+        t_out[r] = h.t
+        seg[r] = h.segment
+        ex[r] = h.exemplar
+        tets[r] = h.tet
+        tan[r, 0], tan[r, 1], tan[r, 2] = h.tangent[0], h.tangent[1], h.tangent[2]
     return t_out, seg, ex, tets, tan
 
 
@@ -362,9 +365,10 @@ def trace_primary(sc, cam_o, dirs, tmax):
 # the surface-scene interface (stages.core.geometry.surface) for a ShellScene
 @njit(cache=True)
 def shell_surface_hit(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    t, tet, seg, fib, k, bi, bj, hit, tan, nrm, flat, rad = shell_trace(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax,
-                                                                        ign_fiber, ign_prim, ign_window)
-    return SurfaceHit(t, seg, fib, tet, tan[0], tan[1], tan[2], nrm[0], nrm[1], nrm[2], rad)
+    h = shell_trace(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+    tan = h.tangent
+    nrm = h.normal
+    return SurfaceHit(h.t, h.segment, h.fibre, h.tet, tan[0], tan[1], tan[2], nrm[0], nrm[1], nrm[2], h.radius)
 
 
 @overload(surface_hit)
@@ -379,5 +383,5 @@ def _shell_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_p
 def _shell_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
     if is_tuple_class(scene, ShellScene):
         def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return shell_trace(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)[0] < np.inf
+            return shell_trace(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window).t < np.inf
         return impl

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from pipeline.tile_runner import load_tiling, run_tile
+from pipeline.runners.tile import load_tiling, run_tile
 from stages.core.geometry.bvh import build_fiber_bvh, intersect
 from stages.core.geometry.capsule import capsule_intersect
 from stages.core.shell.traversal import shell_intersect
@@ -91,10 +91,10 @@ def _render_both(sc, bvh, cam, w, h, S0, n_ex_seg):
     for i in range(h):
         for j in range(w):
             o, d = camera_ray(cam, i, j, 0.5, 0.5)
-            t, tet, seg, fib, k, bi, bj, hit, tan, fl = shell_intersect(sc, o[0], o[1], o[2], d[0], d[1], d[2], 1e30)
+            h = shell_intersect(sc, o[0], o[1], o[2], d[0], d[1], d[2], 1e30)
             t2, s2 = intersect(bvh, o[0], o[1], o[2], d[0], d[1], d[2], 0.0, 1e30, -1, 0, 0)
-            out[i, j, 0] = t
-            out[i, j, 1] = seg - k * n_ex_seg if seg >= 0 else -1
+            out[i, j, 0] = h.t
+            out[i, j, 1] = h.segment - h.exemplar * n_ex_seg if h.segment >= 0 else -1
             out[i, j, 2] = t2
             out[i, j, 3] = s2 % S0 if s2 >= 0 else -1
     return out
@@ -197,7 +197,8 @@ def test_curved_shell_has_no_cracks(tmp_path):
     for i in range(14):
         for j in range(14):
             o, d = camera_ray(cam, i, j, 0.5, 0.5)
-            t, tet, seg, fib, k, bi, bj, hit, tan, fl = shell_intersect(sc, *o, *d, 1e30)
+            h = shell_intersect(sc, *o, *d, 1e30)
+            t = h.t
             with np.errstate(divide="ignore"):
                 ta, tb = (X.min(0) - o) / d, (X.max(0) - o) / d
             lo, hi = np.minimum(ta, tb).max(), np.maximum(ta, tb).min()
@@ -212,7 +213,7 @@ def test_curved_shell_has_no_cracks(tmp_path):
                 if not np.isfinite(_march(sc, X, tets, o, d, t - 1e-6, t + 2e-5, 1e-7)):
                     grazing_bad += 1
             if np.isfinite(t):
-                assert abs(np.linalg.norm(tan) - 1) < 1e-9
+                assert abs(np.linalg.norm(h.tangent) - 1) < 1e-9
     assert hits > 60
     assert (holes, late, grazing_bad) == (0, 0, 0), f"{hits} marched hits: {holes} holes, {late} late, {grazing_bad} off-surface"
 

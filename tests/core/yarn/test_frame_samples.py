@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from tests.helpers import EXACTNESS_SWATCH as SCENE
-from pipeline.procedural_runner import build
+from pipeline.runners.tables import build
 from stages.core.curves.frames import curve_frame_at
 from stages.core.yarn.frame_samples import eq7, foot_point, frame_at
 

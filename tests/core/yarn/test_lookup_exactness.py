@@ -21,7 +21,8 @@ import pytest
 
 from tests.helpers import EXACTNESS_SWATCH as SCENE
 from pipeline.artifacts import Artifact
-from pipeline.procedural_runner import build, run_realize
+from pipeline.runners.realize import run_realize
+from pipeline.runners.tables import build
 from stages.core.yarn.lookup import lookup_points
 from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
 
@@ -64,18 +65,18 @@ def _assert_exact(fib, cv, tab, Q, min_inside):
     ref = query_realized(pts32, rad, segment_fiber(off), np.asarray(fib["fiber_yarn"]), np.asarray(fib["fiber_ply"]),
                          kinds, np.asarray(fib["fiber_index"]), lo, cell, dims, start, items, Q, tol)
     got = lookup_points(cv, tab, Q)
-    clear = (ref[4] > tol) & ~ref[5]
+    clear = (ref.surface_gap > tol) & ~ref.kind_tie
     assert clear.mean() > 0.95
-    inside_ref = ref[0][clear]
+    inside_ref = ref.inside[clear]
     assert inside_ref.sum() > min_inside  # many points inside fibres take part
-    assert np.array_equal(got[0][clear], inside_ref)
-    both = clear & ref[0]
-    assert np.array_equal(got[1][both], ref[1][both])
-    assert np.array_equal(got[2][both], ref[2][both])
-    cosang = np.einsum("ij,ij->i", got[3][both], ref[3][both])
+    assert np.array_equal(got.inside[clear], inside_ref)
+    both = clear & ref.inside
+    assert np.array_equal(got.yarn[both], ref.yarn[both])
+    assert np.array_equal(got.kind[both], ref.kind[both])
+    cosang = np.einsum("ij,ij->i", got.direction[both], ref.direction[both])
     assert np.degrees(np.arccos(np.clip(cosang, -1, 1))).max() < 1.0
-    assert np.all(got[1][~got[0]] == -1) and np.all(got[2][~got[0]] == 0)
-    np.testing.assert_allclose(np.linalg.norm(got[3][got[0]], axis=1), 1.0, rtol=1e-9)
+    assert np.all(got.yarn[~got.inside] == -1) and np.all(got.kind[~got.inside] == 0)
+    np.testing.assert_allclose(np.linalg.norm(got.direction[got.inside], axis=1), 1.0, rtol=1e-9)
     return got, both
 
 
@@ -85,7 +86,7 @@ def test_lookup_equals_brute_force_on_realized_fibres(swatch):
     Q = _points(fib)
     assert len(Q) >= 100_000
     got, both = _assert_exact(fib, cv, tabs["hybrid"], Q, 5000)
-    assert set(np.unique(got[2][both])) == {1, 2, 3}
+    assert set(np.unique(got.kind[both])) == {1, 2, 3}
 
 
 def test_closed_yarn_seam_is_exact(tmp_path):
@@ -125,6 +126,6 @@ def test_hybrid_and_realization_free_hairs_agree(swatch):
     Q = _points(fib, 5000, 25000, seed=1)
     a = lookup_points(cv, tab, Q)
     b = lookup_points(cv, tab_free, Q)
-    assert (a[2] == 3).sum() > 100
+    assert (a.kind == 3).sum() > 100
     for x, y in zip(a, b):
         assert np.array_equal(x, y)
