@@ -28,10 +28,13 @@ from __future__ import annotations
 import difflib
 import importlib
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
-import numpy as np
 
 from ..errors import LoomError
+
+if TYPE_CHECKING:  # numpy stays out of `loomlight --help`
+    import numpy as np
 
 
 @dataclass

@@ -30,12 +30,12 @@ def run_lookup(tables, points: Path, out: Path) -> dict:
     if not np.isfinite(pts).all():
         raise LoomError(points, f"row {int(np.argmax(~np.isfinite(pts).all(axis=1)))}", "non-finite coordinate")
     cv, tab, _ = load_tables(tables)
-    inside, yarn, kind, direction, density, albedo = lookup_points(cv, tab, np.ascontiguousarray(pts, np.float64))
+    res = lookup_points(cv, tab, np.ascontiguousarray(pts, np.float64))
     if out.suffix != ".npz":
         raise LoomError(out, None, "the output file must end in .npz")
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(f".{out.name}.tmp.npz")
-    np.savez(tmp, inside=inside, yarn=yarn.astype(np.int64), kind=kind.astype(np.int64), direction=direction,
-             density=density, albedo=albedo)
+    np.savez(tmp, inside=res.inside, yarn=res.yarn.astype(np.int64), kind=res.kind.astype(np.int64),
+             direction=res.direction, density=res.density, albedo=res.albedo)
     tmp.replace(out)
-    return {"inside": int(inside.sum()), "points": len(pts)}
+    return {"inside": int(res.inside.sum()), "points": len(pts)}

@@ -19,6 +19,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.capsule import point_segment_dist2
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness"])
@@ -55,23 +56,9 @@ def covering_segment(bvh, x, y, z):
             f = bvh.seg_fiber[s]
             if f >= best_f:
                 continue
-            ax = prims[q, 0]
-            ay = prims[q, 1]
-            az = prims[q, 2]
-            ux = prims[q, 3] - ax
-            uy = prims[q, 4] - ay
-            uz = prims[q, 5] - az
-            wx = x - ax
-            wy = y - ay
-            wz = z - az
-            uu = ux * ux + uy * uy + uz * uz
-            t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
-            t = min(max(t, 0.0), 1.0)
-            dx = wx - t * ux
-            dy = wy - t * uy
-            dz = wz - t * uz
             r = prims[q, 6]
-            if dx * dx + dy * dy + dz * dz < r * r:
+            if point_segment_dist2(x, y, z, prims[q, 0], prims[q, 1], prims[q, 2],
+                                   prims[q, 3], prims[q, 4], prims[q, 5]) < r * r:
                 best = s
                 best_f = f
     return best

@@ -27,6 +27,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.rng import uniform
 from stages.render.medium import NO_MEDIUM, extinction, medium_lookup
 
@@ -40,23 +41,6 @@ RATIO_RR_THRESHOLD = 0.1  # ratio tracking plays Russian roulette below this tra
 def make_majorant_grid(lo, hi, res, mu) -> MajorantGrid:
     return MajorantGrid(np.asarray(lo, np.float64), np.asarray(hi, np.float64),
                         np.asarray(res, np.int64), np.ascontiguousarray(mu, np.float64))
-
-
-@njit(cache=True)
-def _pt_seg_d2(px, py, pz, ax, ay, az, bx, by, bz):
-    ux = bx - ax
-    uy = by - ay
-    uz = bz - az
-    wx = px - ax
-    wy = py - ay
-    wz = pz - az
-    uu = ux * ux + uy * uy + uz * uz
-    t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
-    t = min(max(t, 0.0), 1.0)
-    dx = wx - t * ux
-    dy = wy - t * uy
-    dz = wz - t * uz
-    return dx * dx + dy * dy + dz * dz
 
 
 @njit(cache=True)
@@ -86,7 +70,7 @@ def majorants_from_capsules(a, b, radius, bound, lo, hi, res):
                     cx = lo[0] + (ix + 0.5) * cs[0]
                     cy = lo[1] + (iy + 0.5) * cs[1]
                     cz = lo[2] + (iz + 0.5) * cs[2]
-                    d2 = _pt_seg_d2(cx, cy, cz, a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2])
+                    d2 = point_segment_dist2(cx, cy, cz, a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2])
                     if d2 <= (r + half_diag) ** 2:
                         mu[iz, iy, ix] = bound[k]
     return mu

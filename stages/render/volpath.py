@@ -17,7 +17,6 @@ and ``has_ground`` (``stages.render.ground``), ``max_depth``, ``rr_depth``. Its 
 of each path; the tile loop is ``stages.render.tiles``.
 Random numbers: uniform(seed, pixel * spp + sample, dim) with pixel jitter in dims 0-1, so the image
 is a pure function of the inputs, whatever the number of threads or the tiling.
-
 """
 
 from collections import namedtuple
@@ -81,8 +80,21 @@ def _escaped(lt, n, prev_pdf, dx, dy, dz):
 
 
 @njit(cache=True)
-def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, index, max_depth, rr_depth):
-    """Radiance along one camera ray: (r, g, b, hit, first distance, lookups, rays)."""
+def trace_path(it, o, d, seed, index):
+    """``PathSample`` of the camera ray (o, d) of camera sample ``index`` (see the module doc)."""
+    med = it.medium
+    maj = it.majorant
+    lt = it.lights
+    ground = it.ground
+    ground_on = it.has_ground
+    max_depth = it.max_depth
+    rr_depth = it.rr_depth
+    ox = o[0]
+    oy = o[1]
+    oz = o[2]
+    dx = d[0]
+    dy = d[1]
+    dz = d[2]
     lights, env, marg, cond = lt
     nl = lights.shape[0]
     Lr = 0.0
@@ -211,15 +223,10 @@ def trace_path(med, maj, lt, ground, ground_on, ox, oy, oz, dx, dy, dz, seed, in
             br /= q
             bg /= q
             bb /= q
-    return Lr, Lg, Lb, hit, first_t, lookups, rays
+    return PathSample(Lr, Lg, Lb, hit, first_t, lookups, rays)
 
 
 @overload(radiance)
 def _volpath_radiance(integ, o, d, seed, index):
     if is_tuple_class(integ, VolpathIntegrator):
-        def impl(integ, o, d, seed, index):
-            r, g, b, hit, ft, lk, nr = trace_path(integ.medium, integ.majorant, integ.lights, integ.ground,
-                                                  integ.has_ground, o[0], o[1], o[2], d[0], d[1], d[2], seed, index,
-                                                  integ.max_depth, integ.rr_depth)
-            return PathSample(r, g, b, hit, ft, lk, nr)
-        return impl
+        return lambda integ, o, d, seed, index: trace_path(integ, o, d, seed, index)

@@ -29,13 +29,13 @@ query for shadow rays. Both skip the segments of fibre ``ign_fiber`` within ``ig
 ``ign_seg`` along the chain: a ray leaving a fibre through its BCSDF does not hit the fibre it leaves
 (the BCSDF accounts for the fibre's own cross-section). Pass ign_fiber = -1 to test everything.
 """
-import math
 from collections import namedtuple
 
 import numpy as np
 from numba import njit
 
 from stages.core.geometry.capsule import capsule_intersect
+from stages.core.geometry.slab import safe_inverse, slab_enter
 
 LEAF_MAX = 4
 N_BINS = 16
@@ -270,50 +270,10 @@ def build_fiber_bvh(points, fiber_offsets, point_radius):
 
 # ------------------------------------------------------------------------------------------------
 @njit(cache=True)
-def _box_enter(nlo, nhi, node, ox, oy, oz, ix, iy, iz, tmax):
-    """Entry distance of a ray into box ``node`` of (lo, hi) arrays, inf when missed or beyond tmax."""
-    t0 = (nlo[node, 0] - ox) * ix
-    t1 = (nhi[node, 0] - ox) * ix
-    tn = min(t0, t1)
-    tf = max(t0, t1)
-    t0 = (nlo[node, 1] - oy) * iy
-    t1 = (nhi[node, 1] - oy) * iy
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    t0 = (nlo[node, 2] - oz) * iz
-    t1 = (nhi[node, 2] - oz) * iz
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    if tf < tn or tf < 0.0 or tn > tmax:
-        return np.inf
-    return tn
-
-
-@njit(cache=True)
 def _node_enter(nodes, node, ox, oy, oz, ix, iy, iz, tmax):
-    """``_box_enter`` on the packed node array."""
-    t0 = (nodes[node, 0] - ox) * ix
-    t1 = (nodes[node, 3] - ox) * ix
-    tn = min(t0, t1)
-    tf = max(t0, t1)
-    t0 = (nodes[node, 1] - oy) * iy
-    t1 = (nodes[node, 4] - oy) * iy
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    t0 = (nodes[node, 2] - oz) * iz
-    t1 = (nodes[node, 5] - oz) * iz
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    if tf < tn or tf < 0.0 or tn > tmax:
-        return np.inf
-    return tn
-
-
-@njit(cache=True)
-def _inv(d):
-    if d == 0.0:
-        return 1e300
-    return 1.0 / d
+    """Entry distance of a ray into box ``node`` of the packed node array (``slab_enter``, tmin 0)."""
+    return slab_enter(nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3], nodes[node, 4], nodes[node, 5],
+                      ox, oy, oz, ix, iy, iz, 0.0, tmax)
 
 
 @njit(cache=True)
@@ -353,9 +313,9 @@ def intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_w
     if prims.shape[0] == 0:
         return np.inf, -1
     ilo, ihi = ignore_range(bvh, ign_fiber, ign_seg, ign_window)
-    ix = _inv(dx)
-    iy = _inv(dy)
-    iz = _inv(dz)
+    ix = safe_inverse(dx)
+    iy = safe_inverse(dy)
+    iz = safe_inverse(dz)
     stack = np.empty(256, np.int64)
     stack_t = np.empty(256)  # entry distance of each pushed node: skipped if a nearer hit was found since
     best_t = tmax
@@ -418,9 +378,9 @@ def occluded(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_wi
     if prims.shape[0] == 0:
         return False
     ilo, ihi = ignore_range(bvh, ign_fiber, ign_seg, ign_window)
-    ix = _inv(dx)
-    iy = _inv(dy)
-    iz = _inv(dz)
+    ix = safe_inverse(dx)
+    iy = safe_inverse(dy)
+    iz = safe_inverse(dz)
     if _node_enter(nodes, 0, ox, oy, oz, ix, iy, iz, tmax) == np.inf:
         return False
     stack = np.empty(256, np.int64)

@@ -104,3 +104,21 @@ def capsule_normal(px, py, pz, ax, ay, az, bx, by, bz):
     if n == 0.0:
         return 0.0, 0.0, 1.0, s
     return nx / n, ny / n, nz / n, s
+
+
+@njit(cache=True)
+def point_segment_dist2(px, py, pz, ax, ay, az, bx, by, bz):
+    """Squared distance from p to the segment [a, b] (p inside the capsule of radius r iff < r^2)."""
+    ux = bx - ax
+    uy = by - ay
+    uz = bz - az
+    wx = px - ax
+    wy = py - ay
+    wz = pz - az
+    uu = ux * ux + uy * uy + uz * uz
+    t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0
+    t = min(max(t, 0.0), 1.0)
+    dx = wx - t * ux
+    dy = wy - t * uy
+    dz = wz - t * uz
+    return dx * dx + dy * dy + dz * dz

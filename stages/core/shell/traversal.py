@@ -44,6 +44,7 @@ from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.capsule import capsule_intersect, capsule_normal
+from stages.core.geometry.slab import safe_inverse, slab_enter
 from stages.core.geometry.surface import SurfaceHit, surface_hit, surface_occluded
 
 ShellScene = namedtuple("ShellScene", [
@@ -61,29 +62,9 @@ MAX_STEPS = 1 << 20
 
 
 @njit(cache=True)
-def _inv(d):
-    if d == 0.0:
-        return 1e300
-    return 1.0 / d
-
-
-@njit(cache=True)
 def _box(lo, hi, node, ox, oy, oz, ix, iy, iz, tmin, tmax):
-    t0 = (lo[node, 0] - ox) * ix
-    t1 = (hi[node, 0] - ox) * ix
-    tn = min(t0, t1)
-    tf = max(t0, t1)
-    t0 = (lo[node, 1] - oy) * iy
-    t1 = (hi[node, 1] - oy) * iy
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    t0 = (lo[node, 2] - oz) * iz
-    t1 = (hi[node, 2] - oz) * iz
-    tn = max(tn, min(t0, t1))
-    tf = min(tf, max(t0, t1))
-    if tf < tn or tf < tmin or tn > tmax:
-        return np.inf
-    return tn
+    return slab_enter(lo[node, 0], lo[node, 1], lo[node, 2], hi[node, 0], hi[node, 1], hi[node, 2],
+                      ox, oy, oz, ix, iy, iz, tmin, tmax)
 
 
 @njit(cache=True)
@@ -118,7 +99,7 @@ def enter_shell(sc, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """(t, boundary face) of the nearest boundary face entered at tmin <= t < tmax; (inf, -1) if none."""
     if sc.bprim.shape[0] == 0:
         return np.inf, -1
-    ix, iy, iz = _inv(dx), _inv(dy), _inv(dz)
+    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
     stack = np.empty(128, np.int64)
     stack[0] = 0
     sp = 1
@@ -170,7 +151,7 @@ def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_s
     """Nearest capsule hit (t, segment) with tmin < t < tmax in the BVH rooted at ``root`` (ties: lower
     index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar segment
     ``ign_seg`` (-1: test everything)."""
-    ix, iy, iz = _inv(dx), _inv(dy), _inv(dz)
+    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
     stack = np.empty(256, np.int64)
     stack[0] = root
     sp = 1
