@@ -337,14 +337,19 @@ class ArtifactWriter:
         h = hashlib.sha256()
         h.update(self.kind.encode())
         h.update(_canonical(jsonable(self.summary)).encode())
-        def walk(g, prefix=""):
-            for name, a in sorted(g.arrays(), key=lambda t: t[0]):
-                h.update(f"{prefix}{name}:{a.dtype}:{a.shape}".encode())
-                h.update(np.ascontiguousarray(a[...]).tobytes())
-            for name, sub in sorted(g.groups(), key=lambda t: t[0]):
-                walk(sub, prefix + name + "/")
-        walk(group)
+        hash_arrays(group, h)
         return h.hexdigest()
+
+
+def hash_arrays(group, h) -> None:
+    """Feed every array of a zarr group (name, dtype, shape, bytes; sorted, sub-groups too) to hash h."""
+    def walk(g, prefix=""):
+        for name, a in sorted(g.arrays(), key=lambda t: t[0]):
+            h.update(f"{prefix}{name}:{a.dtype}:{a.shape}".encode())
+            h.update(np.ascontiguousarray(a[...]).tobytes())
+        for name, sub in sorted(g.groups(), key=lambda t: t[0]):
+            walk(sub, prefix + name + "/")
+    walk(group)
 
 
 def _publish(tmp: Path, path: Path) -> None:

@@ -1,11 +1,14 @@
 """Hashes of a directory of loomlight outputs, for refactors that must not change one output byte.
 
-    python scripts/output_hashes.py OUT_DIR > hashes.txt          # before the change
-    python scripts/output_hashes.py OUT_DIR | diff hashes.txt -   # after: no lines differ
+    make demo OUT=/tmp/a && scripts/refactor_extras.sh /tmp/a      # before the change
+    .venv/bin/python scripts/output_hashes.py /tmp/a > hashes.txt
+    make demo OUT=/tmp/b && scripts/refactor_extras.sh /tmp/b      # after
+    .venv/bin/python scripts/output_hashes.py /tmp/b | diff hashes.txt -   # no lines differ
 
 Images and arrays (.exr, .png, .npy, .txt) are hashed as files, .npz archives by their arrays. An artifact (a zarr directory) is hashed by its
 arrays (name, dtype, shape, bytes) and its summary without the fields that measure the run rather
-than the result (times, rates, peak memory, thread count, paths on disk). Reports (.md, .html) are
+than the result (times, rates, peak memory, thread count, paths on disk, including the ``source``
+path a voxel grid records). Reports (.md, .html) are
 skipped: they quote timings.
 """
 import hashlib
@@ -15,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-VOLATILE = ("_s", "_per_s", "peak_memory_bytes", "threads", "created", "exr", "png", "scene", "path")
+VOLATILE = ("_s", "_per_s", "peak_memory_bytes", "threads", "created", "exr", "png", "scene", "path", "source")
 
 
 def _steady(obj):
@@ -30,18 +33,12 @@ def _steady(obj):
 def artifact_hash(path: Path) -> str:
     import zarr
 
+    from pipeline.artifacts import hash_arrays
+
     g = zarr.open_group(str(path), mode="r")
     h = hashlib.sha256()
     h.update(json.dumps(_steady(dict(g.attrs).get("summary", {})), sort_keys=True).encode())
-
-    def walk(grp, prefix=""):
-        for name, a in sorted(grp.arrays(), key=lambda t: t[0]):
-            h.update(f"{prefix}{name}:{a.dtype}:{a.shape}".encode())
-            h.update(np.ascontiguousarray(a[...]).tobytes())
-        for name, sub in sorted(grp.groups(), key=lambda t: t[0]):
-            walk(sub, prefix + name + "/")
-
-    walk(g)
+    hash_arrays(g, h)
     return h.hexdigest()
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from ..renderers import COMMON_DEFAULTS, method_help, settings_help, source_help
+from ..renderers import COMMON_DEFAULTS, material_help, method_help, settings_help, source_help
 
 
 def register(app: typer.Typer) -> None:
@@ -29,7 +29,7 @@ def register(app: typer.Typer) -> None:
                tables: Path = typer.Option(None, "--tables", help="volpath --source procedural: the procedural tables artifact."),
                grid: Path = typer.Option(None, "--grid", help="volpath --source grid: the voxel grid artifact."),
                bcsdf: str = typer.Option(None, "--bcsdf", help="BCSDF preset for yarn groups whose scene entry names none (data/bcsdf/)."),
-               material: str = typer.Option(None, "--material", help="fiberpath: bcsdf (default) or lambert."),
+               material: str = typer.Option(None, "--material", help=material_help()),
                max_depth: int = typer.Option(None, "--max-depth", help=f"Maximum scattering events per path (default: render.max_depth, else {COMMON_DEFAULTS['max_depth']})."),
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
                exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops."),

@@ -173,6 +173,12 @@ def settings_help() -> str:
     return "Method-specific setting KEY=VALUE (repeatable) -- " + "; ".join(parts) + "."
 
 
+def material_help() -> str:
+    parts = [f"{m.name}: {' or '.join(m.materials)} (default {m.materials[0]})" for m in METHODS.values()
+             if m.materials and m.module == m.name]
+    return "Fibre material -- " + "; ".join(parts) + "."
+
+
 def render_schema() -> dict:
     """The JSON Schema of a scene's [render] table (``schemas/scene.schema.json`` takes it from here)."""
     positive = {"type": "integer", "minimum": 1}
