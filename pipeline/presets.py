@@ -44,6 +44,7 @@ LENGTH_KEYS = ("yarn_radius", "ellipse_long", "ellipse_short", "yarn_alpha", "al
 NORMAL_LENGTH_KEYS = ("flyaway_hair_ze", "flyaway_hair_r0", "flyaway_hair_re", "flyaway_loop_r1")
 DENSITY_KEYS = ("flyaway_hair_density", "flyaway_loop_density")
 DEFAULTS = {"R_max": 1.0, "rho_max": 1.0, "use_migration": 1, "use_flyaways": 1}
+MAX_RATIO = 1e3   # lengths within 1/MAX_RATIO..MAX_RATIO yarn radii (check_proportions)
 
 
 def list_presets() -> list[str]:
@@ -56,7 +57,24 @@ def check_preset(d: dict, file, place_prefix: str = "") -> dict:
     d = {**DEFAULTS, **d}
     if d["rho_min"] > d["rho_max"]:
         raise LoomError(file, f"{place_prefix}rho_min", f"rho_min ({d['rho_min']}) exceeds rho_max ({d['rho_max']})")
+    check_proportions(d, file, place_prefix)
     return d
+
+
+def check_proportions(d: dict, file, place_prefix: str = "") -> None:
+    """Pitches, ply axes and fibre radius within 1/MAX_RATIO..MAX_RATIO yarn radii, flyaway lengths and
+    per-length densities at most MAX_RATIO yarn radii (per yarn radius): beyond, a yarn twists or fills
+    faster than float64 positions along it resolve, and the tables would be noise."""
+    R = d["yarn_radius"]
+    for k in ("yarn_alpha", "alpha", "ellipse_long", "ellipse_short", "fiber_radius"):
+        if not R / MAX_RATIO <= d[k] <= R * MAX_RATIO:
+            raise LoomError(file, f"{place_prefix}{k}", f"{d[k]:g} is not within 1e-3 to 1e3 times yarn_radius ({R:g})")
+    for k in NORMAL_LENGTH_KEYS:
+        if max(abs(d[k][0]), d[k][1]) > R * MAX_RATIO:
+            raise LoomError(file, f"{place_prefix}{k}", f"{d[k]} exceeds 1e3 times yarn_radius ({R:g})")
+    for k in DENSITY_KEYS:
+        if d[k] * R > MAX_RATIO:
+            raise LoomError(file, f"{place_prefix}{k}", f"{d[k]:g} per unit length exceeds 1e3 per yarn_radius ({R:g})")
 
 
 def load_preset(name: str) -> dict:
@@ -160,6 +178,7 @@ def resolve_yarn_types(yarn_types: list[dict], type_radius: list[float], preset:
         else:
             d["scale"] = 1.0
         d = apply_overrides(d, yt, file, place=f"yarn_types[{i}]")
+        check_proportions(d, file, f"yarn_types[{i}].")
         d["name"] = name
         out.append(d)
     return out

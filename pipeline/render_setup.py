@@ -71,8 +71,8 @@ def pack_lights(lights: list[dict], scene_path: str | Path | None = None) -> Lig
             rows.append(pack_light("envmap", [s, s, s]))
         else:
             raise LoomError(scene_path, f"{place}.type", f"unknown light type {kind!r}")
-        if np.any(rows[-1][1:4] < 0):
-            raise LoomError(scene_path, place, "light colours must be non-negative")
+        if not np.all(np.isfinite(rows[-1])) or np.any(rows[-1][1:4] < 0):
+            raise LoomError(scene_path, place, "light values and directions must be finite, colours non-negative")
     arr = np.asarray(rows, dtype=np.float64).reshape(-1, LIGHT_SIZE)
     env, marg, cond = envmap_tables(env_img)
     return LightSet(arr, env, marg, cond)

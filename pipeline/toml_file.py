@@ -3,7 +3,9 @@
 ``read_toml(path, what="file")`` returns the document as a dict. Every way a file can fail to be
 TOML is one ``LoomError`` line naming the file (exit code 2): ``<what> not found``,
 ``is a directory, not a <what>``, ``byte N: not a UTF-8 text file``,
-``line N: not valid TOML: ...``. Callers check the document itself (``pipeline.schemas.validate``).
+``line N: not valid TOML: ...``, and ``<key>: nan is not a finite number``: TOML allows nan and inf
+but no loomlight file takes them, so they are refused wherever they appear (``lights[0].irradiance``).
+Callers check the document itself (``pipeline.schemas.validate``).
 
 ``dumps_toml(doc)`` writes a document of plain data (tables, arrays, strings, numbers, booleans)
 as top-level ``key = value`` lines, tables inline; ``tomllib.loads`` reads it back unchanged
@@ -34,9 +36,23 @@ def read_toml(path, what: str = "file") -> dict:
     except OSError as e:
         raise LoomError(path, None, f"cannot read the {what}: {e.strerror or e}") from None
     try:
-        return tomllib.loads(text)
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise LoomError(path, f"line {_line_of(e)}", f"not valid TOML: {e}") from None
+    _refuse_non_finite(doc, path, "")
+    return doc
+
+
+def _refuse_non_finite(value, path, place: str) -> None:
+    """A LoomError at the first nan or inf of a TOML document (place in the schemas' notation)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        raise LoomError(path, place or "<top>", f"{value} is not a finite number (loomlight takes no nan or inf)")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _refuse_non_finite(v, path, f"{place}.{k}" if place else str(k))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            _refuse_non_finite(v, path, f"{place}[{i}]")
 
 
 def _line_of(e: tomllib.TOMLDecodeError):

@@ -3,7 +3,8 @@
 ``read_curves(path, **opts)`` dispatches on the suffix: ``.bcc`` (bcc.py), ``.obj`` (obj.py),
 ``.txt`` (polyline_txt.py), ``.wif`` (wif.py: a weaving draft woven into warp and weft curves;
 opts scale, crimp, max_threads, repeat, samples_per_cell). For curve files ``scale`` (default 1)
-multiplies coordinates and radii. An unknown suffix or a missing file raises LoomError.
+multiplies coordinates and radii. An unknown suffix, a missing file or a file without curves raises
+LoomError; coordinates beyond +-1e6 scene units are refused (``pipeline.limits``).
 
 Beside the curve formats: ``obj_mesh.py`` (an OBJ triangle mesh with uv, the tile stage's base
 surface) and ``mitsuba_txt.py`` (realized fibres as Mitsuba 3 curve text, ``loomlight export``).
@@ -38,13 +39,15 @@ def read_curves(path, **opts) -> CurveSet:
     if suffix not in SUFFIXES:
         raise LoomError(path, None, f"unknown curve file type {path.suffix!r}: expected one of {', '.join(SUFFIXES)}")
     if not path.is_file():
-        raise LoomError(path, None, "no such file")
+        raise LoomError(path, None, "is a directory, not a curve file" if path.is_dir() else "no such file")
     if suffix == ".wif":
         return _module(suffix).read(path, **opts)
     scale = float(opts.pop("scale", 1.0) or 1.0)
     if not scale > 0:
         raise LoomError(path, "scale", f"scale = {scale} must be positive")
     cs = _module(suffix).read(path, **opts)
+    if not cs.points:
+        raise LoomError(path, None, "no curves: the file holds no control points")
     if scale != 1.0:
         cs.points = [np.asarray(p, dtype=np.float64) * scale for p in cs.points]
         if cs.point_radius is not None:

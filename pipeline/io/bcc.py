@@ -30,6 +30,7 @@ import numpy as np
 
 from ..curveset import CurveSet
 from ..errors import LoomError
+from ..limits import coordinate_problem, first_bad_row
 
 HEADER_SIZE = 64
 _HEADER = struct.Struct("<3sB2sbbQQ40s")
@@ -94,10 +95,9 @@ def read(path, group: str = "other", **_ignored) -> CurveSet:
             raise LoomError(path, f"byte {off}: curve {c}",
                             f"point count {n} overruns the file ({12 * m} bytes of points needed, {size - off - 4} left)")
         p = np.frombuffer(data, "<f4", 3 * m, off + 4).reshape(m, 3)
-        finite = np.isfinite(p).all(axis=1)
-        if not finite.all():
-            k = int(np.argmin(finite))
-            raise LoomError(path, f"curve {c}, point {k}", f"non-finite coordinate {p[k].tolist()}")
+        k = first_bad_row(p)
+        if k >= 0:
+            raise LoomError(path, f"curve {c}, point {k}", coordinate_problem(p[k].tolist()))
         points.append(to_z_up(p, head["up_axis"]).astype(np.float32, copy=False))
         closed.append(n < 0)
         total += m

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..curveset import GROUPS, CurveSet
 from ..errors import LoomError
+from ..limits import coordinate_problem
 
 
 def fmt32(x) -> str:
@@ -52,6 +53,8 @@ def read(path, **_ignored) -> CurveSet:
                 raise LoomError(path, f"line {lineno}", f"bad vertex coordinate in {line!r}") from None
             if not all(math.isfinite(c) for c in xyz):
                 raise LoomError(path, f"line {lineno}", f"non-finite vertex coordinate in {line!r}")
+            if why := coordinate_problem(xyz):
+                raise LoomError(path, f"line {lineno}", why)
             verts.append(xyz)
         elif rec == "l":
             try:
@@ -62,6 +65,9 @@ def read(path, **_ignored) -> CurveSet:
         elif rec == "g":
             name = tok[1].lower() if len(tok) > 1 else "other"
             group = name if name in GROUPS else "other"
+    if not lines:
+        raise LoomError(path, None, f"no curves: the file has no 'l' line elements ({len(verts)} 'v' vertices); "
+                        "loomlight reads OBJ polylines (v/l records)")
     allv = np.asarray(verts, dtype=np.float32).reshape(-1, 3)
     nv = len(allv)
     points, closed, groups = [], [], []

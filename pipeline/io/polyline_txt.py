@@ -21,6 +21,7 @@ import numpy as np
 
 from ..curveset import CurveSet
 from ..errors import LoomError
+from ..limits import MAX_LENGTH, coordinate_problem
 from .obj import fmt32
 
 
@@ -65,6 +66,10 @@ def read(path, group: str = "other", **_ignored) -> CurveSet:
         ncols_cur = ncols_file = len(row)
         if len(row) == 4 and row[3] <= 0:
             raise LoomError(path, f"line {lineno}", f"radius {row[3]} is not positive")
+        if len(row) == 4 and row[3] > MAX_LENGTH:
+            raise LoomError(path, f"line {lineno}", f"radius {row[3]:g} is beyond {MAX_LENGTH:g} scene units")
+        if why := coordinate_problem(row[:3]):
+            raise LoomError(path, f"line {lineno}", why)
         cur.append(row)
     if cur:
         curves.append((cur_start, cur))

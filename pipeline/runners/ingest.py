@@ -14,6 +14,7 @@ import numpy as np
 from ..artifacts import ArtifactWriter
 from ..curveset import GROUPS, CurveSet
 from ..errors import LoomError
+from ..limits import MAX_COORD, MAX_LENGTH, coordinate_problem, first_bad_row
 from ..progress import info, warn
 from ..scene import load_scene
 
@@ -42,12 +43,7 @@ def curves_from_input(path: Path, radius: float | None, scale: float | None):
         else:
             from ..io import read_curves
 
-            cs = read_curves(src)
-            s = fab.get("scale", scale)
-            if s:
-                cs.points = [p * s for p in cs.points]
-                if cs.point_radius is not None:
-                    cs.point_radius = [r * s for r in cs.point_radius]
+            cs = _scaled(read_curves(src), fab.get("scale", scale), src)
         return cs, scene, {"fabric": src}
     if path.suffix.lower() == ".wif":
         from ..generators import from_wif
@@ -55,30 +51,42 @@ def curves_from_input(path: Path, radius: float | None, scale: float | None):
         return from_wif(path, scale=scale or 1.0, crimp=1.0, max_threads=None, repeat=None), None, {}
     from ..io import read_curves
 
-    cs = read_curves(path)
-    if scale:
-        cs.points = [p * scale for p in cs.points]
-        if cs.point_radius is not None:
-            cs.point_radius = [r * scale for r in cs.point_radius]
-    return cs, None, {}
+    return _scaled(read_curves(path), scale, path), None, {}
+
+
+def _scaled(cs: CurveSet, s: float | None, file: Path) -> CurveSet:
+    """Coordinates and radii times ``s`` (when given), refusing a product beyond the limits."""
+    if not s:
+        return cs
+    for c, p in enumerate(cs.points):
+        k = first_bad_row(np.asarray(p, np.float64) * s)
+        if k >= 0:
+            raise LoomError(file, f"curve {c}, point {k}", f"scaled by {s:g}, coordinate {np.asarray(p)[k].tolist()} "
+                            f"goes beyond +-{MAX_COORD:g} scene units")
+    cs.points = [p * s for p in cs.points]
+    if cs.point_radius is not None:
+        cs.point_radius = [r * s for r in cs.point_radius]
+    return cs
 
 
 def validate_curves(cs: CurveSet, file: Path, merge_duplicates: bool) -> CurveSet:
     """NaN/inf, fewer than 2 points, repeated consecutive points (merged with a warning, or refused)."""
+    if not cs.points:
+        raise LoomError(file, None, "no curves")
     pts_out, rad_out = [], []
     merged_total = 0
     for c, pts in enumerate(cs.points):
+        if np.ndim(pts) != 2 or np.shape(pts)[1] != 3:
+            raise LoomError(file, f"curve {c}", f"expected (n, 3) control points, got shape {np.shape(pts)}")
+        k = first_bad_row(pts)
+        if k >= 0:
+            raise LoomError(file, f"curve {c}, point {k}", coordinate_problem(np.asarray(pts, np.float64)[k].tolist()))
         pts = np.asarray(pts, dtype=np.float32)
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise LoomError(file, f"curve {c}", f"expected (n, 3) control points, got shape {pts.shape}")
-        bad = ~np.isfinite(pts).all(axis=1)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise LoomError(file, f"curve {c}, point {k}", f"non-finite coordinate {pts[k].tolist()}")
         rad = None if cs.point_radius is None else np.asarray(cs.point_radius[c], dtype=np.float32)
-        if rad is not None and (~np.isfinite(rad) | (rad <= 0)).any():
-            k = int(np.argmax(~np.isfinite(rad) | (rad <= 0)))
-            raise LoomError(file, f"curve {c}, point {k}", f"radius must be positive and finite, got {rad[k]}")
+        if rad is not None and (~np.isfinite(rad) | (rad <= 0) | (rad > MAX_LENGTH)).any():
+            k = int(np.argmax(~np.isfinite(rad) | (rad <= 0) | (rad > MAX_LENGTH)))
+            raise LoomError(file, f"curve {c}, point {k}", f"radius must be positive and at most {MAX_LENGTH:g}, "
+                            f"got {rad[k]}")
         if len(pts) < 2:
             raise LoomError(file, f"curve {c}", f"a curve needs at least 2 points, got {len(pts)}")
         same = np.all(pts[1:] == pts[:-1], axis=1)

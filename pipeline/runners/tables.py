@@ -9,12 +9,14 @@ same (Curves, Tables) in memory from a yarns artifact (the realize runner and Ta
 """
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
 
 from ..artifacts import Artifact, ArtifactWriter
 from ..errors import LoomError
+from ..limits import check_positive
 from ..yarns import CURVE_ARRAYS, curves_from_group
 from .yarn_types import type_summary, yarn_types_of
 
@@ -62,14 +64,11 @@ def check_options(preset, radius, nbins=None, spacing=None, budget=None):
 
     if preset is not None:
         load_preset(preset)
-    if radius is not None and not radius > 0:
-        raise LoomError(None, "--radius", f"yarn radius must be positive, got {radius}")
+    check_positive(radius, "--radius")
     if nbins is not None and nbins < 1:
         raise LoomError(None, "--bins", f"need at least one azimuth bin, got {nbins}")
-    if spacing is not None and not spacing > 0:
-        raise LoomError(None, "--spacing", f"sample spacing must be positive, got {spacing}")
-    if budget is not None and not budget > 0:
-        raise LoomError(None, "--budget", f"memory budget must be positive, got {budget}")
+    check_positive(spacing, "--spacing")
+    check_positive(budget, "--budget", upper=math.inf)
 
 
 def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False):
