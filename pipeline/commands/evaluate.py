@@ -46,12 +46,14 @@ def register(app: typer.Typer) -> None:
     ):
         """Compare renders against a reference: metrics, error maps, report (and sweeps, Table 1)."""
         from ..errors import LoomError
+        from ..outputs import DIRECTORY, check_output
 
         modes = [m for m, on in (("--ref/--test", ref is not None or bool(test)), ("--sweep", sweep is not None),
                                  ("--table1", table1)) if on]
         if len(modes) != 1:
             raise LoomError(None, "evaluate", "give exactly one of --ref/--test, --sweep or --table1"
                             + (f" (got {', '.join(modes)})" if modes else ""))
+        check_output(out, "-o", DIRECTORY)
         if modes[0] == "--sweep":
             from ..runners.sweep import run_sweep
 

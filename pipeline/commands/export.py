@@ -14,7 +14,9 @@ def register(app: typer.Typer) -> None:
                                                         "line between curves); .bcc: polyline Binary Curve Collection."),
     ):
         """Write realized fibres as Mitsuba 3 curve text or a polyline BCC file."""
+        from ..outputs import check_output
         from ..runners.export import run_export
 
+        check_output(out, "-o", suffixes=(".txt", ".bcc"))
         res = run_export(fibers, out)
         typer.echo(f"wrote {out} ({res['curves']} curves)")

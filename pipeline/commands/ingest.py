@@ -12,23 +12,26 @@ def register(app: typer.Typer) -> None:
         input: Path = typer.Argument(..., help="A curve file (.bcc Binary Curve Collection, .obj polylines, "
                                                 ".txt 'x y z [r]' polylines), a WIF weaving draft (.wif), or a scene (.toml)."),
         out: Path = typer.Option(..., "-o", "--out", help="Output yarns artifact (directory ending in .zarr)."),
-        radius: float = typer.Option(None, "--radius", help="Yarn radius for inputs that carry none.", min=0.0),
-        scale: float = typer.Option(None, "--scale", help="Multiply file coordinates by this factor.", min=0.0),
+        radius: float = typer.Option(None, "--radius", help="Yarn radius for inputs that carry none (positive, at most 1e6)."),
+        scale: float = typer.Option(None, "--scale", help="Multiply file coordinates by this factor (positive; scaled "
+                                                          "coordinates must stay within +-1e6 scene units)."),
         refuse_duplicates: bool = typer.Option(False, "--refuse-duplicates",
                                                help="Refuse repeated consecutive control points instead of merging them."),
         frame_samples: int = typer.Option(4, "--frame-samples", min=1, help="Stored RMF samples per spline segment."),
-        write: Path = typer.Option(None, "--write", help="Also write the validated curves as .bcc or .obj."),
+        write: Path = typer.Option(None, "--write", help="Also write the validated curves as .bcc, .obj or .txt."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
     ):
         """Read, validate and spline yarn curves (C1 Catmull-Rom, arc length, rotation-minimising frames,
         seed 000 δ_i bound, segment grid) and publish them as a yarns artifact."""
-        from ..errors import LoomError
+        from ..limits import check_positive
+        from ..outputs import ARTIFACT, check_output
         from ..runners.ingest import run_ingest
 
-        if radius is not None and radius <= 0:
-            raise LoomError(None, "--radius", f"must be positive, got {radius}")
-        if scale is not None and scale <= 0:
-            raise LoomError(None, "--scale", f"must be positive, got {scale}")
+        check_output(out, "-o", ARTIFACT)
+        if write is not None:
+            check_output(write, "--write", suffixes=(".bcc", ".obj", ".txt"))
+        check_positive(radius, "--radius")
+        check_positive(scale, "--scale")
         res = run_ingest(input, out, radius=radius, scale=scale, merge_duplicates=not refuse_duplicates,
                          force=force, write=write, frame_samples=frame_samples)
         if not res["skipped"]:

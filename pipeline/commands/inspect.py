@@ -20,9 +20,12 @@ def register(app: typer.Typer) -> None:
         from ..artifacts import Artifact
         from ..errors import LoomError
         from ..inspectors import inspector_for
+        from ..outputs import check_output
 
         if png is None and not show:
             raise LoomError(artifact, "--png", "give --png FILE or --show")
+        if png is not None:
+            check_output(png, "--png")
         art = Artifact(artifact)
         mod = inspector_for(art.kind)
         out = mod.inspect(art, png, show=show, frames=frames, yarn=yarn, z=z, size=(width, height))

@@ -15,7 +15,9 @@ def register(app: typer.Typer) -> None:
     ):
         """Inside a fibre or not, yarn index (-1 outside), kind (0 none, 1 regular, 2 loop, 3 hair), unit fibre
         direction (zero outside), density and albedo, for every point."""
+        from ..outputs import check_output
         from ..runners.lookup import run_lookup
 
+        check_output(out, "-o", suffixes=(".npz",))
         res = run_lookup(tables, points, out)
         typer.echo(f"wrote {out} ({res['inside']} of {res['points']} points inside a fibre)")

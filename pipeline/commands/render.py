@@ -32,11 +32,18 @@ def register(app: typer.Typer) -> None:
                material: str = typer.Option(None, "--material", help=material_help()),
                max_depth: int = typer.Option(None, "--max-depth", help=f"Maximum scattering events per path (default: render.max_depth, else {COMMON_DEFAULTS['max_depth']})."),
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
-               exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops."),
+               exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops (finite, within +-64)."),
                set_: list[str] = typer.Option(None, "--set", help=settings_help())):
         """Render SCENE to an EXR + PNG preview + render artifact with statistics."""
+        from ..errors import LoomError
+        from ..outputs import ARTIFACT, check_output
         from ..runners.render import run_render
 
+        if not -64.0 <= exposure <= 64.0:
+            raise LoomError(None, "--exposure", f"must be a finite number of stops within +-64, got {exposure}")
+        check_output(out, "-o", suffixes=(".exr",))
+        check_output(out.with_suffix(".png"), "-o")
+        check_output(out.with_suffix(".zarr"), "-o", ARTIFACT)
         result = run_render(scene, method=method, out=out, width=width, height=height, spp=spp, seed=seed,
                             source=source, fibers=fibers, tables=tables, grid=grid, bcsdf=bcsdf, material=material, max_depth=max_depth,
                             threads=threads, exposure=exposure, settings=set_ or [])

@@ -12,7 +12,7 @@ def register(app: typer.Typer) -> None:
         yarns: Path = typer.Argument(..., help="A yarns artifact (loomlight ingest)."),
         out: Path = typer.Option(..., "-o", "--out", help="Output tables artifact (directory ending in .zarr)."),
         preset: str = typer.Option(None, "--preset", help="Give every yarn this preset (data/yarns/NAME.toml)."),
-        radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius."),
+        radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers."),
         bins: int = typer.Option(32, "--bins", help="Azimuth bins of the regular-fibre tables (seed 000 Fig. 7)."),
         hair_mode: str = typer.Option("hybrid", "--hair-mode",
@@ -21,8 +21,10 @@ def register(app: typer.Typer) -> None:
     ):
         """Per yarn type and ply: fibre trajectories binned by azimuth; per yarn: hair tables (hybrid mode);
         loops from consistent random numbers; plus a copy of the yarn curves, so renderers need only this."""
+        from ..outputs import ARTIFACT, check_output
         from ..runners.tables import run_tables
 
+        check_output(out, "-o", ARTIFACT)
         res = run_tables(yarns, out, preset=preset, radius=radius, seed=seed, nbins=bins, hair_mode=hair_mode,
                          force=force)
         if res["skipped"]:

@@ -17,8 +17,10 @@ def register(app: typer.Typer) -> None:
         """Realize periodic fibre exemplars from weave drafts, cut them into blocks, lay the blocks over the
         cloth's (u, v) domain by the block map, and build the shell (base surface offset along its smoothed
         normals, split into tetrahedra) that maps them onto the surface."""
+        from ..outputs import ARTIFACT, check_output
         from ..runners.tile import run_tile
 
+        check_output(out, "-o", ARTIFACT)
         res = run_tile(config, out, force=force)
         if res["skipped"]:
             typer.echo(f"{out} is up to date")

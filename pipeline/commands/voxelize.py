@@ -23,6 +23,10 @@ def register(app: typer.Typer) -> None:
                      export_npy: Path = typer.Option(None, "--export-npy", help="Also write raw numpy volumes to this directory."),
                      force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged.")):
         """Voxelize the procedural fibre medium: density and mean fibre direction per voxel."""
+        from ..outputs import ARTIFACT, DIRECTORY, check_output
         from ..runners.voxelize import run_voxelize
 
+        check_output(out, "-o", ARTIFACT)
+        if export_npy is not None:
+            check_output(export_npy, "--export-npy", DIRECTORY)
         typer.echo(run_voxelize(tables, out, res, supersample, export_npy, force))
