@@ -2,10 +2,16 @@
 
 Every module in ``pipeline.commands`` defines ``register(app)``; subcommands are discovered, so a
 new stage adds one file. Bad input raises ``LoomError``: one line on stderr, exit code 2.
+
+Last resort (the readers, runners and ``pipeline.outputs`` check input first): an ``OSError`` that
+escapes them (disk full, a file vanishing under a run) is also one line and exit code 2. Any other
+exception is a bug in loomlight: one line naming it and asking for a report, exit code 1, and with
+``LOOMLIGHT_DEBUG=1`` the traceback too.
 """
 from __future__ import annotations
 
 import importlib
+import os
 import pkgutil
 import sys
 
@@ -58,14 +64,30 @@ def main(argv: list[str] | None = None) -> int:
     except typer.Abort:
         typer.echo("aborted", err=True)
         return 1
+    except OSError as e:
+        where = e.filename if e.filename is not None else "<system>"
+        typer.echo(f"error: {where}: {e.strerror or e}", err=True)
+        _debug_traceback()
+        return 2
     except Exception as e:
         # usage errors (missing argument, unknown option, bad value) from typer's bundled click:
         # they can show themselves; report them as bad input (exit code 2), anything else is a bug
         if hasattr(e, "show") and hasattr(e, "exit_code"):
             e.show()
             return 2
-        raise
+        msg = " ".join(str(e).split())[:200]
+        typer.echo(f"error: internal error {type(e).__name__}: {msg} -- this is a loomlight bug, please report it "
+                   f"(LOOMLIGHT_DEBUG=1 shows the traceback)", err=True)
+        _debug_traceback()
+        return 1
     return 0
+
+
+def _debug_traceback() -> None:
+    if os.environ.get("LOOMLIGHT_DEBUG", "") not in ("", "0"):
+        import traceback
+
+        traceback.print_exc()
 
 
 def entry() -> None:  # pragma: no cover
