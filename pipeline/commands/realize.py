@@ -20,13 +20,12 @@ def register(app: typer.Typer) -> None:
     ):
         """Full realization (seed 000 Eq. 1-4 and 7): regular, loop and hair fibres with radius, yarn, ply and
         kind. The same random numbers as `loomlight tables`, so both describe one fabric."""
-        from ..errors import LoomError
+        from ..limits import check_positive
         from ..outputs import ARTIFACT, check_output
         from ..runners.realize import run_realize
 
         check_output(out, "-o", ARTIFACT)
-        if not budget_mib > 0:
-            raise LoomError(None, "--budget", f"memory budget must be positive, got {budget_mib}")
+        check_positive(budget_mib, "--budget", upper=float("inf"))
         res = run_realize(yarns, out, preset=preset, radius=radius, seed=seed, spacing=spacing,
                           budget=int(budget_mib * 2**20), force=force)
         if res["skipped"]:
