@@ -28,6 +28,8 @@ def register(app: typer.Typer) -> None:
             check_output(png, "--png")
         art = Artifact(artifact)
         mod = inspector_for(art.kind)
+        if png is not None:
+            png.parent.mkdir(parents=True, exist_ok=True)  # as every output's missing directories are
         out = mod.inspect(art, png, show=show, frames=frames, yarn=yarn, z=z, size=(width, height))
         if png is not None:
             typer.echo(str(out or png))
