@@ -62,4 +62,5 @@ def write_curves(path, cs: CurveSet, **opts) -> None:
     suffix = path.suffix.lower()
     if suffix not in (".bcc", ".obj", ".txt"):
         raise LoomError(path, None, f"cannot write curve file type {path.suffix!r}: expected .bcc, .obj or .txt")
+    path.parent.mkdir(parents=True, exist_ok=True)
     _module(suffix).write(path, cs, **opts)
