@@ -186,7 +186,7 @@ def test_bug_is_one_line_exit_1_traceback_on_request(cli, tmp_path, monkeypatch)
     and asking for a report; LOOMLIGHT_DEBUG=1 adds the traceback."""
     import pipeline.runners.export as export_runner
 
-    def broken(fibers, out):
+    def broken(*args, **kwargs):
         raise ZeroDivisionError("float division by zero")
 
     monkeypatch.setattr(export_runner, "run_export", broken)
@@ -202,7 +202,7 @@ def test_unexpected_os_error_is_one_line_exit_2(cli, tmp_path, monkeypatch):
     """The last-resort net: an OSError the specific checks could not foresee (a full disk) names its file."""
     import pipeline.runners.export as export_runner
 
-    def disk_full(fibers, out):
+    def disk_full(fibers, out, **kwargs):
         raise OSError(28, "No space left on device", str(out))
 
     monkeypatch.setattr(export_runner, "run_export", disk_full)
