@@ -1,16 +1,34 @@
 """The artifact store: every stage writes one zarr v3 group (a directory).
 
 Attributes of the root group:
-  ``loomlight``: schema id and version, stage, parameters, content hashes of inputs, build key,
-                 loomlight version, wall time, peak memory, ``complete: true``, content hash;
+  ``loomlight``: schema id and version, stage, parameters, the inputs (path, identity, stat
+                 fingerprint), build key, loomlight version, wall time, peak memory, per-array
+                 checksums, content hash, ``complete: true``;
   ``summary``:   the kind-specific numbers ``loomlight info`` shows (counts, bounds, bytes).
 
 Publishing is atomic: an artifact is built in a hidden sibling directory, its attributes are
 schema-checked and marked complete, then it is exchanged with the previous one in one
 ``renameat2(RENAME_EXCHANGE)`` (two renames where the kernel lacks it). A stage killed at any
-moment leaves no partial artifact at the output path and the previous artifact untouched.
-A stage whose inputs, parameters and code (loomlight's own source files) are unchanged is not re-run:
-its build key matches the one recorded in the existing artifact.
+moment leaves no partial artifact at the output path and the previous artifact untouched; the next
+writer of that path (even one that finds the artifact up to date) removes what killed runs left.
+Files published together with an artifact (a render's EXR and PNG: ``companions``) go through a
+journal: all of them are complete before it is written, and a publication a kill interrupted
+after that is finished by the next writer of the artifact, so the set on disk is either the old
+one or the new one.
+
+Artifacts are what they claim: at write every array gets a sha256 and a crc32c of its bytes, and
+the content hash covers the kind, the summary and those checksums. ``Artifact`` refuses one whose
+content hash does not match its summary and checksums (an edited summary or hash), whose arrays
+differ from the recorded ones, or that has no checksums (written before they were recorded:
+rebuild it), and checks an array's crc32c whenever it reads it, so a deleted or truncated chunk is
+an error, never zeros.
+
+A stage whose inputs, parameters and code (loomlight's own source files) are unchanged is not
+re-run: its build key matches the one recorded in the existing artifact. An input's identity is
+recomputed from its bytes (a file's sha256; an artifact's chunk and metadata files hashed), never
+taken from what the input says of itself; a stat fingerprint of every file (size, mtime, ctime,
+inode: ctime cannot be set back without changing the clock) recorded beside it lets an unchanged
+input skip the re-hashing.
 """
 from __future__ import annotations
 
@@ -19,8 +37,10 @@ import ctypes.util
 import hashlib
 import json
 import os
+import re
 import resource
 import shutil
+import sys
 import time
 import uuid
 from pathlib import Path
@@ -34,6 +54,18 @@ from .errors import IncompleteArtifact, LoomError
 from .schemas import validate
 
 SCHEMA_VERSION = 1
+FILE = "file"                      # the kind of an input that is a plain file, not an artifact
+PAUSE_ENV = "LOOMLIGHT_PAUSE_AT"   # tests: "<point>[,<point>...]" sleeps there (see pause_point)
+_HEX64 = re.compile(r"^[0-9a-f]{64}$")
+
+
+def pause_point(name: str) -> None:
+    """A named moment of publication (``built``, ``journal``, ``half-published``); a process whose
+    LOOMLIGHT_PAUSE_AT names it announces the moment on stderr and sleeps, so a test can kill it there."""
+    points = os.environ.get(PAUSE_ENV)
+    if points and name in points.split(","):
+        print(f"loomlight: paused at {name}", file=sys.stderr, flush=True)
+        time.sleep(3600)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -44,17 +76,6 @@ def _sha256_file(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
-
-
-def content_hash(path: str | Path) -> str:
-    """Content hash of an input: a file's sha256, or an artifact's recorded content hash."""
-    path = Path(path)
-    if path.is_dir():
-        meta = read_meta(path)
-        return meta["content_hash"]
-    if not path.exists():
-        raise LoomError(path, None, "file not found")
-    return _sha256_file(path)
 
 
 def _canonical(obj: Any) -> str:
@@ -100,6 +121,131 @@ def build_key(kind: str, stage: str, params: Mapping, input_hashes: Mapping[str,
     return hashlib.sha256(_canonical(doc).encode()).hexdigest()
 
 
+def content_digest(kind: str, summary: Mapping, checksums: Mapping) -> str:
+    """The content hash: sha256 over the kind, the summary and every array's recorded checksums."""
+    doc = {"kind": kind, "summary": summary, "arrays": checksums}
+    return hashlib.sha256(_canonical(doc).encode()).hexdigest()
+
+
+def array_checksums(a, block_bytes: int = 16 << 20) -> dict:
+    """{"sha256", "crc32c"} of a (zarr) array's C-order bytes, read in blocks of whole chunk rows."""
+    import google_crc32c
+
+    h, crc = hashlib.sha256(), 0
+    rows = a.shape[0] if a.ndim else 1
+    step = max(1, block_bytes // max(1, int(a.nbytes) // max(rows, 1)))
+    if a.ndim:
+        step = max(a.chunks[0], step // a.chunks[0] * a.chunks[0])
+    for i in range(0, max(rows, 1), step):
+        raw = np.ascontiguousarray(a[i:i + step] if a.ndim else a[...]).reshape(-1).view(np.uint8)
+        h.update(raw)
+        crc = google_crc32c.extend(crc, raw.tobytes())
+    return {"sha256": h.hexdigest(), "crc32c": int(crc)}
+
+
+def _crc32c(data: np.ndarray) -> int:
+    import google_crc32c
+
+    return int(google_crc32c.value(np.ascontiguousarray(data).reshape(-1).view(np.uint8)))
+
+
+def hash_arrays(group, h) -> None:
+    """Feed every array of a zarr group (name, dtype, shape, bytes; sorted, sub-groups too) to hash h."""
+    for name, a in _walk_arrays(group):
+        h.update(f"{name}:{a.dtype}:{a.shape}".encode())
+        h.update(np.ascontiguousarray(a[...]).tobytes())
+
+
+def _walk_arrays(group, prefix=""):
+    """(name, zarr array) of a group and its sub-groups, sorted by name at every level."""
+    for name, a in sorted(group.arrays(), key=lambda t: t[0]):
+        yield prefix + name, a
+    for name, sub in sorted(group.groups(), key=lambda t: t[0]):
+        yield from _walk_arrays(sub, prefix + name + "/")
+
+
+# ------------------------------------------------------------------------------------------------
+# inputs: identity (recomputed from the bytes) and stat fingerprint
+def _root_attrs(path: Path) -> dict:
+    try:
+        return json.loads((path / "zarr.json").read_text()).get("attributes", {}) or {}
+    except (OSError, ValueError, AttributeError) as e:  # ValueError: bad JSON or bytes that are not UTF-8
+        raise LoomError(path / "zarr.json", None, f"unreadable artifact metadata: {_short(e)}") from None
+
+
+def _artifact_files(path: Path) -> list[tuple[str, Path]]:
+    """Every file of an artifact directory but its root zarr.json, by relative path."""
+    out = []
+    for dirpath, dirnames, filenames in os.walk(path):
+        dirnames.sort()
+        for fn in filenames:
+            f = Path(dirpath) / fn
+            rel = f.relative_to(path).as_posix()
+            if rel != "zarr.json":
+                out.append((rel, f))
+    return sorted(out)
+
+
+def _check_kind(path: Path, kind, found: str) -> None:
+    if kind is None:
+        return
+    kinds = (kind,) if isinstance(kind, str) else tuple(kind)
+    if found not in kinds:
+        want = " or ".join(repr(k) if k != FILE else "a file" for k in kinds)
+        what = "a file" if found == FILE else f"a {found!r} artifact"
+        raise LoomError(path, None, f"expected {want if FILE in kinds else 'a ' + want + ' artifact'}, found {what}")
+
+
+def _input_kind(path: Path, kind) -> str:
+    """The input's kind (FILE or the artifact's kind), refusing a missing input or one of the wrong kind."""
+    if path.is_dir():
+        found = read_meta(path).get("kind", "?")
+    elif path.exists():
+        found = FILE
+    else:
+        raise LoomError(path, None, "artifact not found" if path.suffix == ".zarr" else "file not found")
+    _check_kind(path, kind, found)
+    return found
+
+
+def input_identity(path: str | Path, kind=None) -> str:
+    """What an input is, from its bytes: a file's sha256; for an artifact, a sha256 over its kind,
+    content hash and summary and every chunk and array-metadata file (names, sizes, bytes)."""
+    path = Path(path)
+    if _input_kind(path, kind) == FILE:
+        return _sha256_file(path)
+    attrs = _root_attrs(path)
+    meta = attrs.get("loomlight", {})
+    h = hashlib.sha256(_canonical({"kind": meta.get("kind"), "content_hash": meta.get("content_hash"),
+                                   "summary": attrs.get("summary")}).encode())
+    for rel, f in _artifact_files(path):
+        h.update(f"\0{rel}\0{f.stat().st_size}\0".encode())
+        with open(f, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()
+
+
+def content_hash(path: str | Path) -> str:
+    """Identity of an input file or artifact (``input_identity``)."""
+    return input_identity(path)
+
+
+def stat_fingerprint(path: str | Path, kind=None) -> str:
+    """sha256 over (size, mtime, ctime, inode) of an input's files (an artifact's root metadata by its
+    bytes): equal fingerprints mean untouched files, since writing a file moves its ctime."""
+    path = Path(path)
+    _input_kind(path, kind)
+    h = hashlib.sha256()
+    files = [(path.name, path)] if path.is_file() else _artifact_files(path)
+    for rel, f in files:
+        st = f.stat()
+        h.update(f"{rel}\0{st.st_size}\0{st.st_mtime_ns}\0{st.st_ctime_ns}\0{st.st_ino}\0{st.st_dev}\n".encode())
+    if path.is_dir():
+        h.update((path / "zarr.json").read_bytes())
+    return h.hexdigest()
+
+
 # ------------------------------------------------------------------------------------------------
 # reading
 def read_meta(path: str | Path) -> dict:
@@ -109,11 +255,7 @@ def read_meta(path: str | Path) -> dict:
         raise LoomError(path, None, "artifact not found")
     if not (path / "zarr.json").exists():
         raise LoomError(path, None, "not a zarr v3 artifact (no zarr.json)")
-    try:
-        attrs = json.loads((path / "zarr.json").read_text()).get("attributes", {})
-    except (OSError, json.JSONDecodeError) as e:
-        raise LoomError(path / "zarr.json", None, f"unreadable artifact metadata: {e}") from None
-    meta = attrs.get("loomlight")
+    meta = _root_attrs(path).get("loomlight")
     if not isinstance(meta, dict):
         raise LoomError(path, None, "not a loomlight artifact (no 'loomlight' attributes)")
     if meta.get("complete") is not True:
@@ -121,17 +263,51 @@ def read_meta(path: str | Path) -> dict:
     return meta
 
 
+def verify_meta(path: Path, meta: dict, summary: dict) -> dict:
+    """The recorded checksums, once the content hash matches them and the summary."""
+    checksums = meta.get("arrays")
+    if not isinstance(checksums, dict):
+        raise LoomError(path, None, "artifact has no checksums (written by a loomlight before they were recorded); "
+                        "rebuild it with its stage")
+    if content_digest(meta.get("kind"), summary, checksums) != meta.get("content_hash"):
+        raise LoomError(path, None, "the summary or checksums do not match the content hash (edited?); "
+                        "rebuild it with its stage")
+    return checksums
+
+
 class Artifact:
-    """A complete, schema-checked artifact opened for reading."""
+    """A complete, schema-checked artifact opened for reading; every array read is checked
+    against the checksum recorded at write."""
 
     def __init__(self, path: str | Path, kind: str | None = None):
         self.path = Path(path)
         self.meta = read_meta(self.path)
         if kind is not None and self.meta.get("kind") != kind:
             raise LoomError(self.path, None, f"expected a {kind!r} artifact, found {self.meta.get('kind')!r}")
-        self.group = zarr.open_group(str(self.path), mode="r")
-        self.summary = dict(self.group.attrs.get("summary", {}))
-        _check_schema(self.path, self.meta, self.summary, self.group)
+        self.summary = dict(_root_attrs(self.path).get("summary", {}) or {})
+        self._checksums = verify_meta(self.path, self.meta, self.summary)
+        try:
+            self.group = zarr.open_group(str(self.path), mode="r")
+            manifest = _manifest(self.meta, self.summary, self.group)
+        except LoomError:
+            raise
+        except Exception as e:  # a corrupt array zarr.json
+            raise LoomError(self.path, None, f"unreadable artifact ({_short(e)})") from None
+        self._check_arrays(manifest["arrays"])
+        validate(self.meta, "artifact-meta", self.path, prefix="loomlight.")
+        validate(manifest, self.meta["kind"], self.path)
+
+    def _check_arrays(self, found: dict) -> None:
+        for name, rec in sorted(self._checksums.items()):
+            a = found.get(name)
+            if a is None:
+                raise LoomError(self.path, f"array {name}", "recorded at write but missing (deleted?)")
+            if a["dtype"] != rec.get("dtype") or a["shape"] != rec.get("shape"):
+                raise LoomError(self.path, f"array {name}", f"is {a['dtype']} {a['shape']}, recorded as "
+                                f"{rec.get('dtype')} {rec.get('shape')}")
+        extra = sorted(set(found) - set(self._checksums))
+        if extra:
+            raise LoomError(self.path, f"array {extra[0]}", "not recorded at write (added later?)")
 
     @property
     def kind(self) -> str:
@@ -142,36 +318,34 @@ class Artifact:
         return self.meta.get("params", {})
 
     def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._checksums:
+            raise LoomError(self.path, name, "array missing from artifact")
+        place = f"array {name}"
         try:
-            return self.group[name][...]
-        except KeyError:
-            raise LoomError(self.path, name, "array missing from artifact") from None
+            data = self.group[name][...]
+        except Exception as e:  # zarr / codec errors: a truncated or garbled chunk, a missing array directory
+            raise LoomError(self.path, place, f"cannot be read, chunk missing or corrupt ({_short(e)})") from None
+        if _crc32c(data) != self._checksums[name]["crc32c"]:
+            raise LoomError(self.path, place, "content does not match its checksum (chunk missing or corrupt)")
+        return data
 
     def __contains__(self, name: str) -> bool:
-        return name in self.group
+        return name in self._checksums
 
     def arrays(self) -> dict[str, Any]:
-        out = {}
-        def walk(g, prefix=""):
-            for name, a in g.arrays():
-                out[prefix + name] = a
-            for name, sub in g.groups():
-                walk(sub, prefix + name + "/")
-        walk(self.group)
-        return out
+        return dict(_walk_arrays(self.group))
 
     def nbytes(self) -> int:
         return int(sum(a.nbytes for a in self.arrays().values()))
 
 
+def _short(e: BaseException) -> str:
+    text = " ".join(str(e).split()) or type(e).__name__
+    return text if len(text) <= 160 else text[:157] + "..."
+
+
 def _manifest(meta: dict, summary: dict, group) -> dict:
-    arrays = {}
-    def walk(g, prefix=""):
-        for name, a in g.arrays():
-            arrays[prefix + name] = {"dtype": str(a.dtype), "shape": list(a.shape)}
-        for name, sub in g.groups():
-            walk(sub, prefix + name + "/")
-    walk(group)
+    arrays = {name: {"dtype": str(a.dtype), "shape": list(a.shape)} for name, a in _walk_arrays(group)}
     return {"summary": summary, "arrays": arrays, "params": meta.get("params", {})}
 
 
@@ -206,29 +380,43 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def _clean_stale_siblings(path: Path) -> None:
-    """Remove hidden build directories left by killed stages (their process is gone)."""
+def temp_sibling(path: Path, tag: str = "tmp") -> Path:
+    """A hidden name beside ``path`` owned by this process: ``.<name>.<tag>-<pid>-<random><suffix>``."""
+    return path.parent / f".{path.name}.{tag}-{os.getpid()}-{uuid.uuid4().hex[:8]}{path.suffix}"
+
+
+_OWNED = re.compile(r"\.(tmp|old|publish)-(\d+)-[0-9a-f]{8}")
+
+
+def _owner_dead(p: Path) -> bool:
+    m = _OWNED.search(p.name)
+    return m is not None and not _pid_alive(int(m.group(2)))
+
+
+def _remove(p: Path) -> None:
+    if p.is_dir() and not p.is_symlink():
+        shutil.rmtree(p, ignore_errors=True)
+    else:
+        p.unlink(missing_ok=True)
+
+
+def clean_stale(path: Path) -> None:
+    """Finish a publication of ``path`` a killed run left half done (its journal), restore a previous
+    artifact a killed fallback publication left aside, then remove the hidden temporaries killed
+    runs left beside ``path`` (their process is gone)."""
     parent = path.parent
     if not parent.exists():
         return
-    for p in parent.glob(f".{path.name}.tmp-*"):
-        try:
-            pid = int(p.name.rsplit("-", 2)[-2])
-        except (ValueError, IndexError):
-            continue
-        if not _pid_alive(pid):
-            shutil.rmtree(p, ignore_errors=True)
-    for p in parent.glob(f".{path.name}.old-*"):
-        shutil.rmtree(p, ignore_errors=True)
-
-
-def is_up_to_date(path: str | Path, key: str) -> bool:
-    """True when a complete artifact at ``path`` was built with build key ``key``."""
-    try:
-        meta = read_meta(path)
-    except LoomError:
-        return False
-    return meta.get("build_key") == key
+    dead = sorted(p for p in parent.glob(f".{path.name}.*") if _owner_dead(p))
+    for p in dead:
+        if _OWNED.search(p.name).group(1) == "publish" and p.suffix == ".json":
+            _roll_forward(p)
+    for p in dead:
+        if _OWNED.search(p.name).group(1) == "old" and not path.exists() and p.is_dir():
+            os.rename(p, path)
+    for p in dead:
+        if p.exists() or p.is_symlink():
+            _remove(p)
 
 
 class ArtifactWriter:
@@ -239,46 +427,104 @@ class ArtifactWriter:
         with ArtifactWriter(out, kind="yarns", stage="ingest", params=p, inputs={"source": src}) as w:
             w.write("points", pts, chunks=(65536, 3))
             w.summary.update(curves=n)
+
+    ``inputs`` maps a name to a path, or to ``(path, kind)``: kind ``FILE`` (a plain file), an artifact
+    kind or a tuple of kinds; an input of another kind is refused. The output may be neither an
+    input nor inside one, nor an existing file or directory that is not an artifact.
+    ``companions`` are files published together with the artifact (``companion(dst)`` gives the
+    temporary path to write each to).
     """
 
     def __init__(self, path: str | Path, kind: str, stage: str, params: Mapping | None = None,
-                 inputs: Mapping[str, str | Path] | None = None):
+                 inputs: Mapping[str, Any] | None = None, companions=()):
         self.path = Path(path)
         if self.path.suffix != ".zarr":
             raise LoomError(self.path, None, "artifact paths end in .zarr")
         self.kind = kind
         self.stage = stage
         self.params = jsonable(params or {})
-        self.inputs = {name: str(p) for name, p in (inputs or {}).items()}
-        self.input_hashes = {name: content_hash(p) for name, p in self.inputs.items()}
-        self.key = build_key(kind, stage, self.params, self.input_hashes)
+        self.inputs: dict[str, tuple[str, Any]] = {}
+        for name, spec in (inputs or {}).items():
+            p, k = spec if isinstance(spec, tuple) else (spec, None)
+            self.inputs[name] = (str(p), k)
+        self.companions = [Path(c) for c in companions]
+        self._check_outputs()
+        clean_stale(self.path)
+        for c in self.companions:
+            clean_stale(c)
+        self._ids: dict[str, str] | None = None
+        self._stats: dict[str, str] = {}
+        self._staged: dict[Path, Path] = {}
         self.summary: dict[str, Any] = {}
         self.tmp: Path | None = None
         self.group = None
         self._t0 = 0.0
 
-    def up_to_date(self) -> bool:
-        return is_up_to_date(self.path, self.key)
+    # -- checks before any work -------------------------------------------------------------------
+    def _check_outputs(self) -> None:
+        p = self.path
+        if p.is_symlink():
+            raise LoomError(p, "-o", "is a symbolic link; give the artifact's real path")
+        if p.exists():
+            if not p.is_dir():
+                raise LoomError(p, "-o", "exists and is not an artifact (a regular file); refusing to replace it")
+            if any(p.iterdir()) and not isinstance(_loose_meta(p), dict):
+                raise LoomError(p, "-o", "exists and is not a loomlight artifact; refusing to replace it")
+        for c in self.companions:
+            if c.is_dir():
+                raise LoomError(c, "-o", "is a directory")
+        for name, (ip, _) in self.inputs.items():
+            ir = Path(ip).resolve()
+            for o in [p, *self.companions]:
+                r = o.resolve()
+                if r == ir or ir in r.parents or r in ir.parents:
+                    raise LoomError(o, "-o", f"the output would overwrite the {name} input {ip}; choose another path")
 
+    # -- up to date -------------------------------------------------------------------------------
+    def input_identities(self, recorded: Mapping | None = None) -> dict[str, str]:
+        """Every input's identity, recomputed from its bytes unless its stat fingerprint equals the one
+        ``recorded`` beside the identity (by the artifact built from it)."""
+        if self._ids is None or recorded is not None:
+            ids = {}
+            for name, (p, k) in self.inputs.items():
+                fp = stat_fingerprint(p, k)
+                rec = (recorded or {}).get(name) or {}
+                if rec.get("stat") == fp and rec.get("path") == p and _HEX64.match(str(rec.get("sha256", ""))):
+                    ids[name] = rec["sha256"]
+                else:
+                    ids[name] = input_identity(p, k)
+                self._stats[name] = fp
+            self._ids = ids
+        return self._ids
+
+    def up_to_date(self) -> bool:
+        """True when the artifact at the output path is complete, intact in its metadata and was built
+        with this build key."""
+        try:
+            meta = read_meta(self.path)
+            verify_meta(self.path, meta, _root_attrs(self.path).get("summary", {}) or {})
+        except LoomError:
+            self.input_identities()
+            return False
+        ids = self.input_identities(meta.get("inputs"))
+        return meta.get("build_key") == build_key(self.kind, self.stage, self.params, ids)
+
+    # -- building ---------------------------------------------------------------------------------
     def __enter__(self) -> "ArtifactWriter":
+        if self._ids is None:  # not asked up_to_date: the previous artifact's record may still spare the hashing
+            self.input_identities(_recorded_inputs(self.path))
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        _clean_stale_siblings(self.path)
-        self.tmp = self.path.parent / f".{self.path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        self.tmp = temp_sibling(self.path)
         self.group = zarr.open_group(str(self.tmp), mode="w", zarr_format=3)
         self.group.attrs["loomlight"] = {"kind": self.kind, "stage": self.stage, "complete": False}
         self._t0 = time.perf_counter()
         return self
 
-    # -- arrays ---------------------------------------------------------------------------------
     def write(self, name: str, data, chunks=None, dimension_names=None, attributes=None):
         data = np.asarray(data)
         if chunks is None:
             chunks = _default_chunks(data.shape, data.dtype.itemsize)
-        kw = {}
-        if dimension_names is not None:
-            kw["dimension_names"] = dimension_names
-        a = self.group.create_array(name, shape=data.shape, chunks=chunks, dtype=data.dtype,
-                                    fill_value=_fill(data.dtype), attributes=attributes or {}, **kw)
+        a = self.create(name, data.shape, data.dtype, chunks, dimension_names, attributes)
         if data.size:
             a[...] = data
         return a
@@ -292,64 +538,91 @@ class ArtifactWriter:
         return self.group.create_array(name, shape=tuple(shape), chunks=tuple(chunks), dtype=dtype,
                                        fill_value=_fill(dtype), attributes=attributes or {}, **kw)
 
+    def companion(self, dst: str | Path) -> Path:
+        """The temporary path to write companion ``dst`` to; it is published with the artifact."""
+        dst = Path(dst)
+        if dst not in self.companions:
+            raise ValueError(f"{dst} is not a companion of {self.path}")
+        self._staged[dst] = self._staged.get(dst) or temp_sibling(dst)
+        return self._staged[dst]
+
     @property
     def store_path(self) -> Path:
         """Where chunk tasks open the array being built (the hidden directory)."""
         assert self.tmp is not None
         return self.tmp
 
-    # -- publishing -----------------------------------------------------------------------------
+    # -- publishing -------------------------------------------------------------------------------
     def __exit__(self, exc_type, exc, tb):
         if exc_type is not None:
-            shutil.rmtree(self.tmp, ignore_errors=True)
+            self._discard()
             return False
         try:
             self._finalize()
         except BaseException:
-            shutil.rmtree(self.tmp, ignore_errors=True)
+            self._discard()
             raise
         return False
 
+    def _discard(self) -> None:
+        shutil.rmtree(self.tmp, ignore_errors=True)
+        for t in self._staged.values():
+            _remove(t)
+
     def _finalize(self) -> None:
         group = zarr.open_group(str(self.tmp), mode="r+")
+        summary = jsonable(self.summary)
+        checksums = {}
+        for name, a in _walk_arrays(group):
+            checksums[name] = {"dtype": str(a.dtype), "shape": list(a.shape), **array_checksums(a)}
+        companions = {}
+        for dst in self.companions:
+            tmp = self._staged.get(dst)
+            if tmp is None or not tmp.is_file():
+                raise RuntimeError(f"companion {dst} of {self.path} was not written")
+            companions[dst.name] = {"path": str(dst), "sha256": _sha256_file(tmp)}
+        ids = self.input_identities()
         meta = {
             "kind": self.kind,
             "schema": f"loomlight/{self.kind}",
             "schema_version": SCHEMA_VERSION,
             "stage": self.stage,
             "params": self.params,
-            "inputs": {n: {"path": p, "sha256": self.input_hashes[n]} for n, p in self.inputs.items()},
-            "build_key": self.key,
+            "inputs": {n: {"path": p, "sha256": ids[n], "stat": self._stats[n]} for n, (p, _) in self.inputs.items()},
+            "build_key": build_key(self.kind, self.stage, self.params, ids),
             "loomlight_version": __version__,
             "wall_time_s": time.perf_counter() - self._t0,
             "peak_memory_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-            "content_hash": self._content_hash(group),
+            "arrays": checksums,
+            "content_hash": content_digest(self.kind, summary, checksums),
             "complete": True,
         }
-        summary = jsonable(self.summary)
+        if companions:
+            meta["companions"] = companions
         _check_schema(self.tmp, meta, summary, group)
         group.attrs["summary"] = summary
         group.attrs["loomlight"] = meta
-        _publish(self.tmp, self.path)
-
-    def _content_hash(self, group) -> str:
-        h = hashlib.sha256()
-        h.update(self.kind.encode())
-        h.update(_canonical(jsonable(self.summary)).encode())
-        hash_arrays(group, h)
-        return h.hexdigest()
+        pause_point("built")
+        if self._staged:
+            _publish_set([(t, d) for d, t in self._staged.items()] + [(self.tmp, self.path)], self.path)
+        else:
+            _publish(self.tmp, self.path)
 
 
-def hash_arrays(group, h) -> None:
-    """Feed every array of a zarr group (name, dtype, shape, bytes; sorted, sub-groups too) to hash h."""
-    def walk(g, prefix=""):
-        for name, a in sorted(g.arrays(), key=lambda t: t[0]):
-            h.update(f"{prefix}{name}:{a.dtype}:{a.shape}".encode())
-            h.update(np.ascontiguousarray(a[...]).tobytes())
-        for name, sub in sorted(g.groups(), key=lambda t: t[0]):
-            walk(sub, prefix + name + "/")
-    walk(group)
+def _recorded_inputs(path: Path) -> dict | None:
+    try:
+        return read_meta(path).get("inputs")
+    except LoomError:
+        return None
+
+
+def _loose_meta(path: Path):
+    """The 'loomlight' attributes of a directory, complete or not; None when it has none."""
+    try:
+        return _root_attrs(path).get("loomlight")
+    except LoomError:
+        return None
 
 
 def _publish(tmp: Path, path: Path) -> None:
@@ -357,12 +630,52 @@ def _publish(tmp: Path, path: Path) -> None:
         if _exchange(tmp, path):
             shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the previous artifact
             return
-        old = path.parent / f".{path.name}.old-{uuid.uuid4().hex[:8]}"
+        old = temp_sibling(path, "old")
         os.rename(path, old)
         os.rename(tmp, path)
         shutil.rmtree(old, ignore_errors=True)
     else:
         os.rename(tmp, path)
+
+
+def _move(tmp: Path, dst: Path) -> None:
+    if tmp.is_dir():
+        _publish(tmp, dst)
+    else:
+        os.replace(tmp, dst)
+
+
+def _publish_set(moves: list[tuple[Path, Path]], path: Path) -> None:
+    """Publish complete temporaries (files first, the artifact directory last) as one set: a journal
+    listing the moves is written first (with the new directory's zarr.json digest, to tell it from the
+    previous artifact an exchange leaves in its place), so the next writer of ``path`` finishes a
+    publication a kill interrupted."""
+    entries = [[str(t), str(d), _sha256_file(t / "zarr.json") if t.is_dir() else None] for t, d in moves]
+    journal = temp_sibling(path, "publish").with_suffix(".json")
+    tmp = temp_sibling(path).with_suffix(".json")
+    tmp.write_text(json.dumps(entries))
+    os.replace(tmp, journal)
+    pause_point("journal")
+    for i, (t, d) in enumerate(moves):
+        _move(t, d)
+        if i == 0:
+            pause_point("half-published")
+    journal.unlink()
+
+
+def _roll_forward(journal: Path) -> None:
+    """Finish the moves a killed publication listed (those whose temporary is still the new one)."""
+    try:
+        entries = json.loads(journal.read_text())
+    except (OSError, ValueError):
+        entries = []
+    for t, d, digest in entries:
+        t, d = Path(t), Path(d)
+        if t.is_dir() and (not (t / "zarr.json").is_file() or _sha256_file(t / "zarr.json") != digest):
+            continue  # the previous artifact, exchanged out: clean_stale removes it
+        if t.exists():
+            _move(t, d)
+    journal.unlink(missing_ok=True)
 
 
 def _fill(dtype: np.dtype):

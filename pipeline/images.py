@@ -1,38 +1,51 @@
-"""Image output: linear float32 OpenEXR plus an sRGB PNG preview, both written atomically."""
+"""Image output: linear float32 OpenEXR plus an sRGB PNG preview, each written atomically (to a
+hidden temporary beside it, then renamed), or into a temporary the caller publishes (``into``: a
+render publishes its EXR, PNG and render artifact as one set, ``pipeline.artifacts``)."""
 from __future__ import annotations
 
 import os
-import uuid
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
 from .errors import LoomError
 
 
-def _tmp(path: Path) -> Path:
-    return path.parent / f".{path.name}.tmp-{os.getpid()}-{uuid.uuid4().hex[:8]}{path.suffix}"
+def _write_atomic(path: Path, write: Callable[[Path], None], into: Path | None = None) -> Path:
+    """``write(tmp)`` to a temporary beside ``path``, then rename it into place; with ``into``, write
+    there and leave the publishing to the caller."""
+    from .artifacts import temp_sibling
 
-
-def write_exr(path: str | Path, rgb: np.ndarray, extra: dict[str, np.ndarray] | None = None) -> Path:
-    """Linear RGB (H, W, 3) as float32 OpenEXR (ZIP); ``extra`` adds named single channels (A, depth, ...)."""
-    import OpenEXR
-
-    path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    channels = {"RGB": np.ascontiguousarray(rgb, dtype=np.float32)}
-    for k, v in (extra or {}).items():
-        channels[k] = np.ascontiguousarray(v, dtype=np.float32)
-    tmp = _tmp(path)
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    if into is not None:
+        write(into)
+        return into
+    tmp = temp_sibling(path)
     try:
-        with OpenEXR.File(header, channels) as f:
-            f.write(str(tmp))
+        write(tmp)
         os.replace(tmp, path)
     finally:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+def write_exr(path: str | Path, rgb: np.ndarray, extra: dict[str, np.ndarray] | None = None,
+              into: Path | None = None) -> Path:
+    """Linear RGB (H, W, 3) as float32 OpenEXR (ZIP); ``extra`` adds named single channels (A, depth, ...)."""
+    import OpenEXR
+
+    channels = {"RGB": np.ascontiguousarray(rgb, dtype=np.float32)}
+    for k, v in (extra or {}).items():
+        channels[k] = np.ascontiguousarray(v, dtype=np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+
+    def write(tmp: Path) -> None:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+
+    return _write_atomic(Path(path), write, into)
 
 
 def read_exr(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -65,24 +78,18 @@ def to_srgb8(rgb: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     return np.round(np.clip(enc, 0, 1) * 255.0).astype(np.uint8)
 
 
-def write_png(path: str | Path, img8: np.ndarray) -> Path:
+def write_png(path: str | Path, img8: np.ndarray, into: Path | None = None) -> Path:
     import matplotlib.image as mpimg
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = _tmp(path)
-    try:
-        mpimg.imsave(str(tmp), img8, format="png")
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
-    return path
+    return _write_atomic(Path(path), lambda tmp: mpimg.imsave(str(tmp), img8, format="png"), into)
 
 
-def write_render(exr_path: str | Path, rgb: np.ndarray, extra: dict | None = None, exposure: float = 0.0) -> tuple[Path, Path]:
-    """EXR at ``exr_path`` and its sRGB preview beside it (same stem, .png)."""
+def write_render(exr_path: str | Path, rgb: np.ndarray, extra: dict | None = None, exposure: float = 0.0,
+                 into: Callable[[Path], Path] | None = None) -> tuple[Path, Path]:
+    """EXR at ``exr_path`` and its sRGB preview beside it (same stem, .png); ``into(final path)`` gives
+    the temporaries to write them to instead (the caller publishes them)."""
     exr_path = Path(exr_path)
-    write_exr(exr_path, rgb, extra)
-    png = write_png(exr_path.with_suffix(".png"), to_srgb8(rgb, exposure))
-    return exr_path, png
+    png_path = exr_path.with_suffix(".png")
+    exr = write_exr(exr_path, rgb, extra, into(exr_path) if into else None)
+    png = write_png(png_path, to_srgb8(rgb, exposure), into(png_path) if into else None)
+    return exr, png

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import typer
 
+from ..memory import BUDGET_HELP
+
 
 def register(app: typer.Typer) -> None:
     @app.command("ingest")
@@ -20,11 +22,13 @@ def register(app: typer.Typer) -> None:
         frame_samples: int = typer.Option(4, "--frame-samples", min=1, help="Stored RMF samples per spline segment."),
         write: Path = typer.Option(None, "--write", help="Also write the validated curves as .bcc, .obj or .txt."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
         """Read, validate and spline yarn curves (C1 Catmull-Rom, arc length, rotation-minimising frames,
         seed 000 δ_i bound, segment grid) and publish them as a yarns artifact."""
         from ..limits import check_positive
         from ..outputs import ARTIFACT, check_output
+        from ..memory import budget as memory_budget
         from ..runners.ingest import run_ingest
 
         check_output(out, "-o", ARTIFACT)
@@ -33,6 +37,6 @@ def register(app: typer.Typer) -> None:
         check_positive(radius, "--radius")
         check_positive(scale, "--scale")
         res = run_ingest(input, out, radius=radius, scale=scale, merge_duplicates=not refuse_duplicates,
-                         force=force, write=write, frame_samples=frame_samples)
+                         force=force, write=write, frame_samples=frame_samples, budget=memory_budget(budget))
         if not res["skipped"]:
             typer.echo(f"wrote {out} ({res['curves']} curves)")

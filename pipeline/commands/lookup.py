@@ -5,6 +5,8 @@ from pathlib import Path
 
 import typer
 
+from ..memory import BUDGET_HELP
+
 
 def register(app: typer.Typer) -> None:
     @app.command("lookup")
@@ -12,12 +14,14 @@ def register(app: typer.Typer) -> None:
         tables: Path = typer.Argument(..., help="A tables artifact (loomlight tables)."),
         points: Path = typer.Option(..., "--points", help="(N, 3) float array of fabric-space points (.npy)."),
         out: Path = typer.Option(..., "-o", "--out", help="Output .npz: inside, yarn, kind, direction, density, albedo."),
+        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
         """Inside a fibre or not, yarn index (-1 outside), kind (0 none, 1 regular, 2 loop, 3 hair), unit fibre
         direction (zero outside), density and albedo, for every point."""
         from ..outputs import check_output
+        from ..memory import budget as memory_budget
         from ..runners.lookup import run_lookup
 
         check_output(out, "-o", suffixes=(".npz",))
-        res = run_lookup(tables, points, out)
+        res = run_lookup(tables, points, out, budget=memory_budget(budget))
         typer.echo(f"wrote {out} ({res['inside']} of {res['points']} points inside a fibre)")

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import typer
 
+from ..memory import BUDGET_HELP
+
 
 def register(app: typer.Typer) -> None:
     @app.command("realize")
@@ -15,19 +17,18 @@ def register(app: typer.Typer) -> None:
         radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers (as for tables)."),
         spacing: float = typer.Option(0.002, "--spacing", help="Largest step between vertices along z (scene units; positive, at most 1e6)."),
-        budget_mib: float = typer.Option(2048.0, "--budget", help="Refuse when the fibres would exceed this many MiB."),
+        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
     ):
         """Full realization (seed 000 Eq. 1-4 and 7): regular, loop and hair fibres with radius, yarn, ply and
         kind. The same random numbers as `loomlight tables`, so both describe one fabric."""
-        from ..limits import check_positive
+        from ..memory import budget as memory_budget
         from ..outputs import ARTIFACT, check_output
         from ..runners.realize import run_realize
 
         check_output(out, "-o", ARTIFACT)
-        check_positive(budget_mib, "--budget", upper=float("inf"))
         res = run_realize(yarns, out, preset=preset, radius=radius, seed=seed, spacing=spacing,
-                          budget=int(budget_mib * 2**20), force=force)
+                          budget=memory_budget(budget), force=force)
         if res["skipped"]:
             typer.echo(f"{out} is up to date; use --force to rebuild")
         else:

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import typer
 
+from ..memory import BUDGET_HELP
+
 
 def register(app: typer.Typer) -> None:
     @app.command("tables")
@@ -18,15 +20,17 @@ def register(app: typer.Typer) -> None:
         hair_mode: str = typer.Option("hybrid", "--hair-mode",
                                       help="'hybrid' (stored hair z extents, z-bins) or 'free' (Algorithm 3)."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
         """Per yarn type and ply: fibre trajectories binned by azimuth; per yarn: hair tables (hybrid mode);
         loops from consistent random numbers; plus a copy of the yarn curves, so renderers need only this."""
         from ..outputs import ARTIFACT, check_output
+        from ..memory import budget as memory_budget
         from ..runners.tables import run_tables
 
         check_output(out, "-o", ARTIFACT)
         res = run_tables(yarns, out, preset=preset, radius=radius, seed=seed, nbins=bins, hair_mode=hair_mode,
-                         force=force)
+                         force=force, budget=memory_budget(budget))
         if res["skipped"]:
             typer.echo(f"{out} is up to date; use --force to rebuild")
         else:

@@ -5,6 +5,8 @@ from pathlib import Path
 
 import typer
 
+from ..memory import BUDGET_HELP
+
 
 def register(app: typer.Typer) -> None:
     @app.command("tile")
@@ -13,15 +15,17 @@ def register(app: typer.Typer) -> None:
                                                 "exemplar weaves, yarn, block map, base surface, scene."),
         out: Path = typer.Option(..., "-o", "--out", help="Output tiling artifact (directory ending in .zarr)."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
         """Realize periodic fibre exemplars from weave drafts, cut them into blocks, lay the blocks over the
         cloth's (u, v) domain by the block map, and build the shell (base surface offset along its smoothed
         normals, split into tetrahedra) that maps them onto the surface."""
         from ..outputs import ARTIFACT, check_output
+        from ..memory import budget as memory_budget
         from ..runners.tile import run_tile
 
         check_output(out, "-o", ARTIFACT)
-        res = run_tile(config, out, force=force)
+        res = run_tile(config, out, force=force, budget=memory_budget(budget))
         if res["skipped"]:
             typer.echo(f"{out} is up to date")
         else:

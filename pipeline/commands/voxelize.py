@@ -13,6 +13,8 @@ from pathlib import Path
 
 import typer
 
+from ..memory import BUDGET_HELP
+
 
 def register(app: typer.Typer) -> None:
     @app.command("voxelize")
@@ -21,12 +23,14 @@ def register(app: typer.Typer) -> None:
                      res: tuple[int, int, int] = typer.Option(..., "--res", help="Voxels along x, y, z: NX NY NZ."),
                      supersample: int = typer.Option(2, "--supersample", help="Lookups per voxel along each axis."),
                      export_npy: Path = typer.Option(None, "--export-npy", help="Also write raw numpy volumes to this directory."),
-                     force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged.")):
+                     force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+                     budget: float = typer.Option(None, "--budget", help=BUDGET_HELP)):
         """Voxelize the procedural fibre medium: density and mean fibre direction per voxel."""
         from ..outputs import ARTIFACT, DIRECTORY, check_output
+        from ..memory import budget as memory_budget
         from ..runners.voxelize import run_voxelize
 
         check_output(out, "-o", ARTIFACT)
         if export_npy is not None:
             check_output(export_npy, "--export-npy", DIRECTORY)
-        typer.echo(run_voxelize(tables, out, res, supersample, export_npy, force))
+        typer.echo(run_voxelize(tables, out, res, supersample, export_npy, force, memory_budget(budget)))

@@ -163,7 +163,7 @@ class Evaluation:
 def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_dir: str | Path,
                     force: bool = False, title: str | None = None) -> Evaluation:
     from .. import report as rp
-    from ..artifacts import ArtifactWriter
+    from ..artifacts import FILE, ArtifactWriter
 
     ref_path = Path(ref_path)
     test_paths = [Path(p) for p in test_paths]
@@ -179,13 +179,13 @@ def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_
 
     ref_stats = render_stats(ref_path)
     test_stats = [render_stats(p) for p in test_paths]
-    inputs: dict[str, Path] = {"reference": ref_path}
+    inputs: dict[str, tuple] = {"reference": (ref_path, FILE)}
     if "render_artifact" in ref_stats:
-        inputs["reference_render"] = Path(ref_stats["render_artifact"])
+        inputs["reference_render"] = (Path(ref_stats["render_artifact"]), "render")
     for lab, p, st in zip(labels, test_paths, test_stats):
-        inputs[f"test:{lab}"] = p
+        inputs[f"test:{lab}"] = (p, FILE)
         if "render_artifact" in st:
-            inputs[f"render:{lab}"] = Path(st["render_artifact"])
+            inputs[f"render:{lab}"] = (Path(st["render_artifact"]), "render")
     params = {"mode": "images", "labels": labels, "relmse_eps": 0.01,
               "ssim": {"window": 11, "sigma": 1.5, "K1": 0.01, "K2": 0.03, "on": "srgb_luminance", "L": 1.0},
               "delta_e": {"formula": "CIE 2000", "input": "linear sRGB clipped to [0, 1]", "white": "D65"}}

@@ -7,13 +7,15 @@ publishes the ``yarns`` artifact.
 """
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
 
-from ..artifacts import ArtifactWriter
+from ..artifacts import FILE, ArtifactWriter
 from ..curveset import GROUPS, CurveSet
 from ..errors import LoomError
+from ..memory import Estimate, budget as memory_budget
 from ..limits import MAX_COORD, MAX_LENGTH, coordinate_problem, first_bad_row
 from ..progress import info, warn
 from ..scene import load_scene
@@ -119,24 +121,121 @@ def _estimate_radius(cs: CurveSet) -> float:
     return float(0.5 * np.median(seg)) if len(seg) else 1.0
 
 
+# ------------------------------------------------------------------------------------------------ memory
+POINT_BYTES = 140        # per control point: curve lists, float32/float64 copies, tangents, segments, grid items
+FRAME_BYTES = 40         # per frame sample (--frame-samples per segment): arc length, normal, twist
+FILE_BYTES = 8           # reading a curve file: its bytes, decoded, a few times over
+WIF_LINE_BYTES = 250     # a parsed WIF line: key, value and line number in the section dictionaries
+
+
+def curves_estimate(points: float, frame_samples: int, what: str = "loomlight ingest") -> Estimate:
+    """Splining ``points`` control points: frames, segment grid and the arrays of the yarns artifact."""
+    return Estimate(what).add("yarn curves", points * (POINT_BYTES + FRAME_BYTES * frame_samples),
+                              f"{int(points):,} control points")
+
+
+def woven_points(ends: float, picks: float, samples: int) -> float:
+    """Control points of a woven fabric (stages.core.curves.woven: (K - 1) s + 2 (s // 2) + 1 per yarn)."""
+    per = lambda k: (k - 1) * samples + 2 * (samples // 2) + 1  # noqa: E731
+    return ends * per(picks) + picks * per(ends)
+
+
+def _wif_counts(path: Path) -> dict:
+    """Declared (else largest used) ends, picks, shafts and treadles of a WIF draft, read from its section
+    dictionaries before any matrix is built; values the reader will refuse count as 0."""
+    from ..io.wif import parse_sections
+
+    s = parse_sections(path)
+
+    def declared(sec, key):
+        v = s.get(sec, {}).get(key, (None, None))[0]
+        try:
+            return max(0, int(str(v).replace(" ", "")))
+        except ValueError:
+            return 0
+
+    def used(sec):
+        keys, vals = [0], [0]
+        for k, (v, _) in s.get(sec, {}).items():
+            if k.isdigit():
+                keys.append(int(k))
+                vals += [int(x) for x in re.findall(r"\d+", v or "")]
+        return max(keys), max(vals)
+
+    th_key, th_val = used("threading")
+    pick_key, lift_val = used("liftplan" if "liftplan" in s else "treadling")
+    tu_key, tu_val = used("tieup")
+    return {"ends": max(declared("warp", "threads"), th_key), "picks": max(declared("weft", "threads"), pick_key),
+            "shafts": max(declared("weaving", "shafts"), th_val, tu_val, lift_val if "liftplan" in s else 0),
+            "treadles": max(declared("weaving", "treadles"), tu_key, 0 if "liftplan" in s else lift_val)}
+
+
+def wif_estimate(path: Path, frame_samples: int, repeat=None, max_threads=None, samples: int = 6) -> Estimate:
+    """A WIF draft's ingest: the parsed sections, the threading, lift and interlacement matrices (bool and
+    the int64 products of pipeline.io.wif / stages.ingest.weave), per-thread colours, then the woven curves
+    of the repeated, cropped draft."""
+    est = Estimate("loomlight ingest")
+    est.add("WIF sections", WIF_LINE_BYTES * path.stat().st_size / 4, path.name)
+    n = _wif_counts(path)
+    E, P, S, T = (float(n[k]) for k in ("ends", "picks", "shafts", "treadles"))
+    est.add("draft matrices", 9 * (E * S + P * S + P * T + T * S + E * P) + 8 * (E + P),
+            f"{int(E):,} ends x {int(P):,} picks, {int(S):,} shafts, {int(T):,} treadles")
+    rx, ry = (int(x) for x in repeat) if repeat is not None else (1, 1)
+    E, P = E * max(rx, 1), P * max(ry, 1)
+    if max_threads is not None and int(max_threads) >= 1:
+        E, P = min(E, int(max_threads)), min(P, int(max_threads))
+    est.add("repeated draft", 9 * E * P)
+    return est.extend(curves_estimate(woven_points(E, P, samples), frame_samples))
+
+
+def input_estimate(path: Path, frame_samples: int) -> Estimate:
+    """Memory of reading and splining an ingest input, from what it declares before anything is built: a
+    generator's ends, picks and samples, a WIF draft's thread, shaft and treadle counts, a curve file's size."""
+    if path.suffix.lower() == ".wif":
+        return wif_estimate(path, frame_samples)
+    if path.suffix.lower() != ".toml":
+        return Estimate("loomlight ingest").add("reading", FILE_BYTES * path.stat().st_size, path.name)
+    fab = load_scene(path).fabric
+    if fab["source"] == "wif":
+        return wif_estimate(Path(fab["path"]), frame_samples, fab.get("repeat"), fab.get("max_threads"))
+    if fab["source"] != "generator":
+        return input_estimate(Path(fab["path"]), frame_samples)
+    gen = fab["generator"]
+    ends, picks = float(gen.get("ends", 16)), float(gen.get("picks", 16))
+    if gen.get("kind") == "knit":
+        s = int(gen.get("samples_per_cell", 16))
+        pts = picks * (ends * s + 1)
+    else:
+        s = int(gen.get("samples_per_cell", 6))
+        pts = woven_points(ends, picks, s)
+    est = Estimate("loomlight ingest").add("generated curves", 64 * pts, f"{gen.get('kind')} {int(ends):,} x {int(picks):,}")
+    return est.extend(curves_estimate(pts, frame_samples))
+
+
 def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: float | None = None,
                merge_duplicates: bool = True, force: bool = False, write: Path | None = None,
-               frame_samples: int = 4) -> dict:
+               frame_samples: int = 4, budget=None) -> dict:
+    """Ingest (or skip when up to date); ``budget`` (``pipeline.memory.budget``): refuse an input whose
+    estimated peak memory exceeds it, before it is read (``input_estimate``) and again, from its control
+    points, before it is splined."""
     from stages.ingest.spline_process import process_curves
 
     input_path = Path(input_path)
     if not input_path.exists():
         raise LoomError(input_path, None, "input file not found")
+    limit = budget or memory_budget()
+    input_estimate(input_path, frame_samples).check(limit, input_path)
     cs, scene, extra_inputs = curves_from_input(input_path, radius, scale)
     params = {"input": str(input_path), "radius": radius, "scale": scale, "merge_duplicates": merge_duplicates,
               "frame_samples": frame_samples}
     writer = ArtifactWriter(out, kind="yarns", stage="ingest", params=params,
-                            inputs={"input": input_path, **extra_inputs})
+                            inputs={name: (p, FILE) for name, p in {"input": input_path, **extra_inputs}.items()})
     if writer.up_to_date() and not force and write is None:
         (Path(out) / "zarr.json").touch()
         info(f"{out} is up to date (same inputs and parameters); use --force to rebuild")
         return {"skipped": True}
     src_file = extra_inputs.get("fabric", input_path)
+    curves_estimate(sum(len(p) for p in cs.points), frame_samples).check(limit, src_file)
     cs = validate_curves(cs, src_file, merge_duplicates)
     if write is not None:
         from ..io import write_curves

@@ -10,17 +10,38 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def run_lookup(tables, points: Path, out: Path) -> dict:
-    """{"inside": points inside a fibre, "points": points looked up}."""
+POINT_BYTES = 200    # a point: read, as float64, its six results and their copies in the .npz
+
+
+def _npy_rows(path: Path) -> int:
+    """Rows of a .npy array from its header alone (0 when unreadable: np.load says why below)."""
     import numpy as np
 
+    try:
+        shape = np.load(path, mmap_mode="r", allow_pickle=False).shape
+    except (ValueError, OSError):
+        return 0
+    return int(shape[0]) if shape else 1
+
+
+def run_lookup(tables, points: Path, out: Path, budget=None) -> dict:
+    """{"inside": points inside a fibre, "points": points looked up}. ``budget`` (``pipeline.memory.budget``):
+    refuse before reading the points when they, their results and the loaded tables would exceed it."""
+    import numpy as np
+
+    from ..artifacts import Artifact, clean_stale, temp_sibling
     from ..errors import LoomError
-    from .tables import load_tables
+    from ..memory import budget as memory_budget
+    from .tables import accel_estimate, load_tables
     from stages.core.yarn.lookup import lookup_points
 
     points, out = Path(points), Path(out)
     if not points.exists():
         raise LoomError(points, None, "file not found")
+    clean_stale(out)
+    est = accel_estimate(Artifact(tables, kind="tables"), "loomlight lookup")
+    n = _npy_rows(points)
+    est.add("points", float(POINT_BYTES) * n, f"{n:,} points").check(budget or memory_budget(), points)
     try:
         pts = np.load(points, allow_pickle=False)
     except (ValueError, OSError) as e:
@@ -34,7 +55,7 @@ def run_lookup(tables, points: Path, out: Path) -> dict:
     if out.suffix != ".npz":
         raise LoomError(out, None, "the output file must end in .npz")
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp.npz")
+    tmp = temp_sibling(out)
     np.savez(tmp, inside=res.inside, yarn=res.yarn.astype(np.int64), kind=res.kind.astype(np.int64),
              direction=res.direction, density=res.density, albedo=res.albedo)
     tmp.replace(out)

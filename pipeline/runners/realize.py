@@ -2,9 +2,14 @@
 
 ``run_realize`` builds the tables (``pipeline.runners.tables.build``: the same random numbers as
 ``loomlight tables``, so both describe one fabric), counts the full realization before building it
-(``realized_size``: 16 bytes a vertex, 19 bytes a fibre) and refuses one over the memory budget,
-then realizes regular, loop and hair fibres (``stages.procedural.realize``) and publishes them with
-radius, yarn, ply, kind and index per fibre.
+(``realized_size``: 16 bytes a vertex, 19 bytes a fibre), then realizes regular, loop and hair fibres
+(``stages.procedural.realize``) block by block of pieces (float64 vertices, converted to the stored
+float32 per block) and publishes them with radius, yarn, ply, kind and index per fibre.
+
+Memory: before anything is built the peak is estimated from the yarns artifact, the yarn types and
+the spacing (``realization_estimate``: the tables build plus the expected vertices and pieces) and
+refused past the budget; once the tables exist the exact counts (``realized_size``, the plan's
+per-yarn capacities) are checked again before the plan and the vertices are allocated.
 """
 from __future__ import annotations
 
@@ -13,14 +18,17 @@ from typing import NamedTuple
 import numpy as np
 
 from ..artifacts import ArtifactWriter
-from ..errors import LoomError
-from .tables import build, check_options
+from ..memory import Estimate, budget as memory_budget
+from .tables import build, check_options, prepare, slot_hairs, tables_estimate
 from .yarn_types import type_summary
 
 DEFAULT_SPACING = 0.002       # cm between realized vertices along the yarn (z_step_size / 5)
-DEFAULT_BUDGET = 2 << 30      # bytes a realization may occupy
 FIBER_VERTEX_BYTES = 16       # float32 xyz + float32 radius
 FIBER_BYTES = 8 + 4 + 2 + 1 + 4  # offset, yarn, ply, kind, index
+PLAN_BYTES = 47               # yarn_plan's columns per piece of capacity (ply, index, kind, a0, a1, hair z1/ze, nv)
+PIECE_BYTES = 2 * PLAN_BYTES + 4 + FIBER_BYTES  # the concatenated plan beside the per-yarn buffers, + the stored columns
+BLOCK_VERTICES = 1 << 19      # vertices realized (float64) and measured (chord_error) per block
+BLOCK_BYTES = BLOCK_VERTICES * (32 + 150)  # a block's float64 vertices and radii, chord_error's temporaries
 
 
 class RealizedSize(NamedTuple):
@@ -48,35 +56,95 @@ def realized_size(tab, curve_length, spacing) -> RealizedSize:
     return RealizedSize(nv * FIBER_VERTEX_BYTES + nf * FIBER_BYTES, nv, nf, per_kind, fibres_kind)
 
 
-def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAULT_SPACING,
-                budget=DEFAULT_BUDGET, force=False):
-    from stages.procedural.realize import chord_error, realize_fill
+def _plan_capacity(tp, length, hairs) -> np.ndarray:
+    """yarn_plan's buffer capacity (pieces) for yarns of one type with these lengths and hair counts."""
+    from stages.core.yarn import model as M
 
-    check_options(preset, radius, spacing=spacing, budget=budget)
+    length = np.asarray(length, np.float64)
+    ncyc = np.floor(length * tp[M.S_MIG] / tp[M.ALPHA]) + 4 if tp[M.USE_MIGRATION] else np.full(len(length), 3.0)
+    return float(tp[M.PLY_NUM]) * float(tp[M.FIBER_NUM]) * (2 * ncyc + 2) + hairs + 1
+
+
+def _vertex_parts(est: Estimate, vertices: float, pieces: float, capacity: float) -> Estimate:
+    est.add("realized fibres", vertices * FIBER_VERTEX_BYTES + pieces * PIECE_BYTES + capacity * PLAN_BYTES
+            + min(vertices, BLOCK_VERTICES) / BLOCK_VERTICES * BLOCK_BYTES,
+            f"{int(vertices):,} vertices, {int(pieces):,} fibres")
+    return est
+
+
+def realization_estimate(prep, spacing: float) -> Estimate:
+    """The realization's memory from the yarn types and lengths alone (expected counts): per regular
+    fibre its length over the spacing plus one vertex per piece (two more pieces per loop), per hair
+    its expected yarn-space length over the spacing, the plan's per-yarn buffers."""
+    from stages.core.yarn import model as M
+
+    est = Estimate("loomlight realize")
+    verts = pieces = cap = 0.0
+    for t, tp in enumerate(prep.types.tparams):
+        L = prep.curve_length[prep.types.yarn_type == t]
+        if not len(L):
+            continue
+        P, N = float(tp[M.PLY_NUM]), float(tp[M.FIBER_NUM])
+        loops = tp[M.P_LOOP] * (L * tp[M.S_MIG] / tp[M.ALPHA] + 2) if tp[M.USE_FLYAWAYS] and tp[M.USE_MIGRATION] else 0 * L
+        fib_pieces = P * N * (1 + 2 * loops)
+        verts += float(np.sum(P * N * L / spacing + fib_pieces))
+        pieces += float(np.sum(fib_pieces))
+        n = slot_hairs(tp, L)
+        rm = tp[M.HAIR_RMAX] + tp[M.PLY_RADIUS]
+        rms = lambda mu, sig: float(np.hypot(tp[mu], tp[sig]))  # noqa: E731
+        speed = (rms(M.ZE_MU, M.ZE_SIG) * (1 + rm * 2 * np.pi / tp[M.YARN_ALPHA]) + rms(M.RE_MU, M.RE_SIG)
+                 + tp[M.HAIR_RMAX] * rms(M.PE_MU, M.PE_SIG))
+        verts += float(np.sum(P * n * (speed / spacing + 2)))
+        pieces += float(np.sum(P * n))
+        cap += float(np.sum(_plan_capacity(tp, L, P * n)))
+    return _vertex_parts(est, verts, pieces, cap)
+
+
+def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAULT_SPACING,
+                budget=None, force=False):
+    """Build (or skip when up to date) the fibers artifact; ``budget`` (``pipeline.memory.budget``, default
+    a fraction of the available memory): refuse before building when the estimated peak exceeds it."""
+    from stages.procedural.realize import chord_error, realize_fill, realize_plan
+
+    check_options(preset, radius, spacing=spacing)
     params = {"preset": preset, "radius": radius, "seed": int(seed), "spacing": float(spacing)}
-    w = ArtifactWriter(out, kind="fibers", stage="realize", params=params, inputs={"yarns": yarns_path})
+    w = ArtifactWriter(out, kind="fibers", stage="realize", params=params, inputs={"yarns": (yarns_path, "yarns")})
     if w.up_to_date() and not force:
         return {"skipped": True}
-    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, hair_mode="hybrid")
+    limit = budget or memory_budget()
+    prep = prepare(yarns_path, preset, radius)
+    tables_estimate(prep, 32, "hybrid", what="loomlight realize").extend(realization_estimate(prep, spacing)).check(
+        limit, prep.yarns.path)
+    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, hair_mode="hybrid", derive=False,
+                                        prepared=prep)
     nbytes, verts, nfib, per_kind, fib_kind = realized_size(tab, cv.curve_length, spacing)
-    if nbytes > budget:
-        raise LoomError(out, "--budget", f"the realization would take {nbytes / 2**20:.1f} MiB ({verts} vertices, "
-                        f"{nfib} fibres), over the budget of {budget / 2**20:.1f} MiB; raise --budget or --spacing")
-    from stages.procedural.realize import realize_plan
+    hairs = np.add.reduceat(tab.hair_count, tab.yarn_ply_off[:-1]) if len(tab.yarn_type) else np.zeros(0)
+    cap = sum(float(_plan_capacity(tab.tparams[t], cv.curve_length[c:c + 1], hairs[c])[0])
+              for c, t in enumerate(tab.yarn_type))
+    exact = Estimate("loomlight realize").add("tables", sum(np.asarray(a).nbytes for a in tab) + sum(np.asarray(a).nbytes for a in cv))
+    _vertex_parts(exact, verts, nfib, cap).check(limit, yarns.path)
 
     yarn, ply, idx, kind, a0, a1, hz1, hze, nv = realize_plan(tab, cv.curve_length, spacing)
     assert int(nv.sum()) == verts and len(nv) == nfib
     offsets = np.zeros(len(nv) + 1, np.int64)
     np.cumsum(nv, out=offsets[1:])
-    pts = np.empty((verts, 3))
-    rad = np.empty(verts)
-    realize_fill(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, offsets, pts, rad)
-    pts32 = pts.astype(np.float32)
-    del pts
-    sag, turn = chord_error(pts32, offsets)
+    pts32 = np.empty((verts, 3), np.float32)
+    rad32 = np.empty(verts, np.float32)
+    sag = turn = 0.0
+    for a, b in _blocks(offsets):
+        lo, hi = offsets[a], offsets[b]
+        pts = np.empty((hi - lo, 3))
+        rad = np.empty(hi - lo)
+        realize_fill(cv, tab, yarn[a:b], ply[a:b], idx[a:b], kind[a:b], a0[a:b], a1[a:b], hz1[a:b], hze[a:b],
+                     offsets[a:b + 1] - lo, pts, rad)
+        pts32[lo:hi] = pts
+        rad32[lo:hi] = rad
+        del pts, rad
+        s, r = chord_error(pts32[lo:hi], offsets[a:b + 1] - lo)
+        sag, turn = max(sag, s), max(turn, r)
     with w:
         w.write("points", pts32, dimension_names=("point", "xyz"))
-        w.write("point_radius", rad.astype(np.float32))
+        w.write("point_radius", rad32)
         w.write("fiber_offsets", offsets)
         w.write("fiber_yarn", yarn.astype(np.int32))
         w.write("fiber_ply", ply.astype(np.int16))
@@ -95,3 +163,14 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
             "yarn_types": type_summary(dicts),
         })
     return {"skipped": False, "fibers": int(nfib), "vertices": int(verts), "bytes": int(nbytes)}
+
+
+def _blocks(offsets):
+    """(first piece, end piece) of consecutive pieces holding about BLOCK_VERTICES vertices each."""
+    n = len(offsets) - 1
+    a = 0
+    while a < n:
+        b = int(np.searchsorted(offsets, offsets[a] + BLOCK_VERTICES, side="right")) - 1
+        b = min(n, max(b, a + 1))
+        yield a, b
+        a = b

@@ -6,6 +6,12 @@ segment grid is padded by each yarn's fibre-extent bound (hairs reach beyond the
 ``load_tables(path)`` gives the (Curves, Tables) pair the lookup kernels take. ``build`` makes the
 same (Curves, Tables) in memory from a yarns artifact (the realize runner and Table 1 use it);
 ``check_options`` checks the options the tables and realize commands share.
+
+Memory: ``tables_estimate`` counts the build's peak from the yarns artifact and the packed yarn types
+alone (plies x fibres x bins, hairs and loops per unit length times the yarn lengths, per-ply
+bookkeeping), so ``run_tables`` (and ``run_realize``) refuse an oversized build before it starts;
+``accel_estimate`` counts what loading a tables artifact derives (frame samples, chord grid) from its
+small per-yarn arrays, for the stages that load tables.
 """
 from __future__ import annotations
 
@@ -17,8 +23,13 @@ import numpy as np
 from ..artifacts import Artifact, ArtifactWriter
 from ..errors import LoomError
 from ..limits import check_positive
+from ..memory import Estimate, budget as memory_budget
 from ..yarns import CURVE_ARRAYS, curves_from_group
-from .yarn_types import type_summary, yarn_types_of
+from .yarn_types import YarnTypes, type_summary, yarn_types_of
+
+FOLD_CAP = 0.5             # build_tables' cap on kappa x extent: g_min >= 1 - FOLD_CAP
+SLOT_BYTES = 1200          # per (yarn, ply): the dozen small arrays and list entries the build keeps
+PY_ARRAY_BYTES = 150       # a small numpy array in a Python list (header, list slot, bin start)
 
 
 class BuiltTables(NamedTuple):
@@ -41,15 +52,28 @@ def padded_curves(get, extent):
                        grid_items=np.asarray(gitems, np.int32), grid_pad=pad)
 
 
-def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", derive=True) -> BuiltTables:
+class Prepared(NamedTuple):
+    yarns: Artifact
+    types: YarnTypes
+    curve_length: np.ndarray   # (Y,) arc length of every yarn
+
+
+def prepare(yarns_path, preset=None, radius=None) -> Prepared:
+    """The yarns artifact and its resolved yarn types: what the estimates and the build start from."""
+    yarns = Artifact(yarns_path, kind="yarns")
+    types = yarn_types_of(yarns, preset, radius)
+    return Prepared(yarns, types, np.asarray(yarns["curve_length"], np.float64))
+
+
+def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", derive=True,
+          prepared: Prepared | None = None) -> BuiltTables:
     """(cv, tab, info, type dicts, yarns artifact) for a yarns artifact; derive: also the lookups'
     load-time structures (tables.derive_lookup_accel)."""
     from stages.procedural.tables import build_tables
     from stages.core.yarn.accel import derive_lookup_accel
     from stages.core.yarn.model import extent_bound
 
-    yarns = Artifact(yarns_path, kind="yarns")
-    dicts, tparams, ytype, albedo = yarn_types_of(yarns, preset, radius)
+    yarns, (dicts, tparams, ytype, albedo), _ = prepared or prepare(yarns_path, preset, radius)
     ext = np.array([extent_bound(tparams[t]) for t in ytype])
     cv = padded_curves(lambda n: yarns[n], ext)
     mode = {"hybrid": 0, "free": 1}[hair_mode]
@@ -57,6 +81,99 @@ def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hyb
     if derive:
         tab = derive_lookup_accel(cv, tab)
     return BuiltTables(cv, tab, info, dicts, yarns)
+
+
+def _rms(tp, mu, sig):
+    return float(np.hypot(tp[mu], tp[sig]))
+
+
+def slot_hairs(tp, length) -> np.ndarray:
+    """Hairs per ply of yarns of these lengths (tables.hair_count's rule), as floats (no overflow)."""
+    from stages.core.yarn import model as M
+
+    return np.round(tp[M.HAIR_DENSITY] * np.asarray(length, np.float64)) if tp[M.USE_FLYAWAYS] else np.zeros(len(length))
+
+
+def _bin_fraction(tp, nbins: int) -> float:
+    """Mean fraction of a ply's azimuth bins a regular fibre is listed in (regular_tables' rule, with the
+    largest reach factor the fold cap allows and fibre radii spread uniformly over the disc)."""
+    from stages.core.yarn import model as M
+    from stages.core.yarn.tables import PAD_FRACTION
+
+    K = M.reach_factor(M.transverse_speed_bound(tp), 1.0 - FOLD_CAP)
+    m = K * tp[M.FIBER_RADIUS] * (1.0 + PAD_FRACTION) / min(tp[M.E_SHORT], tp[M.E_LONG])
+    R = tp[M.R_MAX] * np.sqrt((np.arange(64) + 0.5) / 64.0)
+    lo = (tp[M.RHO_MIN] if tp[M.USE_MIGRATION] else 1.0) * R
+    reach = np.where(lo > m, np.arcsin(np.minimum(1.0, m / np.maximum(lo, 1e-300))), np.pi)
+    return float(np.mean(np.minimum(1.0, reach / np.pi + 2.0 / nbins)))
+
+
+def tables_estimate(prep: Prepared, nbins: int, hair_mode: str, what: str = "loomlight tables") -> Estimate:
+    """Peak memory of ``build(..., derive=False)`` from the yarns artifact and yarn types alone: the
+    curves with their padded grid, per type the regular fibres and their azimuth bins (regular_tables:
+    (bins x fibres) float temporaries per ply, one small array per bin), per (yarn, ply) the hybrid hairs
+    (stored z extents, shapes and bin lists, twice while concatenated, plus the slot's Python shape
+    list), the loops and their z-bins, and the per-ply bookkeeping."""
+    from stages.core.yarn import model as M
+
+    est = Estimate(what)
+    yarns, types, length = prep
+    est.add("yarn curves", 3 * yarns.nbytes(), f"{len(length)} yarns")
+    B = int(nbins)
+    for t, tp in enumerate(types.tparams):
+        P, N = float(tp[M.PLY_NUM]), float(tp[M.FIBER_NUM])
+        items = P * N * B * _bin_fraction(tp, B)
+        nbytes = 96 * P * N + 25 * B * N + (PY_ARRAY_BYTES + 16) * P * B + 8 * items
+        est.add(f"regular fibres of {types.dicts[t].get('name', t)}", nbytes,
+                f"{int(P)} plies x {int(N)} fibres x {B} bins")
+    hairs = loops = slots = slot_peak = 0.0
+    for t, tp in enumerate(types.tparams):
+        L = length[types.yarn_type == t]
+        if not len(L):
+            continue
+        P, N = float(tp[M.PLY_NUM]), float(tp[M.FIBER_NUM])
+        slots += P * len(L)
+        if hair_mode == "hybrid":
+            n = slot_hairs(tp, L)
+            overlap = 1.0 + 2.0 * tp[M.HAIR_DENSITY] * (_rms(tp, M.ZE_MU, M.ZE_SIG) + 2.2 * tp[M.FIBER_RADIUS])
+            hairs += P * float(n.sum()) * (2 * (80 + 4 * overlap) + 32)
+            slot_peak = max(slot_peak, 256.0 * float(n.max()))
+        if tp[M.USE_FLYAWAYS] and tp[M.USE_MIGRATION] and tp[M.P_LOOP] > 0:
+            loops += P * float(np.sum(tp[M.P_LOOP] * N * (L * tp[M.S_MIG] / tp[M.ALPHA] + 2))) * 96
+        zbin = 0.5 * tp[M.ALPHA] / max(tp[M.S_MIG], 1e-12)
+        loops += P * float(np.sum(np.ceil(L / zbin) + 1)) * 64
+    est.add("hairs", hairs + slot_peak, "hybrid z extents, shapes and z-bins")
+    est.add("loops", loops, "mutated cycles and their z-bins")
+    est.add("per-ply bookkeeping", SLOT_BYTES * slots, f"{int(slots)} (yarn, ply) slots")
+    return est
+
+
+def accel_estimate(art: Artifact, what: str) -> Estimate:
+    """Memory of loading a tables artifact: its stored arrays plus what derive_lookup_accel builds
+    (frame samples at the error-bounded step of every yarn, twice while resampled; the chord grid;
+    per-fibre, per-hair and fringe bounds), from the artifact's small per-yarn arrays."""
+    from stages.core.yarn import model as M
+    from stages.core.yarn.tables import FO_ZBIN_EXTENTS, FRAME_TOLERANCE
+
+    est = Estimate(what)
+    est.add("stored tables", 2 * art.nbytes(), art.path.name)
+    tp, ytype = art["tparams"], art["yarn_type"]
+    length, ext, kap = art["yarn_length"], art["yarn_extent"], art["yarn_kappa"]
+    radius = art["curves/radius"][:len(ytype)]
+    k2 = kap * kap * ext + kap
+    step = np.maximum(np.minimum(0.5 * radius, np.sqrt(8.0 * FRAME_TOLERANCE * tp[ytype, M.FIBER_RADIUS]
+                                                       / np.maximum(k2, 1e-12))), 1e-3 * radius)
+    samples = float(np.sum(length / step + 2))
+    est.add("frame samples", 2 * 120 * samples, f"{int(samples)} samples")
+    pts = art["curves/points"]
+    if len(pts) and len(ext):
+        box = pts.max(0) - pts.min(0) + 2 * ext.max()
+        cells = float(min(1 << 23, np.prod(np.ceil(box / (0.5 * ext.max())))))
+        stride = max(1.0, 0.5 * float(ext.min()) / float(np.mean(step)))
+        est.add("chord grid", 8 * cells + 27 * 24 * samples / stride, f"{int(cells)} cells")
+        est.add("fringe and bounds", 64 * float(np.sum(length / (FO_ZBIN_EXTENTS * ext) + 1))
+                + 8 * len(art["fib_R"]) + 40 * len(art["hair_z1"]) + 24 * len(art["lz_start"]))
+    return est
 
 
 def check_options(preset, radius, nbins=None, spacing=None, budget=None):
@@ -71,17 +188,22 @@ def check_options(preset, radius, nbins=None, spacing=None, budget=None):
     check_positive(budget, "--budget", upper=math.inf)
 
 
-def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False):
+def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False,
+               budget=None):
+    """Build (or skip when up to date) the tables artifact; ``budget`` (``pipeline.memory.budget``):
+    refuse before building when the estimated peak memory exceeds it."""
     from stages.core.yarn.tables import STORED_FIELDS, table_bytes
 
     check_options(preset, radius, nbins)
     if hair_mode not in ("hybrid", "free"):
         raise LoomError(None, "--hair-mode", f"must be 'hybrid' or 'free', got {hair_mode!r}")
     params = {"preset": preset, "radius": radius, "seed": int(seed), "bins": int(nbins), "hair_mode": hair_mode}
-    w = ArtifactWriter(out, kind="tables", stage="tables", params=params, inputs={"yarns": yarns_path})
+    w = ArtifactWriter(out, kind="tables", stage="tables", params=params, inputs={"yarns": (yarns_path, "yarns")})
     if w.up_to_date() and not force:
         return {"skipped": True}
-    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode, derive=False)
+    prep = prepare(yarns_path, preset, radius)
+    tables_estimate(prep, nbins, hair_mode).check(budget or memory_budget(), prep.yarns.path)
+    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode, derive=False, prepared=prep)
     parts = table_bytes(tab)
     with w:
         for name in STORED_FIELDS:

@@ -4,7 +4,8 @@ Configuration (``schemas/tile-config.schema.json``; relative paths against the f
   scene            scene file with camera / lights / render settings for rendering the tiling
   seed             random seed of the fibre realization (default 0)
   [yarn]           preset (data/yarns, default cotton1), radius (yarn radius, default spacing / 2.2),
-                   fibers_per_ply (override the preset's fibre count), fiber_radius,
+                   fibers_per_ply (override the preset's fibre count; the fibre radius follows at the packing
+                   fraction, pipeline/presets.py), fiber_radius (overrides that),
                    segment_length (fibre polyline step; default min pitch / 12), use_migration
   [weave]          spacing = [warp, weft] thread spacing (default [0.1, 0.1]), crimp (default 1),
                    block_cells = [bx, by] weave cells per block (default [1, 1])
@@ -30,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
+from ..memory import Estimate, budget as memory_budget
 from ..schemas import validate
 from ..toml_file import read_toml
 from .tile_exemplars import DEFAULT_SPACING, build_exemplars, exemplar_interlacement
@@ -54,13 +56,44 @@ def load_config(path) -> dict:
     return cfg
 
 
+# ------------------------------------------------------------------------------------------------ memory
+TRIANGLE_BYTES = 1400   # a base triangle: its three shell tetrahedra (vertices, neighbours, planes, both affine maps)
+VERTEX_BYTES = 200      # an exemplar fibre vertex: realized, wrapped, blocked, concatenated
+
+
+def tile_estimate(cfg, config: Path, overs, nbu: int, nbv: int) -> Estimate:
+    """The tile stage's peak from its configuration: the block map, the base mesh and its shell
+    (two triangles per surface cell, three tetrahedra per triangle; an OBJ surface by its file size) and
+    every exemplar's fibres (plies x fibres per yarn, a vertex per polyline step along its length)."""
+    from stages.core.yarn import model as M
+
+    from .tile_exemplars import yarn_params
+
+    est = Estimate("loomlight tile")
+    est.add("block map", 16.0 * nbu * nbv, f"{nbu} x {nbv} blocks")
+    s = cfg["surface"]
+    if s["kind"] == "obj":
+        tris = Path(s["path"]).stat().st_size / 10.0 if Path(s["path"]).exists() else 0.0
+    else:
+        nu, nv = s.get("resolution") or {"flat": (8, 8), "cylinder": (32, 8)}.get(s["kind"], (32, 32))
+        tris = 2.0 * nu * nv
+    est.add("shell", TRIANGLE_BYTES * tris, f"{int(tris):,} base triangles")
+    tp, _, seg, _ = yarn_params(cfg, config)
+    sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
+    fibres = tp[M.PLY_NUM] * tp[M.FIBER_NUM]
+    verts = sum(fibres * (E * (P * sy * 1.5 / seg + 2) + P * (E * sx * 1.5 / seg + 2)) for E, P in
+                (o.shape for o in overs))
+    est.add("exemplar fibres", VERTEX_BYTES * verts, f"{int(verts):,} vertices")
+    return est
+
+
 # ------------------------------------------------------------------------------------------------ run
-def run_tile(config, out, force: bool = False) -> dict:
+def run_tile(config, out, force: bool = False, budget=None) -> dict:
     from stages.tile.base_surfaces import triangle_checks, vertex_normals
     from stages.tile.shell import build_shell
     from stages.tile.tiling import block_grid
 
-    from ..artifacts import ArtifactWriter
+    from ..artifacts import FILE, ArtifactWriter
 
     config = Path(config)
     cfg = load_config(config)
@@ -80,7 +113,8 @@ def run_tile(config, out, force: bool = False) -> dict:
     for name, p in inputs.items():
         if not Path(p).exists():
             raise LoomError(config, name if name != "config" else None, f"file not found: {p}")
-    w = ArtifactWriter(out, kind="tiling", stage="tile", params={"config": cfg}, inputs=inputs)
+    w = ArtifactWriter(out, kind="tiling", stage="tile", params={"config": cfg},
+                       inputs={name: (p, FILE) for name, p in inputs.items()})
     if not force and w.up_to_date():
         return {"skipped": True}
 
@@ -90,6 +124,7 @@ def run_tile(config, out, force: bool = False) -> dict:
     overs = [exemplar_interlacement(ex, config, f"exemplars[{k}]") for k, ex in enumerate(exs_cfg)]
     bcx, bcy = cfg.get("weave", {}).get("block_cells", [1, 1])
     nbu, nbv = block_grid(cfg.get("tiling", {}).get("repeat", [2, 2]), (overs[0].shape[0] // bcx, overs[0].shape[1] // bcy))
+    tile_estimate(cfg, config, overs, nbu, nbv).check(budget or memory_budget(), config)
     bmap = block_map(cfg, config, K, nbu, nbv)
     sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
     bw, bh = bcx * sx, bcy * sy

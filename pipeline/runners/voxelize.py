@@ -10,11 +10,18 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False):
-    """Build (or skip when up to date) the grid artifact; returns a summary line."""
+VOXEL_BYTES = 32           # density, roughness (float32), direction, albedo (3 x float32)
+EXPORT_VOXEL_BYTES = 96    # --export-npy: the SGGX volume and its float64 temporaries
+
+
+def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, budget=None):
+    """Build (or skip when up to date) the grid artifact; returns a summary line. ``budget``
+    (``pipeline.memory.budget``): refuse before loading the tables when the grid, the tables and what
+    loading them derives would exceed it."""
     import numpy as np
 
-    from ..artifacts import ArtifactWriter
+    from ..artifacts import Artifact, ArtifactWriter
+    from ..memory import budget as memory_budget
     from ..errors import LoomError
     from ..progress import progress
     from ..renderers.volpath import procedural_source
@@ -30,12 +37,19 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False):
         raise LoomError(None, "--res", f"{nx} x {ny} x {nz} voxels is more than 512^3")
     out = Path(out)
     params = {"res": res, "supersample": int(supersample)}
-    w = ArtifactWriter(out, kind="grid", stage="voxelize", params=params, inputs={"tables": tables})
+    w = ArtifactWriter(out, kind="grid", stage="voxelize", params=params, inputs={"tables": (tables, "tables")})
     if w.up_to_date() and not force and export_npy is None:
         return f"{out} is up to date"
     from stages.render.grid_medium import sggx_volume, voxelize
 
-    med, maj, _ = procedural_source(tables)
+    from .tables import accel_estimate
+
+    est = accel_estimate(Artifact(tables, kind="tables"), "loomlight voxelize")
+    voxels = float(nx) * ny * nz
+    est.add("voxels", voxels * (VOXEL_BYTES + (EXPORT_VOXEL_BYTES if export_npy is not None else 0)),
+            f"{nx} x {ny} x {nz}")
+    est.check(budget or memory_budget(), tables)
+    med, maj, _, _ = procedural_source(tables)
     lo, hi = maj.lo, maj.hi
     den = np.zeros((nz, ny, nx), np.float32)
     dirs = np.zeros((nz, ny, nx, 3), np.float32)
