@@ -112,7 +112,7 @@ def run(out_dir) -> dict:
 
     def render(spp_):
         t = time.perf_counter()
-        film = render_tiles(integ, pcam, 1, spp_, tiles, new_film(PW, PH))
+        film = render_tiles(integ, pcam, 1, spp_, 0, spp_, tiles, new_film(PW, PH))
         dt = time.perf_counter() - t
         return dt, finalize(film, spp_).rays, float(film[..., F_HIT].mean() / spp_)
 

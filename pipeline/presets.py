@@ -14,8 +14,30 @@ Keys (seed 000 §3.2; names of the original fitting tool; lengths in centimetres
   flyaway_loop_density        loops per unit length per ply; flyaway_loop_r1: [mu, sigma] of a loop's maximal
                               radius (drawn with 0.5 sigma; kept where > 1.05 x the fibre's radius there)
   use_migration, use_flyaways 0/1 switches; aabb_*, z_step_*: the fitted sample's extent (informative)
-  fiber_radius, albedo (RGB), density (extinction inside a fibre, per unit length), roughness:
-                              optical defaults chosen by loomlight (not fitted)
+  packing_fraction            fraction of a ply's cross-section its fibres fill (default ``PACKING_FRACTION``)
+  fiber_radius                default sqrt(packing_fraction e_long e_short / fiber_num): the radius at which the
+                              fitted fibre count fills that fraction of the ply's elliptical cross-section
+  density                     volpath's extinction inside a fibre, per unit length; default ``fibre_density``
+                              = FIBRE_OPTICAL_DEPTH / (2 fiber_radius)
+  albedo (RGB), roughness     the fibres' colour when a scene names none, the SGGX roughness: loomlight
+                              defaults (not fitted)
+
+Same fibres, same optics. The fitted presets give fibre counts and ply shapes from CT-scanned yarns
+but no fibre radius; at the radii of real fibres (5-10 um) those counts fill 1.5-9 % of a ply, and
+an explicit-fibre render of such a yarn is see-through while its volume (at any density a volume
+renders solid) is not. loomlight therefore sizes fibres so the plies are packed as real staple
+yarns are (``PACKING_FRACTION`` = 0.5; ring-spun yarns measure about 0.4-0.6), and volpath's
+medium, which is non-zero only inside those fibres (seed 000 §4), stands for them as a cloud of
+opaque cylinders: a fibre of radius r intercepts every ray that crosses it, projecting 2 r per unit
+length, which a medium fibre does only in the limit of infinite density. Its density is set by the
+optical depth ``FIBRE_OPTICAL_DEPTH`` (kappa) across a fibre's diameter, den = kappa / (2 r): a ray
+crossing the fibre at a uniformly random offset is scattered with probability
+P(kappa) = mean over offsets u of 1 - exp(-kappa sqrt(1 - u^2)) = 0.956 at kappa = 5, so the volume
+extinguishes 0.956 of the fibres' projected area per volume (kappa = 1.27, den = 2 / (pi r), would
+only match the projected area if the fibres were spread evenly, and gives P = 0.62). Delta tracking
+costs a lookup per 1 / den of path inside fibre-occupied majorant cells, so kappa is a compromise:
+kappa = 5 costs about what the former fixed density of 1000 per cm did. The volume's scattering is the
+fibres' BCSDF (``stages.render.volpath``, ``pipeline.renderers.volpath``).
 
 Scaling to a yarn radius R (``scale_preset``) is a similarity transform with factor
 S = R / yarn_radius: every length is multiplied by S (yarn_radius, ellipse axes, both pitches,
@@ -45,6 +67,20 @@ NORMAL_LENGTH_KEYS = ("flyaway_hair_ze", "flyaway_hair_r0", "flyaway_hair_re", "
 DENSITY_KEYS = ("flyaway_hair_density", "flyaway_loop_density")
 DEFAULTS = {"R_max": 1.0, "rho_max": 1.0, "use_migration": 1, "use_flyaways": 1}
 MAX_RATIO = 1e3   # lengths within 1/MAX_RATIO..MAX_RATIO yarn radii (check_proportions)
+PACKING_FRACTION = 0.5
+FIBRE_OPTICAL_DEPTH = 5.0  # kappa: a medium fibre's optical depth across its diameter (module doc)
+
+
+def packed_fibre_radius(d: dict, packing: float | None = None) -> float:
+    """The fibre radius at which ``fiber_num`` fibres fill ``packing`` of a ply's elliptical cross-section."""
+    f = float(packing if packing is not None else d.get("packing_fraction", PACKING_FRACTION))
+    return float(np.sqrt(f * d["ellipse_long"] * d["ellipse_short"] / d["fiber_num"]))
+
+
+def fibre_density(fiber_radius: float) -> float:
+    """volpath's extinction inside a fibre, kappa / (2 r): a medium fibre of optical depth kappa across
+    its diameter, nearly as opaque as the explicit fibre it stands for (module doc)."""
+    return FIBRE_OPTICAL_DEPTH / (2.0 * float(fiber_radius))
 
 
 def list_presets() -> list[str]:
@@ -57,6 +93,8 @@ def check_preset(d: dict, file, place_prefix: str = "") -> dict:
     d = {**DEFAULTS, **d}
     if d["rho_min"] > d["rho_max"]:
         raise LoomError(file, f"{place_prefix}rho_min", f"rho_min ({d['rho_min']}) exceeds rho_max ({d['rho_max']})")
+    if "fiber_radius" not in d:
+        d["fiber_radius"] = packed_fibre_radius(d)
     check_proportions(d, file, place_prefix)
     return d
 
@@ -103,8 +141,11 @@ def scale_preset(d: dict, radius: float) -> dict:
 
 
 def apply_overrides(d: dict, yt: dict, file=None, place: str = "yarns") -> dict:
-    """Scene yarn-type overrides (fiber_radius, density, roughness, color -> albedo), checked."""
+    """Scene yarn-type overrides (packing_fraction, fiber_radius, density, roughness, color -> albedo),
+    checked; the density defaults to ``fibre_density`` of the final fibre radius."""
     out = dict(d)
+    if "packing_fraction" in yt and "fiber_radius" not in yt:
+        out["fiber_radius"] = packed_fibre_radius(out, yt["packing_fraction"])
     for k in ("fiber_radius", "density", "roughness"):
         if k in yt:
             out[k] = float(yt[k])
@@ -112,6 +153,8 @@ def apply_overrides(d: dict, yt: dict, file=None, place: str = "yarns") -> dict:
         out["albedo"] = [float(x) for x in yt["color"]]
     if not out["fiber_radius"] > 0:
         raise LoomError(file, f"{place}.fiber_radius", "fibre radius must be positive")
+    if "density" not in out:
+        out["density"] = fibre_density(out["fiber_radius"])
     if out["density"] < 0:
         raise LoomError(file, f"{place}.density", "density must not be negative")
     return out
@@ -148,7 +191,7 @@ def pack(d: dict) -> np.ndarray:
         tp[sig] = d[key][1] * f
     tp[M.FIBER_RADIUS] = d["fiber_radius"]
     tp[M.ALB_R:M.ALB_B + 1] = d["albedo"]
-    tp[M.DENSITY] = d["density"]
+    tp[M.DENSITY] = d["density"] if "density" in d else fibre_density(d["fiber_radius"])
     tp[M.ROUGHNESS] = d["roughness"]
     tp[M.USE_MIGRATION] = float(d.get("use_migration", 1))
     tp[M.USE_FLYAWAYS] = float(d.get("use_flyaways", 1))

@@ -152,21 +152,28 @@ def fibers_from_arrays(points, point_radius, fiber_offsets, fiber_yarn=None, yar
     return Fibers(path, points, point_radius, off, fiber_yarn, yarn_albedo, yarn_group)
 
 
+def input_yarn_groups(art) -> np.ndarray | None:
+    """The yarn group of every yarn (0 warp, 1 weft, 2 knit, 3 other) from the yarns artifact an
+    artifact was built from, None when it names none that can be read."""
+    from .artifacts import Artifact
+
+    for inp in art.meta.get("inputs", {}).values():
+        try:
+            src = Artifact(inp["path"])
+        except LoomError:
+            continue
+        if src.kind == "yarns" and "group" in src:
+            return np.asarray(src["group"], np.int64)
+    return None
+
+
 def load_fibers(path: str | Path) -> Fibers:
     """Arrays of a ``fibers`` artifact (stage realize); the yarn groups come from its yarns input."""
     from .artifacts import Artifact
 
     path = Path(path)
     art = Artifact(path, kind="fibers")
-    group = None
-    for name, inp in art.meta.get("inputs", {}).items():
-        try:
-            src = Artifact(inp["path"])
-        except LoomError:
-            continue
-        if src.kind == "yarns" and "group" in src:
-            group = np.asarray(src["group"], np.int64)
-            break
+    group = input_yarn_groups(art)
     albedo = art["yarn_albedo"] if "yarn_albedo" in art else None
     yarn = art["fiber_yarn"] if "fiber_yarn" in art else None
     return fibers_from_arrays(art["points"], art["point_radius"], art["fiber_offsets"], yarn, albedo, group, path)

@@ -31,6 +31,7 @@ def register(app: typer.Typer) -> None:
                bcsdf: str = typer.Option(None, "--bcsdf", help="BCSDF preset for yarn groups whose scene entry names none (data/bcsdf/)."),
                material: str = typer.Option(None, "--material", help=material_help()),
                max_depth: int = typer.Option(None, "--max-depth", help=f"Maximum scattering events per path (default: render.max_depth, else {COMMON_DEFAULTS['max_depth']})."),
+               max_spp: int = typer.Option(None, "--max-spp", min=0, help="Adaptive sampling: pixels whose relative error after --spp samples exceeds render.target_error (default 0.05) are rendered again with up to this many new samples (default: render.max_spp, else 0 = off)."),
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
                exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops (finite, within +-64)."),
                set_: list[str] = typer.Option(None, "--set", help=settings_help())):
@@ -46,6 +47,6 @@ def register(app: typer.Typer) -> None:
         check_output(out.with_suffix(".zarr"), "-o", ARTIFACT)
         result = run_render(scene, method=method, out=out, width=width, height=height, spp=spp, seed=seed,
                             source=source, fibers=fibers, tables=tables, grid=grid, bcsdf=bcsdf, material=material, max_depth=max_depth,
-                            threads=threads, exposure=exposure, settings=set_ or [])
+                            threads=threads, exposure=exposure, settings=set_ or [], max_spp=max_spp)
         for line in result:
             typer.echo(line)

@@ -95,7 +95,8 @@ class RenderMethod:
 
 
 # settings every method shares: scene key render.<name> (camera.<name> for the image size), or the option
-COMMON_DEFAULTS = {"width": 320, "height": 240, "spp": 16, "seed": 0, "max_depth": 32, "rr_depth": 5, "tile_size": 16}
+COMMON_DEFAULTS = {"width": 320, "height": 240, "spp": 16, "seed": 0, "max_depth": 32, "rr_depth": 5, "tile_size": 16,
+                   "max_spp": 0, "target_error": 0.05}  # max_spp 0: no adaptive sampling (renderers/film.py)
 
 FIBERS = ArtifactInput("fibers", ("fibers",), "the realized fibres (loomlight realize)")
 TILING = ArtifactInput("fibers", ("tiling",), "a tiling artifact (loomlight tile)")
@@ -103,7 +104,8 @@ TABLES = ArtifactInput("tables", ("tables",), "the procedural tables (loomlight 
 GRID = ArtifactInput("grid", ("grid",), "a voxel grid (loomlight voxelize)")
 
 _FIBERPATH_SETTINGS = (
-    Setting("tint", "yarn: multiply each yarn's BCSDF transmission colour C_TT by the yarn's colour", ("none", "yarn")),
+    Setting("tint", "yarn (default): both BCSDF lobe colours times the yarn's colour; none: the presets as fitted",
+            ("yarn", "none")),
     Setting("tiling", "a tiling artifact (same as --fibers TILING.zarr)"),
 )
 _FIBERPATH_SOURCES = (
@@ -120,6 +122,12 @@ METHODS = {m.name: m for m in (
         default_source="procedural",
         settings=(Setting("majorant_cell", "majorant grid cell size in scene units (default: a quarter of the "
                                            "mean yarn extent bound)"),
+                  Setting("phase", "bcsdf (default): a collision scatters by the yarn's tinted fibre BCSDF, as "
+                                    "fiberpath's fibres do; microflake: seed 000's specular micro-flakes",
+                          ("bcsdf", "microflake")),
+                  Setting("albedo", "micro-flakes' single-scattering albedo -- bcsdf (default): each yarn's "
+                                    "tinted BCSDF's mean albedo; color: the yarn's colour itself",
+                          ("bcsdf", "color")),
                   Setting("tables", "the tables artifact (same as --tables)"),
                   Setting("grid", "the grid artifact (same as --grid)"))),
     RenderMethod(
@@ -196,6 +204,11 @@ def render_schema() -> dict:
             "rr_depth": positive,
             "source": {"enum": all_sources()},
             "tile_size": {"type": "integer", "minimum": 4},
+            "max_spp": {"type": "integer", "minimum": 0,
+                        "description": "adaptive sampling: pixels whose relative error after spp samples exceeds "
+                                       "target_error are rendered again with up to max_spp samples (0: off)"},
+            "target_error": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                             "description": "adaptive sampling: relative standard error of a pixel's mean aimed at"},
             "ground": {
                 "type": "object",
                 "additionalProperties": False,

@@ -9,9 +9,10 @@ scene's ``render.source``, which selects volpath's density source, is ignored. T
 (default) gives every fibre the BCSDF preset of its yarn group -- scene key ``yarns.<group>.bcsdf``
 (falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).
-``--set tint=yarn`` multiplies each yarn's TT colour C_TT by the yarn's albedo (the scene's
-``yarns.<group>.color`` as realized into the fibers artifact), so dyed yarns keep their colour under a
-fitted preset. A preset given as a ``.toml`` path in the scene is resolved against the scene file.
+Each yarn's colour (the scene's ``yarns.<group>.color`` as realized into the fibers artifact) tints
+its BCSDF: both lobe colours, C_R inside the Fresnel-like weight and C_TT, are multiplied by it
+(``--set tint=yarn``, the default), so a dyed yarn keeps its colour under a preset fitted to white
+fibres; ``--set tint=none`` renders the presets as fitted. A preset given as a ``.toml`` path in the scene is resolved against the scene file.
 On a tiling, each yarn group's albedo is the scene's ``yarns.<group>.color``, else the yarn preset's.
 Lights, camera and the optional ground plane come from the scene.
 """
@@ -33,16 +34,9 @@ from . import RenderResult
 SELF_WINDOW = 1 << 40
 
 
-def fiber_materials(scene, fibers, options):
-    """(mat_of_fiber (F,) int32, materials (NM, MAT_SIZE)) for the chosen material model."""
-    from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
-
-    material = options.get("material") or "bcsdf"
-    if material == "lambert":
-        mats = np.stack([pack_material_lambert(a) for a in fibers.yarn_albedo])
-        return fibers.fiber_yarn.astype(np.int32), mats
-    if material != "bcsdf":
-        raise LoomError(None, "--material", f"unknown fibre material {material!r} (known: bcsdf, lambert)")
+def bcsdf_names(scene, options) -> dict:
+    """Yarn group index -> BCSDF preset name: the scene's ``yarns.<group>.bcsdf`` (a ``.toml`` path is
+    resolved against the scene file), else ``--bcsdf``."""
     names = {}
     for g, gname in enumerate(GROUP_NAMES):
         name = scene.yarn_type(gname).get("bcsdf")
@@ -51,46 +45,79 @@ def fiber_materials(scene, fibers, options):
         name = name or options.get("bcsdf")
         if name:
             names[g] = name
-    if fibers.yarn_group is not None:
-        yarn_group = np.clip(np.asarray(fibers.yarn_group, np.int64), 0, 3)
-        if len(yarn_group) < len(fibers.yarn_albedo):
-            yarn_group = np.concatenate([yarn_group, np.full(len(fibers.yarn_albedo) - len(yarn_group), 3)])
-    else:
-        # the fibres' yarn groups are unknown (no yarns artifact among the fibers artifact's inputs):
-        # 'other' (falling back to yarns.default.bcsdf, then --bcsdf), else the one preset the scene names
-        yarn_group = np.full(len(fibers.yarn_albedo), 3)
-        named = sorted(set(names.values()))
-        if 3 not in names and len(named) == 1:
-            names[3] = named[0]
-    used = sorted(set(int(g) for g in yarn_group[np.unique(fibers.fiber_yarn)]))
-    presets = []
-    index = {}
-    group_mat = {}
-    for g in used:
-        name = names.get(g)
-        if not name:
+    return names
+
+
+def yarn_groups(yarn_group, n_yarns, names) -> np.ndarray:
+    """The group of every yarn (0 warp, 1 weft, 2 knit, 3 other); unknown groups (no yarns artifact among
+    the inputs) count as 'other', which takes the one preset the scene names when it names one."""
+    if yarn_group is not None:
+        g = np.clip(np.asarray(yarn_group, np.int64), 0, 3)
+        if len(g) < n_yarns:
+            g = np.concatenate([g, np.full(n_yarns - len(g), 3)])
+        return g
+    named = sorted(set(names.values()))
+    if 3 not in names and len(named) == 1:
+        names[3] = named[0]
+    return np.full(n_yarns, 3)
+
+
+def yarn_bcsdfs(scene, yarn_group, n_yarns, used_yarns, options, required=True) -> list:
+    """The packed (untinted) BCSDF of every yarn, None where its group names none and not ``required``;
+    a used yarn whose group names none is an error when ``required``."""
+    names = bcsdf_names(scene, options)
+    groups = yarn_groups(yarn_group, n_yarns, names)
+    loaded = {}
+    out = [None] * n_yarns
+    for g in sorted(set(int(g) for g in groups[used_yarns])):
+        if g not in names and required:
             known = ", ".join(f"{GROUP_NAMES[k]}={v}" for k, v in sorted(names.items())) or "none"
             raise LoomError(scene.path, f"yarns.{GROUP_NAMES[g]}.bcsdf",
                             f"no BCSDF preset for the fibres of yarn group {GROUP_NAMES[g]!r} (scene names: {known}); "
                             "set it (or yarns.default.bcsdf) in the scene or pass --bcsdf NAME")
-        if name not in index:
-            index[name] = len(presets)
-            presets.append(pack_material_bcsdf(load_bcsdf_preset(name)))
-        group_mat[g] = index[name]
-    lut = np.zeros(len(yarn_group), np.int32)
-    for y, g in enumerate(yarn_group):
-        lut[y] = group_mat.get(int(g), 0)
-    tint = (options.get("extra") or {}).get("tint", "none")
-    if tint == "yarn":  # one material per yarn: its group's preset with C_TT times the yarn albedo
-        mats = []
-        for y in range(len(fibers.yarn_albedo)):
-            row = presets[lut[y]].copy() if y < len(lut) else presets[0].copy()
-            row[4:7] *= fibers.yarn_albedo[y]   # packed BCSDF starts at column 1: C_TT is 3:6 there
-            mats.append(row)
-        return fibers.fiber_yarn.astype(np.int32), np.stack(mats)
-    if tint != "none":
+    for y in range(n_yarns):
+        name = names.get(int(groups[y]))
+        if name:
+            if name not in loaded:
+                loaded[name] = load_bcsdf_preset(name)
+            out[y] = loaded[name]
+    return out
+
+
+def fiber_materials(scene, fibers, options):
+    """(mat_of_fiber (F,) int32, materials (NM, MAT_SIZE)) for the chosen material model.
+
+    ``bcsdf`` with ``tint=yarn`` (the default): one material per yarn, its group's BCSDF with both lobe
+    colours times the yarn's colour (``stages.core.shading.bcsdf.tint_bcsdf``); ``tint=none``: the
+    presets as fitted, one material per preset. ``lambert``: the yarn's colour as albedo."""
+    from stages.core.shading.bcsdf import tint_bcsdf
+    from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
+
+    material = options.get("material") or "bcsdf"
+    if material == "lambert":
+        mats = np.stack([pack_material_lambert(a) for a in fibers.yarn_albedo])
+        return fibers.fiber_yarn.astype(np.int32), mats
+    if material != "bcsdf":
+        raise LoomError(None, "--material", f"unknown fibre material {material!r} (known: bcsdf, lambert)")
+    tint = (options.get("extra") or {}).get("tint", "yarn")
+    if tint not in ("yarn", "none"):
         raise LoomError(None, "--set tint", f"unknown tint {tint!r} (known: none, yarn)")
-    return lut[fibers.fiber_yarn], np.stack(presets)
+    Y = len(fibers.yarn_albedo)
+    params = yarn_bcsdfs(scene, fibers.yarn_group, Y, np.unique(fibers.fiber_yarn), options)
+    if tint == "yarn":
+        mats = [pack_material_bcsdf(tint_bcsdf(p, fibers.yarn_albedo[y])) if p is not None
+                else pack_material_lambert(fibers.yarn_albedo[y]) for y, p in enumerate(params)]
+        return fibers.fiber_yarn.astype(np.int32), np.stack(mats)
+    index, rows, lut = {}, [], np.zeros(Y, np.int32)
+    for y, p in enumerate(params):
+        if p is None:
+            continue
+        key = p.tobytes()
+        if key not in index:
+            index[key] = len(rows)
+            rows.append(pack_material_bcsdf(p))
+        lut[y] = index[key]
+    return lut[fibers.fiber_yarn], np.stack(rows)
 
 
 def tiling_fibers(scene, art) -> Fibers:
@@ -153,7 +180,7 @@ def render(scene, options: dict) -> RenderResult:
     from stages.render.film import VARIANCE_CHANNELS
 
     from ..artifacts import read_meta
-    from .film import render_film
+    from .film import render_film, sampling_of
 
     path = options.get("fibers") or (options.get("extra") or {}).get("tiling")
     source = options.get("source")
@@ -172,13 +199,14 @@ def render(scene, options: dict) -> RenderResult:
         geometry, fibers, eps, label, stats = _realized_scene(path)
     mat_of_fiber, mats = fiber_materials(scene, fibers, options)
     ground, has_ground = ground_array(scene.render)
-    W, H, spp, seed = options["width"], options["height"], options["spp"], options["seed"]
+    W, H, seed = options["width"], options["height"], options["seed"]
     max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
     cam = camera_array(scene.camera, W, H)
     integ = FiberpathIntegrator(geometry, mat_of_fiber, mats, pack_material_lambert(ground[1:4]), lights.table(),
                                 ground, has_ground, max_depth, rr_depth, SELF_WINDOW, eps)
-    rgb, extra, img, render_s = render_film(label, integ, cam, W, H, spp, seed, options["tile_size"],
-                                           VARIANCE_CHANNELS, options.get("threads"))
-    stats = {"rays": img.rays, "paths": W * H * spp, "render_s": render_s, **stats,
+    run = render_film(label, integ, cam, W, H, sampling_of(options), seed, options["tile_size"], VARIANCE_CHANNELS,
+                      options.get("threads"))
+    stats = {"rays": run.image.rays, "paths": run.samples, "render_s": run.render_s, "compile_s": run.compile_s,
+             "refined_pixels": run.refined_pixels, **stats,
              "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
-    return RenderResult(rgb, extra, stats)
+    return RenderResult(run.rgb, run.extra, stats)

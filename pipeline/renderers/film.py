@@ -1,32 +1,119 @@
 """Run the shared tile loop (``stages.render.tiles``) over an image with a progress bar.
 
-``render_film(label, integ, cam, width, height, spp, seed, tile_size, variance, threads)`` renders
-the image in batches of tiles (one progress step per tile) and finishes the film
-(``stages.render.film.finalize``): returns (rgb, extra channels ``A``/``depth``/``variance``,
-``FilmImage`` with the ray and lookup totals, render seconds).
+``render_film(label, integ, cam, width, height, sampling, seed, tile_size, variance, threads)``
+compiles (or loads from numba's cache) the integrator's tile loop on an empty tile first, so the
+render time excludes compilation (reported apart as ``compile_s``), renders the image in batches of
+tiles (one progress step per tile) and finishes the film (``stages.render.film.finalize``). Returns
+a ``FilmRun``: rgb, extra channels ``A``/``depth``/``variance``, the ``FilmImage`` (ray and lookup
+totals), render and compile seconds, samples traced and pixels refined.
+
+Adaptive sampling (``Sampling``: ``spp``, ``max_spp``, ``target_error``). Every pixel first takes
+``spp`` samples. With ``max_spp`` > ``spp``, a pixel whose relative standard error of the mean
+luminance, sqrt(variance of the mean) / max(mean, 1 % of the image's mean luminance), exceeds
+``target_error`` is rendered again with n = min(max_spp, ceil(spp (error / target)^2)) new samples
+(sample numbers after the first pass, so new random numbers) and its value is the mean of those
+alone: the first pass only decides how many samples a pixel gets, so each pixel's estimate stays
+unbiased (averaging the first pass in would favour pixels whose first samples happened to be
+dark). This is what converges the fireflies of sharp BCSDF lobes under delta lights, which no
+sampling strategy can remove (a directional light is only reached by next-event estimation).
 """
 from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
+
+import numpy as np
 
 from ..progress import progress
 
 
-def render_film(label, integ, cam, width, height, spp, seed, tile_size, variance, threads=None):
-    from stages.render.film import finalize, new_film, tile_grid
+@dataclass(frozen=True)
+class Sampling:
+    spp: int
+    max_spp: int | None = None       # None or <= spp: every pixel takes spp samples
+    target_error: float = 0.05
+
+    @property
+    def adaptive(self) -> bool:
+        return self.max_spp is not None and self.max_spp > self.spp
+
+
+@dataclass
+class FilmRun:
+    rgb: np.ndarray
+    extra: dict
+    image: object          # stages.render.film.FilmImage
+    render_s: float
+    compile_s: float
+    samples: int
+    refined_pixels: int
+
+
+def _pass(label, integ, cam, seed, stride, first, counts, tiles, film, threads):
     from stages.render.tiles import render_tiles
 
-    tiles = tile_grid(width, height, int(tile_size))
-    film = new_film(width, height)
     batch = max(1, 4 * (os.cpu_count() or 1))
-    t0 = time.perf_counter()
-    with progress(f"{label} {width}x{height} @ {spp} spp", len(tiles)) as advance:
+    with progress(label, len(tiles)) as advance:
         for b0 in range(0, len(tiles), batch):
             b1 = min(b0 + batch, len(tiles))
-            render_tiles(integ, cam, seed, spp, tiles[b0:b1], film, threads)
+            render_tiles(integ, cam, seed, stride, first, counts, tiles[b0:b1], film, threads)
             advance(b1 - b0)
+
+
+def refine_counts(film, spp, sampling) -> np.ndarray:
+    """Samples each pixel takes in the second pass (0: keep the first pass) -- module doc."""
+    from stages.render.film import F_Y, F_YY
+
+    n = float(spp)
+    mean = film[..., F_Y] / n
+    var_mean = np.maximum(film[..., F_YY] / n - mean * mean, 0.0) / max(n - 1.0, 1.0) if spp > 1 else \
+        np.full(mean.shape, np.inf)
+    floor = max(0.01 * float(mean.mean()), 1e-6)
+    err = np.sqrt(var_mean) / np.maximum(mean, floor)
+    want = np.ceil(spp * (err / sampling.target_error) ** 2)
+    counts = np.where(err > sampling.target_error, np.minimum(want, sampling.max_spp), 0)
+    return counts.astype(np.int64)
+
+
+def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile_size, variance,
+                threads=None) -> FilmRun:
+    from stages.render.film import finalize, new_film, tile_grid
+    from stages.render.tiles import render_tile
+
+    spp = int(sampling.spp)
+    stride = spp + (int(sampling.max_spp) if sampling.adaptive else 0)
+    tiles = tile_grid(width, height, int(tile_size))
+    film = new_film(width, height)
+    counts = np.full((height, width), spp, np.int64)
+    t0 = time.perf_counter()
+    render_tile(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, film)  # compile or load; renders nothing
+    compile_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    _pass(f"{label} {width}x{height} @ {spp} spp", integ, cam, seed, stride, 0, counts, tiles, film, threads)
+    refined = 0
+    samples = int(counts.sum())
+    if sampling.adaptive:
+        more = refine_counts(film, spp, sampling)
+        refined = int(np.count_nonzero(more))
+        if refined:
+            film2 = new_film(width, height)
+            busy = np.array([more[r0:r1, c0:c1].any() for r0, c0, r1, c1 in tiles], bool)
+            _pass(f"{label}: {refined} pixels to at most {sampling.max_spp} spp", integ, cam, seed, stride, spp, more,
+                  tiles[busy], film2, threads)
+            sel = more > 0
+            film[sel] = film2[sel]
+            counts = np.where(sel, more, counts)
+            samples += int(more.sum())
     render_s = time.perf_counter() - t0
-    img = finalize(film, spp, variance)
+    img = finalize(film, counts, variance)
     extra = {"A": img.alpha, "depth": img.depth, "variance": img.variance}
-    return img.rgb, extra, img, render_s
+    return FilmRun(img.rgb, extra, img, render_s, compile_s, samples, refined)
+
+
+def sampling_of(options) -> Sampling:
+    """The ``Sampling`` of resolved render options (``spp``, ``max_spp``, ``target_error``)."""
+    max_spp = options.get("max_spp")
+    return Sampling(int(options["spp"]), int(max_spp) if max_spp else None,
+                    float(options.get("target_error") or 0.05))
+

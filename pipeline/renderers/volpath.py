@@ -7,6 +7,14 @@ Sources (``--source``, default the scene's ``render.source``, else procedural):
   and roughness from the yarn types the fibres were realized with.
 - ``grid``: a ``grid`` artifact of ``loomlight voxelize`` (``--set grid=PATH.zarr``).
 
+Optics (``FibreOptics``): the volume stands for the fibres a fiberpath render shows. Its density is
+the fibres' projected area per volume (``pipeline.presets``); a collision with a fibre of a yarn
+whose group names a BCSDF (``yarns.<group>.bcsdf`` or ``--bcsdf``) scatters by that BCSDF tinted by
+the yarn's colour, exactly as fiberpath's fibres do (``stages.render.volpath``, "Fibre phase
+function"); ``--set phase=microflake`` (and every voxel-grid collision) uses seed 000's specular
+micro-flakes instead, with the tinted BCSDF's mean albedo as single-scattering albedo
+(``--set albedo=color``: the yarn's colour itself).
+
 Scene: camera, lights, ``render.max_depth``, ``render.rr_depth``, ``render.tile_size`` and the
 optional ``render.ground``. ``--set majorant_cell=X`` sets the majorant-grid cell size (scene units;
 default: a quarter of the mean yarn extent bound, at most 128 cells along an axis).
@@ -22,7 +30,7 @@ import numpy as np
 
 from ..errors import LoomError
 from ..progress import warn
-from ..render_setup import ground_array, load_fibers, pack_lights
+from ..render_setup import ground_array, input_yarn_groups, load_fibers, pack_lights
 from ..scene import camera_array
 from . import RenderResult
 
@@ -53,8 +61,11 @@ def _majorant_res(lo, hi, cell):
     return np.maximum(1, np.ceil(ext / cell)).astype(np.int64)
 
 
-def procedural_source(tables_path, cell=None):
-    """(ProceduralMedium, MajorantGrid, info) from a tables artifact."""
+def procedural_source(tables_path, cell=None, optics=None):
+    """(ProceduralMedium, MajorantGrid, info, mats) from a tables artifact, scattering as ``optics``;
+    without optics (voxelize) the tables' own colours and micro-flake roughness, no fibre phase."""
+    from stages.core.shading.material import MAT_SIZE
+    from stages.core.yarn.model import ROUGHNESS
     from stages.render.procedural_medium import ProceduralMedium, fiber_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
@@ -62,17 +73,29 @@ def procedural_source(tables_path, cell=None):
 
     if not tables_path:
         raise LoomError(None, "--set tables=PATH.zarr", "--source procedural needs a tables artifact (loomlight tables)")
-    cv, tab, _ = load_tables(tables_path)
+    cv, tab, art = load_tables(tables_path)
+    if optics is None:
+        mats = np.zeros((len(tab.yarn_type), MAT_SIZE))
+        mats[:, 0] = -1.0  # micro-flakes
+    else:
+        groups = input_yarn_groups(art)
+        mats, has = optics.rows(tab.yarn_albedo, groups)
+        tparams = tab.tparams.copy()
+        for t in range(len(tparams)):  # fibre phase function: the extinction of thin cylinders (roughness 0)
+            if np.any(tab.yarn_type == t) and np.all(has[tab.yarn_type == t]):
+                tparams[t, ROUGHNESS] = 0.0
+        tab = tab._replace(yarn_albedo=np.ascontiguousarray(optics.albedo(tab.yarn_albedo, groups)), tparams=tparams)
     a, b, r, bound = fiber_capsules(cv, tab, 0.25)
     lo, hi = _box_of_capsules(a, b, r)
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * float(np.mean(tab.yarn_extent)))
     mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)
-    return ProceduralMedium(cv, tab), make_majorant_grid(lo, hi, res, mu), {"yarns": int(len(tab.yarn_type))}
+    return ProceduralMedium(cv, tab), make_majorant_grid(lo, hi, res, mu), {"yarns": int(len(tab.yarn_type))}, mats
 
 
-def realized_source(fibers_path, cell=None):
-    """(RealizedMedium, MajorantGrid, info) from a fibers artifact; per-yarn density and roughness
-    from the yarn types the fibres were realized with (their yarns artifact and preset/radius)."""
+def realized_source(fibers_path, cell, optics):
+    """(RealizedMedium, MajorantGrid, info, mats) from a fibers artifact; per-yarn density and
+    roughness from the yarn types the fibres were realized with (their yarns artifact and
+    preset/radius), scattering as ``optics``."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.yarn.model import DENSITY, ROUGHNESS, extent_bound
     from stages.render.realized_medium import RealizedMedium, fiber_capsules
@@ -94,38 +117,95 @@ def realized_source(fibers_path, cell=None):
     if int(fibers.fiber_yarn.max()) >= Y:
         raise LoomError(fibers_path, "fiber_yarn", f"fibres name yarns beyond the {Y} yarns of {yarns.path}")
     tp = tparams[ytype]
-    albedo = np.zeros((Y, 3))
-    albedo[: min(Y, len(fibers.yarn_albedo))] = fibers.yarn_albedo[:Y]
+    colour = np.zeros((Y, 3))
+    colour[: min(Y, len(fibers.yarn_albedo))] = fibers.yarn_albedo[:Y]
+    mats, has = optics.rows(colour, fibers.yarn_group)
+    albedo = optics.albedo(colour, fibers.yarn_group)
+    roughness = np.where(has, 0.0, tp[:, ROUGHNESS])  # fibre phase function: thin cylinders' extinction
     extent = float(np.mean([extent_bound(t) for t in tp]))
     t0 = time.perf_counter()
     bvh, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
     med = RealizedMedium(bvh, fibers.fiber_yarn.astype(np.int32), np.ascontiguousarray(tp[:, DENSITY]),
-                         albedo, np.ascontiguousarray(tp[:, ROUGHNESS]))
+                         np.ascontiguousarray(albedo), np.ascontiguousarray(roughness))
     a, b, r, bound = fiber_capsules(med)
     lo, hi = _box_of_capsules(a, b, r)
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * extent)
     mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)
     info = {"fibers": fibers.n_fibers, "segments": int(len(bvh.seg_a)), "bvh_build_s": time.perf_counter() - t0}
-    return med, make_majorant_grid(lo, hi, res, mu), info
+    return med, make_majorant_grid(lo, hi, res, mu), info, mats
 
 
-def grid_source(grid_path, cell=None):
-    """(GridMedium, MajorantGrid, info) from a grid artifact (macrocells of 4 voxels by default)."""
+def grid_source(grid_path, cell, optics):
+    """(GridMedium, MajorantGrid, info, mats) from a grid artifact (macrocells of 4 voxels by default):
+    micro-flakes (voxels know no yarn), the voxels' colours made albedos by ``optics``."""
     from stages.render.grid_medium import GridMedium
     from stages.render.tracking import majorants_from_voxels, make_majorant_grid
 
     art = _artifact(grid_path, "grid", "--set grid=PATH.zarr")
     lo, hi = (np.asarray(v, float) for v in art.summary["bounds"])
     den = np.ascontiguousarray(art["density"], np.float32)
+    colour = np.asarray(art["albedo"], np.float32)
+    albedo = optics.albedo(colour.reshape(-1, 3), None).reshape(colour.shape)
     med = GridMedium(lo, hi, den, np.ascontiguousarray(art["direction"], np.float32),
-                     np.ascontiguousarray(art["albedo"], np.float32), np.ascontiguousarray(art["roughness"], np.float32))
+                     np.ascontiguousarray(albedo, np.float32), np.ascontiguousarray(art["roughness"], np.float32))
     vox = (hi - lo) / np.array(den.shape[::-1])
     res = _majorant_res(lo, hi, cell or 4.0 * float(vox.max()))
     mu = majorants_from_voxels(den, lo, hi, res)
-    return med, make_majorant_grid(lo, hi, res, mu), {"voxels": list(den.shape[::-1])}
+    return med, make_majorant_grid(lo, hi, res, mu), {"voxels": list(den.shape[::-1])}, optics.rows(np.zeros((0, 3)), None)[0]
 
 
-def open_source(source, options):
+class FibreOptics:
+    """How the volume scatters, from the fibres it stands for (``--set phase`` and ``--set albedo``).
+
+    ``rows(colours, groups)`` -> (mats (Y, MAT_SIZE), has (Y,) bool): per yarn its group's BCSDF tinted
+    by its colour (``stages.core.shading.bcsdf.tint_bcsdf``), the fibre phase function of
+    ``stages.render.volpath``; model -1 (micro-flakes) where the scene names no BCSDF for the group or
+    with ``phase=microflake``. ``albedo(colours, groups)``: the micro-flake albedo, the tinted BCSDF's
+    mean albedo (``bcsdf_mean_albedo``) unless ``albedo=color`` or no BCSDF (then the colour itself).
+    ``groups`` None: the yarns are unknown (voxels): the scene's one BCSDF applies, if it names one."""
+
+    def __init__(self, scene, options):
+        extra = options.get("extra") or {}
+        self.scene, self.options = scene, options
+        self.phase = extra.get("phase", "bcsdf")
+        self.albedo_mode = extra.get("albedo", "bcsdf")
+        if self.phase not in ("bcsdf", "microflake"):
+            raise LoomError(None, "--set phase", f"unknown phase function {self.phase!r} (known: bcsdf, microflake)")
+        if self.albedo_mode not in ("bcsdf", "color"):
+            raise LoomError(None, "--set albedo", f"unknown albedo {self.albedo_mode!r} (known: bcsdf, color)")
+
+    def _params(self, n, groups):
+        from .fiberpath import yarn_bcsdfs
+
+        return yarn_bcsdfs(self.scene, groups, n, np.arange(n), self.options, required=False)
+
+    def albedo(self, colours, groups):
+        from stages.core.shading.bcsdf import bcsdf_mean_albedo, tint_bcsdf
+
+        colours = np.asarray(colours, np.float64)
+        if self.albedo_mode == "color":
+            return colours
+        if groups is None:
+            p = self._params(1, None)[0]
+            return colours if p is None else bcsdf_mean_albedo(tint_bcsdf(p, colours))
+        return np.stack([c if p is None else bcsdf_mean_albedo(tint_bcsdf(p, c))
+                         for c, p in zip(colours, self._params(len(colours), groups))]).reshape(colours.shape)
+
+    def rows(self, colours, groups):
+        from stages.core.shading.bcsdf import tint_bcsdf
+        from stages.core.shading.material import MAT_SIZE, pack_material_bcsdf
+
+        n = len(colours)
+        mats = np.zeros((n, MAT_SIZE))
+        mats[:, 0] = -1.0  # micro-flakes
+        if self.phase == "bcsdf" and groups is not None:
+            for y, p in enumerate(self._params(n, groups)):
+                if p is not None:
+                    mats[y] = pack_material_bcsdf(tint_bcsdf(p, colours[y]))
+        return mats, mats[:, 0] >= 0.0
+
+
+def open_source(source, options, optics):
     extra = options.get("extra") or {}
     tables = options.get("tables") or extra.get("tables")
     cell = extra.get("majorant_cell")
@@ -137,11 +217,11 @@ def open_source(source, options):
         if not cell > 0:
             raise LoomError(None, "--set majorant_cell", f"must be positive, got {cell}")
     if source == "procedural":
-        return procedural_source(tables, cell)
+        return procedural_source(tables, cell, optics)
     if source == "realized":
-        return realized_source(options.get("fibers"), cell)
+        return realized_source(options.get("fibers"), cell, optics)
     if source == "grid":
-        return grid_source(options.get("grid") or extra.get("grid"), cell)
+        return grid_source(options.get("grid") or extra.get("grid"), cell, optics)
     raise LoomError(None, "--source", f"unknown volpath source {source!r} (known: {', '.join(SOURCES)})")
 
 
@@ -162,7 +242,7 @@ def render(scene, options: dict) -> RenderResult:
     from stages.render.film import VARIANCE_LUMINANCE
     from stages.render.volpath import VolpathIntegrator
 
-    from .film import render_film
+    from .film import render_film, sampling_of
 
     source = options.get("source") or scene.render.get("source") or "procedural"
     if source not in SOURCES:
@@ -172,21 +252,25 @@ def render(scene, options: dict) -> RenderResult:
     lights = pack_lights(scene.lights, scene.path)
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
-    W, H, spp, seed = options["width"], options["height"], options["spp"], options["seed"]
+    W, H, seed = options["width"], options["height"], options["seed"]
     max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
     ground, has_ground = ground_array(scene.render)
     cam = camera_array(scene.camera, W, H)
 
     t0 = time.perf_counter()
-    med, maj, info = open_source(source, options)
+    med, maj, info, mats = open_source(source, options, FibreOptics(scene, options))
     build_s = time.perf_counter() - t0
     if not _sees_fabric(maj, cam, W, H):
         warn(f"the camera of {scene.path} sees no fabric (source {source}); rendering anyway")
-    integ = VolpathIntegrator(med, maj, lights.table(), ground, bool(has_ground), max_depth, rr_depth)
-    rgb, extra, img, render_s = render_film(f"volpath ({source})", integ, cam, W, H, spp, seed, options["tile_size"],
-                                           VARIANCE_LUMINANCE, options.get("threads"))
-    stats = {"rays": img.rays, "paths": W * H * spp, "render_s": render_s, "source": source,
-             "medium_lookups": img.lookups, "medium_lookups_per_s": img.lookups / max(render_s, 1e-12),
+    integ = VolpathIntegrator(med, maj, lights.table(), ground, bool(has_ground), max_depth, rr_depth,
+                              np.ascontiguousarray(mats, np.float64))
+    run = render_film(f"volpath ({source})", integ, cam, W, H, sampling_of(options), seed, options["tile_size"],
+                      VARIANCE_LUMINANCE, options.get("threads"))
+    lookups, render_s = run.image.lookups, run.render_s
+    stats = {"rays": run.image.rays, "paths": run.samples, "render_s": render_s, "compile_s": run.compile_s,
+             "refined_pixels": run.refined_pixels, "source": source,
+             "medium_lookups": lookups, "medium_lookups_per_s": lookups / max(render_s, 1e-12),
              "source_build_s": build_s, "majorant_cells": [int(x) for x in maj.res],
-             "majorant_occupied": float(np.mean(maj.mu > 0)), "max_depth": max_depth, "rr_depth": rr_depth, **info}
-    return RenderResult(rgb, extra, stats)
+             "majorant_occupied": float(np.mean(maj.mu > 0)), "max_depth": max_depth, "rr_depth": rr_depth,
+             "fibre_phase_yarns": int(np.sum(mats[:, 0] >= 0)), **info}
+    return RenderResult(run.rgb, run.extra, stats)

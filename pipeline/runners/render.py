@@ -5,8 +5,11 @@ scene (``[camera]``, ``[render]``) and the registry's ``COMMON_DEFAULTS`` (``pip
 checks the ``--set`` keys and the artifact inputs against the method's declaration, runs the method
 and writes the linear float32 EXR (RGB plus the extra channels), an sRGB PNG preview beside it and
 a ``render`` artifact ``<out stem>.zarr`` holding the image (chunked) and the statistics: wall time,
-render time, spp, paths/s, rays/s, peak memory, thread count. The artifact's inputs are the scene and
-every artifact the method's source read.
+render time, spp, paths/s, rays/s, peak memory, thread count. The three are published as one set
+(``ArtifactWriter`` companions): a render killed at any moment leaves the previous EXR, PNG and
+artifact, or the new ones, never a mix, and the artifact records the EXR's and PNG's sha256. The
+artifact's inputs are the scene and every artifact the method's source read; the outputs are
+checked (not an input, not a file or directory in the way) before anything is rendered.
 """
 from __future__ import annotations
 
@@ -15,6 +18,36 @@ import time
 from pathlib import Path
 
 from ..errors import LoomError
+from ..memory import Estimate, budget as memory_budget
+
+INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid"}  # artifact kinds per option
+PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
+VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
+MAJORANT_BYTES = 32 << 20  # volpath's majorant grid (at most 128 cells per axis)
+
+
+def render_estimate(options: dict, inputs: dict) -> Estimate:
+    """A render's peak from its size and the artifacts it reads: the film, realized fibres (or a tiling's
+    exemplars) with their BVH, procedural tables with what loading them derives, a voxel grid."""
+    from ..artifacts import Artifact
+    from .tables import accel_estimate
+
+    est = Estimate("loomlight render")
+    W, H = options["width"], options["height"]
+    est.add("film", float(PIXEL_BYTES) * W * H, f"{W} x {H} pixels")
+    for key, (path, _) in inputs.items():
+        if key == "scene":
+            continue
+        art = Artifact(path)
+        if art.kind == "tables":
+            est.extend(accel_estimate(art, est.what)).add("majorant grid", MAJORANT_BYTES)
+        elif art.kind in ("fibers", "tiling"):
+            points = art.arrays()["points" if art.kind == "fibers" else "ex_points"]
+            est.add(f"{art.kind} and their BVH", VERTEX_BYTES * points.shape[0] + 2 * art.nbytes(),
+                    f"{points.shape[0]:,} vertices")
+        else:
+            est.add(f"{art.kind} arrays", 3 * art.nbytes(), art.path.name)
+    return est
 
 
 def _positive(value, name):
@@ -41,7 +74,8 @@ def parse_settings(settings, m) -> dict:
 
 
 def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, source=None, fibers=None, tables=None,
-                    grid=None, bcsdf=None, material=None, max_depth=None, threads=None, extra=None) -> dict:
+                    grid=None, bcsdf=None, material=None, max_depth=None, threads=None, extra=None,
+                    max_spp=None) -> dict:
     from ..renderers import COMMON_DEFAULTS
 
     extra = extra or {}
@@ -56,7 +90,8 @@ def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, sour
         "width": pick(width, cam, "width"), "height": pick(height, cam, "height"), "spp": pick(spp, rs, "spp"),
         "seed": int(seed if seed is not None else rs.get("seed", scene.seed)),
         "max_depth": pick(max_depth, rs, "max_depth"), "rr_depth": pick(None, rs, "rr_depth"),
-        "tile_size": pick(None, rs, "tile_size"),
+        "tile_size": pick(None, rs, "tile_size"), "max_spp": pick(max_spp, rs, "max_spp"),
+        "target_error": float(rs.get("target_error", COMMON_DEFAULTS["target_error"])),
         "source": source, "fibers": str(fibers) if fibers else extra.get("tiling"),
         "tables": str(tables) if tables else extra.get("tables"), "grid": str(grid) if grid else extra.get("grid"),
         "bcsdf": bcsdf, "material": material, "threads": threads, "extra": extra,
@@ -83,11 +118,13 @@ def check_inputs(scene, m, options) -> None:
 
 def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
                fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None,
-               exposure=0.0, settings=()):
-    """Render and publish; returns the lines to print (output paths and statistics)."""
+               exposure=0.0, settings=(), max_spp=None, budget=None):
+    """Render and publish; returns the lines to print (output paths and statistics). ``budget``
+    (``pipeline.memory.budget``, default a fraction of the available memory): refuse before rendering
+    when the estimated peak memory exceeds it."""
     import numpy as np
 
-    from ..artifacts import ArtifactWriter
+    from ..artifacts import FILE, ArtifactWriter
     from ..images import write_render
     from ..renderers import RenderResult
     from ..renderers import method as registered
@@ -108,12 +145,22 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     m = registered(method)
     extra = parse_settings(settings, m)
     options = resolve_options(scene, m, width, height, spp, seed, source, fibers, tables, grid, bcsdf, material,
-                              max_depth, threads, extra)
+                              max_depth, threads, extra, max_spp)
     check_inputs(scene, m, options)
     if threads:
         import numba
 
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    inputs = {"scene": (scene.path, FILE)}
+    for key in sorted({inp.option for src in m.sources for inp in src.inputs}):
+        if options[key]:
+            inputs[key] = (options[key], INPUT_KINDS.get(key))
+    params = {k: v for k, v in options.items() if k != "threads"}
+    params["method"] = method
+    art_path = out.with_suffix(".zarr")
+    writer = ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs,
+                            companions=(out, out.with_suffix(".png")))
+    render_estimate(options, inputs).check(budget or memory_budget(), scene.path)
     t0 = time.perf_counter()
     result: RenderResult = m.run(scene, options)
     wall = time.perf_counter() - t0
@@ -136,21 +183,15 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     stats["paths_per_s"] = stats["paths"] / render_s
     stats["rays_per_s"] = stats["rays"] / render_s
     stats["method_stats"] = {k: v for k, v in st.items() if k not in ("rays", "paths", "render_s")}
-    inputs = {"scene": scene.path}
-    for key in sorted({inp.option for src in m.sources for inp in src.inputs}):
-        if options[key]:
-            inputs[key] = options[key]
-    params = {k: v for k, v in options.items() if k != "threads"}
-    params["method"] = method
-    exr, png = write_render(out, rgb, result.extra, exposure=exposure)
-    art_path = out.with_suffix(".zarr")
-    with ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs) as w:
+    with writer as w:
+        write_render(out, rgb, result.extra, exposure=exposure, into=w.companion)
         H, W = rgb.shape[:2]
         w.write("image", rgb, chunks=(min(H, 128), min(W, 128), 3), dimension_names=("y", "x", "c"))
         for name, ch in result.extra.items():
             w.write(f"channels/{name}", np.ascontiguousarray(ch, dtype=np.float32), chunks=(min(H, 128), min(W, 128)),
                     dimension_names=("y", "x"))
         w.summary.update(stats)
+    exr, png = out, out.with_suffix(".png")
     return [f"image    : {exr}", f"preview  : {png}", f"artifact : {art_path}",
             f"{method}: {stats['width']}x{stats['height']} @ {stats['spp']} spp in {wall:.2f} s "
             f"(render {render_s:.2f} s, {stats['paths_per_s']:.3g} paths/s, {stats['rays_per_s']:.3g} rays/s, "

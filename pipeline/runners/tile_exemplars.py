@@ -89,7 +89,7 @@ def exemplar_interlacement(ex, file, place):
 def yarn_params(cfg, file) -> YarnParams:
     from stages.core.yarn import model as M
 
-    from ..presets import load_preset, pack, scale_preset
+    from ..presets import load_preset, pack, packed_fibre_radius, scale_preset
 
     y = cfg.get("yarn", {})
     sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
@@ -99,8 +99,9 @@ def yarn_params(cfg, file) -> YarnParams:
     except LoomError as e:
         raise LoomError(file, "yarn.preset", e.message) from None
     d = scale_preset(d, float(radius))
-    if "fibers_per_ply" in y:
+    if "fibers_per_ply" in y:  # the packed fibre radius follows the count (unless fiber_radius is given)
         d["fiber_num"] = int(y["fibers_per_ply"])
+        d["fiber_radius"] = packed_fibre_radius(d)
     if "fiber_radius" in y:
         d["fiber_radius"] = float(y["fiber_radius"])
     if "use_migration" in y:

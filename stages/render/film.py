@@ -13,10 +13,11 @@ its samples of (in channel order) R, G, B; R^2, G^2, B^2; luminance Y = 0.2126 R
 0.0722 B and Y^2; hit (1 when the camera ray met the scene); the distance to the first
 interaction; medium lookups; rays.
 
-``finalize(film, spp, variance)`` -> ``FilmImage``: ``rgb`` (H, W, 3) the mean, ``alpha`` the fraction
+``finalize(film, counts, variance)`` -> ``FilmImage``: ``rgb`` (H, W, 3) the mean, ``alpha`` the fraction
 of samples that hit, ``depth`` the mean first-interaction distance over those samples (0 where none),
-``variance`` the variance of the pixel mean (sample variance / spp), all float32, and the totals
-``lookups`` and ``rays``. ``variance`` selects the estimator of the variance channel:
+``variance`` the variance of the pixel mean (sample variance / n), all float32, and the totals
+``lookups`` and ``rays``; ``counts`` is the number of samples n of every pixel (an int or an (H, W)
+array). ``variance`` selects the estimator of the variance channel:
 ``VARIANCE_LUMINANCE`` (of the luminance; volpath) or ``VARIANCE_CHANNELS`` (each channel's, averaged
 over R, G, B; fiberpath). The two methods wrote these before they shared a film and their images
 stay byte-identical; one estimator for both is a change of outputs left to a later issue.
@@ -63,15 +64,16 @@ def add_pixel(film, row, col, sr, sg, sb, srr, sgg, sbb, sy, syy, sh, sd, sl, sn
     film[row, col, F_RAYS] = sn
 
 
-def finalize(film, spp, variance=VARIANCE_CHANNELS) -> FilmImage:
-    n = spp
-    rgb = film[..., F_R:F_B + 1] / n
+def finalize(film, counts, variance=VARIANCE_CHANNELS) -> FilmImage:
+    n = np.broadcast_to(np.asarray(counts, np.float64), film.shape[:2])
+    n3 = n[..., None]
+    rgb = film[..., F_R:F_B + 1] / n3
     hits = film[..., F_HIT]
     if variance == VARIANCE_LUMINANCE:
         mean = film[..., F_Y] / n
-        var = np.maximum(film[..., F_YY] / n - mean * mean, 0.0) / (n - 1) if n > 1 else np.zeros_like(mean)
+        var = np.where(n > 1, np.maximum(film[..., F_YY] / n - mean * mean, 0.0) / np.maximum(n - 1, 1), 0.0)
     elif variance == VARIANCE_CHANNELS:
-        var = (np.maximum(film[..., F_RR:F_BB + 1] / n - rgb * rgb, 0.0) * (n / max(n - 1, 1)) / n).mean(axis=2)
+        var = (np.maximum(film[..., F_RR:F_BB + 1] / n3 - rgb * rgb, 0.0) * (n3 / np.maximum(n3 - 1, 1)) / n3).mean(axis=2)
     else:
         raise ValueError(f"unknown variance estimator {variance!r}")
     depth = np.where(hits > 0, film[..., F_DEPTH] / np.maximum(hits, 1), 0.0)

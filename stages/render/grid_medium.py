@@ -74,7 +74,8 @@ def grid_lookup(med, x, y, z):
     a = med.albedo[bz, by, bx]
     # the stored arrays may be float32: every field is float64 (MediumPoint)
     return MediumPoint(np.float64(den), np.float64(d[0]), np.float64(d[1]), np.float64(d[2]), np.float64(a[0]),
-                       np.float64(a[1]), np.float64(a[2]), np.float64(med.roughness[bz, by, bx]))
+                       np.float64(a[1]), np.float64(a[2]), np.float64(med.roughness[bz, by, bx]), np.int64(-1),
+                       np.int64(-1))
 
 
 @overload(medium_lookup)

@@ -14,11 +14,12 @@ every direction: a majorant for den bounds the extinction.
 
 A *density source* is a namedtuple class whose numba implementation of
 ``medium_lookup(med, x, y, z)`` is registered with ``numba.extending.overload``; it returns a
-``MediumPoint`` (all fields float64)
+``MediumPoint``
 
-    (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness)
+    (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness, yarn, fibre)
 
-with den = 0 outside every fibre (``NO_MEDIUM``; other fields then unused). The integrator
+(float64 but for the int64 yarn and fibre: the covering fibre's yarn and a number that tells the
+fibres apart, -1 where the source does not know them) with den = 0 outside every fibre (``NO_MEDIUM``; other fields then unused). The integrator
 (``stages.render.volpath``) is compiled once per source class. Sources: ``HomogeneousMedium``
 (below; a box of constant fibre material, for closed-form tests), ``stages.render.grid_medium``,
 ``stages.render.procedural_medium``, ``stages.render.realized_medium``.
@@ -32,9 +33,12 @@ from numba.extending import overload
 from stages.core.dispatch import is_tuple_class
 from stages.core.shading.sggx import fiber_sggx, projected_area
 
-MediumPoint = namedtuple("MediumPoint", ["den", "tx", "ty", "tz", "albedo_r", "albedo_g", "albedo_b", "roughness"])
-MediumPoint.__doc__ = """A density source's answer at a point: density, unit fibre tangent, RGB albedo, SGGX roughness."""
-NO_MEDIUM = MediumPoint(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # outside every fibre
+MediumPoint = namedtuple("MediumPoint", ["den", "tx", "ty", "tz", "albedo_r", "albedo_g", "albedo_b", "roughness",
+                                         "yarn", "fibre"])
+MediumPoint.__doc__ = """A density source's answer at a point: density, unit fibre tangent, RGB albedo, SGGX roughness,
+the yarn the covering fibre belongs to and a number telling the covering fibres apart (-1 both where
+the source does not know them: voxels, boxes)."""
+NO_MEDIUM = MediumPoint(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, np.int64(-1), np.int64(-1))  # outside every fibre
 
 
 def medium_lookup(med, x, y, z):
@@ -68,7 +72,8 @@ def homogeneous_lookup(med, x, y, z):
     t = med.tangent
     a = med.albedo
     return MediumPoint(np.float64(med.density), np.float64(t[0]), np.float64(t[1]), np.float64(t[2]),
-                       np.float64(a[0]), np.float64(a[1]), np.float64(a[2]), np.float64(med.roughness))
+                       np.float64(a[0]), np.float64(a[1]), np.float64(a[2]), np.float64(med.roughness), np.int64(-1),
+                       np.int64(-1))
 
 
 @overload(medium_lookup)

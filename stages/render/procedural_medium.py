@@ -44,7 +44,8 @@ def procedural_lookup(med, x, y, z):
     if not r.inside:
         return NO_MEDIUM
     rough = med.tab.tparams[med.tab.yarn_type[r.yarn], ROUGHNESS]
-    return MediumPoint(r.density, r.dir_x, r.dir_y, r.dir_z, r.albedo_r, r.albedo_g, r.albedo_b, rough)
+    return MediumPoint(r.density, r.dir_x, r.dir_y, r.dir_z, r.albedo_r, r.albedo_g, r.albedo_b, rough,
+                       np.int64(r.yarn), np.int64(r.fibre))
 
 
 @overload(medium_lookup)

@@ -81,10 +81,11 @@ def realized_lookup(med, x, y, z):
         tz /= n
     else:
         tx, ty, tz = 0.0, 0.0, 1.0
-    c = med.fiber_yarn[med.bvh.seg_fiber[s]]
+    f = med.bvh.seg_fiber[s]
+    c = med.fiber_yarn[f]
     a = med.yarn_albedo
     return MediumPoint(np.float64(med.yarn_density[c]), tx, ty, tz, np.float64(a[c, 0]), np.float64(a[c, 1]),
-                       np.float64(a[c, 2]), np.float64(med.yarn_roughness[c]))
+                       np.float64(a[c, 2]), np.float64(med.yarn_roughness[c]), np.int64(c), np.int64(f))
 
 
 @overload(medium_lookup)

@@ -12,7 +12,7 @@ reaches**, so rays skip empty space without a single lookup, and outside the box
 
 MajorantGrid fields: lo, hi (float64[3], the box), res (int64[3]: nx, ny, nz), mu (float64[nz, ny, nx]).
 
-``track(med, maj, o, d, tmax, seed, index, dim, ratio)`` returns a ``Flight``
+``track(med, maj, o, d, tmax, seed, index, dim, ratio, skip_fibre=-1)`` returns a ``Flight``
     (collided, t, transmittance, dim, lookups, point)
 with dim the next random-number dimension, lookups the medium lookups made and point the
 ``MediumPoint`` at the collision (``NO_MEDIUM`` without one). Delta mode (ratio = False) stops at
@@ -130,8 +130,10 @@ def ray_box(lo, hi, ox, oy, oz, dx, dy, dz):
 
 
 @njit(cache=True)
-def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio):
-    """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax]."""
+def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_fibre=-1):
+    """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax]; points
+    of fibre ``skip_fibre`` (a MediumPoint.fibre, -1 none) count as empty: a ray leaving a fibre that
+    scattered it as a whole does not meet that fibre again."""
     T = 1.0
     lookups = 0
     t_near, t_far = ray_box(maj.lo, maj.hi, ox, oy, oz, dx, dy, dz)
@@ -173,6 +175,8 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio):
                 m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz)
                 lookups += 1
                 st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
+                if skip_fibre >= 0 and m.fibre == skip_fibre:
+                    st = 0.0
                 if ratio:
                     T *= 1.0 - st / mu
                     if T < RATIO_RR_THRESHOLD:

@@ -1,18 +1,31 @@
-"""Volumetric path tracer for micro-flake fibre media (seed 000 §5.4).
+"""Volumetric path tracer for fibre media (seed 000 §5.4).
 
 Unidirectional path tracing through an anisotropic medium given by a density source
 (``stages.render.medium``): free flights by delta tracking on a majorant grid
-(``stages.render.tracking``), scattering by the specular micro-flake phase function sampled
-exactly (weight = albedo), next-event estimation toward the lights with ratio-tracked
+(``stages.render.tracking``), scattering by the fibres' BCSDF (below) or the specular micro-flake
+phase function sampled exactly (weight = albedo), next-event estimation toward the lights with ratio-tracked
 transmittance, multiple importance sampling (power heuristic) between light sampling and phase /
 BSDF sampling for lights that a ray can hit (environment: constant, SG, envmap), Russian roulette
 after ``rr_depth`` interactions, and at most ``max_depth`` path segments (Mitsuba's convention:
 max_depth = 1 shows only directly visible emitters). An optional diffuse ground plane z = height
 (Lambertian, RGB albedo) catches shadows.
 
+Fibre phase function. A volume that stands for explicit fibres (realized or procedural: the source
+knows the yarn of the covering fibre) can scatter as those fibres do: with ``mats`` holding a
+material row per yarn (``stages.core.shading.material``: the yarn's tinted fibre BCSDF), a collision
+in yarn y is fiberpath's BCSDF vertex -- next-event estimation with S(wi, wl) cos(theta_l), sampling
+by the BCSDF, the sample weight S cos / pdf carrying the fibre's albedo -- at the fibre tangent there.
+This is the radiative transfer of a cloud of thin opaque fibres: extinction density x projected width
+(den sin(theta_t) with den = 2 / (pi r), the fibres' projected area per volume, ``pipeline.presets``),
+in-scattering sigma_t(wi) int S(wi, wo) cos(theta_o) L(wo) dwo, so volpath is the homogenised limit of
+fiberpath on the same fibres. As in fiberpath, the scattered and shadow rays do not meet the fibre
+they leave (its medium is skipped: the BCSDF already accounts for the fibre as a whole). Collisions whose yarn is unknown (voxel grids, test boxes) or without a
+row (``mats`` empty: ``--set phase=microflake``) use the micro-flake phase function of seed 000 App. A.
+
 ``VolpathIntegrator`` fields: ``medium`` (a density source, ``stages.render.medium``), ``majorant``
 (its ``MajorantGrid``), ``lights`` (``LightTable``, ``stages.render.lights``), ``ground`` float64[4]
-and ``has_ground`` (``stages.render.ground``), ``max_depth``, ``rr_depth``. Its ``radiance``
+and ``has_ground`` (``stages.render.ground``), ``max_depth``, ``rr_depth``, ``mats`` (Y, MAT_SIZE)
+material rows per yarn (0 rows: micro-flakes everywhere). Its ``radiance``
 (``stages.render.integrator``) reports the medium lookups and rays (free-flight and shadow queries)
 of each path; the tile loop is ``stages.render.tiles``.
 Random numbers: uniform(seed, pixel * spp + sample, dim) with pixel jitter in dims 0-1, so the image
@@ -28,6 +41,7 @@ from numba.extending import overload
 from stages.core.dispatch import is_tuple_class
 from stages.core.rng import uniform
 from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample
+from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
@@ -35,7 +49,7 @@ from stages.render.lights import environment_radiance, light_eval, light_pdf, li
 from stages.render.tracking import track
 
 VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
-                                                     "max_depth", "rr_depth"])
+                                                     "max_depth", "rr_depth", "mats"])
 
 
 @njit(cache=True)
@@ -45,11 +59,12 @@ def _power(a, b):
 
 
 @njit(cache=True)
-def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, index, dim):
-    """Ratio-tracked transmittance toward direction w (an infinitely far light); the ground occludes."""
+def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, index, dim, skip_fibre):
+    """Ratio-tracked transmittance toward direction w (an infinitely far light), not counting fibre
+    ``skip_fibre``; the ground occludes."""
     if ground_intersect(ground, ground_on, pz, wz, 0.0) < np.inf:
         return 0.0, dim, 0
-    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, dim, True)
+    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, dim, True, skip_fibre)
     return fl.transmittance, fl.dim, fl.lookups
 
 
@@ -79,6 +94,13 @@ def _escaped(lt, n, prev_pdf, dx, dy, dz):
     return r, g, b
 
 
+@njit(cache=True, inline="always")
+def fibre_phase(yarn, mats):
+    """True when the collision is with a fibre of a yarn that has a material row (fibre phase function;
+    model -1 marks a yarn that scatters by micro-flakes)."""
+    return 0 <= yarn < mats.shape[0] and mats[yarn, 0] >= 0.0
+
+
 @njit(cache=True)
 def trace_path(it, o, d, seed, index):
     """``PathSample`` of the camera ray (o, d) of camera sample ``index`` (see the module doc)."""
@@ -89,6 +111,7 @@ def trace_path(it, o, d, seed, index):
     ground_on = it.has_ground
     max_depth = it.max_depth
     rr_depth = it.rr_depth
+    mats = it.mats
     ox = o[0]
     oy = o[1]
     oz = o[2]
@@ -112,13 +135,17 @@ def trace_path(it, o, d, seed, index):
     first_t = 0.0
     nrm = np.zeros(3)
     wi = np.empty(3)
+    tan = np.empty(3)
+    wsc = np.empty(3)
+    ctx = np.empty(CTX_SIZE)
     alb = np.empty(3)
     alb[0] = ground[1]
     alb[1] = ground[2]
     alb[2] = ground[3]
+    skip = np.int64(-1)  # the fibre the ray leaves after a fibre-phase collision (not met again)
     while True:
         tg = ground_intersect(ground, ground_on, oz, dz, 1e-9)
-        fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, dim, False)
+        fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, dim, False, skip)
         rays += 1
         collided = fl.collided
         t = fl.t
@@ -142,6 +169,7 @@ def trace_path(it, o, d, seed, index):
         u4 = uniform(seed, index, dim + 3)
         u5 = uniform(seed, index, dim + 4)
         dim += 5
+        next_skip = np.int64(-1)
         if nl > 0:
             k = min(int(u3 * nl), nl - 1)
             lw, ler, leg, leb, lpdf, ldelta = light_sample(lights, k, env, marg, cond, u1, u2)
@@ -150,7 +178,46 @@ def trace_path(it, o, d, seed, index):
             lw = nrm
             ler = leg = leb = lpdf = 0.0
             ldelta = False
-        if collided:
+        if collided and fibre_phase(fl.point.yarn, mats):
+            # the fibre's own scattering function: fiberpath's vertex (module doc, "Fibre phase function")
+            px = ox + t * dx
+            py = oy + t * dy
+            pz = oz + t * dz
+            m = fl.point
+            mat = mats[m.yarn]
+            tan[0] = m.tx
+            tan[1] = m.ty
+            tan[2] = m.tz
+            wi[0] = -dx
+            wi[1] = -dy
+            wi[2] = -dz
+            material_prepare(mat, tan, tan, wi, ctx)  # (a curve material ignores the normal argument)
+            if lpdf > 0.0:
+                f0, f1, f2, pf = material_eval_pdf(mat, ctx, tan, tan, wi, lw)
+                if f0 > 0.0 or f1 > 0.0 or f2 > 0.0:
+                    tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
+                                                 seed, index, dim, m.fibre)
+                    lookups += lk
+                    rays += 1
+                    if tr > 0.0:
+                        c = tr * (1.0 if ldelta else _power(lpdf, pf)) / lpdf
+                        Lr += br * ler * f0 * c
+                        Lg += bg * leg * f1 * c
+                        Lb += bb * leb * f2 * c
+            u6 = uniform(seed, index, dim)
+            dim += 1
+            w0, w1, w2, pdf = material_sample(mat, ctx, tan, tan, wi, u6, u4, u5, wsc)
+            if pdf <= 0.0:
+                break
+            br *= w0
+            bg *= w1
+            bb *= w2
+            wx = wsc[0]
+            wy = wsc[1]
+            wz = wsc[2]
+            prev_pdf = pdf
+            next_skip = m.fibre
+        elif collided:
             px = ox + t * dx
             py = oy + t * dy
             pz = oz + t * dz
@@ -163,7 +230,7 @@ def trace_path(it, o, d, seed, index):
                 f = phase_eval(S, -dx, -dy, -dz, lw[0], lw[1], lw[2])
                 if f > 0.0:
                     tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
-                                                 seed, index, dim)
+                                                 seed, index, dim, -1)
                     lookups += lk
                     rays += 1
                     if tr > 0.0:
@@ -190,7 +257,7 @@ def trace_path(it, o, d, seed, index):
                 fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
                 if fr > 0.0 or fg > 0.0 or fb > 0.0:
                     tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
-                                                 seed, index, dim)
+                                                 seed, index, dim, -1)
                     lookups += lk
                     rays += 1
                     if tr > 0.0:
@@ -214,6 +281,7 @@ def trace_path(it, o, d, seed, index):
         dx = wx
         dy = wy
         dz = wz
+        skip = next_skip
         if n >= rr_depth:
             q = min(max(br, bg, bb), 0.95)
             u = uniform(seed, index, dim)

@@ -31,7 +31,7 @@ def render_arrays(pts, offs, rad, mats, mat_of_fiber, light_rows, cam, spp, seed
     integ = FiberpathIntegrator(bvh, np.asarray(mat_of_fiber, np.int32), np.asarray(mats, np.float64),
                                 pack_material_lambert(g[1:4]), lights, g, ground is not None, max_depth, rr_depth,
                                 WHOLE_FIBRE, 1e-7)
-    film = render_tiles(integ, cam, seed, spp, tile_grid(W, H, tile), new_film(W, H))
+    film = render_tiles(integ, cam, seed, spp, 0, spp, tile_grid(W, H, tile), new_film(W, H))
     img = finalize(film, spp, VARIANCE_CHANNELS)
     return img.rgb.astype(np.float64), img.variance.astype(np.float64), img.alpha.astype(np.float64), img.rays
 
@@ -374,10 +374,10 @@ def test_cli_renders_exr_png_artifact(cli, tmp_path):
     (tmp_path / "bad.toml").write_text('c_r = [0.1, 0.1, 0.1]\nc_tt = [0.5, 2.5, 0.5]\nbeta_r = 3.0\nbeta_tt = 10.0\ngamma_tt = 20.0\n')
     code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
     assert code == 2 and "c_tt[1]" in err and "2.5" in err and not (tmp_path / "x.exr").exists()
-    # tinting by yarn albedo: TT colour times the albedo (0.6 here) darkens the image
+    # tinting by the yarn's colour (the default): both lobe colours times the colour (0.6 here) darken the image
     scene.write_text(SCENE.format(bcsdf="gabardine"))
-    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "g.exr")[0] == 0
-    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "gt.exr", "--set", "tint=yarn")[0] == 0
+    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "g.exr", "--set", "tint=none")[0] == 0
+    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "gt.exr")[0] == 0
     g, gt = read_exr(tmp_path / "g.exr")[0], read_exr(tmp_path / "gt.exr")[0]
     assert gt.sum() < g.sum()
     # empty fibers artifact

@@ -83,11 +83,12 @@ def test_covering_segment_is_the_lowest_covering_fibre(medium):
 
 @njit
 def _lookup(med, X):
-    out = np.empty((X.shape[0], 8))
+    out = np.empty((X.shape[0], 10))
     for k in range(X.shape[0]):
         r = medium_lookup(med, X[k, 0], X[k, 1], X[k, 2])
-        for j in range(8):
-            out[k, j] = r[j]
+        out[k, 0], out[k, 1], out[k, 2], out[k, 3] = r.den, r.tx, r.ty, r.tz
+        out[k, 4], out[k, 5], out[k, 6], out[k, 7] = r.albedo_r, r.albedo_g, r.albedo_b, r.roughness
+        out[k, 8], out[k, 9] = r.yarn, r.fibre
     return out
 
 
@@ -109,6 +110,7 @@ def test_medium_lookup_returns_the_yarn_and_the_segment_tangent(medium):
         assert o[0] == med.yarn_density[c]
         np.testing.assert_array_equal(o[4:7], med.yarn_albedo[c])
         assert o[7] == med.yarn_roughness[c]
+        assert o[8] == c and o[9] == f  # the covering fibre's yarn and the fibre itself
         cand = np.flatnonzero(cov & (fib == f))
         dirs = (b[cand] - a[cand]) / np.linalg.norm(b[cand] - a[cand], axis=1)[:, None]
         assert np.min(np.linalg.norm(dirs - o[1:4], axis=1)) < 1e-12

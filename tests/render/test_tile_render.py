@@ -37,7 +37,7 @@ def _render(scene, mat_of_fiber, cam, lights, W, H, spp):
     # up to 3 scattering events: rays also start inside the shell
     integ = FiberpathIntegrator(scene, mat_of_fiber, mats, pack_material_lambert(np.zeros(3)), lights.table(),
                                 np.zeros(4), False, 3, 2, 0, 1e-9)
-    img = finalize(render_tiles(integ, cam, 3, spp, tile_grid(W, H, 8), new_film(W, H)), spp)
+    img = finalize(render_tiles(integ, cam, 3, spp, 0, spp, tile_grid(W, H, 8), new_film(W, H)), spp)
     return img.rgb, img.alpha * spp, img.rays
 
 

@@ -23,6 +23,7 @@ from stages.core.shading.sggx import fiber_sggx, phase_eval, projected_area
 from stages.render.tracking import make_majorant_grid, majorants_from_voxels, track
 from stages.render.lights import LightTable
 from stages.render.tiles import render_tiles
+from stages.core.shading.material import MAT_SIZE
 from stages.render.volpath import VolpathIntegrator
 
 Z = 5.0  # standard errors allowed
@@ -109,8 +110,8 @@ def _render(med, maj, lt, cam, spp, max_depth=1000, rr_depth=5, ground=None, see
     """(H, W, 6): mean R, G, B, alpha, (unused), variance of the mean luminance -- from the shared film."""
     W, H = int(cam[13]), int(cam[14])
     g = np.zeros(4) if ground is None else np.asarray(ground, float)
-    integ = VolpathIntegrator(med, maj, lt, g, ground is not None, max_depth, rr_depth)
-    film = render_tiles(integ, cam, seed, spp, tile_grid(W, H, tile), new_film(W, H))
+    integ = VolpathIntegrator(med, maj, lt, g, ground is not None, max_depth, rr_depth, np.zeros((0, MAT_SIZE)))
+    film = render_tiles(integ, cam, seed, spp, 0, spp, tile_grid(W, H, tile), new_film(W, H))
     img = finalize(film, spp, VARIANCE_LUMINANCE)
     out = np.zeros((H, W, 6))
     out[..., :3] = film[..., F_R:F_B + 1] / spp
@@ -338,7 +339,7 @@ def test_procedural_majorant_covers_every_fibre(small):
     from pipeline.renderers.volpath import procedural_source
     from stages.core.yarn.lookup import lookup_points
 
-    med, maj, _ = procedural_source(str(small / "t.zarr"))
+    med, maj, _, _ = procedural_source(str(small / "t.zarr"))
     fib = Artifact(small / "f.zarr", kind="fibers")
     pts = np.asarray(fib["points"], np.float64)
     rf = float(np.max(fib["point_radius"]))

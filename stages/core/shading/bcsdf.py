@@ -454,3 +454,38 @@ def bcsdf_albedo(p, theta_i):
         f = fresnel_R(theta_i, p[c])
         out[c] = f + (1.0 - f) * p[3 + c]
     return out
+
+
+def tint_bcsdf(p, colour):
+    """The packed BCSDF of a dyed fibre: both lobe colours (C_R inside F_R, and C_TT) multiplied by the
+    fibre's colour. At grazing incidence F_R still tends to 1 (white), as a dielectric's reflection does.
+    ``colour`` may be (..., 3): the result is then (..., BCSDF_SIZE)."""
+    c = np.asarray(colour, np.float64)
+    c = np.broadcast_to(c, c.shape[:-1] + (3,)) if c.ndim else np.full(3, float(c))
+    q = np.array(np.broadcast_to(np.asarray(p, np.float64), c.shape[:-1] + (BCSDF_SIZE,)))
+    q[..., 0:3] *= c
+    q[..., 3:6] *= c
+    return q
+
+
+def _mean_fresnel_tail(nodes=64):
+    """cos^2-weighted mean over theta in [-pi/2, pi/2] of (1 - |cos theta|)^5 (Gauss-Legendre)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    c = np.cos(HALF_PI * x)
+    return float(np.sum(w * c * c * (1.0 - c) ** 5) / np.sum(w * c * c))
+
+
+MEAN_FRESNEL_TAIL = _mean_fresnel_tail()
+
+
+def bcsdf_mean_albedo(p):
+    """Single-scattering albedo of a fibre in an isotropic radiance field: the albedo
+    A(theta_i) = F_R + (1 - F_R) C_TT (``bcsdf_albedo``) averaged over incidence with weight
+    cos^2(theta_i) (the fibre's projected width times the solid angle at theta_i), i.e. the fraction
+    of the light a randomly lit fibre intercepts that it scatters. F_R is linear in C_R, so the mean is
+    F + (1 - F) C_TT with F = C_R + (1 - C_R) m, m = the weighted mean of (1 - |cos|)^5
+    (``MEAN_FRESNEL_TAIL``). ``p`` may also be an (..., BCSDF_SIZE) array. A volume standing for these
+    fibres takes it as its albedo (``pipeline.renderers.volpath``)."""
+    p = np.asarray(p, np.float64)
+    f = p[..., 0:3] + (1.0 - p[..., 0:3]) * MEAN_FRESNEL_TAIL
+    return f + (1.0 - f) * p[..., 3:6]

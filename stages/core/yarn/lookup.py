@@ -1,10 +1,11 @@
 """Point lookups without realization: seed 000 Algorithms 1-3 on the tables of tables.py.
 
 ``lookup_point(cv, tab, px, py, pz)`` answers, for a fabric-space point p, a ``FibreLookup``
-    (inside, yarn, kind, dir_x, dir_y, dir_z, density, albedo_r, albedo_g, albedo_b)
+    (inside, yarn, kind, dir_x, dir_y, dir_z, density, albedo_r, albedo_g, albedo_b, fibre)
 with kind 0 none, 1 regular, 2 loop, 3 hair; dir the unit fibre tangent at the closest point of the
 covering fibre (zero outside); density the yarn type's density (0 outside); ``OUTSIDE`` where no
-fibre covers p. ``lookup_points(cv, tab, pts)`` does it for (N, 3) points in parallel and returns
+fibre covers p; fibre a number that tells the covering fibres apart (-1 outside).
+``lookup_points(cv, tab, pts)`` does it for (N, 3) points in parallel and returns
 the same fields as arrays (``FibreLookups``: inside, yarn, kind, direction (N, 3), density,
 albedo (N, 3)).
 ``tab`` must carry its derived fields (``tables.derive_lookup_accel``; ``load_tables`` does it).
@@ -63,20 +64,22 @@ from stages.core.yarn.tables import fringe_bits, fringe_window, hair_node_seed_n
 FOOT_TOL = 1e-4  # foot-point Newton stops at steps below this x the fibre radius (w absorbs the rest)
 GN_TOL = 1e-5  # Gauss-Newton stops when a step moves the fibre point by less than this x the fibre radius
 
-FibreLookup = namedtuple("FibreLookup", ["inside", "yarn", "kind", "dir_x", "dir_y", "dir_z", "density",
-                                         "albedo_r", "albedo_g", "albedo_b"])
-FibreLookup.__doc__ = """lookup_point's answer at p (module doc)."""
-KeyedLookup = namedtuple("KeyedLookup", FibreLookup._fields + ("key",))
+_ANSWER = ("inside", "yarn", "kind", "dir_x", "dir_y", "dir_z", "density", "albedo_r", "albedo_g", "albedo_b")
+FibreLookup = namedtuple("FibreLookup", _ANSWER + ("fibre",))
+FibreLookup.__doc__ = """lookup_point's answer at p (module doc); ``fibre`` identifies the covering fibre
+within the fabric (yarn * FIBRE_ID_STRIDE + its order key; -1 outside)."""
+KeyedLookup = namedtuple("KeyedLookup", _ANSWER + ("key",))
 KeyedLookup.__doc__ = """yarn_lookup's answer: FibreLookup's fields and the covering fibre's order key
 (_order_key; NO_FIBRE outside)."""
 FibreLookups = namedtuple("FibreLookups", ["inside", "yarn", "kind", "direction", "density", "albedo"])
 FibreLookups.__doc__ = """lookup_points' answers: inside (N,) bool, yarn (N,) int32, kind (N,) int8,
 direction (N, 3), density (N,), albedo (N, 3)."""
 
-OUTSIDE = FibreLookup(False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+OUTSIDE = FibreLookup(False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -1)
 NO_FIBRE = 1 << 62  # yarn_lookup's order key when nothing covers p
-OUTSIDE_KEYED = KeyedLookup(*OUTSIDE, NO_FIBRE)
+OUTSIDE_KEYED = KeyedLookup(False, -1, 0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, NO_FIBRE)
 ORDER_STRIDE = 1 << 32  # order key of a hit: (2 ply + is_hair) * ORDER_STRIDE + fibre index
+FIBRE_ID_STRIDE = 1 << 40  # FibreLookup.fibre = yarn * FIBRE_ID_STRIDE + order key (keys stay below it)
 
 
 @njit(cache=True, inline="always")
@@ -87,8 +90,9 @@ def _answer(c, kind, tx, ty, tz, tp, tab, key):
 
 @njit(cache=True, inline="always")
 def _unkeyed(r):
+    fibre = r.yarn * FIBRE_ID_STRIDE + r.key if r.inside else np.int64(-1)
     return FibreLookup(r.inside, r.yarn, r.kind, r.dir_x, r.dir_y, r.dir_z, r.density, r.albedo_r, r.albedo_g,
-                       r.albedo_b)
+                       r.albedo_b, fibre)
 
 
 @njit(cache=True, inline="always")

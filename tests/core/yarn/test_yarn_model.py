@@ -27,7 +27,10 @@ def test_nine_presets_ship_and_pass_the_schema():
     assert presets.list_presets() == NAMES
     for name in NAMES:
         d = presets.load_preset(name)
-        assert 0.0001 <= d["fiber_radius"] <= 0.0016
+        # the derived fibre radius fills PACKING_FRACTION of the ply's elliptical cross-section
+        fill = d["fiber_num"] * d["fiber_radius"] ** 2 / (d["ellipse_long"] * d["ellipse_short"])
+        assert fill == pytest.approx(presets.PACKING_FRACTION, rel=1e-12)
+        assert 0.0001 <= d["fiber_radius"] <= 0.004
         assert d["rho_max"] == 1.0 and d["R_max"] == 1.0
 
 
