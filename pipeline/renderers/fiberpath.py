@@ -206,7 +206,6 @@ def render(scene, options: dict) -> RenderResult:
                                 ground, has_ground, max_depth, rr_depth, SELF_WINDOW, eps)
     run = render_film(label, integ, cam, W, H, sampling_of(options), seed, options["tile_size"], VARIANCE_CHANNELS,
                       options.get("threads"))
-    stats = {"rays": run.image.rays, "paths": run.samples, "render_s": run.render_s, "compile_s": run.compile_s,
-             "refined_pixels": run.refined_pixels, **stats,
+    stats = {**run.stats(), **stats,
              "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
     return RenderResult(run.rgb, run.extra, stats)

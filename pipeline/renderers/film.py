@@ -48,6 +48,36 @@ class FilmRun:
     compile_s: float
     samples: int
     refined_pixels: int
+    target_error: float = 0.05
+
+    def stats(self) -> dict:
+        """The statistics every method reports: rays, paths (samples), render and compile seconds,
+        pixels refined and the ``convergence`` of the image (``convergence``)."""
+        return {"rays": self.image.rays, "paths": self.samples, "render_s": self.render_s,
+                "compile_s": self.compile_s, "refined_pixels": self.refined_pixels,
+                "convergence": convergence(self.rgb, self.extra["variance"], self.target_error)}
+
+
+def relative_error(rgb, variance) -> np.ndarray:
+    """Per pixel the relative standard error of its mean, sqrt(variance channel) / max(luminance,
+    1 % of the image's mean luminance): how far the pixel may still move with more samples."""
+    lum = rgb[..., 0] * 0.2126 + rgb[..., 1] * 0.7152 + rgb[..., 2] * 0.0722
+    floor = max(0.01 * float(lum.mean()), 1e-6)
+    return np.sqrt(np.maximum(np.asarray(variance, np.float64), 0.0)) / np.maximum(lum, floor)
+
+
+def convergence(rgb, variance, target_error: float = 0.05) -> dict:
+    """How converged an image is: the median, 95th percentile and maximum relative standard error of
+    its pixels (``relative_error``), the fraction of pixels within ``target_error``, and the relative
+    variance of the image's mean luminance (sum of the pixel variances / N^2, over the mean^2)."""
+    err = relative_error(rgb, variance)
+    lum = rgb[..., 0] * 0.2126 + rgb[..., 1] * 0.7152 + rgb[..., 2] * 0.0722
+    n = err.size
+    mean = float(lum.mean())
+    return {"rel_error_p50": float(np.median(err)), "rel_error_p95": float(np.percentile(err, 95)),
+            "rel_error_max": float(err.max()), "within_target": float(np.mean(err <= target_error)),
+            "target_error": float(target_error),
+            "mean_rel_variance": float(np.sum(variance, dtype=np.float64) / n / n / max(mean * mean, 1e-30))}
 
 
 def _pass(label, integ, cam, seed, stride, first, counts, tiles, film, threads):
@@ -108,7 +138,7 @@ def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile
     render_s = time.perf_counter() - t0
     img = finalize(film, counts, variance)
     extra = {"A": img.alpha, "depth": img.depth, "variance": img.variance}
-    return FilmRun(img.rgb, extra, img, render_s, compile_s, samples, refined)
+    return FilmRun(img.rgb, extra, img, render_s, compile_s, samples, refined, float(sampling.target_error))
 
 
 def sampling_of(options) -> Sampling:

@@ -267,8 +267,7 @@ def render(scene, options: dict) -> RenderResult:
     run = render_film(f"volpath ({source})", integ, cam, W, H, sampling_of(options), seed, options["tile_size"],
                       VARIANCE_LUMINANCE, options.get("threads"))
     lookups, render_s = run.image.lookups, run.render_s
-    stats = {"rays": run.image.rays, "paths": run.samples, "render_s": render_s, "compile_s": run.compile_s,
-             "refined_pixels": run.refined_pixels, "source": source,
+    stats = {**run.stats(), "source": source,
              "medium_lookups": lookups, "medium_lookups_per_s": lookups / max(render_s, 1e-12),
              "source_build_s": build_s, "majorant_cells": [int(x) for x in maj.res],
              "majorant_occupied": float(np.mean(maj.mu > 0)), "max_depth": max_depth, "rr_depth": rr_depth,
