@@ -188,6 +188,23 @@ def sweep_scatter_png(pairs: dict[str, tuple[np.ndarray, np.ndarray]], path: str
     return _savefig(fig, Path(path))
 
 
+def side_by_side_png(images: Sequence[np.ndarray], titles: Sequence[str], path: str | Path) -> Path:
+    """The full images in one row at their own resolution, sRGB at exposure 0 (as the previews), each
+    titled with its name, resolution and mean intensity."""
+    plt = _plt()
+    n = len(images)
+    h, w = images[0].shape[:2]
+    scale = max(1.0, 320.0 / w)  # small renders are shown enlarged (nearest neighbour), never shrunk
+    fig, axes = plt.subplots(1, n, figsize=(n * w * scale / 100 + 0.3 * n, h * scale / 100 + 0.7), squeeze=False)
+    for ax, img, title in zip(axes[0], images, titles):
+        ax.imshow(_preview(img), interpolation="nearest")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        mean = ", ".join(f"{v:.3f}" for v in np.asarray(img, float).reshape(-1, 3).mean(axis=0))
+        ax.set_title(f"{title}\n{img.shape[1]}x{img.shape[0]}, mean {mean}", fontsize=8)
+    return _savefig(fig, Path(path))
+
+
 def contact_sheet_png(images: list[list[np.ndarray | None]], rows: Sequence[str], cols: Sequence[str],
                       path: str | Path) -> Path:
     plt = _plt()

@@ -10,11 +10,20 @@
 - ``delta_e2000_mean``: mean CIEDE2000 over pixels, linear sRGB clipped to [0, 1] -> XYZ -> Lab (D65);
 - ``mean_intensity``: per-channel image mean (seed 001 §6.3),
 
-and, when a render artifact ``<image>.zarr`` lies beside an image, the render's wall time, peak
-memory, samples per pixel and paths per second from its summary (falling back to the artifact's
-provenance block), plus the speed-up over the reference where both times are known.
+and, when a render artifact ``<image>.zarr`` lies beside an image, the render's resolution, samples
+per pixel (asked and traced, with adaptive sampling), render time *excluding numba compilation*
+(``time_s``; compilation, loading and the source build reported apart: ``compile_s``,
+``wall_time_s``), peak memory, paths per second and convergence (relative standard error of the
+pixels, ``pipeline.renderers.film.convergence``) from its summary, plus the speed-up over the
+reference (render times) where both are known. Against the reference every test gets
+``brightness_ratio`` (its mean intensity over the reference's, per channel) and
+``brightness_mismatch`` (a channel off by more than ``BRIGHTNESS_TOLERANCE``), and, where both
+images carry a variance channel, ``noise_rmse`` (the RMSE that Monte Carlo noise alone would give,
+sqrt of the mean summed variance of the two pixel means) and ``noise_dominated`` (noise_rmse over
+half the measured RMSE: the per-pixel metrics then measure noise, not the methods; the report says so).
 
-Outputs in ``out_dir``: ``metrics.json`` ({test name: {metric: value}}), ``error_<name>.png``,
+Outputs in ``out_dir``: ``metrics.json`` ({test name: {metric: value}}), ``images.png`` (the full
+images side by side, one exposure), ``error_<name>.png``,
 ``crops_<name>.png``, ``metrics.png``, ``report.md``, ``report.html`` and the ``evaluation``
 artifact ``evaluation.zarr`` (metrics as summary; input EXR and render artifact content hashes as
 provenance). An evaluation whose inputs are unchanged is not recomputed unless ``force``.
@@ -35,6 +44,8 @@ import numpy as np
 from ..errors import LoomError
 
 METRIC_KEYS = ("rmse", "relmse", "ssim", "delta_e2000_mean")
+BRIGHTNESS_TOLERANCE = 0.10   # a test whose mean intensity differs by more in a channel is flagged
+NOISE_FRACTION = 0.5          # noise_rmse above this fraction of the RMSE: the metrics measure noise
 SSIM_NOTE = ("SSIM: Wang et al. 2004, 11x11 Gaussian window (sigma 1.5), K1 = 0.01, K2 = 0.03, on sRGB-encoded "
              "luminance clipped to [0, 1] (dynamic range L = 1). relMSE: mean of (t - r)^2 / (r^2 + 0.01). "
              "CIEDE2000: linear sRGB clipped to [0, 1] -> XYZ -> Lab (D65), mean over pixels.")
@@ -102,6 +113,49 @@ def render_stats(image: str | Path) -> dict:
     pps = _first(summary, "paths_per_s", "paths_per_second")
     if pps is not None:
         out["paths_per_s"] = float(pps)
+    w, h = _first(summary, "width"), _first(summary, "height")
+    if w is not None and h is not None:
+        out["resolution"] = [int(w), int(h)]
+        paths = _first(summary, "paths")
+        if paths is not None and w * h > 0:
+            out["samples_per_pixel"] = float(paths) / (w * h)
+    ms = summary.get("method_stats") if isinstance(summary.get("method_stats"), dict) else {}
+    cs = _first(ms, "compile_s")
+    if cs is not None:
+        out["compile_s"] = float(cs)
+    if isinstance(ms.get("convergence"), dict):
+        out["convergence"] = ms["convergence"]
+    t = out.get("render_time_s", out.get("wall_time_s"))
+    if t is not None:
+        out["time_s"] = float(t)
+    return out
+
+
+def load_variance(path: str | Path) -> np.ndarray | None:
+    """The image's ``variance`` channel (variance of each pixel's mean), None where it has none."""
+    from ..images import read_exr
+
+    try:
+        _, ch = read_exr(path)
+    except LoomError:
+        return None
+    v = ch.get("variance")
+    return None if v is None or not np.all(np.isfinite(v)) else np.asarray(v, np.float64)
+
+
+def agreement(test: np.ndarray, ref: np.ndarray, rmse: float, var_test=None, var_ref=None) -> dict:
+    """Brightness ratio and mismatch flag of a test against the reference; the noise RMSE and whether
+    noise dominates the per-pixel metrics where both variance channels are known (module doc)."""
+    from stages.evaluate.metrics import mean_intensity
+
+    mt, mr = np.asarray(mean_intensity(test), float), np.asarray(mean_intensity(ref), float)
+    ratio = mt / np.maximum(mr, 1e-12)
+    out = {"brightness_ratio": [float(v) for v in ratio],
+           "brightness_mismatch": bool(np.any(np.abs(ratio - 1.0) > BRIGHTNESS_TOLERANCE))}
+    if var_test is not None and var_ref is not None and var_test.shape == var_ref.shape == test.shape[:2]:
+        noise = float(np.sqrt(np.mean(var_test + var_ref)))
+        out["noise_rmse"] = noise
+        out["noise_dominated"] = bool(noise > NOISE_FRACTION * rmse)
     return out
 
 
@@ -205,11 +259,13 @@ def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_
     rel_maps = []
     pictures: list[Path] = []
     rep = rp.Report(title or f"Evaluation against {ref_path.name}")
+    var_ref = load_variance(ref_path)
     for lab, p, st, test in zip(labels, test_paths, test_stats, tests):
         entry = image_metrics(test, ref)
+        entry.update(agreement(test, ref, entry["rmse"], load_variance(p), var_ref))
         entry.update({k: v for k, v in st.items() if k != "render_artifact"})
-        if "wall_time_s" in st and "wall_time_s" in ref_stats and st["wall_time_s"] > 0:
-            entry["speedup_vs_reference"] = ref_stats["wall_time_s"] / st["wall_time_s"]
+        if "time_s" in st and "time_s" in ref_stats and st["time_s"] > 0:
+            entry["speedup_vs_reference"] = ref_stats["time_s"] / st["time_s"]
         metrics[lab] = entry
         rel_maps.append(rp.relative_error(test, ref).astype(np.float32))
         s = slug(lab)
@@ -220,6 +276,8 @@ def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_
     ref_entry = {"name": ref_path.name, "mean_intensity": [float(v) for v in mean_intensity(ref)],
                  **{k: v for k, v in ref_stats.items() if k != "render_artifact"}}
     pictures.append(rp.metric_bars_png(metrics, out_dir / "metrics.png", f"against {ref_path.name}"))
+    pictures.append(rp.side_by_side_png([ref, *tests], [f"{ref_path.name} (reference)", *labels],
+                                        out_dir / "images.png"))
 
     # metrics.json, report
     rp.write_text(out_dir / "metrics.json", json.dumps(metrics, indent=2, sort_keys=True) + "\n")
@@ -241,18 +299,57 @@ def metric_row(label: str, e: dict) -> list[str]:
 
     sp = e.get("speedup_vs_reference")
     return [label, fmt_num(e.get("rmse")), fmt_num(e.get("relmse")), fmt_num(e.get("ssim")),
-            fmt_num(e.get("delta_e2000_mean")), fmt_seconds(e.get("wall_time_s")),
+            fmt_num(e.get("delta_e2000_mean")), fmt_seconds(e.get("time_s", e.get("wall_time_s"))),
             f"{sp:.2f}x" if sp is not None else "-", fmt_bytes(e.get("peak_memory_bytes"))]
 
 
-METRIC_HEADERS = ["image", "RMSE", "relMSE", "SSIM", "mean ΔE00", "time", "speed-up", "peak memory"]
+METRIC_HEADERS = ["image", "RMSE", "relMSE", "SSIM", "mean ΔE00", "render time", "speed-up", "peak memory"]
+IMAGE_HEADERS = ["image", "resolution", "spp (traced)", "mean R, G, B", "ratio to reference", "render time",
+                 "compile", "pixel rel. error p50 / p95"]
+
+
+def image_row(label: str, e: dict, reference: bool = False) -> list[str]:
+    """One image's line: resolution, samples, mean intensity, brightness ratio, times, convergence."""
+    from ..report import fmt_seconds
+
+    res = e.get("resolution")
+    spp = e.get("spp")
+    traced = e.get("samples_per_pixel")
+    spp_s = "-" if spp is None else (f"{spp} ({traced:.1f})" if traced is not None and abs(traced - spp) > 1e-9 else f"{spp}")
+    mean = ", ".join(f"{v:.4f}" for v in e.get("mean_intensity", []))
+    ratio = "1 (reference)" if reference else ", ".join(f"{v:.3f}" for v in e.get("brightness_ratio", []))
+    if e.get("brightness_mismatch"):
+        ratio += " **MISMATCH**"
+    conv = e.get("convergence") or {}
+    conv_s = f"{conv['rel_error_p50']:.3f} / {conv['rel_error_p95']:.3f}" if "rel_error_p50" in conv else "-"
+    return [label, f"{res[0]}x{res[1]}" if res else "-", spp_s, mean or "-", ratio,
+            fmt_seconds(e.get("time_s")), fmt_seconds(e.get("compile_s")), conv_s]
 
 
 def _images_report(rep, ref_path: Path, ref_entry: dict, metrics: dict, labels: list[str]) -> None:
     from ..report import fmt_bytes, fmt_seconds
 
-    rep.paragraph(f"Reference: {ref_path} (render time {fmt_seconds(ref_entry.get('wall_time_s'))}, "
-                  f"peak memory {fmt_bytes(ref_entry.get('peak_memory_bytes'))}).")
+    rep.paragraph(f"Reference: {ref_path} (render time {fmt_seconds(ref_entry.get('time_s'))} excluding "
+                  f"compilation, peak memory {fmt_bytes(ref_entry.get('peak_memory_bytes'))}).")
+    rep.heading("Images")
+    rep.table(IMAGE_HEADERS, [image_row(ref_path.name, ref_entry, reference=True)]
+              + [image_row(l, metrics[l]) for l in labels],
+              caption="Render time excludes numba compilation (compile column: compiling or loading the kernels). "
+                      "spp: samples asked per pixel, traced in brackets where adaptive sampling added some. "
+                      "Pixel rel. error: relative standard error of the pixels' means (50th / 95th percentile).")
+    rep.image("images.png", "The full images side by side, one exposure")
+    flags = [f"**Brightness mismatch**: {l} differs from the reference by more than "
+             f"{BRIGHTNESS_TOLERANCE:.0%} in mean intensity (ratios "
+             f"{', '.join(f'{v:.3f}' for v in metrics[l]['brightness_ratio'])})." for l in labels
+             if metrics[l].get("brightness_mismatch")]
+    flags += [f"**Noise dominates** {l}: Monte Carlo noise alone would give an RMSE of "
+              f"{metrics[l]['noise_rmse']:.4g} against the measured {metrics[l]['rmse']:.4g}; its per-pixel "
+              f"metrics (RMSE, relMSE, SSIM, ΔE) measure noise more than the methods. Render more samples."
+              for l in labels if metrics[l].get("noise_dominated")]
+    for f in flags or ["Every test agrees with the reference in mean intensity within "
+                       f"{BRIGHTNESS_TOLERANCE:.0%} per channel, and no test's per-pixel metrics are dominated by noise "
+                       "(where variance channels tell)."]:
+        rep.paragraph(f)
     rep.paragraph(SSIM_NOTE)
     rep.heading("Metrics")
     rep.table(METRIC_HEADERS, [metric_row(l, metrics[l]) for l in labels])

@@ -247,7 +247,7 @@ def gather_images(sweep: Sweep, jobs: list[Job], out: Path, render: bool) -> Swe
             means[ci, mi] = mean_intensity(img)
             st = render_stats(job.exr)
             stamp = _stamp(job) or {}
-            t = st.get("wall_time_s", stamp.get("measured_wall_time_s"))
+            t = st.get("time_s", stamp.get("measured_wall_time_s"))  # render time, compilation excluded
             if t is not None:
                 times[ci, mi] = t
             label = f"{c.name}/{name}.exr"

@@ -195,3 +195,38 @@ def test_table1_bad_inputs(cli, tmp_path, monkeypatch):
                        "--realized", tmp_path / "nope.exr", "-o", tmp_path / "o")
     assert code == 2 and "nope.exr" in err
     assert not (tmp_path / "o" / "report.md").exists()
+
+
+def test_brightness_mismatch_noise_and_render_facts_are_reported(cli, tmp_path):
+    """A test 1.5x as bright as the reference is flagged (ratio 1.5 per channel) and one 1.05x is not;
+    with variance channels of pixel variance v each, the noise RMSE is sqrt(2 v) and noise dominates
+    when it exceeds half the measured RMSE; resolution, spp, compile time and the render time
+    (compilation excluded) come from the render artifact; the full images are shown side by side."""
+    ref = _scene_image(seed=3)
+    v = np.full(ref.shape[:2], 0.04 ** 2, np.float32)
+    write_render(tmp_path / "ref.exr", ref, {"variance": v})
+    write_render(tmp_path / "bright.exr", ref * np.float32(1.5), {"variance": v})
+    write_render(tmp_path / "close.exr", ref * np.float32(1.05), {"variance": v})
+    for name, t in (("ref", 12.0), ("bright", 3.0), ("close", 3.0)):
+        _fake_render_artifact(tmp_path / f"{name}.exr", t + 5.0, 1)
+        g = zarr.open_group(str(tmp_path / f"{name}.zarr"), mode="r+")
+        g.attrs["summary"] = {**g.attrs["summary"], "render_time_s": t, "width": ref.shape[1], "height": ref.shape[0],
+                              "paths": ref.shape[0] * ref.shape[1] * 20, "method_stats": {"compile_s": 5.0}}
+    out = tmp_path / "eval"
+    code, _, err = cli("evaluate", "--ref", tmp_path / "ref.exr", "--test", tmp_path / "bright.exr",
+                       "--test", tmp_path / "close.exr", "-o", out)
+    assert code == 0, err
+    m = json.loads((out / "metrics.json").read_text())
+    b, c = m["bright.exr"], m["close.exr"]
+    assert b["brightness_ratio"] == pytest.approx([1.5] * 3, rel=1e-6) and b["brightness_mismatch"]
+    assert c["brightness_ratio"] == pytest.approx([1.05] * 3, rel=1e-6) and not c["brightness_mismatch"]
+    noise = np.sqrt(2 * 0.04 ** 2)
+    assert b["noise_rmse"] == pytest.approx(noise, rel=1e-5) and c["noise_rmse"] == pytest.approx(noise, rel=1e-5)
+    assert not b["noise_dominated"]          # RMSE 0.5 x mean ~ 0.25 >> noise
+    assert c["noise_dominated"]              # RMSE 0.05 x mean ~ 0.025 < 2 x noise
+    assert b["resolution"] == [ref.shape[1], ref.shape[0]] and b["samples_per_pixel"] == pytest.approx(20.0)
+    assert b["compile_s"] == 5.0 and b["time_s"] == 3.0 and b["speedup_vs_reference"] == pytest.approx(4.0)
+    md = (out / "report.md").read_text()
+    assert "**Brightness mismatch**: bright.exr" in md and "close.exr differs" not in md
+    assert "**Noise dominates** close.exr" in md and "](images.png)" in md
+    assert (out / "images.png").stat().st_size > 0
