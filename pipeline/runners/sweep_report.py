@@ -45,6 +45,10 @@ def summarize_methods(mnames: list[str], reference: str, means: np.ndarray, time
         rms_ref = float(np.sqrt(np.mean(r * r)))
         st = {"configurations": int(ok.sum()), "rmse_mean_intensity": float(np.sqrt(np.mean(d * d))),
               "relative_rmse_mean_intensity": float(np.sqrt(np.mean(d * d)) / rms_ref) if rms_ref > 0 else None}
+        ratio = means[ok, mi] / np.maximum(r, 1e-12)  # mean intensity over the reference's, per channel
+        worst = np.unravel_index(np.argmax(np.abs(ratio - 1.0)), ratio.shape)
+        st["worst_brightness_ratio"] = float(ratio[worst])
+        st["brightness_within_10pct"] = float(np.mean(np.abs(ratio - 1.0) <= 0.10))
         tt = times[ok, mi]
         t = float(np.nanmean(tt)) if np.any(~np.isnan(tt)) else None
         st["time_per_image_s"] = t
@@ -77,9 +81,13 @@ def write_report(sweep: Sweep, out: Path, got: SweepImages, methods: dict) -> No
             continue
         s = methods[n]
         rows.append([n, s["configurations"], fmt_num(s["rmse_mean_intensity"]), fmt_num(s["relative_rmse_mean_intensity"]),
+                     fmt_num(s["worst_brightness_ratio"]), f"{s['brightness_within_10pct']:.0%}",
                      fmt_num(s.get("mean_rmse")), fmt_num(s.get("mean_ssim")), fmt_num(s.get("mean_delta_e2000_mean"))])
-    rep.table(["method", "configurations", "RMSE mean intensity", "relative", "mean image RMSE", "mean SSIM",
-               "mean ΔE00"], rows)
+    rep.table(["method", "configurations", "RMSE mean intensity", "relative", "worst ratio", "channels within 10 %",
+               "mean image RMSE", "mean SSIM", "mean ΔE00"], rows,
+              caption="Worst ratio: the mean intensity over the reference's farthest from 1 over configurations "
+                      "and channels; channels within 10 %: the fraction of (configuration, channel) means within "
+                      "10 % of the reference's.")
     rp.sweep_rmse_png({n: methods[n]["rmse_mean_intensity"] for n in mnames if n in methods and n != sweep.reference},
                       out / "sweep_rmse.png", sweep.reference)
     rep.image("sweep_rmse.png", "RMSE of mean image intensity per method against the reference")
@@ -95,8 +103,12 @@ def write_report(sweep: Sweep, out: Path, got: SweepImages, methods: dict) -> No
                for n in mnames if n in methods])
     rep.heading("Configurations")
     lum = np.array([0.2126, 0.7152, 0.0722])
-    rep.table(["configuration", "lighting / view"] + [f"Y mean, {n}" for n in mnames],
+    others = [mi for mi in range(len(mnames)) if mi != ri]
+    rep.table(["configuration", "lighting / view"] + [f"Y mean, {n}" for n in mnames]
+              + [f"R, G, B ratio {mnames[mi]} / {sweep.reference}" for mi in others],
               [[c.name, c.label] + [fmt_num(float(means[ci, mi] @ lum)) if ok[ci, mi] else "-" for mi in range(len(mnames))]
+               + [", ".join(f"{v:.3f}" for v in means[ci, mi] / np.maximum(means[ci, ri], 1e-12)) if ok[ci, mi] else "-"
+                  for mi in others]
                for ci, c in enumerate(configs)])
     sheet = [[images.get((c.name, n)) for n in mnames] for c in configs]
     rp.contact_sheet_png(sheet, [c.name for c in configs], mnames, out / "contact_sheet.png")
