@@ -14,6 +14,7 @@ ones compiles render kernels, and what is checked is that a refused command leav
 from __future__ import annotations
 
 import hashlib
+import json
 import os
 import shutil
 import stat
@@ -61,6 +62,30 @@ CASES = [
     ("tables-preset-alpha-tiny", ["tables", "{W}/yarns.zarr", "--preset", "{H}/preset_alpha_tiny", "-o", "{W}/tables.zarr"],
      "preset_alpha_tiny.toml: yarn_alpha"),
     ("tables-corrupt-chunk", ["tables", "{W}/corrupt_yarns.zarr", "-o", "{W}/tables.zarr"], "corrupt_yarns.zarr"),
+    # artifacts are what they claim: a deleted or truncated chunk, an edited content hash or summary
+    ("tables-deleted-chunk", ["tables", "{W}/deleted_chunk.zarr", "-o", "{W}/tables.zarr"],
+     "deleted_chunk.zarr: array points: content does not match its checksum"),
+    ("tables-truncated-chunk", ["tables", "{W}/truncated_chunk.zarr", "-o", "{W}/tables.zarr"],
+     "truncated_chunk.zarr: array points: cannot be read"),
+    ("tables-edited-hash", ["tables", "{W}/edited_hash.zarr", "-o", "{W}/tables.zarr"],
+     "edited_hash.zarr: the summary or checksums do not match the content hash"),
+    ("tables-edited-summary", ["tables", "{W}/edited_summary.zarr", "-o", "{W}/tables.zarr"],
+     "edited_summary.zarr: the summary or checksums do not match the content hash"),
+    ("realize-deleted-chunk", ["realize", "{W}/deleted_chunk.zarr", "-o", "{W}/fibers.zarr"], "deleted_chunk.zarr"),
+    ("export-truncated-chunk", ["export", "{W}/truncated_fibers.zarr", "-o", "{W}/fibers.txt"],
+     "truncated_fibers.zarr: array points"),
+    ("info-edited-summary", ["info", "{W}/edited_summary.zarr"], "edited_summary.zarr"),
+    # inputs of the wrong kind (also where the output is up to date), outputs over inputs or files
+    ("tables-input-wrong-kind", ["tables", "{W}/tables.zarr", "-o", "{W}/t2.zarr"],
+     "tables.zarr: expected a 'yarns' artifact, found a 'tables' artifact"),
+    ("tables-up-to-date-wrong-kind", ["tables", "{W}/fibers.zarr", "-o", "{W}/tables.zarr"],
+     "fibers.zarr: expected a 'yarns' artifact, found a 'fibers' artifact"),
+    ("realize-input-is-file", ["realize", "{H}/small.txt", "-o", "{W}/fibers.zarr"],
+     "small.txt: expected a 'yarns' artifact, found a file"),
+    ("tables-out-is-input", ["tables", "{W}/yarns.zarr", "-o", "{W}/yarns.zarr"], "yarns.zarr"),
+    ("realize-out-is-input", ["realize", "{W}/yarns.zarr", "-o", "{W}/yarns.zarr"], "yarns.zarr"),
+    ("render-artifact-is-input", ["render", "{H}/scene_ok.toml", *FIBERPATH, "-o", "{W}/fibers.exr"], "fibers"),
+    ("tables-out-is-plain-file", ["tables", "{W}/yarns.zarr", "-o", "{W}/plain.zarr"], "plain.zarr"),
     ("tables-out-in-proc", ["tables", "{W}/yarns.zarr", "-o", "/proc/tables.zarr"], "/proc/tables.zarr"),
     ("realize-spacing-inf", ["realize", "{W}/yarns.zarr", "--spacing", "inf", "-o", "{W}/fibers.zarr"], "--spacing"),
     ("realize-radius-nan", ["realize", "{W}/yarns.zarr", "--radius", "nan", "-o", "{W}/fibers.zarr"], "--radius"),
@@ -112,9 +137,21 @@ CASES = [
 ]
 
 
+def _chunk(artifact: Path, array: str) -> Path:
+    """The first chunk file of ``array``."""
+    return sorted(p for p in (artifact / array).rglob("*") if p.is_file() and p.name != "zarr.json")[0]
+
+
+def _edit_meta(artifact: Path, edit) -> None:
+    """Edit the root attributes of an artifact in place (its zarr.json), as a hand or a tool would."""
+    doc = json.loads((artifact / "zarr.json").read_text())
+    edit(doc["attributes"])
+    (artifact / "zarr.json").write_text(json.dumps(doc))
+
+
 def _garble(artifact: Path, array: str) -> None:
     """Overwrite the middle of the first chunk file of ``array`` with other bytes (same length)."""
-    chunk = sorted(p for p in (artifact / array).rglob("*") if p.is_file() and p.name != "zarr.json")[0]
+    chunk = _chunk(artifact, array)
     data = bytearray(chunk.read_bytes())
     mid = len(data) // 2
     data[mid:mid + 16] = bytes((b ^ 0x5A) for b in data[mid:mid + 16])
@@ -134,7 +171,16 @@ def workspace(tmp_path_factory):
     assert main(["realize", str(W / "yarns.zarr"), "--spacing", "0.01", "-o", str(W / "fibers.zarr")]) == 0
     for copy in ("grid.zarr", "tiling.zarr", "render.zarr", "corrupt_yarns.zarr", "garbled_meta.zarr"):
         shutil.copytree(W / "yarns.zarr", W / copy)
+    for copy in ("deleted_chunk.zarr", "truncated_chunk.zarr", "edited_hash.zarr", "edited_summary.zarr"):
+        shutil.copytree(W / "yarns.zarr", W / copy)
     shutil.copytree(W / "fibers.zarr", W / "corrupt_fibers.zarr")
+    shutil.copytree(W / "fibers.zarr", W / "truncated_fibers.zarr")
+    _chunk(W / "deleted_chunk.zarr", "points").unlink()
+    for art in ("truncated_chunk.zarr", "truncated_fibers.zarr"):
+        with open(_chunk(W / art, "points"), "r+b") as f:
+            f.truncate(10)
+    _edit_meta(W / "edited_hash.zarr", lambda a: a["loomlight"].__setitem__("content_hash", "0" * 64))
+    _edit_meta(W / "edited_summary.zarr", lambda a: a["summary"].__setitem__("curves", a["summary"]["curves"] + 1))
     _garble(W / "corrupt_yarns.zarr", "points")
     _garble(W / "corrupt_fibers.zarr", "points")
     (W / "garbled_meta.zarr" / "zarr.json").write_bytes((H / "random_bytes.bcc").read_bytes())

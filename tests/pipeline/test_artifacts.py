@@ -133,3 +133,30 @@ def test_chunk_tasks_write_their_own_chunks(tmp_path):
         tasks = [ChunkTask(_fill_chunk, (str(w.store_path), "squares", k, 10)) for k in range(4)]
         run_tasks(tasks[::-1], "chunks")  # any order
     assert np.array_equal(Artifact(tmp_path / "c.zarr")["squares"], np.arange(40.0) ** 2)
+
+
+def test_input_identity_is_recomputed_from_bytes(tmp_path):
+    """The up-to-date check hashes an input artifact's chunk files, not what its metadata claims: a chunk
+    rewritten with other bytes of the same size (its zarr.json, content hash and mtime put back as they
+    were) makes the artifact built from it out of date; an input of the wrong kind is refused."""
+    a = _write(tmp_path / "a.zarr", value=1.0)
+    b_args = dict(kind="yarns", stage="test", params={"k": 1}, inputs={"yarns": (a, "yarns")})
+    with ArtifactWriter(tmp_path / "b.zarr", **b_args) as w:
+        _yarn_like(w)
+    assert ArtifactWriter(tmp_path / "b.zarr", **b_args).up_to_date()
+    root = (a / "zarr.json").read_bytes()
+    chunk = sorted(p for p in (a / "points").rglob("*") if p.is_file() and p.name != "zarr.json")[0]
+    st = chunk.stat()
+    with ArtifactWriter(tmp_path / "other.zarr", kind="yarns", stage="test", params={}) as w:
+        _yarn_like(w)
+        w.group["points"][...] = np.full((4, 3), 7.0, np.float32)
+    other = sorted(p for p in (tmp_path / "other.zarr" / "points").rglob("*") if p.is_file() and p.name != "zarr.json")[0]
+    data = other.read_bytes()
+    assert len(data) == st.st_size and data != chunk.read_bytes()
+    chunk.write_bytes(data)
+    os.utime(chunk, ns=(st.st_atime_ns, st.st_mtime_ns))
+    assert (a / "zarr.json").read_bytes() == root
+    assert not ArtifactWriter(tmp_path / "b.zarr", **b_args).up_to_date()
+    with pytest.raises(LoomError, match="expected a 'fibers' artifact, found a 'yarns' artifact"):
+        ArtifactWriter(tmp_path / "b.zarr", kind="yarns", stage="test", params={"k": 1},
+                       inputs={"yarns": (a, "fibers")}).up_to_date()
