@@ -187,3 +187,58 @@ def ground_array(render: dict) -> tuple[np.ndarray, bool]:
     out[0] = float(g.get("height", 0.0))
     out[1:4] = g.get("albedo", [0.5, 0.5, 0.5])
     return out, True
+
+
+# ------------------------------------------------------------------------------------------------
+def _describe_fabric(f: dict) -> str:
+    if f.get("source") == "generator":
+        g = f.get("generator") or {}
+        return "generator " + ", ".join(f"{k} = {g[k]}" for k in sorted(g))
+    extra = ", ".join(f"{k} = {f[k]}" for k in sorted(f) if k not in ("source", "file", "sha256"))
+    return f"{f.get('source')} {f.get('file')} (sha256 {str(f.get('sha256'))[:12]})" + (f", {extra}" if extra else "")
+
+
+def check_scene_matches(scene, path, option: str) -> None:
+    """Refuse a scene whose fabric or yarn types are not those the ``fibers`` or ``tables`` artifact at
+    ``path`` was made of (``--fibers``/``--tables`` of another scene, file or preset), naming both.
+
+    The rule: ingest records ``pipeline.scene.ingest_identity`` of its scene (or of its bare curve
+    file: that file, no yarn types) in the yarns artifact's summary, tables and realize carry it into
+    theirs; the render scene's identity must equal it -- the same fabric source (a file by its
+    sha256 and the keys that reshape it, or the same generator table) and, for every yarn group
+    the fabric has, the same yarn type (preset, radius, colour, fibre radius, density, roughness,
+    packing fraction; ``bcsdf`` is the renderer's own and may differ). A ``--preset`` or
+    ``--radius`` the artifact was made with must equal the preset or radius the scene states for
+    those groups (a scene that states none leaves it open). An artifact that records no identity
+    (made from arrays by hand, a tiling, whose exemplars come from its tile config) is not compared."""
+    from .artifacts import Artifact, jsonable
+    from .scene import ingest_identity
+
+    art = Artifact(path)
+    rec = art.summary.get("ingest_identity")
+    if not isinstance(rec, dict) or art.kind not in ("fibers", "tables"):
+        return
+    mine = jsonable(ingest_identity(scene))
+    made = f"{Path(path).name} (--{option}, made from {rec.get('scene') or rec['fabric'].get('file')})"
+    fix = "render the scene it was made from, or re-run ingest and " + ("realize" if art.kind == "fibers" else "tables") \
+        + " on this scene"
+    strip = lambda f: {k: v for k, v in f.items() if k != "file"}  # noqa: E731  (a renamed copy is the same file)
+    if strip(mine["fabric"]) != strip(rec["fabric"]):
+        raise LoomError(scene.path, "fabric", f"the scene's fabric ({_describe_fabric(mine['fabric'])}) is not the one "
+                        f"{made} is made of ({_describe_fabric(rec['fabric'])}); {fix}")
+    groups = rec.get("groups") or list(GROUP_NAMES)
+    for g in groups:
+        a, b = mine["yarns"].get(g, {}), (rec.get("yarns") or {}).get(g, {})
+        for key in sorted(set(a) | set(b)):
+            if a.get(key) != b.get(key):
+                raise LoomError(scene.path, f"yarns.{g}.{key}", f"the scene's {g} yarns have {key} = "
+                                f"{a.get(key, '(unset)')}, but {made} has {key} = {b.get(key, '(unset)')}; {fix}")
+    for key in ("preset", "radius"):
+        override = art.params.get(key)
+        if override is None:
+            continue
+        for g in groups:
+            stated = mine["yarns"].get(g, {}).get(key)
+            if stated is not None and stated != override:
+                raise LoomError(scene.path, f"yarns.{g}.{key}", f"the scene's {g} yarns have {key} = {stated}, but "
+                                f"{made} was made with --{key} {override}; {fix}")

@@ -20,6 +20,8 @@ from .toml_file import read_toml
 CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": COMMON_DEFAULTS["width"], "height": COMMON_DEFAULTS["height"]}
 RENDER_DEFAULTS = {k: COMMON_DEFAULTS[k] for k in ("spp", "seed", "max_depth", "rr_depth", "tile_size")}
 YARN_GROUPS = ("warp", "weft", "knit", "other")
+RENDER_ONLY_YARN_KEYS = ("bcsdf",)  # yarn-type keys only the renderer reads (not baked into yarns, tables, fibres)
+FABRIC_SHAPE_KEYS = ("scale", "crimp", "repeat", "max_threads")  # fabric keys that change a source file's curves
 
 
 @dataclass
@@ -97,6 +99,48 @@ def load_scene(path: str | Path) -> Scene:
         render["ground"]["albedo"] = _rgb(render["ground"]["albedo"])
     return Scene(path=path, raw=raw, name=scene_tbl.get("name", path.stem), seed=int(scene_tbl.get("seed", 0)),
                  fabric=fabric, yarns=copy.deepcopy(raw.get("yarns", {})), camera=camera, lights=lights, render=render)
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def ingest_identity(scene: Scene) -> dict:
+    """What of a scene its ``yarns`` artifact (and the tables and fibres made from that) is made of:
+    ``fabric`` -- the source, the source file by its sha256 (its name kept for messages) and the
+    keys that reshape its curves, or the generator table -- and ``yarns`` -- every group's yarn type
+    (``yarns.default`` merged in) without the keys only the renderer reads (``bcsdf``). Recorded by
+    ingest in the artifact's summary, carried by tables and realize, compared by render
+    (``pipeline.render_setup.check_scene_matches``)."""
+    fab = scene.fabric
+    fabric = {"source": fab["source"]}
+    if fab["source"] == "generator":
+        fabric["generator"] = copy.deepcopy(fab["generator"])
+    else:
+        p = Path(fab["path"])
+        fabric.update(file=p.name, sha256=_sha256(p) if p.is_file() else None)
+        fabric.update({k: fab[k] for k in FABRIC_SHAPE_KEYS if k in fab})
+    yarns = {}
+    for g in YARN_GROUPS:
+        t = {k: v for k, v in scene.yarn_type(g).items() if k not in RENDER_ONLY_YARN_KEYS}
+        if t:
+            yarns[g] = t
+    return {"scene": scene.path.name, "fabric": fabric, "yarns": yarns}
+
+
+def file_identity(path: str | Path, scale: float | None = None) -> dict:
+    """``ingest_identity`` of a curve file or WIF draft ingested without a scene: the file, no yarn types."""
+    p = Path(path)
+    fabric = {"source": "wif" if p.suffix.lower() == ".wif" else "file", "file": p.name, "sha256": _sha256(p)}
+    if scale:
+        fabric["scale"] = scale
+    return {"scene": None, "fabric": fabric, "yarns": {}}
 
 
 def camera_array(camera: dict, width: int | None = None, height: int | None = None) -> np.ndarray:

@@ -130,7 +130,9 @@ def tiling_fibers(scene, art) -> Fibers:
         fy[ex_fibers[k]:ex_fibers[k + 1]] += yarn_off[k]
     group = art["ex_yarn_group"].astype(np.int64)
     albedo = np.empty((len(group), 3))
-    for g in (0, 1):
+    for g in range(len(GROUP_NAMES)):  # every group present (was warp and weft only: other rows stayed unset)
+        if not np.any(group == g):
+            continue
         yt = scene.yarn_type(GROUP_NAMES[g])
         col = yt.get("color")
         if col is None:

@@ -212,6 +212,18 @@ def input_estimate(path: Path, frame_samples: int) -> Estimate:
     return est.extend(curves_estimate(pts, frame_samples))
 
 
+def _identity(scene, input_path: Path, scale) -> dict:
+    """What the artifact is made of (``pipeline.scene.ingest_identity``), for render to compare its scene with."""
+    from ..scene import file_identity, ingest_identity
+
+    if scene is None:
+        return file_identity(input_path, scale)
+    ident = ingest_identity(scene)
+    if scale and scene.fabric["source"] != "generator" and "scale" not in scene.fabric:
+        ident["fabric"]["scale"] = scale  # --scale applies where the scene states none
+    return ident
+
+
 def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: float | None = None,
                merge_duplicates: bool = True, force: bool = False, write: Path | None = None,
                frame_samples: int = 4, budget=None) -> dict:
@@ -307,5 +319,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
             "grid": {"dims": proc["grid_dims"].tolist(), "cell": float(proc["grid_cell"][0]),
                      "items": int(len(proc["grid_items"]))},
             "scene": str(input_path) if scene is not None else None,
+            "ingest_identity": {**_identity(scene, input_path, scale),
+                                "groups": [GROUPS[g] for g in sorted(set(group_idx.tolist()))]},
         })
     return {"skipped": False, "curves": ncurve}

@@ -161,6 +161,7 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
                       "hair": per_kind[3] * FIBER_VERTEX_BYTES + fib_kind[3] * FIBER_BYTES},
             "bounds": [pts32.min(axis=0).tolist(), pts32.max(axis=0).tolist()] if verts else [[0, 0, 0], [0, 0, 0]],
             "yarn_types": type_summary(dicts),
+            "ingest_identity": yarns.summary.get("ingest_identity"),
         })
     return {"skipped": False, "fibers": int(nfib), "vertices": int(verts), "bytes": int(nbytes)}
 

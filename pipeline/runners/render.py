@@ -69,6 +69,10 @@ def parse_settings(settings, m) -> dict:
         if k not in known:
             raise LoomError(None, f"--set {k}", f"{m.name} has no setting {k!r} (known: {', '.join(known) or 'none'})"
                             + did_you_mean(k, known))
+        choices = next(s.choices for s in m.settings if s.key == k)
+        if choices and v not in choices:
+            raise LoomError(None, f"--set {k}", f"{m.name}: unknown {k} {v!r} (known: {', '.join(choices)})"
+                            + did_you_mean(v, choices))
         extra[k] = v
     return extra
 
@@ -114,6 +118,34 @@ def check_inputs(scene, m, options) -> None:
         if not options.get(inp.option):
             via = f"{m.name} --source {src.name}" if len(m.sources) > 1 else m.name
             raise LoomError(None, f"--{inp.option}", f"{via} needs {inp.what}: pass --{inp.option} PATH.zarr")
+    check_bcsdf_names(scene, options)
+    from ..render_setup import check_scene_matches
+
+    for key in ("fibers", "tables"):
+        if options.get(key):
+            check_scene_matches(scene, options[key], key)
+
+
+def check_bcsdf_names(scene, options) -> None:
+    """Every BCSDF preset the scene names (``yarns.<group>.bcsdf``, a ``.toml`` path resolved against the
+    scene) and ``--bcsdf`` exists and is valid, whether or not a yarn of the fabric uses it."""
+    from ..render_setup import read_bcsdf_preset
+
+    named = [(f"yarns.{g}.bcsdf", t["bcsdf"]) for g, t in sorted(scene.yarns.items()) if t.get("bcsdf")]
+    for place, name in named:
+        try:
+            read_bcsdf_preset(str(scene.resolve(name)) if name.endswith(".toml") else name)
+        except LoomError as e:
+            if e.file is not None:  # the preset file itself is broken: its own message names it
+                raise
+            raise LoomError(scene.path, place, e.message) from None
+    if options.get("bcsdf"):
+        try:
+            read_bcsdf_preset(options["bcsdf"])
+        except LoomError as e:
+            if e.file is not None:
+                raise
+            raise LoomError(None, "--bcsdf", e.message) from None
 
 
 def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,

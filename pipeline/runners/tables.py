@@ -222,6 +222,7 @@ def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair
             "folded_yarns": folded,
             "curvature_max": float(np.max(info["curvature_max"])) if len(info["curvature_max"]) else 0.0,
             "exact": folded == 0,
+            "ingest_identity": yarns.summary.get("ingest_identity"),
         })
     return {"skipped": False, "yarns": int(len(tab.yarn_type)), "folded": folded}
 
