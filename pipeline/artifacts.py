@@ -324,9 +324,11 @@ class Artifact:
         try:
             data = self.group[name][...]
         except Exception as e:  # zarr / codec errors: a truncated or garbled chunk, a missing array directory
-            raise LoomError(self.path, place, f"cannot be read, chunk missing or corrupt ({_short(e)})") from None
+            raise LoomError(self.path, place, f"cannot be read, chunk missing or corrupt ({_short(e)}); "
+                            "rebuild it with its stage (--force if it says up to date)") from None
         if _crc32c(data) != self._checksums[name]["crc32c"]:
-            raise LoomError(self.path, place, "content does not match its checksum (chunk missing or corrupt)")
+            raise LoomError(self.path, place, "content does not match its checksum (chunk missing or corrupt); "
+                            "rebuild it with its stage (--force if it says up to date)")
         return data
 
     def __contains__(self, name: str) -> bool:
