@@ -1,14 +1,11 @@
 """The artifact store's contract (pipeline/artifacts.py): provenance attributes, schema checks on write
 and read, atomic publication (a killed or failing stage leaves the previous artifact untouched and no
 partial one), refusal of incomplete artifacts, the unchanged-inputs skip, and chunk tasks."""
-import json
 import os
 import signal
 import subprocess
 import sys
 import textwrap
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
