@@ -13,13 +13,21 @@ SCENE ?= data/scenes/demo.toml
 LARGE_SCENE ?= data/scenes/woven_large.toml
 TILING ?= data/tilings/damask.toml
 DAMASK_SCENE ?= data/scenes/draped_damask.toml
-# main demo pictures; the evaluation set is smaller because procedural volpath is slow (README: Status)
+# main demo pictures (fiberpath adaptive: pixels over render.target_error get up to MAX_SPP new
+# samples); the evaluation set is smaller because procedural volpath is slow (README: Status)
 SPP ?= 8
-EVAL_W ?= 40
-EVAL_H ?= 30
-EVAL_SPP ?= 2
+FIBERPATH_SPP ?= 16
+MAX_SPP ?= 128
+EVAL_W ?= 96
+EVAL_H ?= 72
+EVAL_SPP ?= 8
 
-.PHONY: setup demo test bench table1 sweep clean help
+# make agreement: both swatches, fiberpath against realized volpath, converged (README: One look)
+AGREE ?= out/agreement
+TWILL_SCENE ?= data/scenes/twill_swatch.toml
+AGREE_ARGS ?= --width 128 --height 96 --spp 64
+
+.PHONY: setup demo test bench table1 sweep agreement clean help
 
 help:
 	@echo "make demo    - set up .venv if needed, run the demo scene end to end, print output paths"
@@ -27,6 +35,7 @@ help:
 	@echo "make bench   - benchmarks -> bench/results/*.json and bench/results/summary.md"
 	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time) -> out/table1/report.md"
 	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
+	@echo "make agreement - fiberpath vs volpath on the demo and twill swatches, demo light and sweep lights"
 	@echo "make setup   - create .venv and install loomlight with its test dependencies"
 
 $(VENV)/.installed: pyproject.toml
@@ -68,10 +77,10 @@ $(OUT)/volpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
 	$(LL) render $(SCENE) --method volpath --source realized --fibers $(OUT)/fibers.zarr --spp $(SPP) -o $@
 
 $(OUT)/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
-	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --set tint=yarn --spp $(SPP) -o $@
+	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) -o $@
 
 $(OUT)/damask.exr: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE)
-	$(LL) render $(DAMASK_SCENE) --method fiberpath --fibers $(OUT)/damask_tiling.zarr --spp $(SPP) -o $@
+	$(LL) render $(DAMASK_SCENE) --method fiberpath --fibers $(OUT)/damask_tiling.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) -o $@
 
 # --- evaluation set: the same view, small, procedural vs realized volpath and fiberpath ---
 EVAL_ARGS = --width $(EVAL_W) --height $(EVAL_H) --spp $(EVAL_SPP)
@@ -82,7 +91,7 @@ $(OUT)/eval/volpath-realized.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
 	$(LL) render $(SCENE) --method volpath --source realized --fibers $(OUT)/fibers.zarr $(EVAL_ARGS) -o $@
 
 $(OUT)/eval/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
-	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --set tint=yarn $(EVAL_ARGS) -o $@
+	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr $(EVAL_ARGS) -o $@
 
 $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(OUT)/eval/fiberpath.exr
 	$(LL) evaluate --ref $(OUT)/eval/volpath-realized.exr --test $(OUT)/eval/volpath-procedural.exr \
@@ -117,6 +126,25 @@ table1: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr
 sweep: $(OUT)/fibers.zarr/zarr.json
 	$(LL) evaluate --sweep data/sweeps/demo.toml -o $(OUT)/sweep
 	@echo "report: $(OUT)/sweep/report.md"
+
+$(AGREE)/twill/yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed
+	$(LL) ingest $(TWILL_SCENE) -o $(AGREE)/twill/yarns.zarr
+
+$(AGREE)/twill/fibers.zarr/zarr.json: $(AGREE)/twill/yarns.zarr/zarr.json
+	$(LL) realize $(AGREE)/twill/yarns.zarr -o $(AGREE)/twill/fibers.zarr
+
+$(AGREE)/demo/%.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
+	$(LL) render $(SCENE) --method $(firstword $(subst -, ,$*)) --source realized --fibers $(OUT)/fibers.zarr $(AGREE_ARGS) -o $@
+
+$(AGREE)/twill/%.exr: $(AGREE)/twill/fibers.zarr/zarr.json $(TWILL_SCENE)
+	$(LL) render $(TWILL_SCENE) --method $(firstword $(subst -, ,$*)) --source realized --fibers $(AGREE)/twill/fibers.zarr $(AGREE_ARGS) -o $@
+
+$(AGREE)/%/report/report.md: $(AGREE)/%/fiberpath.exr $(AGREE)/%/volpath.exr
+	$(LL) evaluate --ref $(AGREE)/$*/fiberpath.exr --test $(AGREE)/$*/volpath.exr -o $(AGREE)/$*/report
+
+agreement: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(AGREE)/twill/fibers.zarr/zarr.json sweep
+	$(LL) evaluate --sweep data/sweeps/twill.toml -o $(AGREE)/twill/sweep
+	@echo "reports: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(OUT)/sweep/report.md $(AGREE)/twill/sweep/report.md"
 
 clean:
 	rm -rf out .numba_cache .pytest_cache
