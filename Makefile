@@ -17,7 +17,7 @@ DAMASK_SCENE ?= data/scenes/draped_damask.toml
 # samples); the evaluation set is smaller because procedural volpath is slow (README: Status)
 SPP ?= 8
 FIBERPATH_SPP ?= 16
-MAX_SPP ?= 128
+MAX_SPP ?= 64
 EVAL_W ?= 96
 EVAL_H ?= 72
 EVAL_SPP ?= 8
@@ -141,6 +141,8 @@ $(AGREE)/twill/%.exr: $(AGREE)/twill/fibers.zarr/zarr.json $(TWILL_SCENE)
 
 $(AGREE)/%/report/report.md: $(AGREE)/%/fiberpath.exr $(AGREE)/%/volpath.exr
 	$(LL) evaluate --ref $(AGREE)/$*/fiberpath.exr --test $(AGREE)/$*/volpath.exr -o $(AGREE)/$*/report
+
+.PRECIOUS: $(AGREE)/demo/%.exr $(AGREE)/twill/%.exr
 
 agreement: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(AGREE)/twill/fibers.zarr/zarr.json sweep
 	$(LL) evaluate --sweep data/sweeps/twill.toml -o $(AGREE)/twill/sweep
