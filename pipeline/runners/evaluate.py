@@ -94,25 +94,19 @@ def render_stats(image: str | Path) -> dict:
     except (LoomError, OSError, ValueError):
         return {}
     out: dict = {"render_artifact": str(art)}
-    t = _first(summary, "wall_time_s", "render_time_s", "time_s")
-    if t is None:
-        t = _first(meta, "wall_time_s")
-    if t is not None:
-        out["wall_time_s"] = float(t)
-    rt = _first(summary, "render_time_s")
-    if rt is not None:
-        out["render_time_s"] = float(rt)
-    mem = _first(summary, "peak_memory_bytes", "memory_bytes")
-    if mem is None:
-        mem = _first(meta, "peak_memory_bytes")
-    if mem is not None:
-        out["peak_memory_bytes"] = int(mem)
-    spp = _first(summary, "spp")
-    if spp is not None:
-        out["spp"] = int(spp)
-    pps = _first(summary, "paths_per_s", "paths_per_second")
-    if pps is not None:
-        out["paths_per_s"] = float(pps)
+
+    def put(key, cast, *names, provenance=None):
+        v = _first(summary, *names)
+        if v is None and provenance:
+            v = _first(meta, provenance)
+        if v is not None:
+            out[key] = cast(v)
+
+    put("wall_time_s", float, "wall_time_s", "render_time_s", "time_s", provenance="wall_time_s")
+    put("render_time_s", float, "render_time_s")
+    put("peak_memory_bytes", int, "peak_memory_bytes", "memory_bytes", provenance="peak_memory_bytes")
+    put("spp", int, "spp")
+    put("paths_per_s", float, "paths_per_s", "paths_per_second")
     w, h = _first(summary, "width"), _first(summary, "height")
     if w is not None and h is not None:
         out["resolution"] = [int(w), int(h)]
