@@ -118,3 +118,30 @@ def test_capsule_closed_forms():
     nx, ny, nz, s = capsule_normal(0.4, 0.0, r, *a, *b)
     assert (nx, ny, nz) == pytest.approx((0.0, 0.0, 1.0)) and s == pytest.approx(0.4)
     assert capsule_intersect(0.4, 0.0, r, 0.0, 0.0, 1.0, *a, *b, r, 1e-12) == math.inf
+
+
+def test_capsule_from_inside_meets_its_way_out():
+    """Reference: a ray that starts inside a capsule (a fibre overlapping the one the ray leaves) meets
+    it where it leaves: through the body at the radius (closed form), through an end sphere at its
+    far root; a ray starting on the surface going inward still passes (it is not inside)."""
+    a, b, r = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0), 0.1
+    # from the axis at x = 0.5 straight up: leaves the body at z = r
+    assert capsule_intersect(0.5, 0.0, 0.0, 0.0, 0.0, 1.0, *a, *b, r, 0.0) == pytest.approx(r, abs=1e-14)
+    # from (0.5, 0, 0.03) along +x: leaves through the end sphere at b, x = 1 + sqrt(r^2 - 0.03^2)
+    assert capsule_intersect(0.5, 0.0, 0.03, 1.0, 0.0, 0.0, *a, *b, r, 0.0) == pytest.approx(
+        0.5 + math.sqrt(r * r - 0.03 ** 2), abs=1e-13)
+    # random interior points and directions: the exit point lies on the surface, beyond the origin
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        p = np.array([rng.uniform(-r, 1 + r), *rng.uniform(-r, r, 2)])
+        s = min(max(p[0], 0.0), 1.0)
+        if np.linalg.norm(p - [s, 0, 0]) >= 0.99 * r:
+            continue
+        d = rng.normal(size=3)
+        d /= np.linalg.norm(d)
+        t = capsule_intersect(*p, *d, *a, *b, r, 0.0)
+        q = p + t * d
+        sq = min(max(q[0], 0.0), 1.0)
+        assert 0.0 < t < 1.0 + 3 * r and np.linalg.norm(q - [sq, 0, 0]) == pytest.approx(r, abs=1e-12)
+    # on the surface, heading inward: not inside, so no hit from this capsule's own surface point
+    assert capsule_intersect(0.4, 0.0, r, 0.0, 0.0, -1.0, *a, *b, r, 1e-12) == math.inf
