@@ -3,8 +3,8 @@
 A fibre polyline is a chain of capsules (cylinders with spherical joints and end caps), the same
 shape as Mitsuba 3's ``linearcurve``. A capsule is the union of three convex pieces (the finite
 cylinder body and the two end spheres); a ray's hit is the nearest *entering* intersection of any
-piece beyond ``tmin``. A ray that starts inside a capsule and enters none of its pieces meets it
-where it leaves it (the far root; a capsule is convex). Realized fibres overlap (half a ply's
+piece beyond ``tmin``. A ray that starts inside a capsule meets it where it leaves it (the far
+root; a capsule is convex). Realized fibres overlap (half a ply's
 cross-section is fibre, placed by the procedural model, not packed), and a ray that leaves one fibre
 inside another is inside that fibre's material: volpath's medium scatters it there (the covering
 fibre's density), and so does fiberpath at the way out. A capsule that let such rays through made
@@ -92,8 +92,8 @@ def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
     tb = _sphere_enter(px, py, pz, dx, dy, dz, bx, by, bz, r)
     if tb < best and tb + t0 > tmin:
         best = tb
-    if best == INF and point_segment_dist2(ox + tmin * dx, oy + tmin * dy, oz + tmin * dz,
-                                           ax, ay, az, bx, by, bz) < INSIDE * r * r:
+    if point_segment_dist2(ox + tmin * dx, oy + tmin * dy, oz + tmin * dz,
+                           ax, ay, az, bx, by, bz) < INSIDE * r * r:
         return _capsule_exit(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r) + t0
     return best + t0
 
