@@ -31,8 +31,8 @@ INSIDE = 1.0 - 1e-6  # squared-distance fraction: a point on a capsule's surface
 
 
 @njit(cache=True)
-def _sphere_enter(ox, oy, oz, dx, dy, dz, cx, cy, cz, r):
-    """Near root of |o + t d - c| = r for unit d; inf when missed."""
+def _sphere_root(ox, oy, oz, dx, dy, dz, cx, cy, cz, r, sign):
+    """Root of |o + t d - c| = r for unit d (sign -1: near, +1: far); inf when missed."""
     px = ox - cx
     py = oy - cy
     pz = oz - cz
@@ -45,21 +45,14 @@ def _sphere_enter(ox, oy, oz, dx, dy, dz, cx, cy, cz, r):
     h = r * r - q2
     if h < 0.0:
         return INF
-    return -b - math.sqrt(h)
+    return -b + sign * math.sqrt(h)
 
 
 @njit(cache=True)
-def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
-    """Distance t > tmin to the first entering hit of the capsule (a, b, r) along unit direction d, or inf."""
-    # move the origin next to the segment (t0 is added back at the end)
-    mx = 0.5 * (ax + bx)
-    my = 0.5 * (ay + by)
-    mz = 0.5 * (az + bz)
-    t0 = (mx - ox) * dx + (my - oy) * dy + (mz - oz) * dz
-    px = ox + t0 * dx
-    py = oy + t0 * dy
-    pz = oz + t0 * dz
-    best = INF
+def _body_root(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r, sign):
+    """(t, y, |b - a|^2): the root t (sign -1: near, +1: far) of the infinite cylinder around a -> b
+    along the ray from p, and its axial coordinate y (times |b - a|: within the body iff
+    0 < y < |b - a|^2); t = inf, y = -1 when the ray misses or runs parallel to the axis."""
     bax = bx - ax
     bay = by - ay
     baz = bz - az
@@ -82,60 +75,45 @@ def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
             c = baba * (ux * ux + uy * uy + uz * uz - r * r)
             h = b * b - a * c
             if h >= 0.0:
-                t = (-b - math.sqrt(h)) / a
-                y = baoa + t * bard
-                if y > 0.0 and y < baba and t + t0 > tmin:
-                    best = t
-    ta = _sphere_enter(px, py, pz, dx, dy, dz, ax, ay, az, r)
-    if ta < best and ta + t0 > tmin:
-        best = ta
-    tb = _sphere_enter(px, py, pz, dx, dy, dz, bx, by, bz, r)
-    if tb < best and tb + t0 > tmin:
-        best = tb
-    if point_segment_dist2(ox + tmin * dx, oy + tmin * dy, oz + tmin * dz,
-                           ax, ay, az, bx, by, bz) < INSIDE * r * r:
-        return _capsule_exit(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r) + t0
-    return best + t0
+                t = (-b + sign * math.sqrt(h)) / a
+                return t, baoa + t * bard, baba
+    return INF, -1.0, baba
 
 
 @njit(cache=True)
-def _capsule_exit(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r):
-    """Far root of the (convex) capsule along the ray from p inside it: the largest far root of its
-    pieces, the body's only where it lies between the end planes."""
-    out = -INF
-    bax = bx - ax
-    bay = by - ay
-    baz = bz - az
-    baba = bax * bax + bay * bay + baz * baz
-    if baba > 0.0:
-        oax = px - ax
-        oay = py - ay
-        oaz = pz - az
-        bard = bax * dx + bay * dy + baz * dz
-        baoa = bax * oax + bay * oay + baz * oaz
-        a = baba - bard * bard
-        if a > 1e-12 * baba:
-            k = baoa / baba
-            ux = oax - k * bax
-            uy = oay - k * bay
-            uz = oaz - k * baz
-            b = baba * (dx * oax + dy * oay + dz * oaz) - baoa * bard
-            c = baba * (ux * ux + uy * uy + uz * uz - r * r)
-            h = b * b - a * c
-            if h >= 0.0:
-                t = (-b + math.sqrt(h)) / a
-                y = baoa + t * bard
-                if y >= 0.0 and y <= baba:
-                    out = t
-    for cx, cy, cz in ((ax, ay, az), (bx, by, bz)):
-        qx = px - cx
-        qy = py - cy
-        qz = pz - cz
-        b = qx * dx + qy * dy + qz * dz
-        h = r * r - (qx * qx + qy * qy + qz * qz - b * b)
-        if h >= 0.0:
-            out = max(out, -b + math.sqrt(h))
-    return out
+def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
+    """Distance t > tmin to the first entering hit of the capsule (a, b, r) along unit direction d, or
+    its way out for a ray that starts inside (module doc); inf when none."""
+    # move the origin next to the segment (t0 is added back at the end)
+    mx = 0.5 * (ax + bx)
+    my = 0.5 * (ay + by)
+    mz = 0.5 * (az + bz)
+    t0 = (mx - ox) * dx + (my - oy) * dy + (mz - oz) * dz
+    px = ox + t0 * dx
+    py = oy + t0 * dy
+    pz = oz + t0 * dz
+    if point_segment_dist2(ox + tmin * dx, oy + tmin * dy, oz + tmin * dz,
+                           ax, ay, az, bx, by, bz) < INSIDE * r * r:
+        # inside: the largest far root of the pieces (a capsule is convex)
+        t, y, baba = _body_root(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r, 1.0)
+        out = t if 0.0 <= y <= baba else -INF
+        ta = _sphere_root(px, py, pz, dx, dy, dz, ax, ay, az, r, 1.0)
+        tb = _sphere_root(px, py, pz, dx, dy, dz, bx, by, bz, r, 1.0)
+        for tt in (ta, tb):
+            if tt < INF:
+                out = max(out, tt)
+        return out + t0
+    best = INF
+    t, y, baba = _body_root(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r, -1.0)
+    if y > 0.0 and y < baba and t + t0 > tmin:
+        best = t
+    ta = _sphere_root(px, py, pz, dx, dy, dz, ax, ay, az, r, -1.0)
+    if ta < best and ta + t0 > tmin:
+        best = ta
+    tb = _sphere_root(px, py, pz, dx, dy, dz, bx, by, bz, r, -1.0)
+    if tb < best and tb + t0 > tmin:
+        best = tb
+    return best + t0
 
 
 @njit(cache=True)
