@@ -1,0 +1,78 @@
+"""Rays through the flat fabric made of one exemplar repeated without end (seed 001 §4.1-§4.2).
+
+Seed 001 precomputes on "a large, flat section of fabric synthesized in the same way as the material
+to be rendered"; loomlight uses its limit, the exemplar repeated without end in x and y, so no ray
+ever leaves through a side and every segment sees the same surroundings as its copies in the middle
+of the cloth. Exemplar space (``stages.tile.exemplar``): x in [0, W), y in [0, H), z up; the fabric
+occupies the slab z_lo <= z <= z_hi (the exemplar's fibre bounds).
+
+``periodic_scene(sc, k)`` is the ``ShellScene`` (``stages.core.shell.traversal``) of a tiling whose
+block map holds exemplar ``k`` alone, one period of blocks: the block walk of
+``flat_segment_hit`` then wraps every block into exemplar k, i.e. it meets the exemplar's wrapped
+fibre pieces in every periodic copy. ``periodic_hit`` casts a ray from a point of exemplar space
+until it leaves the slab (or has run ``max_dist``), skipping the fibre ``ign_fiber`` (and its periodic
+copies: a periodic exemplar's fibre continues in its copies, so the copies are the same fibre).
+
+Returns a ``PeriodicHit``: t (inf on escape), the exemplar segment and fibre hit (global ids of the
+tiling: ``seg_src`` / ``seg_srcfiber``), the wrapped segment (for its tangent and radius), the hit
+point (in the ray's own coordinates, not wrapped) and the unit tangent of the hit segment.
+"""
+from collections import namedtuple
+
+import math
+
+import numpy as np
+from numba import njit
+
+from stages.core.shell.traversal import flat_segment_hit
+
+PeriodicHit = namedtuple("PeriodicHit", ["t", "segment", "fibre", "wrapped", "x", "y", "z", "tx", "ty", "tz"])
+PeriodicHit.__doc__ = "periodic_hit's result (module doc); t = inf and ids -1 on escape."
+
+
+def periodic_scene(sc, k: int):
+    """``sc`` with a block map of exemplar ``k`` alone (one period of its blocks)."""
+    nx, ny = (int(v) for v in sc.ex_nblocks[k])
+    return sc._replace(block_map=np.full((nx, ny), k, np.int32))
+
+
+@njit(cache=True)
+def slab_length(oz, dz, z_lo, z_hi, max_dist):
+    """Distance along unit d from height oz to where the ray leaves the slab, capped at max_dist."""
+    if dz > 0.0:
+        L = (z_hi - oz) / dz
+    elif dz < 0.0:
+        L = (z_lo - oz) / dz
+    else:
+        L = np.inf
+    return min(max(L, 0.0), max_dist)
+
+
+@njit(cache=True)
+def periodic_hit(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_dist):
+    """First fibre hit of the ray o + t d (unit d), 0 < t, in the periodic fabric of ``sc`` (a
+    ``periodic_scene``); the whole fibre ``ign_fiber`` is skipped (-1: none)."""
+    L = slab_length(oz, dz, z_lo, z_hi, max_dist)
+    if L <= 0.0:
+        return PeriodicHit(np.inf, -1, -1, -1, ox, oy, oz, 0.0, 0.0, 0.0)
+    t, w, _k, _i, _j, _fx, _fy, _fz = flat_segment_hit(sc, ox, oy, oz, dx, dy, dz, L,
+                                                      ign_fiber, 0, 1 << 30)
+    if w < 0:
+        return PeriodicHit(np.inf, -1, -1, -1, ox, oy, oz, 0.0, 0.0, 0.0)
+    a = sc.seg_a[w]
+    P = sc.points
+    tx = P[a + 1, 0] - P[a, 0]
+    ty = P[a + 1, 1] - P[a, 1]
+    tz = P[a + 1, 2] - P[a, 2]
+    n = math.sqrt(tx * tx + ty * ty + tz * tz)
+    if n > 0.0:
+        tx /= n
+        ty /= n
+        tz /= n
+    return PeriodicHit(t, sc.seg_src[w], sc.seg_srcfiber[w], w, ox + t * dx, oy + t * dy, oz + t * dz, tx, ty, tz)
+
+
+@njit(cache=True)
+def wrap_into_period(x, y, W, H):
+    """(x, y) moved by whole periods into [0, W) x [0, H) (keeps path vertices near the origin)."""
+    return x - W * math.floor(x / W), y - H * math.floor(y / H)
