@@ -1,0 +1,339 @@
+"""Real spherical harmonics: evaluation, projection by quadrature, exact rotation matrices.
+
+Seed 001 (Khungurn et al. 2017) represents the indirect radiance transfer (IIRTF), the fibre BCSDF and
+spherical Gaussian lights in one real SH basis (§2 "Notation", §4.3, §5.3): this module is that basis.
+
+Basis and index
+---------------
+One index j = l (l + 1) + m, l = 0..L, m = -l..l: an expansion of order L has (L + 1)^2 coefficients
+(``sh_count``). With (theta, phi) the polar and azimuthal angles of a unit direction about +z,
+K_l^m = sqrt((2l + 1)/(4 pi) (l - m)!/(l + m)!) and P_l^m the associated Legendre function *without*
+the Condon-Shortley phase (-1)^m,
+
+    Y_{l,0}  = K_l^0 P_l(cos theta)
+    Y_{l,m}  = sqrt2 K_l^m P_l^m(cos theta) cos(m phi)      m > 0
+    Y_{l,-m} = sqrt2 K_l^m P_l^m(cos theta) sin(m phi)      m > 0
+
+This is the usual graphics/chemistry real basis (the one of Ivanic-Ruedenberg and of Wikipedia's
+"real spherical harmonics"), orthonormal: int Y_j Y_k dw = delta_jk. Without the Condon-Shortley phase
+order 1 is sqrt(3/(4 pi)) (y, z, x) for m = -1, 0, 1, with no signs. From scipy's
+complex Y_l^m (which carries the Condon-Shortley phase): Y_{l,m} = sqrt2 (-1)^m Re Y_l^m and
+Y_{l,-m} = sqrt2 (-1)^m Im Y_l^m for m > 0.
+
+``sh_eval`` works on the Cartesian direction, never on angles: (x + i y)^m = sin^m(theta) e^{i m phi},
+times the fully normalised Legendre function divided by sin^m(theta), which obeys the usual stable
+three-term recurrence in l (no poles, no factorials). Orders up to ``SH_LMAX`` = 16.
+
+Projection
+----------
+``sh_quadrature(L, n_theta, n_phi)`` is the product rule Gauss-Legendre in cos(theta) x uniform in phi:
+it integrates exactly every spherical polynomial of degree <= min(2 n_theta - 1, n_phi - 1); the Gram
+matrix of order L needs n_theta >= L + 1 and n_phi >= 2L + 1 (the defaults when 0 is passed).
+``sh_project(values (N, C), dirs, weights, L)`` -> (n_coef, C) = sum_k w_k Y_j(d_k) values[k].
+
+Rotation
+--------
+``sh_rotation(L, R, out)`` fills the block-diagonal ((L+1)^2, (L+1)^2) matrix D(R) such that
+
+    f(w) = sum_j c_j Y_j(w)  =>  f(R^T w) = sum_j (D(R) c)_j Y_j(w)
+
+i.e. D(R) c are the coefficients of f rotated by R (what was at direction v is now at R v). D is
+orthogonal and a representation: D(R1 R2) = D(R1) D(R2). Order 1 is R itself with rows and columns
+permuted to (y, z, x); higher orders follow from the recurrence of Ivanic and Ruedenberg (J. Phys.
+Chem. 100, 6342 (1996), with the corrections of the 1998 erratum, J. Phys. Chem. A 102, 9099), from
+the order-1 block and the order l - 1 block, with the coefficients u, v, w tabulated at import. The
+paper (§5.3.1) cites Pinchon and Hoggan 2007 for the same matrices; both give D(R) exactly.
+Cost: one pass over sum_l (2l + 1)^2 entries (969 at L = 8), no allocation; the renderer then applies
+it block by block with ``sh_rotate`` ((2l + 1)^2 products per order instead of (L + 1)^4). Measured,
+matrix plus its application to one vector, one core: 1.4 us at L = 4, 2.4 us at L = 5, 9 us at L = 8.
+
+Frames
+------
+``rotation_to_frame(x, y, z, R)`` writes the rows x, y, z (a right-handed orthonormal frame given in
+world coordinates) into R: R maps world coordinates to frame coordinates, so D(R) carries world SH
+coefficients to the frame's (the "omega_o-space" rotation of §5.3.1). ``rotation_z_to(axis, R)`` is a
+rotation with R e_z = axis: D(R) turns a zonal expansion about +z into one about ``axis``.
+"""
+import math
+
+import numpy as np
+from numba import njit
+
+from stages.core.geometry.frames import orthonormal_basis
+
+SH_LMAX = 16
+FOUR_PI = 4.0 * math.pi
+SQRT2 = math.sqrt(2.0)
+
+
+def _legendre_tables(lmax):
+    """a_lm, b_lm of the normalised recurrence and the diagonal seeds q_m^m (all for l, m <= lmax)."""
+    a = np.zeros((lmax + 1, lmax + 1))
+    b = np.zeros((lmax + 1, lmax + 1))
+    diag = np.zeros(lmax + 1)
+    diag[0] = 1.0 / math.sqrt(FOUR_PI)
+    for m in range(1, lmax + 1):
+        diag[m] = diag[m - 1] * math.sqrt((2.0 * m + 1.0) / (2.0 * m))
+    for m in range(lmax + 1):
+        for l in range(m + 1, lmax + 1):
+            a[l, m] = math.sqrt((4.0 * l * l - 1.0) / (l * l - m * m))
+            if l >= m + 2:
+                b[l, m] = math.sqrt(((l - 1.0) ** 2 - m * m) / (4.0 * (l - 1.0) ** 2 - 1.0))
+    return a, b, diag
+
+
+_LEG_A, _LEG_B, _LEG_DIAG = _legendre_tables(SH_LMAX)
+
+
+def _rotation_tables(lmax):
+    """Ivanic-Ruedenberg u, v, w for every (l, m, n), l >= 2, stored flat at offset(l) + (m+l)(2l+1) + (n+l)."""
+    off = np.zeros(lmax + 2, np.int64)
+    for l in range(lmax + 1):
+        off[l + 1] = off[l] + (2 * l + 1) ** 2
+    uvw = np.zeros((off[-1], 3))
+    for l in range(2, lmax + 1):
+        for m in range(-l, l + 1):
+            am = abs(m)
+            d = 1.0 if m == 0 else 0.0
+            for n in range(-l, l + 1):
+                denom = (2.0 * l) * (2.0 * l - 1.0) if abs(n) == l else (l + n) * (l - n)
+                k = off[l] + (m + l) * (2 * l + 1) + (n + l)
+                uvw[k, 0] = math.sqrt((l + m) * (l - m) / denom)
+                uvw[k, 1] = 0.5 * math.sqrt((1.0 + d) * (l + am - 1.0) * (l + am) / denom) * (1.0 - 2.0 * d)
+                uvw[k, 2] = -0.5 * math.sqrt(max(0.0, (l - am - 1.0) * (l - am)) / denom) * (1.0 - d)
+    return off, uvw
+
+
+_ROT_OFF, _ROT_UVW = _rotation_tables(SH_LMAX)
+
+
+@njit(cache=True)
+def sh_count(L):
+    """Number of coefficients of an expansion of order L: (L + 1)^2."""
+    return (L + 1) * (L + 1)
+
+
+@njit(cache=True)
+def sh_index(l, m):
+    """Single index j = l (l + 1) + m."""
+    return l * (l + 1) + m
+
+
+@njit(cache=True)
+def _check_order(L):
+    if L < 0 or L > SH_LMAX:
+        raise ValueError("spherical harmonics order out of range 0..SH_LMAX")
+
+
+@njit(cache=True)
+def sh_eval(L, x, y, z, out):
+    """Fill out[:(L+1)^2] with Y_j(x, y, z) for a unit direction (x, y, z)."""
+    _check_order(L)
+    cm = 1.0   # Re (x + i y)^m
+    sm = 0.0   # Im (x + i y)^m
+    for m in range(L + 1):
+        q2 = _LEG_DIAG[m]          # q_{l-2}, then q_{l-1}, q_l: normalised P_l^m / sin^m
+        _sh_store(out, m, m, q2, cm, sm)
+        if m < L:
+            q1 = _LEG_A[m + 1, m] * z * q2
+            _sh_store(out, m + 1, m, q1, cm, sm)
+            for l in range(m + 2, L + 1):
+                q = _LEG_A[l, m] * (z * q1 - _LEG_B[l, m] * q2)
+                _sh_store(out, l, m, q, cm, sm)
+                q2 = q1
+                q1 = q
+        c = cm * x - sm * y
+        sm = sm * x + cm * y
+        cm = c
+
+
+@njit(cache=True, inline="always")
+def _sh_store(out, l, m, q, cm, sm):
+    j = l * (l + 1)
+    if m == 0:
+        out[j] = q
+    else:
+        out[j + m] = SQRT2 * q * cm
+        out[j - m] = SQRT2 * q * sm
+
+
+# ------------------------------------------------------------------------------------------------
+# quadrature and projection
+@njit(cache=True)
+def gauss_legendre(n):
+    """(nodes, weights) of the n-point Gauss-Legendre rule on [-1, 1], nodes ascending (Newton on P_n)."""
+    x = np.empty(n)
+    w = np.empty(n)
+    for i in range((n + 1) // 2):
+        z = math.cos(math.pi * (i + 0.75) / (n + 0.5))
+        dp = 1.0
+        for it in range(100):
+            p1 = 1.0
+            p = z
+            for k in range(2, n + 1):
+                p0 = p1
+                p1 = p
+                p = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k
+            dp = n * (z * p - p1) / (z * z - 1.0)
+            dz = p / dp
+            z -= dz
+            if abs(dz) < 1e-16:
+                break
+        # derivative at the converged node
+        p1 = 1.0
+        p = z
+        for k in range(2, n + 1):
+            p0 = p1
+            p1 = p
+            p = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k
+        dp = n * (z * p - p1) / (z * z - 1.0)
+        wk = 2.0 / ((1.0 - z * z) * dp * dp)
+        x[i] = -z
+        x[n - 1 - i] = z
+        w[i] = wk
+        w[n - 1 - i] = wk
+    if n % 2 == 1:
+        x[n // 2] = 0.0
+    return x, w
+
+
+@njit(cache=True)
+def sh_quadrature(L, n_theta, n_phi):
+    """(dirs (N, 3), weights (N,)), N = n_theta n_phi: Gauss-Legendre in cos(theta) x uniform phi.
+
+    Exact for spherical polynomials of degree <= min(2 n_theta - 1, n_phi - 1); n_theta <= 0 or
+    n_phi <= 0 pick L + 1 and 2L + 1, exact for products of two expansions of order L."""
+    if n_theta <= 0:
+        n_theta = L + 1
+    if n_phi <= 0:
+        n_phi = 2 * L + 1
+    u, wu = gauss_legendre(n_theta)
+    dirs = np.empty((n_theta * n_phi, 3))
+    weights = np.empty(n_theta * n_phi)
+    dphi = 2.0 * math.pi / n_phi
+    k = 0
+    for a in range(n_theta):
+        s = math.sqrt(max(0.0, 1.0 - u[a] * u[a]))
+        for b in range(n_phi):
+            phi = (b + 0.5) * dphi
+            dirs[k, 0] = s * math.cos(phi)
+            dirs[k, 1] = s * math.sin(phi)
+            dirs[k, 2] = u[a]
+            weights[k] = wu[a] * dphi
+            k += 1
+    return dirs, weights
+
+
+@njit(cache=True)
+def sh_project(values, dirs, weights, L):
+    """(n_coef, C) coefficients sum_k weights[k] Y_j(dirs[k]) values[k, c] of a function sampled on a rule."""
+    n = sh_count(L)
+    C = values.shape[1]
+    out = np.zeros((n, C))
+    y = np.empty(n)
+    for k in range(dirs.shape[0]):
+        sh_eval(L, dirs[k, 0], dirs[k, 1], dirs[k, 2], y)
+        for j in range(n):
+            f = weights[k] * y[j]
+            for c in range(C):
+                out[j, c] += f * values[k, c]
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+# rotation (Ivanic-Ruedenberg 1996/1998)
+@njit(cache=True, inline="always")
+def _ir_P(out, i, l, a, b):
+    """P^l_{i,a,b}: order-1 entry R1[i, .] times order l-1 entry R^{l-1}[a, .] (IR Table 2)."""
+    j1 = 2                     # order-1 block centre (l = 1: j = 2 + m)
+    jp = (l - 1) * l           # order l-1 block centre
+    if b == l:
+        return out[j1 + i, j1 + 1] * out[jp + a, jp + l - 1] - out[j1 + i, j1 - 1] * out[jp + a, jp - l + 1]
+    if b == -l:
+        return out[j1 + i, j1 + 1] * out[jp + a, jp - l + 1] + out[j1 + i, j1 - 1] * out[jp + a, jp + l - 1]
+    return out[j1 + i, j1] * out[jp + a, jp + b]
+
+
+@njit(cache=True)
+def sh_rotation(L, R, out):
+    """Fill out ((L+1)^2, (L+1)^2) with D(R): coefficients of f(R^T w) = D(R) @ coefficients of f."""
+    _check_order(L)
+    n = (L + 1) * (L + 1)
+    out[:n, :n] = 0.0
+    out[0, 0] = 1.0
+    if L == 0:
+        return
+    # order 1: R in the (y, z, x) order of m = -1, 0, 1
+    for i in range(3):
+        ri = (i + 1) % 3       # m = i - 1 -> axis y, z, x
+        for k in range(3):
+            out[1 + i, 1 + k] = R[ri, (k + 1) % 3]
+    for l in range(2, L + 1):
+        jc = l * (l + 1)
+        base = _ROT_OFF[l]
+        w2 = 2 * l + 1
+        for m in range(-l, l + 1):
+            am = abs(m)
+            for nn in range(-l, l + 1):
+                k = base + (m + l) * w2 + (nn + l)
+                u = _ROT_UVW[k, 0]
+                v = _ROT_UVW[k, 1]
+                w = _ROT_UVW[k, 2]
+                r = 0.0
+                if u != 0.0:
+                    r += u * _ir_P(out, 0, l, m, nn)
+                if v != 0.0:
+                    if m == 0:
+                        V = _ir_P(out, 1, l, 1, nn) + _ir_P(out, -1, l, -1, nn)
+                    elif m > 0:
+                        if m == 1:
+                            V = SQRT2 * _ir_P(out, 1, l, 0, nn)
+                        else:
+                            V = _ir_P(out, 1, l, m - 1, nn) - _ir_P(out, -1, l, -m + 1, nn)
+                    else:
+                        if m == -1:
+                            V = SQRT2 * _ir_P(out, -1, l, 0, nn)
+                        else:
+                            V = _ir_P(out, 1, l, m + 1, nn) + _ir_P(out, -1, l, -m - 1, nn)
+                    r += v * V
+                if w != 0.0 and am < l - 1:
+                    if m > 0:
+                        W = _ir_P(out, 1, l, m + 1, nn) + _ir_P(out, -1, l, -m - 1, nn)
+                    else:
+                        W = _ir_P(out, 1, l, m - 1, nn) - _ir_P(out, -1, l, -m + 1, nn)
+                    r += w * W
+                out[jc + m, jc + nn] = r
+
+
+@njit(cache=True)
+def sh_rotate(L, D, c, out):
+    """out[:(L+1)^2] = D @ c block by block (D from ``sh_rotation``, of order >= L)."""
+    out[0] = D[0, 0] * c[0]
+    for l in range(1, L + 1):
+        lo = l * l
+        hi = (l + 1) * (l + 1)
+        for a in range(lo, hi):
+            s = 0.0
+            for b in range(lo, hi):
+                s += D[a, b] * c[b]
+            out[a] = s
+
+
+@njit(cache=True)
+def rotation_to_frame(x, y, z, R):
+    """R (3, 3) with rows x, y, z: world -> frame coordinates for a right-handed orthonormal frame."""
+    for k in range(3):
+        R[0, k] = x[k]
+        R[1, k] = y[k]
+        R[2, k] = z[k]
+
+
+@njit(cache=True)
+def rotation_z_to(axis, R):
+    """A rotation R (3, 3) with R e_z = axis (unit): columns (t, b, axis), the right-handed frame of
+    ``stages.core.geometry.frames.orthonormal_basis``."""
+    t, b = orthonormal_basis(axis[0], axis[1], axis[2])
+    for k in range(3):
+        R[k, 0] = t[k]
+        R[k, 1] = b[k]
+        R[k, 2] = axis[k]
