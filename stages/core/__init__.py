@@ -8,6 +8,8 @@
 ``shading``   scattering models with one eval / pdf / sample interface: the fibre BCSDF, Lambert,
               the SGGX micro-flake phase function, and the packed material rows that select them
 ``shell``     shell-mapped tiled exemplars (seed 001 §5.1): the scene and its ray traversal
+``sh``        real spherical harmonics: evaluation, quadrature, projection, exact rotation matrices
+``sg``        spherical Gaussians: mass, products, Fibonacci axes, their SH (zonal) expansion table
 ``rng``       counter-based random numbers (thread-count independent)
 
 Nothing here imports a stage package; stage packages import from here.
