@@ -1,0 +1,110 @@
+"""``loomlight precompute svf|iirtf TILING.zarr -o OUT.zarr``: seed 001 §4's precomputation per exemplar.
+
+``svf``    segment visibility functions of every fibre segment (binary images, SSDF + PCA, sums of SGs)
+``iirtf``  the mean free path, cells and per-cell SH transfer matrices A_C (with standard errors), and
+           the BCSDF's SH table C_S of every fibre material the scene gives the tiling
+Both cover every exemplar of the tiling (patterned cloth: one set per exemplar, §6.4) unless
+``--exemplar`` picks some, run as chunk tasks (``pipeline.chunks``) and skip when up to date.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List
+
+import typer
+
+from ..memory import BUDGET_HELP
+
+app = typer.Typer(name="precompute", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
+                  help="Seed 001 §4: segment visibility functions (svf) and IIRTF transfer matrices (iirtf) of a "
+                       "tiling's exemplars.")
+
+
+def register(root: typer.Typer) -> None:
+    root.add_typer(app, name="precompute")
+
+
+_TILING = typer.Argument(..., help="A tiling artifact (loomlight tile).")
+_OUT = typer.Option(..., "-o", "--out", help="Output artifact (directory ending in .zarr).")
+_EXEMPLAR = typer.Option(None, "--exemplar", help="Exemplar index to precompute (repeatable; default: all).")
+_FORCE = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged.")
+_BUDGET = typer.Option(None, "--budget", help=BUDGET_HELP)
+_THREADS = typer.Option(None, "--threads", help="numba threads (default: all cores); the bytes do not depend on it.")
+
+
+@app.command("svf")
+def svf(
+    tiling: Path = _TILING,
+    out: Path = _OUT,
+    resolution: int = typer.Option(128, "--resolution", help="Visibility image size: RES x RES pixels over "
+                                                             "(theta, phi) (§4.1: 128); at least 8."),
+    components: int = typer.Option(48, "--components", help="PCA components of the SSDFs (§4.1: 48)."),
+    sg_count: int = typer.Option(48, "--sg-count", help="Q, spherical Gaussians per segment (§4.1: 48)."),
+    sg_sharpness: float = typer.Option(128.0, "--sg-sharpness", help="lambda_svf of the visibility SGs (§4.1: 128)."),
+    chunk: int = typer.Option(1024, "--chunk", help="Segments per chunk task."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the per-segment SG rotations and the PCA sketch."),
+    exemplar: List[int] = _EXEMPLAR,
+    force: bool = _FORCE,
+    budget: float = _BUDGET,
+    threads: int = _THREADS,
+):
+    """Segment visibility functions (§4.1): per fibre segment, the binary visibility image of the sky from its
+    midpoint in the exemplar repeated without end, its spherical signed distance function (SSDF) compressed
+    by PCA over the exemplar, and the sum-of-SGs representation."""
+    from ..memory import budget as memory_budget
+    from ..outputs import ARTIFACT, check_output
+    from ..runners.precompute import SvfParams, run_svf
+
+    check_output(out, "-o", ARTIFACT)
+    p = SvfParams(resolution=resolution, components=components, sg_count=sg_count, sg_sharpness=sg_sharpness,
+                  chunk=chunk, seed=seed)
+    res = run_svf(tiling, out, p, exemplars=exemplar or None, force=force, budget=memory_budget(budget),
+                  threads=threads)
+    if res["skipped"]:
+        typer.echo(f"{out} is up to date")
+    else:
+        typer.echo(f"wrote {out} ({res['exemplars']} exemplars, {res['segments']:,} segments, "
+                   f"{res['rays_per_s'] / 1e6:.2f} M rays/s, PCA relative error {res['pca_rel_error']:.3f})")
+
+
+@app.command("iirtf")
+def iirtf(
+    tiling: Path = _TILING,
+    out: Path = _OUT,
+    scene: Path = typer.Option(None, "--scene", help="Scene giving the yarn materials (default: the scene the "
+                                                     "tiling names)."),
+    order: int = typer.Option(4, "--order", help="SH order L of the transfer matrices (§6.1: 4 or 5), 0..8."),
+    cell_factor: float = typer.Option(1.0, "--cell-factor", help="Target cell side in mean free paths (§6.1: 1-2)."),
+    paths: int = typer.Option(50000, "--paths", help="Monte Carlo paths per cell (§4.2: 50,000)."),
+    mfp_paths: int = typer.Option(20000, "--mfp-paths", help="Paths traced to estimate the mean free path."),
+    max_depth: int = typer.Option(64, "--max-depth", help="Largest number of scattering events on a path."),
+    rr_depth: int = typer.Option(3, "--rr-depth", help="Russian roulette from this scattering event on."),
+    theta_samples: int = typer.Option(512, "--theta-samples", help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
+    bcsdf: str = typer.Option(None, "--bcsdf", help="BCSDF preset for yarn groups the scene names none for."),
+    chunk: int = typer.Option(16, "--chunk", help="Cells per chunk task."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the Monte Carlo estimates."),
+    set_: List[str] = typer.Option(None, "--set", help="Material option KEY=VALUE (tint=yarn|none, as render)."),
+    exemplar: List[int] = _EXEMPLAR,
+    force: bool = _FORCE,
+    budget: float = _BUDGET,
+    threads: int = _THREADS,
+):
+    """Incoming indirect radiance transfer functions (§4.2): the exemplar cut into cells of about a mean free
+    path, and per cell the SH matrix A_C taking light to the indirect incoming radiance at the cell's
+    segments, estimated by path tracing the fibre BCSDF, with its standard error; plus the BCSDF's SH table
+    C_S (§4.3) of every material."""
+    from ..memory import budget as memory_budget
+    from ..outputs import ARTIFACT, check_output
+    from ..runners.precompute import IirtfParams, parse_material_options, run_iirtf
+
+    check_output(out, "-o", ARTIFACT)
+    p = IirtfParams(order=order, cell_factor=cell_factor, paths=paths, mfp_paths=mfp_paths, max_depth=max_depth,
+                    rr_depth=rr_depth, theta_samples=theta_samples, chunk=chunk, seed=seed,
+                    material=parse_material_options(set_ or [], bcsdf))
+    res = run_iirtf(tiling, out, p, scene=scene, exemplars=exemplar or None, force=force,
+                    budget=memory_budget(budget), threads=threads)
+    if res["skipped"]:
+        typer.echo(f"{out} is up to date")
+    else:
+        typer.echo(f"wrote {out} ({res['exemplars']} exemplars, {res['cells']:,} cells, mean free path "
+                   f"{', '.join(f'{m:.4g}' for m in res['mean_free_path'])}, {res['paths_per_s'] / 1e3:.1f} k paths/s)")

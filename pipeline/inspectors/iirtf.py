@@ -1,0 +1,120 @@
+"""Picture of an iirtf artifact (stage precompute iirtf): the cells' response to a directional light.
+
+For a directional light of unit irradiance from ``LIGHT`` (default: 30 degrees from the normal), each
+cell's transfer matrices give the SH coefficients of the indirect incoming radiance at its segments,
+c_T = a_C^T Y(w_d) per channel (seed 001 §5.3.1); the fluence  int T dw1 = sqrt(4 pi) c_T[0]  is drawn:
+
+  top row   one panel per z layer of the exemplar's cell grid (top layer first, at most 6), RGB over the
+            exemplar's x-y cells on one exposure (empty cells hatched grey), with the block grid;
+  bottom    the mean fluence of each layer against its height (per channel, with its Monte Carlo standard
+            error), the cell grid and mean free path in the title, and the order-0 to
+            order-L energy of A_C (how directional the indirect light is).
+``--exemplar K`` picks the exemplar (default: the first in the artifact).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..errors import LoomError
+
+LIGHT = np.array([math.sin(math.radians(30.0)) * math.cos(math.radians(20.0)),
+                  math.sin(math.radians(30.0)) * math.sin(math.radians(20.0)), math.cos(math.radians(30.0))])
+
+
+def cell_fluence(a, order: int, w_d):
+    """(C, 3) fluence int T(w_d, w1) dw1 of every cell: a (C, 3, J, J) indexed [cell, channel, j0, j1]."""
+    from stages.core.sh import sh_eval
+
+    J = (order + 1) ** 2
+    Y = np.empty(J)
+    sh_eval(order, float(w_d[0]), float(w_d[1]), float(w_d[2]), Y)
+    return math.sqrt(4 * math.pi) * np.einsum("chk,k->ch", a[:, :, :, 0].astype(np.float64), Y)
+
+
+def cell_fluence_se(se, order: int, w_d):
+    """(C, 3) standard error of ``cell_fluence``, treating the entries' errors as independent."""
+    from stages.core.sh import sh_eval
+
+    J = (order + 1) ** 2
+    Y = np.empty(J)
+    sh_eval(order, float(w_d[0]), float(w_d[1]), float(w_d[2]), Y)
+    return math.sqrt(4 * math.pi) * np.sqrt(np.einsum("chk,k->ch", se[:, :, :, 0].astype(np.float64) ** 2, Y * Y))
+
+
+def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
+    import matplotlib
+
+    if not show:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    infos = art.summary["exemplars"]
+    ks = [i["exemplar"] for i in infos]
+    k = ks[0] if exemplar is None else exemplar
+    if k not in ks:
+        raise LoomError(art.path, "--exemplar", f"exemplar {k} is not in this artifact (has {ks})")
+    info = infos[ks.index(k)]
+    L = int(art.summary["order"])
+    a = art[f"exemplar_{k}/transfer"]
+    se = art[f"exemplar_{k}/transfer_se"]
+    count = art[f"exemplar_{k}/cell_segments"]
+    NX, NY, NZ = info["cell_grid"]
+    flu = cell_fluence(a, L, LIGHT).reshape(NZ, NY, NX, 3)
+    empty = (count == 0).reshape(NZ, NY, NX)
+    show_layers = list(range(NZ - 1, -1, -1))[:6]
+    ncol = max(3, len(show_layers))
+    fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), dpi=100, constrained_layout=True)
+    gs = fig.add_gridspec(2, ncol)
+    expo = float(np.percentile(flu[~empty], 99)) if np.any(~empty) else 1.0
+    expo = expo if expo > 0 else 1.0
+    W, H = NX * info["cell_size"][0], NY * info["cell_size"][1]
+    nbx, nby = (NX // info["cells_per_block"][0], NY // info["cells_per_block"][1])
+    th = math.degrees(math.acos(LIGHT[2]))
+    fig.suptitle(f"IIRTF of exemplar {k} '{info['name']}': response to a directional light {th:.0f} deg from the "
+                 f"normal; {NX}x{NY}x{NZ} cells of {info['cell_size'][0]:.3g} x {info['cell_size'][1]:.3g} x "
+                 f"{info['cell_size'][2]:.3g}, mean free path {info['mean_free_path']:.3g}, SH order {L}, "
+                 f"{art.summary['paths']:,} paths/cell", fontsize=9)
+    for i, iz in enumerate(show_layers):
+        ax = fig.add_subplot(gs[0, i])
+        img = np.clip(flu[iz] / expo, 0, 1) ** (1 / 2.2)
+        img[empty[iz]] = 0.5
+        ax.imshow(img, origin="lower", extent=[0, W, 0, H], interpolation="nearest")
+        for bx in range(1, nbx):
+            ax.axvline(bx * W / nbx, color="white", lw=0.4)
+        for by in range(1, nby):
+            ax.axhline(by * H / nby, color="white", lw=0.4)
+        z0 = info["slab"][0] + iz * info["cell_size"][2]
+        ax.set_title(f"layer {iz}: z {z0:.3f}-{z0 + info['cell_size'][2]:.3f}", fontsize=8)
+        ax.set_xlabel("x (exemplar)")
+        ax.set_ylabel("y (exemplar)")
+    ax = fig.add_subplot(gs[1, : ncol // 2 + 1])
+    zc = info["slab"][0] + (np.arange(NZ) + 0.5) * info["cell_size"][2]
+    se0 = cell_fluence_se(se, L, LIGHT).reshape(NZ, NY * NX, 3)
+    for ch, col in enumerate(("red", "green", "blue")):
+        m = np.array([flu[iz][~empty[iz]][:, ch].mean() if np.any(~empty[iz]) else np.nan for iz in range(NZ)])
+        e = np.array([np.sqrt((se0[iz][~empty[iz].ravel()][:, ch] ** 2).mean()) if np.any(~empty[iz]) else np.nan
+                      for iz in range(NZ)])
+        ax.errorbar(zc, m, yerr=e, color=col, marker="o", ms=3, capsize=2, label=f"{col} (bars: RMS of the cells' Monte Carlo SE)")
+    ax.set_xlabel("cell layer height z (exemplar space; the light comes from +z)")
+    ax.set_ylabel("mean fluence of the indirect light, int T dw1")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    ax = fig.add_subplot(gs[1, ncol // 2 + 1:])
+    full = ~empty.ravel()
+    energy = []
+    for l in range(L + 1):
+        sl = slice(l * l, (l + 1) * (l + 1))
+        energy.append(float((a[full][:, :, sl, :].astype(np.float64) ** 2).sum()))
+    energy = np.array(energy) / max(sum(energy), 1e-300)
+    ax.bar(np.arange(L + 1), energy, color="gray")
+    ax.set_xlabel("SH order l of the light direction (rows of A_C)")
+    ax.set_ylabel("share of sum a^2")
+    ax.set_title("energy of A_C by order", fontsize=9)
+    if png is not None:
+        fig.savefig(png)
+    if show:
+        plt.show()
+    plt.close(fig)
+    return png

@@ -1,0 +1,113 @@
+"""`loomlight precompute svf|iirtf` end to end on the tiny tiling (issue 17 items 1, 5, 7, 8): the info
+contract, skipping when up to date, identical array bytes at 1 and 2 threads (reference: the sha256 of
+every array recorded at write), the inspector pictures, and every bad input -> exit code 2, one line,
+nothing written and an existing artifact untouched."""
+import json
+
+import pytest
+
+from pipeline.artifacts import read_meta
+
+SVF_ARGS = ["--resolution", "16", "--components", "4", "--chunk", "200"]
+IIRTF_ARGS = ["--order", "2", "--paths", "40", "--mfp-paths", "400", "--cell-factor", "3", "--chunk", "64",
+              "--scene", "data/scenes/draped_damask.toml"]
+
+
+def _arrays(path):
+    return {k: v["sha256"] for k, v in read_meta(path)["arrays"].items()}
+
+
+@pytest.fixture(scope="module")
+def built(tiny_tiling, tmp_path_factory):
+    from pipeline.cli import main
+
+    d = tmp_path_factory.mktemp("precompute")
+    tiling = tiny_tiling[0]
+    assert main(["precompute", "svf", str(tiling), "-o", str(d / "svf.zarr"), *SVF_ARGS, "--threads", "2"]) == 0
+    assert main(["precompute", "iirtf", str(tiling), "-o", str(d / "iirtf.zarr"), *IIRTF_ARGS, "--threads", "2"]) == 0
+    return tiling, d
+
+
+def test_info_json_reports_the_contract(built, cli):
+    tiling, d = built
+    code, out, err = cli("info", d / "svf.zarr", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["kind"] == "svf" and doc["resolution"] == [16, 16] and doc["components"] == 4
+    ex = doc["exemplars"]
+    assert [e["exemplar"] for e in ex] == [0, 1]
+    assert sum(e["segments"] for e in ex) == doc["segments"] > 0
+    assert all(e["bytes"] > 0 and 0 <= e["pca_sign_error"] < 0.2 for e in ex)
+    code, out, err = cli("info", d / "iirtf.zarr", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["kind"] == "iirtf" and doc["order"] == 2 and doc["sh_coefficients"] == 9
+    for e in doc["exemplars"]:
+        assert e["mean_free_path"] > 0 and e["cells"] == e["cell_grid"][0] * e["cell_grid"][1] * e["cell_grid"][2]
+        assert e["bytes"] > 0
+
+
+def test_up_to_date_and_thread_count_independent_bytes(built, cli, tmp_path):
+    tiling, d = built
+    code, out, _ = cli("precompute", "svf", tiling, "-o", d / "svf.zarr", *SVF_ARGS)
+    assert code == 0 and "up to date" in out
+    code, out, _ = cli("precompute", "iirtf", tiling, "-o", d / "iirtf.zarr", *IIRTF_ARGS)
+    assert code == 0 and "up to date" in out
+    for kind, args in (("svf", SVF_ARGS), ("iirtf", IIRTF_ARGS)):
+        one = tmp_path / f"{kind}1.zarr"
+        code, _, err = cli("precompute", kind, tiling, "-o", one, *args, "--threads", "1")
+        assert code == 0, err
+        assert _arrays(one) == _arrays(d / f"{kind}.zarr"), kind
+
+
+def test_inspect_pictures(built, cli, tmp_path):
+    _, d = built
+    seg = json.loads(cli("info", d / "svf.zarr", "--json")[1])["exemplars"][1]["segment_range"][0] + 7
+    for args in ((d / "svf.zarr", "--segment", seg), (d / "iirtf.zarr", "--exemplar", 1)):
+        png = tmp_path / "p.png"
+        code, _, err = cli("inspect", *args, "--png", png)
+        assert code == 0, err
+        assert png.stat().st_size > 20000
+    code, _, err = cli("inspect", d / "svf.zarr", "--segment", 10 ** 9, "--png", tmp_path / "q.png")
+    assert code == 2 and "segment" in err
+
+
+BAD = [
+    (("svf",), ["--resolution", "4"], "resolution"),
+    (("svf",), ["--resolution", "20"], "multiple of 8"),
+    (("svf",), ["--components", "0"], "--components"),
+    (("svf",), ["--exemplar", "7"], "exemplar 7"),
+    (("iirtf",), ["--order", "-1"], "SH order"),
+    (("iirtf",), ["--order", "9"], "SH order"),
+    (("iirtf",), ["--cell-factor", "0"], "--cell-factor"),
+    (("iirtf",), ["--cell-factor", "-2"], "--cell-factor"),
+    (("iirtf",), ["--cell-factor", "nan"], "--cell-factor"),
+    (("iirtf",), ["--scene", "no/such/scene.toml"], "not found"),
+]
+
+
+@pytest.mark.parametrize("sub,extra,needle", BAD)
+def test_bad_input_exit_2_nothing_written(built, cli, tmp_path, sub, extra, needle):
+    tiling, d = built
+    base = SVF_ARGS if sub[0] == "svf" else [a for a in IIRTF_ARGS]
+    if "--scene" in extra:
+        i = base.index("--scene")
+        base = base[:i] + base[i + 2:]
+    fresh = tmp_path / "fresh.zarr"
+    code, out, err = cli("precompute", *sub, tiling, "-o", fresh, *base, *extra)
+    assert code == 2, (out, err)
+    assert needle in err and len(err.strip().splitlines()) == 1, err
+    assert not fresh.exists() and not list(tmp_path.glob(".fresh*"))
+    existing = d / f"{sub[0]}.zarr"
+    before = read_meta(existing)["content_hash"]
+    code, _, err = cli("precompute", *sub, tiling, "-o", existing, *base, *extra, "--force")
+    assert code == 2
+    assert read_meta(existing)["content_hash"] == before
+
+
+def test_wrong_kind_of_input(built, cli, tmp_path):
+    _, d = built
+    for sub, args in (("svf", SVF_ARGS), ("iirtf", IIRTF_ARGS)):
+        code, _, err = cli("precompute", sub, d / "svf.zarr", "-o", tmp_path / "x.zarr", *args)
+        assert code == 2 and "tiling" in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "x.zarr").exists()
