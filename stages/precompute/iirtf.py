@@ -1,0 +1,582 @@
+"""The indirect incoming radiance transfer function, IIRTF (seed 001 §4.2, used in §5.3.1).
+
+What it is
+----------
+T(w0, w1, x) is the radiance arriving at a point x of the fabric from direction w1 (travelling
+along -w1) due to a directional light of unit irradiance (on a plane perpendicular to it) arriving
+from direction w0 (travelling along -w0), counting only light paths with at least one scattering
+event on a fibre. It is computed on the flat fabric made of one exemplar repeated without end
+(``stages.precompute.periodic``), light from above only (w0 in the upper hemisphere; T = 0 for
+w0 below the horizon). Direct light is single scattering and is handled by the renderer (SVF): a
+ray from x along w1 that meets no fibre contributes nothing.
+
+Per cell C of an exemplar, T is averaged over the segments whose midpoints mu_k lie in C and
+expanded in real orthonormal spherical harmonics of order L (``stages.core.sh.sh_eval``, index
+j = l(l+1)+m, J = (L+1)^2 functions), one matrix per RGB channel:
+
+    a_C[j0, j1] = 1/|C| sum_k  int_{H+} int_{S^2} T(w0, w1, mu_k) Y_j0(w0) Y_j1(w1) dw1 dw0      (§4.2)
+
+Reconstruction: T(w0, w1, C) ~= sum_{j0, j1} a_C[j0, j1] Y_j0(w0) Y_j1(w1) (``iirtf_reconstruct``);
+for a light with SH coefficients c_d[j0] (a directional light: c_d = Y(w_d)), the incoming indirect
+radiance has coefficients c_T[j1] = sum_j0 a_C[j0, j1] c_d[j0], i.e. c_T = a_C^T c_d (§5.3.1 writes
+A_C c_d with A_C = a_C^T).
+
+Estimator (§4.2)
+----------------
+Per path: segment k uniform among the cell's segments, w1 uniform on the sphere (pdf 1/4pi), and a
+one-path estimate u[j0] of the light integral int_{H+} T(w0, w1, mu_k) Y_j0(w0) dw0; the path's
+estimate is x[j0, j1] = u[j0] Y_j1(w1) 4pi, a_C the mean over N paths and its standard error per
+entry sqrt((sum x^2 - (sum x)^2 / N) / (N (N - 1))) (stored beside a_C). Two estimators of u
+(``light_sampling``):
+
+- "uniform" (the paper's, the default): w0 uniform on the upper hemisphere (pdf 1/2pi), one per path,
+  u[j0] = T^(w0, w1, mu_k) Y_j0(w0) 2pi -- i.e. x = T^ Y_j0(w0) Y_j1(w1) 2pi 4pi.
+- "mis": the same integral as a path tracer lit by the sky "radiance Y_j0 over the upper hemisphere":
+  at every fibre vertex one light direction uniform on the upper hemisphere (next-event estimation)
+  and the BCSDF-sampled continuation when it escapes upwards, combined by the power heuristic. Same
+  expectation; far less variance for sharp lobes (a 1-degree R lobe is rarely met by a uniform w0).
+
+T^ is one path-traced sample: the ray from mu_k along w1 skips k's whole fibre (the BCSDF integrates
+over the fibre's cross-section, ``stages.core.shading.bcsdf`` "Measure"); no fibre hit before it
+leaves the slab: T^ = 0. At each fibre vertex y (wi = the direction back towards the previous vertex)
+next-event estimation to the light -- the only estimator of a delta light -- adds
+throughput * (S cos)(wi, w0) if the shadow ray from y along w0 (skipping y's fibre) leaves the slab
+(or runs ``max_dist``, i.e. out of the side of a finite flat section) without meeting a fibre;
+then the material is sampled for the next direction (throughput *= f cos / pdf), Russian roulette
+from scattering event ``rr_depth`` on (survival min(0.95, max channel of the throughput)), and the
+path continues to the next fibre hit; a path that leaves the slab adds nothing more ("mis": unless
+it leaves upwards, see above). ``max_depth`` is the largest number of fibre vertices on a light path
+(1: single scattering at y only).
+Materials: rows of ``stages.core.shading.material`` through ``mat_of_fiber`` (global fibre id ->
+row), as in the fiberpath renderer; a curve material (BCSDF) leaves from the hit point and skips its
+fibre, an opaque one (Lambert) leaves just off the capsule surface and tests every fibre.
+
+Random numbers: ``uniform(seed, key, dim)`` with key = cell id * 2^32 + path index (global cell id):
+dim 0 picks the segment, 1-2 w0, 3-4 w1, then 6 per fibre vertex (lobe, direction, direction,
+roulette, and "mis"'s light direction). So every cell's result depends only on (seed, cell id, its
+inputs): identical bytes for any thread count and any split of the cells into chunks.
+
+Mean free path (``mean_free_path``)
+-----------------------------------
+ell = the mean length of the path segments between two consecutive fibre scattering events, over
+paths that enter exemplar k's slab from above at a uniform random (x, y) of the period with
+direction -w0, w0 uniform on the upper hemisphere, and scatter at each fibre hit into a direction
+sampled from the hit fibre's material (``material_sample``; the throughput is ignored: ell is a
+property of the fibre arrangement as seen along the directions light takes). The entering segment
+(from the top of the slab to the first hit) and the leaving one (to the slab's boundary) are not
+between two scattering events and do not count; a path ends when it leaves the slab, after
+``max_depth`` events, or when a ray runs ``max_dist``. ell = sum of lengths / number of segments, a
+ratio estimator over independent paths; its standard error by the delta method,
+SE = sqrt(sum_p (S_p - ell n_p)^2 / (N (N - 1))) / mean(n_p), with S_p, n_p path p's total length and
+segment count. Keys: (seed, 2^62 + path index).
+
+Cells (§4.2 "Choosing cell dimensions", ``build_cells``)
+----------------------------------------------------------
+Each exemplar block (block_size bw x bh) is cut into nx x ny cells and the slab [z_lo, z_hi]
+(exemplar k's fibre bounds, ``exemplar_slabs``) into nz layers; per axis n is the whole number >= 1
+whose cell side (side / n) is closest to the target length (cell_factor * ell; ties: fewer cells;
+this is round(side / target) except near the half-way points, where round's choice can be farther).
+Exemplar k's cells cover [0, W) x [0, H) x [z_lo, z_hi] in a grid NX x NY x NZ (NX = nblocks_x nx,
+NY = nblocks_y ny, NZ = nz); the cell index is global over the tiling,
+
+    cell = ex_cells[k] + (iz * NY + iy) * NX + ix          (x fastest, then y, then z)
+
+A segment's cell is the cell of its midpoint wrapped into the period (``seg_cell``); cells with no
+midpoint are empty and get a = 0 (and se = 0).
+
+API (chunk-level: ``iirtf_chunk`` over any contiguous range of global cell ids; chunks are
+independent, may run in other processes, and concatenate to the whole)
+    exemplar_slabs(points, radius, offsets, ex_fibers) -> (K, 2) float64 z_lo, z_hi
+    mean_free_path(sc, k, z_lo, z_hi, period, mat_of_fiber, mats, *, n_paths=20000, seed=0,
+                   max_depth=64, max_dist=None) -> (ell, se, n_segments)
+    cells_per_side(side, target) -> int (per axis)
+    build_cells(points, offsets, ex_fibers, ex_period, ex_nblocks, block_size, slabs, target) -> Cells
+    cell_box(cells, c) -> (k, lo (3,), hi (3,))
+    iirtf_chunk(sc, cells, c0, c1, mat_of_fiber, mats, *, order=4, n_paths=50000, seed=0, max_depth=32,
+                rr_depth=5, light_sampling="uniform", max_dist=None) -> IIRTFChunk(a, se, rays)
+    iirtf_reconstruct(a, w0, w1) -> (N, 3) float64
+    transfer_projection(...)  the one-path estimator (njit), for kernels that need it
+"""
+from collections import namedtuple
+import math
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from stages.core.geometry.capsule import capsule_normal
+from stages.core.rng import uniform
+from stages.core.sh import sh_eval
+from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_is_curve, material_prepare,
+                                          material_sample)
+from stages.precompute.periodic import periodic_hit, periodic_scene, wrap_into_period
+
+MAX_ORDER = 8
+TWO_PI = 2.0 * math.pi
+FOUR_PI = 4.0 * math.pi
+MFP_STREAM = 1 << 62
+MAX_DIST_PERIODS = 32.0  # default max_dist = 32 max(W, H), as the SVF's (stages.precompute.svf)
+
+Cells = namedtuple("Cells", [
+    "ex_cells", "ex_grid", "block_cells", "cell_size", "ex_slab", "ex_period",
+    "seg_cell", "seg_mid", "seg_fibre", "cell_offsets", "cell_segments", "cell_count"])
+Cells.__doc__ = """Cells of a tiling (module doc "Cells"). Per exemplar k: ``ex_cells`` (K+1,) int64 the
+range of global cell ids, ``ex_grid`` (K, 3) int64 (NX, NY, NZ), ``block_cells`` (K, 3) int64 cells per
+block (nx, ny, nz), ``cell_size`` (K, 3) float64 the cell's sides, ``ex_slab`` (K, 2) float64 (z_lo, z_hi),
+``ex_period`` (K, 2) float64 (W, H). Per global segment id s (of fibre f, s = offsets[f] - f + i):
+``seg_cell`` (S,) int64, ``seg_mid`` (S, 3) float64 the midpoint wrapped into the period, ``seg_fibre``
+(S,) int64. Per cell: ``cell_offsets`` (C+1,) int64 CSR into ``cell_segments`` (S,) int64, the
+segments of each cell in increasing id; ``cell_count`` (C,) int64 its number of segments (0: an empty
+cell, a = 0; a cell's cost is n_paths paths if it is not empty, nothing otherwise)."""
+
+IIRTFChunk = namedtuple("IIRTFChunk", ["a", "se", "rays"])
+IIRTFChunk.__doc__ = """iirtf_chunk's result for cells c0..c1-1: ``a`` and ``se`` (c1-c0, 3, J, J) float64
+indexed [cell - c0, channel, j0 (light direction w0), j1 (incoming direction w1)]; ``rays`` (c1-c0,)
+int64 rays cast per cell."""
+
+
+# ------------------------------------------------------------------------------------------------
+# geometry helpers
+
+def exemplar_slabs(points, radius, offsets, ex_fibers):
+    """(K, 2) float64: exemplar k's slab z_lo = min(P_z - R), z_hi = max(P_z + R) over its fibres."""
+    P = np.asarray(points, np.float64)
+    R = np.asarray(radius, np.float64)
+    O = np.asarray(offsets, np.int64)
+    Fb = np.asarray(ex_fibers, np.int64)
+    out = np.empty((len(Fb) - 1, 2))
+    for k in range(len(Fb) - 1):
+        a, b = O[Fb[k]], O[Fb[k + 1]]
+        out[k, 0] = (P[a:b, 2] - R[a:b]).min()
+        out[k, 1] = (P[a:b, 2] + R[a:b]).max()
+    return out
+
+
+def cells_per_side(side: float, target: float) -> int:
+    """The number n >= 1 of cells along a side whose length side / n is closest to ``target``
+    (ties: fewer cells)."""
+    if not (side > 0.0 and target > 0.0 and math.isfinite(side / target)):
+        raise ValueError(f"cells_per_side: side {side} and target {target} must be positive and finite")
+    r = side / target
+    lo = max(1, int(math.floor(r)))
+    hi = lo + 1
+    return lo if abs(side / lo - target) <= abs(side / hi - target) else hi
+
+
+def build_cells(points, offsets, ex_fibers, ex_period, ex_nblocks, block_size, slabs, target) -> Cells:
+    """Cells of every exemplar (module doc "Cells"); ``target`` the target cell length, a number or
+    one per exemplar (cell_factor * ell_k)."""
+    P = np.asarray(points, np.float64)
+    O = np.asarray(offsets, np.int64)
+    Fb = np.asarray(ex_fibers, np.int64)
+    period = np.asarray(ex_period, np.float64).reshape(-1, 2)
+    nblocks = np.asarray(ex_nblocks, np.int64).reshape(-1, 2)
+    bs = np.asarray(block_size, np.float64)
+    slabs = np.asarray(slabs, np.float64).reshape(-1, 2)
+    K = len(Fb) - 1
+    target = np.broadcast_to(np.asarray(target, np.float64), (K,))
+    F = len(O) - 1
+    nseg = O[1:] - O[:-1] - 1
+    seg_fibre = np.repeat(np.arange(F, dtype=np.int64), nseg)
+    first = O[seg_fibre] + (np.arange(len(seg_fibre)) - (O[:-1] - np.arange(F))[seg_fibre])
+    mid = 0.5 * (P[first] + P[first + 1])
+    ex_of_fibre = np.repeat(np.arange(K, dtype=np.int64), Fb[1:] - Fb[:-1])
+    seg_ex = ex_of_fibre[seg_fibre]
+    ex_grid = np.zeros((K, 3), np.int64)
+    block_cells = np.zeros((K, 3), np.int64)
+    cell_size = np.zeros((K, 3))
+    ex_cells = np.zeros(K + 1, np.int64)
+    seg_cell = np.empty(len(seg_fibre), np.int64)
+    for k in range(K):
+        thick = slabs[k, 1] - slabs[k, 0]
+        n = (cells_per_side(bs[0], target[k]), cells_per_side(bs[1], target[k]), cells_per_side(thick, target[k]))
+        block_cells[k] = n
+        ex_grid[k] = (nblocks[k, 0] * n[0], nblocks[k, 1] * n[1], n[2])
+        cell_size[k] = (bs[0] / n[0], bs[1] / n[1], thick / n[2])
+        ex_cells[k + 1] = ex_cells[k] + int(np.prod(ex_grid[k]))
+        sel = seg_ex == k
+        W, H = period[k]
+        x = mid[sel, 0] - W * np.floor(mid[sel, 0] / W)
+        y = mid[sel, 1] - H * np.floor(mid[sel, 1] / H)
+        mid[sel, 0] = x
+        mid[sel, 1] = y
+        NX, NY, NZ = ex_grid[k]
+        ix = np.clip(np.floor(x / cell_size[k, 0]).astype(np.int64), 0, NX - 1)
+        iy = np.clip(np.floor(y / cell_size[k, 1]).astype(np.int64), 0, NY - 1)
+        iz = np.clip(np.floor((mid[sel, 2] - slabs[k, 0]) / cell_size[k, 2]).astype(np.int64), 0, NZ - 1)
+        seg_cell[sel] = ex_cells[k] + (iz * NY + iy) * NX + ix
+    C = int(ex_cells[-1])
+    order = np.argsort(seg_cell, kind="stable").astype(np.int64)
+    count = np.bincount(seg_cell, minlength=C).astype(np.int64)
+    cell_offsets = np.zeros(C + 1, np.int64)
+    np.cumsum(count, out=cell_offsets[1:])
+    return Cells(ex_cells, ex_grid, block_cells, cell_size, slabs.copy(), period.copy(),
+                 seg_cell, mid, seg_fibre, cell_offsets, order, count)
+
+
+def cell_box(cells: Cells, c: int):
+    """(exemplar k, (x0, y0, z0), (x1, y1, z1)): the box of global cell ``c`` in exemplar space."""
+    k = int(np.searchsorted(cells.ex_cells, c, side="right") - 1)
+    NX, NY, _ = cells.ex_grid[k]
+    r = c - cells.ex_cells[k]
+    ix, iy, iz = r % NX, (r // NX) % NY, r // (NX * NY)
+    s = cells.cell_size[k]
+    lo = np.array([ix * s[0], iy * s[1], cells.ex_slab[k, 0] + iz * s[2]])
+    return k, lo, lo + s
+
+
+# ------------------------------------------------------------------------------------------------
+# the path tracer
+
+@njit(cache=True)
+def _vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so):
+    """Set up the fibre vertex of hit ``h``: its tangent, normal and where rays leave from (``so``,
+    wrapped into the period); returns (material row, fibre that rays leaving it skip)."""
+    row = mat_of_fiber[h.fibre]
+    x, y = wrap_into_period(h.x, h.y, W, H)
+    t_tan[0] = h.tx
+    t_tan[1] = h.ty
+    t_tan[2] = h.tz
+    if material_is_curve(mats[row]):
+        n[0] = 0.0
+        n[1] = 0.0
+        n[2] = 0.0
+        so[0] = x
+        so[1] = y
+        so[2] = h.z
+        return row, h.fibre
+    # opaque surface: the capsule's outward normal (the hit moved to the copy of its wrapped piece)
+    a = sc.seg_a[h.wrapped]
+    P = sc.points
+    dx = x - P[a, 0]
+    dy = y - P[a, 1]
+    dx -= W * math.floor(dx / W + 0.5)
+    dy -= H * math.floor(dy / H + 0.5)
+    nx, ny, nz, _s = capsule_normal(P[a, 0] + dx, P[a, 1] + dy, h.z, P[a, 0], P[a, 1], P[a, 2],
+                                    P[a + 1, 0], P[a + 1, 1], P[a + 1, 2])
+    n[0] = nx
+    n[1] = ny
+    n[2] = nz
+    off = 1e-3 * sc.seg_r[h.wrapped] + eps
+    so[0] = x + off * nx
+    so[1] = y + off * ny
+    so[2] = h.z + off * nz
+    return row, -1
+
+
+@njit(cache=True)
+def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ign0, w0, w1, order, mis, seed, key,
+                        dim0, max_depth, rr_depth, max_dist, eps, Y, u):
+    """One path's estimate u[ch, j0] of int_{H+} T(w0', w1, x) Y_j0(w0') dw0' at x = (ox, oy, oz), the ray
+    from x along w1 skipping fibre ``ign0`` (module doc "Estimator"). ``mis`` False: the paper's, T(w0, w1, x)
+    Y_j0(w0) 2 pi with NEE along the path's w0; True: light directions drawn per vertex and BCSDF-sampled
+    escapes, power heuristic. ``Y`` (J,) scratch, ``u`` (3, J) output (zeroed here). Random numbers
+    (seed, key, dim0 + 6 per vertex). Returns the number of rays cast."""
+    J = (order + 1) * (order + 1)
+    for ch in range(3):
+        for j in range(J):
+            u[ch, j] = 0.0
+    h = periodic_hit(sc, z_lo, z_hi, ox, oy, oz, w1[0], w1[1], w1[2], ign0, max_dist)
+    rays = 1
+    if math.isinf(h.t):
+        return rays
+    t_tan = np.empty(3)
+    n = np.empty(3)
+    so = np.empty(3)
+    wi = np.empty(3)
+    wo = np.empty(3)
+    wl = np.empty(3)
+    ctx = np.empty(CTX_SIZE)
+    for k in range(3):
+        wi[k] = -w1[k]
+        wl[k] = w0[k]
+    p_light = 1.0 / TWO_PI
+    T0 = 0.0
+    T1 = 0.0
+    T2 = 0.0
+    tp0 = 1.0
+    tp1 = 1.0
+    tp2 = 1.0
+    depth = 1
+    while True:
+        row, nf = _vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
+        mat = mats[row]
+        material_prepare(mat, t_tan, n, wi, ctx)
+        base = dim0 + 6 * (depth - 1)
+        if mis:  # a light direction of this vertex, uniform on the upper hemisphere
+            z = uniform(seed, key, base + 4)
+            r = math.sqrt(max(0.0, 1.0 - z * z))
+            ph = TWO_PI * uniform(seed, key, base + 5)
+            wl[0] = r * math.cos(ph)
+            wl[1] = r * math.sin(ph)
+            wl[2] = z
+        # next-event estimation towards wl (unit irradiance from there)
+        f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
+        if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
+            rays += 1
+            hs = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf, max_dist)
+            if math.isinf(hs.t):
+                if mis:
+                    w = p_light / (p_light * p_light + pf * pf)
+                    sh_eval(order, wl[0], wl[1], wl[2], Y)
+                    for j in range(J):
+                        y = w * Y[j]
+                        u[0, j] += tp0 * f0 * y
+                        u[1, j] += tp1 * f1 * y
+                        u[2, j] += tp2 * f2 * y
+                else:
+                    T0 += tp0 * f0
+                    T1 += tp1 * f1
+                    T2 += tp2 * f2
+        if depth >= max_depth:
+            break
+        s0, s1, s2, pf = material_sample(mat, ctx, t_tan, n, wi, uniform(seed, key, base),
+                                         uniform(seed, key, base + 1), uniform(seed, key, base + 2), wo)
+        if pf <= 0.0:
+            break
+        tp0 *= s0
+        tp1 *= s1
+        tp2 *= s2
+        if depth >= rr_depth:
+            q = min(0.95, max(tp0, max(tp1, tp2)))
+            if uniform(seed, key, base + 3) >= q:
+                break
+            tp0 /= q
+            tp1 /= q
+            tp2 /= q
+        rays += 1
+        h = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, max_dist)
+        if math.isinf(h.t):
+            if mis and wo[2] > 0.0:  # escaped towards the sky: the BCSDF-sampled light direction
+                w = pf * pf / (pf * pf + p_light * p_light)
+                sh_eval(order, wo[0], wo[1], wo[2], Y)
+                for j in range(J):
+                    y = w * Y[j]
+                    u[0, j] += tp0 * y
+                    u[1, j] += tp1 * y
+                    u[2, j] += tp2 * y
+            break
+        for k in range(3):
+            wi[k] = -wo[k]
+        depth += 1
+    if not mis and (T0 != 0.0 or T1 != 0.0 or T2 != 0.0):
+        sh_eval(order, w0[0], w0[1], w0[2], Y)
+        for j in range(J):
+            y = TWO_PI * Y[j]
+            u[0, j] = T0 * y
+            u[1, j] = T1 * y
+            u[2, j] = T2 * y
+    return rays
+
+
+@njit(cache=True, parallel=True)
+def _iirtf_cells(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, cell_offsets, cell_segments, seg_mid, seg_fibre,
+                 c0, c1, order, mis, n_paths, seed, max_depth, rr_depth, max_dist, eps, a_out, se_out, rays_out):
+    J = (order + 1) * (order + 1)
+    for ci in prange(c1 - c0):
+        c = c0 + ci
+        s_beg = cell_offsets[c]
+        ns = cell_offsets[c + 1] - s_beg
+        if ns == 0:
+            continue
+        S = np.zeros((3, J, J))
+        Q = np.zeros((3, J, J))
+        Y = np.empty(J)
+        Y1 = np.empty(J)
+        u = np.empty((3, J))
+        w0 = np.empty(3)
+        w1 = np.empty(3)
+        rays = 0
+        for p in range(n_paths):
+            key = (c << 32) + p
+            s = cell_segments[s_beg + min(int(uniform(seed, key, 0) * ns), ns - 1)]
+            # w0 uniform on the upper hemisphere (the paper's estimator), w1 uniform on the sphere
+            z = uniform(seed, key, 1)
+            r = math.sqrt(max(0.0, 1.0 - z * z))
+            ph = TWO_PI * uniform(seed, key, 2)
+            w0[0] = r * math.cos(ph)
+            w0[1] = r * math.sin(ph)
+            w0[2] = z
+            z = 1.0 - 2.0 * uniform(seed, key, 3)
+            r = math.sqrt(max(0.0, 1.0 - z * z))
+            ph = TWO_PI * uniform(seed, key, 4)
+            w1[0] = r * math.cos(ph)
+            w1[1] = r * math.sin(ph)
+            w1[2] = z
+            rays += transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, seg_mid[s, 0], seg_mid[s, 1],
+                                        seg_mid[s, 2], seg_fibre[s], w0, w1, order, mis, seed, key, 5, max_depth,
+                                        rr_depth, max_dist, eps, Y, u)
+            nz = False
+            for ch in range(3):
+                for j in range(J):
+                    if u[ch, j] != 0.0:
+                        nz = True
+            if not nz:
+                continue
+            sh_eval(order, w1[0], w1[1], w1[2], Y1)
+            for j1 in range(J):
+                y1 = FOUR_PI * Y1[j1]
+                for ch in range(3):
+                    for j0 in range(J):
+                        x = u[ch, j0] * y1
+                        S[ch, j0, j1] += x
+                        Q[ch, j0, j1] += x * x
+        N = float(n_paths)
+        for ch in range(3):
+            for j0 in range(J):
+                for j1 in range(J):
+                    m = S[ch, j0, j1] / N
+                    a_out[ci, ch, j0, j1] = m
+                    if n_paths > 1:
+                        v = (Q[ch, j0, j1] - S[ch, j0, j1] * m) / (N * (N - 1.0))
+                        se_out[ci, ch, j0, j1] = math.sqrt(max(v, 0.0))
+        rays_out[ci] = rays
+
+
+def _max_dist(max_dist, period):
+    return MAX_DIST_PERIODS * float(max(period)) if max_dist is None else float(max_dist)
+
+
+def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order: int = 4, n_paths: int = 50_000,
+                seed: int = 0, max_depth: int = 32, rr_depth: int = 5, light_sampling: str = "uniform",
+                max_dist=None) -> IIRTFChunk:
+    """a_C and its standard error for global cells c0 <= c < c1 (module doc), prange over cells.
+    ``sc`` the tiling's ShellScene, ``mat_of_fiber`` (F,) int32 material row per global fibre id, ``mats``
+    (NM, MAT_SIZE); ``order`` L in 0..8 (J = (L+1)^2); ``max_dist`` caps every ray (default 32 periods:
+    a flat section 64 periods across); ``light_sampling`` "uniform" (the paper's estimator) or "mis"
+    (module doc "Estimator"). Any split of [0, C) into chunks gives the same bytes; threads
+    take cells one at a time (cells cost from nothing to a full cell's paths)."""
+    order = int(order)
+    if not 0 <= order <= MAX_ORDER:
+        raise ValueError(f"iirtf_chunk: SH order {order} outside 0..{MAX_ORDER}")
+    if not 0 <= c0 <= c1 <= len(cells.cell_offsets) - 1:
+        raise ValueError(f"iirtf_chunk: cell range [{c0}, {c1}) outside [0, {len(cells.cell_offsets) - 1})")
+    if n_paths < 1 or max_depth < 1 or rr_depth < 1:
+        raise ValueError("iirtf_chunk: n_paths, max_depth and rr_depth must be >= 1")
+    if light_sampling not in ("uniform", "mis"):
+        raise ValueError(f"iirtf_chunk: light_sampling {light_sampling!r} is neither 'uniform' nor 'mis'")
+    J = (order + 1) ** 2
+    a = np.zeros((c1 - c0, 3, J, J))
+    se = np.zeros((c1 - c0, 3, J, J))
+    rays = np.zeros(c1 - c0, np.int64)
+    mof = np.ascontiguousarray(mat_of_fiber, np.int32)
+    mats = np.ascontiguousarray(mats, np.float64)
+    for k in range(len(cells.ex_cells) - 1):
+        lo = max(c0, int(cells.ex_cells[k]))
+        hi = min(c1, int(cells.ex_cells[k + 1]))
+        if lo >= hi:
+            continue
+        W, H = (float(v) for v in cells.ex_period[k])
+        z_lo, z_hi = (float(v) for v in cells.ex_slab[k])
+        sl = slice(lo - c0, hi - c0)
+        with numba.parallel_chunksize(1):
+            _iirtf_cells(periodic_scene(sc, k), z_lo, z_hi, W, H, mof, mats, cells.cell_offsets,
+                         cells.cell_segments, cells.seg_mid, cells.seg_fibre, lo, hi, order,
+                         light_sampling == "mis", int(n_paths),
+                         int(seed), int(max_depth), int(rr_depth), _max_dist(max_dist, (W, H)), 1e-7 * max(W, H),
+                         a[sl], se[sl], rays[sl])
+    return IIRTFChunk(a, se, rays)
+
+
+# ------------------------------------------------------------------------------------------------
+# mean free path
+
+@njit(cache=True, parallel=True)
+def _free_paths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, n_paths, seed, max_depth, max_dist, eps, S, Nseg):
+    for p in prange(n_paths):
+        key = MFP_STREAM + p
+        t_tan = np.empty(3)
+        n = np.empty(3)
+        so = np.empty(3)
+        wi = np.empty(3)
+        wo = np.empty(3)
+        ctx = np.empty(CTX_SIZE)
+        x = W * uniform(seed, key, 0)
+        y = H * uniform(seed, key, 1)
+        z = uniform(seed, key, 2)
+        r = math.sqrt(max(0.0, 1.0 - z * z))
+        ph = TWO_PI * uniform(seed, key, 3)
+        wo[0] = -r * math.cos(ph)
+        wo[1] = -r * math.sin(ph)
+        wo[2] = -z
+        h = periodic_hit(sc, z_lo, z_hi, x, y, z_hi, wo[0], wo[1], wo[2], -1, max_dist)
+        total = 0.0
+        count = 0
+        depth = 0
+        while not math.isinf(h.t) and depth < max_depth:
+            depth += 1
+            for k in range(3):
+                wi[k] = -wo[k]
+            row, nf = _vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
+            mat = mats[row]
+            material_prepare(mat, t_tan, n, wi, ctx)
+            base = 4 + 3 * depth
+            _s0, _s1, _s2, pf = material_sample(mat, ctx, t_tan, n, wi, uniform(seed, key, base),
+                                                uniform(seed, key, base + 1), uniform(seed, key, base + 2), wo)
+            if pf <= 0.0:
+                break
+            h = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, max_dist)
+            if not math.isinf(h.t):
+                total += h.t
+                count += 1
+        S[p] = total
+        Nseg[p] = count
+
+
+def mean_free_path(sc, k: int, z_lo: float, z_hi: float, period, mat_of_fiber, mats, *, n_paths: int = 20_000,
+                   seed: int = 0, max_depth: int = 64, max_dist=None):
+    """(ell, standard error, number of segments measured) of exemplar ``k`` (module doc "Mean free path")."""
+    if n_paths < 2 or max_depth < 1:
+        raise ValueError("mean_free_path: n_paths >= 2 and max_depth >= 1")
+    W, H = (float(v) for v in period)
+    S = np.zeros(n_paths)
+    Nseg = np.zeros(n_paths, np.int64)
+    _free_paths(periodic_scene(sc, k), float(z_lo), float(z_hi), W, H, np.ascontiguousarray(mat_of_fiber, np.int32),
+                np.ascontiguousarray(mats, np.float64), int(n_paths), int(seed), int(max_depth),
+                _max_dist(max_dist, (W, H)), 1e-7 * max(W, H), S, Nseg)
+    total = int(Nseg.sum())
+    if total == 0:
+        return math.nan, math.nan, 0
+    ell = float(S.sum() / total)
+    nbar = total / n_paths
+    d = S - ell * Nseg
+    se = math.sqrt(float((d * d).sum()) / (n_paths * (n_paths - 1))) / nbar
+    return ell, se, total
+
+
+# ------------------------------------------------------------------------------------------------
+# reconstruction
+
+@njit(cache=True)
+def _reconstruct(a, order, w0, w1, out):
+    J = (order + 1) * (order + 1)
+    Y0 = np.empty(J)
+    Y1 = np.empty(J)
+    for i in range(w0.shape[0]):
+        sh_eval(order, w0[i, 0], w0[i, 1], w0[i, 2], Y0)
+        sh_eval(order, w1[i, 0], w1[i, 1], w1[i, 2], Y1)
+        for ch in range(3):
+            s = 0.0
+            for j0 in range(J):
+                t = 0.0
+                for j1 in range(J):
+                    t += a[ch, j0, j1] * Y1[j1]
+                s += Y0[j0] * t
+            out[i, ch] = s
+
+
+def iirtf_reconstruct(a, w0, w1):
+    """T(w0, w1) ~= sum a[ch, j0, j1] Y_j0(w0) Y_j1(w1) per channel: ``a`` (3, J, J) one cell's matrices,
+    ``w0``, ``w1`` (N, 3) or (3,) unit directions; returns (N, 3) float64."""
+    a = np.ascontiguousarray(a, np.float64)
+    J = a.shape[-1]
+    order = int(round(math.sqrt(J))) - 1
+    if a.shape != (3, J, J) or (order + 1) ** 2 != J:
+        raise ValueError(f"iirtf_reconstruct: a has shape {a.shape}, expected (3, J, J) with J = (L+1)^2")
+    w0 = np.ascontiguousarray(np.atleast_2d(w0), np.float64)
+    w1 = np.ascontiguousarray(np.atleast_2d(w1), np.float64)
+    if w0.shape != w1.shape or w0.shape[1] != 3:
+        raise ValueError("iirtf_reconstruct: w0 and w1 must both be (N, 3)")
+    out = np.empty((w0.shape[0], 3))
+    _reconstruct(a, order, w0, w1, out)
+    return out
