@@ -77,8 +77,13 @@ def iirtf(
     cell_factor: float = typer.Option(1.0, "--cell-factor", help="Target cell side in mean free paths (§6.1: 1-2)."),
     paths: int = typer.Option(50000, "--paths", help="Monte Carlo paths per cell (§4.2: 50,000)."),
     mfp_paths: int = typer.Option(20000, "--mfp-paths", help="Paths traced to estimate the mean free path."),
-    max_depth: int = typer.Option(64, "--max-depth", help="Largest number of scattering events on a path."),
-    rr_depth: int = typer.Option(3, "--rr-depth", help="Russian roulette from this scattering event on."),
+    max_depth: int = typer.Option(32, "--max-depth", help="Largest number of scattering events on a path."),
+    rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
+    light_sampling: str = typer.Option("uniform", "--light-sampling",
+                                       help="Estimator of the light integral: uniform (§4.2: light directions "
+                                            "uniform on the hemisphere) or mis (the same integral, a path "
+                                            "tracer lit by the SH sky with multiple importance sampling; "
+                                            "much less variance for sharp BCSDFs)."),
     theta_samples: int = typer.Option(512, "--theta-samples", help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
     bcsdf: str = typer.Option(None, "--bcsdf", help="BCSDF preset for yarn groups the scene names none for."),
     chunk: int = typer.Option(16, "--chunk", help="Cells per chunk task."),
@@ -99,7 +104,7 @@ def iirtf(
 
     check_output(out, "-o", ARTIFACT)
     p = IirtfParams(order=order, cell_factor=cell_factor, paths=paths, mfp_paths=mfp_paths, max_depth=max_depth,
-                    rr_depth=rr_depth, theta_samples=theta_samples, chunk=chunk, seed=seed,
+                    rr_depth=rr_depth, light_sampling=light_sampling, theta_samples=theta_samples, chunk=chunk, seed=seed,
                     material=parse_material_options(set_ or [], bcsdf))
     res = run_iirtf(tiling, out, p, scene=scene, exemplars=exemplar or None, force=force,
                     budget=memory_budget(budget), threads=threads)

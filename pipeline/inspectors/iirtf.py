@@ -59,10 +59,15 @@ def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
     L = int(art.summary["order"])
     a = art[f"exemplar_{k}/transfer"]
     se = art[f"exemplar_{k}/transfer_se"]
-    count = art[f"exemplar_{k}/cell_segments"]
+    cell_row = art[f"exemplar_{k}/cell_row"]
     NX, NY, NZ = info["cell_grid"]
-    flu = cell_fluence(a, L, LIGHT).reshape(NZ, NY, NX, 3)
-    empty = (count == 0).reshape(NZ, NY, NX)
+    flu = np.zeros((len(cell_row), 3))
+    flu_se = np.zeros((len(cell_row), 3))
+    full = cell_row >= 0
+    flu[full] = cell_fluence(a, L, LIGHT)[cell_row[full]]
+    flu_se[full] = cell_fluence_se(se, L, LIGHT)[cell_row[full]]
+    flu = flu.reshape(NZ, NY, NX, 3)
+    empty = (~full).reshape(NZ, NY, NX)
     show_layers = list(range(NZ - 1, -1, -1))[:6]
     ncol = max(3, len(show_layers))
     fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), dpi=100, constrained_layout=True)
@@ -91,7 +96,7 @@ def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
         ax.set_ylabel("y (exemplar)")
     ax = fig.add_subplot(gs[1, : ncol // 2 + 1])
     zc = info["slab"][0] + (np.arange(NZ) + 0.5) * info["cell_size"][2]
-    se0 = cell_fluence_se(se, L, LIGHT).reshape(NZ, NY * NX, 3)
+    se0 = flu_se.reshape(NZ, NY * NX, 3)
     for ch, col in enumerate(("red", "green", "blue")):
         m = np.array([flu[iz][~empty[iz]][:, ch].mean() if np.any(~empty[iz]) else np.nan for iz in range(NZ)])
         e = np.array([np.sqrt((se0[iz][~empty[iz].ravel()][:, ch] ** 2).mean()) if np.any(~empty[iz]) else np.nan
@@ -102,11 +107,10 @@ def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     ax = fig.add_subplot(gs[1, ncol // 2 + 1:])
-    full = ~empty.ravel()
     energy = []
     for l in range(L + 1):
         sl = slice(l * l, (l + 1) * (l + 1))
-        energy.append(float((a[full][:, :, sl, :].astype(np.float64) ** 2).sum()))
+        energy.append(float((a[:, :, sl, :].astype(np.float64) ** 2).sum()))
     energy = np.array(energy) / max(sum(energy), 1e-300)
     ax.bar(np.arange(L + 1), energy, color="gray")
     ax.set_xlabel("SH order l of the light direction (rows of A_C)")

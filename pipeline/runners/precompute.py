@@ -9,10 +9,14 @@ depend neither on the chunking nor on the thread count.
 ``svf``  (§4.1)  ``visibility`` (S, R*R/8) uint8 bit-packed images (rows theta from +z, columns phi),
                  ``ssdf_mean`` (D,), ``ssdf_basis`` (n, D), ``ssdf_coeffs`` (S, n) float32 (the PCA of
                  the SSDFs), ``sg_angle`` (S,) and ``sg_weights`` (S, Q) float32 (sums of SGs)
-``iirtf`` (§4.2-4.3) ``seg_cell`` (S,) int32, ``transfer`` (C, 3, n, n) and ``transfer_se`` (C, 3, n, n)
-                 float32 (A_C and its standard error, n = (L+1)^2), ``cell_segments`` (C,) int32; at the
-                 root ``mat_of_fiber`` (F,) int32, ``materials`` (M, MAT_SIZE) and ``bcsdf_sh``
-                 (M, theta_o, n, 3) (C_S, §4.3)
+``iirtf`` (§4.2-4.3) only the cells holding a segment midpoint are stored, as rows: ``transfer`` (N, 3, n, n)
+                 and ``transfer_se`` (N, 3, n, n) float32 (a_C [row, channel, j0 light, j1 incoming] and
+                 its standard error, n = (L+1)^2; the incoming coefficients are c_T = a_C^T c_light),
+                 ``row_cell`` (N,) int32 the row's cell index in the exemplar's grid (x fastest, then y,
+                 then z, ``stages.precompute.iirtf``), ``row_segments`` (N,) int32 its segments,
+                 ``cell_row`` (NX NY NZ,) int32 the row of every cell (-1: empty), ``seg_row`` (S,) int32
+                 the row of every segment of the exemplar; at the root ``mat_of_fiber`` (F,) int32,
+                 ``materials`` (M, MAT_SIZE) and ``bcsdf_sh`` (M, theta_o, n, 3) (C_S, §4.3)
 Segments of exemplar k are the tiling's global segment ids ``segment_range[0] .. segment_range[1] - 1``
 (fibre f's segment i is ``ex_offsets[f] - f + i``).
 """
@@ -65,8 +69,9 @@ class IirtfParams:
     cell_factor: float = 1.0
     paths: int = 50000
     mfp_paths: int = 20000
-    max_depth: int = 64
-    rr_depth: int = 3
+    max_depth: int = 32
+    rr_depth: int = 5
+    light_sampling: str = "uniform"   # "uniform" (the paper's estimator) or "mis" (same integral, less variance)
     theta_samples: int = 512
     chunk: int = 16
     seed: int = 0
@@ -82,6 +87,8 @@ class IirtfParams:
                             ("--theta-samples", self.theta_samples, 2), ("--chunk", self.chunk, 1)):
             if not v >= lo:
                 raise LoomError(None, name, f"must be at least {lo}, got {v}")
+        if self.light_sampling not in ("uniform", "mis"):
+            raise LoomError(None, "--light-sampling", f"unknown estimator {self.light_sampling!r} (known: mis, uniform)")
 
 
 def parse_material_options(settings, bcsdf=None) -> dict:
@@ -346,8 +353,8 @@ def _cells(art, key, targets):
     return _CELLS[k]
 
 
-def _iirtf_task(tiling, tiling_hash, store, k, c0, c1, targets, mof, mats, p: dict):
-    """Chunk task: A_C and its standard error for exemplar k's cells c0..c1-1 (local ids)."""
+def _iirtf_task(tiling, tiling_hash, store, k, r0, r1, targets, mof, mats, p: dict):
+    """Chunk task: A_C and its standard error for exemplar k's stored rows r0..r1-1 (non-empty cells)."""
     from stages.precompute.iirtf import iirtf_chunk
 
     from ..chunks import open_for_chunk
@@ -355,14 +362,24 @@ def _iirtf_task(tiling, tiling_hash, store, k, c0, c1, targets, mof, mats, p: di
     sc, art = periodic_scenes(tiling, tiling_hash)
     cells = _cells(art, (tiling, tiling_hash), targets)
     base = int(cells.ex_cells[k])
+    rows = _nonempty(cells, k)[r0:r1]          # local cell ids of the rows; empty cells between cost nothing
+    c0, c1 = base + int(rows[0]), base + int(rows[-1]) + 1
     t0 = time.perf_counter()
-    res = iirtf_chunk(sc, cells, base + c0, base + c1, mof, mats, order=p["order"], n_paths=p["paths"],
-                      seed=p["seed"], max_depth=p["max_depth"], rr_depth=p["rr_depth"])
+    res = iirtf_chunk(sc, cells, c0, c1, mof, mats, order=p["order"], n_paths=p["paths"],
+                      seed=p["seed"], max_depth=p["max_depth"], rr_depth=p["rr_depth"],
+                      light_sampling=p["light_sampling"])
+    pick = rows - (c0 - base)
     g = f"exemplar_{k}/"
-    open_for_chunk(store, g + "transfer")[c0:c1] = res.a.astype(np.float32)
-    open_for_chunk(store, g + "transfer_se")[c0:c1] = res.se.astype(np.float32)
-    n = np.diff(cells.cell_offsets[base + c0:base + c1 + 1])
-    return {"s": time.perf_counter() - t0, "paths": int(p["paths"]) * int((n > 0).sum()), "rays": int(res.rays.sum())}
+    open_for_chunk(store, g + "transfer")[r0:r1] = res.a[pick].astype(np.float32)
+    open_for_chunk(store, g + "transfer_se")[r0:r1] = res.se[pick].astype(np.float32)
+    return {"s": time.perf_counter() - t0, "paths": int(p["paths"]) * (r1 - r0), "rays": int(res.rays.sum())}
+
+
+def _nonempty(cells, k):
+    """Local cell ids (ascending) of exemplar k's cells that hold a segment midpoint."""
+    base = int(cells.ex_cells[k])
+    n = int(cells.ex_cells[k + 1]) - base
+    return np.flatnonzero(np.diff(cells.cell_offsets[base:base + n + 1]) > 0)
 
 
 def iirtf_estimate(S_all: int, C_max: int, p: IirtfParams, n_mats: int) -> Estimate:
@@ -419,7 +436,9 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     targets = np.array([p.cell_factor * mfp[k][0] if k in mfp else max(bs[0], bs[1]) for k in range(len(periods))])
     cells = _cells(art, (str(tiling), tiling_hash), targets)
     C = {k: int(cells.ex_cells[k + 1] - cells.ex_cells[k]) for k in ks}
-    est = iirtf_estimate(S_all, max(C.values()), p, len(mats))
+    rows = {k: _nonempty(cells, k) for k in ks}
+    N = {k: len(rows[k]) for k in ks}
+    est = iirtf_estimate(S_all, max(N.values()), p, len(mats))
     est.check(budget or memory_budget(), tiling)
     J = (p.order + 1) ** 2
     info = []
@@ -428,13 +447,17 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
         store = w.store_path
         for k in ks:
             g = f"exemplar_{k}/"
-            ch = min(p.chunk, C[k])
-            w.create(g + "transfer", (C[k], 3, J, J), np.float32, (ch, 3, J, J))
-            w.create(g + "transfer_se", (C[k], 3, J, J), np.float32, (ch, 3, J, J))
-            seg0, seg1 = (int(art["ex_offsets"][f]) - f for f in (int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])))
-            w.write(g + "seg_cell", (cells.seg_cell[seg0:seg1] - cells.ex_cells[k]).astype(np.int32))
+            ch = min(p.chunk, N[k])
+            w.create(g + "transfer", (N[k], 3, J, J), np.float32, (ch, 3, J, J))
+            w.create(g + "transfer_se", (N[k], 3, J, J), np.float32, (ch, 3, J, J))
             base = int(cells.ex_cells[k])
-            w.write(g + "cell_segments", np.diff(cells.cell_offsets[base:base + C[k] + 1]).astype(np.int32))
+            cell_row = np.full(C[k], -1, np.int32)
+            cell_row[rows[k]] = np.arange(N[k], dtype=np.int32)
+            seg0, seg1 = (int(art["ex_offsets"][f]) - f for f in (int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])))
+            w.write(g + "cell_row", cell_row)
+            w.write(g + "row_cell", rows[k].astype(np.int32))
+            w.write(g + "row_segments", np.diff(cells.cell_offsets[base:base + C[k] + 1])[rows[k]].astype(np.int32))
+            w.write(g + "seg_row", cell_row[cells.seg_cell[seg0:seg1] - base])
         w.write("mat_of_fiber", mof)
         w.write("materials", mats)
         tabs = np.zeros((len(mats), p.theta_samples, J, 3))
@@ -446,26 +469,26 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
         w.write("bcsdf_sh", tabs)
         pdict = {k: v for k, v in asdict(p).items() if k != "material"}
         tasks = [ChunkTask(_iirtf_task, (str(tiling), tiling_hash, str(store), k, a, b, targets, mof, mats, pdict))
-                 for k in ks for a, b in _chunks(C[k], p.chunk)]
+                 for k in ks for a, b in _chunks(N[k], p.chunk)]
         res = run_tasks(tasks, "iirtf: transfer matrices")
         task_s = sum(r["s"] for r in res)
         paths = sum(r["paths"] for r in res)
         for k in ks:
-            base = int(cells.ex_cells[k])
-            counts = np.diff(cells.cell_offsets[base:base + C[k] + 1])
-            nbytes = 2 * C[k] * 3 * J * J * 4 + 8 * int(counts.sum())
+            S_k = int(art["ex_offsets"][int(art["ex_fibers"][k + 1])] - art["ex_fibers"][k + 1]
+                      - art["ex_offsets"][int(art["ex_fibers"][k])] + art["ex_fibers"][k])
+            nbytes = 2 * N[k] * 3 * J * J * 4 + 4 * (C[k] + 2 * N[k] + S_k)
             info.append({"exemplar": k, "name": art.summary["exemplar_names"][k], "mean_free_path": mfp[k][0],
                          "mean_free_path_se": mfp[k][1], "free_paths": int(mfp[k][2]), "cells": C[k],
-                         "empty_cells": int((counts == 0).sum()),
+                         "stored_cells": N[k], "empty_cells": C[k] - N[k],
                          "cell_grid": [int(v) for v in cells.ex_grid[k]], "cell_size": [float(v) for v in cells.cell_size[k]],
                          "cells_per_block": [int(v) for v in cells.block_cells[k]],
-                         "segments": int(counts.sum()), "slab": [float(v) for v in slabs[k]], "bytes": int(nbytes)})
+                         "segments": S_k, "slab": [float(v) for v in slabs[k]], "bytes": int(nbytes)})
         total_s = time.perf_counter() - t_start
         w.summary.update(kind="iirtf", tiling=str(tiling), scene=str(scene_path), exemplars=info, order=p.order,
                          sh_coefficients=J, cell_factor=p.cell_factor, paths=p.paths, materials=int(len(mats)),
-                         theta_samples=p.theta_samples, seed=p.seed, cells=int(sum(C.values())),
-                         paths_total=int(paths), paths_per_s=paths / max(task_s, 1e-9),
-                         cells_per_s=sum(C.values()) / max(task_s, 1e-9), mean_free_path_s=mfp_s,
+                         theta_samples=p.theta_samples, seed=p.seed, light_sampling=p.light_sampling, cells=int(sum(C.values())),
+                         stored_cells=int(sum(N.values())), paths_total=int(paths), paths_per_s=paths / max(task_s, 1e-9),
+                         cells_per_s=sum(N.values()) / max(task_s, 1e-9), mean_free_path_s=mfp_s,
                          bcsdf_sh_s=cs_s, time_s=total_s, compile_s=compile_s)
     return {"skipped": False, "exemplars": len(ks), "cells": int(sum(C.values())),
             "mean_free_path": [mfp[k][0] for k in ks], "paths_per_s": paths / max(task_s, 1e-9)}

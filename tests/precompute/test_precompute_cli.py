@@ -9,7 +9,7 @@ import pytest
 from pipeline.artifacts import read_meta
 
 SVF_ARGS = ["--resolution", "16", "--components", "4", "--chunk", "200"]
-IIRTF_ARGS = ["--order", "2", "--paths", "40", "--mfp-paths", "400", "--cell-factor", "3", "--chunk", "64",
+IIRTF_ARGS = ["--order", "2", "--paths", "40", "--light-sampling", "mis", "--mfp-paths", "400", "--cell-factor", "3", "--chunk", "64",
               "--scene", "data/scenes/draped_damask.toml"]
 
 
@@ -83,6 +83,7 @@ BAD = [
     (("iirtf",), ["--cell-factor", "-2"], "--cell-factor"),
     (("iirtf",), ["--cell-factor", "nan"], "--cell-factor"),
     (("iirtf",), ["--scene", "no/such/scene.toml"], "not found"),
+    (("iirtf",), ["--light-sampling", "best"], "estimator"),
 ]
 
 
