@@ -16,11 +16,11 @@ direction (sin theta cos phi, sin theta sin phi, cos theta) (``pixel_direction``
 1. Visibility images (chunk level): ``visibility_images(psc, k, z_lo, z_hi, mids, fibres, ...)``
    One ray per pixel centre from mu_k, skipping the segment's whole fibre (and its periodic copies),
    until it leaves the slab z_lo <= z <= z_hi or has run ``max_dist`` (default 32 max(W, H)); a ray
-   that hits nothing there is visible. The answer is ``periodic_hit(...).t == inf`` (identical bits
+   that hits nothing there is visible. The answer is ``periodic_hit_outside(...).t == inf`` (identical bits
    in the tests) by an any-hit walk over whole exemplar periods through the same wrapped capsules (a hit is any capsule
    root in (0, L), wherever it lies), which first tries the capsule that blocked the previous pixel of
    the row and the one that blocked the pixel above (image coherence; pixels are visited in
-   serpentine order). ``tests/precompute/test_svf.py`` compares it with ``periodic_hit`` pixel by pixel.
+   serpentine order). ``tests/precompute/test_svf.py`` compares it with ``periodic_hit_outside`` pixel by pixel.
    The walk reads only exemplar k's fibres, never the block map: ``psc`` may be ``periodic_scene(sc,
    k)`` or the tiling's ``ShellScene`` itself.
 
@@ -97,7 +97,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from stages.core.geometry.capsule import capsule_intersect
+from stages.core.geometry.capsule import INSIDE, capsule_intersect, point_segment_dist2
 from stages.core.geometry.slab import safe_inverse, slab_enter
 from stages.core.rng import normal, uniform
 from stages.core.sg import sg_mass, spherical_fibonacci_axes
@@ -189,9 +189,13 @@ def _box(lo, hi, node, ox, oy, oz, ix, iy, iz, tmin, tmax):
 
 @njit(cache=True, inline="always")
 def _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """Does wrapped capsule s (origin already shifted into its period) have its first root beyond
-    tmin before tmax (capsule_intersect: entering root, or the way out from inside)?"""
+    """Does the ray from the midpoint (origin already shifted into the capsule's period) enter wrapped
+    capsule s beyond tmin before tmax? A capsule that contains the origin lets it through
+    (``stages.precompute.periodic``: rays from a midpoint)."""
     a = seg_a[s]
+    r = seg_r[s]
+    if point_segment_dist2(ox, oy, oz, P[a, 0], P[a, 1], P[a, 2], P[a + 1, 0], P[a + 1, 1], P[a + 1, 2]) < INSIDE * r * r:
+        return False
     t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[a, 0], P[a, 1], P[a, 2],
                           P[a + 1, 0], P[a + 1, 1], P[a + 1, 2], seg_r[s], tmin)
     return t < tmax
@@ -283,7 +287,7 @@ def _periodic_any_hit(P, seg_a, seg_r, srcfib, lo, hi, left_, right_, start, cou
 def periodic_any_hit(sc, k, ox, oy, oz, dx, dy, dz, L, ign_fiber, stack):
     """(piece, ci, cj): a wrapped capsule of exemplar k (not of fibre ign_fiber) that the ray o + t d,
     0 < t < L, hits in the exemplar repeated without end, found in period (ci, cj) (shift
-    (ci nx bw, cj ny bh)); piece = -1 when none. Hit or not agrees with ``periodic_hit`` (a walk over
+    (ci nx bw, cj ny bh)); piece = -1 when none. Hit or not agrees with ``periodic_hit_outside`` (a walk over
     whole periods instead of blocks: the same capsules, the same roots)."""
     return _periodic_any_hit(sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber, sc.fn_lo, sc.fn_hi, sc.fn_left,
                              sc.fn_right, sc.fn_start, sc.fn_count, sc.fprim, sc.ex_root[k],
