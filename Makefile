@@ -22,6 +22,12 @@ EVAL_W ?= 96
 EVAL_H ?= 72
 EVAL_SPP ?= 8
 
+# seed 001 precompute of the damask's two exemplars (README: Precomputed light transport): SVF at the
+# paper's defaults; IIRTF at cells of 3 mean free paths (the paper: 1-2), 500 paths per cell (the paper:
+# 50,000) with the MIS estimator, SH order 4 -- about 7 minutes together on 2 cores
+SVF_ARGS ?= --resolution 128 --components 48
+IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 500 --light-sampling mis
+
 # make agreement: both swatches, fiberpath against realized volpath, converged (README: One look)
 AGREE ?= out/agreement
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
@@ -59,6 +65,12 @@ $(OUT)/fibers.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/proc
 $(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed
 	$(LL) tile $(TILING) -o $(OUT)/damask_tiling.zarr
 
+$(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
+	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_svf.zarr $(SVF_ARGS)
+
+$(OUT)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py)
+	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_iirtf.zarr $(IIRTF_ARGS)
+
 # --- pictures of intermediate artifacts ---
 $(OUT)/yarns.png: $(OUT)/yarns.zarr/zarr.json
 	$(LL) inspect $(OUT)/yarns.zarr --png $@ --frames
@@ -71,6 +83,12 @@ $(OUT)/fibers.png: $(OUT)/fibers.zarr/zarr.json
 
 $(OUT)/damask_tiling.png: $(OUT)/damask_tiling.zarr/zarr.json
 	$(LL) inspect $(OUT)/damask_tiling.zarr --png $@ --width 1200 --height 600
+
+$(OUT)/damask_svf.png: $(OUT)/damask_svf.zarr/zarr.json
+	$(LL) inspect $(OUT)/damask_svf.zarr --png $@
+
+$(OUT)/damask_iirtf.png: $(OUT)/damask_iirtf.zarr/zarr.json
+	$(LL) inspect $(OUT)/damask_iirtf.zarr --png $@
 
 # --- renders (EXR + PNG preview + render artifact with statistics) ---
 $(OUT)/volpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
@@ -98,6 +116,7 @@ $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/vol
 	    --test $(OUT)/eval/fiberpath.exr -o $(OUT)/eval/report
 
 DEMO_OUTPUTS = $(OUT)/yarns.png $(OUT)/cross_section.png $(OUT)/fibers.png $(OUT)/damask_tiling.png \
+	$(OUT)/damask_svf.png $(OUT)/damask_iirtf.png \
 	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr $(OUT)/eval/report/report.md
 
 demo: $(DEMO_OUTPUTS)
@@ -109,6 +128,8 @@ demo: $(DEMO_OUTPUTS)
 	@echo "  fiberpath render     : $(OUT)/fiberpath.exr ($(OUT)/fiberpath.png)"
 	@echo "  damask tiling        : $(OUT)/damask_tiling.zarr ($(OUT)/damask_tiling.png)"
 	@echo "  draped damask render : $(OUT)/damask.exr ($(OUT)/damask.png)"
+	@echo "  damask SVF (seed 001): $(OUT)/damask_svf.zarr ($(OUT)/damask_svf.png)"
+	@echo "  damask IIRTF         : $(OUT)/damask_iirtf.zarr ($(OUT)/damask_iirtf.png)"
 	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
 test: $(VENV)/.installed

@@ -7,8 +7,9 @@ down, the fabric's normal at the top):
   (c) the sign of (b) as a binary image, with the pixels where it differs from (a) marked red;
   (d) the sum-of-SGs visibility V^ssg, with the segment's SG axes as dots.
 
-``--segment K`` picks the segment by its tiling segment id (default: the first segment of the exemplar,
-``--exemplar`` (default 0)); the title gives the exemplar, segment, fibre and visible solid angle.
+``--segment K`` picks the segment by its tiling segment id (default: the segment of ``--exemplar`` (default:
+the first in the artifact) that sees closest to half the upper hemisphere); the title gives the exemplar, segment and visible
+solid angle.
 """
 from __future__ import annotations
 
@@ -56,7 +57,10 @@ def _pick(art, segment, exemplar):
     k = ks[0] if exemplar is None else exemplar
     if k not in ks:
         raise LoomError(art.path, "--exemplar", f"exemplar {k} is not in this artifact (has {ks})")
-    return infos[ks.index(k)], 0
+    packed = art[f"exemplar_{k}/visibility"]
+    R, C = art.summary["resolution"]
+    seen = np.unpackbits(packed, axis=1, count=R * C).sum(axis=1)   # pixels, not solid angle: a picture, not a measure
+    return infos[ks.index(k)], int(np.argmin(np.abs(seen - R * C / 4)))
 
 
 def inspect(art, png, show=False, size=(1200, 900), segment=None, exemplar=None, **_):
