@@ -23,7 +23,8 @@ from ..errors import LoomError
 def segment_svf(art, k: int, s: int):
     """(visibility (R, C), reconstructed SSDF (R, C), V^ssg (R, C), axes (Q, 3)) of the s-th segment of
     exemplar k (index within the exemplar)."""
-    from stages.precompute.svf import pixel_direction, sg_axes, ssdf_reconstruct, ssg_visibility, unpack_images
+    from stages.core.svf import pixel_direction, ssdf_reconstruct, ssg_visibility
+    from stages.precompute.svf import sg_axes, unpack_images
 
     R, C = art.summary["resolution"]
     g = f"exemplar_{k}/"

@@ -12,6 +12,7 @@ from numba import njit
 
 from stages.core.sg import sg_mass, spherical_fibonacci_axes
 from stages.precompute import svf
+import stages.core.svf as core_svf
 from stages.precompute.periodic import periodic_hit_outside, periodic_scene
 
 RES = 32
@@ -22,7 +23,7 @@ def _reference_images(psc, z_lo, z_hi, mids, fibres, R, C, max_dist, out):
     for s in range(mids.shape[0]):
         for r in range(R):
             for c in range(C):
-                x, y, z = svf.pixel_direction(r, c, R, C)
+                x, y, z = core_svf.pixel_direction(r, c, R, C)
                 h = periodic_hit_outside(psc, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], x, y, z, fibres[s], max_dist)
                 out[s, r, c] = 1 if h.t == np.inf else 0
 
@@ -121,7 +122,7 @@ def test_visibility_chunks_are_independent(tiny_svf):
 def _brute_ssdf(img):
     """All pixel pairs: the angle 2 asin(|p - q| / 2) between centres, nearest of the opposite value."""
     R, C = img.shape
-    dirs = np.array([[svf.pixel_direction(r, c, R, C) for c in range(C)] for r in range(R)]).reshape(-1, 3)
+    dirs = np.array([[core_svf.pixel_direction(r, c, R, C) for c in range(C)] for r in range(R)]).reshape(-1, 3)
     v = img.reshape(-1)
     if v.all() or not v.any():
         return np.full(v.shape, math.pi if v.all() else -math.pi)
@@ -176,8 +177,8 @@ def test_ssdf_sign_reproduces_the_images(tiny_svf):
     s = int(np.argmax([(0 < im.sum() < im.size) for im in img]))
     x = X[s].astype(np.float64)
     for r, c in [(0, 0), (5, 31), (16, 7), (31, 13)]:
-        w = np.array(svf.pixel_direction(r, c, RES, RES))
-        assert svf.image_at(x, RES, RES, w) == pytest.approx(x[r * RES + c], abs=1e-12)
+        w = np.array(core_svf.pixel_direction(r, c, RES, RES))
+        assert core_svf.image_at(x, RES, RES, w) == pytest.approx(x[r * RES + c], abs=1e-12)
     found = 0
     for r in range(RES - 1):
         th = (r + 1.0) * math.pi / RES                    # midway between rows r and r + 1
@@ -189,7 +190,7 @@ def test_ssdf_sign_reproduces_the_images(tiny_svf):
                 ph = (c + 0.5) * 2 * math.pi / RES
                 w = np.array([math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)])
                 assert abs(x[r * RES + c]) == abs(x[(r + 1) * RES + c]) == pytest.approx(0.5 * math.pi / RES)
-                assert abs(svf.image_at(x, RES, RES, w)) < 1e-6
+                assert abs(core_svf.image_at(x, RES, RES, w)) < 1e-6
     assert found > 0
 
 
@@ -289,8 +290,8 @@ def test_sg_weights_are_the_visible_solid_angle_per_nearest_axis(tiny_svf):
     angles, weights = svf.sg_fit(packed, seg.ids, RES, RES, 48, seed=9)
     assert angles.dtype == np.float32 and weights.shape == (len(packed), 48) and weights.dtype == np.float32
     img = svf.unpack_images(packed, RES, RES).reshape(len(packed), -1)
-    dirs = np.array([[svf.pixel_direction(r, c, RES, RES) for c in range(RES)] for r in range(RES)]).reshape(-1, 3)
-    omega = np.repeat([svf.pixel_solid_angle(r, RES, RES) for r in range(RES)], RES)
+    dirs = np.array([[core_svf.pixel_direction(r, c, RES, RES) for c in range(RES)] for r in range(RES)]).reshape(-1, 3)
+    omega = np.repeat([core_svf.pixel_solid_angle(r, RES, RES) for r in range(RES)], RES)
     assert omega.sum() == pytest.approx(4 * math.pi, rel=1e-12)
     visible = img @ omega
     assert np.allclose(weights.astype(np.float64).sum(axis=1), visible, rtol=1e-6, atol=1e-7)
@@ -316,7 +317,7 @@ def test_ssg_visibility_integrates_to_the_weights():
         d = rng.normal(size=3)
         d /= np.linalg.norm(d)
         ref = (w * np.exp(lam * (axes @ d - 1))).sum() / (2 * math.pi * (1 - math.exp(-2 * lam)) / lam)
-        assert svf.ssg_visibility(axes, w, lam, d) == pytest.approx(ref, rel=1e-12)
+        assert core_svf.ssg_visibility(axes, w, lam, d) == pytest.approx(ref, rel=1e-12)
     nt, nph = 512, 1024
     th = (np.arange(nt) + 0.5) * math.pi / nt
     ph = (np.arange(nph) + 0.5) * 2 * math.pi / nph
@@ -337,16 +338,16 @@ def test_reconstruction_lookups_agree(tiny_svf):
     rng = np.random.default_rng(6)
     out = np.empty(RES * RES)
     for s in rng.integers(0, len(packed), 4):
-        svf.ssdf_reconstruct(pca.mean, pca.basis, coeffs[s], out)
+        core_svf.ssdf_reconstruct(pca.mean, pca.basis, coeffs[s], out)
         for _ in range(50):
             d = rng.normal(size=3)
             d /= np.linalg.norm(d)
-            v = svf.ssdf_at(pca.mean, pca.basis, coeffs[s], RES, RES, d)
-            assert v == pytest.approx(svf.image_at(out, RES, RES, d), abs=1e-9)
-            assert svf.ssdf_visible(pca.mean, pca.basis, coeffs[s], RES, RES, d) == (v > 0)
+            v = core_svf.ssdf_at(pca.mean, pca.basis, coeffs[s], RES, RES, d)
+            assert v == pytest.approx(core_svf.image_at(out, RES, RES, d), abs=1e-9)
+            assert core_svf.ssdf_visible(pca.mean, pca.basis, coeffs[s], RES, RES, d) == (v > 0)
         r, c = 3, 30
-        d = np.array(svf.pixel_direction(r, c, RES, RES))
-        assert svf.ssdf_at(pca.mean, pca.basis, coeffs[s], RES, RES, d) == pytest.approx(out[r * RES + c], abs=1e-9)
+        d = np.array(core_svf.pixel_direction(r, c, RES, RES))
+        assert core_svf.ssdf_at(pca.mean, pca.basis, coeffs[s], RES, RES, d) == pytest.approx(out[r * RES + c], abs=1e-9)
 
 
 # ------------------------------------------------------------------------------------------------ determinism
