@@ -102,6 +102,9 @@ FIBERS = ArtifactInput("fibers", ("fibers",), "the realized fibres (loomlight re
 TILING = ArtifactInput("fibers", ("tiling",), "a tiling artifact (loomlight tile)")
 TABLES = ArtifactInput("tables", ("tables",), "the procedural tables (loomlight tables)")
 GRID = ArtifactInput("grid", ("grid",), "a voxel grid (loomlight voxelize)")
+SVF = ArtifactInput("svf", ("svf",), "the tiling's segment visibility functions (loomlight precompute svf)")
+IIRTF = ArtifactInput("iirtf", ("iirtf",), "the tiling's IIRTF transfer matrices (loomlight precompute iirtf)")
+CLI_INPUTS = ("fibers", "tables", "grid")   # the artifact options ``render`` has; others come by --set
 
 _FIBERPATH_SETTINGS = (
     Setting("tint", "yarn (default): both BCSDF lobe colours times the yarn's colour; none: the presets as fitted",
@@ -138,6 +141,23 @@ METHODS = {m.name: m for m in (
         "fiberpath_shell", "fiberpath on a tiling artifact (the same as fiberpath --fibers TILING.zarr)",
         "fiberpath", sources=(Source("realized", (TILING,), "a tiling artifact's exemplars under its shell map"),),
         default_source="realized", settings=_FIBERPATH_SETTINGS, materials=("bcsdf", "lambert")),
+    RenderMethod(
+        "prt", "precomputed light transport on a shell-mapped tiling: SVF single + IIRTF multiple scattering "
+               "(seed 001)", "prt",
+        sources=(Source("precomputed", (TILING, SVF, IIRTF), "a tiling (--fibers) with its precomputed SVF and "
+                                                              "IIRTF (--set svf=, --set iirtf=)"),),
+        default_source="precomputed",
+        settings=(Setting("svf", "the svf artifact (loomlight precompute svf)"),
+                  Setting("iirtf", "the iirtf artifact (loomlight precompute iirtf)"),
+                  Setting("tiling", "a tiling artifact (same as --fibers TILING.zarr)"),
+                  Setting("terms", "all (default), single or multi: which scattering terms to render",
+                          ("all", "single", "multi")),
+                  Setting("sg", "mc (default): SG lights sampled into directions (the paper's CPU version); "
+                                "analytic: §5.2.2's Gamma with sum-of-SGs / erf-SSDF visibility", ("mc", "analytic")),
+                  Setting("sigma_glo", "std. dev. of the Gaussian filtering multiple scattering's global "
+                                       "visibility, flat-fabric units (default: the exemplar thickness)"),
+                  Setting("tint", "yarn (default) or none, as fiberpath (must match the IIRTF's materials)",
+                          ("yarn", "none")))),
 )}
 
 

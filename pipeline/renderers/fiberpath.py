@@ -144,7 +144,7 @@ def tiling_fibers(scene, art) -> Fibers:
                   albedo, group)
 
 
-def _ray_eps(lo, hi):
+def ray_eps(lo, hi):
     """Ray offset: 1e-7 of the scene's size (its diagonal plus its largest coordinate)."""
     lo, hi = np.asarray(lo), np.asarray(hi)
     return 1e-7 * max(float(np.linalg.norm(hi - lo) + np.abs(np.concatenate([lo, hi])).max()), 1e-12)
@@ -159,7 +159,7 @@ def _realized_scene(path):
     bvh, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
     stats = {"bvh_build_s": time.perf_counter() - t0, "segments": int(len(bvh.seg_a)), "fibers": fibers.n_fibers,
              "bvh_nodes": int(len(bvh.node_left))}
-    return bvh, fibers, _ray_eps(fibers.points.min(axis=0), fibers.points.max(axis=0)), "fiberpath", stats
+    return bvh, fibers, ray_eps(fibers.points.min(axis=0), fibers.points.max(axis=0)), "fiberpath", stats
 
 
 def _tiling_scene(scene, path):
@@ -173,7 +173,7 @@ def _tiling_scene(scene, path):
     stats = {"scene_build_s": build_s, "tetrahedra": int(art.summary["tetrahedra"]),
              "exemplars": int(art.summary["exemplars"]), "blocks": int(art.summary["blocks"]),
              "segments": int(len(sc.seg_a)), "fibers": fibers.n_fibers}
-    return sc, fibers, _ray_eps(*art.summary["bounds"]), "fiberpath (shell)", stats
+    return sc, fibers, ray_eps(*art.summary["bounds"]), "fiberpath (shell)", stats
 
 
 def render(scene, options: dict) -> RenderResult:

@@ -20,7 +20,8 @@ from pathlib import Path
 from ..errors import LoomError
 from ..memory import Estimate, budget as memory_budget
 
-INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid"}  # artifact kinds per option
+INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid", "svf": "svf",
+               "iirtf": "iirtf"}  # artifact kinds per option
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
 MAJORANT_BYTES = 32 << 20  # volpath's majorant grid (at most 128 cells per axis)
@@ -100,6 +101,10 @@ def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, sour
         "tables": str(tables) if tables else extra.get("tables"), "grid": str(grid) if grid else extra.get("grid"),
         "bcsdf": bcsdf, "material": material, "threads": threads, "extra": extra,
     }
+    from ..renderers import CLI_INPUTS
+
+    for inp in {i.option for src in m.sources for i in src.inputs} - set(CLI_INPUTS):
+        options[inp] = extra.get(inp)   # artifacts render has no option for: --set KEY=PATH.zarr
     for key, name in (("width", "--width"), ("height", "--height"), ("spp", "--spp")):
         _positive(options[key], name)
     if material is not None and m.materials and material not in m.materials:
@@ -117,7 +122,11 @@ def check_inputs(scene, m, options) -> None:
     for inp in src.inputs:
         if not options.get(inp.option):
             via = f"{m.name} --source {src.name}" if len(m.sources) > 1 else m.name
-            raise LoomError(None, f"--{inp.option}", f"{via} needs {inp.what}: pass --{inp.option} PATH.zarr")
+            from ..renderers import CLI_INPUTS
+
+            how = f"--{inp.option} PATH.zarr" if inp.option in CLI_INPUTS else f"--set {inp.option}=PATH.zarr"
+            raise LoomError(None, f"--{inp.option}" if inp.option in CLI_INPUTS else f"--set {inp.option}",
+                            f"{via} needs {inp.what}: pass {how}")
     check_bcsdf_names(scene, options)
     from ..render_setup import check_scene_matches
 

@@ -1,0 +1,169 @@
+"""``--method prt``: precomputed light transport on a shell-mapped tiling (seed 001 §5-§6, CPU version).
+
+Inputs: the tiling (``--fibers TILING.zarr`` or ``--set tiling=``), its segment visibility functions
+(``--set svf=SVF.zarr``, ``loomlight precompute svf``) and its IIRTF (``--set iirtf=IIRTF.zarr``,
+``loomlight precompute iirtf``); both must have been computed from this very tiling (their recorded
+input identity equals the tiling's) and cover every exemplar its block map uses, and the IIRTF's fibre
+materials must be the ones the scene gives the tiling now (the yarn BCSDFs and colours), since single
+scattering shades with them and multiple scattering was precomputed with them.
+
+Settings (``--set``): ``terms`` all (default) | single | multi; ``sg`` mc (default: SG lights sampled into
+directions, the paper's CPU version) | analytic (§5.2.2's Gamma, sum of SGs and erf-smoothed SSDF);
+``sigma_glo`` the standard deviation of the Gaussian that filters the global visibility of multiple
+scattering, in flat-fabric units (default: the tiling's exemplar thickness, the depth over which light
+spreads sideways inside the cloth). Integrator: ``stages.render.prt``.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from ..errors import LoomError
+from . import RenderResult
+
+TERMS = {"all": 3, "single": 1, "multi": 2}
+SG_MODES = {"mc": 0, "analytic": 1}
+
+
+def _check_precompute(art_path, kind, tiling_path, tiling_id):
+    from ..artifacts import Artifact
+
+    a = Artifact(art_path, kind=kind)
+    rec = (a.meta.get("inputs") or {}).get("tiling") or {}
+    if rec.get("sha256") != tiling_id:
+        raise LoomError(art_path, "inputs.tiling", f"was precomputed from another tiling ({rec.get('path')}, identity "
+                        f"{str(rec.get('sha256'))[:12]}) than {tiling_path} (identity {tiling_id[:12]}); run loomlight "
+                        f"precompute {kind} on it")
+    return a
+
+
+def _used_exemplars(art) -> list[int]:
+    bm = art["block_map"]
+    return sorted(int(k) for k in np.unique(bm) if k >= 0)
+
+
+def _float_setting(extra, key, default):
+    v = extra.get(key)
+    if v is None:
+        return default
+    try:
+        x = float(v)
+    except ValueError:
+        raise LoomError(None, f"--set {key}", f"expected a number, got {v!r}") from None
+    if not (math.isfinite(x) and x >= 0):
+        raise LoomError(None, f"--set {key}", f"must be a finite number >= 0, got {v!r}")
+    return x
+
+
+def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
+    """(ShellScene, tiling Artifact, integrator arrays dict) for ``PrtIntegrator``."""
+    from stages.core.shell.top import build_top_surface
+
+    from ..artifacts import input_identity
+    from ..runners.precompute import tiling_materials
+    from ..runners.tile import load_tiling
+
+    sc, art = load_tiling(tiling_path)
+    tid = input_identity(tiling_path, "tiling")
+    svf = _check_precompute(svf_path, "svf", tiling_path, tid)
+    ii = _check_precompute(iirtf_path, "iirtf", tiling_path, tid)
+    used = _used_exemplars(art)
+    for a, what in ((svf, "svf"), (ii, "iirtf")):
+        have = {e["exemplar"] for e in a.summary["exemplars"]}
+        missing = [k for k in used if k not in have]
+        if missing:
+            raise LoomError(a.path, "exemplars", f"has no {what} data for exemplar {missing[0]} "
+                            f"('{art.summary['exemplar_names'][missing[0]]}'), which the tiling's block map uses "
+                            f"(it has {sorted(have)}); precompute it (loomlight precompute {what} without --exemplar)")
+    extra = options.get("extra") or {}
+    mof, mats = tiling_materials(scene, art, {"tint": extra.get("tint", "yarn"), "bcsdf": options.get("bcsdf")})
+    if not (np.array_equal(mof, ii["mat_of_fiber"]) and np.array_equal(mats, ii["materials"])):
+        raise LoomError(ii.path, "materials", "was precomputed with other fibre materials than the scene gives "
+                        f"the tiling now ({scene.path}: yarn BCSDFs, colours, tint); run loomlight precompute iirtf "
+                        "again with this scene")
+    S = int(art.summary["segments"])
+    K = int(art.summary["exemplars"])
+    R, C = svf.summary["resolution"]
+    n = int(svf.summary["components"])
+    svf_row = np.full(S, -1, np.int64)
+    seg_row = np.full(S, -1, np.int64)
+    mean = np.zeros((K, R * C), np.float32)
+    basis = np.zeros((K, n, R * C), np.float32)
+    coeffs, angles, weights, transfer = [], [], [], []
+    off = off2 = 0
+    for e in svf.summary["exemplars"]:
+        k = e["exemplar"]
+        a, b = e["segment_range"]
+        g = f"exemplar_{k}/"
+        svf_row[a:b] = off + np.arange(b - a)
+        off += b - a
+        mean[k] = svf[g + "ssdf_mean"]
+        basis[k] = svf[g + "ssdf_basis"]
+        coeffs.append(svf[g + "ssdf_coeffs"])
+        angles.append(svf[g + "sg_angle"])
+        weights.append(svf[g + "sg_weights"])
+    for e in ii.summary["exemplars"]:
+        k = e["exemplar"]
+        g = f"exemplar_{k}/"
+        rows = ii[g + "seg_row"].astype(np.int64)
+        f0, f1 = int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])
+        a = int(art["ex_offsets"][f0]) - f0
+        seg_row[a:a + len(rows)] = np.where(rows >= 0, rows + off2, -1)
+        tr = ii[g + "transfer"]
+        off2 += len(tr)
+        transfer.append(tr)
+    top = build_top_surface(art["base_uv"], art["base_triangles"], art["base_vertices"], art["base_normals"],
+                            float(art.summary["thickness"]))
+    arrays = dict(top=top, mat_of_fiber=mof, mats=mats, svf_row=svf_row, svf_mean=mean, svf_basis=basis,
+                  svf_coeffs=np.ascontiguousarray(np.concatenate(coeffs)),
+                  svf_res=np.array([R, C], np.int64), sg_angle=np.concatenate(angles),
+                  sg_weights=np.ascontiguousarray(np.concatenate(weights)),
+                  lam_svf=float(svf.summary["sg_sharpness"]), seg_row=seg_row,
+                  transfer=np.ascontiguousarray(np.concatenate(transfer)), order=int(ii.summary["order"]),
+                  cs_table=np.ascontiguousarray(ii["bcsdf_sh"]), mat_cs=np.arange(len(mats), dtype=np.int64))
+    return sc, art, arrays
+
+
+def render(scene, options: dict) -> RenderResult:
+    from stages.core.shading.material import pack_material_lambert
+    from stages.render.film import VARIANCE_CHANNELS
+    from stages.render.prt import PrtIntegrator
+
+    from ..render_setup import ground_array, pack_lights
+    from ..scene import camera_array
+    from .fiberpath import ray_eps
+    from .film import render_film, sampling_of
+
+    extra = options.get("extra") or {}
+    tiling = options.get("fibers") or extra.get("tiling")
+    if scene.camera is None:
+        raise LoomError(scene.path, "camera", "the scene has no [camera] table")
+    lights = pack_lights(scene.lights, scene.path)
+    if len(lights.lights) == 0:
+        raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
+    for key in ("svf", "iirtf"):
+        if not extra.get(key):
+            raise LoomError(None, f"--set {key}", f"prt needs the tiling's {key} artifact: pass --set "
+                            f"{key}=PATH.zarr (loomlight precompute {key})")
+    t0 = time.perf_counter()
+    sc, art, arr = load_prt(scene, tiling, extra["svf"], extra["iirtf"], options)
+    load_s = time.perf_counter() - t0
+    terms = TERMS[extra.get("terms", "all")]
+    sg_mode = SG_MODES[extra.get("sg", "mc")]
+    sigma = _float_setting(extra, "sigma_glo", float(art.summary.get("exemplar_thickness", art.summary["thickness"])))
+    ground, has_ground = ground_array(scene.render)
+    W, H, seed = options["width"], options["height"], options["seed"]
+    cam = camera_array(scene.camera, W, H)
+    flat_size = np.asarray(art.summary["flat_size"], np.float64)
+    integ = PrtIntegrator(sc, arr["top"], arr["mat_of_fiber"], arr["mats"], lights.table(), ground, has_ground,
+                          pack_material_lambert(ground[1:4]), arr["svf_row"], arr["svf_mean"], arr["svf_basis"],
+                          arr["svf_coeffs"], arr["svf_res"], arr["sg_angle"], arr["sg_weights"], arr["lam_svf"],
+                          arr["seg_row"], arr["transfer"], arr["order"], arr["cs_table"], arr["mat_cs"],
+                          flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]))
+    run = render_film("prt", integ, cam, W, H, sampling_of(options), seed, options["tile_size"], VARIANCE_CHANNELS,
+                      options.get("threads"))
+    stats = {**run.stats(), "load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"),
+             "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"])}
+    return RenderResult(run.rgb, run.extra, stats)

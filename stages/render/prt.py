@@ -1,0 +1,308 @@
+"""Precomputed light transport for fabrics (``--method prt``, seed 001 §5-§6, the CPU version).
+
+Geometry: a shell-mapped tiling (``stages.core.shell``): an eye ray walks the shell to its first fibre
+hit x on segment k of exemplar e (§5.1). The outgoing radiance is split (§5):
+
+    L_o(x, w_o) = L_single + L_multi
+
+Single scattering (§5.2), per light:
+- directional (§5.2.1): E S(w_d, w_o) cos(theta_d) V_loc V_glo, with V_loc the sign of segment k's
+  PCA-reconstructed SSDF at w_d (``stages.core.svf.ssdf_at``, bilinear) and V_glo a shadow ray from
+  x_, the top-surface point of the shell above x (``stages.core.shell.top``), against the shell's
+  boundary (the cloth as a macroscopic solid: other folds) and the ground;
+- SG, constant and environment lights, version (a) "mc" (§5.2.1 "Generalization"): the light is
+  sampled into one direction w per light and camera sample (``light_sample``: an SG exactly) and
+  shaded as a directional light of irradiance L(w) / p(w);
+- SG lights, version (b) "analytic" (§5.2.2): P/M(lambda) times ``bcsdf_sg.sg_single_scatter`` (Eq. 2's
+  Gamma with the sum-of-SGs product for lambda <= 100, the erf-smoothed SSDF at the axis for lambda
+  >= 200, linear in lambda between), the SG's power scaled by V_glo of one shadow ray towards a
+  direction sampled from the lobe (soft shadows by sampling the lobe against the shell).
+
+Multiple scattering (§5.3): L_multi = c_S(theta_o) . (R_wo a_C^T c_L) V~_glo per channel, with c_L the SH
+coefficients of the light's radiance in the exemplar's (flat) space (directional: E Y(w_d); SG: P times
+the normalised SG's zonal expansion rotated to its axis, ``stages.core.sg``; mc lights: the sample's
+E Y(w)), a_C the cell's transfer matrices (``seg_row``), R_wo the exact SH rotation into the w_o-space
+of §4.3 (x = the fibre tangent, the view in the xy-plane; ``stages.core.sh.sh_rotation``), c_S the
+BCSDF's SH table at theta_o (``stages.core.shading.bcsdf_sh``), and V~_glo the global visibility
+filtered by a 2D Gaussian of sigma_glo in the flat fabric's plane, estimated as the paper's CPU version
+does: one shadow ray from the top surface above a point x' drawn from the Gaussian around x.
+Lights from below the fabric's plane (in flat space) add no multiple scattering: the IIRTF was
+precomputed for light from above (§3).
+
+Directions: the SVF, the IIRTF and the SH tables live in exemplar (flat) space; a world direction v
+is taken there by the linear part of the hit tetrahedron's world -> flat map (normalised). The
+single-scattering BCSDF is evaluated in world space with the world tangent, as fiberpath does.
+
+Random numbers: ``uniform(seed, index, dim)``: dims 0-1 place the sample in its pixel, then 6 per
+light (2 light sample, 2 Gaussian offset, 2 lobe sample for the analytic SG's shadow).
+
+``PrtIntegrator`` fields: see the namedtuple; ``terms`` bit 1 single, bit 2 multi; ``sg_mode`` 0 mc,
+1 analytic.
+"""
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+from numba.extending import overload
+
+from stages.core.dispatch import is_tuple_class
+from stages.core.rng import uniform
+from stages.core.sg import sg_sh_coefficients, spherical_fibonacci_axes
+from stages.core.sh import sh_eval, sh_rotation
+from stages.core.shading.bcsdf_sg import sg_single_scatter
+from stages.core.shading.bcsdf_sh import bcsdf_sh_lookup, omega_o_frame
+from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare
+from stages.core.shell.top import top_point
+from stages.core.shell.traversal import enter_shell, shell_intersect
+from stages.core.svf import ssdf_at
+from stages.render.ground import ground_intersect
+from stages.render.integrator import PathSample, radiance
+from stages.render.lights import DIRECTIONAL, SG, light_eval, light_sample
+
+PrtIntegrator = namedtuple("PrtIntegrator", [
+    "scene", "top", "mat_of_fiber", "mats", "lights", "ground", "has_ground", "ground_mat",
+    "svf_row", "svf_mean", "svf_basis", "svf_coeffs", "svf_res", "sg_angle", "sg_weights", "lam_svf",
+    "seg_row", "transfer", "order", "cs_table", "mat_cs",
+    "flat_size", "sigma_glo", "terms", "sg_mode", "eps"])
+
+SINGLE = 1
+MULTI = 2
+DIMS_PER_LIGHT = 6
+
+
+@njit(cache=True)
+def _to_flat(w2f, tet, v, out):
+    x = w2f[tet, 0, 0] * v[0] + w2f[tet, 0, 1] * v[1] + w2f[tet, 0, 2] * v[2]
+    y = w2f[tet, 1, 0] * v[0] + w2f[tet, 1, 1] * v[1] + w2f[tet, 1, 2] * v[2]
+    z = w2f[tet, 2, 0] * v[0] + w2f[tet, 2, 1] * v[1] + w2f[tet, 2, 2] * v[2]
+    n = math.sqrt(x * x + y * y + z * z)
+    if n == 0.0:
+        n = 1.0
+    out[0] = x / n
+    out[1] = y / n
+    out[2] = z / n
+
+
+@njit(cache=True)
+def _flat_point(w2f, tet, p):
+    return (w2f[tet, 0, 0] * p[0] + w2f[tet, 0, 1] * p[1] + w2f[tet, 0, 2] * p[2] + w2f[tet, 0, 3],
+            w2f[tet, 1, 0] * p[0] + w2f[tet, 1, 1] * p[1] + w2f[tet, 1, 2] * p[2] + w2f[tet, 1, 3])
+
+
+@njit(cache=True)
+def global_visibility(it, u, v, w):
+    """V_glo: 1.0 when the shadow ray from the top-surface point above (u, v) towards w (world) leaves
+    the cloth (w above the top surface's tangent plane) and meets neither the shell again nor the
+    ground; else 0.0."""
+    ok, x, y, z, nx, ny, nz = top_point(it.top, u, v)
+    if not ok:
+        return 1.0
+    if w[0] * nx + w[1] * ny + w[2] * nz <= 0.0:
+        return 0.0
+    ox = x + it.eps * nx
+    oy = y + it.eps * ny
+    oz = z + it.eps * nz
+    _t, f = enter_shell(it.scene, ox, oy, oz, w[0], w[1], w[2], it.eps, np.inf)
+    if f >= 0:
+        return 0.0
+    if ground_intersect(it.ground, it.has_ground, oz, w[2], it.eps) < np.inf:
+        return 0.0
+    return 1.0
+
+
+@njit(cache=True)
+def _multi(it, row, m, tf, vf, cL, D, R, cT, cs, out):
+    """out[c] = c_S(theta_o) . (R_wo a_C^T c_L[c]) for the three channels (c_L (3, J) in flat space)."""
+    L = it.order
+    J = (L + 1) * (L + 1)
+    theta_v = omega_o_frame(tf, vf, R)
+    sh_rotation(L, R, D)
+    bcsdf_sh_lookup(it.cs_table[it.mat_cs[m]], theta_v, L, cs)
+    a = it.transfer
+    for c in range(3):
+        for j1 in range(J):
+            s = 0.0
+            for j0 in range(J):
+                s += a[row, c, j0, j1] * cL[c, j0]
+            cT[j1] = s
+        acc = 0.0
+        for i in range(J):
+            s = 0.0
+            for j in range(J):
+                s += D[i, j] * cT[j]
+            acc += cs[i, c] * s
+        out[c] = acc
+
+
+@njit(cache=True)
+def prt_radiance(it, o, d, seed, key):
+    lights = it.lights.lights
+    env = it.lights.env
+    marg = it.lights.marginal
+    cond = it.lights.conditional
+    nl = lights.shape[0]
+    h = shell_intersect(it.scene, o[0], o[1], o[2], d[0], d[1], d[2], np.inf)
+    tg = ground_intersect(it.ground, it.has_ground, o[2], d[2], it.eps)
+    L0 = 0.0
+    L1 = 0.0
+    L2 = 0.0
+    rays = 1
+    if tg < h.t:
+        # the ground: Lambertian, lit directly, shadowed by the cloth's shell (a macroscopic object)
+        wi = np.empty(3)
+        n = np.array([0.0, 0.0, 1.0 if d[2] < 0.0 else -1.0])
+        p = np.empty(3)
+        for k in range(3):
+            p[k] = o[k] + tg * d[k] + it.eps * n[k]
+            wi[k] = -d[k]
+        ctx = np.empty(CTX_SIZE)
+        material_prepare(it.ground_mat, n, n, wi, ctx)
+        for k in range(nl):
+            base = 2 + DIMS_PER_LIGHT * k
+            wl, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base),
+                                                     uniform(seed, key, base + 1))
+            if pl <= 0.0:
+                continue
+            f0, f1, f2, _pf = material_eval_pdf(it.ground_mat, ctx, n, n, wi, wl)
+            rays += 1
+            _t, fb = enter_shell(it.scene, p[0], p[1], p[2], wl[0], wl[1], wl[2], it.eps, np.inf)
+            if fb >= 0:
+                continue
+            sc = 1.0 if delta else 1.0 / pl
+            L0 += f0 * lr * sc
+            L1 += f1 * lg * sc
+            L2 += f2 * lb * sc
+        return PathSample(L0, L1, L2, 1.0, tg, 0, rays)
+    if h.segment < 0:
+        for k in range(nl):
+            lr, lg, lb = light_eval(lights, k, env, marg, cond, d)
+            L0 += lr
+            L1 += lg
+            L2 += lb
+        return PathSample(L0, L1, L2, 0.0, 0.0, 0, rays)
+    # the hit: segment, material, frames in world and flat space, the point's (u, v)
+    s = h.segment
+    e = h.exemplar
+    m = it.mat_of_fiber[h.fibre]
+    mat = it.mats[m]
+    t_w = h.tangent
+    wv = np.empty(3)
+    for k in range(3):
+        wv[k] = -d[k]
+    ctx = np.empty(CTX_SIZE)
+    material_prepare(mat, t_w, h.normal, wv, ctx)
+    w2f = it.scene.w2f
+    tf = np.empty(3)
+    vf = np.empty(3)
+    lf = np.empty(3)
+    _to_flat(w2f, h.tet, t_w, tf)
+    _to_flat(w2f, h.tet, wv, vf)
+    X, Y_ = _flat_point(w2f, h.tet, h.hit)
+    u = X / it.flat_size[0]
+    v = Y_ / it.flat_size[1]
+    srow = it.svf_row[s]
+    mrow = it.seg_row[s]
+    R_res = it.svf_res[0]
+    C_res = it.svf_res[1]
+    L = it.order
+    J = (L + 1) * (L + 1)
+    Ysh = np.empty(J)
+    D = np.empty((J, J))
+    Rm = np.empty((3, 3))
+    cT = np.empty(J)
+    cs = np.empty((J, 3))
+    cL = np.zeros((3, J))
+    mo = np.zeros(3)
+    axes_w = np.empty(3)
+    for k in range(nl):
+        base = 2 + DIMS_PER_LIGHT * k
+        typ = int(lights[k, 0])
+        analytic = typ == SG and it.sg_mode == 1
+        # --- single scattering ---
+        if analytic:
+            P0 = lights[k, 1]
+            P1 = lights[k, 2]
+            P2 = lights[k, 3]
+            lam = lights[k, 7]
+            for q in range(3):
+                axes_w[q] = lights[k, 4 + q]
+            # the lobe's global visibility: one shadow ray towards a direction sampled from it
+            wl, _lr, _lg, _lb, pl, _delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base + 4),
+                                                          uniform(seed, key, base + 5))
+            rays += 1
+            vglo = global_visibility(it, u, v, wl) if pl > 0.0 else 0.0
+            if it.terms & SINGLE and vglo > 0.0:
+                _to_flat(w2f, h.tet, axes_w, lf)
+                dk = ssdf_at(it.svf_mean[e], it.svf_basis[e], it.svf_coeffs[srow], R_res, C_res, lf)
+                axes = spherical_fibonacci_axes(it.sg_weights.shape[1], float(it.sg_angle[srow]))
+                g0, g1, g2 = sg_single_scatter(mat[1:11], tf, vf, lf, lam, dk, axes,
+                                               it.sg_weights[srow].astype(np.float64), it.lam_svf)
+                L0 += P0 * g0 * vglo
+                L1 += P1 * g1 * vglo
+                L2 += P2 * g2 * vglo
+            if it.terms & MULTI:
+                _to_flat(w2f, h.tet, axes_w, lf)
+                sg_sh_coefficients(lf, lam, L, Ysh)
+                for j in range(J):
+                    cL[0, j] = P0 * Ysh[j]
+                    cL[1, j] = P1 * Ysh[j]
+                    cL[2, j] = P2 * Ysh[j]
+                vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl) if pl > 0.0 else 0.0
+                rays += 1
+                if vt > 0.0:
+                    _multi(it, mrow, m, tf, vf, cL, D, Rm, cT, cs, mo)
+                    L0 += mo[0] * vt
+                    L1 += mo[1] * vt
+                    L2 += mo[2] * vt
+            continue
+        wl, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base),
+                                                 uniform(seed, key, base + 1))
+        if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+            continue
+        sc = 1.0 if delta else 1.0 / pl
+        E0 = lr * sc
+        E1 = lg * sc
+        E2 = lb * sc
+        _to_flat(w2f, h.tet, wl, lf)
+        if it.terms & SINGLE:
+            f0, f1, f2, _pf = material_eval_pdf(mat, ctx, t_w, h.normal, wv, wl)
+            if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
+                if ssdf_at(it.svf_mean[e], it.svf_basis[e], it.svf_coeffs[srow], R_res, C_res, lf) > 0.0:
+                    rays += 1
+                    if global_visibility(it, u, v, wl) > 0.0:
+                        L0 += f0 * E0
+                        L1 += f1 * E1
+                        L2 += f2 * E2
+        if it.terms & MULTI and lf[2] > 0.0:
+            sh_eval(L, lf[0], lf[1], lf[2], Ysh)
+            for j in range(J):
+                cL[0, j] = E0 * Ysh[j]
+                cL[1, j] = E1 * Ysh[j]
+                cL[2, j] = E2 * Ysh[j]
+            rays += 1
+            vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
+            if vt > 0.0:
+                _multi(it, mrow, m, tf, vf, cL, D, Rm, cT, cs, mo)
+                L0 += mo[0] * vt
+                L1 += mo[1] * vt
+                L2 += mo[2] * vt
+    return PathSample(L0, L1, L2, 1.0, h.t, 0, rays)
+
+
+@njit(cache=True)
+def _filtered_visibility(it, seed, key, dim, u, v, w):
+    """One-sample estimate of V~_glo (§5.3.2): V_glo at a point x' drawn from the Gaussian of sigma_glo
+    around (u, v) in the flat fabric's plane."""
+    if it.sigma_glo > 0.0:
+        r = it.sigma_glo * math.sqrt(-2.0 * math.log(1.0 - uniform(seed, key, dim)))
+        a = 2.0 * math.pi * uniform(seed, key, dim + 1)
+        u = u + r * math.cos(a) / it.flat_size[0]
+        v = v + r * math.sin(a) / it.flat_size[1]
+    return global_visibility(it, u, v, w)
+
+
+@overload(radiance)
+def _prt_radiance(integ, o, d, seed, index):
+    if is_tuple_class(integ, PrtIntegrator):
+        return lambda integ, o, d, seed, index: prt_radiance(integ, o, d, seed, index)
