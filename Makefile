@@ -100,6 +100,14 @@ $(OUT)/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
 $(OUT)/damask.exr: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE)
 	$(LL) render $(DAMASK_SCENE) --method fiberpath --fibers $(OUT)/damask_tiling.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) -o $@
 
+$(OUT)/damask_prt.exr: $(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json $(DAMASK_SCENE)
+	$(LL) render $(DAMASK_SCENE) --method prt --fibers $(OUT)/damask_tiling.zarr --set svf=$(OUT)/damask_svf.zarr \
+	    --set iirtf=$(OUT)/damask_iirtf.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) -o $@
+
+# precomputed light transport against its reference on the same view, error maps and times
+$(OUT)/eval/damask/report.md: $(OUT)/damask.exr $(OUT)/damask_prt.exr
+	$(LL) evaluate --ref $(OUT)/damask.exr --test $(OUT)/damask_prt.exr -o $(OUT)/eval/damask
+
 # --- evaluation set: the same view, small, procedural vs realized volpath and fiberpath ---
 EVAL_ARGS = --width $(EVAL_W) --height $(EVAL_H) --spp $(EVAL_SPP)
 $(OUT)/eval/volpath-procedural.exr: $(OUT)/tables.zarr/zarr.json $(SCENE)
@@ -117,7 +125,8 @@ $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/vol
 
 DEMO_OUTPUTS = $(OUT)/yarns.png $(OUT)/cross_section.png $(OUT)/fibers.png $(OUT)/damask_tiling.png \
 	$(OUT)/damask_svf.png $(OUT)/damask_iirtf.png \
-	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr $(OUT)/eval/report/report.md
+	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr $(OUT)/damask_prt.exr $(OUT)/eval/report/report.md \
+	$(OUT)/eval/damask/report.md
 
 demo: $(DEMO_OUTPUTS)
 	@echo "demo outputs:"
@@ -130,6 +139,8 @@ demo: $(DEMO_OUTPUTS)
 	@echo "  draped damask render : $(OUT)/damask.exr ($(OUT)/damask.png)"
 	@echo "  damask SVF (seed 001): $(OUT)/damask_svf.zarr ($(OUT)/damask_svf.png)"
 	@echo "  damask IIRTF         : $(OUT)/damask_iirtf.zarr ($(OUT)/damask_iirtf.png)"
+	@echo "  damask, prt (seed 001): $(OUT)/damask_prt.exr ($(OUT)/damask_prt.png)"
+	@echo "  prt vs fiberpath     : $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
 	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
 test: $(VENV)/.installed
