@@ -180,5 +180,41 @@ agreement: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(AGRE
 	$(LL) evaluate --sweep data/sweeps/twill.toml -o $(AGREE)/twill/sweep
 	@echo "reports: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(OUT)/sweep/report.md $(AGREE)/twill/sweep/report.md"
 
+# --- seed 001: precomputed light transport against path tracing, and its parameter studies ---
+# make prt-sweep: the damask's two exemplars each alone on a flat patch (data/tilings/flat_satin41.toml,
+# flat_satin14.toml) precomputed with the demo's settings (SVF_ARGS, IIRTF_ARGS; the exemplar only), and the
+# draped damask with the demo's SVF and IIRTF; each swept over the demo sweep's 12 lights, prt against
+# fiberpath at 16 spp (data/sweeps/prt_*.toml), then split into single and multiple scattering
+# (loomlight study prt-terms). make prt-study: seed 001 §6.1's cell-size and SH-order strips on one cheap
+# exemplar (data/studies/prt_params.toml). The sweep files name these paths: out/prt and out/demo.
+PRT := out/prt
+PRT_SWEEPS := flat41 flat14 damask
+PRT_EXEMPLAR_41 := 0
+PRT_EXEMPLAR_14 := 1
+
+$(PRT)/flat%_tiling.zarr/zarr.json: data/tilings/flat_satin%.toml data/scenes/flat_satin.toml $(VENV)/.installed
+	$(LL) tile data/tilings/flat_satin$*.toml -o $(PRT)/flat$*_tiling.zarr
+
+$(PRT)/flat%_svf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
+	$(LL) precompute svf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_svf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(SVF_ARGS)
+
+$(PRT)/flat%_iirtf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py)
+	$(LL) precompute iirtf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_iirtf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(IIRTF_ARGS)
+
+.PRECIOUS: $(PRT)/flat%_tiling.zarr/zarr.json $(PRT)/flat%_svf.zarr/zarr.json $(PRT)/flat%_iirtf.zarr/zarr.json
+.PHONY: prt-sweep prt-study
+
+prt-sweep: $(foreach s,41 14,$(PRT)/flat$(s)_svf.zarr/zarr.json $(PRT)/flat$(s)_iirtf.zarr/zarr.json) \
+		$(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json
+	@for s in $(PRT_SWEEPS); do \
+	    $(LL) evaluate --sweep data/sweeps/prt_$$s.toml -o $(PRT)/$$s && \
+	    $(LL) study prt-terms data/sweeps/prt_$$s.toml --sweep-dir $(PRT)/$$s -o $(PRT)/$$s/terms || exit 1; \
+	done
+	@for s in $(PRT_SWEEPS); do echo "reports: $(PRT)/$$s/report.md $(PRT)/$$s/terms/attribution.md"; done
+
+prt-study: $(VENV)/.installed
+	$(LL) study prt-params data/studies/prt_params.toml -o $(PRT)/study
+	@echo "report: $(PRT)/study/report.md (strips $(PRT)/study/cell_size.png, $(PRT)/study/sh_order.png)"
+
 clean:
 	rm -rf out .numba_cache .pytest_cache
