@@ -36,6 +36,7 @@ import ctypes
 import ctypes.util
 import hashlib
 import json
+import math
 import os
 import re
 import resource
@@ -44,14 +45,17 @@ import sys
 import time
 import uuid
 from pathlib import Path
-from typing import Any, Mapping
-
-import numpy as np
-import zarr
+from typing import TYPE_CHECKING, Any, Mapping
 
 from . import __version__
 from .errors import IncompleteArtifact, LoomError
 from .schemas import validate
+
+if TYPE_CHECKING:
+    import numpy as np
+
+# numpy and zarr are imported where arrays are read or written, not at module level: ``loomlight
+# info`` (metadata only) answers without loading them.
 
 SCHEMA_VERSION = 1
 FILE = "file"                      # the kind of an input that is a plain file, not an artifact
@@ -80,6 +84,8 @@ def _sha256_file(path: Path) -> str:
 
 def _canonical(obj: Any) -> str:
     def default(o):
+        import numpy as np
+
         if isinstance(o, (np.integer,)):
             return int(o)
         if isinstance(o, (np.floating,)):
@@ -130,6 +136,7 @@ def content_digest(kind: str, summary: Mapping, checksums: Mapping) -> str:
 def array_checksums(a, block_bytes: int = 16 << 20) -> dict:
     """{"sha256", "crc32c"} of a (zarr) array's C-order bytes, read in blocks of whole chunk rows."""
     import google_crc32c
+    import numpy as np
 
     h, crc = hashlib.sha256(), 0
     rows = a.shape[0] if a.ndim else 1
@@ -145,12 +152,15 @@ def array_checksums(a, block_bytes: int = 16 << 20) -> dict:
 
 def _crc32c(data: np.ndarray) -> int:
     import google_crc32c
+    import numpy as np
 
     return int(google_crc32c.value(np.ascontiguousarray(data).reshape(-1).view(np.uint8)))
 
 
 def hash_arrays(group, h) -> None:
     """Feed every array of a zarr group (name, dtype, shape, bytes; sorted, sub-groups too) to hash h."""
+    import numpy as np
+
     for name, a in _walk_arrays(group):
         h.update(f"{name}:{a.dtype}:{a.shape}".encode())
         h.update(np.ascontiguousarray(a[...]).tobytes())
@@ -286,16 +296,27 @@ class Artifact:
             raise LoomError(self.path, None, f"expected a {kind!r} artifact, found {self.meta.get('kind')!r}")
         self.summary = dict(_root_attrs(self.path).get("summary", {}) or {})
         self._checksums = verify_meta(self.path, self.meta, self.summary)
-        try:
-            self.group = zarr.open_group(str(self.path), mode="r")
-            manifest = _manifest(self.meta, self.summary, self.group)
-        except LoomError:
-            raise
-        except Exception as e:  # a corrupt array zarr.json
-            raise LoomError(self.path, None, f"unreadable artifact ({_short(e)})") from None
+        self._group = None
+        arrays = _array_metadata(self.path)
+        if arrays is None:  # a data type the metadata walk does not know: let zarr describe the arrays
+            arrays = {name: {"dtype": str(a.dtype), "shape": list(a.shape)} for name, a in _walk_arrays(self.group)}
+        manifest = {"summary": self.summary, "arrays": arrays, "params": self.meta.get("params", {})}
         self._check_arrays(manifest["arrays"])
+        self._arrays = arrays
         validate(self.meta, "artifact-meta", self.path, prefix="loomlight.")
         validate(manifest, self.meta["kind"], self.path)
+
+    @property
+    def group(self):
+        """The zarr group, opened at the first array access (``info`` reads metadata only)."""
+        if self._group is None:
+            import zarr
+
+            try:
+                self._group = zarr.open_group(str(self.path), mode="r")
+            except Exception as e:  # a corrupt zarr.json
+                raise LoomError(self.path, None, f"unreadable artifact ({_short(e)})") from None
+        return self._group
 
     def _check_arrays(self, found: dict) -> None:
         for name, rec in sorted(self._checksums.items()):
@@ -338,7 +359,46 @@ class Artifact:
         return dict(_walk_arrays(self.group))
 
     def nbytes(self) -> int:
+        """Bytes of all arrays, uncompressed."""
+        if all(rec["dtype"] in _ITEMSIZE for rec in self._arrays.values()):
+            return sum(_ITEMSIZE[rec["dtype"]] * math.prod(rec["shape"]) for rec in self._arrays.values())
         return int(sum(a.nbytes for a in self.arrays().values()))
+
+
+_ITEMSIZE = {"bool": 1, "int8": 1, "uint8": 1, "int16": 2, "uint16": 2, "int32": 4, "uint32": 4, "int64": 8,
+             "uint64": 8, "float16": 2, "float32": 4, "float64": 8, "complex64": 8, "complex128": 16}
+
+
+def _array_metadata(path: Path, prefix: str = "") -> dict[str, dict] | None:
+    """{name: {"dtype", "shape"}} of every array of a zarr v3 group and its sub-groups, read from their
+    zarr.json files (no zarr, no numpy); None when an array has a data type other than the plain
+    numeric ones (``_ITEMSIZE``), whose name zarr would spell otherwise."""
+    out: dict[str, dict] = {}
+    try:
+        entries = sorted(os.scandir(path), key=lambda e: e.name)
+    except OSError as e:
+        raise LoomError(path, None, f"unreadable artifact ({_short(e)})") from None
+    for e in entries:
+        node = Path(e.path) / "zarr.json"
+        if not e.is_dir() or not node.is_file():
+            continue
+        try:
+            doc = json.loads(node.read_text())
+            kind = doc["node_type"]
+            if kind == "array":
+                dtype, shape = doc["data_type"], [int(n) for n in doc["shape"]]
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as err:  # a corrupt array zarr.json
+            raise LoomError(path, None, f"unreadable artifact ({node}: {_short(err)})") from None
+        if kind == "array":
+            if not isinstance(dtype, str) or dtype not in _ITEMSIZE:
+                return None
+            out[prefix + e.name] = {"dtype": dtype, "shape": shape}
+        elif kind == "group":
+            sub = _array_metadata(Path(e.path), prefix + e.name + "/")
+            if sub is None:
+                return None
+            out.update(sub)
+    return out
 
 
 def _short(e: BaseException) -> str:
@@ -434,11 +494,14 @@ class ArtifactWriter:
     kind or a tuple of kinds; an input of another kind is refused. The output may be neither an
     input nor inside one, nor an existing file or directory that is not an artifact.
     ``companions`` are files published together with the artifact (``companion(dst)`` gives the
-    temporary path to write each to).
+    temporary path to write each to). ``started``: the ``time.perf_counter()`` at which the stage's run
+    began (default: now); the recorded ``wall_time_s`` runs from it to publication, so it covers the
+    whole stage (reading inputs, compilation, compute, writing), not only the writing.
     """
 
     def __init__(self, path: str | Path, kind: str, stage: str, params: Mapping | None = None,
-                 inputs: Mapping[str, Any] | None = None, companions=()):
+                 inputs: Mapping[str, Any] | None = None, companions=(), started: float | None = None):
+        self._t0 = time.perf_counter() if started is None else float(started)
         self.path = Path(path)
         if self.path.suffix != ".zarr":
             raise LoomError(self.path, None, "artifact paths end in .zarr")
@@ -460,7 +523,6 @@ class ArtifactWriter:
         self.summary: dict[str, Any] = {}
         self.tmp: Path | None = None
         self.group = None
-        self._t0 = 0.0
 
     # -- checks before any work -------------------------------------------------------------------
     def _check_outputs(self) -> None:
@@ -517,12 +579,15 @@ class ArtifactWriter:
             self.input_identities(_recorded_inputs(self.path))
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.tmp = temp_sibling(self.path)
+        import zarr
+
         self.group = zarr.open_group(str(self.tmp), mode="w", zarr_format=3)
         self.group.attrs["loomlight"] = {"kind": self.kind, "stage": self.stage, "complete": False}
-        self._t0 = time.perf_counter()
         return self
 
     def write(self, name: str, data, chunks=None, dimension_names=None, attributes=None):
+        import numpy as np
+
         data = np.asarray(data)
         if chunks is None:
             chunks = _default_chunks(data.shape, data.dtype.itemsize)
@@ -533,6 +598,8 @@ class ArtifactWriter:
 
     def create(self, name: str, shape, dtype, chunks, dimension_names=None, attributes=None):
         """An empty array whose chunks independent chunk tasks fill (see ``pipeline.chunks``)."""
+        import numpy as np
+
         kw = {}
         if dimension_names is not None:
             kw["dimension_names"] = dimension_names
@@ -572,6 +639,8 @@ class ArtifactWriter:
             _remove(t)
 
     def _finalize(self) -> None:
+        import zarr
+
         group = zarr.open_group(str(self.tmp), mode="r+")
         summary = jsonable(self.summary)
         checksums = {}
@@ -681,6 +750,8 @@ def _roll_forward(journal: Path) -> None:
 
 
 def _fill(dtype: np.dtype):
+    import numpy as np
+
     dtype = np.dtype(dtype)
     if dtype.kind == "b":
         return False
@@ -692,6 +763,6 @@ def _fill(dtype: np.dtype):
 def _default_chunks(shape, itemsize: int, target_bytes: int = 4 << 20):
     if len(shape) == 0:
         return ()
-    rest = int(np.prod(shape[1:])) if len(shape) > 1 else 1
+    rest = math.prod(int(s) for s in shape[1:])
     rows = max(1, target_bytes // max(1, rest * itemsize))
     return (int(min(max(shape[0], 1), rows)),) + tuple(int(max(s, 1)) for s in shape[1:])
