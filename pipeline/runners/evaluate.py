@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import json
 import re
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -210,6 +211,7 @@ class Evaluation:
 
 def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_dir: str | Path,
                     force: bool = False, title: str | None = None) -> Evaluation:
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from .. import report as rp
     from ..artifacts import FILE, ArtifactWriter
 
@@ -238,7 +240,7 @@ def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_
               "ssim": {"window": 11, "sigma": 1.5, "K1": 0.01, "K2": 0.03, "on": "srgb_luminance", "L": 1.0},
               "delta_e": {"formula": "CIE 2000", "input": "linear sRGB clipped to [0, 1]", "white": "D65"}}
     writer = ArtifactWriter(out_dir / "evaluation.zarr", kind="evaluation", stage="evaluate",
-                            params=params, inputs=inputs)
+                            params=params, inputs=inputs, started=t_start)
     md, ht = out_dir / "report.md", out_dir / "report.html"
     if not force and writer.up_to_date() and (out_dir / "metrics.json").exists() and md.exists() and ht.exists():
         metrics = json.loads((out_dir / "metrics.json").read_text())

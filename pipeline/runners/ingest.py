@@ -8,6 +8,7 @@ publishes the ``yarns`` artifact.
 from __future__ import annotations
 
 import re
+import time
 from pathlib import Path
 
 import numpy as np
@@ -230,6 +231,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
     """Ingest (or skip when up to date); ``budget`` (``pipeline.memory.budget``): refuse an input whose
     estimated peak memory exceeds it, before it is read (``input_estimate``) and again, from its control
     points, before it is splined."""
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.ingest.spline_process import process_curves
 
     input_path = Path(input_path)
@@ -241,7 +243,8 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
     params = {"input": str(input_path), "radius": radius, "scale": scale, "merge_duplicates": merge_duplicates,
               "frame_samples": frame_samples}
     writer = ArtifactWriter(out, kind="yarns", stage="ingest", params=params,
-                            inputs={name: (p, FILE) for name, p in {"input": input_path, **extra_inputs}.items()})
+                            inputs={name: (p, FILE) for name, p in {"input": input_path, **extra_inputs}.items()},
+                            started=t_start)
     if writer.up_to_date() and not force and write is None:
         (Path(out) / "zarr.json").touch()
         info(f"{out} is up to date (same inputs and parameters); use --force to rebuild")

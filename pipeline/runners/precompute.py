@@ -227,6 +227,7 @@ def _svf_warm_up(tiling, tiling_hash, k, seg, p: SvfParams) -> float:
 
 
 def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None, threads=None) -> dict:
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.precompute.svf import packed_bytes, pca_error_report, ssdf_pca
 
     from ..artifacts import ArtifactWriter
@@ -238,7 +239,7 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     art = _tiling_input(tiling)
     ks = pick_exemplars(art, exemplars, tiling)
     w = ArtifactWriter(out, kind="svf", stage="precompute svf", params={**asdict(p), "exemplars": ks},
-                       inputs={"tiling": (tiling, "tiling")})
+                       inputs={"tiling": (tiling, "tiling")}, started=t_start)
     if not force and w.up_to_date():
         return {"skipped": True}
     segs = {k: _segments(art, k) for k in ks}
@@ -393,6 +394,7 @@ def iirtf_estimate(S_all: int, C_max: int, p: IirtfParams, n_mats: int) -> Estim
 
 
 def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=False, budget=None, threads=None) -> dict:
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.core.shading.bcsdf_sh import bcsdf_sh_table
     from stages.core.shading.material import MAT_BCSDF
     from stages.precompute.iirtf import exemplar_slabs, mean_free_path
@@ -408,7 +410,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     scene_path, sc_obj = _scene_of(tiling, art, scene)
     mof, mats = tiling_materials(sc_obj, art, p.material)
     w = ArtifactWriter(out, kind="iirtf", stage="precompute iirtf", params={**asdict(p), "exemplars": ks},
-                       inputs={"tiling": (tiling, "tiling"), "scene": (scene_path, FILE)})
+                       inputs={"tiling": (tiling, "tiling"), "scene": (scene_path, FILE)}, started=t_start)
     if not force and w.up_to_date():
         return {"skipped": True}
     tiling_hash = art.meta["content_hash"]

@@ -179,6 +179,7 @@ def truncate_iirtf(src: str | Path, order: int, out: str | Path, tiling: str | P
     and their standard errors keep their leading (order+1)^2 rows and columns, the BCSDF tables C_S their
     leading (order+1)^2 coefficients; everything else is copied. ``tiling`` is the tiling ``src`` was
     precomputed from (recorded as the input, so prt accepts the result with that tiling)."""
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from ..artifacts import Artifact, ArtifactWriter
 
     src, out = Path(src), Path(out)
@@ -189,7 +190,7 @@ def truncate_iirtf(src: str | Path, order: int, out: str | Path, tiling: str | P
     J0, J = (L0 + 1) ** 2, (order + 1) ** 2
     w = ArtifactWriter(out, kind="iirtf", stage="study: iirtf cut to a lower SH order",
                        params={"order": order, "source_order": L0},
-                       inputs={"tiling": (Path(tiling), "tiling"), "iirtf": (src, "iirtf")})
+                       inputs={"tiling": (Path(tiling), "tiling"), "iirtf": (src, "iirtf")}, started=t_start)
     if not force and w.up_to_date():
         return out
     with w:

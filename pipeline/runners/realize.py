@@ -13,6 +13,7 @@ per-yarn capacities) are checked again before the plan and the vertices are allo
 """
 from __future__ import annotations
 
+import time
 from typing import NamedTuple
 
 import numpy as np
@@ -104,11 +105,13 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
                 budget=None, force=False):
     """Build (or skip when up to date) the fibers artifact; ``budget`` (``pipeline.memory.budget``, default
     a fraction of the available memory): refuse before building when the estimated peak exceeds it."""
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.procedural.realize import chord_error, realize_fill, realize_plan
 
     check_options(preset, radius, spacing=spacing)
     params = {"preset": preset, "radius": radius, "seed": int(seed), "spacing": float(spacing)}
-    w = ArtifactWriter(out, kind="fibers", stage="realize", params=params, inputs={"yarns": (yarns_path, "yarns")})
+    w = ArtifactWriter(out, kind="fibers", stage="realize", params=params, inputs={"yarns": (yarns_path, "yarns")},
+                       started=t_start)
     if w.up_to_date() and not force:
         return {"skipped": True}
     limit = budget or memory_budget()

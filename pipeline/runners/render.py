@@ -163,6 +163,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     """Render and publish; returns the lines to print (output paths and statistics). ``budget``
     (``pipeline.memory.budget``, default a fraction of the available memory): refuse before rendering
     when the estimated peak memory exceeds it."""
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     import numpy as np
 
     from ..artifacts import FILE, ArtifactWriter
@@ -200,7 +201,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     params["method"] = method
     art_path = out.with_suffix(".zarr")
     writer = ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs,
-                            companions=(out, out.with_suffix(".png")))
+                            companions=(out, out.with_suffix(".png")), started=t_start)
     render_estimate(options, inputs).check(budget or memory_budget(), scene.path)
     t0 = time.perf_counter()
     result: RenderResult = m.run(scene, options)

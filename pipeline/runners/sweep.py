@@ -146,6 +146,7 @@ class SweepResult:
 def run_sweep(sweep_path: str | Path, out_dir: str | Path, force: bool = False, render: bool = True,
               renderer: Callable[[Path, str, Path, list], None] | None = None) -> SweepResult:
     """Render what is missing (``render``), then evaluate every method against the reference."""
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from .. import report as rp
     from ..progress import progress
 
@@ -187,7 +188,8 @@ def run_sweep(sweep_path: str | Path, out_dir: str | Path, force: bool = False, 
               "configurations": [c.name for c in configs]}
     from ..artifacts import ArtifactWriter
 
-    writer = ArtifactWriter(out / "evaluation.zarr", kind="evaluation", stage="evaluate", params=params, inputs=got.inputs)
+    writer = ArtifactWriter(out / "evaluation.zarr", kind="evaluation", stage="evaluate", params=params, inputs=got.inputs,
+                            started=t_start)
     md, ht = out / "report.md", out / "report.html"
     if not force and rendered == 0 and writer.up_to_date() and md.exists() and ht.exists():
         return SweepResult(out, C, methods, 0, reused, md, ht)

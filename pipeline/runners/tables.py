@@ -16,6 +16,7 @@ small per-yarn arrays, for the stages that load tables.
 from __future__ import annotations
 
 import math
+import time
 from typing import NamedTuple
 
 import numpy as np
@@ -192,13 +193,15 @@ def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair
                budget=None):
     """Build (or skip when up to date) the tables artifact; ``budget`` (``pipeline.memory.budget``):
     refuse before building when the estimated peak memory exceeds it."""
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.core.yarn.tables import STORED_FIELDS, table_bytes
 
     check_options(preset, radius, nbins)
     if hair_mode not in ("hybrid", "free"):
         raise LoomError(None, "--hair-mode", f"must be 'hybrid' or 'free', got {hair_mode!r}")
     params = {"preset": preset, "radius": radius, "seed": int(seed), "bins": int(nbins), "hair_mode": hair_mode}
-    w = ArtifactWriter(out, kind="tables", stage="tables", params=params, inputs={"yarns": (yarns_path, "yarns")})
+    w = ArtifactWriter(out, kind="tables", stage="tables", params=params, inputs={"yarns": (yarns_path, "yarns")},
+                       started=t_start)
     if w.up_to_date() and not force:
         return {"skipped": True}
     prep = prepare(yarns_path, preset, radius)

@@ -26,6 +26,7 @@ block map and base surface in ``tile_surface``; ``run_tile`` checks the surface,
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -89,6 +90,7 @@ def tile_estimate(cfg, config: Path, overs, nbu: int, nbv: int) -> Estimate:
 
 # ------------------------------------------------------------------------------------------------ run
 def run_tile(config, out, force: bool = False, budget=None) -> dict:
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.tile.base_surfaces import triangle_checks, vertex_normals
     from stages.tile.shell import build_shell
     from stages.tile.tiling import block_grid
@@ -114,7 +116,7 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
         if not Path(p).exists():
             raise LoomError(config, name if name != "config" else None, f"file not found: {p}")
     w = ArtifactWriter(out, kind="tiling", stage="tile", params={"config": cfg},
-                       inputs={name: (p, FILE) for name, p in inputs.items()})
+                       inputs={name: (p, FILE) for name, p in inputs.items()}, started=t_start)
     if not force and w.up_to_date():
         return {"skipped": True}
 

@@ -7,6 +7,7 @@ over the box of all yarn tubes, publishes density, roughness, direction and albe
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 
@@ -18,6 +19,7 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
     """Build (or skip when up to date) the grid artifact; returns a summary line. ``budget``
     (``pipeline.memory.budget``): refuse before loading the tables when the grid, the tables and what
     loading them derives would exceed it."""
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     import numpy as np
 
     from ..artifacts import Artifact, ArtifactWriter
@@ -37,7 +39,8 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
         raise LoomError(None, "--res", f"{nx} x {ny} x {nz} voxels is more than 512^3")
     out = Path(out)
     params = {"res": res, "supersample": int(supersample)}
-    w = ArtifactWriter(out, kind="grid", stage="voxelize", params=params, inputs={"tables": (tables, "tables")})
+    w = ArtifactWriter(out, kind="grid", stage="voxelize", params=params, inputs={"tables": (tables, "tables")},
+                       started=t_start)
     if w.up_to_date() and not force and export_npy is None:
         return f"{out} is up to date"
     from stages.render.grid_medium import sggx_volume, voxelize
