@@ -185,8 +185,6 @@ def test_info_table_rows_exact(tmp_path, cli, monkeypatch, columns):
 def test_render_wall_time_covers_render_and_compilation(tmp_path, cli):
     """A 4x3 px, 1 spp fiberpath render: the artifact's wall_time_s (whole stage) >= render_time_s +
     compile_s (both inside it); info shows compile_s as its own row and wall_time_s the stage's."""
-    from pipeline.cli import main
-
     rng = np.random.default_rng(1)
     pts = np.concatenate([np.linspace(-0.4, 0.4, 6)[:, None] * rng.normal(size=3) + rng.uniform(-0.2, 0.2, 3)
                           for _ in range(4)]).astype(np.float32)
@@ -204,8 +202,8 @@ def test_render_wall_time_covers_render_and_compilation(tmp_path, cli):
     scene = tmp_path / "s.toml"
     scene.write_text(SCENE)
     out = tmp_path / "r.exr"
-    assert main([str(a) for a in ("render", scene, "--method", "fiberpath", "--fibers", tmp_path / "fibers.zarr",
-                                  "-o", out)]) == 0
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", tmp_path / "fibers.zarr", "-o", out)
+    assert code == 0, err
     attrs = _zarr_attrs(out.with_suffix(".zarr"))
     meta, s = attrs["loomlight"], attrs["summary"]
     compile_s = s["method_stats"]["compile_s"]
@@ -217,6 +215,7 @@ def test_render_wall_time_covers_render_and_compilation(tmp_path, cli):
     assert code == 0 and doc["wall_time_s"] == meta["wall_time_s"] and doc["compile_s"] == compile_s
     assert doc["render_time_s"] == s["render_time_s"]
     code, text, err = cli("info", out.with_suffix(".zarr"))
+    assert code == 0, err
     rows = _rows(text)
     assert rows["compile_s"] == f"{compile_s:.6g}" and rows["wall_time_s"] == f"{meta['wall_time_s']:.6g}"
     assert rows["method_stats.compile_s"] == f"{compile_s:.6g}"
