@@ -56,7 +56,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import LoomError
+from .errors import LoomError, check_name
 from .schemas import validate
 from .toml_file import read_toml
 
@@ -115,19 +115,27 @@ def check_proportions(d: dict, file, place_prefix: str = "") -> None:
             raise LoomError(file, f"{place_prefix}{k}", f"{d[k]:g} per unit length exceeds 1e3 per yarn_radius ({R:g})")
 
 
-def load_preset(name: str) -> dict:
-    """A bundled preset by name, checked."""
-    path = PRESET_DIR / f"{name}.toml"
-    if not path.exists():
-        raise LoomError(None, "preset", f"unknown preset {name!r} (known: {', '.join(list_presets())})")
+def check_preset_name(name: str, file=None, place: str = "--preset") -> None:
+    """``name`` is a bundled preset (or a preset file's path without ``.toml``), else an error at ``place``
+    of ``file`` listing the known names and the nearest one."""
+    if not (PRESET_DIR / f"{name}.toml").is_file():
+        check_name(name, list_presets(), file, place, "preset")
+
+
+def load_preset(name: str, file=None, place: str = "--preset") -> dict:
+    """A bundled preset by name, checked; an unknown name is an error at ``place`` of ``file`` (the
+    command-line option ``--preset`` when ``file`` is None), with the known names."""
+    check_preset_name(name, file, place)
+    path = PRESET_DIR / f"{name}.toml"  # a path without .toml also works (PRESET_DIR / absolute = absolute)
     d = read_toml(path, what="yarn preset")
     return check_preset(d, path)
 
 
-def scale_preset(d: dict, radius: float) -> dict:
-    """The preset magnified to yarn radius ``radius`` (see the module doc for the rule)."""
+def scale_preset(d: dict, radius: float, file=None, place: str = "--radius") -> dict:
+    """The preset magnified to yarn radius ``radius`` (see the module doc for the rule); a radius that is
+    not positive is an error at ``place`` of ``file``."""
     if not radius > 0:
-        raise LoomError(None, "radius", f"yarn radius must be positive, got {radius}")
+        raise LoomError(file, place, f"yarn radius must be positive, got {radius}")
     S = float(radius) / float(d["yarn_radius"])
     out = dict(d)
     for k in LENGTH_KEYS:
@@ -214,7 +222,7 @@ def resolve_yarn_types(yarn_types: list[dict], type_radius: list[float], preset:
     for i, yt in enumerate(yarn_types or [{}]):
         yt = dict(yt or {})
         name = preset or yt.get("preset") or DEFAULT_PRESET
-        d = load_preset(name)
+        d = load_preset(name) if preset else load_preset(name, file, f"yarn_types[{i}].preset")
         R = radius or yt.get("radius") or (type_radius[i] if i < len(type_radius) and type_radius[i] > 0 else None)
         if R is not None:
             d = scale_preset(d, float(R))

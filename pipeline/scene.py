@@ -1,7 +1,13 @@
 """Scene files: TOML, checked against ``schemas/scene.schema.json``.
 
-An unknown or mistyped key is an error naming the key. Relative paths are resolved against the
-scene file's directory. ``load_scene`` returns a :class:`Scene` whose sections are plain dicts with
+An unknown or mistyped key is an error naming the key. Every value that names something is checked
+when the scene is read (``check_names``), so every command that reads a scene refuses a misspelt
+name before any work, naming the file, the dotted key, the known names and the nearest one:
+``fabric.source``, ``fabric.generator.kind`` and ``.pattern``, ``yarns.<group>.preset`` (data/yarns/),
+``yarns.<group>.bcsdf`` (data/bcsdf/, or a ``.toml`` preset file relative to the scene, checked
+against its schema), ``lights[i].type``, ``render.method`` (the renderer registry) and
+``render.source`` (a source of that method). Relative paths are resolved against the scene file's
+directory. ``load_scene`` returns a :class:`Scene` whose sections are plain dicts with
 defaults filled in; ``camera_array`` packs the camera for the render kernels.
 """
 from __future__ import annotations
@@ -12,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import LoomError
+from .errors import LoomError, check_name
 from .renderers import COMMON_DEFAULTS
-from .schemas import validate
+from .schemas import load_schema, validate
 from .toml_file import read_toml
 
 CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": COMMON_DEFAULTS["width"], "height": COMMON_DEFAULTS["height"]}
@@ -53,9 +59,63 @@ def _rgb(v) -> list[float]:
     return [float(x) for x in v]
 
 
+def _named(table, key: str, known, path: Path, place: str, what: str) -> str | None:
+    """Check ``table[key]`` when it is a string (the schema reports other types); return it when known."""
+    if not isinstance(table, dict) or not isinstance(table.get(key), str):
+        return None
+    check_name(table[key], known, path, place, what)
+    return table[key]
+
+
+def _check_bcsdf(name: str, path: Path, place: str) -> None:
+    from .render_setup import bcsdf_presets, read_bcsdf_preset
+
+    if not name.endswith(".toml"):
+        check_name(name, bcsdf_presets(), path, place, "BCSDF preset")
+        return
+    file = Path(name) if Path(name).is_absolute() else (path.parent / name).resolve()
+    if not file.is_file():
+        raise LoomError(path, place, f"BCSDF preset file {file} not found (or name one of: {', '.join(bcsdf_presets())})")
+    read_bcsdf_preset(str(file))  # its own errors name the preset file and its key
+
+
+def check_names(raw: dict, path: Path) -> None:
+    """Every scene value that names something names something that exists (module doc)."""
+    from .generators import KNIT, WOVEN
+    from .presets import check_preset_name
+    from .renderers import METHODS, all_sources, known_methods
+
+    schema = load_schema("scene")
+    fab = raw.get("fabric")
+    _named(fab, "source", schema["properties"]["fabric"]["properties"]["source"]["enum"], path, "fabric.source",
+           "fabric source")
+    gen = fab.get("generator") if isinstance(fab, dict) else None
+    patterns = {"woven": WOVEN, "knit": KNIT}
+    kind = _named(gen, "kind", patterns, path, "fabric.generator.kind", "generator kind")
+    if kind:
+        _named(gen, "pattern", patterns[kind], path, "fabric.generator.pattern", f"{kind} pattern")
+    yarns = raw.get("yarns")
+    for group, t in (yarns.items() if isinstance(yarns, dict) else ()):
+        if isinstance(t, dict) and isinstance(t.get("preset"), str):
+            check_preset_name(t["preset"], path, f"yarns.{group}.preset")
+        if isinstance(t, dict) and isinstance(t.get("bcsdf"), str):
+            _check_bcsdf(t["bcsdf"], path, f"yarns.{group}.bcsdf")
+    lights = raw.get("lights")
+    for i, light in enumerate(lights if isinstance(lights, list) else ()):
+        _named(light, "type", schema["$defs"]["light"]["properties"]["type"]["enum"], path, f"lights[{i}].type",
+               "light type")
+    render = raw.get("render")
+    m = _named(render, "method", known_methods(), path, "render.method", "render method")
+    if m:
+        _named(render, "source", METHODS[m].source_names, path, "render.source", f"{m} source")
+    else:
+        _named(render, "source", all_sources(), path, "render.source", "render source")
+
+
 def load_scene(path: str | Path) -> Scene:
     path = Path(path)
     raw = read_toml(path, what="scene file")
+    check_names(raw, path)
     validate(raw, "scene", path)
     fabric = copy.deepcopy(raw["fabric"])
     src = fabric["source"]

@@ -51,8 +51,9 @@ def register(app: typer.Typer) -> None:
         modes = [m for m, on in (("--ref/--test", ref is not None or bool(test)), ("--sweep", sweep is not None),
                                  ("--table1", table1)) if on]
         if len(modes) != 1:
-            raise LoomError(None, "evaluate", "give exactly one of --ref/--test, --sweep or --table1"
-                            + (f" (got {', '.join(modes)})" if modes else ""))
+            raise LoomError(None, " and ".join(modes) if modes else "--ref/--test",
+                            "give exactly one of --ref/--test, --sweep or --table1"
+                            + (" (got both)" if len(modes) == 2 else " (got all three)" if modes else " (got none)"))
         check_output(out, "-o", DIRECTORY)
         if modes[0] == "--sweep":
             from ..runners.sweep import run_sweep

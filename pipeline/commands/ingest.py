@@ -24,8 +24,11 @@ def register(app: typer.Typer) -> None:
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
-        """Read, validate and spline yarn curves (C1 Catmull-Rom, arc length, rotation-minimising frames,
-        seed 000 δ_i bound, segment grid) and publish them as a yarns artifact."""
+        """Read, validate and spline yarn curves and publish them as a yarns artifact.
+
+        Splines are C1 Catmull-Rom with arc length, rotation-minimising frames, seed 000's δ_i bound and a
+        segment grid. A scene's names (presets, BCSDFs, method, source, light types) are checked first."""
+        from ..errors import LoomError
         from ..limits import check_positive
         from ..outputs import ARTIFACT, check_output
         from ..memory import budget as memory_budget
@@ -36,7 +39,12 @@ def register(app: typer.Typer) -> None:
             check_output(write, "--write", suffixes=(".bcc", ".obj", ".txt"))
         check_positive(radius, "--radius")
         check_positive(scale, "--scale")
-        res = run_ingest(input, out, radius=radius, scale=scale, merge_duplicates=not refuse_duplicates,
-                         force=force, write=write, frame_samples=frame_samples, budget=memory_budget(budget))
+        try:
+            res = run_ingest(input, out, radius=radius, scale=scale, merge_duplicates=not refuse_duplicates,
+                             force=force, write=write, frame_samples=frame_samples, budget=memory_budget(budget))
+        except LoomError as e:  # a key of INPUT (a scene's fabric.generator) named without its file
+            if e.file is None and e.place and not e.place.startswith("-"):
+                raise LoomError(input, e.place, e.message) from None
+            raise
         if not res["skipped"]:
             typer.echo(f"wrote {out} ({res['curves']} curves)")

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from ..errors import LoomError
+from ..errors import LoomError, unknown
 from ..render_setup import GROUP_NAMES, Fibers, ground_array, load_bcsdf_preset, load_fibers, pack_lights
 from ..scene import camera_array
 from . import RenderResult
@@ -98,10 +98,10 @@ def fiber_materials(scene, fibers, options):
         mats = np.stack([pack_material_lambert(a) for a in fibers.yarn_albedo])
         return fibers.fiber_yarn.astype(np.int32), mats
     if material != "bcsdf":
-        raise LoomError(None, "--material", f"unknown fibre material {material!r} (known: bcsdf, lambert)")
+        raise LoomError(None, "--material", unknown("fibre material", material, ("bcsdf", "lambert")))
     tint = (options.get("extra") or {}).get("tint", "yarn")
     if tint not in ("yarn", "none"):
-        raise LoomError(None, "--set tint", f"unknown tint {tint!r} (known: none, yarn)")
+        raise LoomError(None, "--set tint", unknown("tint", tint, ("yarn", "none")))
     Y = len(fibers.yarn_albedo)
     params = yarn_bcsdfs(scene, fibers.yarn_group, Y, np.unique(fibers.fiber_yarn), options)
     if tint == "yarn":

@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LoomError
+from ..errors import LoomError, unknown
 from ..progress import warn
 from ..render_setup import ground_array, input_yarn_groups, load_fibers, pack_lights
 from ..scene import camera_array
@@ -72,7 +72,8 @@ def procedural_source(tables_path, cell=None, optics=None):
     from ..runners.tables import load_tables
 
     if not tables_path:
-        raise LoomError(None, "--set tables=PATH.zarr", "--source procedural needs a tables artifact (loomlight tables)")
+        raise LoomError(None, "--tables", "--source procedural needs the procedural tables (loomlight tables): "
+                        "pass --tables PATH.zarr")
     cv, tab, art = load_tables(tables_path)
     if optics is None:
         mats = np.zeros((len(tab.yarn_type), MAT_SIZE))
@@ -222,7 +223,7 @@ def open_source(source, options, optics):
         return realized_source(options.get("fibers"), cell, optics)
     if source == "grid":
         return grid_source(options.get("grid") or extra.get("grid"), cell, optics)
-    raise LoomError(None, "--source", f"unknown volpath source {source!r} (known: {', '.join(SOURCES)})")
+    raise LoomError(None, "--source", unknown("volpath source", source, SOURCES))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -246,7 +247,7 @@ def render(scene, options: dict) -> RenderResult:
 
     source = options.get("source") or scene.render.get("source") or "procedural"
     if source not in SOURCES:
-        raise LoomError(None, "--source", f"unknown volpath source {source!r} (known: {', '.join(SOURCES)})")
+        raise LoomError(None, "--source", unknown("volpath source", source, SOURCES))
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
     lights = pack_lights(scene.lights, scene.path)

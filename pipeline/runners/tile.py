@@ -31,22 +31,49 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LoomError
+from ..errors import LoomError, check_name
 from ..memory import Estimate, budget as memory_budget
-from ..schemas import validate
+from ..schemas import load_schema, validate
 from ..toml_file import read_toml
 from .tile_exemplars import DEFAULT_SPACING, build_exemplars, exemplar_interlacement
 from .tile_surface import block_map, build_surface
 
 
 # ------------------------------------------------------------------------------------------------ config
+def check_names(cfg: dict, path: Path) -> None:
+    """Every value that names something names something that exists: ``surface.kind``, ``yarn.preset``
+    (data/yarns/) and ``exemplars[i].pattern``; the error names the file, the key, the known names and
+    the nearest one."""
+    from ..presets import check_preset_name
+
+    yarn = cfg.get("yarn")
+    if isinstance(yarn, dict) and isinstance(yarn.get("preset"), str):
+        check_preset_name(yarn["preset"], path, "yarn.preset")
+    schema = load_schema("tile-config")["properties"]
+    checks = [(cfg.get("surface"), "kind", schema["surface"]["properties"]["kind"]["enum"], "surface.kind",
+               "surface kind")]
+    exemplars = cfg.get("exemplars")
+    patterns = schema["exemplars"]["items"]["properties"]["pattern"]["enum"]
+    for i, ex in enumerate(exemplars if isinstance(exemplars, list) else ()):
+        checks.append((ex, "pattern", patterns, f"exemplars[{i}].pattern", "exemplar pattern"))
+    for table, key, known, place, what in checks:
+        if isinstance(table, dict) and isinstance(table.get(key), str):
+            check_name(table[key], known, path, place, what)
+
+
 def load_config(path) -> dict:
+    """The checked configuration, paths resolved; the scene it names is read (and so checked) too."""
     path = Path(path)
     cfg = read_toml(path, what="tiling configuration")
+    check_names(cfg, path)
     validate(cfg, "tile-config", path)
     res = lambda p: str(Path(p) if Path(p).is_absolute() else (path.parent / p).resolve())
     if "scene" in cfg:
         cfg["scene"] = res(cfg["scene"])
+        if Path(cfg["scene"]).is_file():  # a missing scene: run_tile says "file not found" at key scene
+            from ..scene import load_scene
+
+            load_scene(cfg["scene"])
     for ex in cfg["exemplars"]:
         if "path" in ex:
             ex["path"] = res(ex["path"])

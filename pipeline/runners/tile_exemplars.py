@@ -94,11 +94,8 @@ def yarn_params(cfg, file) -> YarnParams:
     y = cfg.get("yarn", {})
     sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
     radius = y.get("radius", min(sx, sy) / 2.2)
-    try:
-        d = load_preset(y.get("preset", "cotton1"))
-    except LoomError as e:
-        raise LoomError(file, "yarn.preset", e.message) from None
-    d = scale_preset(d, float(radius))
+    d = load_preset(y.get("preset", "cotton1"), file, "yarn.preset")
+    d = scale_preset(d, float(radius), file, "yarn.radius")
     if "fibers_per_ply" in y:  # the packed fibre radius follows the count (unless fiber_radius is given)
         d["fiber_num"] = int(y["fibers_per_ply"])
         d["fiber_radius"] = packed_fibre_radius(d)

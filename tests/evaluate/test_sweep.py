@@ -88,10 +88,28 @@ def standin_value(light) -> np.ndarray:
     return np.asarray(light["radiance"], float)
 
 
+def _standin_method():
+    """The stand-in as a registered render method (a scene's render.method is checked when it is read)."""
+    from pipeline.renderers import RenderMethod, Source
+
+    return RenderMethod("standin", "closed-form stand-in", "standin",
+                        sources=tuple(Source(s, (), s) for s in SCALE), default_source="procedural")
+
+
+def load_standin_scene(path):
+    """``load_scene`` of a derived scene whose render.method is the stand-in."""
+    from unittest import mock
+
+    from pipeline.renderers import METHODS
+
+    with mock.patch.dict(METHODS, {"standin": _standin_method()}):
+        return load_scene(path)
+
+
 def standin_render(calls):
     def render(scene_file, method, exr, args):
         assert method == "standin"
-        sc = load_scene(scene_file)
+        sc = load_standin_scene(scene_file)
         v = standin_value(sc.lights[0]) * SCALE[sc.render["source"]]
         h, w = sc.camera["height"], sc.camera["width"]
         checker = 1.0 + 0.5 * np.where((np.add.outer(np.arange(h), np.arange(w)) % 2) == 0, 1.0, -1.0)
@@ -165,13 +183,13 @@ def test_derived_scenes_carry_overrides(sweep_file, tmp_path):
     out = tmp_path / "out"
     sw.run_sweep(sweep_file, out, renderer=standin_render([]))
     lights = _expected_lights(sweep_file)
-    sc = load_scene(out / "renders" / "top_a1_l100" / "fast.scene.toml")
+    sc = load_standin_scene(out / "renders" / "top_a1_l100" / "fast.scene.toml")
     assert sc.lights[0]["type"] == "sg" and sc.lights[0]["sharpness"] == 100
     np.testing.assert_allclose(sc.lights[0]["axis"], lights["top_a1_l100"]["axis"], rtol=1e-12)
     assert len(sc.lights) == 1                       # the configuration replaces the scene's lights
     assert sc.render["spp"] == 2 and sc.render["source"] == "realized" and sc.render["method"] == "standin"
     assert sc.camera["width"] == 16 and sc.camera["height"] == 14 and sc.camera["origin"] == [0, 0, 2]
-    g = load_scene(out / "renders" / "grazing" / "exact.scene.toml")
+    g = load_standin_scene(out / "renders" / "grazing" / "exact.scene.toml")
     assert g.camera["origin"] == [0, -2, 0.3] and g.camera["target"] == [0.0, 0.0, 0.0]
     assert g.render["source"] == "procedural" and g.seed == 3
 

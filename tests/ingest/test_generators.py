@@ -164,4 +164,4 @@ def test_knit_tube_is_closed_and_generator_wraps():
 def test_generator_errors(gen, words):
     with pytest.raises(LoomError) as e:
         generate(gen, yarn_radius=0.01)
-    assert str(e.value).startswith("<input>: fabric.generator: ") and words in str(e.value)
+    assert str(e.value).startswith("fabric.generator: ") and words in str(e.value)
