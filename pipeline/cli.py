@@ -3,6 +3,10 @@
 Every module in ``pipeline.commands`` defines ``register(app)``; subcommands are discovered, so a
 new stage adds one file. Bad input raises ``LoomError``: one line on stderr, exit code 2.
 
+``--help``: every command's summary is the first line of its docstring, one whole sentence; a flag
+shows no value type (``--force``, not ``--force <bool>``: ``command()``), and options that take a
+name show the names they take (``render --method <fiberpath|...>``, from the renderer registry).
+
 Last resort (the readers, runners and ``pipeline.outputs`` check input first): an ``OSError`` that
 escapes them (disk full, a file vanishing under a run) is also one line and exit code 2. Any other
 exception is a bug in loomlight: one line naming it and asking for a report, exit code 1, and with
@@ -20,9 +24,18 @@ import typer
 from . import __version__
 from .errors import LoomError
 
+def _help() -> str:
+    from .renderers import known_methods
+
+    return ("Render cloth at the level of its fibres. ingest reads yarn curves (a curve file, a WIF draft or a "
+            "scene); tables builds procedural fibre tables from them, realize explicit fibres; tile lays fibre "
+            "exemplars over a surface and precompute adds their light transport. render draws a scene with one of "
+            f"{', '.join(known_methods())}, and evaluate compares renders. info and inspect show any artifact.")
+
+
 app = typer.Typer(
     name="loomlight",
-    help="Fibre-level cloth rendering pipeline: ingest -> tables -> tile -> precompute -> render -> evaluate.",
+    help=_help(),
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -38,7 +51,7 @@ def _version(value: bool):
 @app.callback()
 def _root(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
                                        help="Print the version and exit.")):
-    """loomlight: yarn curves in, pictures out, four published methods measured against each other."""
+    """Render cloth at the level of its fibres (the full text: ``_help``)."""
 
 
 def _register_all() -> None:
@@ -53,9 +66,28 @@ def _register_all() -> None:
 _register_all()
 
 
+def command():
+    """The click command ``loomlight`` runs: ``app`` with every flag (``--force``, ``--help``) shown in
+    ``--help`` without a value type (typer would show ``<bool>``, as if the flag took a value)."""
+    import typer.main
+
+    cmd = typer.main.get_command(app)
+    _plain_flags(cmd)
+    return cmd
+
+
+def _plain_flags(cmd) -> None:
+    help_option = cmd.get_help_option(typer.Context(cmd))
+    for p in [*cmd.params, *([help_option] if help_option is not None else [])]:
+        if getattr(p, "is_flag", False) and p.metavar is None:
+            p.metavar = ""
+    for sub in getattr(cmd, "commands", {}).values():
+        _plain_flags(sub)
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
-        app(args=argv, standalone_mode=False)
+        command()(args=argv, standalone_mode=False)
     except LoomError as e:
         typer.echo(f"error: {e.one_line()}", err=True)
         return 2

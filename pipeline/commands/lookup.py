@@ -16,8 +16,10 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "-o", "--out", help="Output .npz: inside, yarn, kind, direction, density, albedo."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
-        """Inside a fibre or not, yarn index (-1 outside), kind (0 none, 1 regular, 2 loop, 3 hair), unit fibre
-        direction (zero outside), density and albedo, for every point."""
+        """Look up the procedural fibres at given points (seed 000 Algorithm 1).
+
+        For every point: inside a fibre or not, yarn index (-1 outside), kind (0 none, 1 regular, 2 loop,
+        3 hair), unit fibre direction (zero outside), density and albedo."""
         from ..outputs import check_output
         from ..memory import budget as memory_budget
         from ..runners.lookup import run_lookup

@@ -16,8 +16,8 @@ import typer
 from ..memory import BUDGET_HELP
 
 app = typer.Typer(name="precompute", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
-                  help="Seed 001 §4: segment visibility functions (svf) and IIRTF transfer matrices (iirtf) of a "
-                       "tiling's exemplars.")
+                  help="Precompute the light transport of a tiling's exemplars for render --method prt.\n\n"
+                       "Seed 001 §4: segment visibility functions (svf), then IIRTF transfer matrices (iirtf).")
 
 
 def register(root: typer.Typer) -> None:
@@ -48,7 +48,9 @@ def svf(
     budget: float = _BUDGET,
     threads: int = _THREADS,
 ):
-    """Segment visibility functions (§4.1): per fibre segment, the binary visibility image of the sky from its
+    """Compute the segment visibility functions of every fibre segment (seed 001 §4.1).
+
+    Per fibre segment: the binary visibility image of the sky from its
     midpoint in the exemplar repeated without end, its spherical signed distance function (SSDF) compressed
     by PCA over the exemplar, and the sum-of-SGs representation."""
     from ..memory import budget as memory_budget
@@ -79,22 +81,24 @@ def iirtf(
     mfp_paths: int = typer.Option(20000, "--mfp-paths", help="Paths traced to estimate the mean free path."),
     max_depth: int = typer.Option(32, "--max-depth", help="Largest number of scattering events on a path."),
     rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
-    light_sampling: str = typer.Option("uniform", "--light-sampling",
+    light_sampling: str = typer.Option("uniform", "--light-sampling", metavar="<uniform | mis>",
                                        help="Estimator of the light integral: uniform (§4.2: light directions "
                                             "uniform on the hemisphere) or mis (the same integral, a path "
                                             "tracer lit by the SH sky with multiple importance sampling; "
                                             "much less variance for sharp BCSDFs)."),
     theta_samples: int = typer.Option(512, "--theta-samples", help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
-    bcsdf: str = typer.Option(None, "--bcsdf", help="BCSDF preset for yarn groups the scene names none for."),
+    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset for yarn groups the scene names none for."),
     chunk: int = typer.Option(16, "--chunk", help="Cells per chunk task."),
     seed: int = typer.Option(0, "--seed", help="Seed of the Monte Carlo estimates."),
-    set_: List[str] = typer.Option(None, "--set", help="Material option KEY=VALUE (tint=yarn|none, as render)."),
+    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help="Material option KEY=VALUE (tint=yarn|none, as render)."),
     exemplar: List[int] = _EXEMPLAR,
     force: bool = _FORCE,
     budget: float = _BUDGET,
     threads: int = _THREADS,
 ):
-    """Incoming indirect radiance transfer functions (§4.2): the exemplar cut into cells of about a mean free
+    """Compute the incoming indirect radiance transfer functions of every exemplar (seed 001 §4.2-4.3).
+
+    The exemplar cut into cells of about a mean free
     path, and per cell the SH matrix A_C taking light to the indirect incoming radiance at the cell's
     segments, estimated by path tracing the fibre BCSDF, with its standard error; plus the BCSDF's SH table
     C_S (§4.3) of every material."""

@@ -13,15 +13,17 @@ def register(app: typer.Typer) -> None:
     def realize(
         yarns: Path = typer.Argument(..., help="A yarns artifact (loomlight ingest)."),
         out: Path = typer.Option(..., "-o", "--out", help="Output fibers artifact (directory ending in .zarr)."),
-        preset: str = typer.Option(None, "--preset", help="Give every yarn this preset (data/yarns/NAME.toml)."),
+        preset: str = typer.Option(None, "--preset", metavar="<name>", help="Give every yarn this preset (data/yarns/NAME.toml)."),
         radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers (as for tables)."),
         spacing: float = typer.Option(0.002, "--spacing", help="Largest step between vertices along z (scene units; positive, at most 1e6)."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
     ):
-        """Full realization (seed 000 Eq. 1-4 and 7): regular, loop and hair fibres with radius, yarn, ply and
-        kind. The same random numbers as `loomlight tables`, so both describe one fabric."""
+        """Realize every fibre of the yarns explicitly, as a fibers artifact (seed 000 Eq. 1-4 and 7).
+
+        Regular, loop and hair fibres with radius, yarn, ply and kind, from the same random numbers as
+        `loomlight tables`, so both describe one fabric."""
         from ..memory import budget as memory_budget
         from ..outputs import ARTIFACT, check_output
         from ..runners.realize import run_realize

@@ -12,34 +12,43 @@ from pathlib import Path
 
 import typer
 
-from ..renderers import COMMON_DEFAULTS, material_help, method_help, settings_help, source_help
+from ..renderers import (COMMON_DEFAULTS, material_help, material_metavar, method_help, method_metavar, settings_help,
+                         source_help, source_metavar)
 
 
 def register(app: typer.Typer) -> None:
     @app.command("render")
     def render(scene: Path = typer.Argument(..., help="Scene file (TOML)."),
-               method: str = typer.Option(None, "--method", "-m", help=method_help()),
+               method: str = typer.Option(None, "--method", "-m", metavar=method_metavar(), help=method_help()),
                out: Path = typer.Option(..., "--out", "-o", help="Output EXR path (PNG preview and .zarr artifact go beside it)."),
                width: int = typer.Option(None, "--width", help=f"Image width in pixels (default: camera.width, else {COMMON_DEFAULTS['width']})."),
                height: int = typer.Option(None, "--height", help=f"Image height in pixels (default: camera.height, else {COMMON_DEFAULTS['height']})."),
                spp: int = typer.Option(None, "--spp", help=f"Samples per pixel (default: render.spp, else {COMMON_DEFAULTS['spp']})."),
                seed: int = typer.Option(None, "--seed", help=f"Random seed (default: render.seed, else {COMMON_DEFAULTS['seed']})."),
-               source: str = typer.Option(None, "--source", help=source_help()),
+               source: str = typer.Option(None, "--source", metavar=source_metavar(), help=source_help()),
                fibers: Path = typer.Option(None, "--fibers", help="A fibers artifact (realized fibres) for fibre renderers, or a tiling artifact (shell-mapped exemplars)."),
                tables: Path = typer.Option(None, "--tables", help="volpath --source procedural: the procedural tables artifact."),
                grid: Path = typer.Option(None, "--grid", help="volpath --source grid: the voxel grid artifact."),
-               bcsdf: str = typer.Option(None, "--bcsdf", help="BCSDF preset for yarn groups whose scene entry names none (data/bcsdf/)."),
-               material: str = typer.Option(None, "--material", help=material_help()),
+               bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset (a name in data/bcsdf/ or a preset file) for yarn groups whose scene entry names none."),
+               material: str = typer.Option(None, "--material", metavar=material_metavar(), help=material_help()),
                max_depth: int = typer.Option(None, "--max-depth", help=f"Maximum scattering events per path (default: render.max_depth, else {COMMON_DEFAULTS['max_depth']})."),
                max_spp: int = typer.Option(None, "--max-spp", min=0, help="Adaptive sampling: pixels whose relative error after --spp samples exceeds render.target_error (default 0.05) are rendered again with up to this many new samples (default: render.max_spp, else 0 = off)."),
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
                exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops (finite, within +-64)."),
-               set_: list[str] = typer.Option(None, "--set", help=settings_help())):
-        """Render SCENE to an EXR + PNG preview + render artifact with statistics."""
-        from ..errors import LoomError
+               set_: list[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help=settings_help())):
+        """Render a scene to a linear EXR, an sRGB PNG preview and a render artifact with statistics."""
+        from ..errors import LoomError, check_name
         from ..outputs import ARTIFACT, check_output
+        from ..renderers import all_sources
+        from ..renderers import method as registered
         from ..runners.render import run_render
 
+        if method is not None:  # the names first: before the outputs are checked or the scene is read
+            m = registered(method)
+            if source is not None:
+                m.source(source)
+        elif source is not None:
+            check_name(source, all_sources(), None, "--source", "render source")
         if not -64.0 <= exposure <= 64.0:
             raise LoomError(None, "--exposure", f"must be a finite number of stops within +-64, got {exposure}")
         check_output(out, "-o", suffixes=(".exr",))

@@ -15,7 +15,8 @@ from pathlib import Path
 import typer
 
 app = typer.Typer(name="study", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
-                  help="Studies of the prt renderer (seed 001 §6): parameter strips and error attribution.")
+                  help="Study the prt renderer against fiberpath (seed 001 §6): parameter strips and error "
+                       "attribution.")
 
 
 def register(root: typer.Typer) -> None:
@@ -27,8 +28,8 @@ _FORCE = typer.Option(False, "--force", help="Redo precomputes and renders even 
 _STUDY = typer.Argument(..., help="A study file (TOML; format in pipeline/runners/prt_study.py).")
 _SWEEP = typer.Argument(..., help="The prt sweep file (methods 'fiberpath' and 'prt').")
 _SWEEP_DIR = typer.Option(..., "--sweep-dir", help="Where loomlight evaluate --sweep wrote that sweep.")
-_REFERENCE = typer.Option("fiberpath", "--reference", help="The reference method's name in the sweep.")
-_PRT = typer.Option("prt", "--prt", help="The prt method's name in the sweep.")
+_REFERENCE = typer.Option("fiberpath", "--reference", metavar="<name>", help="The reference method's name in the sweep.")
+_PRT = typer.Option("prt", "--prt", metavar="<name>", help="The prt method's name in the sweep.")
 
 
 @app.command("prt-params")
@@ -37,7 +38,7 @@ def prt_params(
     out: Path = _OUT,
     force: bool = _FORCE,
 ):
-    """Seed 001 §6.1: IIRTF cell size and SH order, each against fiberpath on the same view."""
+    """Compare prt's IIRTF cell sizes and SH orders with fiberpath on one view (seed 001 §6.1)."""
     from ..outputs import DIRECTORY, check_output
     from ..runners.prt_study import run_params
 

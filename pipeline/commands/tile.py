@@ -17,9 +17,11 @@ def register(app: typer.Typer) -> None:
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
-        """Realize periodic fibre exemplars from weave drafts, cut them into blocks, lay the blocks over the
-        cloth's (u, v) domain by the block map, and build the shell (base surface offset along its smoothed
-        normals, split into tetrahedra) that maps them onto the surface."""
+        """Lay fibre exemplars of weave drafts over a surface and build the shell that maps them onto it.
+
+        Realizes periodic fibre exemplars from weave drafts, cuts them into blocks, lays the blocks over the
+        cloth's (u, v) domain by the block map, and builds the shell (base surface offset along its smoothed
+        normals, split into tetrahedra) that maps them onto the surface (seed 001 §2)."""
         from ..outputs import ARTIFACT, check_output
         from ..memory import budget as memory_budget
         from ..runners.tile import run_tile

@@ -2,7 +2,7 @@
 
 Averages ``--supersample``^3 procedural lookups per voxel (``stages.render.grid_medium.voxelize``):
 mean density, principal fibre direction, density-weighted albedo and roughness, over the box of all
-yarn tubes. The grid renders with ``loomlight render --method volpath --source grid --set grid=...``.
+yarn tubes. The grid renders with ``loomlight render --method volpath --source grid --grid GRID.zarr``.
 ``--export-npy DIR`` also writes raw numpy volumes for other renderers (Mitsuba 3 ``gridvolume``
 layout, (Z, Y, X[, C]) over the box in ``grid_bounds.npy``): density.npy, albedo.npy,
 direction.npy, roughness.npy and sggx.npy (6-channel Sxx, Syy, Szz, Sxy, Sxz, Syz).

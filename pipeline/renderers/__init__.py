@@ -25,13 +25,12 @@ To add a method: its integrator (``stages/render/<method>.py``), its setup modul
 """
 from __future__ import annotations
 
-import difflib
 import importlib
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 
-from ..errors import LoomError
+from ..errors import LoomError, did_you_mean, unknown  # noqa: F401 (did_you_mean: for the render runner)
 
 if TYPE_CHECKING:  # numpy stays out of `loomlight --help`
     import numpy as np
@@ -83,8 +82,7 @@ class RenderMethod:
         for s in self.sources:
             if s.name == name:
                 return s
-        raise LoomError(None, "--source", f"{self.name} has no source {name!r} (known: {', '.join(self.source_names)})"
-                        + did_you_mean(name, self.source_names))
+        raise LoomError(None, "--source", unknown(f"{self.name} source", name, self.source_names))
 
     @property
     def source_names(self) -> tuple[str, ...]:
@@ -161,11 +159,6 @@ METHODS = {m.name: m for m in (
 )}
 
 
-def did_you_mean(name, known) -> str:
-    close = difflib.get_close_matches(str(name), list(known), n=1)
-    return f"; did you mean {close[0]!r}?" if close else ""
-
-
 def known_methods() -> list[str]:
     return sorted(METHODS)
 
@@ -173,8 +166,7 @@ def known_methods() -> list[str]:
 def method(name: str) -> RenderMethod:
     """The registered method ``name``; unknown names raise a LoomError listing the known ones."""
     if name not in METHODS:
-        raise LoomError(None, "--method", f"unknown render method {name!r} (known: {', '.join(known_methods())})"
-                        + did_you_mean(name, METHODS))
+        raise LoomError(None, "--method", unknown("render method", name, known_methods()))
     return METHODS[name]
 
 
@@ -183,13 +175,39 @@ def all_sources() -> list[str]:
 
 
 def method_help() -> str:
-    return "Render method: " + "; ".join(f"{m.name} ({m.summary})" for m in METHODS.values()) + \
+    return "Render method: " + "; ".join(f"{m.name}, {m.summary}" for m in METHODS.values()) + \
         ". Default: the scene's render.method."
 
 
+def _input_option(inp: ArtifactInput) -> str:
+    return f"--{inp.option}" if inp.option in CLI_INPUTS else f"--set {inp.option}="
+
+
 def source_help() -> str:
-    parts = [f"{m.name}: {', '.join(m.source_names)} (default {m.default_source})" for m in METHODS.values()]
-    return "Where the method takes its geometry from -- " + "; ".join(parts) + ". Default: the scene's render.source."
+    parts = []
+    for m in METHODS.values():
+        srcs = [f"{s.name}{' (default)' if s.name == m.default_source and len(m.sources) > 1 else ''} "
+                f"from {' + '.join(_input_option(i) for i in s.inputs)}" for s in m.sources]
+        parts.append(f"{m.name}: {', '.join(srcs)}")
+    return "Where the method takes its geometry from -- " + "; ".join(parts) + \
+        ". Default: the scene's render.source, else the method's default."
+
+
+def choices_metavar(names) -> str:
+    """An option's metavar in ``--help`` listing the values it takes: ``<volpath|fiberpath|...>``."""
+    return "<" + " | ".join(names) + ">"
+
+
+def method_metavar() -> str:
+    return choices_metavar(METHODS)
+
+
+def source_metavar() -> str:
+    return choices_metavar(dict.fromkeys(s.name for m in METHODS.values() for s in m.sources))
+
+
+def material_metavar() -> str:
+    return choices_metavar(dict.fromkeys(x for m in METHODS.values() for x in m.materials))
 
 
 def settings_help() -> str:
@@ -217,7 +235,7 @@ def render_schema() -> dict:
                                                                  if k not in ("width", "height")),
         "properties": {
             "method": {"type": "string", "description": "a registered method: " + ", ".join(known_methods())
-                       + " (checked against the registry when rendering)"},
+                       + " (checked against the registry when the scene is read)"},
             "spp": positive,
             "seed": {"type": "integer", "minimum": 0},
             "max_depth": positive,
