@@ -1,14 +1,26 @@
 """Pictures of intermediate artifacts, one module per artifact kind (``<kind>.py``).
 
-Each module defines ``inspect(artifact, png, show=False, **options)`` and draws with pyvista
-off-screen (or matplotlib for plots). ``pyvista_setup`` chooses an off-screen backend that works.
+Each module defines ``inspect(artifact, png, show=False, **options)``. Pictures are matplotlib
+figures: every panel has a title, every colour coding a legend or a colour bar, and no text is
+smaller than ``MIN_FONT_PT`` points at the saved resolution (``DPI``). Three-dimensional views are
+drawn by pyvista off-screen (``pyvista_setup``), cropped to their content (``screenshot``) and placed
+into a matplotlib panel (with ``--show`` the pyvista window opens instead, for turning the view).
 """
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 
+import numpy as np
+
 from ..errors import LoomError
+
+DPI = 100            # pixels per inch of the saved PNG: ``--width`` x ``--height`` pixels = size / DPI inches
+MIN_FONT_PT = 9      # the smallest text anywhere in a picture, in points at DPI
+STYLE = {"font.size": 10, "axes.titlesize": 10.5, "axes.labelsize": 10, "xtick.labelsize": 9,
+         "ytick.labelsize": 9, "legend.fontsize": 9, "legend.title_fontsize": 9, "figure.titlesize": 11.5,
+         "figure.dpi": DPI, "savefig.dpi": DPI, "figure.facecolor": "white", "savefig.facecolor": "white"}
 
 
 def pyvista_setup():
@@ -18,6 +30,59 @@ def pyvista_setup():
 
     pyvista.OFF_SCREEN = True
     return pyvista
+
+
+@contextlib.contextmanager
+def pyplot(show: bool = False):
+    """matplotlib.pyplot (the Agg backend unless ``show``) with the inspectors' style in force:
+    create and save the figure inside the ``with``."""
+    import matplotlib
+
+    if not show:
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    with plt.rc_context(STYLE):
+        yield plt
+
+
+def finish(fig, png, show: bool = False, tight: bool = True):
+    """Save ``fig`` to ``png`` (cropped to its content when ``tight``), show it if asked, close it."""
+    import matplotlib.pyplot as plt
+
+    if png is not None:
+        fig.savefig(str(png), dpi=DPI, **({"bbox_inches": "tight", "pad_inches": 0.06} if tight else {}))
+    if show:
+        plt.show()
+    plt.close(fig)
+    return png
+
+
+def crop_to_content(img: np.ndarray, background=None, pad: int = 4) -> np.ndarray:
+    """``img`` (H, W, C) cut to the bounding box of the pixels that differ from ``background`` (default:
+    the top-left pixel's colour), with ``pad`` pixels kept around."""
+    bg = img[0, 0] if background is None else np.asarray(background, img.dtype)
+    diff = np.any(np.abs(img.astype(np.int32) - bg.astype(np.int32)) > 3, axis=-1)
+    rows, cols = np.nonzero(diff.any(axis=1))[0], np.nonzero(diff.any(axis=0))[0]
+    if len(rows) == 0:
+        return img
+    r0, r1 = max(rows[0] - pad, 0), min(rows[-1] + pad + 1, img.shape[0])
+    c0, c1 = max(cols[0] - pad, 0), min(cols[-1] + pad + 1, img.shape[1])
+    return img[r0:r1, c0:c1]
+
+
+def screenshot(plotter) -> np.ndarray:
+    """The off-screen plotter's picture (H, W, 3) uint8, cropped to its content; closes the plotter."""
+    img = plotter.screenshot(return_img=True)
+    plotter.close()
+    return crop_to_content(np.asarray(img)[..., :3])
+
+
+def image_panel(ax, img, title: str) -> None:
+    """A 3D view's picture in a panel: no axes, equal aspect, a title."""
+    ax.imshow(img, interpolation="lanczos" if min(img.shape[:2]) > 200 else "nearest")
+    ax.set_axis_off()
+    ax.set_title(title)
 
 
 def inspector_for(kind: str):

@@ -1,13 +1,17 @@
-"""Picture of a fibers artifact: the realized fibres of one yarn (or a stretch of it) as lines,
-regular fibres in the yarn's albedo, loops orange, hairs red (pyvista, off-screen)."""
+"""Picture of a fibers artifact: the realized fibres of one yarn (or a stretch of it) as lines seen from
+the side, by kind in distinct colours named in the legend: regular blue, loop orange, hair red (the same
+colours as the tables inspector's cross-section), pyvista off-screen. The title gives the yarn, its
+albedo, the stretch drawn and the fibre counts."""
 from __future__ import annotations
 
 import numpy as np
 
-from . import pyvista_setup
+from . import finish, image_panel, pyplot, pyvista_setup, screenshot
 
-KIND_COLORS = {2: (1.0, 0.55, 0.1), 3: (0.85, 0.1, 0.1)}
+KIND_NAMES = {1: "regular", 2: "loop", 3: "hair"}
+KIND_COLORS = {1: (0.12, 0.40, 0.75), 2: (1.0, 0.55, 0.05), 3: (0.85, 0.08, 0.08)}
 MAX_VERTICES = 400_000
+VIEWS = {0: "xz", 1: "yz", 2: "xz"}   # look across the stretch's main axis, z up where possible
 
 
 def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
@@ -30,7 +34,7 @@ def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
     axis = int(np.argmax(ext))
     centre = float(np.median(pts[sel, axis])) if z is None else float(z)
     half = 0.5 * ext[axis] * min(1.0, MAX_VERTICES / max(len(sel), 1))
-    plotter = pv.Plotter(off_screen=not show, window_size=list(size))
+    plotter = pv.Plotter(off_screen=not show, window_size=[int(size[0]), int(size[1])])
     plotter.set_background("white")
     groups = {}
     for f in fibres:
@@ -38,27 +42,37 @@ def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
         keep = np.abs(p[:, axis] - centre) <= half
         if keep.sum() < 2:
             continue
-        p = p[keep]
-        groups.setdefault(int(kind[f]), []).append(p)
-    for k, polys in groups.items():
-        allp = np.concatenate(polys)
-        lines = []
-        base = 0
+        groups.setdefault(int(kind[f]), []).append(p[keep])
+    for k in sorted(groups):
+        polys = groups[k]
+        lines, base = [], 0
         for p in polys:
             lines.append(np.concatenate([[len(p)], base + np.arange(len(p))]))
             base += len(p)
-        mesh = pv.PolyData(allp)
+        mesh = pv.PolyData(np.concatenate(polys))
         mesh.lines = np.concatenate(lines)
-        color = tuple(np.clip(albedo[y], 0, 1)) if k == 1 else KIND_COLORS[k]
-        plotter.add_mesh(mesh, color=color, line_width=2 if k == 1 else 3, render_lines_as_tubes=False,
-                         label={1: "regular", 2: "loop", 3: "hair"}[k])
-    plotter.add_legend(bcolor="white", face="line")
-    plotter.add_axes()
-    plotter.camera_position = "iso"
+        plotter.add_mesh(mesh, color=KIND_COLORS[k], line_width=1.5 if k == 1 else 2.5, render_lines_as_tubes=False,
+                         label=KIND_NAMES[k])
+    plotter.camera_position = VIEWS[axis]
+    plotter.camera.elevation = 20
     plotter.reset_camera()
+    counts = {k: len(v) for k, v in groups.items()}
+    legend = [(f"{KIND_NAMES[k]} ({counts.get(k, 0)} fibres)", KIND_COLORS[k]) for k in (1, 2, 3)]
+    axname = "xyz"[axis]
+    title = (f"fibres of yarn {y} (albedo {', '.join(f'{v:.2f}' for v in albedo[y])}): "
+             f"{axname} {centre - half:.3g} to {centre + half:.3g}, seen across {axname}")
     if show:
+        plotter.add_text(title, font_size=12, color="black")
+        plotter.add_legend([[lab, col] for lab, col in legend], bcolor="white", face="line", size=(0.25, 0.15))
         plotter.show(screenshot=str(png) if png else None)
-    else:
-        plotter.screenshot(str(png))
-        plotter.close()
-    return png
+        return png
+    img = screenshot(plotter)
+    with pyplot() as plt:
+        from matplotlib.lines import Line2D
+
+        fig, ax = plt.subplots(figsize=(size[0] / 100, size[1] / 100))
+        image_panel(ax, img, title)
+        ax.legend(handles=[Line2D([], [], color=col, lw=3, label=lab) for lab, col in legend],
+                  loc="upper left", bbox_to_anchor=(1.0, 1.0), title="fibre kind", frameon=False)
+        fig.tight_layout()
+        return finish(fig, png)

@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from ..errors import LoomError
+from . import finish, pyplot
 
 LIGHT = np.array([math.sin(math.radians(30.0)) * math.cos(math.radians(20.0)),
                   math.sin(math.radians(30.0)) * math.sin(math.radians(20.0)), math.cos(math.radians(30.0))])
@@ -44,11 +45,13 @@ def cell_fluence_se(se, order: int, w_d):
 
 
 def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
-    import matplotlib
+    with pyplot(show) as plt:
+        fig = _figure(plt, art, size, exemplar)
+        return finish(fig, png, show)
 
-    if not show:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def _figure(plt, art, size, exemplar):
+    from matplotlib.patches import Patch
 
     infos = art.summary["exemplars"]
     ks = [i["exemplar"] for i in infos]
@@ -70,8 +73,8 @@ def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
     empty = (~full).reshape(NZ, NY, NX)
     show_layers = list(range(NZ - 1, -1, -1))[:6]
     ncol = max(3, len(show_layers))
-    fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), dpi=100, constrained_layout=True)
-    gs = fig.add_gridspec(2, ncol)
+    fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), dpi=100, layout="constrained")
+    gs = fig.add_gridspec(2, ncol, height_ratios=[size[0] / ncol / 100 + 0.6, 4.0])
     expo = float(np.percentile(flu[~empty], 99)) if np.any(~empty) else 1.0
     expo = expo if expo > 0 else 1.0
     W, H = NX * info["cell_size"][0], NY * info["cell_size"][1]
@@ -91,7 +94,7 @@ def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
         for by in range(1, nby):
             ax.axhline(by * H / nby, color="white", lw=0.4)
         z0 = info["slab"][0] + iz * info["cell_size"][2]
-        ax.set_title(f"layer {iz}: z {z0:.3f}-{z0 + info['cell_size'][2]:.3f}", fontsize=8)
+        ax.set_title(f"layer {iz}: z {z0:.3f}-{z0 + info['cell_size'][2]:.3f}", fontsize=9)
         ax.set_xlabel("x (exemplar)")
         ax.set_ylabel("y (exemplar)")
     ax = fig.add_subplot(gs[1, : ncol // 2 + 1])
@@ -104,7 +107,8 @@ def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
         ax.errorbar(zc, m, yerr=e, color=col, marker="o", ms=3, capsize=2, label=f"{col} (bars: RMS of the cells' Monte Carlo SE)")
     ax.set_xlabel("cell layer height z (exemplar space; the light comes from +z)")
     ax.set_ylabel("mean fluence of the indirect light, int T dw1")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=9)
+    ax.set_title("mean fluence per layer (the top row shows it per cell)")
     ax.grid(alpha=0.3)
     ax = fig.add_subplot(gs[1, ncol // 2 + 1:])
     energy = []
@@ -115,10 +119,9 @@ def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
     ax.bar(np.arange(L + 1), energy, color="gray")
     ax.set_xlabel("SH order l of the light direction (rows of A_C)")
     ax.set_ylabel("share of sum a^2")
-    ax.set_title("energy of A_C by order", fontsize=9)
-    if png is not None:
-        fig.savefig(png)
-    if show:
-        plt.show()
-    plt.close(fig)
-    return png
+    ax.set_title("energy of A_C by order")
+    fig.legend(handles=[Patch(facecolor=(0.5, 0.5, 0.5), label="empty cell (no fibre)"),
+                        Patch(facecolor="white", edgecolor="0.3", label="white lines: block grid"),
+                        Patch(facecolor=(1, 0.85, 0.6), label=f"cell RGB = fluence / {expo:.3g} (99th pct.), sRGB")],
+               loc="outside lower center", ncol=3, frameon=False, fontsize=9)
+    return fig

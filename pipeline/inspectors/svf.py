@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from ..errors import LoomError
+from . import finish, pyplot
 
 
 def segment_svf(art, k: int, s: int):
@@ -65,11 +66,11 @@ def _pick(art, segment, exemplar):
 
 
 def inspect(art, png, show=False, size=(1200, 900), segment=None, exemplar=None, **_):
-    import matplotlib
+    with pyplot(show) as plt:
+        return finish(_figure(plt, art, size, segment, exemplar), png, show)
 
-    if not show:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def _figure(plt, art, size, segment, exemplar):
     from matplotlib.colors import TwoSlopeNorm
 
     info, s = _pick(art, segment, exemplar)
@@ -101,23 +102,19 @@ def inspect(art, png, show=False, size=(1200, 900), segment=None, exemplar=None,
     if len(wrong):
         a.scatter((wrong[:, 1] + 0.5) * 360 / C, (wrong[:, 0] + 0.5) * 180 / R, s=4, c="red",
                   label=f"{len(wrong)} pixels differ from (a)")
-        a.legend(loc="lower right", fontsize=8)
-    a.set_title("(c) sign of the SSDF")
+        a.legend(loc="lower right", fontsize=9)
+    a.set_title("(c) sign of the SSDF (white > 0)")
     a = ax[1, 1]
     im = a.imshow(ssg, cmap="viridis", extent=ext, aspect="auto", interpolation="nearest")
     th = np.degrees(np.arccos(np.clip(axes[:, 2], -1, 1)))
     ph = np.degrees(np.arctan2(axes[:, 1], axes[:, 0])) % 360
     a.scatter(ph, th, s=6, c="white", edgecolors="black", linewidths=0.3, label="SG axes")
-    a.legend(loc="lower right", fontsize=8)
+    a.legend(loc="lower right", fontsize=9)
     a.set_title(f"(d) sum of {len(axes)} SGs, lambda_svf = {art.summary['sg_sharpness']:g}")
     fig.colorbar(im, ax=a, label="V^ssg")
     for a in ax.ravel():
         a.set_xlabel("phi (degrees)")
         a.set_ylabel("theta from +z (degrees)")
-        a.axhline(90, color="orange", lw=0.6, ls="--")
-    if png is not None:
-        fig.savefig(png)
-    if show:
-        plt.show()
-    plt.close(fig)
-    return png
+        a.axhline(90, color="orange", lw=0.8, ls="--", label="horizon (theta 90)")
+    ax[0, 0].legend(loc="lower right", fontsize=9)
+    return fig

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 
+from . import finish, pyplot
+
 
 def cross_section(tab, c, z):
     """(centres (n, 2), kinds (n,), plies (n,)) of the fibres of yarn c crossing yarn-space z."""
@@ -36,11 +38,11 @@ def cross_section(tab, c, z):
 
 
 def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
-    import matplotlib
+    with pyplot(show) as plt:
+        return finish(_figure(plt, art, yarn, z, size), png, show)
 
-    if not show:
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+
+def _figure(plt, art, yarn, z, size):
     from matplotlib.patches import Circle, Ellipse
 
     from stages.core.yarn import model as M
@@ -79,7 +81,9 @@ def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
             ax.plot([cx, ex], [cy, ey], color="0.75", lw=0.5, zorder=0)
     for k, lab in colors.items():
         ax.plot([], [], "o", color=lab, label={1: "regular", 2: "loop", 3: "hair"}[k])
-    ax.legend(loc="upper right")
+    ax.plot([], [], color="0.3", lw=1, label="ply ellipse")
+    ax.plot([], [], color="0.75", lw=1, label="azimuth bin boundary")
+    ax.legend(loc="upper right", title="fibre centres (at fibre radius)")
     ax.set_aspect("equal")
     ext = float(tab.yarn_extent[c])
     ax.set_xlim(-ext, ext)
@@ -87,9 +91,4 @@ def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
     ax.set_xlabel("x (along n)")
     ax.set_ylabel("y (along b)")
     ax.set_title(f"yarn {c} cross-section at z = {zz:.4g}: {len(pts)} fibres, {B} azimuth bins per ply")
-    if show:
-        plt.show()
-    else:
-        fig.savefig(png)
-    plt.close(fig)
-    return png
+    return fig
