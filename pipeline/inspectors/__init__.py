@@ -47,11 +47,22 @@ def pyplot(show: bool = False):
 
 
 def finish(fig, png, show: bool = False, tight: bool = True):
-    """Save ``fig`` to ``png`` (cropped to its content when ``tight``), show it if asked, close it."""
+    """Save ``fig`` to ``png`` (within the figure's size, cut to its content when ``tight``: no empty
+    margins), show it if asked, close it."""
+    import io
+
+    import matplotlib.image as mpimg
     import matplotlib.pyplot as plt
 
     if png is not None:
-        fig.savefig(str(png), dpi=DPI, **({"bbox_inches": "tight", "pad_inches": 0.06} if tight else {}))
+        if tight:
+            buf = io.BytesIO()
+            fig.savefig(buf, dpi=DPI, format="png")
+            buf.seek(0)
+            img = (np.asarray(mpimg.imread(buf, format="png"))[..., :3] * 255).round().astype(np.uint8)
+            mpimg.imsave(str(png), np.ascontiguousarray(crop_to_content(img, (255, 255, 255), pad=6)))
+        else:
+            fig.savefig(str(png), dpi=DPI)
     if show:
         plt.show()
     plt.close(fig)

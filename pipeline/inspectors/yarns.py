@@ -85,9 +85,10 @@ def inspect(art, png, show=False, frames=False, yarn=-1, size=(1200, 900), **_):
     with pyplot() as plt:
         from matplotlib.patches import Patch
 
-        fig, ax = plt.subplots(figsize=(size[0] / 100, size[1] / 100))
+        # as tall as the view needs at the width left beside the legend (at most --height)
+        fh = min(size[1] / 100, 0.78 * size[0] / 100 * img.shape[0] / img.shape[1] + 0.5)
+        fig, ax = plt.subplots(figsize=(size[0] / 100, fh), layout="constrained")
         image_panel(ax, img, title)
-        ax.legend(handles=[Patch(facecolor=col, edgecolor="0.3", label=lab) for lab, col in legend],
-                  loc="upper left", bbox_to_anchor=(1.0, 1.0), title="colours", frameon=False)
-        fig.tight_layout()
+        fig.legend(handles=[Patch(facecolor=col, edgecolor="0.3", label=lab) for lab, col in legend],
+                  loc="outside right upper", title="colours", frameon=False)
         return finish(fig, png)
