@@ -13,30 +13,35 @@ SCENE ?= data/scenes/demo.toml
 LARGE_SCENE ?= data/scenes/woven_large.toml
 TILING ?= data/tilings/damask.toml
 DAMASK_SCENE ?= data/scenes/draped_damask.toml
-# main demo pictures (fiberpath adaptive: pixels over render.target_error get up to MAX_SPP new
-# samples); the evaluation set is smaller because procedural volpath is slow (README: Status)
+# make demo stays under 10 minutes on an idle 2-core machine from a fresh clone (README: Status), so
+# its pictures are 240x180 (the scenes' cameras say 320x240: DEMO_SIZE= renders those) and its
+# precomputes are reduced (below). Main pictures: fiberpath adaptive (pixels over render.target_error
+# get up to MAX_SPP new samples); the evaluation set is smaller because procedural volpath is slow.
+DEMO_SIZE ?= --width 240 --height 180
 SPP ?= 8
 FIBERPATH_SPP ?= 16
-MAX_SPP ?= 64
-EVAL_W ?= 96
-EVAL_H ?= 72
+MAX_SPP ?= 32
+EVAL_W ?= 64
+EVAL_H ?= 48
 EVAL_SPP ?= 8
 
-# seed 001 precompute of the damask's two exemplars (README: Precomputed light transport): SVF at the
-# paper's defaults; IIRTF at cells of 3 mean free paths (the paper: 1-2), 500 paths per cell (the paper:
-# 50,000) with the MIS estimator, SH order 4 -- about 7 minutes together on 2 cores
-SVF_ARGS ?= --resolution 128 --components 48
-IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 500 --light-sampling mis
+# seed 001 precompute of the damask's two exemplars (README: Precomputed light transport): SVF images of
+# 64x64 (the paper: 128x128), 48 PCA components; IIRTF at cells of 3 mean free paths (the paper: 1-2),
+# 250 paths per cell (the paper: 50,000) with the MIS estimator, SH order 4. make prt-sweep uses more
+# (PRT_SVF_ARGS, PRT_IIRTF_ARGS).
+SVF_ARGS ?= --resolution 64 --components 48
+IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 250 --light-sampling mis
 
 # make agreement: both swatches, fiberpath against realized volpath, converged (README: One look)
 AGREE ?= out/agreement
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
 AGREE_ARGS ?= --width 128 --height 96 --spp 64
 
-.PHONY: setup demo test bench table1 sweep agreement clean help
+.PHONY: setup demo demo-quick test test-all bench table1 sweep agreement clean help
 
 help:
 	@echo "make demo    - set up .venv if needed, run the demo scene end to end, print output paths"
+	@echo "make demo-quick - the same at small sizes and reduced precomputes, a first look in a few minutes (out/quick)"
 	@echo "make test    - set up .venv if needed, run the test suite"
 	@echo "make bench   - benchmarks -> bench/results/*.json and bench/results/summary.md"
 	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time) -> out/table1/report.md"
@@ -44,10 +49,13 @@ help:
 	@echo "make agreement - fiberpath vs volpath on the demo and twill swatches, demo light and sweep lights"
 	@echo "make setup   - create .venv and install loomlight with its test dependencies"
 
+# pip's output goes to .venv/pip.log and is shown only when the install fails
+PIP := $(BIN)/python -m pip --disable-pip-version-check --no-input
 $(VENV)/.installed: pyproject.toml
-	@test -x $(BIN)/python || $(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
+	@test -x $(BIN)/python || { echo "creating $(VENV) (python3 -m venv)"; $(PY) -m venv $(VENV); }
+	@echo "installing loomlight and its dependencies into $(VENV) (log: $(VENV)/pip.log)"
+	@{ $(PIP) install -q --upgrade pip && $(PIP) install -q -e '.[test]'; } > $(VENV)/pip.log 2>&1 \
+	    || { cat $(VENV)/pip.log; echo "error: pip install failed (log above, also in $(VENV)/pip.log)"; exit 1; }
 	@touch $@
 
 setup: $(VENV)/.installed
@@ -92,17 +100,17 @@ $(OUT)/damask_iirtf.png: $(OUT)/damask_iirtf.zarr/zarr.json
 
 # --- renders (EXR + PNG preview + render artifact with statistics) ---
 $(OUT)/volpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
-	$(LL) render $(SCENE) --method volpath --source realized --fibers $(OUT)/fibers.zarr --spp $(SPP) -o $@
+	$(LL) render $(SCENE) --method volpath --source realized --fibers $(OUT)/fibers.zarr --spp $(SPP) $(DEMO_SIZE) -o $@
 
 $(OUT)/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
-	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) -o $@
+	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
 $(OUT)/damask.exr: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE)
-	$(LL) render $(DAMASK_SCENE) --method fiberpath --fibers $(OUT)/damask_tiling.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) -o $@
+	$(LL) render $(DAMASK_SCENE) --method fiberpath --fibers $(OUT)/damask_tiling.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
 $(OUT)/damask_prt.exr: $(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json $(DAMASK_SCENE)
 	$(LL) render $(DAMASK_SCENE) --method prt --fibers $(OUT)/damask_tiling.zarr --set svf=$(OUT)/damask_svf.zarr \
-	    --set iirtf=$(OUT)/damask_iirtf.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) -o $@
+	    --set iirtf=$(OUT)/damask_iirtf.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
 # precomputed light transport against its reference on the same view, error maps and times
 $(OUT)/eval/damask/report.md: $(OUT)/damask.exr $(OUT)/damask_prt.exr
@@ -143,6 +151,12 @@ demo: $(DEMO_OUTPUTS)
 	@echo "  prt vs fiberpath     : $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
 	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
+# the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
+demo-quick:
+	@$(MAKE) --no-print-directory demo OUT=out/quick DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
+	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
+	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis"
+
 test: $(VENV)/.installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
@@ -182,13 +196,14 @@ agreement: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(AGRE
 
 # --- seed 001: precomputed light transport against path tracing, and its parameter studies ---
 # make prt-sweep: the damask's two exemplars each alone on a flat patch (data/tilings/flat_satin41.toml,
-# flat_satin14.toml) precomputed with the demo's settings (SVF_ARGS, IIRTF_ARGS; the exemplar only), and the
-# draped damask with the demo's SVF and IIRTF; each swept over the demo sweep's 12 lights, prt against
+# flat_satin14.toml; the exemplar only) and the draped damask, precomputed with PRT_SVF_ARGS / PRT_IIRTF_ARGS; each swept over the demo sweep's 12 lights, prt against
 # fiberpath at 16 spp (data/sweeps/prt_*.toml), then split into single and multiple scattering
 # (loomlight study prt-terms). make prt-study: seed 001 §6.1's cell-size and SH-order strips on one cheap
-# exemplar (data/studies/prt_params.toml). The sweep files name these paths: out/prt and out/demo.
+# exemplar (data/studies/prt_params.toml). The sweep files name these paths (out/prt).
 PRT := out/prt
 PRT_SWEEPS := flat41 flat14 damask
+PRT_SVF_ARGS ?= --resolution 128 --components 48
+PRT_IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 500 --light-sampling mis
 PRT_EXEMPLAR_41 := 0
 PRT_EXEMPLAR_14 := 1
 
@@ -196,16 +211,25 @@ $(PRT)/flat%_tiling.zarr/zarr.json: data/tilings/flat_satin%.toml data/scenes/fl
 	$(LL) tile data/tilings/flat_satin$*.toml -o $(PRT)/flat$*_tiling.zarr
 
 $(PRT)/flat%_svf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
-	$(LL) precompute svf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_svf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(SVF_ARGS)
+	$(LL) precompute svf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_svf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(PRT_SVF_ARGS)
 
 $(PRT)/flat%_iirtf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py)
-	$(LL) precompute iirtf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_iirtf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(IIRTF_ARGS)
+	$(LL) precompute iirtf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_iirtf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(PRT_IIRTF_ARGS)
 
-.PRECIOUS: $(PRT)/flat%_tiling.zarr/zarr.json $(PRT)/flat%_svf.zarr/zarr.json $(PRT)/flat%_iirtf.zarr/zarr.json
+$(PRT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed
+	$(LL) tile $(TILING) -o $(PRT)/damask_tiling.zarr
+
+$(PRT)/damask_svf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
+	$(LL) precompute svf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_svf.zarr $(PRT_SVF_ARGS)
+
+$(PRT)/damask_iirtf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py)
+	$(LL) precompute iirtf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_iirtf.zarr $(PRT_IIRTF_ARGS)
+
+.PRECIOUS: $(PRT)/damask_%.zarr/zarr.json $(PRT)/flat%_tiling.zarr/zarr.json $(PRT)/flat%_svf.zarr/zarr.json $(PRT)/flat%_iirtf.zarr/zarr.json
 .PHONY: prt-sweep prt-study
 
 prt-sweep: $(foreach s,41 14,$(PRT)/flat$(s)_svf.zarr/zarr.json $(PRT)/flat$(s)_iirtf.zarr/zarr.json) \
-		$(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json
+		$(PRT)/damask_svf.zarr/zarr.json $(PRT)/damask_iirtf.zarr/zarr.json
 	@for s in $(PRT_SWEEPS); do \
 	    $(LL) evaluate --sweep data/sweeps/prt_$$s.toml -o $(PRT)/$$s && \
 	    $(LL) study prt-terms data/sweeps/prt_$$s.toml --sweep-dir $(PRT)/$$s -o $(PRT)/$$s/terms || exit 1; \
