@@ -131,12 +131,20 @@ $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/vol
 	$(LL) evaluate --ref $(OUT)/eval/volpath-realized.exr --test $(OUT)/eval/volpath-procedural.exr \
 	    --test $(OUT)/eval/fiberpath.exr -o $(OUT)/eval/report
 
-DEMO_OUTPUTS = $(OUT)/yarns.png $(OUT)/cross_section.png $(OUT)/fibers.png $(OUT)/damask_tiling.png \
-	$(OUT)/damask_svf.png $(OUT)/damask_iirtf.png \
-	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr $(OUT)/damask_prt.exr $(OUT)/eval/report/report.md \
-	$(OUT)/eval/damask/report.md
+# the longest chains first: with DEMO_JOBS stages at a time, numba compilation (one core) overlaps
+# another stage's two-thread work
+DEMO_OUTPUTS = $(OUT)/eval/report/report.md $(OUT)/damask_prt.exr $(OUT)/eval/damask/report.md \
+	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr \
+	$(OUT)/yarns.png $(OUT)/cross_section.png $(OUT)/fibers.png $(OUT)/damask_tiling.png \
+	$(OUT)/damask_svf.png $(OUT)/damask_iirtf.png
+DEMO_JOBS ?= 2
 
-demo: $(DEMO_OUTPUTS)
+.PHONY: demo-outputs
+demo-outputs: $(DEMO_OUTPUTS)
+
+# two stages at a time, each one's output printed whole when it ends (no live progress bars then)
+demo: $(VENV)/.installed
+	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target demo-outputs
 	@echo "demo outputs:"
 	@echo "  yarn curves          : $(OUT)/yarns.zarr ($(OUT)/yarns.png)"
 	@echo "  procedural tables    : $(OUT)/tables.zarr (cross-section $(OUT)/cross_section.png)"
