@@ -96,6 +96,19 @@ def image_panel(ax, img, title: str) -> None:
     ax.set_title(title)
 
 
+def view_with_legend(plotter, size, title: str, handles, legend_title: str, png):
+    """A pyvista view cut to its content in a matplotlib panel titled ``title``, with ``handles``
+    (matplotlib legend handles) beside it; the figure as tall as the view needs at the width left
+    beside the legend (at most ``size[1]``)."""
+    img = screenshot(plotter)
+    with pyplot() as plt:
+        fh = min(size[1] / 100, 0.78 * size[0] / 100 * img.shape[0] / img.shape[1] + 0.5)
+        fig, ax = plt.subplots(figsize=(size[0] / 100, fh), layout="constrained")
+        image_panel(ax, img, title)
+        fig.legend(handles=handles, loc="outside right upper", title=legend_title, frameon=False)
+        return finish(fig, png)
+
+
 def inspector_for(kind: str):
     try:
         return importlib.import_module(f"{__name__}.{kind}")

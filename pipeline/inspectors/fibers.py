@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import finish, image_panel, pyplot, pyvista_setup, screenshot
+from . import pyvista_setup, view_with_legend
 
 KIND_NAMES = {1: "regular", 2: "loop", 3: "hair"}
 KIND_COLORS = {1: (0.12, 0.40, 0.75), 2: (1.0, 0.55, 0.05), 3: (0.85, 0.08, 0.08)}
@@ -66,14 +66,7 @@ def inspect(art, png, show=False, yarn=-1, z=None, size=(1200, 900), **_):
         plotter.add_legend([[lab, col] for lab, col in legend], bcolor="white", face="line", size=(0.25, 0.15))
         plotter.show(screenshot=str(png) if png else None)
         return png
-    img = screenshot(plotter)
-    with pyplot() as plt:
-        from matplotlib.lines import Line2D
+    from matplotlib.lines import Line2D
 
-        # as tall as the view needs at the width left beside the legend (at most --height)
-        fh = min(size[1] / 100, 0.78 * size[0] / 100 * img.shape[0] / img.shape[1] + 0.5)
-        fig, ax = plt.subplots(figsize=(size[0] / 100, fh), layout="constrained")
-        image_panel(ax, img, title)
-        fig.legend(handles=[Line2D([], [], color=col, lw=3, label=lab) for lab, col in legend],
-                  loc="outside right upper", title="fibre kind", frameon=False)
-        return finish(fig, png)
+    return view_with_legend(plotter, size, title, [Line2D([], [], color=col, lw=3, label=lab) for lab, col in legend],
+                            "fibre kind", png)

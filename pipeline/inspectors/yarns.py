@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import finish, image_panel, pyplot, pyvista_setup, screenshot
+from . import pyvista_setup, view_with_legend
 
 FRAME_COLORS = {"T (tangent)": (0.12, 0.35, 0.95), "N (normal)": (0.85, 0.1, 0.1), "B (binormal)": (0.1, 0.6, 0.15)}
 
@@ -81,14 +81,7 @@ def inspect(art, png, show=False, frames=False, yarn=-1, size=(1200, 900), **_):
         plotter.add_legend([[lab, col] for lab, col in legend], bcolor="white", face="rectangle", size=(0.25, 0.2))
         plotter.show(screenshot=str(png) if png else None)
         return png
-    img = screenshot(plotter)
-    with pyplot() as plt:
-        from matplotlib.patches import Patch
+    from matplotlib.patches import Patch
 
-        # as tall as the view needs at the width left beside the legend (at most --height)
-        fh = min(size[1] / 100, 0.78 * size[0] / 100 * img.shape[0] / img.shape[1] + 0.5)
-        fig, ax = plt.subplots(figsize=(size[0] / 100, fh), layout="constrained")
-        image_panel(ax, img, title)
-        fig.legend(handles=[Patch(facecolor=col, edgecolor="0.3", label=lab) for lab, col in legend],
-                  loc="outside right upper", title="colours", frameon=False)
-        return finish(fig, png)
+    return view_with_legend(plotter, size, title,
+                            [Patch(facecolor=col, edgecolor="0.3", label=lab) for lab, col in legend], "colours", png)
