@@ -48,6 +48,7 @@ import numpy as np
 
 from ..errors import LoomError
 from ..schemas import validate
+from ..scene import load_scene
 from ..toml_file import read_toml
 
 
@@ -135,6 +136,7 @@ def load_sweep(path: str | Path) -> Sweep:
         scene_path = (path.parent / scene_path).resolve()
     if not scene_path.exists():
         raise LoomError(path, "sweep.scene", f"scene file {scene_path} not found")
+    load_scene(scene_path)  # the base scene's names checked now, not at each derived render
     scene_raw = read_toml(scene_path, what="scene file")
     methods = [Method(m["name"], m.get("method", m["name"]), dict(m.get("render", {})), list(m.get("args", [])))
                for m in raw["methods"]]

@@ -258,3 +258,14 @@ def test_toml_writer_round_trip():
            "lights": [{"type": "sg", "axis": [0.0, 0.6, 0.8], "sharpness": 1e-05, "power": [1, 2.5, 3]}],
            "render": {"ground": {"albedo": 0.5}, "flag": True}}
     assert tomllib.loads(sw.dumps_toml(doc)) == doc
+
+
+def test_sweep_checks_its_base_scene_names_when_read(cli, sweep_file, tmp_path):
+    """A misspelt name in the base scene is refused when the sweep is read, naming the scene file and
+    key, before any configuration is rendered (pipeline.scene.load_scene's checks)."""
+    (tmp_path / "scene.toml").write_text(SCENE + '[yarns.warp]\npreset = "coton1"\n')
+    out = tmp_path / "bad_scene"
+    code, _, err = cli("evaluate", "--sweep", sweep_file, "-o", out, "--no-render")
+    assert code == 2, err
+    assert "scene.toml: yarns.warp.preset: unknown preset 'coton1'" in err and "did you mean 'cotton1'" in err
+    assert not out.exists() or not any(out.iterdir())
