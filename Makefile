@@ -47,14 +47,14 @@ help:
 	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time) -> out/table1/report.md"
 	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
 	@echo "make agreement - fiberpath vs volpath on the demo and twill swatches, demo light and sweep lights"
-	@echo "make setup   - create .venv and install loomlight with its test dependencies"
+	@echo "make setup   - create .venv and install loomlight with its test and Dask dependencies"
 
 # pip's output goes to .venv/pip.log and is shown only when the install fails
 PIP := $(BIN)/python -m pip --disable-pip-version-check --no-input
 $(VENV)/.installed: pyproject.toml
 	@test -x $(BIN)/python || { echo "creating $(VENV) (python3 -m venv)"; $(PY) -m venv $(VENV); }
 	@echo "installing loomlight and its dependencies into $(VENV) (log: $(VENV)/pip.log)"
-	@{ $(PIP) install -q --upgrade pip && $(PIP) install -q -e '.[test]'; } > $(VENV)/pip.log 2>&1 \
+	@{ $(PIP) install -q --upgrade pip && $(PIP) install -q -e '.[test,dask]'; } > $(VENV)/pip.log 2>&1 \
 	    || { cat $(VENV)/pip.log; echo "error: pip install failed (log above, also in $(VENV)/pip.log)"; exit 1; }
 	@touch $@
 

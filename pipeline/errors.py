@@ -21,6 +21,9 @@ class LoomError(Exception):
         self.message = message
         super().__init__(self.one_line())
 
+    def __reduce__(self):  # picklable (a chunk task's error crosses from a Dask worker)
+        return (self.__class__, (self.file, self.place, self.message))
+
     def one_line(self) -> str:
         msg = " ".join(str(self.message).split())
         return ": ".join([p for p in (self.file, self.place) if p] + [msg])

@@ -14,6 +14,7 @@ from typing import List
 import typer
 
 from ..memory import BUDGET_HELP
+from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 app = typer.Typer(name="precompute", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
                   help="Precompute the light transport of a tiling's exemplars for render --method prt.\n\n"
@@ -47,6 +48,9 @@ def svf(
     force: bool = _FORCE,
     budget: float = _BUDGET,
     threads: int = _THREADS,
+    scheduler: str = SCHEDULER,
+    workers: int = WORKERS,
+    threads_per_worker: int = THREADS_PER_WORKER,
 ):
     """Compute the segment visibility functions of every fibre segment (seed 001 §4.1).
 
@@ -55,13 +59,14 @@ def svf(
     by PCA over the exemplar, and the sum-of-SGs representation."""
     from ..memory import budget as memory_budget
     from ..outputs import ARTIFACT, check_output
+    from ..chunks import resolve_scheduler
     from ..runners.precompute import SvfParams, run_svf
 
     check_output(out, "-o", ARTIFACT)
     p = SvfParams(resolution=resolution, components=components, sg_count=sg_count, sg_sharpness=sg_sharpness,
                   chunk=chunk, seed=seed)
     res = run_svf(tiling, out, p, exemplars=exemplar or None, force=force, budget=memory_budget(budget),
-                  threads=threads)
+                  threads=threads, scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))
     if res["skipped"]:
         typer.echo(f"{out} is up to date")
     else:
@@ -95,6 +100,9 @@ def iirtf(
     force: bool = _FORCE,
     budget: float = _BUDGET,
     threads: int = _THREADS,
+    scheduler: str = SCHEDULER,
+    workers: int = WORKERS,
+    threads_per_worker: int = THREADS_PER_WORKER,
 ):
     """Compute the incoming indirect radiance transfer functions of every exemplar (seed 001 §4.2-4.3).
 
@@ -104,6 +112,7 @@ def iirtf(
     C_S (§4.3) of every material."""
     from ..memory import budget as memory_budget
     from ..outputs import ARTIFACT, check_output
+    from ..chunks import resolve_scheduler
     from ..runners.precompute import IirtfParams, parse_material_options, run_iirtf
 
     check_output(out, "-o", ARTIFACT)
@@ -111,7 +120,8 @@ def iirtf(
                     rr_depth=rr_depth, light_sampling=light_sampling, theta_samples=theta_samples, chunk=chunk, seed=seed,
                     material=parse_material_options(set_ or [], bcsdf))
     res = run_iirtf(tiling, out, p, scene=scene, exemplars=exemplar or None, force=force,
-                    budget=memory_budget(budget), threads=threads)
+                    budget=memory_budget(budget), threads=threads,
+                    scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))
     if res["skipped"]:
         typer.echo(f"{out} is up to date")
     else:

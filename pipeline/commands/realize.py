@@ -6,6 +6,7 @@ from pathlib import Path
 import typer
 
 from ..memory import BUDGET_HELP
+from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 
 def register(app: typer.Typer) -> None:
@@ -19,18 +20,23 @@ def register(app: typer.Typer) -> None:
         spacing: float = typer.Option(0.002, "--spacing", help="Largest step between vertices along z (scene units; positive, at most 1e6)."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+        scheduler: str = SCHEDULER,
+        workers: int = WORKERS,
+        threads_per_worker: int = THREADS_PER_WORKER,
     ):
         """Realize every fibre of the yarns explicitly, as a fibers artifact (seed 000 Eq. 1-4 and 7).
 
         Regular, loop and hair fibres with radius, yarn, ply and kind, from the same random numbers as
         `loomlight tables`, so both describe one fabric."""
+        from ..chunks import resolve_scheduler
         from ..memory import budget as memory_budget
         from ..outputs import ARTIFACT, check_output
         from ..runners.realize import run_realize
 
         check_output(out, "-o", ARTIFACT)
+        sched = resolve_scheduler(scheduler, None, workers, threads_per_worker)
         res = run_realize(yarns, out, preset=preset, radius=radius, seed=seed, spacing=spacing,
-                          budget=memory_budget(budget), force=force)
+                          budget=memory_budget(budget), force=force, scheduler=sched)
         if res["skipped"]:
             typer.echo(f"{out} is up to date; use --force to rebuild")
         else:

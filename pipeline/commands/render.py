@@ -12,6 +12,7 @@ from pathlib import Path
 
 import typer
 
+from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 from ..renderers import (COMMON_DEFAULTS, material_help, material_metavar, method_help, method_metavar, settings_help,
                          source_help, source_metavar)
 
@@ -35,7 +36,8 @@ def register(app: typer.Typer) -> None:
                max_spp: int = typer.Option(None, "--max-spp", min=0, help="Adaptive sampling: pixels whose relative error after --spp samples exceeds render.target_error (default 0.05) are rendered again with up to this many new samples (default: render.max_spp, else 0 = off)."),
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
                exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops (finite, within +-64)."),
-               set_: list[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help=settings_help())):
+               set_: list[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help=settings_help()),
+               scheduler: str = SCHEDULER, workers: int = WORKERS, threads_per_worker: int = THREADS_PER_WORKER):
         """Render a scene to a linear EXR, an sRGB PNG preview and a render artifact with statistics."""
         from ..errors import LoomError, check_name
         from ..outputs import ARTIFACT, check_output
@@ -56,6 +58,7 @@ def register(app: typer.Typer) -> None:
         check_output(out.with_suffix(".zarr"), "-o", ARTIFACT)
         result = run_render(scene, method=method, out=out, width=width, height=height, spp=spp, seed=seed,
                             source=source, fibers=fibers, tables=tables, grid=grid, bcsdf=bcsdf, material=material, max_depth=max_depth,
-                            threads=threads, exposure=exposure, settings=set_ or [], max_spp=max_spp)
+                            threads=threads, exposure=exposure, settings=set_ or [], max_spp=max_spp,
+                            scheduler=scheduler, workers=workers, threads_per_worker=threads_per_worker)
         for line in result:
             typer.echo(line)

@@ -14,6 +14,7 @@ from pathlib import Path
 import typer
 
 from ..memory import BUDGET_HELP
+from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 
 def register(app: typer.Typer) -> None:
@@ -24,8 +25,10 @@ def register(app: typer.Typer) -> None:
                      supersample: int = typer.Option(2, "--supersample", help="Lookups per voxel along each axis."),
                      export_npy: Path = typer.Option(None, "--export-npy", help="Also write raw numpy volumes to this directory."),
                      force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
-                     budget: float = typer.Option(None, "--budget", help=BUDGET_HELP)):
+                     budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
+                     scheduler: str = SCHEDULER, workers: int = WORKERS, threads_per_worker: int = THREADS_PER_WORKER):
         """Voxelize the procedural fibre medium: density and mean fibre direction per voxel."""
+        from ..chunks import resolve_scheduler
         from ..outputs import ARTIFACT, DIRECTORY, check_output
         from ..memory import budget as memory_budget
         from ..runners.voxelize import run_voxelize
@@ -33,4 +36,5 @@ def register(app: typer.Typer) -> None:
         check_output(out, "-o", ARTIFACT)
         if export_npy is not None:
             check_output(export_npy, "--export-npy", DIRECTORY)
-        typer.echo(run_voxelize(tables, out, res, supersample, export_npy, force, memory_budget(budget)))
+        sched = resolve_scheduler(scheduler, None, workers, threads_per_worker)
+        typer.echo(run_voxelize(tables, out, res, supersample, export_npy, force, memory_budget(budget), sched))

@@ -242,6 +242,9 @@ def render_schema() -> dict:
             "rr_depth": positive,
             "source": {"enum": all_sources()},
             "tile_size": {"type": "integer", "minimum": 4},
+            "scheduler": {"type": "string", "pattern": "^(local|processes|tcp://.+:[0-9]+)$",
+                          "description": "where the render's tile tasks run: local, processes (a Dask LocalCluster) "
+                                         "or tcp://HOST:PORT (a Dask scheduler); --scheduler overrides it"},
             "max_spp": {"type": "integer", "minimum": 0,
                         "description": "adaptive sampling: pixels whose relative error after spp samples exceeds "
                                        "target_error are rendered again with up to max_spp samples (0: off)"},

@@ -176,13 +176,14 @@ def _tiling_scene(scene, path):
     return sc, fibers, ray_eps(*art.summary["bounds"]), "fiberpath (shell)", stats
 
 
-def render(scene, options: dict) -> RenderResult:
+def film_setup(scene, options: dict):
+    """The ``FilmSetup`` of a fiberpath render (``pipeline.renderers.film``): integrator, camera, label."""
     from stages.core.shading.material import pack_material_lambert
     from stages.render.fiberpath import FiberpathIntegrator
     from stages.render.film import VARIANCE_CHANNELS
 
     from ..artifacts import read_meta
-    from .film import render_film, sampling_of
+    from .film import FilmSetup
 
     path = options.get("fibers") or (options.get("extra") or {}).get("tiling")
     source = options.get("source")
@@ -201,13 +202,19 @@ def render(scene, options: dict) -> RenderResult:
         geometry, fibers, eps, label, stats = _realized_scene(path)
     mat_of_fiber, mats = fiber_materials(scene, fibers, options)
     ground, has_ground = ground_array(scene.render)
-    W, H, seed = options["width"], options["height"], options["seed"]
     max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
-    cam = camera_array(scene.camera, W, H)
+    cam = camera_array(scene.camera, options["width"], options["height"])
     integ = FiberpathIntegrator(geometry, mat_of_fiber, mats, pack_material_lambert(ground[1:4]), lights.table(),
                                 ground, has_ground, max_depth, rr_depth, SELF_WINDOW, eps)
-    run = render_film(label, integ, cam, W, H, sampling_of(options), seed, options["tile_size"], VARIANCE_CHANNELS,
-                      options.get("threads"))
-    stats = {**run.stats(), **stats,
-             "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
-    return RenderResult(run.rgb, run.extra, stats)
+    stats = {**stats, "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
+    return FilmSetup(label, integ, cam, VARIANCE_CHANNELS, stats)
+
+
+def render(scene, options: dict) -> RenderResult:
+    from .film import RemoteFilm, render_film, sampling_of
+
+    s = film_setup(scene, options)
+    run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
+                      options["seed"], options["tile_size"], s.variance, options.get("threads"),
+                      RemoteFilm(__name__, str(scene.path), options, str(options.get("out") or "")))
+    return RenderResult(run.rgb, run.extra, {**run.stats(), **s.stats})

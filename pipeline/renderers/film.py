@@ -16,12 +16,22 @@ alone: the first pass only decides how many samples a pixel gets, so each pixel'
 unbiased (averaging the first pass in would favour pixels whose first samples happened to be
 dark). This is what converges the fireflies of sharp BCSDF lobes under delta lights, which no
 sampling strategy can remove (a directional light is only reached by next-event estimation).
+
+On a Dask scheduler (``pipeline.chunks``; ``remote`` given) each pass is a list of chunk tasks, one per
+band of ``tile_size`` image rows: a worker rebuilds the integrator and camera once per command
+(``RemoteFilm``: the renderer module's ``film_setup(scene, options)``, then the empty-tile compile),
+renders its band's tiles into a band of the film and writes it to a scratch zarr array beside the
+output (removed afterwards); the driver reads the film back and finishes it as above. Every pixel
+depends only on its own random numbers, so the image is the same bytes as a local render.
 """
 from __future__ import annotations
 
+import json
 import os
 import time
-from dataclasses import dataclass
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -80,6 +90,91 @@ def convergence(rgb, variance, target_error: float = 0.05) -> dict:
             "mean_rel_variance": float(np.sum(variance, dtype=np.float64) / n / n / max(mean * mean, 1e-30))}
 
 
+@dataclass(frozen=True)
+class FilmSetup:
+    """What a renderer module's ``film_setup(scene, options)`` returns: the integrator and camera the
+    tile loop takes, the progress label, the variance mode and the statistics known before rendering."""
+    label: str
+    integ: object
+    cam: np.ndarray
+    variance: str
+    stats: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RemoteFilm:
+    """How a Dask worker rebuilds a render's ``FilmSetup``: ``<module>.film_setup(scene, options)``."""
+    module: str
+    scene_path: str
+    options: dict
+    out: str          # the output EXR: the scratch film lies beside it
+    token: str = field(default_factory=lambda: uuid.uuid4().hex)  # one command: its workers' cache key
+
+    def build(self):
+        import importlib
+
+        from stages.render.film import new_film
+        from stages.render.tiles import render_tile
+
+        from ..scene import load_scene
+
+        t0 = time.perf_counter()
+        s = importlib.import_module(self.module).film_setup(load_scene(self.scene_path), self.options)
+        t1 = time.perf_counter()
+        counts = np.zeros((1, 1), np.int64)
+        render_tile(s.integ, s.cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
+        return s, t1 - t0, time.perf_counter() - t1
+
+    def key(self) -> str:
+        return json.dumps([self.module, self.scene_path, self.token, self.options], sort_keys=True, default=str)
+
+
+def _band_task(remote: RemoteFilm, seed, stride, first, counts, r0, tile_size, width, store, name):
+    """Chunk task: render the image rows r0 .. r0 + len(counts) - 1 (tiles of ``tile_size``) with the
+    band's sample counts and write the band of the film to the scratch array ``name``."""
+    from stages.render.film import new_film, tile_grid
+    from stages.render.tiles import render_tiles
+
+    from ..chunks import open_for_chunk, worker_cache
+
+    built = []
+    s, setup_s, compile_s = worker_cache(remote.key(), lambda: built.append(1) or remote.build())
+    rows = counts.shape[0]
+    tiles = tile_grid(width, rows, tile_size)
+    tiles[:, 0] += r0
+    tiles[:, 2] += r0
+    tiles = tiles[[counts[t[0] - r0:t[2] - r0, t[1]:t[3]].any() for t in tiles]]
+    band = new_film(width, rows)
+    t0 = time.perf_counter()
+    render_tiles(s.integ, s.cam, seed, stride, first, counts, tiles, band, None, r0)
+    render_s = time.perf_counter() - t0
+    open_for_chunk(store, name)[r0:r0 + rows] = band
+    return {"render_s": render_s, "setup_s": setup_s if built else 0.0, "compile_s": compile_s if built else 0.0}
+
+
+def _distributed_pass(label, remote, seed, stride, first, counts, tile_size, film, scratch, name):
+    """One pass on the session's scheduler: a task per band of ``tile_size`` rows that has samples to
+    take; the bands come back into ``film``. Returns the tasks' summed seconds (setup, compile)."""
+    import zarr
+
+    from stages.render.film import FILM_CHANNELS
+
+    from ..chunks import ChunkTask, run_tasks
+
+    H, W = counts.shape
+    zarr.create_array(str(scratch), name=name, shape=(H, W, FILM_CHANNELS), dtype=np.float64,
+                      chunks=(tile_size, W, FILM_CHANNELS), fill_value=0.0)
+    bands = [(r0, min(r0 + tile_size, H)) for r0 in range(0, H, tile_size)]
+    bands = [(a, b) for a, b in bands if counts[a:b].any()]
+    tasks = [ChunkTask(_band_task, (remote, int(seed), int(stride), int(first), np.ascontiguousarray(counts[a:b]), a,
+                                    int(tile_size), W, str(scratch), name)) for a, b in bands]
+    res = run_tasks(tasks, label)
+    arr = zarr.open_array(str(scratch), path=name, mode="r")
+    for a, b in bands:
+        film[a:b] = arr[a:b]
+    return {k: sum(r[k] for r in res) for k in ("setup_s", "compile_s")}
+
+
 def _pass(label, integ, cam, seed, stride, first, counts, tiles, film, threads):
     from stages.render.tiles import render_tiles
 
@@ -107,17 +202,23 @@ def refine_counts(film, spp, sampling) -> np.ndarray:
 
 
 def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile_size, variance,
-                threads=None) -> FilmRun:
+                threads=None, remote: RemoteFilm | None = None) -> FilmRun:
     from stages.render.film import finalize, new_film, tile_grid
-    from stages.render.tiles import render_tile
+
+    from .. import chunks
 
     spp = int(sampling.spp)
     stride = spp + (int(sampling.max_spp) if sampling.adaptive else 0)
+    counts = np.full((height, width), spp, np.int64)
+    if remote is not None and chunks.distributed():
+        return _render_film_distributed(label, remote, width, height, sampling, seed, int(tile_size), variance,
+                                        spp, stride, counts)
+    from stages.render.tiles import render_tile
+
     tiles = tile_grid(width, height, int(tile_size))
     film = new_film(width, height)
-    counts = np.full((height, width), spp, np.int64)
     t0 = time.perf_counter()
-    render_tile(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, film)  # compile or load; renders nothing
+    render_tile(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, film, 0)  # compile or load; renders nothing
     compile_s = time.perf_counter() - t0
     t0 = time.perf_counter()
     _pass(f"{label} {width}x{height} @ {spp} spp", integ, cam, seed, stride, 0, counts, tiles, film, threads)
@@ -139,6 +240,51 @@ def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile
     img = finalize(film, counts, variance)
     extra = {"A": img.alpha, "depth": img.depth, "variance": img.variance}
     return FilmRun(img.rgb, extra, img, render_s, compile_s, samples, refined, float(sampling.target_error))
+
+
+def _render_film_distributed(label, remote, width, height, sampling, seed, tile_size, variance, spp, stride,
+                             counts) -> FilmRun:
+    """render_film's passes as chunk tasks (module doc). render_s: the passes' wall time, less the
+    workers' setup and compile seconds (reported apart, summed over the workers)."""
+    import shutil
+
+    from stages.render.film import finalize, new_film
+
+    from ..artifacts import temp_sibling
+
+    if remote.out:
+        scratch = temp_sibling(Path(remote.out).with_suffix(".zarr"), "tmp")
+    else:  # a render with no output path (a study): the working directory, which the workers must see
+        scratch = temp_sibling(Path.cwd() / "loomlight-film.zarr", "tmp")
+    film = new_film(width, height)
+    try:
+        t0 = time.perf_counter()
+        spent = _distributed_pass(f"{label} {width}x{height} @ {spp} spp", remote, seed, stride, 0, counts, tile_size,
+                                  film, scratch, "pass0")
+        refined = 0
+        samples = int(counts.sum())
+        if sampling.adaptive:
+            more = refine_counts(film, spp, sampling)
+            refined = int(np.count_nonzero(more))
+            if refined:
+                film2 = new_film(width, height)
+                s2 = _distributed_pass(f"{label}: {refined} pixels to at most {sampling.max_spp} spp", remote, seed,
+                                       stride, spp, more, tile_size, film2, scratch, "pass1")
+                spent = {k: spent[k] + s2[k] for k in spent}
+                sel = more > 0
+                film[sel] = film2[sel]
+                counts = np.where(sel, more, counts)
+                samples += int(more.sum())
+        wall = time.perf_counter() - t0
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    img = finalize(film, counts, variance)
+    extra = {"A": img.alpha, "depth": img.depth, "variance": img.variance}
+    from .. import chunks
+
+    workers = max(1, chunks.worker_count())
+    render_s = max(wall - (spent["setup_s"] + spent["compile_s"]) / workers, 1e-9)
+    return FilmRun(img.rgb, extra, img, render_s, spent["compile_s"], samples, refined, float(sampling.target_error))
 
 
 def sampling_of(options) -> Sampling:

@@ -126,7 +126,8 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
     return sc, art, arrays
 
 
-def render(scene, options: dict) -> RenderResult:
+def film_setup(scene, options: dict):
+    """The ``FilmSetup`` of a prt render (``pipeline.renderers.film``): integrator, camera, label."""
     from stages.core.shading.material import pack_material_lambert
     from stages.render.film import VARIANCE_CHANNELS
     from stages.render.prt import PrtIntegrator
@@ -134,7 +135,7 @@ def render(scene, options: dict) -> RenderResult:
     from ..render_setup import ground_array, pack_lights
     from ..scene import camera_array
     from .fiberpath import ray_eps
-    from .film import render_film, sampling_of
+    from .film import FilmSetup
 
     extra = options.get("extra") or {}
     tiling = options.get("fibers") or extra.get("tiling")
@@ -154,16 +155,23 @@ def render(scene, options: dict) -> RenderResult:
     sg_mode = SG_MODES[extra.get("sg", "mc")]
     sigma = _float_setting(extra, "sigma_glo", float(art.summary.get("exemplar_thickness", art.summary["thickness"])))
     ground, has_ground = ground_array(scene.render)
-    W, H, seed = options["width"], options["height"], options["seed"]
-    cam = camera_array(scene.camera, W, H)
+    cam = camera_array(scene.camera, options["width"], options["height"])
     flat_size = np.asarray(art.summary["flat_size"], np.float64)
     integ = PrtIntegrator(sc, arr["top"], arr["mat_of_fiber"], arr["mats"], lights.table(), ground, has_ground,
                           pack_material_lambert(ground[1:4]), arr["svf_row"], arr["svf_mean"], arr["svf_basis"],
                           arr["svf_coeffs"], arr["svf_res"], arr["sg_angle"], arr["sg_weights"], arr["lam_svf"],
                           arr["seg_row"], arr["transfer"], arr["order"], arr["cs_table"], arr["mat_cs"],
                           flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]))
-    run = render_film("prt", integ, cam, W, H, sampling_of(options), seed, options["tile_size"], VARIANCE_CHANNELS,
-                      options.get("threads"))
-    stats = {**run.stats(), "load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"),
+    stats = {"load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"),
              "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"])}
-    return RenderResult(run.rgb, run.extra, stats)
+    return FilmSetup("prt", integ, cam, VARIANCE_CHANNELS, stats)
+
+
+def render(scene, options: dict) -> RenderResult:
+    from .film import RemoteFilm, render_film, sampling_of
+
+    s = film_setup(scene, options)
+    run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
+                      options["seed"], options["tile_size"], s.variance, options.get("threads"),
+                      RemoteFilm(__name__, str(scene.path), options, str(options.get("out") or "")))
+    return RenderResult(run.rgb, run.extra, {**run.stats(), **s.stats})

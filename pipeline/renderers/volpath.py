@@ -239,11 +239,12 @@ def _sees_fabric(maj, cam, W, H, n=24):
     return False
 
 
-def render(scene, options: dict) -> RenderResult:
+def film_setup(scene, options: dict):
+    """The ``FilmSetup`` of a volpath render (``pipeline.renderers.film``): integrator, camera, label."""
     from stages.render.film import VARIANCE_LUMINANCE
     from stages.render.volpath import VolpathIntegrator
 
-    from .film import render_film, sampling_of
+    from .film import FilmSetup
 
     source = options.get("source") or scene.render.get("source") or "procedural"
     if source not in SOURCES:
@@ -253,7 +254,7 @@ def render(scene, options: dict) -> RenderResult:
     lights = pack_lights(scene.lights, scene.path)
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
-    W, H, seed = options["width"], options["height"], options["seed"]
+    W, H = options["width"], options["height"]
     max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
     ground, has_ground = ground_array(scene.render)
     cam = camera_array(scene.camera, W, H)
@@ -265,12 +266,20 @@ def render(scene, options: dict) -> RenderResult:
         warn(f"the camera of {scene.path} sees no fabric (source {source}); rendering anyway")
     integ = VolpathIntegrator(med, maj, lights.table(), ground, bool(has_ground), max_depth, rr_depth,
                               np.ascontiguousarray(mats, np.float64))
-    run = render_film(f"volpath ({source})", integ, cam, W, H, sampling_of(options), seed, options["tile_size"],
-                      VARIANCE_LUMINANCE, options.get("threads"))
-    lookups, render_s = run.image.lookups, run.render_s
-    stats = {**run.stats(), "source": source,
-             "medium_lookups": lookups, "medium_lookups_per_s": lookups / max(render_s, 1e-12),
-             "source_build_s": build_s, "majorant_cells": [int(x) for x in maj.res],
+    stats = {"source": source, "source_build_s": build_s, "majorant_cells": [int(x) for x in maj.res],
              "majorant_occupied": float(np.mean(maj.mu > 0)), "max_depth": max_depth, "rr_depth": rr_depth,
              "fibre_phase_yarns": int(np.sum(mats[:, 0] >= 0)), **info}
+    return FilmSetup(f"volpath ({source})", integ, cam, VARIANCE_LUMINANCE, stats)
+
+
+def render(scene, options: dict) -> RenderResult:
+    from .film import RemoteFilm, render_film, sampling_of
+
+    s = film_setup(scene, options)
+    run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
+                      options["seed"], options["tile_size"], s.variance, options.get("threads"),
+                      RemoteFilm(__name__, str(scene.path), options, str(options.get("out") or "")))
+    lookups, render_s = run.image.lookups, run.render_s
+    stats = {**run.stats(), "medium_lookups": lookups, "medium_lookups_per_s": lookups / max(render_s, 1e-12),
+             **s.stats}
     return RenderResult(run.rgb, run.extra, stats)

@@ -226,12 +226,12 @@ def _svf_warm_up(tiling, tiling_hash, k, seg, p: SvfParams) -> float:
     return time.perf_counter() - t0
 
 
-def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None, threads=None) -> dict:
+def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None, threads=None, scheduler=None) -> dict:
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.precompute.svf import packed_bytes, pca_error_report, ssdf_pca
 
     from ..artifacts import ArtifactWriter
-    from ..chunks import ChunkTask, open_for_chunk, run_tasks
+    from ..chunks import ChunkTask, open_for_chunk, run_tasks, session
 
     p.check()
     _threads(threads)
@@ -262,7 +262,7 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     info = []
     t_start = time.perf_counter()
     rays = vis_s = 0.0
-    with w:
+    with session(scheduler), w:
         store = w.store_path
         for k in ks:
             S = len(segs[k].ids)
@@ -393,14 +393,15 @@ def iirtf_estimate(S_all: int, C_max: int, p: IirtfParams, n_mats: int) -> Estim
     return est
 
 
-def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=False, budget=None, threads=None) -> dict:
+def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=False, budget=None, threads=None,
+              scheduler=None) -> dict:
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.core.shading.bcsdf_sh import bcsdf_sh_table
     from stages.core.shading.material import MAT_BCSDF
     from stages.precompute.iirtf import exemplar_slabs, mean_free_path
 
     from ..artifacts import FILE, ArtifactWriter
-    from ..chunks import ChunkTask, run_tasks
+    from ..chunks import ChunkTask, run_tasks, session
 
     p.check()
     _threads(threads)
@@ -445,7 +446,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     J = (p.order + 1) ** 2
     info = []
     t_start = time.perf_counter()
-    with w:
+    with session(scheduler), w:
         store = w.store_path
         for k in ks:
             g = f"exemplar_{k}/"

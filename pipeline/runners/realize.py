@@ -3,8 +3,14 @@
 ``run_realize`` builds the tables (``pipeline.runners.tables.build``: the same random numbers as
 ``loomlight tables``, so both describe one fabric), counts the full realization before building it
 (``realized_size``: 16 bytes a vertex, 19 bytes a fibre), then realizes regular, loop and hair fibres
-(``stages.procedural.realize``) block by block of pieces (float64 vertices, converted to the stored
-float32 per block) and publishes them with radius, yarn, ply, kind and index per fibre.
+(``stages.procedural.realize``) and publishes them with radius, yarn, ply, kind and index per fibre.
+
+The vertices are chunk tasks (``pipeline.chunks``), one per chunk of ``VERTEX_CHUNK`` vertices of the
+stored arrays: a task realizes the pieces (fibres) that overlap its vertex range (float64, converted
+to the stored float32), writes its range of ``points`` and ``point_radius`` straight into the artifact
+under construction and returns its chord error and bounds. A piece that straddles two chunks is
+realized by both tasks, identically. The tasks run here or on a Dask scheduler (``--scheduler``); a
+worker rebuilds the tables once (the same random numbers), the driver never holds the vertices.
 
 Memory: before anything is built the peak is estimated from the yarns artifact, the yarn types and
 the spacing (``realization_estimate``: the tables build plus the expected vertices and pieces) and
@@ -28,7 +34,8 @@ FIBER_VERTEX_BYTES = 16       # float32 xyz + float32 radius
 FIBER_BYTES = 8 + 4 + 2 + 1 + 4  # offset, yarn, ply, kind, index
 PLAN_BYTES = 47               # yarn_plan's columns per piece of capacity (ply, index, kind, a0, a1, hair z1/ze, nv)
 PIECE_BYTES = 2 * PLAN_BYTES + 4 + FIBER_BYTES  # the concatenated plan beside the per-yarn buffers, + the stored columns
-BLOCK_VERTICES = 1 << 19      # vertices realized (float64) and measured (chord_error) per block
+BLOCK_VERTICES = 1 << 19      # vertices realized (float64) and measured (chord_error) per block (estimates)
+VERTEX_CHUNK = 1 << 18        # vertices per stored chunk of points / point_radius, and per chunk task
 BLOCK_BYTES = BLOCK_VERTICES * (32 + 150)  # a block's float64 vertices and radii, chord_error's temporaries
 
 
@@ -101,12 +108,42 @@ def realization_estimate(prep, spacing: float) -> Estimate:
     return _vertex_parts(est, verts, pieces, cap)
 
 
+def _tables_key(yarns_path, yarns_hash, preset, radius, seed):
+    return ("realize-tables", str(yarns_path), yarns_hash, preset, radius, int(seed))
+
+
+def _realize_task(yarns_path, yarns_hash, preset, radius, seed, store, v0, v1, plan, offsets):
+    """Chunk task: the vertices v0..v1-1 of the realization; ``plan`` the pieces overlapping them (the
+    plan's columns), ``offsets`` their vertex offsets (absolute, one more than pieces)."""
+    from stages.procedural.realize import chord_error, realize_fill
+
+    from ..chunks import open_for_chunk, worker_cache
+
+    def tables():
+        b = build(yarns_path, preset, radius, seed, hair_mode="hybrid", derive=False)
+        return b.cv, b.tab
+
+    cv, tab = worker_cache(_tables_key(yarns_path, yarns_hash, preset, radius, seed), tables)
+    lo, hi = int(offsets[0]), int(offsets[-1])
+    pts = np.empty((hi - lo, 3))
+    rad = np.empty(hi - lo)
+    realize_fill(cv, tab, *plan, offsets - lo, pts, rad)
+    pts32 = pts[v0 - lo:v1 - lo].astype(np.float32)
+    sag, turn = chord_error(pts.astype(np.float32), offsets - lo)
+    open_for_chunk(store, "points")[v0:v1] = pts32
+    open_for_chunk(store, "point_radius")[v0:v1] = rad[v0 - lo:v1 - lo].astype(np.float32)
+    return {"sag": float(sag), "turn": float(turn), "lo": pts32.min(axis=0), "hi": pts32.max(axis=0)}
+
+
 def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAULT_SPACING,
-                budget=None, force=False):
+                budget=None, force=False, scheduler=None):
     """Build (or skip when up to date) the fibers artifact; ``budget`` (``pipeline.memory.budget``, default
-    a fraction of the available memory): refuse before building when the estimated peak exceeds it."""
+    a fraction of the available memory): refuse before building when the estimated peak exceeds it;
+    ``scheduler`` (``pipeline.chunks``): where the vertex chunk tasks run."""
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
-    from stages.procedural.realize import chord_error, realize_fill, realize_plan
+    from stages.procedural.realize import realize_plan
+
+    from ..chunks import ChunkTask, run_tasks, session, worker_cache
 
     check_options(preset, radius, spacing=spacing)
     params = {"preset": preset, "radius": radius, "seed": int(seed), "spacing": float(spacing)}
@@ -131,23 +168,26 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
     assert int(nv.sum()) == verts and len(nv) == nfib
     offsets = np.zeros(len(nv) + 1, np.int64)
     np.cumsum(nv, out=offsets[1:])
-    pts32 = np.empty((verts, 3), np.float32)
-    rad32 = np.empty(verts, np.float32)
-    sag = turn = 0.0
-    for a, b in _blocks(offsets):
-        lo, hi = offsets[a], offsets[b]
-        pts = np.empty((hi - lo, 3))
-        rad = np.empty(hi - lo)
-        realize_fill(cv, tab, yarn[a:b], ply[a:b], idx[a:b], kind[a:b], a0[a:b], a1[a:b], hz1[a:b], hze[a:b],
-                     offsets[a:b + 1] - lo, pts, rad)
-        pts32[lo:hi] = pts
-        rad32[lo:hi] = rad
-        del pts, rad
-        s, r = chord_error(pts32[lo:hi], offsets[a:b + 1] - lo)
-        sag, turn = max(sag, s), max(turn, r)
-    with w:
-        w.write("points", pts32, dimension_names=("point", "xyz"))
-        w.write("point_radius", rad32)
+    key = _tables_key(yarns_path, yarns.meta["content_hash"], preset, radius, seed)
+    plan = (yarn, ply, idx, kind, a0, a1, hz1, hze)
+    with session(scheduler), w:
+        worker_cache(key, lambda: (cv, tab))  # local tasks take the tables built above
+        ch = (VERTEX_CHUNK, 3)
+        w.create("points", (verts, 3), np.float32, ch, dimension_names=("point", "xyz"))
+        w.create("point_radius", (verts,), np.float32, ch[:1])
+        tasks = []
+        for v0 in range(0, verts, VERTEX_CHUNK):
+            v1 = min(v0 + VERTEX_CHUNK, verts)
+            a = int(np.searchsorted(offsets, v0, side="right")) - 1
+            b = int(np.searchsorted(offsets, v1, side="left"))
+            tasks.append(ChunkTask(_realize_task, (str(yarns_path), yarns.meta["content_hash"], preset, radius,
+                                                   int(seed), str(w.store_path), v0, v1,
+                                                   tuple(c[a:b] for c in plan), offsets[a:b + 1])))
+        parts = run_tasks(tasks, f"realize {nfib:,} fibres")
+        sag = max((r["sag"] for r in parts), default=0.0)
+        turn = max((r["turn"] for r in parts), default=0.0)
+        bounds = ([np.min([r["lo"] for r in parts], axis=0).tolist(), np.max([r["hi"] for r in parts], axis=0).tolist()]
+                  if parts else [[0, 0, 0], [0, 0, 0]])
         w.write("fiber_offsets", offsets)
         w.write("fiber_yarn", yarn.astype(np.int32))
         w.write("fiber_ply", ply.astype(np.int16))
@@ -162,19 +202,9 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
                       "regular": per_kind[1] * FIBER_VERTEX_BYTES + fib_kind[1] * FIBER_BYTES,
                       "loop": per_kind[2] * FIBER_VERTEX_BYTES + fib_kind[2] * FIBER_BYTES,
                       "hair": per_kind[3] * FIBER_VERTEX_BYTES + fib_kind[3] * FIBER_BYTES},
-            "bounds": [pts32.min(axis=0).tolist(), pts32.max(axis=0).tolist()] if verts else [[0, 0, 0], [0, 0, 0]],
+            "bounds": bounds,
             "yarn_types": type_summary(dicts),
             "ingest_identity": yarns.summary.get("ingest_identity"),
         })
     return {"skipped": False, "fibers": int(nfib), "vertices": int(verts), "bytes": int(nbytes)}
 
-
-def _blocks(offsets):
-    """(first piece, end piece) of consecutive pieces holding about BLOCK_VERTICES vertices each."""
-    n = len(offsets) - 1
-    a = 0
-    while a < n:
-        b = int(np.searchsorted(offsets, offsets[a] + BLOCK_VERTICES, side="right")) - 1
-        b = min(n, max(b, a + 1))
-        yield a, b
-        a = b

@@ -159,14 +159,17 @@ def check_bcsdf_names(scene, options) -> None:
 
 def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
                fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None,
-               exposure=0.0, settings=(), max_spp=None, budget=None):
+               exposure=0.0, settings=(), max_spp=None, budget=None, scheduler=None, workers=None,
+               threads_per_worker=None):
     """Render and publish; returns the lines to print (output paths and statistics). ``budget``
     (``pipeline.memory.budget``, default a fraction of the available memory): refuse before rendering
-    when the estimated peak memory exceeds it."""
+    when the estimated peak memory exceeds it. ``scheduler``: where the tile tasks run (``--scheduler``;
+    ``pipeline.chunks``), with ``workers`` and ``threads_per_worker`` for a LocalCluster."""
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     import numpy as np
 
     from ..artifacts import FILE, ArtifactWriter
+    from ..chunks import resolve_scheduler, session
     from ..images import write_render
     from ..renderers import RenderResult
     from ..renderers import method as registered
@@ -181,6 +184,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     if out.suffix.lower() != ".exr":
         raise LoomError(out, "-o", "the output image must end in .exr")
     scene = load_scene(scene_path)
+    sched = resolve_scheduler(scheduler, scene, workers, threads_per_worker)
     method = method or scene.render.get("method")
     if not method:
         raise LoomError(scene.path, "render.method", "no render method: pass --method")
@@ -203,8 +207,10 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     writer = ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs,
                             companions=(out, out.with_suffix(".png")), started=t_start)
     render_estimate(options, inputs).check(budget or memory_budget(), scene.path)
+    options["out"] = str(out)  # where a distributed render puts its scratch film (not a parameter)
     t0 = time.perf_counter()
-    result: RenderResult = m.run(scene, options)
+    with session(sched):
+        result: RenderResult = m.run(scene, options)
     wall = time.perf_counter() - t0
     rgb = np.ascontiguousarray(result.rgb, dtype=np.float32)
     if rgb.shape != (options["height"], options["width"], 3):

@@ -1,9 +1,14 @@
 """Voxelize runner: a voxel grid of the procedural fibre medium of a tables artifact (``grid`` artifact).
 
 ``run_voxelize`` checks the resolution (at most 512^3 voxels) and supersampling, averages
-``supersample``^3 procedural lookups per voxel slab by slab (``stages.render.grid_medium.voxelize``)
-over the box of all yarn tubes, publishes density, roughness, direction and albedo, and with
-``export_npy`` also writes the raw numpy volumes (the layout is described in ``pipeline.commands.voxelize``).
+``supersample``^3 procedural lookups per voxel (``stages.render.grid_medium.voxelize``) over the box of
+all yarn tubes, publishes density, roughness, direction and albedo, and with ``export_npy`` also
+writes the raw numpy volumes (the layout is described in ``pipeline.commands.voxelize``).
+
+Each slab of ``SLAB`` z-slices is a chunk task (``pipeline.chunks``) that writes its chunks of the four
+arrays straight into the artifact under construction and returns its maximum density and occupied
+voxels; the tasks run here or on a Dask scheduler (``--scheduler``), where a worker loads the
+procedural tables once. The driver never holds the grid (``--export-npy`` reads it back).
 """
 from __future__ import annotations
 
@@ -13,19 +18,47 @@ from pathlib import Path
 
 VOXEL_BYTES = 32           # density, roughness (float32), direction, albedo (3 x float32)
 EXPORT_VOXEL_BYTES = 96    # --export-npy: the SGGX volume and its float64 temporaries
+SLAB = 16                  # z-slices per stored chunk and per chunk task
 
 
-def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, budget=None):
+def _medium(tables, tables_hash):
+    from ..chunks import worker_cache
+    from ..renderers.volpath import procedural_source
+
+    return worker_cache(("voxelize", str(tables), tables_hash), lambda: procedural_source(tables)[0])
+
+
+def _voxelize_task(tables, tables_hash, store, lo, hi, res, supersample, z0, z1):
+    """Chunk task: voxel slices z0..z1-1 of all four arrays."""
+    import numpy as np
+
+    from stages.render.grid_medium import voxelize
+
+    from ..chunks import open_for_chunk
+
+    nx, ny, _ = (int(r) for r in res)
+    den = np.zeros((z1 - z0, ny, nx), np.float32)
+    dirs = np.zeros((z1 - z0, ny, nx, 3), np.float32)
+    alb = np.zeros((z1 - z0, ny, nx, 3), np.float32)
+    rough = np.zeros((z1 - z0, ny, nx), np.float32)
+    voxelize(_medium(tables, tables_hash), lo, hi, np.asarray(res, np.int64), int(supersample), z0, z1, den, dirs,
+             alb, rough)
+    for name, a in (("density", den), ("roughness", rough), ("direction", dirs), ("albedo", alb)):
+        open_for_chunk(store, name)[z0:z1] = a
+    return {"max_density": float(den.max()) if den.size else 0.0, "occupied": int(np.count_nonzero(den > 0))}
+
+
+def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, budget=None, scheduler=None):
     """Build (or skip when up to date) the grid artifact; returns a summary line. ``budget``
     (``pipeline.memory.budget``): refuse before loading the tables when the grid, the tables and what
-    loading them derives would exceed it."""
+    loading them derives would exceed it. ``scheduler`` (``pipeline.chunks``): where the slabs run."""
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     import numpy as np
 
     from ..artifacts import Artifact, ArtifactWriter
+    from ..chunks import ChunkTask, run_tasks, session, worker_cache
     from ..memory import budget as memory_budget
     from ..errors import LoomError
-    from ..progress import progress
     from ..renderers.volpath import procedural_source
 
     res = [int(r) for r in res]
@@ -43,7 +76,7 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
                        started=t_start)
     if w.up_to_date() and not force and export_npy is None:
         return f"{out} is up to date"
-    from stages.render.grid_medium import sggx_volume, voxelize
+    from stages.render.grid_medium import sggx_volume
 
     from .tables import accel_estimate
 
@@ -52,32 +85,31 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
     est.add("voxels", voxels * (VOXEL_BYTES + (EXPORT_VOXEL_BYTES if export_npy is not None else 0)),
             f"{nx} x {ny} x {nz}")
     est.check(budget or memory_budget(), tables)
-    med, maj, _, _ = procedural_source(tables)
-    lo, hi = maj.lo, maj.hi
-    den = np.zeros((nz, ny, nx), np.float32)
-    dirs = np.zeros((nz, ny, nx, 3), np.float32)
-    alb = np.zeros((nz, ny, nx, 3), np.float32)
-    rough = np.zeros((nz, ny, nx), np.float32)
-    resa = np.array(res, np.int64)
-    step = max(1, min(nz, (1 << 16) // max(nx * ny, 1)))
-    with progress(f"voxelize {nx}x{ny}x{nz}", nz) as advance:
-        for z0 in range(0, nz, step):
-            z1 = min(z0 + step, nz)
-            voxelize(med, lo, hi, resa, int(supersample), z0, z1, den[z0:z1], dirs[z0:z1], alb[z0:z1], rough[z0:z1])
-            advance(z1 - z0)
-    with w:
-        chunks = (min(nz, 64), min(ny, 64), min(nx, 64))
-        w.write("density", den, chunks=chunks, dimension_names=("z", "y", "x"))
-        w.write("roughness", rough, chunks=chunks, dimension_names=("z", "y", "x"))
-        w.write("direction", dirs, chunks=chunks + (3,), dimension_names=("z", "y", "x", "c"))
-        w.write("albedo", alb, chunks=chunks + (3,), dimension_names=("z", "y", "x", "c"))
+    tables_art = Artifact(tables, kind="tables")
+    tables_hash = tables_art.meta["content_hash"]
+    with session(scheduler), w:
+        med, maj, _, _ = worker_cache(("voxelize-source", str(tables), tables_hash), lambda: procedural_source(tables))
+        worker_cache(("voxelize", str(tables), tables_hash), lambda: med)  # local tasks take it
+        lo, hi = maj.lo, maj.hi
+        chunks = (min(nz, SLAB), min(ny, 64), min(nx, 64))
+        w.create("density", (nz, ny, nx), np.float32, chunks, dimension_names=("z", "y", "x"))
+        w.create("roughness", (nz, ny, nx), np.float32, chunks, dimension_names=("z", "y", "x"))
+        w.create("direction", (nz, ny, nx, 3), np.float32, chunks + (3,), dimension_names=("z", "y", "x", "c"))
+        w.create("albedo", (nz, ny, nx, 3), np.float32, chunks + (3,), dimension_names=("z", "y", "x", "c"))
+        tasks = [ChunkTask(_voxelize_task, (str(tables), tables_hash, str(w.store_path), lo, hi, res,
+                                            int(supersample), z0, min(z0 + SLAB, nz))) for z0 in range(0, nz, SLAB)]
+        parts = run_tasks(tasks, f"voxelize {nx}x{ny}x{nz}")
+        max_density = max(r["max_density"] for r in parts)
+        occupied = sum(r["occupied"] for r in parts) / float(nx * ny * nz)
         w.summary.update(kind="grid", resolution=res, bounds=[lo.tolist(), hi.tolist()],
-                         voxel_size=((hi - lo) / np.array(res)).tolist(), max_density=float(den.max()),
-                         occupied_fraction=float(np.mean(den > 0)), supersample=int(supersample),
-                         bytes=int(den.nbytes + rough.nbytes + dirs.nbytes + alb.nbytes), source=str(tables))
-    line = (f"wrote {out} ({nx}x{ny}x{nz} voxels, {100 * np.mean(den > 0):.1f}% occupied, "
-            f"max density {den.max():.4g})")
+                         voxel_size=((hi - lo) / np.array(res)).tolist(), max_density=max_density,
+                         occupied_fraction=occupied, supersample=int(supersample),
+                         bytes=int(nx * ny * nz * VOXEL_BYTES), source=str(tables))
+    line = (f"wrote {out} ({nx}x{ny}x{nz} voxels, {100 * occupied:.1f}% occupied, "
+            f"max density {max_density:.4g})")
     if export_npy is not None:
+        grid = Artifact(out, kind="grid")
+        den, alb, dirs, rough = (grid[n] for n in ("density", "albedo", "direction", "roughness"))
         d = Path(export_npy)
         d.mkdir(parents=True, exist_ok=True)
         np.save(d / "density.npy", den)

@@ -1,12 +1,13 @@
 """The tile loop every render method shares: camera samples, the integrator, the film, threads.
 
-``render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film)`` renders pixels
-[row0, row1) x [col0, col1): pixel (row, col) takes the ``counts[row, col]`` samples s = first,
+``render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off)`` renders
+pixels [row0, row1) x [col0, col1): pixel (row, col) takes the ``counts[row - row_off, col]`` samples s = first,
 first + 1, ...; camera sample ``index = (row W + col) stride + s`` jitters its position inside the
 pixel with ``uniform(seed, index, 0)`` and ``uniform(seed, index, 1)`` (a box filter,
 ``stages.render.film``), traces the camera ray (``stages.render.camera``) with the integrator's
 ``radiance`` (``stages.render.integrator``) and stores the pixel's sums (a pixel with no samples
-is left as it is). ``stride`` bounds every pixel's sample numbers, so indices never collide; a plain
+is left as it is) in ``film[row - row_off, col]``: ``counts`` and ``film`` may be a band of the image's
+rows starting at ``row_off`` (a chunk task renders one band) or the whole image (``row_off`` 0). ``stride`` bounds every pixel's sample numbers, so indices never collide; a plain
 render has stride = first + counts = spp. It is compiled once per integrator class and releases
 the GIL; calling it on an empty tile compiles (or loads) it without rendering.
 
@@ -27,11 +28,11 @@ from stages.render.integrator import radiance
 
 
 @njit(cache=True, nogil=True)
-def render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film):
+def render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off):
     W = int(cam[13])
     for row in range(row0, row1):
         for col in range(col0, col1):
-            n = counts[row, col]
+            n = counts[row - row_off, col]
             if n <= 0:
                 continue
             pix = row * W + col
@@ -64,12 +65,13 @@ def render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1,
                 sd += ps.depth
                 sl += ps.lookups
                 sn += ps.rays
-            add_pixel(film, row, col, sr, sg, sb, srr, sgg, sbb, sy, syy, sh, sd, sl, sn)
+            add_pixel(film, row - row_off, col, sr, sg, sb, srr, sgg, sbb, sy, syy, sh, sd, sl, sn)
 
 
-def render_tiles(integ, cam, seed, stride, first, counts, tiles, film, threads=None):
+def render_tiles(integ, cam, seed, stride, first, counts, tiles, film, threads=None, row_off=0):
     """Render the tiles (rows of (row0, col0, row1, col1)) into ``film``; returns it. ``counts``: an
-    (H, W) int array of samples per pixel (or an int: every pixel)."""
+    int array of samples per pixel shaped as ``film``'s first two axes (or an int: every pixel);
+    both hold the image's rows from ``row_off`` on."""
     import numba
 
     n = int(threads or numba.get_num_threads())
@@ -79,10 +81,10 @@ def render_tiles(integ, cam, seed, stride, first, counts, tiles, film, threads=N
     args = (integ, cam, int(seed), int(stride), int(first), np.ascontiguousarray(counts, np.int64))
     if n <= 1 or len(tiles) <= 1:
         for t in tiles:
-            render_tile(*args, t[0], t[1], t[2], t[3], film)
+            render_tile(*args, t[0], t[1], t[2], t[3], film, int(row_off))
         return film
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(max_workers=n) as ex:
-        list(ex.map(lambda t: render_tile(*args, t[0], t[1], t[2], t[3], film), tiles))
+        list(ex.map(lambda t: render_tile(*args, t[0], t[1], t[2], t[3], film, int(row_off)), tiles))
     return film
