@@ -617,9 +617,10 @@ class ArtifactWriter:
 
     @property
     def store_path(self) -> Path:
-        """Where chunk tasks open the array being built (the hidden directory)."""
+        """Where chunk tasks open the array being built (the hidden directory), absolute: tasks may run
+        in another process, in another directory."""
         assert self.tmp is not None
-        return self.tmp
+        return self.tmp.resolve()
 
     # -- publishing -------------------------------------------------------------------------------
     def __exit__(self, exc_type, exc, tb):

@@ -143,6 +143,14 @@ class _Dask:
         self.spec, self.client, self.cluster = spec, client, cluster
         self.tasks = 0
 
+    def workers(self) -> int:
+        if self.spec.kind == "processes":
+            return self.spec.workers
+        try:
+            return max(1, len(self.client.scheduler_info().get("workers", {})))
+        except Exception:  # the count only scales a reported time
+            return 1
+
     def lost(self, e: BaseException) -> LoomError:
         where = self.spec.address or "the LocalCluster"
         why = " ".join(str(e).split())[:160] or "connection closed"
@@ -216,14 +224,7 @@ def distributed() -> bool:
 
 def worker_count() -> int:
     """Workers of the open session (1 without one)."""
-    if _session is None:
-        return 1
-    if _session.spec.kind == "processes":
-        return _session.spec.workers
-    try:
-        return max(1, len(_session.client.scheduler_info().get("workers", {})))
-    except Exception:  # the count only scales a reported time
-        return 1
+    return _session.workers() if _session is not None else 1
 
 
 def _call(task: ChunkTask):

@@ -129,6 +129,19 @@ class RemoteFilm:
         return json.dumps([self.module, self.scene_path, self.token, self.options], sort_keys=True, default=str)
 
 
+def remote_film(module: str, scene, options: dict) -> RemoteFilm:
+    """The ``RemoteFilm`` of a render, its paths made absolute (a worker's directory is not ours)."""
+    def absolute(v):
+        return str(Path(v).resolve()) if isinstance(v, str) and v and Path(v).exists() else v
+
+    opts = dict(options)
+    for k in ("fibers", "tables", "grid", "bcsdf"):
+        opts[k] = absolute(opts.get(k))
+    opts["extra"] = {k: absolute(v) for k, v in (options.get("extra") or {}).items()}
+    out = options.get("out") or ""
+    return RemoteFilm(module, str(Path(scene.path).resolve()), opts, str(Path(out).resolve()) if out else "")
+
+
 def _band_task(remote: RemoteFilm, seed, stride, first, counts, r0, tile_size, width, store, name):
     """Chunk task: render the image rows r0 .. r0 + len(counts) - 1 (tiles of ``tile_size``) with the
     band's sample counts and write the band of the film to the scratch array ``name``."""

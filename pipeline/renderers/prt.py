@@ -168,10 +168,10 @@ def film_setup(scene, options: dict):
 
 
 def render(scene, options: dict) -> RenderResult:
-    from .film import RemoteFilm, render_film, sampling_of
+    from .film import remote_film, render_film, sampling_of
 
     s = film_setup(scene, options)
     run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
                       options["seed"], options["tile_size"], s.variance, options.get("threads"),
-                      RemoteFilm(__name__, str(scene.path), options, str(options.get("out") or "")))
+                      remote_film(__name__, scene, options))
     return RenderResult(run.rgb, run.extra, {**run.stats(), **s.stats})

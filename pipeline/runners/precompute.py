@@ -128,7 +128,7 @@ def periodic_scenes(tiling_path, content_hash: str):
     """The tiling's ``ShellScene`` (built once per process: chunk tasks of one run share it)."""
     from .tile import load_tiling
 
-    key = (str(tiling_path), content_hash)
+    key = (str(Path(tiling_path).resolve()), content_hash)  # a chunk task's path is absolute
     if key not in _SCENES:
         _SCENES.clear()
         sc, art = load_tiling(tiling_path)
@@ -274,7 +274,7 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
             w.create(g + "ssdf_coeffs", (S, p.components), np.float32, (ch, p.components))
             w.write(g + "segment_ids", segs[k].ids, chunks=(max(ch, 1 << 16),))
         pdict = asdict(p)
-        tasks = [ChunkTask(_svf_visibility_task, (str(tiling), tiling_hash, str(store), k, a, b, pdict))
+        tasks = [ChunkTask(_svf_visibility_task, (str(tiling.resolve()), tiling_hash, str(store), k, a, b, pdict))
                  for k in ks for a, b in _chunks(len(segs[k].ids), p.chunk)]
         for r in run_tasks(tasks, "svf: visibility images"):
             rays += r["rays"]
@@ -345,7 +345,7 @@ _CELLS: dict = {}
 def _cells(art, key, targets):
     from stages.precompute.iirtf import build_cells, exemplar_slabs
 
-    k = (key, tuple(float(t) for t in targets))
+    k = ((str(Path(key[0]).resolve()), key[1]), tuple(float(t) for t in targets))  # a task's path is absolute
     if k not in _CELLS:
         _CELLS.clear()
         slabs = exemplar_slabs(art["ex_points"], art["ex_radius"], art["ex_offsets"], art["ex_fibers"])
@@ -471,7 +471,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
         cs_s = time.perf_counter() - t0
         w.write("bcsdf_sh", tabs)
         pdict = {k: v for k, v in asdict(p).items() if k != "material"}
-        tasks = [ChunkTask(_iirtf_task, (str(tiling), tiling_hash, str(store), k, a, b, targets, mof, mats, pdict))
+        tasks = [ChunkTask(_iirtf_task, (str(tiling.resolve()), tiling_hash, str(store), k, a, b, targets, mof, mats, pdict))
                  for k in ks for a, b in _chunks(N[k], p.chunk)]
         res = run_tasks(tasks, "iirtf: transfer matrices")
         task_s = sum(r["s"] for r in res)

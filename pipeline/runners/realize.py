@@ -20,6 +20,7 @@ per-yarn capacities) are checked again before the plan and the vertices are allo
 from __future__ import annotations
 
 import time
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -168,7 +169,8 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
     assert int(nv.sum()) == verts and len(nv) == nfib
     offsets = np.zeros(len(nv) + 1, np.int64)
     np.cumsum(nv, out=offsets[1:])
-    key = _tables_key(yarns_path, yarns.meta["content_hash"], preset, radius, seed)
+    yarns_abs = str(Path(yarns_path).resolve())  # chunk tasks may run in another directory
+    key = _tables_key(yarns_abs, yarns.meta["content_hash"], preset, radius, seed)
     plan = (yarn, ply, idx, kind, a0, a1, hz1, hze)
     with session(scheduler), w:
         worker_cache(key, lambda: (cv, tab))  # local tasks take the tables built above
@@ -180,7 +182,7 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
             v1 = min(v0 + VERTEX_CHUNK, verts)
             a = int(np.searchsorted(offsets, v0, side="right")) - 1
             b = int(np.searchsorted(offsets, v1, side="left"))
-            tasks.append(ChunkTask(_realize_task, (str(yarns_path), yarns.meta["content_hash"], preset, radius,
+            tasks.append(ChunkTask(_realize_task, (yarns_abs, yarns.meta["content_hash"], preset, radius,
                                                    int(seed), str(w.store_path), v0, v1,
                                                    tuple(c[a:b] for c in plan), offsets[a:b + 1])))
         parts = run_tasks(tasks, f"realize {nfib:,} fibres")

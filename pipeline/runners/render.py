@@ -209,8 +209,9 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     render_estimate(options, inputs).check(budget or memory_budget(), scene.path)
     options["out"] = str(out)  # where a distributed render puts its scratch film (not a parameter)
     t0 = time.perf_counter()
-    with session(sched):
+    with session(sched) as dask:
         result: RenderResult = m.run(scene, options)
+        workers = dask.workers() if dask is not None else 0
     wall = time.perf_counter() - t0
     rgb = np.ascontiguousarray(result.rgb, dtype=np.float32)
     if rgb.shape != (options["height"], options["width"], 3):
@@ -224,6 +225,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
         "spp": options["spp"], "seed": options["seed"], "wall_time_s": wall, "render_time_s": render_s,
         "paths": int(st.get("paths", rgb.shape[0] * rgb.shape[1] * options["spp"])),
         "rays": int(st.get("rays", 0)), "threads": int(numba.get_num_threads()),
+        "scheduler": sched.address or sched.kind, "workers": workers,
         "peak_memory_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
         "mean_rgb": [float(x) for x in rgb.reshape(-1, 3).mean(axis=0)],
         "exr": str(out), "png": str(out.with_suffix(".png")),
@@ -243,4 +245,5 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     return [f"image    : {exr}", f"preview  : {png}", f"artifact : {art_path}",
             f"{method}: {stats['width']}x{stats['height']} @ {stats['spp']} spp in {wall:.2f} s "
             f"(render {render_s:.2f} s, {stats['paths_per_s']:.3g} paths/s, {stats['rays_per_s']:.3g} rays/s, "
-            f"{stats['threads']} threads, peak {stats['peak_memory_bytes'] / 2**20:.0f} MiB)"]
+            + (f"{workers} Dask workers" if workers else f"{stats['threads']} threads")
+            + f", peak {stats['peak_memory_bytes'] / 2**20:.0f} MiB)"]

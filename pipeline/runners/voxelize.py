@@ -87,16 +87,17 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
     est.check(budget or memory_budget(), tables)
     tables_art = Artifact(tables, kind="tables")
     tables_hash = tables_art.meta["content_hash"]
+    tables_abs = str(Path(tables).resolve())  # chunk tasks may run in another directory
     with session(scheduler), w:
-        med, maj, _, _ = worker_cache(("voxelize-source", str(tables), tables_hash), lambda: procedural_source(tables))
-        worker_cache(("voxelize", str(tables), tables_hash), lambda: med)  # local tasks take it
+        med, maj, _, _ = procedural_source(tables)
+        worker_cache(("voxelize", tables_abs, tables_hash), lambda: med)  # local tasks take it
         lo, hi = maj.lo, maj.hi
         chunks = (min(nz, SLAB), min(ny, 64), min(nx, 64))
         w.create("density", (nz, ny, nx), np.float32, chunks, dimension_names=("z", "y", "x"))
         w.create("roughness", (nz, ny, nx), np.float32, chunks, dimension_names=("z", "y", "x"))
         w.create("direction", (nz, ny, nx, 3), np.float32, chunks + (3,), dimension_names=("z", "y", "x", "c"))
         w.create("albedo", (nz, ny, nx, 3), np.float32, chunks + (3,), dimension_names=("z", "y", "x", "c"))
-        tasks = [ChunkTask(_voxelize_task, (str(tables), tables_hash, str(w.store_path), lo, hi, res,
+        tasks = [ChunkTask(_voxelize_task, (tables_abs, tables_hash, str(w.store_path), lo, hi, res,
                                             int(supersample), z0, min(z0 + SLAB, nz))) for z0 in range(0, nz, SLAB)]
         parts = run_tasks(tasks, f"voxelize {nx}x{ny}x{nz}")
         max_density = max(r["max_density"] for r in parts)
