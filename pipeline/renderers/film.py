@@ -216,6 +216,12 @@ def refine_counts(film, spp, sampling) -> np.ndarray:
 
 def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile_size, variance,
                 threads=None, remote: RemoteFilm | None = None) -> FilmRun:
+    """Render the image in one or two passes (module doc): here on ``threads`` threads, or as band
+    tasks on the open Dask session when ``remote`` says how a worker rebuilds the integrator. On Dask,
+    render_s is the passes' wall time less the workers' setup and compile seconds (summed over the
+    workers, divided by their number) and compile_s the workers' compile seconds."""
+    import shutil
+
     from stages.render.film import finalize, new_film, tile_grid
 
     from .. import chunks
@@ -223,81 +229,70 @@ def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile
     spp = int(sampling.spp)
     stride = spp + (int(sampling.max_spp) if sampling.adaptive else 0)
     counts = np.full((height, width), spp, np.int64)
+    spent = {"setup_s": 0.0, "compile_s": 0.0}
     if remote is not None and chunks.distributed():
-        return _render_film_distributed(label, remote, width, height, sampling, seed, int(tile_size), variance,
-                                        spp, stride, counts)
-    from stages.render.tiles import render_tile
+        from ..artifacts import temp_sibling
 
-    tiles = tile_grid(width, height, int(tile_size))
+        # the scratch film lies beside the output (or, with none, in the working directory): workers see it
+        scratch = temp_sibling(Path(remote.out or Path.cwd() / "loomlight-film").with_suffix(".zarr"), "tmp")
+
+        def run_pass(text, first, cnt, film, name):
+            r = _distributed_pass(text, remote, seed, stride, first, cnt, int(tile_size), film, scratch, name)
+            for k in spent:
+                spent[k] += r[k]
+
+        def cleanup():
+            shutil.rmtree(scratch, ignore_errors=True)
+    else:
+        from stages.render.tiles import render_tile
+
+        tiles = tile_grid(width, height, int(tile_size))
+        t0 = time.perf_counter()
+        render_tile(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
+        spent["compile_s"] = time.perf_counter() - t0
+
+        def run_pass(text, first, cnt, film, name):
+            busy = np.array([cnt[r0:r1, c0:c1].any() for r0, c0, r1, c1 in tiles], bool)
+            _pass(text, integ, cam, seed, stride, first, cnt, tiles[busy], film, threads)
+
+        def cleanup():
+            pass
     film = new_film(width, height)
-    t0 = time.perf_counter()
-    render_tile(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, film, 0)  # compile or load; renders nothing
-    compile_s = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    _pass(f"{label} {width}x{height} @ {spp} spp", integ, cam, seed, stride, 0, counts, tiles, film, threads)
     refined = 0
     samples = int(counts.sum())
-    if sampling.adaptive:
-        more = refine_counts(film, spp, sampling)
-        refined = int(np.count_nonzero(more))
-        if refined:
-            film2 = new_film(width, height)
-            busy = np.array([more[r0:r1, c0:c1].any() for r0, c0, r1, c1 in tiles], bool)
-            _pass(f"{label}: {refined} pixels to at most {sampling.max_spp} spp", integ, cam, seed, stride, spp, more,
-                  tiles[busy], film2, threads)
-            sel = more > 0
-            film[sel] = film2[sel]
-            counts = np.where(sel, more, counts)
-            samples += int(more.sum())
-    render_s = time.perf_counter() - t0
-    img = finalize(film, counts, variance)
-    extra = {"A": img.alpha, "depth": img.depth, "variance": img.variance}
-    return FilmRun(img.rgb, extra, img, render_s, compile_s, samples, refined, float(sampling.target_error))
-
-
-def _render_film_distributed(label, remote, width, height, sampling, seed, tile_size, variance, spp, stride,
-                             counts) -> FilmRun:
-    """render_film's passes as chunk tasks (module doc). render_s: the passes' wall time, less the
-    workers' setup and compile seconds (reported apart, summed over the workers)."""
-    import shutil
-
-    from stages.render.film import finalize, new_film
-
-    from ..artifacts import temp_sibling
-
-    if remote.out:
-        scratch = temp_sibling(Path(remote.out).with_suffix(".zarr"), "tmp")
-    else:  # a render with no output path (a study): the working directory, which the workers must see
-        scratch = temp_sibling(Path.cwd() / "loomlight-film.zarr", "tmp")
-    film = new_film(width, height)
     try:
         t0 = time.perf_counter()
-        spent = _distributed_pass(f"{label} {width}x{height} @ {spp} spp", remote, seed, stride, 0, counts, tile_size,
-                                  film, scratch, "pass0")
-        refined = 0
-        samples = int(counts.sum())
+        run_pass(f"{label} {width}x{height} @ {spp} spp", 0, counts, film, "pass0")
         if sampling.adaptive:
             more = refine_counts(film, spp, sampling)
             refined = int(np.count_nonzero(more))
             if refined:
                 film2 = new_film(width, height)
-                s2 = _distributed_pass(f"{label}: {refined} pixels to at most {sampling.max_spp} spp", remote, seed,
-                                       stride, spp, more, tile_size, film2, scratch, "pass1")
-                spent = {k: spent[k] + s2[k] for k in spent}
+                run_pass(f"{label}: {refined} pixels to at most {sampling.max_spp} spp", spp, more, film2, "pass1")
                 sel = more > 0
                 film[sel] = film2[sel]
                 counts = np.where(sel, more, counts)
                 samples += int(more.sum())
         wall = time.perf_counter() - t0
     finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+        cleanup()
+    render_s = wall
+    if remote is not None and chunks.distributed():
+        render_s = max(wall - (spent["setup_s"] + spent["compile_s"]) / max(1, chunks.worker_count()), 1e-9)
     img = finalize(film, counts, variance)
     extra = {"A": img.alpha, "depth": img.depth, "variance": img.variance}
-    from .. import chunks
-
-    workers = max(1, chunks.worker_count())
-    render_s = max(wall - (spent["setup_s"] + spent["compile_s"]) / workers, 1e-9)
     return FilmRun(img.rgb, extra, img, render_s, spent["compile_s"], samples, refined, float(sampling.target_error))
+
+
+def render_with_film(module: str, scene, options: dict):
+    """(FilmSetup, FilmRun) of a render method whose module defines ``film_setup(scene, options)``."""
+    import importlib
+
+    s = importlib.import_module(module).film_setup(scene, options)
+    run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
+                      options["seed"], options["tile_size"], s.variance, options.get("threads"),
+                      remote_film(module, scene, options))
+    return s, run
 
 
 def sampling_of(options) -> Sampling:

@@ -168,10 +168,7 @@ def film_setup(scene, options: dict):
 
 
 def render(scene, options: dict) -> RenderResult:
-    from .film import remote_film, render_film, sampling_of
+    from .film import render_with_film
 
-    s = film_setup(scene, options)
-    run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
-                      options["seed"], options["tile_size"], s.variance, options.get("threads"),
-                      remote_film(__name__, scene, options))
+    s, run = render_with_film(__name__, scene, options)
     return RenderResult(run.rgb, run.extra, {**run.stats(), **s.stats})

@@ -273,12 +273,9 @@ def film_setup(scene, options: dict):
 
 
 def render(scene, options: dict) -> RenderResult:
-    from .film import remote_film, render_film, sampling_of
+    from .film import render_with_film
 
-    s = film_setup(scene, options)
-    run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
-                      options["seed"], options["tile_size"], s.variance, options.get("threads"),
-                      remote_film(__name__, scene, options))
+    s, run = render_with_film(__name__, scene, options)
     lookups, render_s = run.image.lookups, run.render_s
     stats = {**run.stats(), "medium_lookups": lookups, "medium_lookups_per_s": lookups / max(render_s, 1e-12),
              **s.stats}
