@@ -1,6 +1,7 @@
 """``loomlight precompute svf|iirtf TILING.zarr -o OUT.zarr``: seed 001 §4's precomputation per exemplar.
 
 ``svf``    segment visibility functions of every fibre segment (binary images, SSDF + PCA, sums of SGs)
+``btf``    one exemplar as seed 002's fitted cloth texture (Lafortune lobes x view lookup table, mip levels)
 ``iirtf``  the mean free path, cells and per-cell SH transfer matrices A_C (with standard errors), and
            the BCSDF's SH table C_S of every fibre material the scene gives the tiling
 Both cover every exemplar of the tiling (patterned cloth: one set per exemplar, §6.4) unless
@@ -17,8 +18,9 @@ from ..memory import BUDGET_HELP
 from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 app = typer.Typer(name="precompute", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
-                  help="Precompute the light transport of a tiling's exemplars for render --method prt.\n\n"
-                       "Seed 001 §4: segment visibility functions (svf), then IIRTF transfer matrices (iirtf).")
+                  help="Precompute the light transport of a tiling's exemplars for render --method prt "
+                       "(seed 001 §4: svf, then iirtf), or fit one exemplar as a cloth texture for render "
+                       "--method btf (seed 002: btf).")
 
 
 def register(root: typer.Typer) -> None:
@@ -127,3 +129,58 @@ def iirtf(
     else:
         typer.echo(f"wrote {out} ({res['exemplars']} exemplars, {res['cells']:,} cells, mean free path "
                    f"{', '.join(f'{m:.4g}' for m in res['mean_free_path'])}, {res['paths_per_s'] / 1e3:.1f} k paths/s)")
+
+
+@app.command("btf")
+def btf(
+    tiling: Path = _TILING,
+    out: Path = _OUT,
+    exemplar: int = typer.Option(0, "--exemplar", help="The exemplar (repeat) of the tiling to fit."),
+    scene: Path = typer.Option(None, "--scene", help="Scene giving the yarn materials (default: the scene the "
+                                                     "tiling names)."),
+    resolution: int = typer.Option(32, "--resolution", help="Texels a side of the finest level (a power of two; "
+                                                            "seed 002: 32)."),
+    views: str = typer.Option("8x8", "--views", help="View grid THETAxPHI: rings of equal solid angle x azimuths "
+                                                    "(8x8 = the paper's 64 table entries; 4x8 its 32)."),
+    lights: str = typer.Option("8x8", "--lights", help="Light grid THETAxPHI, as --views."),
+    spp: int = typer.Option(16, "--spp", help="Rays per texel and view (super-sampled alpha and radiance)."),
+    lobes: int = typer.Option(2, "--lobes", help="Lafortune lobes per texel: 1 or 2."),
+    threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "
+                                                             "mean change is below this (seed 002: 0.1)."),
+    max_rounds: int = typer.Option(10, "--max-rounds", help="At most this many lobe/table alternations."),
+    max_depth: int = typer.Option(16, "--max-depth", help="Largest number of scattering events on a path."),
+    rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
+    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset for yarn groups the scene names none for."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the Monte Carlo estimates."),
+    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help="Material option KEY=VALUE (tint=yarn|none, as render)."),
+    force: bool = _FORCE,
+    budget: float = _BUDGET,
+    threads: int = _THREADS,
+    scheduler: str = SCHEDULER,
+    workers: int = WORKERS,
+    threads_per_worker: int = THREADS_PER_WORKER,
+):
+    """Fit one exemplar of a tiling as a view-dependent cloth texture (seed 002 §4-§5).
+
+    Radiance samples of the repeat over view x light grids, path traced on its explicit fibres with
+    its copies all around, alpha and average normals per texel; per texel diffuse + Lafortune lobes
+    times a view lookup table, and mip levels down to 1 x 1."""
+    from ..chunks import resolve_scheduler
+    from ..memory import budget as memory_budget
+    from ..outputs import ARTIFACT, check_output
+    from ..runners.precompute import parse_material_options
+    from ..runners.precompute_btf import BtfParams, parse_grid, run_btf
+
+    check_output(out, "-o", ARTIFACT)
+    p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=parse_grid(lights, "--lights"),
+                  spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, max_depth=max_depth,
+                  rr_depth=rr_depth, seed=seed, material=parse_material_options(set_ or [], bcsdf))
+    res = run_btf(tiling, out, p, scene=scene, exemplar=exemplar, force=force, budget=memory_budget(budget),
+                  threads=threads, scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))
+    if res["skipped"]:
+        typer.echo(f"{out} is up to date")
+    else:
+        typer.echo(f"wrote {out} ({res['resolution']}x{res['resolution']} texels, {res['views']} views x "
+                   f"{res['lights']} lights, {res['levels']} levels, {res['fit_bytes'] / 2**20:.2f} MiB fitted; "
+                   f"acquisition {res['acquire_s']:.1f} s, fit {res['fit_s']:.1f} s; fit RMSE level 0 "
+                   f"{res['fit_rmse'][0]:.4g} (without the table {res['fit_rmse_no_table'][0]:.4g})")

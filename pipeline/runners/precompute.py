@@ -99,7 +99,7 @@ def parse_material_options(settings, bcsdf=None) -> dict:
             raise LoomError(None, "--set", f"expected KEY=VALUE, got {kv!r}")
         k, v = (s.strip() for s in kv.split("=", 1))
         if k != "tint":
-            raise LoomError(None, f"--set {k}", f"precompute iirtf has no setting {k!r} (known: tint)")
+            raise LoomError(None, f"--set {k}", f"precompute has no setting {k!r} (known: tint)")
         if v not in ("yarn", "none"):
             raise LoomError(None, "--set tint", f"unknown tint {v!r} (known: none, yarn)")
         out["tint"] = v
@@ -156,7 +156,7 @@ def _chunks(n: int, size: int) -> list[tuple[int, int]]:
     return [(a, min(n, a + size)) for a in range(0, n, size)]
 
 
-def _tiling_input(tiling):
+def tiling_input(tiling):
     from ..artifacts import Artifact
 
     return Artifact(tiling, kind="tiling")
@@ -236,7 +236,7 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     p.check()
     _threads(threads)
     tiling = Path(tiling)
-    art = _tiling_input(tiling)
+    art = tiling_input(tiling)
     ks = pick_exemplars(art, exemplars, tiling)
     w = ArtifactWriter(out, kind="svf", stage="precompute svf", params={**asdict(p), "exemplars": ks},
                        inputs={"tiling": (tiling, "tiling")}, started=t_start)
@@ -314,7 +314,7 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
 
 
 # ------------------------------------------------------------------------------------------------ iirtf
-def _scene_of(tiling: Path, art, scene):
+def materials_scene(tiling: Path, art, scene):
     from ..scene import load_scene
 
     path = scene or art.summary.get("scene")
@@ -406,9 +406,9 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     p.check()
     _threads(threads)
     tiling = Path(tiling)
-    art = _tiling_input(tiling)
+    art = tiling_input(tiling)
     ks = pick_exemplars(art, exemplars, tiling)
-    scene_path, sc_obj = _scene_of(tiling, art, scene)
+    scene_path, sc_obj = materials_scene(tiling, art, scene)
     mof, mats = tiling_materials(sc_obj, art, p.material)
     w = ArtifactWriter(out, kind="iirtf", stage="precompute iirtf", params={**asdict(p), "exemplars": ks},
                        inputs={"tiling": (tiling, "tiling"), "scene": (scene_path, FILE)}, started=t_start)

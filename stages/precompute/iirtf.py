@@ -105,12 +105,11 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from stages.core.geometry.capsule import capsule_normal
 from stages.core.rng import uniform
 from stages.core.sh import sh_eval
-from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_is_curve, material_prepare,
+from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_prepare,
                                           material_sample)
-from stages.precompute.periodic import periodic_hit, periodic_hit_outside, periodic_scene, wrap_into_period
+from stages.precompute.periodic import periodic_hit, periodic_hit_outside, periodic_scene, periodic_vertex
 
 MAX_ORDER = 8
 TWO_PI = 2.0 * math.pi
@@ -230,42 +229,6 @@ def cell_box(cells: Cells, c: int):
 # the path tracer
 
 @njit(cache=True)
-def _vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so):
-    """Set up the fibre vertex of hit ``h``: its tangent, normal and where rays leave from (``so``,
-    wrapped into the period); returns (material row, fibre that rays leaving it skip)."""
-    row = mat_of_fiber[h.fibre]
-    x, y = wrap_into_period(h.x, h.y, W, H)
-    t_tan[0] = h.tx
-    t_tan[1] = h.ty
-    t_tan[2] = h.tz
-    if material_is_curve(mats[row]):
-        n[0] = 0.0
-        n[1] = 0.0
-        n[2] = 0.0
-        so[0] = x
-        so[1] = y
-        so[2] = h.z
-        return row, h.fibre
-    # opaque surface: the capsule's outward normal (the hit moved to the copy of its wrapped piece)
-    a = sc.seg_a[h.wrapped]
-    P = sc.points
-    dx = x - P[a, 0]
-    dy = y - P[a, 1]
-    dx -= W * math.floor(dx / W + 0.5)
-    dy -= H * math.floor(dy / H + 0.5)
-    nx, ny, nz, _s = capsule_normal(P[a, 0] + dx, P[a, 1] + dy, h.z, P[a, 0], P[a, 1], P[a, 2],
-                                    P[a + 1, 0], P[a + 1, 1], P[a + 1, 2])
-    n[0] = nx
-    n[1] = ny
-    n[2] = nz
-    off = 1e-3 * sc.seg_r[h.wrapped] + eps
-    so[0] = x + off * nx
-    so[1] = y + off * ny
-    so[2] = h.z + off * nz
-    return row, -1
-
-
-@njit(cache=True)
 def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ign0, w0, w1, order, mis, seed, key,
                         dim0, max_depth, rr_depth, max_dist, eps, Y, u):
     """One path's estimate u[ch, j0] of int_{H+} T(w0', w1, x) Y_j0(w0') dw0' at x = (ox, oy, oz), the ray
@@ -300,7 +263,7 @@ def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ig
     tp2 = 1.0
     depth = 1
     while True:
-        row, nf = _vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
+        row, nf = periodic_vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
         mat = mats[row]
         material_prepare(mat, t_tan, n, wi, ctx)
         base = dim0 + 6 * (depth - 1)
@@ -508,7 +471,7 @@ def _free_paths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, n_paths, seed, max_dep
             depth += 1
             for k in range(3):
                 wi[k] = -wo[k]
-            row, nf = _vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
+            row, nf = periodic_vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
             mat = mats[row]
             material_prepare(mat, t_tan, n, wi, ctx)
             base = 4 + 3 * depth

@@ -34,8 +34,9 @@ import math
 import numpy as np
 from numba import njit
 
-from stages.core.geometry.capsule import INSIDE, point_segment_dist2
-from stages.core.shell.traversal import flat_segment_hit
+from stages.core.geometry.capsule import INSIDE, capsule_normal, point_segment_dist2
+from stages.core.shading.material import material_is_curve
+from stages.core.shell.traversal import flat_segment_hit, flat_segment_occluded
 
 PeriodicHit = namedtuple("PeriodicHit", ["t", "segment", "fibre", "wrapped", "x", "y", "z", "tx", "ty", "tz",
                                          "fx", "fy", "fz"])
@@ -85,6 +86,16 @@ def periodic_hit(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_dist):
 
 
 @njit(cache=True)
+def periodic_occluded(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_dist):
+    """Does the ray o + t d (unit d), 0 < t, meet a fibre before it leaves the slab (or has run
+    ``max_dist``)? ``periodic_hit``'s answer to "is t finite", without looking for the nearest hit."""
+    L = slab_length(oz, dz, z_lo, z_hi, max_dist)
+    if L <= 0.0:
+        return False
+    return flat_segment_occluded(sc, ox, oy, oz, dx, dy, dz, L, ign_fiber, 0, 1 << 30)
+
+
+@njit(cache=True)
 def contains(sc, w, px, py, pz):
     """Is the point p (the wrapped piece's coordinates) inside wrapped capsule w?"""
     a = sc.seg_a[w]
@@ -121,3 +132,41 @@ def periodic_hit_outside(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_
 def wrap_into_period(x, y, W, H):
     """(x, y) moved by whole periods into [0, W) x [0, H) (keeps path vertices near the origin)."""
     return x - W * math.floor(x / W), y - H * math.floor(y / H)
+
+
+@njit(cache=True)
+def periodic_vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so):
+    """Set up the scattering vertex of hit ``h`` for a path tracer in the periodic fabric: its tangent
+    ``t_tan``, normal ``n`` (zero for a curve material: the BCSDF integrates over the fibre's cross-section;
+    the capsule's outward normal for an opaque one) and where rays leave from (``so``, wrapped into the
+    period); returns (material row, fibre that rays leaving it skip, -1 for an opaque surface)."""
+    row = mat_of_fiber[h.fibre]
+    x, y = wrap_into_period(h.x, h.y, W, H)
+    t_tan[0] = h.tx
+    t_tan[1] = h.ty
+    t_tan[2] = h.tz
+    if material_is_curve(mats[row]):
+        n[0] = 0.0
+        n[1] = 0.0
+        n[2] = 0.0
+        so[0] = x
+        so[1] = y
+        so[2] = h.z
+        return row, h.fibre
+    # opaque surface: the capsule's outward normal (the hit moved to the copy of its wrapped piece)
+    a = sc.seg_a[h.wrapped]
+    P = sc.points
+    dx = x - P[a, 0]
+    dy = y - P[a, 1]
+    dx -= W * math.floor(dx / W + 0.5)
+    dy -= H * math.floor(dy / H + 0.5)
+    nx, ny, nz, _s = capsule_normal(P[a, 0] + dx, P[a, 1] + dy, h.z, P[a, 0], P[a, 1], P[a, 2],
+                                    P[a + 1, 0], P[a + 1, 1], P[a + 1, 2])
+    n[0] = nx
+    n[1] = ny
+    n[2] = nz
+    off = 1e-3 * sc.seg_r[h.wrapped] + eps
+    so[0] = x + off * nx
+    so[1] = y + off * ny
+    so[2] = h.z + off * nz
+    return row, -1

@@ -184,6 +184,37 @@ def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_s
 
 
 @njit(cache=True)
+def fiber_any(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
+    """Is there a capsule hit with tmin < t < tmax in the BVH rooted at ``root`` (skips as
+    ``fiber_nearest``)? Stops at the first one found: shadow rays need no nearest hit."""
+    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
+    stack = np.empty(256, np.int64)
+    stack[0] = root
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        node = stack[sp]
+        if _box(sc.fn_lo, sc.fn_hi, node, ox, oy, oz, ix, iy, iz, tmin, tmax) == np.inf:
+            continue
+        if sc.fn_left[node] < 0:
+            for j in range(sc.fn_start[node], sc.fn_start[node] + sc.fn_count[node]):
+                s = sc.fprim[j]
+                if ign_fiber >= 0 and sc.seg_srcfiber[s] == ign_fiber and abs(sc.seg_src[s] - ign_seg) <= ign_window:
+                    continue
+                i = sc.seg_a[s]
+                P = sc.points
+                t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
+                                      P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], sc.seg_r[s], tmin)
+                if t < tmax:
+                    return True
+            continue
+        stack[sp] = sc.fn_left[node]
+        stack[sp + 1] = sc.fn_right[node]
+        sp += 2
+    return False
+
+
+@njit(cache=True)
 def _floor_div(x, w):
     return int(math.floor(x / w))
 
@@ -236,6 +267,53 @@ def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_wind
         if tmx == np.inf and tmy == np.inf:
             break
     return np.inf, -1, -1, 0, 0, 0.0, 0.0, 0.0
+
+
+@njit(cache=True)
+def flat_segment_occluded(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window):
+    """Does the flat segment a + s u, 0 < s < L (u unit), meet any fibre (``flat_segment_hit``'s block
+    walk with ``fiber_any``)?"""
+    bw = sc.block_size[0]
+    bh = sc.block_size[1]
+    nbu = sc.block_map.shape[0]
+    nbv = sc.block_map.shape[1]
+    i = _floor_div(ax, bw)
+    j = _floor_div(ay, bh)
+    if ux > 0.0:
+        stx, tmx, tdx = 1, ((i + 1) * bw - ax) / ux, bw / ux
+    elif ux < 0.0:
+        stx, tmx, tdx = -1, (i * bw - ax) / ux, -bw / ux
+    else:
+        stx, tmx, tdx = 0, np.inf, np.inf
+    if uy > 0.0:
+        sty, tmy, tdy = 1, ((j + 1) * bh - ay) / uy, bh / uy
+    elif uy < 0.0:
+        sty, tmy, tdy = -1, (j * bh - ay) / uy, -bh / uy
+    else:
+        sty, tmy, tdy = 0, np.inf, np.inf
+    s = 0.0
+    steps = 0
+    while s < L and steps < MAX_STEPS:
+        steps += 1
+        s1 = min(tmx, tmy, L)
+        if s1 > s:
+            k = sc.block_map[i % nbu, j % nbv]
+            if k >= 0:
+                shx = (i - (i % sc.ex_nblocks[k, 0])) * bw
+                shy = (j - (j % sc.ex_nblocks[k, 1])) * bh
+                if fiber_any(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1, ign_fiber, ign_seg,
+                             ign_window):
+                    return True
+            s = s1
+        if tmx < tmy:
+            i += stx
+            tmx += tdx
+        else:
+            j += sty
+            tmy += tdy
+        if tmx == np.inf and tmy == np.inf:
+            break
+    return False
 
 
 @njit(cache=True)

@@ -1,0 +1,103 @@
+"""Picture of a btf artifact (stage precompute btf, seed 002): what was acquired and what was fitted.
+
+Top rows, for two view/light pairs (a view near the normal with a light at mid elevation, and a
+grazing view with the light opposite it): the acquired radiance per texel r(l, v) beside the fitted
+model f_r(l, v) = T(v) . f_1(l, v) of level 0 (seed 002 Eq. 1-2), on one shared scale per pair
+(sRGB-encoded, the scale in the title), the texel's alpha for that view, and the per-texel difference.
+Bottom row: the mip pyramid, the fitted model of every level for the first pair, each level's
+texels drawn at the size of level 0 (seed 002 §5.1), with the level's fit RMSE.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import finish, pyplot
+
+
+def _pairs(summary):
+    nv_t, nv_p = summary["view_grid"]
+    nl_t, nl_p = summary["light_grid"]
+    v0 = 0
+    l0 = (nl_t // 2) * nl_p
+    v1 = (max(nv_t - 2, 0)) * nv_p
+    l1 = (nl_t // 2) * nl_p + nl_p // 2
+    return [(v0, l0), (v1, l1)]
+
+
+def model_image(rho, lobes, table, frame, view_grid, v_dir, l_dir):
+    """(r, r, 3) f_r(l, v) of every texel of one level."""
+    from stages.core.btf import table_lookup, texel_f1
+
+    r = rho.shape[0]
+    out = np.zeros((r, r, 3))
+    nt, npz = (int(x) for x in view_grid)
+    for i in range(r):
+        for j in range(r):
+            for c in range(3):
+                f1 = texel_f1(rho[i, j].astype(np.float64), lobes[i, j].astype(np.float64),
+                              frame[i, j].astype(np.float64), c, *l_dir, *v_dir)
+                out[i, j, c] = f1 * table_lookup(table[i, j].astype(np.float64), nt, npz, *v_dir, c)
+    return out
+
+
+def _srgb(x, scale):
+    y = np.clip(np.asarray(x, float) / max(scale, 1e-12), 0.0, 1.0)
+    return np.where(y <= 0.0031308, 12.92 * y, 1.055 * np.power(y, 1 / 2.4) - 0.055)
+
+
+def _angles(d):
+    theta = np.degrees(np.arccos(np.clip(d[2], -1, 1)))
+    phi = np.degrees(np.arctan2(d[1], d[0])) % 360
+    return f"θ {theta:.0f}° φ {phi:.0f}°"
+
+
+def inspect(art, png, show=False, size=(1200, 900), **_):
+    s = art.summary
+    views, lights = art["view_dirs"], art["light_dirs"]
+    samples = art["samples"]
+    alpha = art["alpha"]
+    levels = int(s["levels"])
+    lev0 = {n: art[f"level_0/{n}"] for n in ("rho", "lobes", "table", "frame")}
+    pairs = _pairs(s)
+    with pyplot(show) as plt:
+        fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), layout="constrained")
+        top = fig.subfigures(3, 1, height_ratios=[1, 1, 0.9])
+        for row, (vi, li) in enumerate(pairs):
+            acq = samples[:, :, vi, li, :].astype(np.float64)
+            fit = model_image(lev0["rho"], lev0["lobes"], lev0["table"], lev0["frame"], s["view_grid"], views[vi],
+                              lights[li])
+            scale = float(max(np.percentile(acq, 99.5), 1e-6))
+            axes = top[row].subplots(1, 4)
+            axes[0].imshow(_srgb(acq, scale), origin="lower", interpolation="nearest")
+            axes[0].set_title(f"acquired r(l, v), scale {scale:.3g}")
+            axes[1].imshow(_srgb(fit, scale), origin="lower", interpolation="nearest")
+            axes[1].set_title("fitted T(v) f₁(l, v), level 0")
+            im = axes[2].imshow(alpha[:, :, vi], origin="lower", vmin=0, vmax=1, cmap="gray", interpolation="nearest")
+            axes[2].set_title("alpha of this view")
+            fig.colorbar(im, ax=axes[2], shrink=0.8)
+            diff = (fit - acq).mean(axis=-1) / scale
+            lim = max(float(np.abs(diff).max()), 1e-6)
+            im = axes[3].imshow(diff, origin="lower", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+            axes[3].set_title("fitted − acquired (/ scale)")
+            fig.colorbar(im, ax=axes[3], shrink=0.8)
+            for ax in axes:
+                ax.set_xticks([])
+                ax.set_yticks([])
+            top[row].suptitle(f"view {_angles(views[vi])}, light {_angles(lights[li])}  (texels x → , y ↑)")
+        axes = top[2].subplots(1, levels)
+        axes = np.atleast_1d(axes)
+        vi, li = pairs[0]
+        acq0 = samples[:, :, vi, li, :].astype(np.float64)
+        scale = float(max(np.percentile(acq0, 99.5), 1e-6))
+        res = int(s["resolution"])
+        rmse = s.get("fit_rmse", [])
+        for lev, ax in enumerate(axes):
+            f = {n: art[f"level_{lev}/{n}"] for n in ("rho", "lobes", "table", "frame")}
+            img = model_image(f["rho"], f["lobes"], f["table"], f["frame"], s["view_grid"], views[vi], lights[li])
+            rep = res // img.shape[0]
+            ax.imshow(_srgb(np.kron(img, np.ones((rep, rep, 1))), scale), origin="lower", interpolation="nearest")
+            ax.set_title(f"level {lev}: {img.shape[0]}²" + (f"\nRMSE {rmse[lev]:.3g}" if lev < len(rmse) else ""))
+            ax.set_xticks([])
+            ax.set_yticks([])
+        top[2].suptitle(f"mip pyramid (first pair) -- {s['exemplar_name']} of {s['source']}, {s['lobes']} lobe(s)")
+        return finish(fig, png, show)

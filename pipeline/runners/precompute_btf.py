@@ -1,0 +1,205 @@
+"""``precompute btf``: one repeat of a tiling fitted to seed 002's per-texel BRDFs (a ``btf`` artifact).
+
+``run_btf`` takes exemplar ``k`` of a tiling (a woven repeat, or a knitted one), the fibre materials
+the scene gives it (the same as ``fiberpath`` renders and ``precompute iirtf`` uses:
+``pipeline.runners.precompute.tiling_materials``), and
+
+1. **acquires** (seed 002 §4, ``stages.precompute.btf``) per texel of a res x res grid over the repeat's
+   top face, per view of the view grid and per light of the light grid the radiance per unit
+   irradiance r(l, v), the alpha of each view and the texel's average normal and tangent, path traced
+   in the repeat repeated without end. One chunk task per texel row (``pipeline.chunks``: here or on a
+   Dask scheduler); each writes its row of ``samples`` (float16) and ``alpha`` into the artifact.
+2. **fits** (seed 002 §5, ``stages.precompute.btf_fit``) per texel and channel the diffuse term and
+   1-2 Lafortune lobes by Levenberg-Marquardt alternating with the lookup table T(v) of Eq. 4, and the
+   mip levels from 2 x 2 groups of texels (§5.1) down to 1 x 1, each level's fit RMSE with and without
+   the table (the paper's Fig. 5 point) recorded in the summary. The fit reads the stored (float16)
+   samples, so a refit from the artifact reproduces it.
+
+Defaults: 32 x 32 texels (the paper's), views and lights on 8 x 8 grids of equal solid angle (64 each,
+the paper's 64-entry tables; ``--views 4x8`` gives the paper's 32), 16 samples per texel and view, two
+lobes, threshold 0.1 (the paper's), paths of at most 16 scattering events.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LoomError
+from ..memory import Estimate, budget as memory_budget
+
+
+@dataclass
+class BtfParams:
+    resolution: int = 32
+    views: tuple = (8, 8)            # (n_theta, n_phi) of the view grid
+    lights: tuple = (8, 8)           # (n_theta, n_phi) of the light grid
+    spp: int = 16
+    lobes: int = 2
+    threshold: float = 0.1
+    max_rounds: int = 10
+    max_depth: int = 16
+    rr_depth: int = 5
+    seed: int = 0
+    material: dict = field(default_factory=dict)
+
+    def check(self) -> None:
+        r = self.resolution
+        if r < 1 or r & (r - 1) or r > 256:
+            raise LoomError(None, "--resolution", f"must be a power of two from 1 to 256, got {r}")
+        for name, g in (("--views", self.views), ("--lights", self.lights)):
+            if len(g) != 2 or min(g) < 1 or g[0] * g[1] > 4096:
+                raise LoomError(None, name, f"must be THETAxPHI with positive counts, at most 4096 directions; got {g}")
+        for name, v in (("--spp", self.spp), ("--max-depth", self.max_depth), ("--rr-depth", self.rr_depth),
+                        ("--max-rounds", self.max_rounds)):
+            if v < 1:
+                raise LoomError(None, name, f"must be a positive integer, got {v}")
+        if self.lobes not in (1, 2):
+            raise LoomError(None, "--lobes", f"must be 1 or 2 (seed 002 §7), got {self.lobes}")
+        if not (math.isfinite(self.threshold) and self.threshold > 0):
+            raise LoomError(None, "--threshold", f"must be a positive number, got {self.threshold}")
+
+
+def parse_grid(text: str, option: str) -> tuple[int, int]:
+    """``8x8`` -> (8, 8): rings of equal solid angle x azimuths."""
+    parts = str(text).lower().split("x")
+    if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+        raise LoomError(None, option, f"expected THETAxPHI (e.g. 8x8), got {text!r}")
+    return int(parts[0]), int(parts[1])
+
+
+def btf_estimate(res, V, L, segments) -> Estimate:
+    est = Estimate("loomlight precompute btf")
+    est.add("tiling scene", 520.0 * segments, f"{segments:,} segments")
+    est.add("samples", res * res * V * L * 3 * (2 + 4 + 8), f"{res}x{res} texels x {V} views x {L} lights (float16 "
+            "stored, float32 read, float64 fit)")
+    est.add("fit", res * res * V * 4 * 8 * 6, "tables and lobes of every level")
+    return est
+
+
+def _btf_row_task(tiling, tiling_hash, store, k, iy, mof, mats, view_dirs, light_dirs, p: dict):
+    """Chunk task: texel row iy -- samples and alpha into the artifact; returns normal sums and timings."""
+    from stages.precompute.btf import acquire_texels
+    from stages.precompute.iirtf import exemplar_slabs
+    from stages.precompute.periodic import periodic_scene
+
+    from ..chunks import open_for_chunk
+    from .precompute import periodic_scenes
+
+    sc, art = periodic_scenes(tiling, tiling_hash)
+    slab = exemplar_slabs(art["ex_points"], art["ex_radius"], art["ex_offsets"], art["ex_fibers"])[k]
+    W, H = (float(v) for v in art["ex_period"][k])
+    res = p["resolution"]
+    t0 = time.perf_counter()
+    rad, alpha, nsum, rays = acquire_texels(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats,
+                                            res, iy * res, (iy + 1) * res, view_dirs, light_dirs, p["spp"], p["seed"],
+                                            p["max_depth"], p["rr_depth"], _max_dist(W, H, slab), _eps(W, H, slab))
+    open_for_chunk(store, "samples")[iy] = rad.astype(np.float16)
+    open_for_chunk(store, "alpha")[iy] = alpha
+    return {"normal": nsum, "rays": int(rays.sum()), "s": time.perf_counter() - t0}
+
+
+def _max_dist(W, H, slab) -> float:
+    """How far a ray may run inside the slab (grazing rays stop after this many periods)."""
+    return 64.0 * max(W, H, float(slab[1] - slab[0]))
+
+
+def _eps(W, H, slab) -> float:
+    return 1e-7 * (max(W, H) + abs(float(slab[0])) + abs(float(slab[1])))
+
+
+def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budget=None, threads=None,
+            scheduler=None) -> dict:
+    t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
+    from stages.core.btf import hemisphere_grid
+    from stages.precompute.btf import acquire_texels, texel_frames
+    from stages.precompute.btf_fit import fit_levels
+    from stages.precompute.iirtf import exemplar_slabs
+    from stages.precompute.periodic import periodic_scene
+
+    from ..artifacts import FILE, ArtifactWriter
+    from ..chunks import ChunkTask, run_tasks, session
+    from .precompute import materials_scene, periodic_scenes, pick_exemplars, tiling_input, tiling_materials
+
+    p.check()
+    if threads:
+        import numba
+
+        numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    tiling = Path(tiling)
+    art = tiling_input(tiling)
+    k = pick_exemplars(art, [exemplar], tiling)[0]
+    scene_path, sc_obj = materials_scene(tiling, art, scene)
+    mof, mats = tiling_materials(sc_obj, art, p.material)
+    w = ArtifactWriter(out, kind="btf", stage="precompute btf", params={**asdict(p), "exemplar": k},
+                       inputs={"tiling": (tiling, "tiling"), "scene": (scene_path, FILE)}, started=t_start)
+    if not force and w.up_to_date():
+        return {"skipped": True}
+    res = p.resolution
+    view_dirs = hemisphere_grid(*p.views)
+    light_dirs = hemisphere_grid(*p.lights)
+    V, L = len(view_dirs), len(light_dirs)
+    limit = budget or memory_budget()
+    btf_estimate(res, V, L, int(art.summary["segments"])).check(limit, tiling)
+    tiling_hash = art.meta["content_hash"]
+    tiling_abs = str(tiling.resolve())  # chunk tasks may run in another directory
+    sc, _ = periodic_scenes(tiling_abs, tiling_hash)
+    slab = exemplar_slabs(art["ex_points"], art["ex_radius"], art["ex_offsets"], art["ex_fibers"])[k]
+    W, H = (float(v) for v in art["ex_period"][k])
+    t0 = time.perf_counter()  # compile (or load) the acquisition kernel on one texel, one view, one light
+    acquire_texels(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, res, 0, 1, view_dirs[:1],
+                   light_dirs[:1], 1, p.seed, 2, 2, _max_dist(W, H, slab), _eps(W, H, slab))
+    compile_s = time.perf_counter() - t0
+    pdict = {key: v for key, v in asdict(p).items() if key != "material"}
+    with session(scheduler), w:
+        store = w.store_path
+        w.write("view_dirs", view_dirs)
+        w.write("light_dirs", light_dirs)
+        w.create("samples", (res, res, V, L, 3), np.float16, (1, res, V, L, 3),
+                 dimension_names=("y", "x", "view", "light", "c"))
+        w.create("alpha", (res, res, V), np.float32, (1, res, V), dimension_names=("y", "x", "view"))
+        t0 = time.perf_counter()
+        parts = run_tasks([ChunkTask(_btf_row_task, (tiling_abs, tiling_hash, str(store), k, iy, mof, mats, view_dirs,
+                                                     light_dirs, pdict)) for iy in range(res)],
+                          f"btf: acquisition, {res}x{res} texels x {V} views x {L} lights")
+        acquire_s = time.perf_counter() - t0
+        rays = sum(r["rays"] for r in parts)
+        frames = texel_frames(np.concatenate([r["normal"] for r in parts])).reshape(res, res, 2, 3)
+        samples = w.group["samples"][...].astype(np.float32)
+        alpha = w.group["alpha"][...]
+        t0 = time.perf_counter()
+        levels = fit_levels(samples, alpha, frames, view_dirs, light_dirs, p.lobes, p.threshold,
+                            max_rounds=p.max_rounds)
+        fit_s = time.perf_counter() - t0
+        del samples
+        fit_bytes = 0
+        rmse, rmse_nt, unconverged = [], [], 0
+        for lev, f in enumerate(levels):
+            r = res >> lev
+            g = f"level_{lev}/"
+            arrays = {"rho": f.rho.reshape(r, r, 3), "lobes": f.lobes.reshape(r, r, p.lobes, 3, 4),
+                      "table": f.table.reshape(r, r, V, 4), "frame": f.frames.reshape(r, r, 2, 3),
+                      "rmse": f.rmse.reshape(r, r, 3)}
+            for name, a in arrays.items():
+                a = np.ascontiguousarray(a, np.float32)
+                w.write(g + name, a)
+                if name != "rmse":
+                    fit_bytes += a.nbytes
+            rmse.append(float(np.sqrt(np.mean(np.square(f.rmse)))))
+            rmse_nt.append(float(np.sqrt(np.mean(np.square(f.rmse_no_table)))))
+            unconverged += int(np.count_nonzero(~np.asarray(f.converged)))
+        mean_r = float(np.mean(w.group["samples"][...].astype(np.float32)))
+        w.summary.update(kind="btf", source=str(tiling), source_hash=tiling_hash, scene=str(scene_path), exemplar=k,
+                         exemplar_name=str(art.summary["exemplar_names"][k]), period=[W, H], resolution=res,
+                         levels=len(levels), lobes=p.lobes, view_grid=list(p.views), light_grid=list(p.lights),
+                         spp=p.spp, fit_rmse=rmse, fit_rmse_no_table=rmse_nt, fit_bytes=int(fit_bytes),
+                         mean_radiance=mean_r, relative_fit_rmse=[x / max(mean_r, 1e-12) for x in rmse],
+                         unconverged_texels=unconverged, alpha_mean=float(np.mean(alpha)), rays=int(rays),
+                         rays_per_s=rays / max(acquire_s, 1e-9), acquire_s=acquire_s, fit_s=fit_s,
+                         compile_s=compile_s)
+    return {"skipped": False, "resolution": res, "views": V, "lights": L, "levels": len(levels), "fit_rmse": rmse,
+            "fit_rmse_no_table": rmse_nt, "acquire_s": acquire_s, "fit_s": fit_s, "fit_bytes": int(fit_bytes),
+            "mean_radiance": mean_r}

@@ -1,0 +1,182 @@
+"""Acquisition of a repeat's radiance samples for the fitted cloth texture (seed 002 §4).
+
+Seed 002 renders a stitch model "with direct and indirect illumination" for every view and light
+direction and reads back, per sampling point of a res x res grid on the top face of the model's
+bounding box, the radiance of the surface seen through that point along the view direction (Fig. 2:
+the point is *projected* along v, so parallax mixes radiance from different surface points into one
+texel, which the fit then explains), an alpha per view from ray casting (super-sampled: a fraction),
+and the average normal. loomlight path traces its explicit fibres instead of the paper's hardware
+lighting, with the repeat's copies all around it (``stages.precompute.periodic``: the exemplar repeated
+without end, so parallax and light from the neighbours are exact):
+
+For texel (iy, ix) of the exemplar's W x H box, view v (the grids of ``stages.core.btf``) and sample
+s = 0..spp-1: the point p = ((ix + u0) W / res, (iy + u1) H / res, z_hi) on the top face (u jittered
+per sample, the super-sampling of the texel's footprint), the ray from p along -v into the fabric.
+It misses (leaves through the bottom): a hole for this sample. It hits: a path from there, the fibre
+materials of the renderer (``material_eval_pdf`` / ``material_sample``), and at *every* vertex
+next-event estimation towards *every* light direction of the light grid (a shadow ray that must leave
+the fabric through the top), so one camera path serves all lights (the paper's "reuse camera paths
+across lights" -- the cost driver). Each light is directional with unit irradiance, so the sum over the
+path's vertices of throughput x f cos x visibility is r(l, v): the radiance per unit irradiance that
+the fit's f_r(l, v) models (``stages.core.btf``). Russian roulette from ``rr_depth``; at most
+``max_depth`` vertices.
+
+Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
+is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
+``alpha`` = hits / spp. Per texel: the sum of the first hits' surface normals (the capsule's outward
+normal at the hit, whatever the material) over all views and samples, for the average normal.
+
+Random numbers: ``uniform(seed, key, dim)`` with key = (texel * V + view) * spp + sample, so the
+result is the same whatever the thread count or the split of texels into chunks.
+"""
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from stages.core.geometry.capsule import capsule_normal
+from stages.core.rng import uniform
+from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
+from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_vertex
+
+DIMS_PER_VERTEX = 4      # lobe, two for the direction, Russian roulette
+FIRST_DIMS = 2           # the point's jitter
+
+
+@njit(cache=True)
+def _first_normal(sc, h, out):
+    """Add the outward capsule normal at the first hit ``h`` (in its wrapped piece's coordinates)."""
+    a = sc.seg_a[h.wrapped]
+    P = sc.points
+    nx, ny, nz, _s = capsule_normal(h.fx, h.fy, h.fz, P[a, 0], P[a, 1], P[a, 2],
+                                    P[a + 1, 0], P[a + 1, 1], P[a + 1, 2])
+    out[0] += nx
+    out[1] += ny
+    out[2] += nz
+
+
+@njit(cache=True)
+def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx, vy, vz, light_dirs, spp, seed,
+                       key0, max_depth, rr_depth, max_dist, eps, radiance, normal):
+    """Radiance sums (L, 3) of texel ``texel`` seen from v over ``spp`` samples into ``radiance`` (zeroed
+    here) and the first-hit normals into ``normal`` (added); returns (hits, rays)."""
+    L = light_dirs.shape[0]
+    for k in range(L):
+        for c in range(3):
+            radiance[k, c] = 0.0
+    iy = texel // res
+    ix = texel - iy * res
+    t_tan = np.empty(3)
+    n = np.empty(3)
+    so = np.empty(3)
+    wi = np.empty(3)
+    wo = np.empty(3)
+    wl = np.empty(3)
+    ctx = np.empty(CTX_SIZE)
+    hits = 0
+    rays = 0
+    for s in range(spp):
+        key = key0 + s
+        px = (ix + uniform(seed, key, 0)) * W / res
+        py = (iy + uniform(seed, key, 1)) * H / res
+        rays += 1
+        h = periodic_hit(sc, z_lo, z_hi, px, py, z_hi, -vx, -vy, -vz, -1, max_dist)
+        if math.isinf(h.t):
+            continue
+        hits += 1
+        _first_normal(sc, h, normal)
+        wi[0] = vx
+        wi[1] = vy
+        wi[2] = vz
+        tp0 = 1.0
+        tp1 = 1.0
+        tp2 = 1.0
+        depth = 1
+        while True:
+            row, nf = periodic_vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
+            mat = mats[row]
+            material_prepare(mat, t_tan, n, wi, ctx)
+            for k in range(L):  # next-event estimation towards every light (unit irradiance)
+                wl[0] = light_dirs[k, 0]
+                wl[1] = light_dirs[k, 1]
+                wl[2] = light_dirs[k, 2]
+                f0, f1, f2, _pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
+                if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
+                    continue
+                rays += 1
+                if not periodic_occluded(sc, z_lo, z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf, max_dist):
+                    radiance[k, 0] += tp0 * f0
+                    radiance[k, 1] += tp1 * f1
+                    radiance[k, 2] += tp2 * f2
+            if depth >= max_depth:
+                break
+            base = FIRST_DIMS + DIMS_PER_VERTEX * (depth - 1)
+            s0, s1, s2, pf = material_sample(mat, ctx, t_tan, n, wi, uniform(seed, key, base),
+                                             uniform(seed, key, base + 1), uniform(seed, key, base + 2), wo)
+            if pf <= 0.0:
+                break
+            tp0 *= s0
+            tp1 *= s1
+            tp2 *= s2
+            if depth >= rr_depth:
+                q = min(0.95, max(tp0, max(tp1, tp2)))
+                if uniform(seed, key, base + 3) >= q:
+                    break
+                tp0 /= q
+                tp1 /= q
+                tp2 /= q
+            rays += 1
+            h = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, max_dist)
+            if math.isinf(h.t):
+                break
+            wi[0] = -wo[0]
+            wi[1] = -wo[1]
+            wi[2] = -wo[2]
+            depth += 1
+    return hits, rays
+
+
+@njit(cache=True, parallel=True)
+def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_dirs, light_dirs, spp, seed,
+                   max_depth, rr_depth, max_dist, eps):
+    """Texels t0..t1-1 (row-major ids of the res x res grid): (radiance (T, V, L, 3) float32 mean over the
+    hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc."""
+    T = t1 - t0
+    V = view_dirs.shape[0]
+    L = light_dirs.shape[0]
+    radiance = np.zeros((T, V, L, 3), np.float32)
+    alpha = np.zeros((T, V), np.float32)
+    normal = np.zeros((T, V, 3))
+    rays = np.zeros((T, V), np.int64)
+    for job in prange(T * V):
+        i = job // V
+        v = job - i * V
+        texel = t0 + i
+        acc = np.empty((L, 3))
+        key0 = (texel * V + v) * spp
+        hits, r = texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, view_dirs[v, 0],
+                                     view_dirs[v, 1], view_dirs[v, 2], light_dirs, spp, seed, key0, max_depth,
+                                     rr_depth, max_dist, eps, acc, normal[i, v])
+        rays[i, v] = r
+        alpha[i, v] = hits / spp
+        if hits > 0:
+            for k in range(L):
+                for c in range(3):
+                    radiance[i, v, k, c] = acc[k, c] / hits
+    return radiance, alpha, normal.sum(axis=1), rays.sum(axis=1)
+
+
+def texel_frames(normal_sums):
+    """Average normal and tangent per texel (§4): n = the normalised sum of first-hit normals (+z where
+    nothing was hit), b = the unit vector perpendicular to n and the x axis, t = b x n. (T, 2, 3)."""
+    n = np.asarray(normal_sums, np.float64).reshape(-1, 3).copy()
+    norm = np.linalg.norm(n, axis=1)
+    n[norm <= 1e-12] = (0.0, 0.0, 1.0)
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    b = np.cross(n, np.array([1.0, 0.0, 0.0]))
+    bad = np.linalg.norm(b, axis=1) < 1e-6          # n along x: take y as the binormal
+    b[bad] = np.cross(np.cross(n[bad], np.array([0.0, 1.0, 0.0])), n[bad])
+    b /= np.linalg.norm(b, axis=1)[:, None]
+    t = np.cross(b, n)
+    t /= np.linalg.norm(t, axis=1)[:, None]
+    return np.stack([n, t], axis=1)
