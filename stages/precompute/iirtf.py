@@ -109,7 +109,8 @@ from stages.core.rng import uniform
 from stages.core.sh import sh_eval
 from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_prepare,
                                           material_sample)
-from stages.precompute.periodic import periodic_hit, periodic_hit_outside, periodic_scene, periodic_vertex
+from stages.precompute.periodic import (periodic_hit, periodic_hit_outside, periodic_occluded, periodic_scene,
+                                        periodic_vertex)
 
 MAX_ORDER = 8
 TWO_PI = 2.0 * math.pi
@@ -278,8 +279,7 @@ def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ig
         f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
         if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
             rays += 1
-            hs = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf, max_dist)
-            if math.isinf(hs.t):
+            if not periodic_occluded(sc, z_lo, z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf, max_dist):
                 if mis:
                     w = p_light / (p_light * p_light + pf * pf)
                     sh_eval(order, wl[0], wl[1], wl[2], Y)
