@@ -3,15 +3,20 @@
 Configuration (``schemas/tile-config.schema.json``; relative paths against the file's directory):
   scene            scene file with camera / lights / render settings for rendering the tiling
   seed             random seed of the fibre realization (default 0)
-  [yarn]           preset (data/yarns, default cotton1), radius (yarn radius, default spacing / 2.2),
+  [yarn]           preset (data/yarns, default cotton1), radius (yarn radius, default spacing / 2.2; knitted:
+                   the knit generator's 0.06 min(w, h / 0.8)),
                    fibers_per_ply (override the preset's fibre count; the fibre radius follows at the packing
                    fraction, pipeline/presets.py), fiber_radius (overrides that),
                    segment_length (fibre polyline step; default min pitch / 12), use_migration
   [weave]          spacing = [warp, weft] thread spacing (default [0.1, 0.1]), crimp (default 1),
                    block_cells = [bx, by] weave cells per block (default [1, 1])
-  [[exemplars]]    pattern = plain | twill (n, m) | satin (n, step) | basket (n) | wif (path), ends,
+  [knit]           (knitted exemplars) spacing = [w, h] wale and course spacing (default [0.1, 0.08]),
+                   block_stitches = [bx, by] stitches per block (default [1, 1])
+  [[exemplars]]    woven: pattern = plain | twill (n, m) | satin (n, step) | basket (n) | wif (path), ends,
                    picks (the exemplar size; default the draft's natural repeat), invert (swap warp and
-                   weft faces: 4/1 satin -> 1/4 satin), name
+                   weft faces: 4/1 satin -> 1/4 satin), name;
+                   knitted: pattern = stockinette | garter | rib1x1, wales, courses (default the pattern's
+                   repeat: 1 x 1, 1 x 2, 2 x 1), name. One tiling's exemplars are all woven or all knitted.
   [tiling]         repeat = [ru, rv] repeats of exemplar 0 over the cloth (default [2, 2]) -> the block
                    grid; block_map = PNG path or integer array (rows top to bottom, columns along u;
                    resampled nearest to the block grid), map_values (pixel value of exemplar i)
@@ -35,7 +40,7 @@ from ..errors import LoomError, check_name
 from ..memory import Estimate, budget as memory_budget
 from ..schemas import load_schema, validate
 from ..toml_file import read_toml
-from .tile_exemplars import DEFAULT_SPACING, build_exemplars, exemplar_interlacement
+from .tile_exemplars import build_exemplars, exemplar_vertices, tiling_layout
 from .tile_surface import block_map, build_surface
 
 
@@ -89,14 +94,10 @@ TRIANGLE_BYTES = 1400   # a base triangle: its three shell tetrahedra (vertices,
 VERTEX_BYTES = 200      # an exemplar fibre vertex: realized, wrapped, blocked, concatenated
 
 
-def tile_estimate(cfg, config: Path, overs, nbu: int, nbv: int) -> Estimate:
+def tile_estimate(cfg, config: Path, layout, nbu: int, nbv: int) -> Estimate:
     """The tile stage's peak from its configuration: the block map, the base mesh and its shell
     (two triangles per surface cell, three tetrahedra per triangle; an OBJ surface by its file size) and
-    every exemplar's fibres (plies x fibres per yarn, a vertex per polyline step along its length)."""
-    from stages.core.yarn import model as M
-
-    from .tile_exemplars import yarn_params
-
+    every exemplar's fibres (``tile_exemplars.exemplar_vertices``)."""
     est = Estimate("loomlight tile")
     est.add("block map", 16.0 * nbu * nbv, f"{nbu} x {nbv} blocks")
     s = cfg["surface"]
@@ -106,11 +107,7 @@ def tile_estimate(cfg, config: Path, overs, nbu: int, nbv: int) -> Estimate:
         nu, nv = s.get("resolution") or {"flat": (8, 8), "cylinder": (32, 8)}.get(s["kind"], (32, 32))
         tris = 2.0 * nu * nv
     est.add("shell", TRIANGLE_BYTES * tris, f"{int(tris):,} base triangles")
-    tp, _, seg, _ = yarn_params(cfg, config)
-    sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
-    fibres = tp[M.PLY_NUM] * tp[M.FIBER_NUM]
-    verts = sum(fibres * (E * (P * sy * 1.5 / seg + 2) + P * (E * sx * 1.5 / seg + 2)) for E, P in
-                (o.shape for o in overs))
+    verts = exemplar_vertices(cfg, config, layout)
     est.add("exemplar fibres", VERTEX_BYTES * verts, f"{int(verts):,} vertices")
     return est
 
@@ -150,12 +147,12 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
     # surface first: cheap checks before the fibres are realized
     exs_cfg = cfg["exemplars"]
     K = len(exs_cfg)
-    overs = [exemplar_interlacement(ex, config, f"exemplars[{k}]") for k, ex in enumerate(exs_cfg)]
-    bcx, bcy = cfg.get("weave", {}).get("block_cells", [1, 1])
-    nbu, nbv = block_grid(cfg.get("tiling", {}).get("repeat", [2, 2]), (overs[0].shape[0] // bcx, overs[0].shape[1] // bcy))
-    tile_estimate(cfg, config, overs, nbu, nbv).check(budget or memory_budget(), config)
+    layout = tiling_layout(cfg, config)
+    bcx, bcy = layout.block_cells
+    nbu, nbv = block_grid(cfg.get("tiling", {}).get("repeat", [2, 2]), (layout.sizes[0][0] // bcx, layout.sizes[0][1] // bcy))
+    tile_estimate(cfg, config, layout, nbu, nbv).check(budget or memory_budget(), config)
     bmap = block_map(cfg, config, K, nbu, nbv)
-    sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
+    sx, sy = layout.spacing
     bw, bh = bcx * sx, bcy * sy
     flat_size = (nbu * bw, nbv * bh)
     V, UV, F = build_surface(cfg, config, flat_size)
@@ -169,7 +166,7 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
         raise LoomError(sfile, f"triangle {int(flip[0])}", f"flipped triangle (its uv or normal orientation is "
                                                            f"opposite to the mesh's); {len(flip)} such triangle(s)")
 
-    exs, T_ex, (bw, bh) = build_exemplars(cfg, config)
+    exs, T_ex, (bw, bh) = build_exemplars(cfg, config, layout)
     T = float(s.get("thickness", T_ex))
     shell = build_shell(V, UV, F, N, T, flat_size, T_ex)
     bad = np.flatnonzero(shell["volume"] <= 0)
@@ -230,6 +227,8 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
             segments=int(seg_off[-1]), wrapped_segments=int(len(cat([e["wrap"]["points"] for e in exs])) - wrap_pieces_n[-1]),
             exemplar_sizes=[list(e["over"].shape) for e in exs], surface=s["kind"], scene=cfg.get("scene"),
             bounds=[X.min(0).tolist(), X.max(0).tolist()], exemplar_bounds=[lo.tolist(), hi.tolist()])
+        if layout.kind == "knit":  # exemplar_sizes of a weft knit: 0 ends x courses picks (tile_exemplars doc)
+            w.summary.update(exemplar_kind="knit", exemplar_stitches=[list(e["stitches"].shape[::-1]) for e in exs])
     return {"skipped": False, "exemplars": K, "blocks": int(nbu * nbv), "tetrahedra": int(len(shell["tets"]))}
 
 

@@ -1,11 +1,24 @@
-"""The tile stage's exemplars: periodic fibre patches realized from weave drafts.
+"""The tile stage's exemplars: periodic fibre patches realized from weave drafts or knit patterns.
 
-``exemplar_interlacement`` turns one ``[[exemplars]]`` entry (plain, twill, satin, basket or a WIF
-draft; ends x picks; invert) into its warp-over-weft interlacement, refusing a size that is not a
-multiple of the draft's repeat. ``yarn_params`` packs the ``[yarn]`` table (a preset scaled to the
-yarn radius, with its overrides) and the fibre polyline step. ``build_exemplars`` realizes every
-exemplar (``stages.tile.exemplar``), moves them into one exemplar space (every fibre surface in
-z in [0, T]) and cuts them into blocks of ``weave.block_cells``.
+A tiling's exemplars are all woven or all knitted (``tiling_layout`` refuses a mix: the blocks of one
+tiling share one cell size).
+
+Woven: ``exemplar_interlacement`` turns one ``[[exemplars]]`` entry (plain, twill, satin, basket or a
+WIF draft; ends x picks; invert) into its warp-over-weft interlacement, refusing a size that is not a
+multiple of the draft's repeat; ``[weave]`` gives the spacing and the weave cells per block.
+
+Knitted: an entry with pattern = stockinette | garter | rib1x1 and ``wales`` x ``courses`` stitches (default
+the pattern's repeat: 1 x 1, garter 1 x 2, rib1x1 2 x 1; multiples of it) is realized by
+``stages.tile.knit_exemplar`` from the ingest knit generator's loop model; ``[knit]`` gives spacing =
+[wale spacing w, course spacing h] (default the generator's: [0.1, 0.8 w]) and block_stitches = [bx, by]
+(stitches per block, default [1, 1]); the yarn radius defaults to the generator's (0.06 min(w, h / 0.8)).
+A weft knit has no ends: its interlacement is stored as 0 ends x ``courses`` picks (each course a yarn of
+group knit), so the exemplar size consumers read (ends + picks = yarns) holds.
+
+``yarn_params`` packs the ``[yarn]`` table (a preset scaled to the yarn radius, with its overrides) and
+the fibre polyline step. ``build_exemplars`` realizes every exemplar (``stages.tile.exemplar`` /
+``stages.tile.knit_exemplar``), moves them into one exemplar space (every fibre surface in z in [0, T])
+and cuts them into blocks.
 """
 from __future__ import annotations
 
@@ -17,6 +30,9 @@ import numpy as np
 from ..errors import LoomError
 
 DEFAULT_SPACING = 0.1
+DEFAULT_COURSE_RATIO = 0.8   # course spacing / wale spacing: the ingest knit generator's default (pipeline/generators.py)
+WOVEN_KEYS = ("n", "m", "step", "invert", "path", "ends", "picks")
+KNIT_KEYS = ("wales", "courses")
 
 
 class YarnParams(NamedTuple):
@@ -24,6 +40,14 @@ class YarnParams(NamedTuple):
     radius: float           # yarn radius
     segment_length: float   # fibre polyline step
     preset: dict            # the scaled preset with the [yarn] overrides
+
+
+class Layout(NamedTuple):
+    kind: str               # 'woven' or 'knit': every exemplar of a tiling is one kind
+    spacing: tuple          # (sx, sy): warp and weft spacing, or wale and course spacing (w, h)
+    block_cells: tuple      # (bx, by) weave cells or stitches per block
+    sizes: list             # per exemplar (nx, ny) cells: (ends, picks) or (wales, courses)
+    overs: list             # per exemplar: the interlacement (ends, picks), or the stitches (courses, wales)
 
 
 class Exemplars(NamedTuple):
@@ -86,14 +110,121 @@ def exemplar_interlacement(ex, file, place):
     return over
 
 
+def is_knit(ex) -> bool:
+    from stages.core.curves.knit import PATTERNS
+
+    return ex.get("pattern") in PATTERNS
+
+
+def fabric_kind(cfg, file) -> str:
+    """'woven' or 'knit'; a mix of woven and knitted exemplars, or the other kind's table, is refused."""
+    exs = cfg["exemplars"]
+    kinds = ["knit" if is_knit(ex) else "woven" for ex in exs]
+    kind = kinds[0]
+    for k, (ex, kk) in enumerate(zip(exs, kinds)):
+        if kk != kind:
+            raise LoomError(file, f"exemplars[{k}].pattern", f"{ex['pattern']!r} is a {kk} pattern but exemplars[0] "
+                            f"({exs[0]['pattern']!r}) is a {kind} pattern: a tiling's exemplars are all woven or all knitted "
+                            f"(its blocks share one cell size); make two tilings")
+        wrong = WOVEN_KEYS if kk == "knit" else KNIT_KEYS
+        for key in wrong:
+            if key in ex:
+                raise LoomError(file, f"exemplars[{k}].{key}", f"{key!r} does not apply to a {kk} exemplar "
+                                f"({ex['pattern']!r}); " + ("a knitted exemplar takes wales and courses" if kk == "knit"
+                                                            else "wales and courses are for knitted exemplars"))
+    other = "weave" if kind == "knit" else "knit"
+    if other in cfg:
+        raise LoomError(file, other, f"a [{other}] table does not apply to {kind} exemplars; "
+                        + ("a knitted tiling takes [knit] spacing = [w, h] and block_stitches" if kind == "knit"
+                           else "a woven tiling takes [weave]"))
+    return kind
+
+
+def knit_spacing(cfg):
+    """(w, h): wale and course spacing of a knitted tiling."""
+    k = cfg.get("knit", {})
+    if "spacing" in k:
+        return float(k["spacing"][0]), float(k["spacing"][1])
+    return DEFAULT_SPACING, DEFAULT_COURSE_RATIO * DEFAULT_SPACING
+
+
+def knit_stitches(ex, file, place):
+    """(wales, courses) of one knitted exemplar, checked to be whole repeats of its pattern."""
+    from stages.tile.knit_exemplar import check_repeat, natural_repeat
+
+    nw, nc = natural_repeat(ex["pattern"])
+    wales, courses = int(ex.get("wales", nw)), int(ex.get("courses", nc))
+    try:
+        check_repeat(ex["pattern"], wales, courses)
+    except ValueError as e:
+        raise LoomError(file, f"{place}.{'courses' if courses % nc else 'wales'}", str(e)) from None
+    return wales, courses
+
+
+def tiling_layout(cfg, file) -> Layout:
+    """The kind, cell spacing, cells per block and size of every exemplar, checked (before any fibre)."""
+    kind = fabric_kind(cfg, file)
+    places = [f"exemplars[{k}]" for k in range(len(cfg["exemplars"]))]
+    if kind == "knit":
+        from stages.core.curves.knit import stitch_types
+
+        spacing = knit_spacing(cfg)
+        cells = tuple(cfg.get("knit", {}).get("block_stitches", [1, 1]))
+        sizes = [knit_stitches(ex, file, pl) for ex, pl in zip(cfg["exemplars"], places)]
+        overs = [stitch_types(ex["pattern"], *sz) for ex, sz in zip(cfg["exemplars"], sizes)]
+        names, what, key = ("wales", "courses"), "stitches", "knit.block_stitches"
+    else:
+        spacing = tuple(cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING]))
+        cells = tuple(cfg.get("weave", {}).get("block_cells", [1, 1]))
+        overs = [exemplar_interlacement(ex, file, pl) for ex, pl in zip(cfg["exemplars"], places)]
+        sizes = [tuple(o.shape) for o in overs]
+        names, what, key = ("ends", "picks"), "cells", "weave.block_cells"
+    for pl, (nx, ny) in zip(places, sizes):
+        if nx % cells[0] or ny % cells[1]:
+            raise LoomError(file, pl, f"exemplar of {nx} {names[0]} x {ny} {names[1]} cannot be cut into blocks of "
+                                      f"{cells[0]} x {cells[1]} {what} ({key})")
+    return Layout(kind, (float(spacing[0]), float(spacing[1])), (int(cells[0]), int(cells[1])), sizes, overs)
+
+
+def default_radius(cfg, file) -> float:
+    """The yarn radius without [yarn] radius: woven min(spacing) / 2.2, knitted the knit generator's."""
+    if fabric_kind(cfg, file) == "knit":
+        from stages.core.curves.knit import default_radius as knit_radius
+
+        return knit_radius(*knit_spacing(cfg))
+    sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
+    return min(sx, sy) / 2.2
+
+
+def exemplar_vertices(cfg, file, layout: Layout) -> float:
+    """Fibre vertices of every exemplar (plies x fibres per yarn, a vertex per polyline step along its
+    length), for the memory estimate; a knitted course's length is the loop model's (the arc length of its
+    periodic centreline). The wrapped copies (counted in the tile runner's bytes per vertex) hold about as
+    many again: 1.05 x for a 1 x 1 stockinette, whose loops reach 1.1 h beyond the box, as measured."""
+    from stages.core.yarn import model as M
+
+    tp, radius, seg, _ = yarn_params(cfg, file)
+    fibres = tp[M.PLY_NUM] * tp[M.FIBER_NUM]
+    sx, sy = layout.spacing
+    if layout.kind == "woven":
+        return float(sum(fibres * (E * (P * sy * 1.5 / seg + 2) + P * (E * sx * 1.5 / seg + 2))
+                         for E, P in layout.sizes))
+    from stages.tile.knit_exemplar import knit_centreline
+
+    verts = 0.0
+    for ex, (wales, courses) in zip(cfg["exemplars"], layout.sizes):
+        L = knit_centreline(ex["pattern"], wales, courses, sx, sy, radius, 0).L
+        verts += fibres * courses * (L / seg + 2)
+    return float(verts)
+
+
 def yarn_params(cfg, file) -> YarnParams:
     from stages.core.yarn import model as M
 
     from ..presets import load_preset, pack, packed_fibre_radius, scale_preset
 
     y = cfg.get("yarn", {})
-    sx, sy = cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
-    radius = y.get("radius", min(sx, sy) / 2.2)
+    radius = y["radius"] if "radius" in y else default_radius(cfg, file)
     d = load_preset(y.get("preset", "cotton1"), file, "yarn.preset")
     d = scale_preset(d, float(radius), file, "yarn.radius")
     if "fibers_per_ply" in y:  # the packed fibre radius follows the count (unless fiber_radius is given)
@@ -109,27 +240,29 @@ def yarn_params(cfg, file) -> YarnParams:
     return YarnParams(tp, float(radius), float(seg), d)
 
 
-def build_exemplars(cfg, file) -> Exemplars:
+def build_exemplars(cfg, file, layout: Layout | None = None) -> Exemplars:
     from stages.tile.exemplar import realize_exemplar, segment_blocks, wrap_pieces
+    from stages.tile.knit_exemplar import realize_knit_exemplar
 
+    layout = layout or tiling_layout(cfg, file)
     tp, radius, seg_len, _ = yarn_params(cfg, file)
-    wv = cfg.get("weave", {})
-    sx, sy = wv.get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING])
-    crimp = wv.get("crimp", 1.0)
-    bcx, bcy = wv.get("block_cells", [1, 1])
+    sx, sy = layout.spacing
+    bcx, bcy = layout.block_cells
+    crimp = cfg.get("weave", {}).get("crimp", 1.0)
     seed = int(cfg.get("seed", 0))
     exs = []
-    for k, ex in enumerate(cfg["exemplars"]):
-        place = f"exemplars[{k}]"
-        over = exemplar_interlacement(ex, file, place)
-        E, P = over.shape
-        if E % bcx or P % bcy:
-            raise LoomError(file, f"{place}", f"exemplar of {E} ends x {P} picks cannot be cut into blocks of "
-                                               f"{bcx} x {bcy} cells (weave.block_cells)")
-        r = realize_exemplar(over, sx, sy, tp, tp, radius, radius, crimp, seed, seg_len)
-        r["over"] = over
+    for k, (ex, over, (nx, ny)) in enumerate(zip(cfg["exemplars"], layout.overs, layout.sizes)):
+        if layout.kind == "knit":
+            try:
+                r = realize_knit_exemplar(ex["pattern"], nx, ny, sx, sy, tp, radius, seed, seg_len)
+            except ValueError as e:
+                raise LoomError(file, f"exemplars[{k}]", str(e)) from None
+            r["over"] = np.zeros((0, ny), bool)   # a weft knit: 0 ends x courses picks (module doc)
+        else:
+            r = realize_exemplar(over, sx, sy, tp, tp, radius, radius, crimp, seed, seg_len)
+            r["over"] = over
         r["name"] = ex.get("name", f"{ex['pattern']}{k}")
-        r["nblocks"] = (E // bcx, P // bcy)
+        r["nblocks"] = (nx // bcx, ny // bcy)
         exs.append(r)
     # common exemplar space: z shifted so that every fibre surface lies in [0, T]
     zlo = min(float((e["points"][:, 2] - e["radius"]).min()) for e in exs)

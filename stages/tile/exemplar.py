@@ -23,6 +23,8 @@ Periodic fibres
     loops and hairs (random per migration cycle / per hair, not periodic) are not realized in an
     exemplar. A fibre is sampled at z_m = m L / n_seg, m = 0..n_seg, and placed by seed 000 Eq. 7:
     p = c(z) + x n(z) + y b(z). Its last point is its first point shifted by one period.
+    ``periodic_yarn_fibres`` does this for one yarn; the knitted exemplars (``stages.tile.knit_exemplar``)
+    use it, and ``wrap_pieces`` and ``segment_blocks`` below, for their periodic courses.
 
 Blocks
     The exemplar is cut into blocks of ``bcx`` x ``bcy`` weave cells (block size bw = bcx sx, bh =
@@ -38,6 +40,7 @@ Pure numpy / numba; invalid parameters raise ValueError (the pipeline turns it i
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -110,6 +113,29 @@ def periodic_fiber_points(tp, type_key, yarn_seed, z, pos, nrm, bnm, out, out_r)
                 out_r[base + m] = tp[FIBER_RADIUS]
 
 
+class YarnFibres(NamedTuple):
+    points: np.ndarray   # (n_fibres n_points, 3) the fibre polylines, one after the other
+    radius: np.ndarray   # (n_fibres n_points,) fibre radius at each point
+    n_fibres: int        # plies x fibres per ply
+    n_points: int        # points per fibre: n_seg + 1, the last = the first + one period
+
+
+def periodic_yarn_fibres(s, cl, L, tp, type_key, yarn_key, segment_length) -> YarnFibres:
+    """The fibres of one periodic yarn: dense centreline samples ``cl`` at arc lengths ``s`` (s = 0 at
+    the period's start), period ``L`` along it; pitches snapped (``snap_periodic``), n_seg = ceil(L /
+    segment_length) (at least 4) equal steps z_m = m L / n_seg, seed 000 Eq. 7 in the +z frame."""
+    tp = snap_periodic(tp, L)
+    nseg = max(4, int(math.ceil(L / segment_length)))
+    z = np.arange(nseg + 1) * (L / nseg)
+    pos, t, n, b = centreline_frames(s, cl, z)
+    nf = int(tp[PLY_NUM]) * int(tp[FIBER_NUM])
+    out = np.empty((nf * (nseg + 1), 3))
+    out_r = np.empty(nf * (nseg + 1))
+    periodic_fiber_points(tp, type_key, yarn_key, z, np.ascontiguousarray(pos), np.ascontiguousarray(n),
+                          np.ascontiguousarray(b), out, out_r)
+    return YarnFibres(out, out_r, nf, nseg + 1)
+
+
 def realize_exemplar(over, sx, sy, tp_warp, tp_weft, r_warp, r_weft, crimp, seed, segment_length):
     """Explicit periodic fibres of one repeat.
 
@@ -122,21 +148,13 @@ def realize_exemplar(over, sx, sy, tp_warp, tp_weft, r_warp, r_weft, crimp, seed
         warp = yarn < E
         idx = yarn if warp else yarn - E
         s, cl, L = periodic_centreline(over, sx, sy, r_warp, r_weft, crimp, warp, idx)
-        tp = snap_periodic(tp_warp if warp else tp_weft, L)
-        nseg = max(4, int(math.ceil(L / segment_length)))
-        z = np.arange(nseg + 1) * (L / nseg)
-        pos, t, n, b = centreline_frames(s, cl, z)
-        nf = int(tp[PLY_NUM]) * int(tp[FIBER_NUM])
-        out = np.empty((nf * (nseg + 1), 3))
-        out_r = np.empty(nf * (nseg + 1))
         tkey = int(hash_u64(seed, 1 if warp else 2, 7) >> np.uint64(1))
         ykey = int(hash_u64(seed, yarn, 11) >> np.uint64(1))
-        periodic_fiber_points(tp, tkey, ykey, z, np.ascontiguousarray(pos), np.ascontiguousarray(n),
-                              np.ascontiguousarray(b), out, out_r)
-        pts.append(out)
-        rads.append(out_r)
-        counts += [nseg + 1] * nf
-        fy += [yarn] * nf
+        yf = periodic_yarn_fibres(s, cl, L, tp_warp if warp else tp_weft, tkey, ykey, segment_length)
+        pts.append(yf.points)
+        rads.append(yf.radius)
+        counts += [yf.n_points] * yf.n_fibres
+        fy += [yarn] * yf.n_fibres
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     return {"points": np.concatenate(pts), "radius": np.concatenate(rads), "offsets": offsets,
             "fiber_yarn": np.asarray(fy, np.int32),
