@@ -17,7 +17,7 @@ from . import finish, image_panel, pyplot, pyvista_setup, screenshot
 
 PALETTE = np.array([[0.85, 0.70, 0.35], [0.55, 0.12, 0.16], [0.20, 0.45, 0.70], [0.30, 0.62, 0.32],
                     [0.60, 0.40, 0.70], [0.85, 0.50, 0.20]])
-GROUP_COLORS = {0: ("warp", (0.90, 0.60, 0.10)), 1: ("weft", (0.15, 0.38, 0.80))}
+GROUP_COLORS = {0: ("warp", (0.90, 0.60, 0.10)), 1: ("weft", (0.15, 0.38, 0.80)), 2: ("knit", (0.75, 0.25, 0.20))}
 SHELL_COLOR = "lightblue"
 MAX_BLOCK_LABELS = 64
 
@@ -92,8 +92,12 @@ def draw_exemplar(ax, art, k: int) -> None:
     ax.set_xlabel("x (exemplar)")
     ax.set_ylabel("y (exemplar)")
     E, Pk = art.summary["exemplar_sizes"][k]
+    size = f"{E} ends x {Pk} picks"
+    if art.summary.get("exemplar_kind") == "knit":
+        wales, courses = art.summary["exemplar_stitches"][k]
+        size = f"{wales} wales x {courses} courses"
     ax.set_title(f"exemplar {k} '{art.summary['exemplar_names'][k]}' from the top:\n"
-                 f"{E} ends x {Pk} picks, {nbx} x {nby} blocks (ids)")
+                 f"{size}, {nbx} x {nby} blocks (ids)")
 
 
 def base_view(art, pv, size, off_screen):
@@ -159,7 +163,8 @@ def inspect(art, png, show=False, yarn=-1, size=(1200, 900), **_):
         for ax, k in zip(axes, ks):
             draw_exemplar(ax, art, k)
         axes[len(axes) - ncol if len(axes) >= ncol else 0].legend(
-            handles=[Patch(facecolor=c, label=n) for n, c in GROUP_COLORS.values()], loc="upper left",
+            handles=[Patch(facecolor=c, label=n) for g, (n, c) in GROUP_COLORS.items()
+                     if np.any(art["ex_yarn_group"] == g)], loc="upper left",
             bbox_to_anchor=(0.0, -0.16), ncol=2, frameon=False, title="yarn (darker = deeper in the cloth)",
             alignment="left")
         return finish(fig, png, show)

@@ -139,7 +139,8 @@ TILING_CASES = [
     ("preset", 'preset = "silk1"', 'preset = "slik1"', "yarn.preset",
      f"unknown preset 'slik1' (known: {PRESETS}); did you mean 'silk1'?"),
     ("pattern", 'pattern = "satin"', 'pattern = "sateen"', "exemplars[0].pattern",
-     "unknown exemplar pattern 'sateen' (known: plain, twill, satin, basket, wif); did you mean 'satin'?"),
+     "unknown exemplar pattern 'sateen' (known: plain, twill, satin, basket, wif, stockinette, garter, rib1x1); "
+     "did you mean 'satin'?"),
 ]
 
 
