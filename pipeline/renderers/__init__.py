@@ -102,6 +102,7 @@ TABLES = ArtifactInput("tables", ("tables",), "the procedural tables (loomlight 
 GRID = ArtifactInput("grid", ("grid",), "a voxel grid (loomlight voxelize)")
 SVF = ArtifactInput("svf", ("svf",), "the tiling's segment visibility functions (loomlight precompute svf)")
 IIRTF = ArtifactInput("iirtf", ("iirtf",), "the tiling's IIRTF transfer matrices (loomlight precompute iirtf)")
+BTF = ArtifactInput("btf", ("btf",), "a fitted cloth texture (loomlight precompute btf)")
 CLI_INPUTS = ("fibers", "tables", "grid")   # the artifact options ``render`` has; others come by --set
 
 _FIBERPATH_SETTINGS = (
@@ -156,6 +157,22 @@ METHODS = {m.name: m for m in (
                                        "visibility, flat-fabric units (default: the exemplar thickness)"),
                   Setting("tint", "yarn (default) or none, as fiberpath (must match the IIRTF's materials)",
                           ("yarn", "none")))),
+    RenderMethod(
+        "btf", "a fitted cloth texture (Lafortune lobes x view table, mip-mapped) on a triangle mesh (seed 002)",
+        "btf",
+        sources=(Source("mesh", (BTF,), "an OBJ with texture coordinates (--set mesh=, --set repeat=) and the "
+                                        "texture (--set btf=)"),
+                 Source("tiling", (TILING, BTF), "a tiling's base surface (--fibers) and the texture fitted from "
+                                                 "its repeat (--set btf=)")),
+        default_source="mesh",
+        settings=(Setting("btf", "the btf artifact (loomlight precompute btf)"),
+                  Setting("mesh", "an OBJ mesh with texture coordinates (vt)"),
+                  Setting("repeat", "texture repeats across the mesh's uv [0, 1] (default 1; mesh only)"),
+                  Setting("tiling", "a tiling artifact (same as --fibers TILING.zarr)"),
+                  Setting("mip", "on (default): the mip level of each pixel's footprint, blended between levels; "
+                                 "off: level 0 everywhere", ("on", "off")),
+                  Setting("shadows", "off (default) or on: shadow rays towards directional lights through the "
+                                     "mesh's alpha", ("off", "on")))),
 )}
 
 

@@ -1,0 +1,129 @@
+"""btf render speed (seed 002 §7: "about 1 frame per second for a resolution of 730 x 400"): frames per second.
+
+Geometry: the draped damask's base surface (``data/tilings/damask.toml``: a 4 x 4 cloth over a sphere of
+radius 1, 40 x 40 quads, 3200 triangles, ``stages.tile.base_surfaces.sphere_drape``) with 8 texture
+repeats across its uv. Texture: a synthetic btf of the paper's size -- 32 x 32 texels, 6 levels,
+2 lobes, 64 views (8 x 8) and 64 lights -- random rho, lobes, view table and frames with a few holes,
+written as an artifact (float32 arrays) and read back by the renderer's loader, so ``fit_bytes`` is
+the bytes of the arrays it reads (target <= 4 MB, the paper's "4 MB ... including all mip-map levels").
+Camera: the draped damask scene's at 730 x 400, 1 spp, one directional light, no shadow rays, mip on.
+Frames per second on 2 threads after compilation (target >= 10), the median of 7 frames; also
+1 thread, mip off and shadows on, and the CPU seconds a frame takes (all threads together: on a
+machine shared with other work, wall-clock frames per second understate what the code does).
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+W, H = 730, 400
+
+
+def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=(8, 8), period=(0.5, 0.5), seed=0):
+    """A btf artifact of random (plausible) texels; every level independent."""
+    from pipeline.artifacts import ArtifactWriter
+    from stages.core.btf import hemisphere_grid
+
+    rng = np.random.default_rng(seed)
+    V = view_grid[0] * view_grid[1]
+    with ArtifactWriter(path, kind="btf", stage="precompute btf", params={"synthetic": seed}, inputs={}) as w:
+        w.write("view_dirs", hemisphere_grid(*view_grid))
+        w.write("light_dirs", hemisphere_grid(*light_grid))
+        for lv in range(levels):
+            r = res >> lv
+            w.write(f"level_{lv}/rho", rng.uniform(0.02, 0.25, (r, r, 3)).astype(np.float32))
+            lob = np.empty((r, r, lobes, 3, 4), np.float32)
+            lob[..., 0] = rng.uniform(-1.2, -0.6, (r, r, lobes, 1))
+            lob[..., 1] = lob[..., 0] * 1.22
+            lob[..., 2] = rng.uniform(0.6, 1.0, (r, r, lobes, 1))
+            lob[..., 3] = rng.uniform(2.0, 30.0, (r, r, lobes, 1))
+            w.write(f"level_{lv}/lobes", lob)
+            tb = rng.uniform(0.6, 1.4, (r, r, V, 4)).astype(np.float32)
+            tb[..., 3] = np.where(rng.uniform(size=(r, r, V)) < 0.05, 0.0, 1.0)
+            w.write(f"level_{lv}/table", tb)
+            n = np.stack([rng.normal(0, 0.1, (r, r)), rng.normal(0, 0.1, (r, r)), np.ones((r, r))], -1)
+            n /= np.linalg.norm(n, axis=-1, keepdims=True)
+            t = np.cross(np.cross(n, [1.0, 0.0, 0.0]), n)
+            t /= np.linalg.norm(t, axis=-1, keepdims=True)
+            w.write(f"level_{lv}/frame", np.stack([n, t], -2).astype(np.float32))
+        w.summary.update(kind="btf", source="synthetic", source_hash="synthetic", exemplar=0,
+                         exemplar_name="synthetic", period=list(period), resolution=res, levels=levels, lobes=lobes,
+                         view_grid=list(view_grid), light_grid=list(light_grid))
+
+
+def run(out_dir) -> dict:
+    import stages  # noqa: F401, I001  (before numba: importing stages points numba's cache at the project's)
+    import numba
+
+    from pipeline.render_setup import pack_lights
+    from pipeline.renderers.btf import DressedMesh, load_btf, pack_integrator
+    from pipeline.scene import camera_array, load_scene
+    from stages.core.geometry.triangles import area_weighted_normals
+    from stages.render import btf as _btf  # noqa: F401  (registers the integrator's radiance)
+    from stages.render.film import F_HIT, new_film, tile_grid
+    from stages.render.tiles import render_tile, render_tiles
+    from stages.tile.base_surfaces import sphere_drape
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "bench_btf.zarr"
+    if not (path / "zarr.json").exists():
+        synthetic_btf(path)
+    tex = load_btf(path)
+    V, UV, F = sphere_drape(4.0, 1.0, 40, 40, folds=6, fold_amplitude=0.25)
+    geom = DressedMesh(V, F, area_weighted_normals(V, F), UV * 8.0, "draped damask base surface")
+    scene = load_scene(ROOT / "data" / "scenes" / "draped_damask.toml")
+    lights = pack_lights([lt for lt in scene.lights if lt["type"] == "directional"][:1], scene.path)
+    cam = camera_array(scene.camera, W, H)
+    ground, has_ground = np.zeros(4), False
+    tiles = tile_grid(W, H, 16)
+    counts = np.ones((H, W), np.int64)
+
+    def fps(integ, threads, frames=7):
+        numba.set_num_threads(threads)
+        render_tile(integ, cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)   # compile or load
+        render_tiles(integ, cam, 0, 1, 0, counts, tiles, new_film(W, H), threads)   # warm caches
+        times, cpu = [], []
+        film = None
+        for _ in range(frames):
+            film = new_film(W, H)
+            film[...] = 0.0   # its pages mapped before the clock starts, as in one long render
+            t = time.perf_counter()
+            c = time.process_time()
+            render_tiles(integ, cam, 0, 1, 0, counts, tiles, film, threads)
+            cpu.append(time.process_time() - c)
+            times.append(time.perf_counter() - t)
+        return 1.0 / float(np.median(times)), float(film[..., F_HIT].mean()), float(np.median(cpu))
+
+    t0 = time.perf_counter()
+    integ = pack_integrator(geom, tex, lights, ground, has_ground, cam, mip=True, shadows=False)
+    setup_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    render_tile(integ, cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)
+    compile_s = time.perf_counter() - t0
+    threads = min(2, numba.config.NUMBA_NUM_THREADS)
+    load = os.getloadavg()[0]
+    fps2, coverage, cpu2 = fps(integ, threads)
+    fps1, _, cpu1 = fps(integ, 1, 3)
+    fps_nomip, _, _ = fps(integ._replace(mip=False), threads, 3)
+    fps_shadows, _, _ = fps(integ._replace(shadows=1), threads, 3)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    return {
+        "image": f"{W}x{H} @ 1 spp", "triangles": int(len(F)), "btf": "32 x 32, 6 levels, 2 lobes, 64 views, 64 lights",
+        "fit_bytes": int(tex.fit_bytes), "fit_bytes_target": 4 * 2**20, "coverage": coverage,
+        "threads": threads, "fps": fps2, "fps_target": 10.0, "fps_1_thread": fps1, "fps_mip_off": fps_nomip,
+        "fps_shadows_on": fps_shadows, "pixels_per_s": fps2 * W * H,
+        "cpu_s_per_frame": cpu2, "cpu_s_per_frame_1_thread": cpu1, "load_average_before": load,
+        "setup_s": setup_s, "first_tile_incl_compile_s": compile_s,
+    }
+
+
+if __name__ == "__main__":
+    import json
+    import sys
+
+    print(json.dumps(run(sys.argv[1] if len(sys.argv) > 1 else "/tmp/bench_btf"), indent=1))

@@ -1,0 +1,334 @@
+"""``--method btf``: a fitted cloth texture (seed 002) dressed on a triangle mesh.
+
+A ``btf`` artifact (``loomlight precompute btf``) holds one repeat of a fabric as a spatially varying
+BRDF, f_r = T(v) . f_1 (Lafortune lobes times a view lookup table, Daubert et al. 2001 §3), with its
+mip levels. This method renders it on any triangle mesh, as the paper's §6 does, repeating the
+texture over the mesh's texture coordinates. Two geometries (``--source``, else whichever is given):
+
+- **an OBJ mesh** (``--source mesh``)::
+
+      loomlight render SCENE.toml --method btf --set btf=BTF.zarr --set mesh=DRESS.obj --set repeat=40 -o out.exr
+
+  The mesh needs texture coordinates (``vt``, faces as ``v/vt`` or ``v/vt/vn``) in [0, 1]; the repeat is
+  laid ``repeat`` times across them (T_N of §6, a positive number, default 1): the pattern coordinate
+  is frac(uv repeat). Normals: the OBJ's (``vn``) when every face corner names one, else area-weighted
+  vertex normals. The pattern's x axis runs along increasing u.
+- **a tiling's base surface** (``--source tiling``)::
+
+      loomlight render SCENE.toml --method btf --set btf=BTF.zarr --fibers TILING.zarr -o out.exr
+
+  The surface the ``tile`` stage shell-maps its exemplars onto (its vertices, normals and flat (u, v)):
+  the pattern coordinate is the flat position divided by the texture's period, so one texture repeat
+  covers one exemplar period, exactly where the tiling puts the exemplar. The texture must have been
+  fitted from this tiling: its recorded source hash must be the tiling's content hash (a texture of
+  another tiling's repeat is refused, naming both). A tiling of several exemplars (a damask) is
+  rendered with the one exemplar the texture was fitted to, everywhere.
+
+Settings (``--set KEY=VALUE``):
+
+- ``btf``: the texture (required).
+- ``mesh``, ``repeat``: the OBJ and its repeat count (mesh source only).
+- ``tiling``: the same as ``--fibers TILING.zarr``.
+- ``mip`` = on (default) | off: on, each pixel reads the mip level whose texel matches its footprint
+  on the surface (distance, incidence and the camera's pixel angle), blended linearly between the two
+  nearest levels (§6.1): distant cloth is filtered instead of aliasing. off: level 0 everywhere.
+  Within a level the nearest texel is read (no bilinear filter).
+- ``shadows`` = off (default) | on: shadow rays from each hit towards the directional lights, through
+  the mesh's surfaces with their alpha (holes let light through) and blocked by the ground.
+
+Alpha: where the texture's alpha (its coverage at the view) is below 1 -- a hole in a loose weave or
+knit -- the ray goes on through the surface, and the pixel is alpha x the cloth + (1 - alpha) x what
+lies behind: the mesh's other side or other parts, the scene's ground (``render.ground``), or the
+lights seen directly. Lights: directional lights exactly, constant / SG / environment lights by a sum
+over the texture's light grid (``stages.render.btf``). Lights, camera and ground come from the scene;
+the scene's fabric and yarns are not read. Statistics: the texture's size (``fit_bytes``: the bytes of
+the arrays the renderer reads), levels, views, triangles. Integrator: ``stages.render.btf``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from collections import namedtuple
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LoomError
+from . import RenderResult
+
+# a surface to dress: vertices, triangles, unit vertex normals, vertex pattern coordinates (in repeats)
+DressedMesh = namedtuple("DressedMesh", ["vertices", "triangles", "normals", "pattern_uv", "what"])
+# the texture, every level flattened and packed (``stages.render.btf`` module doc: ``texels``, ``table``,
+# ``levels``), with what else the renderer needs from the artifact
+BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "period",
+                                       "fit_bytes", "summary"])
+SOURCES = ("mesh", "tiling")
+ON_OFF = {"on": True, "off": False}
+
+
+# ------------------------------------------------------------------------------------------------ texture
+def load_btf(path) -> BtfTexture:
+    """The texture of a ``btf`` artifact, its levels flattened and checked (grids, shapes, finite values)."""
+    from stages.core.btf import hemisphere_grid
+
+    from ..artifacts import Artifact
+
+    art = Artifact(path, kind="btf")
+    s = art.summary
+    res, levels, K = int(s["resolution"]), int(s["levels"]), int(s["lobes"])
+    nt, nph = (int(x) for x in s["view_grid"])
+    lt, lph = (int(x) for x in s["light_grid"])
+    if res & (res - 1) or not 1 <= levels <= res.bit_length():
+        raise LoomError(path, "summary", f"resolution {res} with {levels} levels: the resolution must be a power "
+                        f"of two and the levels at most log2(resolution) + 1")
+    V = nt * nph
+    names = ["view_dirs", "light_dirs"] + [f"level_{lv}/{a}" for lv in range(levels)
+                                           for a in ("rho", "lobes", "table", "frame")]
+    have = art.arrays()
+    missing = [n for n in names if n not in have]
+    if missing:
+        raise LoomError(path, f"array {missing[0]}", "missing: the renderer reads every level's rho, lobes, table "
+                        "and frame and the view and light directions")
+    for name, grid, (a, b) in (("view_dirs", "view_grid", (nt, nph)), ("light_dirs", "light_grid", (lt, lph))):
+        d = np.asarray(art[name], np.float64)
+        if d.shape != (a * b, 3) or not np.allclose(d, hemisphere_grid(a, b), atol=1e-5):
+            raise LoomError(path, f"array {name}", f"is not the hemisphere grid of summary.{grid} = [{a}, {b}] "
+                            "(stages.core.btf.hemisphere_grid): the renderer interpolates and sums on that grid")
+    texels, tables, levels_rows = [], [], []
+    n = 0
+    for lv in range(levels):
+        r = res >> lv
+        want = {"rho": (r, r, 3), "lobes": (r, r, K, 3, 4), "table": (r, r, V, 4), "frame": (r, r, 2, 3)}
+        x = {}
+        for a, shape in want.items():
+            x[a] = np.asarray(art[f"level_{lv}/{a}"], np.float64)
+            if x[a].shape != shape:
+                raise LoomError(path, f"array level_{lv}/{a}", f"has shape {list(x[a].shape)}, expected {list(shape)}")
+            if not np.all(np.isfinite(x[a])):
+                raise LoomError(path, f"array level_{lv}/{a}", "holds nan or inf")
+        nrm, tan = x["frame"][..., 0, :], x["frame"][..., 1, :]
+        texels.append(np.concatenate([x["rho"], nrm, tan, np.cross(nrm, tan), x["lobes"].reshape(r, r, -1)],
+                                     axis=-1).reshape(r * r, -1))
+        tables.append(x["table"].reshape(r * r, V, 4))
+        levels_rows.append((n, r))
+        n += r * r
+    fit_bytes = sum(int(np.prod(have[k].shape)) * np.dtype(have[k].dtype).itemsize for k in names)
+    return BtfTexture(np.ascontiguousarray(np.concatenate(texels)), np.ascontiguousarray(np.concatenate(tables), np.float32),
+                      np.asarray(levels_rows, np.int64), K, (nt, nph),
+                      np.ascontiguousarray(art["light_dirs"], np.float64), tuple(float(v) for v in s["period"]),
+                      fit_bytes, s)
+
+
+# ------------------------------------------------------------------------------------------------ geometry
+def _obj_normals(path: Path, V, UV):
+    """The OBJ's own normal at every vertex of ``read_obj_mesh`` (one per distinct (v, vt) corner, in the
+    order it numbers them, checked against its positions and uv; the mean of the normals its corners
+    name), or None when a face corner names no normal."""
+    v, vt, vn, keys = [], [], [], {}
+    for ln, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
+        parts = line.split()
+        if not parts or parts[0] not in ("v", "vt", "vn", "f"):
+            continue
+        try:
+            if parts[0] == "v":
+                v.append([float(x) for x in parts[1:4]])
+            elif parts[0] == "vt":
+                vt.append([float(x) for x in parts[1:3]])
+            elif parts[0] == "vn":
+                vn.append([float(x) for x in parts[1:4]])
+                if len(vn[-1]) != 3 or not np.all(np.isfinite(vn[-1])):
+                    raise ValueError(line)
+            else:
+                corners = []
+                for c in parts[1:]:
+                    ids = c.split("/")
+                    if len(ids) < 3 or ids[2] == "":
+                        return None
+                    vi, ti, ni = (int(x) for x in ids[:3])
+                    corners.append((vi - 1 if vi > 0 else len(v) + vi, ti - 1 if ti > 0 else len(vt) + ti,
+                                    ni - 1 if ni > 0 else len(vn) + ni))
+                    if not 0 <= corners[-1][2] < len(vn):
+                        raise LoomError(path, f"line {ln}", "face normal index out of range")
+                for k in range(1, len(corners) - 1):
+                    for c in (corners[0], corners[k], corners[k + 1]):
+                        keys.setdefault(c[:2], []).append(c[2])
+        except ValueError:
+            raise LoomError(path, f"line {ln}", "unreadable normal (vn x y z) or face corner (v/vt/vn)") from None
+    order = list(keys)
+    if len(order) != len(V) or not np.array_equal(np.asarray(v)[[k[0] for k in order]], V) \
+            or not np.array_equal(np.asarray(vt)[[k[1] for k in order]], UV):
+        return None
+    vn = np.asarray(vn, np.float64)
+    N = np.stack([vn[ns].sum(axis=0) for ns in keys.values()])
+    length = np.linalg.norm(N, axis=1)
+    if np.any(length == 0):
+        return None
+    return N / length[:, None]
+
+
+def load_obj(path, repeat: float) -> DressedMesh:
+    """The OBJ at ``path`` (``--set mesh``) dressed with ``repeat`` texture repeats across its uv."""
+    from stages.core.geometry.triangles import area_weighted_normals
+
+    from ..io.obj_mesh import read_obj_mesh
+
+    p = Path(path)
+    if not p.is_file():
+        raise LoomError(p, None, "mesh file not found (--set mesh)")
+    for ln, line in enumerate(p.read_text(errors="replace").splitlines(), 1):
+        parts = line.split()
+        if parts and parts[0] == "f" and any(len(c.split("/")) < 2 or c.split("/")[1] == "" for c in parts[1:]):
+            raise LoomError(p, f"line {ln}", "face corner without a texture coordinate (v/vt): the btf method "
+                                             "places its texture by the mesh's uv")
+    try:
+        V, UV, F = read_obj_mesh(p, p)
+    except LoomError as e:
+        if "no texture coordinates" in e.message:
+            raise LoomError(p, None, "no texture coordinates (vt): the btf method places its texture by the "
+                                     "mesh's uv") from None
+        raise
+    if not (np.all(np.isfinite(V)) and np.all(np.isfinite(UV))):
+        raise LoomError(p, None, "vertex or texture coordinates hold nan or inf")
+    N = _obj_normals(p, V, UV)
+    what = "its normals"
+    if N is None:
+        N = area_weighted_normals(V, F)
+        what = "area-weighted normals"
+    return DressedMesh(V, F, N, UV * repeat, f"{p.name} ({len(F)} triangles, {what}, repeat {repeat:g})")
+
+
+def load_tiling_surface(path, btf_path, tex: BtfTexture) -> DressedMesh:
+    """A tiling's base surface (``--fibers``) dressed with the texture fitted from its repeat."""
+    from ..artifacts import Artifact
+
+    art = Artifact(path, kind="tiling")
+    s = tex.summary
+    mine = art.meta.get("content_hash")
+    if s.get("source_hash") != mine:
+        names = art.summary.get("exemplar_names") or []
+        raise LoomError(btf_path, "summary.source_hash",
+                        f"a BTF from a different repeat than the scene names: {btf_path} was fitted to exemplar "
+                        f"{s.get('exemplar')} ('{s.get('exemplar_name')}') of {s.get('source')} (content hash "
+                        f"{str(s.get('source_hash'))[:12]}), but the tiling is {path} (exemplars "
+                        f"{', '.join(repr(x) for x in names)}, content hash {str(mine)[:12]}); run loomlight "
+                        f"precompute btf on {path}")
+    flat = np.asarray(art.summary["flat_size"], np.float64)
+    scale = flat / np.asarray(tex.period, np.float64)   # base uv in [0, 1] spans flat_size; one repeat = period
+    V = np.asarray(art["base_vertices"], np.float64)
+    N = np.asarray(art["base_normals"], np.float64)
+    N = N / np.maximum(np.linalg.norm(N, axis=1), 1e-300)[:, None]
+    F = np.asarray(art["base_triangles"], np.int64)
+    return DressedMesh(V, F, N, np.asarray(art["base_uv"], np.float64) * scale[None, :],
+                       f"{Path(path).name} base surface ({len(F)} triangles)")
+
+
+# ------------------------------------------------------------------------------------------------ setup
+def _repeat(extra) -> float:
+    v = extra.get("repeat")
+    if v is None:
+        return 1.0
+    try:
+        x = float(v)
+    except ValueError:
+        raise LoomError(None, "--set repeat", f"expected a number of texture repeats across uv [0, 1], got {v!r}") \
+            from None
+    if not (math.isfinite(x) and x > 0):
+        raise LoomError(None, "--set repeat", f"must be a finite number > 0 (texture repeats across uv), got {v!r}")
+    return x
+
+
+def geometry_source(scene, options) -> str:
+    """'mesh' or 'tiling': ``--source``, the scene's ``render.source`` when it names one of them, else the
+    geometry given (``--set mesh`` or ``--fibers``); both or neither given is an error."""
+    extra = options.get("extra") or {}
+    src = options.get("source") or (scene.render.get("source") if scene.render.get("source") in SOURCES else None)
+    mesh, tiling = extra.get("mesh"), options.get("fibers")
+    if mesh and tiling:
+        raise LoomError(None, "--set mesh", "btf renders one geometry: an OBJ (--set mesh=PATH.obj) or a tiling's "
+                                            "surface (--fibers TILING.zarr), not both")
+    src = src or ("tiling" if tiling else "mesh")
+    if src == "mesh" and not mesh:
+        raise LoomError(None, "--set mesh", "btf needs a geometry: an OBJ with texture coordinates (--set "
+                                            "mesh=PATH.obj --set repeat=N) or a tiling (--fibers TILING.zarr)")
+    if src == "tiling" and extra.get("repeat") is not None:
+        raise LoomError(None, "--set repeat", "applies to --set mesh only: on a tiling, one texture repeat covers "
+                                              "one exemplar period")
+    return src
+
+
+def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_ground, cam, mip: bool, shadows: bool):
+    """The ``BtfIntegrator`` of a dressed mesh and a texture under a camera (``pack_camera`` layout)."""
+    from stages.core.geometry.triangles import build_triangle_mesh, uv_derivatives
+    from stages.render.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator
+    from stages.render.lights import DIRECTIONAL
+
+    from .fiberpath import ray_eps
+
+    V, F = geom.vertices, geom.triangles
+    mesh = build_triangle_mesh(V, F)
+    dpdx, dpdy = uv_derivatives(V, geom.pattern_uv, F)
+
+    def unit(a):
+        n = np.linalg.norm(a, axis=1)
+        return a / np.where(n > 0, n, 1.0)[:, None]
+    shading = np.empty((len(F), SHADING_SIZE))
+    shading[:, 0:9] = geom.normals[F].reshape(-1, 9)
+    shading[:, 9:15] = geom.pattern_uv[F].reshape(-1, 6)
+    shading[:, 15:18] = unit(dpdx)
+    shading[:, 18:21] = unit(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]))
+    shading[:, 21] = np.sqrt(np.linalg.norm(np.cross(dpdx, dpdy), axis=1)) / float(tex.levels[0, 1])
+    table = lights.table()
+    quad = int(np.count_nonzero(table.lights[:, 0] != DIRECTIONAL))
+    eps = ray_eps(V.min(0), V.max(0)) if len(V) else 1e-9
+    pixel_angle = 2.0 * float(cam[12]) / float(cam[13])
+    return BtfIntegrator(mesh, shading, tex.texels, tex.table, tex.levels, int(tex.view_grid[0]),
+                         int(tex.view_grid[1]), tex.light_dirs, table, quad, ground, has_ground, pixel_angle,
+                         np.ascontiguousarray(cam[3:6], np.float64), bool(mip), int(bool(shadows)), MAX_LAYERS, eps)
+
+
+def film_setup(scene, options: dict):
+    """The ``FilmSetup`` of a btf render (``pipeline.renderers.film``): integrator, camera, label."""
+    from stages.render.film import VARIANCE_CHANNELS
+
+    from ..render_setup import ground_array, pack_lights
+    from ..scene import camera_array
+    from .film import FilmSetup
+
+    extra = options.get("extra") or {}
+    if scene.camera is None:
+        raise LoomError(scene.path, "camera", "the scene has no [camera] table")
+    lights = pack_lights(scene.lights, scene.path)
+    if len(lights.lights) == 0:
+        raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
+    btf_path = options.get("btf") or extra.get("btf")
+    if not btf_path:
+        raise LoomError(None, "--set btf", "btf needs the fitted texture: pass --set btf=PATH.zarr (loomlight "
+                                           "precompute btf)")
+    src = geometry_source(scene, options)
+    repeat = _repeat(extra)
+    t0 = time.perf_counter()
+    tex = load_btf(btf_path)
+    if src == "mesh":
+        geom = load_obj(extra["mesh"], repeat)
+    else:
+        geom = load_tiling_surface(options["fibers"], btf_path, tex)
+    mip = ON_OFF[extra.get("mip", "on")]
+    shadows = ON_OFF[extra.get("shadows", "off")]
+    ground, has_ground = ground_array(scene.render)
+    cam = camera_array(scene.camera, options["width"], options["height"])
+    integ = pack_integrator(geom, tex, lights, ground, has_ground, cam, mip, shadows)
+    load_s = time.perf_counter() - t0
+    stats = {"load_s": load_s, "geometry": geom.what, "source": src, "triangles": int(len(geom.triangles)),
+             "bvh_nodes": int(len(integ.mesh.nodes)), "btf_resolution": int(tex.levels[0, 1]),
+             "btf_levels": int(len(tex.levels)), "btf_lobes": int(tex.lobes),
+             "btf_views": int(tex.table.shape[1]), "btf_lights": int(len(tex.light_dirs)),
+             "fit_bytes": int(tex.fit_bytes), "mip": "on" if mip else "off", "shadows": "on" if shadows else "off",
+             "max_layers": int(integ.max_layers)}
+    return FilmSetup("btf", integ, cam, VARIANCE_CHANNELS, stats)
+
+
+def render(scene, options: dict) -> RenderResult:
+    from .film import render_with_film
+
+    s, run = render_with_film(__name__, scene, options)
+    return RenderResult(run.rgb, run.extra, {**run.stats(), **s.stats})

@@ -1,0 +1,497 @@
+"""A fitted cloth texture on a triangle mesh (``--method btf``, seed 002 §6 and §6.1, in software).
+
+Every camera ray finds its nearest triangle (``stages.core.geometry.triangles``) and there, the paper's
+four steps (§6):
+
+1. **normal**: the vertex normals interpolated with the hit's barycentrics, normalised; the tangent t
+   is the triangle's dP/dx (x the pattern's first coordinate) made orthogonal to that normal;
+   b = n x t. (x = t, y = b, z = n) is the surface's local frame, which the texture calls pattern
+   space. A ray that meets a triangle's back face sees the cloth's other side: n is flipped towards
+   the viewer (t kept, so b flips too), and the back shows the same texture, mirrored.
+2. **texel**: the pattern coordinate (the corners' pattern coordinates interpolated, counted in
+   repeats) modulo 1 picks texel (floor(frac(y) r), floor(frac(x) r)) of a level of r x r texels: the
+   nearest texel, no filtering within a level.
+3. **f_r**: light l and view v = -d in the local frame give f_r(l, v) = T(v) . f_1(l, v) (Eq. 1-2: the
+   Lafortune lobes with l, v in the texel's own frame, ``stages.core.btf``; T(v) and alpha bilinear on
+   the view grid with ``grid_weights``, once per ray for every texel it reads). f_r includes l_z.
+4. **radiance**: a directional light of irradiance E (``stages.render.lights``) adds E f_r(l, v);
+   constant, SG and environment lights are summed over the texture's own light grid (the equal-area
+   hemisphere grid of the fit, every direction 2 pi / L of solid angle):
+   sum_j (2 pi / L) L_light(l_j) f_r(l_j, v), l_j taken from the local frame to the world.
+
+**Alpha** (§3, §6): the table's alpha at the view is the texel's coverage for that view, 0 at a hole
+in the weave. The ray goes on through the surface (the next hit along the same ray, up to
+``max_layers`` surfaces; further ones are not seen) and the pixel is alpha C_front + (1 - alpha)
+C_behind, behind being other parts of the mesh, the ground plane (``stages.render.ground``: Lambertian,
+lit by the same lights, the same quadrature) or the lights seen directly (the background). ``hit``
+(the film's alpha channel) is 1 when the ray met the mesh or the ground, as for every integrator.
+
+**Mip-mapping** (§6.1, ``mip``): one pixel subtends the solid angle (2 tan(fov/2) / width)^2 cos^3 at
+angle off the camera axis; at distance t and incidence cos_i to the triangle its footprint on the
+surface is t sqrt(solid angle) / cos_i wide along its long axis (what OpenGL's level selection takes).
+A level-0 texel on triangle k is sqrt(|dP/dx x dP/dy|) / res wide (dP/dx, dP/dy: the world size of
+one repeat along the pattern's axes). The level is log2(footprint / texel) clamped to [0, levels - 1],
+blended linearly between the two nearest levels: alpha and alpha-weighted colour (premultiplied), so
+holes fade into the coarser levels' partial coverage.
+
+**Shadows** (``shadows``): a directional light's shadow ray from the hit towards the light passes the
+mesh's surfaces with their coverage, transmittance prod (1 - alpha), alpha read at each surface for
+the ray's direction at the receiver's mip level (up to ``max_layers`` surfaces); the ground blocks it.
+The lights of the quadrature are not shadowed.
+
+``BtfIntegrator`` fields: ``mesh`` (``TriangleMesh``); ``shading`` (T, SHADING_SIZE) per triangle: its
+corners' unit normals (9), their pattern coordinates in repeats (6), the unit tangent dP/dx (3), the
+unit geometric normal (3) and the world width of a level-0 texel on it (1); the texture, all levels
+flattened (level l's texel (iy, ix) is row ``levels[l, 0] + iy levels[l, 1] + ix``, ``levels[l, 1]``
+its resolution): ``texels`` (N, TEXEL_HEAD + 12 K) rho (3), the texel frame's n, t, b = n x t (9),
+then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb and alpha;
+``n_theta``, ``n_phi`` the view grid, ``light_dirs`` (L, 3) the light grid (pattern space);
+``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional, ``ground``,
+``has_ground``; ``pixel_angle`` 2 tan(fov / 2) / width and ``forward`` the camera axis; ``mip``,
+``shadows`` (0 or 1), ``max_layers``, ``eps`` (ray offset, scene units). Nothing is random: the
+estimate is exact per camera ray (the tile loop's jitter places the ray in its pixel).
+
+Speed: the estimator is one inlined kernel on arrays borrowed without reference counts
+(``borrowed``): numba's atomic reference counting of the integrator's arrays at every helper call
+cost more than tracing and shading together.
+"""
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic, overload
+
+from stages.core.btf import LOBE_PARAMS, grid_weights, lafortune_lobe
+from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.triangles import TriangleHit, mesh_intersect
+from stages.render.ground import ground_intersect
+from stages.render.integrator import PathSample, radiance
+from stages.render.lights import DIRECTIONAL, environment_radiance, light_eval
+
+BtfIntegrator = namedtuple("BtfIntegrator", [
+    "mesh", "shading", "texels", "table", "levels", "n_theta", "n_phi", "light_dirs",
+    "lights", "quad_lights", "ground", "has_ground", "pixel_angle", "forward",
+    "mip", "shadows", "max_layers", "eps"])
+
+MAX_LAYERS = 4
+INV_PI = 1.0 / math.pi
+# ``shading`` columns per triangle
+S_NORMALS = 0        # corner normals n0, n1, n2 (9)
+S_PATTERN = 9        # corner pattern coordinates (x0, y0, x1, y1, x2, y2)
+S_TANGENT = 15       # unit dP/dx
+S_GEOMETRIC = 18     # unit geometric normal (e1 x e2)
+S_TEXEL_WIDTH = 21   # world width of a level-0 texel
+SHADING_SIZE = 22
+# ``texels`` columns
+T_RHO = 0
+T_FRAME = 3          # n (3), t (3), b = n x t (3)
+TEXEL_HEAD = 12      # then lobe k, channel c at TEXEL_HEAD + (3 k + c) LOBE_PARAMS: C_x, C_y, C_z, N
+
+# the local frame at a hit: normal, tangent, binormal, pattern coordinate, |cos| of incidence, hit point
+SurfaceFrame = namedtuple("SurfaceFrame", ["nx", "ny", "nz", "tx", "ty", "tz", "bx", "by", "bz", "pu", "pv",
+                                           "cos_i", "px", "py", "pz"])
+
+
+# ------------------------------------------------------------------------------------------------
+def _without_meminfo(context, builder, ty, val):
+    if isinstance(ty, types.Array):
+        ary = context.make_array(ty)(context, builder, value=val)
+        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
+        ary.parent = cgutils.get_null_value(ary.parent.type)
+        return ary._getvalue()
+    if isinstance(ty, types.BaseTuple):
+        for i, t in enumerate(ty.types):
+            val = builder.insert_value(val, _without_meminfo(context, builder, t, builder.extract_value(val, i)), i)
+    return val
+
+
+@intrinsic
+def borrowed(typingctx, value):
+    """``value`` (an array or a nested tuple of arrays) with every array's reference count detached: the
+    same data, no atomic increments and decrements wherever it is passed. Valid while the caller
+    holds ``value`` (here: the tile loop holds the integrator for the whole tile)."""
+    def codegen(context, builder, sig, args):
+        return _without_meminfo(context, builder, sig.args[0], args[0])
+    return value(value), codegen
+
+
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def surface_frame(shading, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, eps):
+    """The local frame at the hit (t, tri, b1, b2) of ray o + t d, facing the ray's origin (module doc);
+    the hit point is moved ``eps`` off the surface towards that side."""
+    S = shading
+    w0 = 1.0 - b1 - b2
+    gx = S[tri, S_GEOMETRIC]
+    gy = S[tri, S_GEOMETRIC + 1]
+    gz = S[tri, S_GEOMETRIC + 2]
+    gd = gx * dx + gy * dy + gz * dz
+    side = -1.0 if gd > 0.0 else 1.0            # which side of the triangle the ray comes from
+    nx = w0 * S[tri, 0] + b1 * S[tri, 3] + b2 * S[tri, 6]
+    ny = w0 * S[tri, 1] + b1 * S[tri, 4] + b2 * S[tri, 7]
+    nz = w0 * S[tri, 2] + b1 * S[tri, 5] + b2 * S[tri, 8]
+    nl = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if nl > 0.0:
+        nx = side * nx / nl
+        ny = side * ny / nl
+        nz = side * nz / nl
+    else:
+        nx = side * gx
+        ny = side * gy
+        nz = side * gz
+    tx = S[tri, S_TANGENT]
+    ty = S[tri, S_TANGENT + 1]
+    tz = S[tri, S_TANGENT + 2]
+    c = tx * nx + ty * ny + tz * nz               # the tangent made orthogonal to n
+    tx -= c * nx
+    ty -= c * ny
+    tz -= c * nz
+    tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+    if tl < 1e-9:   # dP/dx along the normal: any tangent (the texel's own frame still holds its shape)
+        if abs(nx) < 0.9:
+            tx, ty, tz = 1.0 - nx * nx, -nx * ny, -nx * nz
+        else:
+            tx, ty, tz = -ny * nx, 1.0 - ny * ny, -ny * nz
+        tl = math.sqrt(tx * tx + ty * ty + tz * tz)
+    tx /= tl
+    ty /= tl
+    tz /= tl
+    p = S_PATTERN
+    pu = S[tri, p] + b1 * (S[tri, p + 2] - S[tri, p]) + b2 * (S[tri, p + 4] - S[tri, p])
+    pv = S[tri, p + 1] + b1 * (S[tri, p + 3] - S[tri, p + 1]) + b2 * (S[tri, p + 5] - S[tri, p + 1])
+    e = eps * side
+    return SurfaceFrame(nx, ny, nz, tx, ty, tz, ny * tz - nz * ty, nz * tx - nx * tz, nx * ty - ny * tx, pu, pv,
+                        abs(gd), ox + t * dx + e * gx, oy + t * dy + e * gy, oz + t * dz + e * gz)
+
+
+@njit(cache=True, inline="always")
+def to_local(f, wx, wy, wz):
+    """World direction into the local frame (pattern space)."""
+    return (wx * f.tx + wy * f.ty + wz * f.tz, wx * f.bx + wy * f.by + wz * f.bz, wx * f.nx + wy * f.ny + wz * f.nz)
+
+
+@njit(cache=True, inline="always")
+def texel_index(levels, level, pu, pv):
+    """Row of the flattened texture: level ``level``'s nearest texel to pattern coordinate (pu, pv)."""
+    r = levels[level, 1]
+    ix = min(int((pu - math.floor(pu)) * r), r - 1)
+    iy = min(int((pv - math.floor(pv)) * r), r - 1)
+    return levels[level, 0] + iy * r + ix
+
+
+@njit(cache=True, inline="always")
+def mip_blend(it, width, texel_width):
+    """(level l0, level l1, weight of l1) for a footprint ``width`` over level-0 texels of ``texel_width``."""
+    top = it.levels.shape[0] - 1
+    if not it.mip or top == 0 or not (width > 0.0 and texel_width > 0.0):
+        return 0, 0, 0.0
+    lam = math.log2(width / texel_width)
+    if not lam > 0.0:
+        return 0, 0, 0.0
+    if lam >= top:
+        return top, top, 0.0
+    l0 = int(math.floor(lam))
+    return l0, l0 + 1, lam - l0
+
+
+@njit(cache=True, inline="always")
+def footprint(it, t, cos_i, dx, dy, dz):
+    """Width of the pixel's footprint on the surface along its long axis (module doc)."""
+    c = max(dx * it.forward[0] + dy * it.forward[1] + dz * it.forward[2], 1e-3)   # cos off the camera axis
+    return t * it.pixel_angle * c * math.sqrt(c) / max(cos_i, 1e-6)
+
+
+@njit(cache=True, inline="always")
+def view_lookup(table, idx, i0, i1, i2, i3, w0, w1, w2, w3, c):
+    """T(v) channel c (alpha: c = 3) of texel row idx with the view's grid weights."""
+    return w0 * table[idx, i0, c] + w1 * table[idx, i1, c] + w2 * table[idx, i2, c] + w3 * table[idx, i3, c]
+
+
+@njit(cache=True, inline="always")
+def texel_f1_rgb(texels, n_lobes, idx, lx, ly, lz, vx, vy, vz):
+    """f_1(l, v) of texel row idx, three channels (Eq. 2; ``stages.core.btf.texel_f1`` on the packed
+    texel, with l and v taken into the texel frame once for the three channels); 0 for l_z <= 0."""
+    if lz <= 0.0:
+        return 0.0, 0.0, 0.0
+    X = texels
+    f = T_FRAME
+    ax = lx * X[idx, f + 3] + ly * X[idx, f + 4] + lz * X[idx, f + 5]     # l' = (l.t, l.b, l.n)
+    ay = lx * X[idx, f + 6] + ly * X[idx, f + 7] + lz * X[idx, f + 8]
+    az = lx * X[idx, f] + ly * X[idx, f + 1] + lz * X[idx, f + 2]
+    cx = vx * X[idx, f + 3] + vy * X[idx, f + 4] + vz * X[idx, f + 5]     # v'
+    cy = vx * X[idx, f + 6] + vy * X[idx, f + 7] + vz * X[idx, f + 8]
+    cz = vx * X[idx, f] + vy * X[idx, f + 1] + vz * X[idx, f + 2]
+    s0 = X[idx, T_RHO]
+    s1 = X[idx, T_RHO + 1]
+    s2 = X[idx, T_RHO + 2]
+    for k in range(n_lobes):
+        q = TEXEL_HEAD + 3 * k * LOBE_PARAMS
+        s0 += lafortune_lobe(X[idx, q], X[idx, q + 1], X[idx, q + 2], X[idx, q + 3], ax, ay, az, cx, cy, cz)
+        q += LOBE_PARAMS
+        s1 += lafortune_lobe(X[idx, q], X[idx, q + 1], X[idx, q + 2], X[idx, q + 3], ax, ay, az, cx, cy, cz)
+        q += LOBE_PARAMS
+        s2 += lafortune_lobe(X[idx, q], X[idx, q + 1], X[idx, q + 2], X[idx, q + 3], ax, ay, az, cx, cy, cz)
+    return lz * s0, lz * s1, lz * s2     # Eq. 2: l_z (rho + sum of lobes)
+
+
+@njit(cache=True)
+def layer_alpha(it, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, l0, l1, fl):
+    """Coverage of the surface a shadow ray (direction d) hits, for the line along d, at mip (l0, l1, fl)."""
+    f = surface_frame(it.shading, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, 0.0)
+    vx, vy, vz = to_local(f, -dx, -dy, -dz)
+    i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(it.n_theta, it.n_phi, vx, vy, vz)
+    a = view_lookup(it.table, texel_index(it.levels, l0, f.pu, f.pv), i0, i1, i2, i3, w0, w1, w2, w3, 3)
+    if fl > 0.0:
+        a1 = view_lookup(it.table, texel_index(it.levels, l1, f.pu, f.pv), i0, i1, i2, i3, w0, w1, w2, w3, 3)
+        a = (1.0 - fl) * a + fl * a1
+    return min(max(a, 0.0), 1.0)
+
+
+@njit(cache=True)
+def shadow_transmittance(it, px, py, pz, lx, ly, lz, l0, l1, fl):
+    """(fraction of a directional light's beam (towards l) reaching p, rays traced): the ground blocks it,
+    each mesh surface passes 1 - its coverage (module doc)."""
+    if it.has_ground and ground_intersect(it.ground, True, pz, lz, 0.0) < np.inf:
+        return 0.0, 0
+    tr = 1.0
+    tmin = 0.0
+    rays = 0
+    for _layer in range(it.max_layers):
+        h = mesh_intersect(it.mesh, px, py, pz, lx, ly, lz, tmin, np.inf)
+        rays += 1
+        if h.tri < 0:
+            break
+        tr *= 1.0 - layer_alpha(it, h.tri, h.b1, h.b2, h.t, px, py, pz, lx, ly, lz, l0, l1, fl)
+        if tr <= 0.0:
+            return 0.0, rays
+        tmin = h.t + it.eps
+    return tr, rays
+
+
+@njit(cache=True)
+def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
+    """sum_j (2 pi / L) L_light(l_j) f_1(l_j, v) over the light grid, all non-directional lights, for texel
+    rows ia and (when ``two``) ib: (a r, a g, a b, b r, b g, b b)."""
+    lights = it.lights.lights
+    texels = it.texels
+    K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
+    ld = it.light_dirs
+    dw = 2.0 * math.pi / ld.shape[0]   # each grid direction's solid angle
+    w = np.empty(3)
+    sa0 = 0.0
+    sa1 = 0.0
+    sa2 = 0.0
+    sb0 = 0.0
+    sb1 = 0.0
+    sb2 = 0.0
+    for j in range(ld.shape[0]):
+        lx = ld[j, 0]
+        ly = ld[j, 1]
+        lz = ld[j, 2]
+        w[0] = lx * f.tx + ly * f.bx + lz * f.nx
+        w[1] = lx * f.ty + ly * f.by + lz * f.ny
+        w[2] = lx * f.tz + ly * f.bz + lz * f.nz
+        r0 = 0.0
+        r1 = 0.0
+        r2 = 0.0
+        for k in range(lights.shape[0]):
+            if lights[k, 0] != DIRECTIONAL:
+                q0, q1, q2 = light_eval(lights, k, it.lights.env, it.lights.marginal, it.lights.conditional, w)
+                r0 += q0
+                r1 += q1
+                r2 += q2
+        if r0 == 0.0 and r1 == 0.0 and r2 == 0.0:
+            continue
+        r0 *= dw
+        r1 *= dw
+        r2 *= dw
+        f0, f1, f2 = texel_f1_rgb(texels, K, ia, lx, ly, lz, vx, vy, vz)
+        sa0 += r0 * f0
+        sa1 += r1 * f1
+        sa2 += r2 * f2
+        if two:
+            f0, f1, f2 = texel_f1_rgb(texels, K, ib, lx, ly, lz, vx, vy, vz)
+            sb0 += r0 * f0
+            sb1 += r1 * f1
+            sb2 += r2 * f2
+    return sa0, sa1, sa2, sb0, sb1, sb2
+
+
+@njit(cache=True, inline="always")
+def shade_surface(it, f, tri, t, dx, dy, dz):
+    """(front r, g, b, coverage, rays) of the surface hit with frame f: the coverage-weighted radiance
+    towards -d and the coverage, both blended over the mip levels (module doc)."""
+    lights = it.lights.lights
+    table = it.table
+    texels = it.texels
+    K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
+    vx, vy, vz = to_local(f, -dx, -dy, -dz)
+    i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(it.n_theta, it.n_phi, vx, vy, vz)
+    l0, l1, fl = mip_blend(it, footprint(it, t, f.cos_i, dx, dy, dz), it.shading[tri, S_TEXEL_WIDTH])
+    two = fl > 0.0
+    ia = texel_index(it.levels, l0, f.pu, f.pv)
+    ib = texel_index(it.levels, l1, f.pu, f.pv)
+    # T(v) and alpha of the (one or two) texels, premultiplied by alpha and their mip weights
+    aa = (1.0 - fl) * view_lookup(table, ia, i0, i1, i2, i3, w0, w1, w2, w3, 3)
+    ta0 = aa * view_lookup(table, ia, i0, i1, i2, i3, w0, w1, w2, w3, 0)
+    ta1 = aa * view_lookup(table, ia, i0, i1, i2, i3, w0, w1, w2, w3, 1)
+    ta2 = aa * view_lookup(table, ia, i0, i1, i2, i3, w0, w1, w2, w3, 2)
+    ab = 0.0
+    tb0 = 0.0
+    tb1 = 0.0
+    tb2 = 0.0
+    if two:
+        ab = fl * view_lookup(table, ib, i0, i1, i2, i3, w0, w1, w2, w3, 3)
+        tb0 = ab * view_lookup(table, ib, i0, i1, i2, i3, w0, w1, w2, w3, 0)
+        tb1 = ab * view_lookup(table, ib, i0, i1, i2, i3, w0, w1, w2, w3, 1)
+        tb2 = ab * view_lookup(table, ib, i0, i1, i2, i3, w0, w1, w2, w3, 2)
+    cover = aa + ab
+    # sums over the lights of E f_1 (a: the texel of level l0, b: of level l1)
+    sa0 = 0.0
+    sa1 = 0.0
+    sa2 = 0.0
+    sb0 = 0.0
+    sb1 = 0.0
+    sb2 = 0.0
+    rays = 0
+    if cover > 0.0:
+        for k in range(lights.shape[0]):
+            if lights[k, 0] != DIRECTIONAL:
+                continue
+            wx = lights[k, 4]
+            wy = lights[k, 5]
+            wz = lights[k, 6]
+            lx, ly, lz = to_local(f, wx, wy, wz)
+            if lz <= 0.0:
+                continue
+            vis = 1.0
+            if it.shadows:
+                vis, nr = shadow_transmittance(it, f.px, f.py, f.pz, wx, wy, wz, l0, l1, fl)
+                rays += nr
+                if vis <= 0.0:
+                    continue
+            e0 = lights[k, 1] * vis
+            e1 = lights[k, 2] * vis
+            e2 = lights[k, 3] * vis
+            f0, f1, f2 = texel_f1_rgb(texels, K, ia, lx, ly, lz, vx, vy, vz)
+            sa0 += e0 * f0
+            sa1 += e1 * f1
+            sa2 += e2 * f2
+            if two:
+                f0, f1, f2 = texel_f1_rgb(texels, K, ib, lx, ly, lz, vx, vy, vz)
+                sb0 += e0 * f0
+                sb1 += e1 * f1
+                sb2 += e2 * f2
+        if it.quad_lights > 0:
+            q0, q1, q2, q3, q4, q5 = quadrature_f1(it, f, ia, ib, two, vx, vy, vz)
+            sa0 += q0
+            sa1 += q1
+            sa2 += q2
+            sb0 += q3
+            sb1 += q4
+            sb2 += q5
+    return ta0 * sa0 + tb0 * sb0, ta1 * sa1 + tb1 * sb1, ta2 * sa2 + tb2 * sb2, min(max(cover, 0.0), 1.0), rays
+
+
+@njit(cache=True)
+def shade_ground(it, t, ox, oy, oz, dx, dy, dz):
+    """(r, g, b, rays) leaving the Lambertian ground plane at o + t d towards -d: directional lights
+    (shadowed through the mesh when ``shadows``) and the light-grid quadrature of the others."""
+    lights = it.lights.lights
+    s = 1.0 if dz < 0.0 else -1.0      # the side of the plane the ray comes from
+    px = ox + t * dx
+    py = oy + t * dy
+    pz = oz + t * dz + s * it.eps
+    a0 = it.ground[1] * INV_PI
+    a1 = it.ground[2] * INV_PI
+    a2 = it.ground[3] * INV_PI
+    L0 = 0.0
+    L1 = 0.0
+    L2 = 0.0
+    rays = 0
+    for k in range(lights.shape[0]):
+        if lights[k, 0] != DIRECTIONAL:
+            continue
+        c = s * lights[k, 6]
+        if c <= 0.0:
+            continue
+        vis = 1.0
+        if it.shadows:
+            vis, nr = shadow_transmittance(it, px, py, pz, lights[k, 4], lights[k, 5], lights[k, 6], 0, 0, 0.0)
+            rays += nr
+        L0 += lights[k, 1] * vis * c * a0
+        L1 += lights[k, 2] * vis * c * a1
+        L2 += lights[k, 3] * vis * c * a2
+    if it.quad_lights > 0:
+        ld = it.light_dirs
+        dw = 2.0 * math.pi / ld.shape[0]
+        w = np.empty(3)
+        for j in range(ld.shape[0]):
+            w[0] = ld[j, 0]
+            w[1] = s * ld[j, 1]
+            w[2] = s * ld[j, 2]
+            c = ld[j, 2] * dw
+            for k in range(lights.shape[0]):
+                if lights[k, 0] != DIRECTIONAL:
+                    q0, q1, q2 = light_eval(lights, k, it.lights.env, it.lights.marginal, it.lights.conditional, w)
+                    L0 += q0 * c * a0
+                    L1 += q1 * c * a1
+                    L2 += q2 * c * a2
+    return L0, L1, L2, rays
+
+
+@njit(cache=True, inline="always")
+def btf_radiance(it, o, d):
+    """``PathSample`` of the camera ray (o, d): surfaces front to back with their coverage (module doc)."""
+    ox = o[0]
+    oy = o[1]
+    oz = o[2]
+    dx = d[0]
+    dy = d[1]
+    dz = d[2]
+    L0 = 0.0
+    L1 = 0.0
+    L2 = 0.0
+    thr = 1.0
+    first_t = 0.0
+    rays = 0
+    tmin = 0.0
+    for layer in range(it.max_layers + 1):
+        if layer < it.max_layers:
+            h = mesh_intersect(it.mesh, ox, oy, oz, dx, dy, dz, tmin, np.inf)
+            rays += 1
+        else:   # surfaces beyond the last layer are not seen
+            h = TriangleHit(np.inf, -1, 0.0, 0.0)
+        th = h.t
+        tg = ground_intersect(it.ground, it.has_ground, oz, dz, tmin)
+        if tg < th:
+            g0, g1, g2, nr = shade_ground(it, tg, ox, oy, oz, dx, dy, dz)
+            if layer == 0:
+                first_t = tg
+            return PathSample(L0 + thr * g0, L1 + thr * g1, L2 + thr * g2, 1.0, first_t, 0, rays + nr)
+        if th == np.inf:
+            e0, e1, e2 = environment_radiance(it.lights.lights, it.lights.env, it.lights.marginal,
+                                              it.lights.conditional, d)
+            return PathSample(L0 + thr * e0, L1 + thr * e1, L2 + thr * e2, 1.0 if layer > 0 else 0.0,
+                              first_t, 0, rays)
+        if layer == 0:
+            first_t = th
+        f = surface_frame(it.shading, h.tri, h.b1, h.b2, th, ox, oy, oz, dx, dy, dz, it.eps)
+        c0, c1, c2, cover, nr = shade_surface(it, f, h.tri, th, dx, dy, dz)
+        rays += nr
+        L0 += thr * c0
+        L1 += thr * c1
+        L2 += thr * c2
+        thr *= 1.0 - cover
+        if thr <= 0.0:
+            break
+        tmin = th + it.eps
+    return PathSample(L0, L1, L2, 1.0, first_t, 0, rays)
+
+
+@overload(radiance, inline="always")
+def _btf_radiance(integ, o, d, seed, index):
+    if is_tuple_class(integ, BtfIntegrator):
+        return lambda integ, o, d, seed, index: btf_radiance(borrowed(integ), o, d)

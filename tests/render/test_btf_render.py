@@ -1,0 +1,596 @@
+"""``loomlight render --method btf`` (stages/render/btf.py, pipeline/renderers/btf.py; seed 002 §6) on small
+synthetic textures (btf artifacts written by hand: a Lambertian texture is rho = albedo / pi, no lobes,
+T = 1, alpha = 1) dressed on flat quads and on a flat tiling's base surface.
+
+What is compared with what (each test names its reference):
+- ray-triangle queries (``stages.core.geometry.triangles``) against brute force over every triangle;
+  dP/du, dP/dv against the triangles' own edges (round trip);
+- the packed texel model (``stages.render.btf.texel_f1_rgb`` / ``view_lookup``) against
+  ``stages.core.btf.texel_f1`` / ``table_lookup`` on random texels;
+- a Lambertian quad under a directional light against the closed form E a / pi cos(theta) in every
+  pixel, under a constant light against L a (the light grid's quadrature of cos is exact);
+- holes: partial and zero alpha against alpha C_front + (1 - alpha) C_behind in closed form, two layers
+  of the mesh and the ground behind; shadow rays through the same holes;
+- mip: a spatially uniform texture renders the same with mip on and off; levels of distinct colours
+  give the blend of the two levels the closed-form footprint selects, on the exact camera rays;
+- the texture's repeat: uv shifted by one period gives the same bytes (by half a period, not);
+- a tiling's base surface equals the same surface written as an OBJ with repeat = flat size / period;
+- the same bytes at 1 and 2 threads; bad settings and a texture of another repeat: exit 2, nothing
+  written.
+"""
+import math
+import shutil
+
+import numpy as np
+import pytest
+from numba import njit
+
+from pipeline.artifacts import ArtifactWriter, read_meta
+from pipeline.images import read_exr
+from stages.core.btf import grid_weights, hemisphere_grid, table_lookup, texel_f1
+from stages.core.geometry.triangles import (
+    area_weighted_normals,
+    build_triangle_mesh,
+    mesh_intersect,
+    mesh_intersect_brute,
+    mesh_occluded,
+    uv_derivatives,
+)
+from stages.render.btf import texel_f1_rgb, view_lookup
+
+VIEW_GRID = (4, 8)
+LIGHT_GRID = (8, 8)
+
+SCENE = """
+[scene]
+name = "btf-quad"
+seed = 5
+[fabric]
+source = "generator"
+[fabric.generator]
+kind = "woven"
+pattern = "plain"
+ends = 2
+picks = 2
+spacing = 0.1
+yarn_radius = 0.045
+[camera]
+origin = {origin}
+target = {target}
+up = [0.0, 1.0, 0.0]
+fov = 40.0
+width = {width}
+height = {height}
+{lights}
+{render}
+"""
+SUN = """
+[[lights]]
+type = "directional"
+direction = [{d}]
+irradiance = {e}
+"""
+SKY = """
+[[lights]]
+type = "constant"
+radiance = {l}
+"""
+
+
+def _cli(*args):
+    """The loomlight CLI in-process: (exit code, stdout, stderr)."""
+    import contextlib
+    import io
+
+    from pipeline.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main([str(a) for a in args])
+    return code, out.getvalue(), err.getvalue()
+
+
+def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, table=None, lobe_params=None,
+              period=(0.5, 0.5), source_hash="none", source="none", frame=None):
+    """A btf artifact. ``rho``: an rgb (every texel of every level) or a function (level, r) -> (r, r, 3);
+    ``alpha``: a number or a function (level, r, views) -> (r, r, V); ``table``: None (T = 1) or a function
+    (level, r, views) -> (r, r, V, 3); ``lobe_params`` None (no lobes: C = 0) or (r, r, K, 3, 4) per level
+    via a function (level, r)."""
+    path = str(path)
+    shutil.rmtree(path, ignore_errors=True)
+    views = hemisphere_grid(*VIEW_GRID)
+    V = len(views)
+    with ArtifactWriter(path, kind="btf", stage="precompute btf", params={"test": 1}, inputs={}) as w:
+        w.write("view_dirs", views)
+        w.write("light_dirs", hemisphere_grid(*LIGHT_GRID))
+        for lv in range(levels):
+            r = res >> lv
+            w.write(f"level_{lv}/rho", (rho(lv, r) if callable(rho) else np.broadcast_to(rho, (r, r, 3))).astype(np.float32))
+            lob = np.zeros((r, r, lobes, 3, 4), np.float32)
+            lob[..., 3] = 1.0
+            if lobe_params is not None:
+                lob[...] = lobe_params(lv, r)
+            w.write(f"level_{lv}/lobes", lob)
+            tb = np.ones((r, r, V, 4), np.float32)
+            if table is not None:
+                tb[..., :3] = table(lv, r, views)
+            tb[..., 3] = alpha(lv, r, views) if callable(alpha) else alpha
+            w.write(f"level_{lv}/table", tb)
+            fr = np.zeros((r, r, 2, 3), np.float32)
+            fr[..., 0, 2] = 1.0
+            fr[..., 1, 0] = 1.0
+            if frame is not None:
+                fr[...] = frame(lv, r)
+            w.write(f"level_{lv}/frame", fr)
+        w.summary.update(kind="btf", source=source, source_hash=source_hash, exemplar=0, exemplar_name="test",
+                         period=list(period), resolution=res, levels=levels, lobes=lobes, view_grid=list(VIEW_GRID),
+                         light_grid=list(LIGHT_GRID))
+    return path
+
+
+def write_obj(path, V, UV, F, normals=None):
+    def num(x):
+        return repr(float(x))   # shortest round-trip text of the double
+    lines = [f"v {num(x)} {num(y)} {num(z)}" for x, y, z in V] + [f"vt {num(u)} {num(v)}" for u, v in UV]
+    if normals is not None:
+        lines += [f"vn {num(x)} {num(y)} {num(z)}" for x, y, z in normals]
+        lines += [f"f {a + 1}/{a + 1}/{a + 1} {b + 1}/{b + 1}/{b + 1} {c + 1}/{c + 1}/{c + 1}" for a, b, c in F]
+    else:
+        lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in F]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def quad(size=2.0, z=0.0, n=2, uv_shift=(0.0, 0.0)):
+    """A flat square [-size/2, size/2]^2 at height z, n x n cells, uv in [0, 1]^2 (+ shift)."""
+    g = np.linspace(0.0, 1.0, n + 1)
+    u, v = np.meshgrid(g, g, indexing="ij")
+    UV = np.stack([u.ravel(), v.ravel()], 1)
+    V = np.stack([(UV[:, 0] - 0.5) * size, (UV[:, 1] - 0.5) * size, np.full(len(UV), z)], 1)
+    F = []
+    for i in range(n):
+        for j in range(n):
+            a, b, c, d = i * (n + 1) + j, (i + 1) * (n + 1) + j, (i + 1) * (n + 1) + j + 1, i * (n + 1) + j + 1
+            F += [(a, b, c), (a, c, d)]
+    return V, UV + np.asarray(uv_shift), np.asarray(F)
+
+
+class Bench:
+    """Writes scenes, meshes and textures into one directory and renders them."""
+
+    def __init__(self, d):
+        self.d = d
+        self.n = 0
+
+    def name(self, stem):
+        self.n += 1
+        return self.d / f"{stem}{self.n}"
+
+    def scene(self, lights, origin=(0.4, -0.6, 3.0), target=(0.0, 0.0, 0.0), width=40, height=30, render=""):
+        p = self.name("scene").with_suffix(".toml")
+        p.write_text(SCENE.format(lights=lights, origin=list(origin), target=list(target), width=width, height=height,
+                                  render=render))
+        return p
+
+    def render(self, scene, *args, threads=2):
+        """(rgb float64 (H, W, 3), extra channels, exr path) of a render that must succeed."""
+        out = self.name("r").with_suffix(".exr")
+        code, _, err = _cli("render", scene, "-o", out, "--method", "btf", "--spp", "1", "--threads", threads, *args)
+        assert code == 0, err
+        rgb, ch = read_exr(out)
+        return rgb.astype(np.float64), ch, out
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory):
+    return Bench(tmp_path_factory.mktemp("btf"))
+
+
+# ------------------------------------------------------------------------------------------------ geometry
+@njit
+def _all_hits(mesh, O, D, tmin, brute):
+    out = np.empty((len(O), 4))
+    for k in range(len(O)):
+        if brute:
+            h = mesh_intersect_brute(mesh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], tmin[k], np.inf)
+        else:
+            h = mesh_intersect(mesh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], tmin[k], np.inf)
+        out[k, 0] = h.t
+        out[k, 1] = h.tri
+        out[k, 2] = h.b1
+        out[k, 3] = h.b2
+    return out
+
+
+@njit
+def _all_occluded(mesh, O, D, tmax):
+    out = np.empty(len(O), np.bool_)
+    for k in range(len(O)):
+        out[k] = mesh_occluded(mesh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], 0.0, tmax[k])
+    return out
+
+
+def test_triangle_queries_against_brute_force():
+    """Reference: every triangle tested in order (``mesh_intersect_brute``). 400 random triangles in a
+    unit box plus a 12 x 12 grid (shared edges and vertices), 4000 rays: random ones, rays aimed at
+    grid vertices and edge midpoints (every one inside the grid finds it: no cracks), and the same rays
+    again from just behind their first hit (tmin = that t): the BVH's nearest hit (t, triangle,
+    barycentrics) is identical, and any-hit agrees with 'nearest t < tmax'."""
+    rng = np.random.default_rng(4)
+    A = rng.uniform(-1, 1, (400, 3))
+    tri = A[:, None, :] + rng.normal(0, 0.15, (400, 3, 3))
+    Vg, _, Fg = quad(size=2.0, z=0.3, n=12)
+    V = np.concatenate([tri.reshape(-1, 3), Vg])
+    F = np.concatenate([np.arange(1200).reshape(-1, 3), Fg + 1200])
+    mesh = build_triangle_mesh(V, F)
+    O = rng.uniform(-2, 2, (4000, 3))
+    O[:, 2] = rng.uniform(1.5, 3.0, 4000)
+    target = rng.uniform(-1, 1, (4000, 3))
+    target[:1000] = Vg[rng.integers(0, len(Vg), 1000)]                                  # grid vertices
+    e = Fg[rng.integers(0, len(Fg), 1000)]
+    target[1000:2000] = 0.5 * (Vg[e[:, 0]] + Vg[e[:, 1]])                                # grid edges
+    D = target - O
+    D /= np.linalg.norm(D, axis=1)[:, None]
+    zero = np.zeros(len(O))
+    got = _all_hits(mesh, O, D, zero, False)
+    assert np.array_equal(got, _all_hits(mesh, O, D, zero, True))
+    inner = np.abs(target[:2000, :2]).max(axis=1) < 0.99                    # no cracks at the grid's inner
+    assert np.mean(got[:, 1] >= 0) > 0.5 and np.all(got[:2000][inner, 1] >= 0)  # vertices and edges
+    hit = got[:, 1] >= 0
+    behind = np.where(hit, got[:, 0] + 1e-9, 0.0)                          # the next surface behind each hit
+    nxt = _all_hits(mesh, O, D, behind, False)
+    assert np.array_equal(nxt, _all_hits(mesh, O, D, behind, True))
+    assert np.all(nxt[hit, 0] > got[hit, 0])
+    tmax = np.where(hit, got[:, 0] * rng.uniform(0.5, 1.5, 4000), rng.uniform(0.5, 5, 4000))
+    assert np.array_equal(_all_occluded(mesh, O, D, tmax), got[:, 0] < tmax)
+
+
+def test_uv_derivatives_and_normals_round_trip():
+    """Reference: each triangle's own edges. dP/du du + dP/dv dv of its two uv edges gives back its two
+    edges; area-weighted normals of a flat mesh are its plane's normal, of a closed box point outwards."""
+    rng = np.random.default_rng(2)
+    V = rng.normal(size=(30, 3))
+    UV = rng.uniform(size=(30, 2))
+    F = rng.integers(0, 30, (50, 3))
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    du, dv = uv_derivatives(V, UV, F)
+    for k in (1, 2):
+        a = UV[F[:, k]] - UV[F[:, 0]]
+        assert np.allclose(du * a[:, :1] + dv * a[:, 1:], V[F[:, k]] - V[F[:, 0]], atol=1e-9)
+    Vq, _, Fq = quad(n=3)
+    assert np.allclose(area_weighted_normals(Vq, Fq), [0, 0, 1])
+    box = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1), (2, 3, 7), (2, 7, 6), (0, 2, 6),
+             (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+    N = area_weighted_normals(box, np.asarray(faces))
+    assert np.all(np.einsum("ij,ij->i", N, box - 0.5) > 0)
+
+
+@njit
+def _packed_vs_core(texels, table, rho, lobes, frame, tab, L, Vd, nt, nph):
+    err = 0.0
+    K = lobes.shape[1]
+    for i in range(len(rho)):
+        for j in range(len(L)):
+            lx, ly, lz = L[j, 0], L[j, 1], L[j, 2]
+            vx, vy, vz = Vd[j, 0], Vd[j, 1], Vd[j, 2]
+            f = texel_f1_rgb(texels, K, i, lx, ly, lz, vx, vy, vz)
+            i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(nt, nph, vx, vy, vz)
+            for c in range(3):
+                ref = texel_f1(rho[i], lobes[i], frame[i], c, lx, ly, lz, vx, vy, vz)
+                err = max(err, abs(f[c] - ref) / max(abs(ref), 1e-12))
+            for c in range(4):
+                ref = table_lookup(tab[i], nt, nph, vx, vy, vz, c)
+                err = max(err, abs(view_lookup(table, i, i0, i1, i2, i3, w0, w1, w2, w3, c) - ref))
+    return err
+
+
+def test_packed_texels_equal_the_core_model(tmp_path):
+    """Reference: ``stages.core.btf.texel_f1`` and ``table_lookup`` (Eq. 1-2 as the fit reads it) on the
+    artifact's own arrays: the renderer's packed texels (``pipeline.renderers.btf.load_btf``) give the
+    same f_1 (relative 1e-12) and T(v), alpha (1e-6, float32 table) for random texels with two
+    anisotropic lobes and tilted frames, random lights and views of the upper hemisphere."""
+    from pipeline.renderers.btf import load_btf
+
+    rng = np.random.default_rng(7)
+
+    def lobes(lv, r):
+        p = rng.uniform(-1.0, 1.0, (r, r, 2, 3, 4))
+        p[..., 3] = rng.uniform(1, 20, (r, r, 2, 3))
+        return p
+
+    def frame(lv, r):
+        n = rng.normal(0, 0.3, (r, r, 3)) + [0, 0, 1]
+        n /= np.linalg.norm(n, axis=-1, keepdims=True)
+        t = np.cross(np.cross(n, [1.0, 0.0, 0.0]), n)
+        return np.stack([n, t / np.linalg.norm(t, axis=-1, keepdims=True)], -2)
+
+    path = write_btf(tmp_path / "b.zarr", res=4, levels=2, lobes=2, rho=lambda lv, r: rng.uniform(0, 0.3, (r, r, 3)),
+                     lobe_params=lobes, frame=frame, table=lambda lv, r, v: rng.uniform(0.5, 1.5, (r, r, len(v), 3)),
+                     alpha=lambda lv, r, v: rng.uniform(0, 1, (r, r, len(v))))
+    tex = load_btf(path)
+    from pipeline.artifacts import Artifact
+
+    art = Artifact(path)
+    cat = np.concatenate
+    g = lambda a: cat([np.asarray(art[f"level_{lv}/{a}"], np.float64).reshape((-1,) + art[f"level_{lv}/{a}"].shape[2:])
+                       for lv in range(2)])
+    L = rng.normal(size=(60, 3))
+    L[:, 2] = np.abs(L[:, 2])
+    Vd = rng.normal(size=(60, 3))
+    Vd[:, 2] = np.abs(Vd[:, 2])
+    L /= np.linalg.norm(L, axis=1)[:, None]
+    Vd /= np.linalg.norm(Vd, axis=1)[:, None]
+    err = _packed_vs_core(tex.texels, tex.table, g("rho"), g("lobes"), g("frame"), g("table"), L, Vd, *VIEW_GRID)
+    assert err < 1e-6
+    assert tex.fit_bytes == sum(a.nbytes for name, a in art.arrays().items() if name.startswith(("level_", "view_", "light_")))
+
+
+# ------------------------------------------------------------------------------------------------ shading
+def _lambertian_setup(bench, albedo=(0.6, 0.4, 0.2)):
+    btf = write_btf(bench.name("lambert").with_suffix(".zarr"), rho=np.asarray(albedo) / math.pi)
+    V, UV, F = quad()
+    mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+    return btf, mesh, np.asarray(albedo)
+
+
+def test_lambertian_quad_closed_form(bench):
+    """Reference: closed form. A flat quad with a Lambertian texture (f_1 = l_z rho, rho = a / pi, T = 1)
+    under a directional light of irradiance E from theta: every pixel that sees the quad is
+    E a / pi cos(theta) (float32 EXR: 1e-6); under a constant light L (the light grid's equal-area
+    quadrature, exact for cos): L a; under both, their sum. Mip on (the default) with every level alike.
+    An OBJ with its own normals (vn, tilted by 17 degrees) is shaded with them: E a / pi (l . n_obj)."""
+    btf, mesh, a = _lambertian_setup(bench)
+    d = np.array([-0.3, 0.2, -0.8])
+    cos = -d[2] / np.linalg.norm(d)
+    args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=3")
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0)), *args)
+    hit = ch["A"] > 0
+    assert hit.mean() > 0.5
+    assert np.allclose(rgb[hit], 2.0 * a / math.pi * cos, rtol=1e-6, atol=0)
+    rgb, ch, _ = bench.render(bench.scene(SKY.format(l=0.7)), *args)
+    assert np.allclose(rgb[ch["A"] > 0], 0.7 * a, rtol=1e-6)
+    assert np.allclose(rgb[ch["A"] == 0], 0.7, rtol=1e-6)            # the sky behind
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0) + SKY.format(l=0.7)), *args)
+    assert np.allclose(rgb[ch["A"] > 0], 2.0 * a / math.pi * cos + 0.7 * a, rtol=1e-6)
+    V, UV, F = quad()
+    n = np.array([0.3, 0.0, 1.0]) / math.sqrt(1.09)                  # the OBJ's own (tilted) normals shade
+    tilted = write_obj(bench.name("tilted").with_suffix(".obj"), V, UV, F, normals=np.tile(n, (len(V), 1)))
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0)), "--set", f"btf={btf}",
+                              "--set", f"mesh={tilted}")
+    assert np.allclose(rgb[ch["A"] > 0], 2.0 * a / math.pi * float(-d @ n / np.linalg.norm(d)), rtol=1e-6)
+
+
+GROUND = """
+[render.ground]
+height = -0.5
+albedo = [0.2, 0.5, 0.3]
+"""
+
+
+@pytest.mark.parametrize("alpha", [0.0, 0.3])
+def test_holes_show_what_lies_behind(bench, alpha):
+    """Reference: closed form of alpha C_front + (1 - alpha) C_behind. A Lambertian quad of coverage alpha
+    (every view) over a Lambertian ground (albedo g), directional light E from theta: the pixel is
+    alpha E a / pi cos + (1 - alpha) E g / pi cos; alpha 0 shows the ground alone. Two such quads
+    stacked: alpha C + alpha (1 - alpha) C + (1 - alpha)^2 ground (the ray goes through both). With
+    shadows on, the ground's light passes the quads with (1 - alpha) each."""
+    a = np.array([0.6, 0.4, 0.2])
+    g = np.array([0.2, 0.5, 0.3])
+    btf = write_btf(bench.name("hole").with_suffix(".zarr"), rho=a / math.pi, alpha=alpha)
+    V, UV, F = quad(size=4.0)
+    one = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+    V2, UV2, F2 = quad(size=4.0, z=0.25)
+    two = write_obj(bench.name("quads").with_suffix(".obj"), np.concatenate([V, V2]), np.concatenate([UV, UV2]),
+                    np.concatenate([F, F2 + len(V)]))
+    E, cos = 2.0, 0.8 / math.sqrt(0.77)
+    scene = bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=E), width=24, height=18, render=GROUND)
+    front, behind = E * a / math.pi * cos, E * g / math.pi * cos
+    rgb, ch, _ = bench.render(scene, "--set", f"btf={btf}", "--set", f"mesh={one}")
+    assert ch["A"].min() == 1.0                                       # quad or ground everywhere
+    centre = rgb[6:12, 8:16].reshape(-1, 3)                           # through the quad
+    assert np.allclose(centre, alpha * front + (1 - alpha) * behind, rtol=1e-6)
+    rgb, _, _ = bench.render(scene, "--set", f"btf={btf}", "--set", f"mesh={two}")
+    want = alpha * front + alpha * (1 - alpha) * front + (1 - alpha) ** 2 * behind
+    assert np.allclose(rgb[6:12, 8:16].reshape(-1, 3), want, rtol=1e-6)
+    rgb, _, _ = bench.render(scene, "--set", f"btf={btf}", "--set", f"mesh={two}", "--set", "shadows=on")
+    tr = 1 - alpha
+    want = alpha * front + alpha * tr * front * tr + tr ** 2 * behind * tr ** 2   # the lower quad is shadowed once
+    assert np.allclose(rgb[6:12, 8:16].reshape(-1, 3), want, rtol=1e-6)
+
+
+def test_mip_of_a_uniform_texture_is_level_0(bench):
+    """Reference: the same render with mip off (level 0 everywhere). Every texel of every level holds the
+    same non-trivial BRDF (two lobes, a view-dependent T and alpha 1): mip on, seen from far enough that
+    the footprint reaches the top levels, gives the same image to 1e-6 (blending equal values); levels of
+    different colours in the same view do not (the view does select coarser levels)."""
+    rng = np.random.default_rng(3)
+    lob = np.tile(np.array([[-0.8, -0.9, 0.7, 8.0], [-0.5, -0.4, 0.9, 3.0]])[:, None, :], (1, 3, 1))
+    table = 0.7 + 0.5 * hemisphere_grid(*VIEW_GRID)[:, :1] * rng.uniform(0.5, 1.0, 3)
+    btf = write_btf(bench.name("uniform").with_suffix(".zarr"), res=16, levels=5, lobes=2, rho=(0.1, 0.08, 0.05),
+                    lobe_params=lambda lv, r: np.broadcast_to(lob, (r, r, 2, 3, 4)),
+                    table=lambda lv, r, v: np.broadcast_to(table, (r, r, len(v), 3)))
+    V, UV, F = quad(size=2.0)
+    mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+    scene = bench.scene(SUN.format(d="0.5, -0.4, -0.7", e=3.0), origin=(0.6, -2.5, 1.4), width=32, height=24)
+    args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=40")
+    on, ch, _ = bench.render(scene, *args)
+    off, _, _ = bench.render(scene, *args, "--set", "mip=off")
+    assert (ch["A"] > 0).mean() > 0.3 and on.max() > 0
+    assert np.allclose(on, off, rtol=1e-6, atol=1e-9)
+    levels = write_btf(bench.name("levels").with_suffix(".zarr"), res=16, levels=5, rho=lambda lv, r: np.full((r, r, 3), 0.05 * (lv + 1)))
+    args = ("--set", f"btf={levels}", "--set", f"mesh={mesh}", "--set", "repeat=40")
+    assert not np.allclose(bench.render(scene, *args)[0], bench.render(scene, *args, "--set", "mip=off")[0])  # mip acts here
+
+
+def test_mip_level_follows_the_footprint(bench):
+    """Reference: closed form on the exact camera rays (the tile loop's jitter, ``stages.core.rng``).
+    Level l of a 32-texel, 6-level texture is Lambertian with pi rho_l = 0.02 (l + 1) (per channel
+    scaled); the camera looks straight down on a flat quad lit from above (E = pi: the pixel is pi rho). The
+    pixel's footprint is t pixel_angle c^1.5 / cos_i (c: cosine off the camera axis, cos_i: incidence),
+    a level-0 texel is size / (repeat 32) wide, lambda = log2(footprint / texel), clamped to [0, 5]:
+    the image is pi ((1 - f) rho_floor(lambda) + f rho_floor(lambda)+1) (1e-5). Mip off: pi rho_0."""
+    from stages.core.rng import uniform
+    from stages.render.camera import camera_ray, pack_camera
+
+    size, repeat, W, H, h = 3.0, 24, 48, 36, 3.0
+    scale = np.array([1.0, 0.8, 0.6])
+    btf = write_btf(bench.name("levels").with_suffix(".zarr"), res=32, levels=6,
+                    rho=lambda lv, r: np.broadcast_to(0.02 * (lv + 1) * scale / math.pi, (r, r, 3)))
+    V, UV, F = quad(size=size)
+    mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+    scene = bench.scene(SUN.format(d="0.0, 0.0, -1.0", e=math.pi), origin=(0.0, 0.0, h), width=W, height=H)
+    args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", f"repeat={repeat}")
+    rgb, ch, _ = bench.render(scene, *args, "--seed", "9")
+    cam = pack_camera(np.array([0.0, 0.0, h]), np.zeros(3), np.array([0.0, 1.0, 0.0]), 40.0, W, H)
+    pa = 2.0 * math.tan(math.radians(20.0)) / W
+    texel = size / (repeat * 32)
+    want = np.zeros((H, W, 3))
+    lams = []
+    for row in range(H):
+        for col in range(W):
+            idx = row * W + col
+            _, d = camera_ray(cam, row, col, uniform(9, idx, 0), uniform(9, idx, 1))
+            c = -d[2]
+            t = h / c
+            lam = min(max(math.log2(t * pa * c * math.sqrt(c) / c / texel), 0.0), 5.0)
+            lams.append(lam)
+            l0 = int(math.floor(lam))
+            f = lam - l0
+            l1 = min(l0 + 1, 5)
+            want[row, col] = ((1 - f) * 0.02 * (l0 + 1) + f * 0.02 * (l1 + 1)) * scale
+    hit = ch["A"] > 0
+    assert hit.mean() > 0.9 and 0.5 < min(lams) < max(lams) < 4.5     # several levels in view, none clamped
+    assert np.allclose(rgb[hit], want[hit], rtol=1e-5)
+    off, _, _ = bench.render(scene, *args, "--seed", "9", "--set", "mip=off")
+    assert np.allclose(off[hit], 0.02 * scale, rtol=1e-6)
+
+
+def _checker(lv, r):
+    """A texture whose texels all differ (per level)."""
+    i, j = np.meshgrid(np.arange(r), np.arange(r), indexing="ij")
+    return np.stack([0.05 + 0.2 * (i / r), 0.05 + 0.2 * (j / r), 0.05 + 0.1 * ((i + j) % 2)], -1)
+
+
+def test_repeat_shifted_by_one_period_is_the_same_image(bench):
+    """Reference: the texture's periodicity. The same quad with uv shifted by 1 / repeat (one period:
+    pattern coordinate + 1) renders the same bytes; shifted by half a period it does not (the test can
+    fail). A texture whose texels all differ, seen at mip level 0 and above."""
+    btf = write_btf(bench.name("checker").with_suffix(".zarr"), res=8, levels=4, rho=_checker)
+    scene = bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0), width=48, height=36)
+    out = []
+    for shift in (0.0, 0.25, 0.125):
+        V, UV, F = quad(size=2.0, uv_shift=(shift, shift))
+        mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+        out.append(bench.render(scene, "--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=4")[0])
+    assert np.array_equal(out[0], out[1])
+    assert not np.allclose(out[0], out[2])
+
+
+def test_threads_do_not_change_the_bytes(bench):
+    """Reference: the render at 1 thread. 2 threads give the same EXR image bytes (textured quads with
+    holes over a ground, shadows on, mip on, a directional and a constant light)."""
+    btf = write_btf(bench.name("checker").with_suffix(".zarr"), res=8, levels=4, rho=_checker,
+                    alpha=lambda lv, r, v: np.where(v[:, 2] > 0.5, 0.4, 1.0)[None, None, :] * np.ones((r, r, 1)))
+    V, UV, F = quad(size=3.0)
+    V2, UV2, F2 = quad(size=1.0, z=0.4)
+    mesh = write_obj(bench.name("quads").with_suffix(".obj"), np.concatenate([V, V2]), np.concatenate([UV, UV2]),
+                     np.concatenate([F, F2 + len(V)]))
+    scene = bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0) + SKY.format(l=0.3), width=40, height=30,
+                        render=GROUND)
+    args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=3", "--set", "shadows=on")
+    a, _, _ = bench.render(scene, *args, threads=1)
+    b, _, _ = bench.render(scene, *args, threads=2)
+    assert np.array_equal(a, b) and a.max() > 0
+
+
+# ------------------------------------------------------------------------------------------------ tiling
+TILING = """
+seed = 3
+[yarn]
+fibers_per_ply = 2
+[weave]
+spacing = [0.1, 0.1]
+[[exemplars]]
+name = "plain"
+pattern = "plain"
+[tiling]
+repeat = [2, 2]
+[surface]
+kind = "flat"
+resolution = [3, 3]
+"""
+
+
+def test_tiling_base_surface_and_foreign_texture(bench):
+    """Reference: the same surface as an OBJ. A flat tiling (0.4 x 0.4, exemplar period 0.2): the btf
+    rendered on its base surface (--fibers) equals the render of its base mesh written as an OBJ with
+    repeat = flat size / period = 2 (same bytes). A texture whose source hash is not the tiling's:
+    exit 2, naming both files and exemplars, nothing written."""
+    from pipeline.artifacts import Artifact
+
+    (bench.d / "tiling.toml").write_text(TILING)
+    tiling = bench.d / "tiling.zarr"
+    code, _, err = _cli("tile", bench.d / "tiling.toml", "-o", tiling)
+    assert code == 0, err
+    art = Artifact(tiling)
+    btf = write_btf(bench.name("own").with_suffix(".zarr"), res=8, levels=4, rho=_checker, period=(0.2, 0.2),
+                    source=str(tiling), source_hash=art.meta["content_hash"])
+    mesh = write_obj(bench.name("base").with_suffix(".obj"), art["base_vertices"], art["base_uv"],
+                     art["base_triangles"])
+    scene = bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0), origin=(0.22, 0.16, 0.6), target=(0.2, 0.2, 0.0),
+                        width=32, height=24)
+    on_tiling, ch, _ = bench.render(scene, "--set", f"btf={btf}", "--fibers", tiling)
+    on_obj, _, _ = bench.render(scene, "--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=2")
+    assert (ch["A"] > 0).mean() > 0.5
+    assert np.array_equal(on_tiling, on_obj)
+    other = write_btf(bench.name("other").with_suffix(".zarr"), period=(0.2, 0.2), source="elsewhere.zarr",
+                      source_hash="0" * 64)
+    out = bench.d / "foreign.exr"
+    code, _, err = _cli("render", scene, "-o", out, "--method", "btf", "--set", f"btf={other}", "--fibers", tiling)
+    assert code == 2, err
+    assert "a BTF from a different repeat than the scene names" in err and "elsewhere.zarr" in err
+    assert str(tiling) in err and "'plain'" in err and "'test'" in err
+    assert not out.exists()
+
+
+# ------------------------------------------------------------------------------------------------ errors
+@pytest.mark.parametrize("case,needle", [
+    ("no uv", "texture coordinate"),
+    ("repeat=0", "--set repeat"),
+    ("repeat=-2", "--set repeat"),
+    ("repeat=many", "--set repeat"),
+    ("mip=maybe", "unknown mip"),
+    ("shadows=yes", "unknown shadows"),
+    ("colour=red", "no setting 'colour'"),
+    ("no btf", "--set btf"),
+    ("no mesh", "--set mesh"),
+    ("btf is not a btf", "expected a 'btf' artifact"),
+])
+def test_bad_settings_exit_2(bench, case, needle):
+    """Reference: the contract for bad input: exit code 2, one line naming the place, nothing written."""
+    btf, mesh, _ = _lambertian_setup(bench)
+    scene = bench.scene(SUN.format(d="0, 0, -1", e=1.0), width=8, height=6)
+    args = ["--set", f"btf={btf}", "--set", f"mesh={mesh}"]
+    if case == "no uv":
+        V, _, F = quad()
+        p = bench.name("nouv").with_suffix(".obj")
+        p.write_text("\n".join([f"v {x} {y} {z}" for x, y, z in V] + [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in F]))
+        args = ["--set", f"btf={btf}", "--set", f"mesh={p}"]
+    elif case == "no btf":
+        args = ["--set", f"mesh={mesh}"]
+    elif case == "no mesh":
+        args = ["--set", f"btf={btf}"]
+    elif case == "btf is not a btf":
+        code, _, err = _cli("render", scene, "-o", bench.d / "lam.exr", "--method", "btf", *args, "--spp", "1")
+        assert code == 0, err
+        args = ["--set", f"btf={bench.d / 'lam.zarr'}", "--set", f"mesh={mesh}"]
+    else:
+        args += ["--set", case]
+    out = bench.name("bad").with_suffix(".exr")
+    code, _, err = _cli("render", scene, "-o", out, "--method", "btf", *args, "--spp", "1")
+    assert code == 2, (case, err)
+    assert needle in err, (case, err)
+    assert len(err.strip().splitlines()) == 1, err
+    assert not out.exists() and not out.with_suffix(".zarr").exists()
+    assert read_meta(btf)["kind"] == "btf"
