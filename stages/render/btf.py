@@ -51,9 +51,13 @@ then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb
 ``shadows`` (0 or 1), ``max_layers``, ``eps`` (ray offset, scene units). Nothing is random: the
 estimate is exact per camera ray (the tile loop's jitter places the ray in its pixel).
 
-Speed: the estimator is one inlined kernel on arrays borrowed without reference counts
-(``borrowed``): numba's atomic reference counting of the integrator's arrays at every helper call
-cost more than tracing and shading together.
+Speed: the estimator is inlined into the tile loop and reads the integrator through ``borrowed``, a
+copy whose arrays carry no reference count: numba's atomic reference counting of the integrator's
+arrays at every helper call, and passing the whole integrator to a function once per ray, cost more
+than tracing and shading together (measured: 0.14 -> 0.09 s a 730 x 400 frame on one core). The rare
+paths (shadow rays, the light-grid quadrature, the ground) stay separate functions, which keeps the
+tile loop's first compilation near 30 s. The triangle traversal keeps its stack on the machine stack
+(``stages.core.geometry.triangles``), so a ray allocates nothing.
 """
 import math
 from collections import namedtuple
