@@ -32,6 +32,10 @@ EVAL_SPP ?= 8
 SVF_ARGS ?= --resolution 64 --components 48
 IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis
 
+# seed 002 in the demo: the damask's ground exemplar fitted as a cloth texture, reduced (the defaults: 32 x 32
+# texels, 8x8 views and lights, 16 rays) and dressed on the draped cloth
+BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8
+
 # make agreement: both swatches, fiberpath against realized volpath, converged (README: One look)
 AGREE ?= out/agreement
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
@@ -47,6 +51,7 @@ help:
 	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time) -> out/table1/report.md"
 	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
 	@echo "make agreement - fiberpath vs volpath on the demo and twill swatches, demo light and sweep lights"
+	@echo "make btf-sweep - seed 002 fitted textures of the damask's two satins against fiberpath (out/btf)"
 	@echo "make setup   - create .venv and install loomlight with its test and Dask dependencies"
 
 # pip's output goes to .venv/pip.log and is shown only when the install fails
@@ -112,9 +117,20 @@ $(OUT)/damask_prt.exr: $(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr
 	$(LL) render $(DAMASK_SCENE) --method prt --fibers $(OUT)/damask_tiling.zarr --set svf=$(OUT)/damask_svf.zarr \
 	    --set iirtf=$(OUT)/damask_iirtf.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
-# precomputed light transport against its reference on the same view, error maps and times
-$(OUT)/eval/damask/report.md: $(OUT)/damask.exr $(OUT)/damask_prt.exr
-	$(LL) evaluate --ref $(OUT)/damask.exr --test $(OUT)/damask_prt.exr -o $(OUT)/eval/damask
+$(OUT)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py)
+	$(LL) precompute btf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_btf_fit.zarr --exemplar 0 $(BTF_ARGS)
+
+$(OUT)/damask_btf_fit.png: $(OUT)/damask_btf_fit.zarr/zarr.json
+	$(LL) inspect $(OUT)/damask_btf_fit.zarr --png $@
+
+$(OUT)/damask_btf.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_SCENE)
+	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
+	    --set btf=$(OUT)/damask_btf_fit.zarr --spp $(SPP) $(DEMO_SIZE) -o $@
+
+# precomputed light transport and the fitted texture against their reference on the same view, error maps
+# and times
+$(OUT)/eval/damask/report.md: $(OUT)/damask.exr $(OUT)/damask_prt.exr $(OUT)/damask_btf.exr
+	$(LL) evaluate --ref $(OUT)/damask.exr --test $(OUT)/damask_prt.exr --test $(OUT)/damask_btf.exr -o $(OUT)/eval/damask
 
 # --- evaluation set: the same view, small, procedural vs realized volpath and fiberpath ---
 EVAL_ARGS = --width $(EVAL_W) --height $(EVAL_H) --spp $(EVAL_SPP)
@@ -136,7 +152,7 @@ $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/vol
 DEMO_OUTPUTS = $(OUT)/eval/report/report.md $(OUT)/damask_prt.exr $(OUT)/eval/damask/report.md \
 	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr \
 	$(OUT)/yarns.png $(OUT)/cross_section.png $(OUT)/fibers.png $(OUT)/damask_tiling.png \
-	$(OUT)/damask_svf.png $(OUT)/damask_iirtf.png
+	$(OUT)/damask_svf.png $(OUT)/damask_iirtf.png $(OUT)/damask_btf_fit.png
 DEMO_JOBS ?= 2
 
 .PHONY: demo-outputs
@@ -159,14 +175,17 @@ demo: $(VENV)/.installed
 	@echo "  damask SVF (seed 001): $(OUT)/damask_svf.zarr ($(OUT)/damask_svf.png)"
 	@echo "  damask IIRTF         : $(OUT)/damask_iirtf.zarr ($(OUT)/damask_iirtf.png)"
 	@echo "  damask, prt (seed 001): $(OUT)/damask_prt.exr ($(OUT)/damask_prt.png)"
-	@echo "  prt vs fiberpath     : $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
+	@echo "  damask texture (seed 002): $(OUT)/damask_btf_fit.zarr ($(OUT)/damask_btf_fit.png)"
+	@echo "  damask, btf (seed 002): $(OUT)/damask_btf.exr ($(OUT)/damask_btf.png)"
+	@echo "  prt, btf vs fiberpath: $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
 	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
 # the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
 demo-quick:
 	@$(MAKE) --no-print-directory demo OUT=out/quick DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
 	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
-	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis"
+	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
+	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4"
 
 test: $(VENV)/.installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
@@ -246,6 +265,22 @@ prt-sweep: $(foreach s,41 14,$(PRT)/flat$(s)_svf.zarr/zarr.json $(PRT)/flat$(s)_
 	    $(LL) study prt-terms data/sweeps/prt_$$s.toml --sweep-dir $(PRT)/$$s -o $(PRT)/$$s/terms || exit 1; \
 	done
 	@for s in $(PRT_SWEEPS); do echo "reports: $(PRT)/$$s/report.md $(PRT)/$$s/terms/attribution.md"; done
+
+# make btf-sweep: seed 002's fitted texture of each damask exemplar alone on its flat patch (the prt sweep's
+# tilings, out/prt/flat41_tiling.zarr and flat14), fitted at the defaults of precompute btf (BTF_SWEEP_ARGS)
+# into out/btf/, against fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
+BTF_DIR := out/btf
+BTF_SWEEP_ARGS ?=
+
+$(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py)
+	$(LL) precompute btf $(PRT)/flat$*_tiling.zarr -o $(BTF_DIR)/flat$*_btf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(BTF_SWEEP_ARGS)
+
+.PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json
+.PHONY: btf-sweep
+
+btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json)
+	@for s in 41 14; do $(LL) evaluate --sweep data/sweeps/btf_flat$$s.toml -o $(BTF_DIR)/flat$$s || exit 1; done
+	@for s in 41 14; do echo "report: $(BTF_DIR)/flat$$s/report.md"; done
 
 prt-study: $(VENV)/.installed
 	$(LL) study prt-params data/studies/prt_params.toml -o $(PRT)/study

@@ -21,7 +21,7 @@ from ..errors import LoomError
 from ..memory import Estimate, budget as memory_budget
 
 INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid", "svf": "svf",
-               "iirtf": "iirtf"}  # artifact kinds per option
+               "iirtf": "iirtf", "btf": "btf"}  # artifact kinds per option
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
 MAJORANT_BYTES = 32 << 20  # volpath's majorant grid (at most 128 cells per axis)
