@@ -15,7 +15,9 @@ four steps (§6):
    Lafortune lobes with l, v in the texel's own frame, ``stages.core.btf``; T(v) and alpha bilinear on
    the view grid with ``grid_weights``, once per ray for every texel it reads). f_r includes l_z.
 4. **radiance**: a directional light of irradiance E (``stages.render.lights``) adds E f_r(l, v);
-   constant, SG and environment lights are summed over the texture's own light grid (the equal-area
+   an SG light of power P adds (P / n) sum_i f_r(l_i, v) over n = 64 fixed stratified points l_i of its
+   own distribution (``sg_f1``: exact in the sharp limit, where the light grid would miss the lobe);
+   constant and environment lights are summed over the texture's own light grid (the equal-area
    hemisphere grid of the fit, every direction 2 pi / L of solid angle):
    sum_j (2 pi / L) L_light(l_j) f_r(l_j, v), l_j taken from the local frame to the world.
 
@@ -72,7 +74,10 @@ from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.triangles import TriangleHit, mesh_intersect
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import DIRECTIONAL, environment_radiance, light_eval
+from stages.render.lights import DIRECTIONAL, SG, environment_radiance, light_eval, light_sample
+
+SG_U = 8    # SG lights: stratified points along the lobe's cos theta ...
+SG_V = 8    # ... and around its axis (sg_f1)
 
 BtfIntegrator = namedtuple("BtfIntegrator", [
     "mesh", "shading", "texels", "table", "levels", "n_theta", "n_phi", "light_dirs",
@@ -301,7 +306,7 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
         r1 = 0.0
         r2 = 0.0
         for k in range(lights.shape[0]):
-            if lights[k, 0] != DIRECTIONAL:
+            if lights[k, 0] != DIRECTIONAL and lights[k, 0] != SG:   # SG lights: sg_f1
                 q0, q1, q2 = light_eval(lights, k, it.lights.env, it.lights.marginal, it.lights.conditional, w)
                 r0 += q0
                 r1 += q1
@@ -320,6 +325,47 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
             sb0 += r0 * f0
             sb1 += r1 * f1
             sb2 += r2 * f2
+    return sa0, sa1, sa2, sb0, sb1, sb2
+
+
+@njit(cache=True)
+def sg_f1(it, f, k, ia, ib, two, vx, vy, vz):
+    """int L_k(l) f_1(l, v) dl of SG light k for texel rows ia (and ib when ``two``): the SG's own
+    distribution on a fixed stratified grid of SG_U x SG_V points (``light_sample`` at the cell
+    centres), each carrying radiance / pdf = the light's power over the points -- exact in the sharp
+    limit (every point at the axis: a directional light of irradiance P), deterministic, and unlike the
+    light grid it does not miss a lobe narrower than the grid's spacing."""
+    lights = it.lights.lights
+    texels = it.texels
+    K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
+    n = SG_U * SG_V
+    sa0 = 0.0
+    sa1 = 0.0
+    sa2 = 0.0
+    sb0 = 0.0
+    sb1 = 0.0
+    sb2 = 0.0
+    for i in range(SG_U):
+        for j in range(SG_V):
+            w, r, g, b, pdf, _delta = light_sample(lights, k, it.lights.env, it.lights.marginal,
+                                                   it.lights.conditional, (i + 0.5) / SG_U, (j + 0.5) / SG_V)
+            if pdf <= 0.0:
+                continue
+            lx, ly, lz = to_local(f, w[0], w[1], w[2])
+            if lz <= 0.0:
+                continue
+            e0 = r / (pdf * n)
+            e1 = g / (pdf * n)
+            e2 = b / (pdf * n)
+            f0, f1, f2 = texel_f1_rgb(texels, K, ia, lx, ly, lz, vx, vy, vz)
+            sa0 += e0 * f0
+            sa1 += e1 * f1
+            sa2 += e2 * f2
+            if two:
+                f0, f1, f2 = texel_f1_rgb(texels, K, ib, lx, ly, lz, vx, vy, vz)
+                sb0 += e0 * f0
+                sb1 += e1 * f1
+                sb2 += e2 * f2
     return sa0, sa1, sa2, sb0, sb1, sb2
 
 
@@ -362,6 +408,15 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
     rays = 0
     if cover > 0.0:
         for k in range(lights.shape[0]):
+            if lights[k, 0] == SG:
+                q0, q1, q2, q3, q4, q5 = sg_f1(it, f, k, ia, ib, two, vx, vy, vz)
+                sa0 += q0
+                sa1 += q1
+                sa2 += q2
+                sb0 += q3
+                sb1 += q4
+                sb2 += q5
+                continue
             if lights[k, 0] != DIRECTIONAL:
                 continue
             wx = lights[k, 4]

@@ -75,6 +75,13 @@ SKY = """
 type = "constant"
 radiance = {l}
 """
+SGL = """
+[[lights]]
+type = "sg"
+axis = [{a}]
+sharpness = {lam}
+power = {p}
+"""
 
 
 def _cli(*args):
@@ -359,6 +366,24 @@ def test_lambertian_quad_closed_form(bench):
     rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0)), "--set", f"btf={btf}",
                               "--set", f"mesh={tilted}")
     assert np.allclose(rgb[ch["A"] > 0], 2.0 * a / math.pi * float(-d @ n / np.linalg.norm(d)), rtol=1e-6)
+
+
+def test_sg_light_limits(bench):
+    """Reference: closed forms of an SG light of power P on a Lambertian texture (f_1 = l_z a / pi): sharp
+    (lambda 1e4, narrower than any light grid) -> the directional light of irradiance P along the axis
+    (to the lobe's width, 1e-3); lambda -> 0 over the upper hemisphere -> the SG's cosine-weighted
+    integral, P a / pi int G cos / M over the hemisphere = P a / pi (pi / 4 pi) for lambda = 1e-4 (G -> 1)
+    (the fixed stratified points integrate cos exactly only in the limit: 1 %)."""
+    btf, mesh, a = _lambertian_setup(bench)
+    args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}")
+    axis = np.array([0.3, -0.2, 0.8])
+    cos = axis[2] / np.linalg.norm(axis)
+    rgb, ch, _ = bench.render(bench.scene(SGL.format(a="0.3, -0.2, 0.8", lam=1e4, p=2.0)), *args)
+    hit = ch["A"] > 0
+    assert hit.mean() > 0.5
+    assert np.allclose(rgb[hit], 2.0 * a / math.pi * cos, rtol=1e-3)
+    rgb, ch, _ = bench.render(bench.scene(SGL.format(a="0.0, 0.0, 1.0", lam=1e-4, p=2.0)), *args)
+    assert np.allclose(rgb[ch["A"] > 0], 2.0 * a / math.pi * 0.25, rtol=1e-2)
 
 
 GROUND = """
