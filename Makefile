@@ -46,7 +46,7 @@ AGREE_ARGS ?= --width 128 --height 96 --spp 64
 help:
 	@echo "make demo    - set up .venv if needed, run the demo scene end to end, print output paths"
 	@echo "make demo-quick - the same at small sizes and reduced precomputes, a first look in a few minutes (out/quick)"
-	@echo "make test    - set up .venv if needed, run the test suite"
+	@echo "make test    - set up .venv if needed, run the test suite (make test-all: with the slow tests)"
 	@echo "make bench   - benchmarks -> bench/results/*.json and bench/results/summary.md"
 	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time) -> out/table1/report.md"
 	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
@@ -187,7 +187,12 @@ demo-quick:
 	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
 	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4"
 
+# make test: everything but the tests marked slow (under 10 minutes on 2 cores from a fresh clone);
+# make test-all: all of them
 test: $(VENV)/.installed
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m "not slow"
+
+test-all: $(VENV)/.installed
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
 
 bench: $(VENV)/.installed

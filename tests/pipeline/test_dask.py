@@ -99,6 +99,7 @@ def test_render_same_exr_on_a_cluster(cli, demo, cluster):
     assert not list(demo.glob(".dask.zarr.tmp-*"))  # the scratch film is gone
 
 
+@pytest.mark.slow
 def test_precompute_on_a_local_cluster_the_command_starts(tmp_path):
     """svf with --scheduler processes --workers 2: the command starts and stops its LocalCluster."""
     from tests.precompute.conftest import make_tiling
@@ -117,6 +118,7 @@ def test_precompute_on_a_local_cluster_the_command_starts(tmp_path):
     assert _arrays(tmp_path / "local.zarr") == _arrays(tmp_path / "dask.zarr")
 
 
+@pytest.mark.slow
 def test_killed_worker_tasks_rerun_and_bytes_stay(demo):
     """A worker process killed while its tasks run: Dask reruns them elsewhere, the fibres are the same."""
     from distributed import Client
@@ -158,6 +160,7 @@ if __name__ == "__main__":
 """
 
 
+@pytest.mark.slow
 def test_lost_scheduler_fails_with_its_address_and_keeps_the_artifact(demo, tmp_path):
     local = demo / "fibers_local.zarr"
     if not local.exists():

@@ -13,7 +13,7 @@ import pytest
 from pipeline.errors import LoomError
 from pipeline.presets import list_presets
 from pipeline.render_setup import bcsdf_presets
-from pipeline.renderers import METHODS, known_methods
+from pipeline.renderers import METHODS, all_sources, known_methods
 from pipeline.runners.tile import load_config
 from pipeline.scene import load_scene
 from tests.helpers import ROOT
@@ -179,7 +179,7 @@ def test_render_method_and_source_options(cli, tmp_path):
                                "did you mean 'procedural'?\n"))
     code, _, err = cli("render", demo, "--source", "realised", "-o", out)
     assert (code, err) == (2, ("error: --source: unknown render source 'realised' "
-                               "(known: grid, precomputed, procedural, realized); did you mean 'realized'?\n"))
+                               f"(known: {_known(all_sources())}); did you mean 'realized'?\n"))
     # procedural without tables: the option the render command has (it said `--set tables=`)
     code, _, err = cli("render", demo, "-o", out)
     assert (code, err) == (2, ("error: --tables: volpath --source procedural needs the procedural tables "

@@ -79,8 +79,7 @@ def _mean_and_error(result):
     return rgb.reshape(-1, 3).mean(axis=0), se
 
 
-@pytest.mark.slow
-def test_fiberpath_and_volpath_agree_in_mean_intensity(swatch):
+def test_fiberpath_and_volpath_agree_in_mean_intensity(swatch):   # a long one, but part of make test
     from pipeline.renderers import fiberpath, volpath
     from pipeline.scene import load_scene
 
