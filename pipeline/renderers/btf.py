@@ -19,7 +19,8 @@ texture over the mesh's texture coordinates. Two geometries (``--source``, else 
 
   The surface the ``tile`` stage shell-maps its exemplars onto (its vertices, normals and flat (u, v)):
   the pattern coordinate is the flat position divided by the texture's period, so one texture repeat
-  covers one exemplar period, exactly where the tiling puts the exemplar. The texture must have been
+  covers one exemplar period, exactly where the tiling puts the exemplar; the surface is moved out along
+  its normals to the top of the exemplar's fibres (the texture's ``top``: where acquisition sampled it). The texture must have been
   fitted from this tiling: its recorded source hash must be the tiling's content hash (a texture of
   another tiling's repeat is refused, naming both). A tiling of several exemplars (a damask) is
   rendered with the one exemplar the texture was fitted to, everywhere.
@@ -219,9 +220,11 @@ def load_tiling_surface(path, btf_path, tex: BtfTexture) -> DressedMesh:
                         f"precompute btf on {path}")
     flat = np.asarray(art.summary["flat_size"], np.float64)
     scale = flat / np.asarray(tex.period, np.float64)   # base uv in [0, 1] spans flat_size; one repeat = period
-    V = np.asarray(art["base_vertices"], np.float64)
     N = np.asarray(art["base_normals"], np.float64)
     N = N / np.maximum(np.linalg.norm(N, axis=1), 1e-300)[:, None]
+    # the texture lives on the top face of the repeat's box (seed 002 §4): the base surface moved out
+    # along its normals to the top of the exemplar's fibres (the shell's flat z is world length there)
+    V = np.asarray(art["base_vertices"], np.float64) + float(s.get("top", 0.0)) * N
     F = np.asarray(art["base_triangles"], np.int64)
     return DressedMesh(V, F, N, np.asarray(art["base_uv"], np.float64) * scale[None, :],
                        f"{Path(path).name} base surface ({len(F)} triangles)")

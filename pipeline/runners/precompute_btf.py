@@ -193,7 +193,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
             unconverged += int(np.count_nonzero(~np.asarray(f.converged)))
         mean_r = float(np.mean(w.group["samples"][...].astype(np.float32)))
         w.summary.update(kind="btf", source=str(tiling), source_hash=tiling_hash, scene=str(scene_path), exemplar=k,
-                         exemplar_name=str(art.summary["exemplar_names"][k]), period=[W, H], resolution=res,
+                         exemplar_name=str(art.summary["exemplar_names"][k]), period=[W, H],
+                         top=float(slab[1]), bottom=float(slab[0]), resolution=res,
                          levels=len(levels), lobes=p.lobes, view_grid=list(p.views), light_grid=list(p.lights),
                          spp=p.spp, fit_rmse=rmse, fit_rmse_no_table=rmse_nt, fit_bytes=int(fit_bytes),
                          mean_radiance=mean_r, relative_fit_rmse=[x / max(mean_r, 1e-12) for x in rmse],

@@ -5,6 +5,8 @@ EXR file); Dask's own fault handling (a killed worker's tasks rerun elsewhere); 
 contract (a failed command leaves the previous artifact, content hash and all, and no temporaries).
 The demo's fabric (data/scenes/demo.toml) is the input: its realize, voxelize and a small fiberpath
 render on a 2-worker cluster; the tiny tiling's svf on a LocalCluster the command starts itself.
+The tests that start clusters are marked slow (their worker processes compile the kernels again on a
+cold cache): ``make test-all`` runs them, ``make test`` the error cases and the local path.
 """
 import json
 import os
@@ -71,6 +73,7 @@ def _siblings(path):
     return sorted(p.name for p in Path(path).parent.iterdir() if p.name.startswith(f".{Path(path).name}."))
 
 
+@pytest.mark.slow
 def test_realize_and_voxelize_same_bytes_on_a_cluster(cli, demo, cluster):
     addr = cluster.scheduler_address
     for where, extra in (("local", []), ("dask", ["--scheduler", addr])):
@@ -84,6 +87,7 @@ def test_realize_and_voxelize_same_bytes_on_a_cluster(cli, demo, cluster):
         assert local == dask and len(local) >= 4
 
 
+@pytest.mark.slow
 def test_render_same_exr_on_a_cluster(cli, demo, cluster):
     """fiberpath with adaptive refinement (two passes of band tasks): the EXR and the image array."""
     code, _, err = cli("realize", demo / "yarns.zarr", "-o", demo / "fibers_local.zarr")
