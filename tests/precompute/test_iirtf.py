@@ -146,6 +146,7 @@ def _brute_free_paths(P, R, O, f0, f1, W, H, lo, hi, z_lo, z_hi, mats, mof, U0, 
                 N[p] += 1
 
 
+@pytest.mark.slow
 def test_mean_free_path_agrees_with_a_brute_force_walk(tiny):
     """Reference: the same estimator on explicit periodic copies of every capsule (brute-force
     intersection, numpy random numbers, other seed); the two ratio estimates agree within 4 combined

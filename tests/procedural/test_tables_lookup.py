@@ -54,7 +54,7 @@ def _dist_point_segment_2d(p, a, b):
     return np.linalg.norm(p - (a + t * ab))
 
 
-@pytest.mark.parametrize("name", ["cotton1", "rayon3"])
+@pytest.mark.parametrize("name", ["cotton1", pytest.param("rayon3", marks=pytest.mark.slow)])
 def test_azimuth_bins_list_every_nearby_trajectory(name):
     """Every fibre whose trajectory comes within the margin of a unit-disc point is in that point's bin
     with the point inside its radial interval (brute force over all fibres)."""

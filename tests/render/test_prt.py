@@ -284,6 +284,7 @@ def _upper_axes(n_theta=6, n_phi=24):
     return np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
 
 
+@pytest.mark.slow
 def test_sum_of_sgs_against_monte_carlo(swatch):
     """Seed 001 Fig. 10's experiment on real segments: a segment's single-scattered radiance towards a
     fixed viewer (near the zenith) from an SG light of sharpness 50 whose axis sweeps the upper

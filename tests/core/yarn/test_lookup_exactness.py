@@ -89,6 +89,7 @@ def test_lookup_equals_brute_force_on_realized_fibres(swatch):
     assert set(np.unique(got.kind[both])) == {1, 2, 3}
 
 
+@pytest.mark.slow
 def test_closed_yarn_seam_is_exact(tmp_path):
     """A closed yarn (a gently waved ring, BCC negative count): its fibres run from s = 0 to L and
     meet at the seam without joining; points around the seam are covered by the pieces at both
