@@ -75,15 +75,17 @@ def test_alpha_is_the_brute_force_coverage_and_holes_are_empty(acquired):
         iy, ix = divmod(texel, RES)
         key0 = (texel * 2 + 0) * SPP          # view 0: straight down
         hits = 0
+        rims = 0
         for s in range(SPP):
             x = (ix + uniform(seed, key0 + s, 0)) * W / RES
             y = (iy + uniform(seed, key0 + s, 1)) * H / RES
             m = _covered(x, y, a, b, r, W, H)
             if abs(m) < 1e-9 * W:            # grazing a capsule's rim: either answer is right
-                pytest.skip("a sample grazes a capsule's rim")
-            hits += m < 0
-        assert alpha[texel, 0] == pytest.approx(hits / SPP), texel
-        if hits == 0:
+                rims += 1
+            else:
+                hits += m < 0
+        assert hits / SPP - 1e-12 <= alpha[texel, 0] <= (hits + rims) / SPP + 1e-12, texel
+        if hits + rims == 0:
             holes += 1
             assert np.all(rad[texel, 0] == 0.0)
     assert holes > 0, "the tiny weave should leave holes seen straight down"

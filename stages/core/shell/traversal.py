@@ -220,9 +220,12 @@ def _floor_div(x, w):
 
 
 @njit(cache=True)
-def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window):
-    """First fibre hit along the flat segment a + s u, 0 < s < L (u unit), through the block map.
-    Returns (s, wrapped segment, exemplar, block i, block j, flat hit in exemplar space x, y, z)."""
+def block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, any_hit):
+    """The block walk of the flat segment a + s u, 0 < s < L (u unit), through the block map, meeting
+    each block's exemplar BVH: the nearest fibre hit (``fiber_nearest``), or with ``any_hit`` the first
+    one found (``fiber_any``; then the returned segment is 0 and the distance and point are not set).
+    Returns (s, wrapped segment, exemplar, block i, block j, flat hit in exemplar space x, y, z); the
+    segment is -1 where nothing is met."""
     bw = sc.block_size[0]
     bh = sc.block_size[1]
     nbu = sc.block_map.shape[0]
@@ -253,10 +256,15 @@ def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_wind
                 ny = sc.ex_nblocks[k, 1]
                 shx = (i - (i % nx)) * bw
                 shy = (j - (j % ny)) * bh
-                t, seg = fiber_nearest(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1,
-                                        ign_fiber, ign_seg, ign_window)
-                if seg >= 0:
-                    return t, seg, k, i, j, ax - shx + t * ux, ay - shy + t * uy, az + t * uz
+                if any_hit:
+                    if fiber_any(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1, ign_fiber, ign_seg,
+                                 ign_window):
+                        return s, 0, k, i, j, 0.0, 0.0, 0.0
+                else:
+                    t, seg = fiber_nearest(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1,
+                                           ign_fiber, ign_seg, ign_window)
+                    if seg >= 0:
+                        return t, seg, k, i, j, ax - shx + t * ux, ay - shy + t * uy, az + t * uz
             s = s1
         if tmx < tmy:
             i += stx
@@ -270,50 +278,17 @@ def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_wind
 
 
 @njit(cache=True)
+def flat_segment_hit(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window):
+    """First fibre hit along the flat segment a + s u, 0 < s < L (u unit), through the block map.
+    Returns (s, wrapped segment, exemplar, block i, block j, flat hit in exemplar space x, y, z)."""
+    return block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, False)
+
+
+@njit(cache=True)
 def flat_segment_occluded(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window):
-    """Does the flat segment a + s u, 0 < s < L (u unit), meet any fibre (``flat_segment_hit``'s block
-    walk with ``fiber_any``)?"""
-    bw = sc.block_size[0]
-    bh = sc.block_size[1]
-    nbu = sc.block_map.shape[0]
-    nbv = sc.block_map.shape[1]
-    i = _floor_div(ax, bw)
-    j = _floor_div(ay, bh)
-    if ux > 0.0:
-        stx, tmx, tdx = 1, ((i + 1) * bw - ax) / ux, bw / ux
-    elif ux < 0.0:
-        stx, tmx, tdx = -1, (i * bw - ax) / ux, -bw / ux
-    else:
-        stx, tmx, tdx = 0, np.inf, np.inf
-    if uy > 0.0:
-        sty, tmy, tdy = 1, ((j + 1) * bh - ay) / uy, bh / uy
-    elif uy < 0.0:
-        sty, tmy, tdy = -1, (j * bh - ay) / uy, -bh / uy
-    else:
-        sty, tmy, tdy = 0, np.inf, np.inf
-    s = 0.0
-    steps = 0
-    while s < L and steps < MAX_STEPS:
-        steps += 1
-        s1 = min(tmx, tmy, L)
-        if s1 > s:
-            k = sc.block_map[i % nbu, j % nbv]
-            if k >= 0:
-                shx = (i - (i % sc.ex_nblocks[k, 0])) * bw
-                shy = (j - (j % sc.ex_nblocks[k, 1])) * bh
-                if fiber_any(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1, ign_fiber, ign_seg,
-                             ign_window):
-                    return True
-            s = s1
-        if tmx < tmy:
-            i += stx
-            tmx += tdx
-        else:
-            j += sty
-            tmy += tdy
-        if tmx == np.inf and tmy == np.inf:
-            break
-    return False
+    """Does the flat segment a + s u, 0 < s < L (u unit), meet any fibre (``block_walk`` with
+    ``fiber_any``)?"""
+    return block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, True)[1] >= 0
 
 
 @njit(cache=True)
