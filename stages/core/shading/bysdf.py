@@ -1,0 +1,690 @@
+"""The BYSDF of seed 004 (§4.1): four-lobe yarn shading -- specular and body, at the entry point x and
+at the exit point y.
+
+The paper's displayed equations were lost; the lobes below are rebuilt from its text (§4.1, Eqs. 1-5)
+and the facts of its public reference implementation (``shared/reference/bysdf.md``). This file holds
+the scattering functions only: the implicit plies, the fibre tables (which give the shading frame and
+the shadowing S), the choice of the exit point y, the attenuation along x -> y and the path itself are
+the integrator's.
+
+Geometry and directions
+-----------------------
+A ray hits a yarn at x with a shading frame: unit fibre tangent ``t`` and unit outward normal ``n``;
+the anisotropic frame is (t, b = n x t, n) (t is made orthogonal to n first, Gram-Schmidt; when t lies
+along n any completion of n is used). ``wi`` is the unit direction towards the viewer, ``wo`` towards
+the light. At x the light either stays on the viewer's side (the *reflection side*) or refracts into
+the yarn (the *transmission side*): the path continues inside along ``d`` (the direction it travels,
+from x towards y), reaches the exit point y, whose outward normal is ``n_y`` (and tangent ``t_y``), and
+leaves towards ``wo``. All functions return f cos (cos = |cos| of the light's direction to the normal
+it leaves or arrives at) as (r, g, b) and the solid-angle pdf of the matching sampler.
+
+The model (beta = SPEC_WEIGHT, m_r = REFLECT_WEIGHT; the paper's Eq. 1 split into the two sides)
+--------------------------------------------------------------------------------------------------
+    f = beta     [ f_sR(x)  +  T_x -> A_s -> KT f_sT(y) ]                          (specular, Eqs. 2-3)
+      + (1-beta) [ m_r S f_bR(x)  +  (1-m_r) T_x -> A_d -> S_y f_bT(y) ]           (body, Eqs. 4-5)
+
+- f_sR, specular reflection at x (Eq. 2, first case): a rough dielectric (Walter et al. 2007) with an
+  anisotropic GGX normal distribution D (alpha_u along t, alpha_v along b), exact dielectric Fresnel F
+  (relative index eta), Smith *uncorrelated* (separable) masking-shadowing G2 = G1(wi) G1(wo) -- the
+  paper names the uncorrelated form -- times the specular colour KS:
+      f cos = KS F(wi.h) D(h) G1(wi) G1(wo) / (4 |wi.n|),     h = (wi + wo) / |wi + wo|.
+  Sampled by visible normals (Heitz 2018) and mirror reflection: weight KS F G2 / G1(wi) = KS F G1(wo).
+- T_x, refraction into the yarn at x (Eq. 2, second case; the "enter" step): only sampled, never
+  evaluated against a light. A visible normal h is sampled and -wi refracted through it (eta); the
+  weight is the scalar (1 - F(wi.h)) G2 / G1(wi) = (1 - F) G1(d). Its f cos is Walter's Eq. 21 with
+  i = wi (index 1), o = d (index eta), times |d.n|:
+      (1 - F) D(h) G1(wi) G1(d) |wi.h| |d.h| eta^2 / (|wi.n| (wi.h + eta d.h)^2),   h ∝ -(wi + eta d),
+  the flux form: it carries *no* 1/eta^2 radiance scaling (Veach 1997 §5.2). The exit at y, from index
+  eta back into air, would carry the inverse factor eta^2; it is left out there too, the two cancel and
+  the product is the physical radiance transport. ``enter_eval_pdf`` gives this value and the density
+  (value = weight * pdf), for testing.
+- f_sT, specular transmission out at y (Eq. 3): the rough dielectric BTDF from inside (index eta) to
+  outside (index 1) with isotropic GGX alpha = ALPHA_EXIT and visible normals seen from inside (from
+  -d); Walter's Eq. 21 with i = -d (index eta), o = wo (index 1), times |wo.n_y|, again the flux form:
+      (1 - F) D(h) G1(-d) G1(wo) |d.h| |wo.h| / (|d.n_y| (eta d.h - wo.h)^2),   h ∝ eta d - wo;
+  sampled by visible normals and refraction, weight (1 - F) G1(wo). Total internal reflection ends the
+  sample (pdf 0): that energy is lost (the reference gives the exit no reflectance). Times KT = KT_EXIT
+  and the specular attenuation A_s.
+- f_bR, body reflection at x (Eq. 4 here; the paper's subscripts were lost): per channel with a' the
+  reflection-side body colour BODY_R (used directly as the reduced albedo a'; the reference maps the
+  colour to a' through a 17-entry table that was not published),
+      f cos = a' cos_o / (4 pi (cos_i + cos_o)) * LS_MIX  +  R_d(a') / pi cos_o * (1 - LS_MIX),
+  a Lommel-Seeliger term (Hanrahan & Krueger 1993) mixed with a diffusion term (Jensen et al. 2001):
+  R_d = (a'/2)(1 + exp(-(4/3) A sqrt(3(1-a')))) exp(-sqrt(3(1-a'))), A = (1 + F_dr)/(1 - F_dr),
+  F_dr = -1.440/eta^2 + 0.710/eta + 0.668 + 0.0636 eta. Why the LS mix is on the *reflection* side:
+  Lommel-Seeliger is single scattering out of a half-space back through the face the light entered --
+  a reflection phenomenon, meaningless for light leaving the far side. Its directional albedo is
+  (a'/2)(1 - mu ln(1 + 1/mu)) <= a'/2 (mu = cos_i): alone it cannot reach albedo 1 even for a' = 1,
+  because it misses the multiply scattered light. The diffusion term supplies that light with albedo
+  R_d <= a' (R_d = 1 exactly at a' = 1), so for a' <= 1 every mix keeps the albedo <= 1 -- the energy
+  conservation the paper states as the reason for the mix. The reference weights the two by the
+  normalised (cos_i + cos_o); here the weight is the constant LS_MIX, which keeps f reciprocal and the
+  albedo in closed form. The cosine-weighted sampler about n has weight f cos / (cos_o / pi).
+- f_bT, body transmission at y (Eq. 5): Lambertian on the outside of the exit point,
+  f cos = BODY_T / pi * max(0, wo.n_y), cosine-weighted sampling about n_y (it does not depend on d).
+- S (at x) and S_y (at y) are the ply-shadowing times fibre-shadowing values of §5 (the integrator's
+  table lookups); they multiply the body lobes only. A_s and A_d are the Beer-Lambert attenuations
+  along x -> y, raised to the number of plies crossed: (exp(-sigma |y - x|))^n_plies with
+  sigma = SIGMA_SPEC and SIGMA_BODY (``attenuation``).
+
+Sides and lobes (importance sampling, §4.1 "Importance Sampling")
+-----------------------------------------------------------------
+The integrator picks the reflection side with probability P_R = ``reflect_probability(p, wi, n)``
+= clamp(beta F(wi.n) + (1 - beta) m_r, 0.05, 0.95) -- the share of the energy budget the model gives the
+reflection side before colours, shadowing and attenuation (the paper: m_r "based on the probability of
+the Fresnel term") -- and divides by it (or by 1 - P_R for the transmission side). Inside a side a lobe
+is picked by u0 with probability proportional to its energy estimate:
+    reflection side:   beta mean(KS) F(wi.n)          vs  (1-beta) m_r S mean(albedo of f_bR at wi.n)
+    transmission side: beta A_s KT                    vs  (1-beta) (1-m_r) A_d S_y mean(BODY_T)
+(positive for every lobe with nonzero energy); the returned pdf is the lobe mixture's and the weight
+is f cos / pdf of the side. A side whose lobes all carry zero energy returns zeros and pdf 0.
+
+Interface (all @njit; vectors float64[3]; returned values are namedtuples)
+-------------------------------------------------------------------------
+    reflect_probability(p, wi, n) -> P_R
+    reflect_eval_pdf(p, t, n, wi, wo, shadow) -> BysdfValue(r, g, b, pdf)
+        beta f_sR + (1-beta) m_r shadow f_bR (f cos); pdf of reflect_sample
+    reflect_sample(p, t, n, wi, shadow, u0, u1, u2) -> BysdfSample(wo, r, g, b, pdf)   weight f cos / pdf
+    enter_sample(p, t, n, wi, u1, u2) -> EnterSample(d, weight, pdf)                    T_x, scalar weight
+    enter_eval_pdf(p, t, n, wi, d) -> (value, pdf)                                      value = weight * pdf
+    exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y) -> BysdfValue
+        beta att_spec KT f_sT + (1-beta)(1-m_r) att_body shadow_y f_bT; pdf of exit_sample
+    exit_sample(p, t_y, n_y, d, att_spec, att_body, shadow_y, u0, u1, u2) -> BysdfSample
+    attenuation(p, distance, n_plies) -> (A_s, A_d)
+and each lobe alone (value without beta, m_r, S, A; colours included):
+    spec_reflect_eval_pdf(p, t, n, wi, wo) / spec_reflect_sample(p, t, n, wi, u1, u2)       KS f_sR
+    spec_exit_eval_pdf(p, t_y, n_y, d, wo) / spec_exit_sample(p, t_y, n_y, d, u1, u2)      KT f_sT
+    body_reflect_eval_pdf(p, n, wi, wo) / body_reflect_sample(p, n, wi, u1, u2)            f_bR
+    body_exit_eval_pdf(p, n_y, wo) / body_exit_sample(p, n_y, u1, u2)                      f_bT
+A failed sample has pdf 0 (its direction is then any unit vector). Degenerate input never gives NaN:
+wi at or below the surface at x (wi.n <= 1e-9), wo on the wrong side, d not leaving through n_y, grazing
+directions and roughness down to ALPHA_MIN = 1e-4 (smaller values are clamped) give zeros and pdf 0.
+The lobe samplers' pdfs are the densities of their *successful* samples (they integrate to the
+success probability: TIR at y, refracted or reflected directions that end up on the wrong side).
+Roughness widening for the multi-scale model (alpha += h_range / 10, §4.2) is done by the caller on p.
+
+Parameters, packed (float64[BYSDF_SIZE], ``pack_bysdf(**named)``; defaults: the reference's example)
+-----------------------------------------------------------------------------------------------------
+    SPEC_WEIGHT beta (0.5)      REFLECT_WEIGHT m_r (0.5)   ALPHA_U (0.2)   ALPHA_V (0.3)   ETA (1.5)
+    KS_R..KS_B specular colour (1)   ALPHA_EXIT (0.9)   KT_EXIT exit transmittance (0.1)
+    BODY_R_R..B reflection-side body colour a' ((0.045, 0.015, 0))
+    BODY_T_R..B transmission-side body colour (six times BODY_R)
+    SIGMA_SPEC (5.5)   SIGMA_BODY (0.1)   LS_MIX Lommel-Seeliger weight of f_bR (0.5)
+"""
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+
+from stages.core.geometry.frames import orthonormal_basis
+from stages.core.shading.lambert import lambert_sample
+
+SPEC_WEIGHT = 0
+REFLECT_WEIGHT = 1
+ALPHA_U = 2
+ALPHA_V = 3
+ETA = 4
+KS_R, KS_G, KS_B = 5, 6, 7
+ALPHA_EXIT = 8
+KT_EXIT = 9
+BODY_R_R, BODY_R_G, BODY_R_B = 10, 11, 12
+BODY_T_R, BODY_T_G, BODY_T_B = 13, 14, 15
+SIGMA_SPEC = 16
+SIGMA_BODY = 17
+LS_MIX = 18
+BYSDF_SIZE = 19
+
+ALPHA_MIN = 1e-4          # smallest GGX roughness (smaller values are clamped)
+COS_EPS = 1e-9            # |cos| at or below this counts as grazing: no scattering
+P_R_MIN, P_R_MAX = 0.05, 0.95
+INV_PI = 1.0 / math.pi
+
+BysdfValue = namedtuple("BysdfValue", ["r", "g", "b", "pdf"])
+BysdfSample = namedtuple("BysdfSample", ["wo", "r", "g", "b", "pdf"])
+EnterSample = namedtuple("EnterSample", ["d", "weight", "pdf"])
+
+BODY_R_DEFAULT = (0.045, 0.015, 0.0)
+
+
+def pack_bysdf(*, spec_weight=0.5, reflect_weight=0.5, alpha_u=0.2, alpha_v=0.3, eta=1.5, ks=1.0,
+               alpha_exit=0.9, kt_exit=0.1, body_r=BODY_R_DEFAULT, body_t=tuple(6.0 * c for c in BODY_R_DEFAULT),
+               sigma_spec=5.5, sigma_body=0.1, ls_mix=0.5):
+    """float64[BYSDF_SIZE] from named values (colours: a scalar or three values). Raises ValueError
+    naming the parameter for a value outside its range: weights and colours in [0, 1], roughness
+    >= ALPHA_MIN, eta > 1, sigmas >= 0, everything finite."""
+    p = np.zeros(BYSDF_SIZE)
+
+    def scalar(name, v, lo, hi, lo_open=False):
+        v = float(v)
+        if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+            raise ValueError(f"pack_bysdf: {name} = {v} outside {'(' if lo_open else '['}{lo}, {hi}]")
+        return v
+
+    def colour(name, v):
+        c = np.broadcast_to(np.asarray(v, dtype=np.float64), (3,))
+        return [scalar(f"{name}[{k}]", c[k], 0.0, 1.0) for k in range(3)]
+
+    p[SPEC_WEIGHT] = scalar("spec_weight", spec_weight, 0.0, 1.0)
+    p[REFLECT_WEIGHT] = scalar("reflect_weight", reflect_weight, 0.0, 1.0)
+    p[ALPHA_U] = scalar("alpha_u", alpha_u, ALPHA_MIN, 1e3)
+    p[ALPHA_V] = scalar("alpha_v", alpha_v, ALPHA_MIN, 1e3)
+    p[ETA] = scalar("eta", eta, 1.0, 10.0, lo_open=True)
+    p[KS_R:KS_B + 1] = colour("ks", ks)
+    p[ALPHA_EXIT] = scalar("alpha_exit", alpha_exit, ALPHA_MIN, 1e3)
+    p[KT_EXIT] = scalar("kt_exit", kt_exit, 0.0, 1.0)
+    p[BODY_R_R:BODY_R_B + 1] = colour("body_r", body_r)
+    p[BODY_T_R:BODY_T_B + 1] = colour("body_t", body_t)
+    p[SIGMA_SPEC] = scalar("sigma_spec", sigma_spec, 0.0, math.inf)
+    p[SIGMA_BODY] = scalar("sigma_body", sigma_body, 0.0, math.inf)
+    p[LS_MIX] = scalar("ls_mix", ls_mix, 0.0, 1.0)
+    return p
+
+
+# ------------------------------------------------------------------------------------------------
+# scalar pieces: Fresnel, GGX, the body albedos
+@njit(cache=True)
+def fresnel_dielectric(cos_i, eta):
+    """Unpolarised Fresnel reflectance for light meeting the interface at cos_i (> 0, on the incident
+    side) with relative index eta = n_transmitted / n_incident; 1 under total internal reflection."""
+    c = min(1.0, abs(cos_i))
+    sin2_t = (1.0 - c * c) / (eta * eta)
+    if sin2_t >= 1.0:
+        return 1.0
+    cos_t = math.sqrt(1.0 - sin2_t)
+    rs = (c - eta * cos_t) / (c + eta * cos_t)
+    rp = (eta * c - cos_t) / (eta * c + cos_t)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+@njit(cache=True)
+def ggx_D(x, y, z, au, av):
+    """Anisotropic GGX normal distribution of the unit micro-normal (x, y, z) in the local frame
+    (x along alpha_u, z the macro normal): 1 / (pi au av (x^2/au^2 + y^2/av^2 + z^2)^2), 0 for z <= 0."""
+    if z <= 0.0:
+        return 0.0
+    e = (x / au) ** 2 + (y / av) ** 2 + z * z
+    return 1.0 / (math.pi * au * av * e * e)
+
+
+@njit(cache=True)
+def ggx_lambda(x, y, z, au, av):
+    """Smith's Lambda of the unit direction (x, y, z) for anisotropic GGX (inf at z = 0)."""
+    z2 = z * z
+    if z2 <= 0.0:
+        return math.inf
+    a2 = (au * au * x * x + av * av * y * y) / z2
+    return 0.5 * (math.sqrt(1.0 + a2) - 1.0)
+
+
+@njit(cache=True)
+def ggx_G1(x, y, z, au, av):
+    """Smith masking 1 / (1 + Lambda) of direction (x, y, z) (the sidedness test is the caller's)."""
+    return 1.0 / (1.0 + ggx_lambda(x, y, z, au, av))
+
+
+@njit(cache=True)
+def ggx_sample_visible(vx, vy, vz, au, av, u1, u2):
+    """A micro-normal (hx, hy, hz) with density G1(v) max(0, v.h) D(h) / v_z: the distribution of
+    visible normals seen from the local unit direction v (v_z > 0), Heitz 2018 Listing 1."""
+    sx = au * vx
+    sy = av * vy
+    sz = vz
+    ln = math.sqrt(sx * sx + sy * sy + sz * sz)
+    sx /= ln
+    sy /= ln
+    sz /= ln
+    lensq = sx * sx + sy * sy
+    if lensq > 0.0:
+        il = 1.0 / math.sqrt(lensq)
+        t1x, t1y = -sy * il, sx * il
+    else:
+        t1x, t1y = 1.0, 0.0
+    t2x = -sz * t1y               # T2 = Vh x T1 (T1 has no z component)
+    t2y = sz * t1x
+    t2z = sx * t1y - sy * t1x
+    r = math.sqrt(u1)
+    ph = 2.0 * math.pi * u2
+    a = r * math.cos(ph)
+    b = r * math.sin(ph)
+    s = 0.5 * (1.0 + sz)
+    b = (1.0 - s) * math.sqrt(max(0.0, 1.0 - a * a)) + s * b
+    c = math.sqrt(max(0.0, 1.0 - a * a - b * b))
+    nx = a * t1x + b * t2x + c * sx
+    ny = a * t1y + b * t2y + c * sy
+    nz = b * t2z + c * sz
+    hx = au * nx
+    hy = av * ny
+    hz = max(0.0, nz)
+    ln = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if ln <= 0.0:
+        return 0.0, 0.0, 1.0
+    return hx / ln, hy / ln, hz / ln
+
+
+@njit(cache=True)
+def lommel_seeliger_albedo(mu):
+    """Directional albedo of the Lommel-Seeliger term cos_o / (4 pi (mu + cos_o)) per unit a':
+    (1 - mu ln(1 + 1/mu)) / 2, for mu = cos_i in (0, 1]."""
+    if mu <= 0.0:
+        return 0.5
+    return 0.5 * (1.0 - mu * math.log1p(1.0 / mu))
+
+
+@njit(cache=True)
+def fresnel_diffuse_reflectance(eta):
+    """F_dr, the diffuse Fresnel reflectance of Jensen et al. 2001 (polynomial fit in eta)."""
+    return -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta
+
+
+@njit(cache=True)
+def diffusion_reflectance(a, eta):
+    """R_d(a'), the total diffuse reflectance of the dipole (Jensen et al. 2001), for a' in [0, 1]."""
+    f = fresnel_diffuse_reflectance(eta)
+    A = (1.0 + f) / (1.0 - f)
+    s = math.sqrt(3.0 * max(0.0, 1.0 - a))
+    return 0.5 * a * (1.0 + math.exp(-4.0 / 3.0 * A * s)) * math.exp(-s)
+
+
+@njit(cache=True)
+def body_reflect_albedo(p, c, mu):
+    """Directional albedo of f_bR in channel c (0, 1, 2) at mu = cos_i: LS_MIX a' LS(mu) + (1-LS_MIX) R_d(a')."""
+    a = p[BODY_R_R + c]
+    m = p[LS_MIX]
+    return m * a * lommel_seeliger_albedo(mu) + (1.0 - m) * diffusion_reflectance(a, p[ETA])
+
+
+# ------------------------------------------------------------------------------------------------
+# frames: a shading frame is the 9-tuple (t, b, n) of world components
+@njit(cache=True)
+def shading_frame(t, n):
+    """(tx, ty, tz, bx, by, bz, nx, ny, nz): t made orthogonal to the unit n, b = n x t; any completion
+    of n when t is (nearly) along n."""
+    c = t[0] * n[0] + t[1] * n[1] + t[2] * n[2]
+    x0 = t[0] - c * n[0]
+    x1 = t[1] - c * n[1]
+    x2 = t[2] - c * n[2]
+    ln = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
+    if ln < 1e-9:
+        (x0, x1, x2), _ = orthonormal_basis(n[0], n[1], n[2])
+    else:
+        x0 /= ln
+        x1 /= ln
+        x2 /= ln
+    b0 = n[1] * x2 - n[2] * x1
+    b1 = n[2] * x0 - n[0] * x2
+    b2 = n[0] * x1 - n[1] * x0
+    return x0, x1, x2, b0, b1, b2, n[0], n[1], n[2]
+
+
+@njit(cache=True)
+def flipped_frame(t, n):
+    """The shading frame of (t, -n): local z points into the yarn (the exit point seen from inside)."""
+    tx, ty, tz, bx, by, bz, nx, ny, nz = shading_frame(t, n)
+    return tx, ty, tz, -bx, -by, -bz, -nx, -ny, -nz
+
+
+@njit(cache=True)
+def to_local(fr, w):
+    return (w[0] * fr[0] + w[1] * fr[1] + w[2] * fr[2],
+            w[0] * fr[3] + w[1] * fr[4] + w[2] * fr[5],
+            w[0] * fr[6] + w[1] * fr[7] + w[2] * fr[8])
+
+
+@njit(cache=True)
+def to_world(fr, x, y, z):
+    w = np.empty(3)
+    w[0] = x * fr[0] + y * fr[3] + z * fr[6]
+    w[1] = x * fr[1] + y * fr[4] + z * fr[7]
+    w[2] = x * fr[2] + y * fr[5] + z * fr[8]
+    return w
+
+
+@njit(cache=True)
+def _unit_copy(v):
+    w = np.empty(3)
+    w[0] = v[0]
+    w[1] = v[1]
+    w[2] = v[2]
+    return w
+
+
+# ------------------------------------------------------------------------------------------------
+# the rough dielectric in local coordinates (Walter et al. 2007 with visible-normal densities)
+@njit(cache=True)
+def _reflect_local(ix, iy, iz, ox, oy, oz, au, av, eta):
+    """(F D G1(i) G1(o) / (4 i_z), pdf) of reflection i -> o, both with z > COS_EPS."""
+    if iz <= COS_EPS or oz <= COS_EPS:
+        return 0.0, 0.0
+    hx, hy, hz = ix + ox, iy + oy, iz + oz
+    ln = math.sqrt(hx * hx + hy * hy + hz * hz)
+    hx /= ln
+    hy /= ln
+    hz /= ln
+    ih = ix * hx + iy * hy + iz * hz
+    D = ggx_D(hx, hy, hz, au, av)
+    if ih <= 0.0 or D <= 0.0:
+        return 0.0, 0.0
+    g1i = ggx_G1(ix, iy, iz, au, av)
+    pdf = g1i * D / (4.0 * iz)                  # G1(i) (i.h) D / i_z  *  1 / (4 i.h)
+    return fresnel_dielectric(ih, eta) * ggx_G1(ox, oy, oz, au, av) * pdf, pdf
+
+
+@njit(cache=True)
+def _transmit_local(ix, iy, iz, ox, oy, oz, au, av, eta):
+    """(value, pdf) of refraction i -> o across the interface, i on the z > 0 side (index 1), o on the
+    other (relative index eta = n_o / n_i); flux form value = (1 - F) G1(o) pdf, pdf the density of
+    visible-normal sampling and refraction (Walter 2007 Eq. 17 Jacobian)."""
+    if iz <= COS_EPS or oz >= -COS_EPS:
+        return 0.0, 0.0
+    hx, hy, hz = ix + eta * ox, iy + eta * oy, iz + eta * oz
+    ln = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if ln <= 1e-12:
+        return 0.0, 0.0
+    if hz < 0.0:
+        ln = -ln
+    hx /= ln
+    hy /= ln
+    hz /= ln
+    ih = ix * hx + iy * hy + iz * hz
+    oh = ox * hx + oy * hy + oz * hz
+    if ih <= 0.0 or oh >= 0.0:
+        return 0.0, 0.0
+    D = ggx_D(hx, hy, hz, au, av)
+    if D <= 0.0:
+        return 0.0, 0.0
+    den = ih + eta * oh
+    if den == 0.0:
+        return 0.0, 0.0
+    jac = eta * eta * (-oh) / (den * den)       # d omega_h / d omega_o
+    pdf = ggx_G1(ix, iy, iz, au, av) * ih * D / iz * jac
+    F = fresnel_dielectric(ih, eta)
+    return (1.0 - F) * ggx_G1(ox, oy, oz, au, av) * pdf, pdf
+
+
+@njit(cache=True)
+def _refract_local(ix, iy, iz, hx, hy, hz, eta):
+    """(ok, ox, oy, oz): -i refracted through the micro-normal h (i.h > 0), relative index eta;
+    ok False under total internal reflection."""
+    c = ix * hx + iy * hy + iz * hz
+    sin2_t = (1.0 - c * c) / (eta * eta)
+    if sin2_t >= 1.0:
+        return False, 0.0, 0.0, 0.0
+    k = c / eta - math.sqrt(1.0 - sin2_t)
+    return True, -ix / eta + k * hx, -iy / eta + k * hy, -iz / eta + k * hz
+
+
+@njit(cache=True)
+def _alphas(p):
+    return max(p[ALPHA_U], ALPHA_MIN), max(p[ALPHA_V], ALPHA_MIN)
+
+
+# ------------------------------------------------------------------------------------------------
+# lobe: specular reflection at x (Eq. 2, first case)
+@njit(cache=True)
+def spec_reflect_eval_pdf(p, t, n, wi, wo):
+    """KS f_sR cos: BysdfValue(r, g, b, pdf of spec_reflect_sample)."""
+    fr = shading_frame(t, n)
+    ix, iy, iz = to_local(fr, wi)
+    ox, oy, oz = to_local(fr, wo)
+    au, av = _alphas(p)
+    v, pdf = _reflect_local(ix, iy, iz, ox, oy, oz, au, av, p[ETA])
+    return BysdfValue(p[KS_R] * v, p[KS_G] * v, p[KS_B] * v, pdf)
+
+
+@njit(cache=True)
+def spec_reflect_sample(p, t, n, wi, u1, u2):
+    """Visible normal, mirror reflection: BysdfSample(wo, weight = KS F G1(wo), pdf)."""
+    fr = shading_frame(t, n)
+    ix, iy, iz = to_local(fr, wi)
+    if iz <= COS_EPS:
+        return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
+    au, av = _alphas(p)
+    hx, hy, hz = ggx_sample_visible(ix, iy, iz, au, av, u1, u2)
+    ih = ix * hx + iy * hy + iz * hz
+    ox, oy, oz = 2.0 * ih * hx - ix, 2.0 * ih * hy - iy, 2.0 * ih * hz - iz
+    v, pdf = _reflect_local(ix, iy, iz, ox, oy, oz, au, av, p[ETA])
+    wo = to_world(fr, ox, oy, oz)
+    if pdf <= 0.0:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    w = v / pdf
+    return BysdfSample(wo, p[KS_R] * w, p[KS_G] * w, p[KS_B] * w, pdf)
+
+
+# ------------------------------------------------------------------------------------------------
+# the enter step at x (Eq. 2, second case): refraction into the yarn, flux form
+@njit(cache=True)
+def enter_eval_pdf(p, t, n, wi, d):
+    """(value, pdf): value = (1 - F) G1(d) pdf, the scalar f cos of refraction from wi into the yarn
+    along d (the direction the path travels inside); pdf the density of enter_sample."""
+    fr = shading_frame(t, n)
+    ix, iy, iz = to_local(fr, wi)
+    dx, dy, dz = to_local(fr, d)
+    au, av = _alphas(p)
+    return _transmit_local(ix, iy, iz, dx, dy, dz, au, av, p[ETA])
+
+
+@njit(cache=True)
+def enter_sample(p, t, n, wi, u1, u2):
+    """EnterSample(d, weight = (1 - F) G1(d), pdf): visible normal, refraction into the yarn."""
+    fr = shading_frame(t, n)
+    ix, iy, iz = to_local(fr, wi)
+    if iz <= COS_EPS:
+        return EnterSample(_unit_copy(n), 0.0, 0.0)
+    au, av = _alphas(p)
+    eta = p[ETA]
+    hx, hy, hz = ggx_sample_visible(ix, iy, iz, au, av, u1, u2)
+    ok, dx, dy, dz = _refract_local(ix, iy, iz, hx, hy, hz, eta)
+    if not ok or ix * hx + iy * hy + iz * hz <= 0.0:
+        return EnterSample(_unit_copy(n), 0.0, 0.0)
+    v, pdf = _transmit_local(ix, iy, iz, dx, dy, dz, au, av, eta)
+    d = to_world(fr, dx, dy, dz)
+    if pdf <= 0.0:
+        return EnterSample(d, 0.0, 0.0)
+    return EnterSample(d, v / pdf, pdf)
+
+
+# ------------------------------------------------------------------------------------------------
+# lobe: specular transmission out at y (Eq. 3), seen from inside: v = -d, local z = -n_y
+@njit(cache=True)
+def spec_exit_eval_pdf(p, t_y, n_y, d, wo):
+    """KT f_sT cos: BysdfValue(r, g, b, pdf of spec_exit_sample); d the direction arriving inside."""
+    fr = flipped_frame(t_y, n_y)
+    dx, dy, dz = to_local(fr, d)
+    ox, oy, oz = to_local(fr, wo)
+    a = max(p[ALPHA_EXIT], ALPHA_MIN)
+    v, pdf = _transmit_local(-dx, -dy, -dz, ox, oy, oz, a, a, 1.0 / p[ETA])
+    v *= p[KT_EXIT]
+    return BysdfValue(v, v, v, pdf)
+
+
+@njit(cache=True)
+def spec_exit_sample(p, t_y, n_y, d, u1, u2):
+    """Visible normal seen from inside, refraction out: BysdfSample(wo, weight = KT (1 - F) G1(wo), pdf);
+    total internal reflection is a failed sample (pdf 0)."""
+    fr = flipped_frame(t_y, n_y)
+    dx, dy, dz = to_local(fr, d)
+    vx, vy, vz = -dx, -dy, -dz
+    if vz <= COS_EPS:
+        return BysdfSample(_unit_copy(n_y), 0.0, 0.0, 0.0, 0.0)
+    a = max(p[ALPHA_EXIT], ALPHA_MIN)
+    eta = 1.0 / p[ETA]
+    hx, hy, hz = ggx_sample_visible(vx, vy, vz, a, a, u1, u2)
+    ok, ox, oy, oz = _refract_local(vx, vy, vz, hx, hy, hz, eta)
+    if not ok or vx * hx + vy * hy + vz * hz <= 0.0:
+        return BysdfSample(_unit_copy(n_y), 0.0, 0.0, 0.0, 0.0)
+    v, pdf = _transmit_local(vx, vy, vz, ox, oy, oz, a, a, eta)
+    wo = to_world(fr, ox, oy, oz)
+    if pdf <= 0.0:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    w = p[KT_EXIT] * v / pdf
+    return BysdfSample(wo, w, w, w, pdf)
+
+
+# ------------------------------------------------------------------------------------------------
+# lobe: body reflection at x (Lommel-Seeliger + diffusion) and body transmission at y (Lambertian)
+@njit(cache=True)
+def body_reflect_eval_pdf(p, n, wi, wo):
+    """f_bR cos: BysdfValue(r, g, b, cos_o / pi)."""
+    ci = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    co = wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2]
+    if ci <= COS_EPS or co <= COS_EPS:
+        return BysdfValue(0.0, 0.0, 0.0, 0.0)
+    m = p[LS_MIX]
+    ls = m * co / (4.0 * math.pi * (ci + co))
+    dif = (1.0 - m) * co * INV_PI
+    eta = p[ETA]
+    a0, a1, a2 = p[BODY_R_R], p[BODY_R_G], p[BODY_R_B]
+    return BysdfValue(a0 * ls + diffusion_reflectance(a0, eta) * dif,
+                      a1 * ls + diffusion_reflectance(a1, eta) * dif,
+                      a2 * ls + diffusion_reflectance(a2, eta) * dif, co * INV_PI)
+
+
+@njit(cache=True)
+def body_reflect_sample(p, n, wi, u1, u2):
+    """Cosine-weighted about n: BysdfSample(wo, f_bR cos / pdf, pdf)."""
+    wo, _, _, _, _ = lambert_sample(p[BODY_R_R:BODY_R_B + 1], n, wi, 0.0, u1, u2)
+    v = body_reflect_eval_pdf(p, n, wi, wo)
+    if v.pdf <= 0.0:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    return BysdfSample(wo, v.r / v.pdf, v.g / v.pdf, v.b / v.pdf, v.pdf)
+
+
+@njit(cache=True)
+def body_exit_eval_pdf(p, n_y, wo):
+    """f_bT cos = BODY_T / pi max(0, wo.n_y): BysdfValue(r, g, b, cos_o / pi)."""
+    co = wo[0] * n_y[0] + wo[1] * n_y[1] + wo[2] * n_y[2]
+    if co <= COS_EPS:
+        return BysdfValue(0.0, 0.0, 0.0, 0.0)
+    c = co * INV_PI
+    return BysdfValue(p[BODY_T_R] * c, p[BODY_T_G] * c, p[BODY_T_B] * c, c)
+
+
+@njit(cache=True)
+def body_exit_sample(p, n_y, u1, u2):
+    """Cosine-weighted about n_y: BysdfSample(wo, BODY_T, pdf)."""
+    wo, _, _, _, _ = lambert_sample(p[BODY_T_R:BODY_T_B + 1], n_y, n_y, 0.0, u1, u2)
+    v = body_exit_eval_pdf(p, n_y, wo)
+    if v.pdf <= 0.0:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    return BysdfSample(wo, v.r / v.pdf, v.g / v.pdf, v.b / v.pdf, v.pdf)
+
+
+# ------------------------------------------------------------------------------------------------
+# the two sides
+@njit(cache=True)
+def reflect_probability(p, wi, n):
+    """P_R = clamp(beta F(wi.n) + (1 - beta) m_r, 0.05, 0.95): the integrator's probability of the
+    reflection side at x (F = 1 for wi at or below the surface)."""
+    mu = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    F = fresnel_dielectric(mu, p[ETA]) if mu > 0.0 else 1.0
+    beta = p[SPEC_WEIGHT]
+    return min(P_R_MAX, max(P_R_MIN, beta * F + (1.0 - beta) * p[REFLECT_WEIGHT]))
+
+
+@njit(cache=True)
+def _reflect_lobe_weights(p, mu, shadow):
+    """(k_spec, k_body, P_spec): lobe factors of the reflection side and the probability of its
+    specular lobe (energy estimates at mu = wi.n; P_spec < 0 when both lobes carry no energy)."""
+    beta = p[SPEC_WEIGHT]
+    k_s = beta
+    k_b = (1.0 - beta) * p[REFLECT_WEIGHT] * max(shadow, 0.0)
+    e_s = k_s * (p[KS_R] + p[KS_G] + p[KS_B]) / 3.0 * fresnel_dielectric(mu, p[ETA])
+    e_b = k_b * (body_reflect_albedo(p, 0, mu) + body_reflect_albedo(p, 1, mu)
+                 + body_reflect_albedo(p, 2, mu)) / 3.0
+    if e_s + e_b <= 0.0:
+        return k_s, k_b, -1.0
+    return k_s, k_b, e_s / (e_s + e_b)
+
+
+@njit(cache=True)
+def reflect_eval_pdf(p, t, n, wi, wo, shadow):
+    """The reflection side at x: BysdfValue of beta KS f_sR + (1 - beta) m_r shadow f_bR (f cos) and
+    the pdf of reflect_sample."""
+    mu = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    if mu <= COS_EPS:
+        return BysdfValue(0.0, 0.0, 0.0, 0.0)
+    k_s, k_b, q = _reflect_lobe_weights(p, mu, shadow)
+    if q < 0.0:
+        return BysdfValue(0.0, 0.0, 0.0, 0.0)
+    s = spec_reflect_eval_pdf(p, t, n, wi, wo)
+    b = body_reflect_eval_pdf(p, n, wi, wo)
+    return BysdfValue(k_s * s.r + k_b * b.r, k_s * s.g + k_b * b.g, k_s * s.b + k_b * b.b,
+                      q * s.pdf + (1.0 - q) * b.pdf)
+
+
+@njit(cache=True)
+def reflect_sample(p, t, n, wi, shadow, u0, u1, u2):
+    """The reflection side at x: u0 picks the specular or the body lobe, (u1, u2) its direction;
+    BysdfSample(wo, f cos / pdf, pdf) with reflect_eval_pdf's value and mixture pdf."""
+    mu = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    if mu <= COS_EPS:
+        return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
+    _, _, q = _reflect_lobe_weights(p, mu, shadow)
+    if q < 0.0:
+        return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
+    if u0 < q:
+        s = spec_reflect_sample(p, t, n, wi, u1, u2)
+    else:
+        s = body_reflect_sample(p, n, wi, u1, u2)
+    if s.pdf <= 0.0:                           # the lobe's sample failed: so does the side's
+        return BysdfSample(s.wo, 0.0, 0.0, 0.0, 0.0)
+    wo = s.wo
+    v = reflect_eval_pdf(p, t, n, wi, wo, shadow)
+    if v.pdf <= 0.0:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    return BysdfSample(wo, v.r / v.pdf, v.g / v.pdf, v.b / v.pdf, v.pdf)
+
+
+@njit(cache=True)
+def _exit_lobe_weights(p, att_spec, att_body, shadow_y):
+    """(k_spec, k_body, P_spec) of the transmission side at y (P_spec < 0: no energy)."""
+    beta = p[SPEC_WEIGHT]
+    k_s = beta * max(att_spec, 0.0)
+    k_b = (1.0 - beta) * (1.0 - p[REFLECT_WEIGHT]) * max(att_body, 0.0) * max(shadow_y, 0.0)
+    e_s = k_s * p[KT_EXIT]
+    e_b = k_b * (p[BODY_T_R] + p[BODY_T_G] + p[BODY_T_B]) / 3.0
+    if e_s + e_b <= 0.0:
+        return k_s, k_b, -1.0
+    return k_s, k_b, e_s / (e_s + e_b)
+
+
+@njit(cache=True)
+def exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y):
+    """The transmission side at y: BysdfValue of beta att_spec KT f_sT + (1 - beta)(1 - m_r) att_body
+    shadow_y f_bT (f cos) and the pdf of exit_sample; d the direction the path arrives along inside."""
+    k_s, k_b, q = _exit_lobe_weights(p, att_spec, att_body, shadow_y)
+    if q < 0.0:
+        return BysdfValue(0.0, 0.0, 0.0, 0.0)
+    s = spec_exit_eval_pdf(p, t_y, n_y, d, wo)
+    b = body_exit_eval_pdf(p, n_y, wo)
+    return BysdfValue(k_s * s.r + k_b * b.r, k_s * s.g + k_b * b.g, k_s * s.b + k_b * b.b,
+                      q * s.pdf + (1.0 - q) * b.pdf)
+
+
+@njit(cache=True)
+def exit_sample(p, t_y, n_y, d, att_spec, att_body, shadow_y, u0, u1, u2):
+    """The transmission side at y: u0 picks the specular or the body lobe, (u1, u2) its direction;
+    BysdfSample(wo, f cos / pdf, pdf) with exit_eval_pdf's value and mixture pdf."""
+    _, _, q = _exit_lobe_weights(p, att_spec, att_body, shadow_y)
+    if q < 0.0:
+        return BysdfSample(_unit_copy(n_y), 0.0, 0.0, 0.0, 0.0)
+    if u0 < q:
+        s = spec_exit_sample(p, t_y, n_y, d, u1, u2)
+    else:
+        s = body_exit_sample(p, n_y, u1, u2)
+    if s.pdf <= 0.0:                           # failed (total internal reflection at y): the path ends
+        return BysdfSample(s.wo, 0.0, 0.0, 0.0, 0.0)
+    wo = s.wo
+    v = exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y)
+    if v.pdf <= 0.0:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    return BysdfSample(wo, v.r / v.pdf, v.g / v.pdf, v.b / v.pdf, v.pdf)
+
+
+@njit(cache=True)
+def attenuation(p, distance, n_plies):
+    """(A_s, A_d) = (exp(-sigma |y - x|))^n_plies for sigma = SIGMA_SPEC and SIGMA_BODY (Beer-Lambert
+    along the chord x -> y, raised to the number of plies crossed, §4.1)."""
+    s = max(distance, 0.0) * max(n_plies, 0.0)
+    return math.exp(-p[SIGMA_SPEC] * s), math.exp(-p[SIGMA_BODY] * s)
