@@ -76,6 +76,10 @@ class RenderMethod:
     default_source: str
     settings: tuple[Setting, ...] = ()
     materials: tuple[str, ...] = ()
+    defaults: tuple[tuple[str, int], ...] = ()   # this method's own defaults of COMMON_DEFAULTS settings
+
+    def default(self, key: str):
+        return dict(self.defaults).get(key, COMMON_DEFAULTS[key])
 
     def source(self, name: str | None) -> Source:
         name = name or self.default_source
@@ -103,6 +107,7 @@ GRID = ArtifactInput("grid", ("grid",), "a voxel grid (loomlight voxelize)")
 SVF = ArtifactInput("svf", ("svf",), "the tiling's segment visibility functions (loomlight precompute svf)")
 IIRTF = ArtifactInput("iirtf", ("iirtf",), "the tiling's IIRTF transfer matrices (loomlight precompute iirtf)")
 BTF = ArtifactInput("btf", ("btf",), "a fitted cloth texture (loomlight precompute btf)")
+YARNS = ArtifactInput("yarns", ("yarns",), "the yarn curves (loomlight ingest)")
 CLI_INPUTS = ("fibers", "tables", "grid")   # the artifact options ``render`` has; others come by --set
 
 _FIBERPATH_SETTINGS = (
@@ -173,6 +178,20 @@ METHODS = {m.name: m for m in (
                                  "off: level 0 everywhere", ("on", "off")),
                   Setting("shadows", "off (default) or on: shadow rays towards directional lights through the "
                                      "mesh's alpha", ("off", "on")))),
+    RenderMethod(
+        "bysdf", "yarn curves only, plies and fibres implicit, four-lobe yarn scattering (seed 004)", "bysdf",
+        sources=(Source("yarns", (YARNS,), "the yarn curves of a yarns artifact (--set yarns=)"),),
+        default_source="yarns",
+        settings=(Setting("yarns", "the yarns artifact (loomlight ingest)"),
+                  Setting("mode", "near (default): the ray's own point; far: the BYSDF integrated over the yarn's "
+                                  "width; multiscale: over the pixel's footprint", ("near", "far", "multiscale")),
+                  Setting("k", "offsets per far / multiscale shading point (default 16)"),
+                  Setting("params", "a TOML of BYSDF parameters per yarn group (loomlight fit-bysdf writes one)"),
+                  Setting("ply_tol", "implicit ply iteration tolerance, in ply radii (default 1e-3)"),
+                  Setting("ply_iter", "implicit ply iteration cap (default 10)"),
+                  Setting("fibre_threshold", "fibre shadowing floor: s (1 - thr) + thr (default 0.5; 1: off)"),
+                  Setting("ply_threshold", "ply shadowing floor (default 0.6; 1: off)")),
+        defaults=(("max_depth", 4),)),
 )}
 
 

@@ -21,7 +21,7 @@ from ..errors import LoomError
 from ..memory import Estimate, budget as memory_budget
 
 INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid", "svf": "svf",
-               "iirtf": "iirtf", "btf": "btf"}  # artifact kinds per option
+               "iirtf": "iirtf", "btf": "btf", "yarns": "yarns"}  # artifact kinds per option
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
 MAJORANT_BYTES = 32 << 20  # volpath's majorant grid (at most 128 cells per axis)
@@ -87,9 +87,13 @@ def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, sour
     cam = scene.camera or {}
     rs = scene.render
 
+    raw_render = (getattr(scene, "raw", None) or {}).get("render", {})
+
     def pick(cli, table, key):
         v = cli if cli is not None else table.get(key)
-        return int(v if v is not None else COMMON_DEFAULTS[key])
+        if cli is None and table is rs and key not in raw_render and key in dict(m.defaults):
+            v = None   # the scene did not set it: the method's own default
+        return int(v if v is not None else m.default(key))
 
     options = {
         "width": pick(width, cam, "width"), "height": pick(height, cam, "height"), "spp": pick(spp, rs, "spp"),

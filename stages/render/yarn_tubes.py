@@ -1,8 +1,8 @@
 """Yarn tubes: rays against the yarn curves themselves (seed 004 §3.2), for ``--method bysdf``.
 
 The BYSDF renders cloth from the ``yarns`` artifact alone. Each yarn is a tube of radius
-``R_env`` (the envelope of its plies, ``stages.core.yarn.implicit_plies.ply_envelope_radius``)
-around the ingest stage's C1 cubic Hermite spline. The tube is traced as a chain of capsules around
+``R_env`` (the farthest reach of its plies, ``stages.core.yarn.implicit_plies.ply_reach_radius``,
+plus a margin; ``pipeline.renderers.bysdf``) around the ingest stage's C1 cubic Hermite spline. The tube is traced as a chain of capsules around
 a polyline that follows the spline closely enough:
 
     Subdivision bound. On a piece [t0, t0 + h] of a cubic segment P(t) = a t^3 + b t^2 + c t + d,

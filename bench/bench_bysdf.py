@@ -1,0 +1,121 @@
+"""bysdf (seed 004) against fiberpath on realized fibres, and multiscale against near on a distant view.
+
+Scene: the demo swatch (``data/scenes/demo.toml``: 8 x 8 plain weave of cotton1, 3 plies x 75 fibres
+per yarn) under its own lights; ``loomlight ingest`` and ``realize`` run once into
+``out/bench_bysdf/`` (kept between runs).
+
+1. Same view, resolution and spp (128 x 96 @ 16 spp, 2 threads), max depth 4 for both: render seconds
+   (kernels only, compilation reported apart) of ``fiberpath`` on the realized fibres and of ``bysdf``
+   ``near`` on the yarn curves; target bysdf >= 5x faster (seed 004 §5: about 6x against the fibre-based
+   model). Geometry memory: the arrays each traversal holds (fiberpath: fibre points, radii, offsets and
+   the capsule BVH; bysdf: the curves, tube pieces and their BVH, and the implicit tables); target
+   >= 100x smaller.
+2. A distant view (the demo camera 8x farther away, the cloth about 16 pixels wide, so a pixel spans
+   about a yarn): ``multiscale`` against ``near`` at equal error. Each mode's efficiency is
+   1 / (mean variance of the pixel means over the cloth's pixels x render seconds), the usual Monte
+   Carlo efficiency: the time ratio at equal error is the inverse ratio of variance x time.
+   Target: multiscale >= 1.2x (seed 004: "20 % faster for distant cloth at equal quality").
+   Also recorded: the two modes' mean cloth radiance (multiscale aggregates the geometry, so it is
+   not the same estimator; their means should be close).
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "out" / "bench_bysdf"
+
+
+def _cli(*args):
+    subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)], check=True, cwd=ROOT,
+                   stdout=subprocess.DEVNULL)
+
+
+def _render(scene, method, W, H, spp, extra, fibers=None):
+    from pipeline.renderers import method as get_method
+    from pipeline.runners.render import resolve_options
+
+    m = get_method(method)
+    opts = resolve_options(scene, m, width=W, height=H, spp=spp, fibers=fibers, max_depth=4, extra=dict(extra))
+    return m.run(scene, opts)
+
+
+def _fiber_bytes(fibers_path):
+    from pipeline.render_setup import load_fibers
+    from stages.core.geometry.bvh import build_fiber_bvh
+
+    f = load_fibers(fibers_path)
+    bvh, _ = build_fiber_bvh(f.points, f.fiber_offsets, f.point_radius)
+    arrays = [f.points, f.point_radius, f.fiber_offsets] + [a for a in bvh if isinstance(a, np.ndarray)]
+    return int(sum(a.nbytes for a in arrays))
+
+
+def run(out_dir) -> dict:
+    import numba
+
+    from pipeline.scene import load_scene
+
+    OUT.mkdir(parents=True, exist_ok=True)
+    scene_path = ROOT / "data" / "scenes" / "demo.toml"
+    yarns, fibers = OUT / "yarns.zarr", OUT / "fibers.zarr"
+    if not (yarns / "zarr.json").exists():
+        _cli("ingest", scene_path, "-o", yarns)
+    if not (fibers / "zarr.json").exists():
+        _cli("realize", yarns, "-o", fibers)
+    scene = load_scene(scene_path)
+    W, H, spp = 128, 96, 16
+    fp = _render(scene, "fiberpath", W, H, spp, {}, fibers=str(fibers))
+    by = _render(scene, "bysdf", W, H, spp, {"yarns": str(yarns), "mode": "near"})
+    fp_bytes = _fiber_bytes(fibers)
+    res = {
+        "image": f"{W}x{H} @ {spp} spp, max depth 4, {numba.config.NUMBA_NUM_THREADS} threads",
+        "fiberpath_render_s": fp.stats["render_s"], "bysdf_render_s": by.stats["render_s"],
+        "fiberpath_compile_s": fp.stats.get("compile_s"), "bysdf_compile_s": by.stats.get("compile_s"),
+        "bysdf_tables_s": by.stats.get("tables_s"),
+        "speedup_bysdf_vs_fiberpath": fp.stats["render_s"] / by.stats["render_s"], "speedup_target": 5.0,
+        "fiberpath_geometry_bytes": fp_bytes, "bysdf_geometry_bytes": by.stats["geometry_bytes"],
+        "memory_ratio": fp_bytes / by.stats["geometry_bytes"], "memory_target": 100.0,
+        "fiberpath_mean_rgb": np.asarray(fp.rgb, float).reshape(-1, 3).mean(0).tolist(),
+        "bysdf_mean_rgb": np.asarray(by.rgb, float).reshape(-1, 3).mean(0).tolist(),
+        "bysdf_paths_per_s": W * H * spp / by.stats["render_s"],
+        "fiberpath_paths_per_s": W * H * spp / fp.stats["render_s"],
+    }
+    # the distant view: the camera 8x farther along its view line
+    cam = dict(scene.camera)
+    o = np.asarray(cam["origin"], float)
+    t = np.asarray(cam["target"], float)
+    cam["origin"] = list(t + 8.0 * (o - t))
+    far = dataclasses.replace(scene, camera=cam)
+    DW, DH, dspp = 96, 72, 32
+    out = {}
+    for mode in ("near", "multiscale"):
+        r = _render(far, "bysdf", DW, DH, dspp, {"yarns": str(yarns), "mode": mode})
+        cloth = np.asarray(r.extra["A"]) > 0.5
+        var = float(np.asarray(r.extra["variance"], float)[cloth].mean())
+        lum = np.asarray(r.rgb, float) @ np.array([0.2126, 0.7152, 0.0722])
+        out[mode] = {"render_s": r.stats["render_s"], "variance": var, "mean": float(lum[cloth].mean()),
+                     "cloth_pixels": int(cloth.sum())}
+    n, m = out["near"], out["multiscale"]
+    res.update({
+        "distant_image": f"{DW}x{DH} @ {dspp} spp, camera 8x farther",
+        "distant_cloth_pixels": n["cloth_pixels"],
+        "near_render_s": n["render_s"], "multiscale_render_s": m["render_s"],
+        "near_variance": n["variance"], "multiscale_variance": m["variance"],
+        "near_mean": n["mean"], "multiscale_mean": m["mean"],
+        "multiscale_speedup_at_equal_error": (n["variance"] * n["render_s"]) / max(m["variance"] * m["render_s"], 1e-300),
+        "multiscale_target": 1.2,
+    })
+    return res
+
+
+if __name__ == "__main__":
+    import json
+
+    os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
+    print(json.dumps(run(OUT), indent=2))

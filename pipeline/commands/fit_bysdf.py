@@ -1,0 +1,39 @@
+"""``loomlight fit-bysdf SCENE --yarns Y.zarr --fibers F.zarr -o params.toml``: fit the BYSDF to fiberpath."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("fit-bysdf")
+    def fit_bysdf(
+        scene: Path = typer.Argument(..., help="The scene (camera; its yarn colours)."),
+        yarns: Path = typer.Option(..., "--yarns", help="The yarns artifact bysdf renders (loomlight ingest)."),
+        fibers: Path = typer.Option(..., "--fibers", help="The realized fibres of the same yarns (loomlight realize): "
+                                                          "the fiberpath reference."),
+        out: Path = typer.Option(..., "-o", "--out", help="The fitted parameters (.toml; a .json report beside it)."),
+        width: int = typer.Option(96, "--width", help="Width of the fitting renders."),
+        height: int = typer.Option(72, "--height", help="Height of the fitting renders."),
+        spp: int = typer.Option(16, "--spp", help="Samples per pixel of the bysdf renders."),
+        ref_spp: int = typer.Option(32, "--ref-spp", help="Samples per pixel of the fiberpath references."),
+        iterations: int = typer.Option(4, "--iterations", help="Fitting rounds (each renders front and back)."),
+    ):
+        """Fit the BYSDF's energy split so bysdf matches fiberpath under front, back and front+back light."""
+        from ..errors import LoomError
+        from ..outputs import check_output
+        from ..runners.fit_bysdf import SETUPS, run_fit
+
+        check_output(out, "-o", suffixes=(".toml",))
+        for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (ref_spp, "--ref-spp"),
+                        (iterations, "--iterations")):
+            if v <= 0:
+                raise LoomError(None, name, f"must be a positive integer, got {v}")
+        rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations, progress=typer.echo)
+        typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}"
+                   + (" (capped: the fibres are brighter than the yarn colours allow)" if rep["energy_capped"] else ""))
+        for n in SETUPS:
+            r = rep["setups"][n]
+            typer.echo(f"  {n:10s} mean luminance error {100 * r['rel_error_luminance']:+.1f} %  (rgb "
+                       + " ".join(f"{100 * e:+.1f}" for e in r["rel_error_rgb"]) + " %)")

@@ -1,0 +1,447 @@
+"""Yarn-level path tracer with the BYSDF (``--method bysdf``, seed 004).
+
+Geometry: yarn tubes only (``stages.render.yarn_tubes``): the ingest stage's splines as capsule
+chains in the fibre tracer's SAH BVH, one "fibre" per yarn. Plies and fibres are implicit
+(``stages.render.yarn_point``): a ray that enters a tube is followed on its elliptical cross-section to
+the first ply it meets; a ray that meets no ply passes on through the yarn. Shading: the four-lobe
+BYSDF (``stages.core.shading.bysdf``) with ply and fibre shadowing.
+
+``BysdfIntegrator`` fields: ``bvh`` (FiberBVH of the tube pieces), ``cv`` (the yarns' ``Curves``),
+``pieces`` (``TubePieces``), ``types`` (tuple of ``YarnType``, one per yarn type), ``yarn_type`` (Y,)
+int32, ``yarn_key`` (Y,) int64 random key of each yarn (fibre-table switching), ``params`` (Y,
+BYSDF_SIZE) the BYSDF of each yarn, ``lights`` (``LightTable``), ``ground`` float64[4] and
+``has_ground`` (``stages.render.ground``), ``ground_albedo`` (3,), ``mode`` (MODE_NEAR, MODE_FAR,
+MODE_MULTISCALE), ``K`` offsets per far / multiscale vertex, ``falloff`` (multiscale weights),
+``pixel_angle`` (radians per pixel: the camera ray cone), ``max_depth``, ``rr_depth``, ``window``
+(tube pieces skipped around the one a ray leaves), ``eps``, ``max_passes`` (yarns a ray may pass
+through between two scattering events).
+
+Estimator
+---------
+At a yarn vertex x (the ply hit) the BYSDF splits into a reflection side (specular and body
+reflection at x) and a transmission side (refraction into the yarn at x by the specular lobe's GGX,
+the straight path to the exit point y on the far side of the envelope, Beer-Lambert attenuation
+raised to the number of plies crossed, then specular and body transmission out at y). One side is
+chosen with probability P_R (``reflect_probability``) and its estimate divided by it. On the chosen
+side, next-event estimation takes one sample of each light and combines it with the side's BYSDF
+sampling by the power heuristic, as ``stages.render.fiberpath`` does; delta lights by NEE alone.
+Shadow rays and continuation rays pass through yarns whose plies they miss (the same implicit
+test), so NEE and BYSDF sampling see the same scene. ``max_depth`` counts scattering events (default
+4, as the reference implementation); Russian roulette from ``rr_depth`` on.
+
+Modes (seed 004 §4.2): ``near`` shades the point of the ray's own offset; ``far`` shades the mean of
+the near BYSDF over K offsets stratified over the whole yarn (h in [-1, 1]): the vertex passes the
+ray on with the fraction of offsets that meet no ply, and otherwise is the mixture of the offsets
+that do (evaluation: their mean; sampling: one of them, uniformly; pdf: the mean); ``multiscale``
+takes the offsets of the ray cone's footprint (width = path length x ``pixel_angle``), aggregates
+normal, tangent and shadowing (``yarn_point.aggregate``) and widens the specular roughness by the
+offset range / 10; a vanishing footprint gives back ``near``.
+
+Random numbers: ``uniform(seed, key, dim)``, dimensions 0-1 for the pixel, then EVENT_DIMS + 2 NL per
+event (a scattering vertex or a pass through a yarn): side, offset pick, lobe and direction, roulette,
+refraction, far pass-through, offset jitter, and one pair per light.
+"""
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit
+from numba.extending import overload
+
+from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.surface import surface_hit
+from stages.core.rng import uniform
+from stages.core.shading import bysdf as B
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample
+from stages.core.yarn.implicit_plies import ply_hit
+from stages.core.yarn.implicit_tables import ply_shadow_lookup
+from stages.render.ground import ground_intersect
+from stages.render.integrator import PathSample, radiance
+from stages.render.lights import light_eval, light_pdf, light_sample
+from stages.render.yarn_point import aggregate, near_point, offset_of, offset_points
+from stages.render.yarn_tubes import cylinder_span, to_yarn, yarn_hit_frame
+
+MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
+MODES = ("near", "far", "multiscale")
+K_MAX = 256
+EVENT_DIMS = 12
+D_SIDE, D_PICK, D_LOBE, D_DIR1, D_DIR2, D_RR, D_ENTER1, D_ENTER2, D_PASS, D_JITTER = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
+
+BysdfIntegrator = namedtuple("BysdfIntegrator", [
+    "bvh", "cv", "pieces", "types", "yarn_type", "yarn_key", "params", "lights", "ground", "has_ground",
+    "ground_albedo", "mode", "K", "falloff", "pixel_angle", "max_depth", "rr_depth", "window", "eps", "max_passes"])
+
+
+@njit(cache=True)
+def enter_yarn(it, h, ox, oy, oz, dx, dy, dz):
+    """(frame, yarn-space entry o (3), direction d (3), length inside, curve) of the ray that hit
+    tube piece h.prim at h.t; length < 0 when the straight envelope at the hit misses the ray (a bend)."""
+    px = ox + h.t * dx
+    py = oy + h.t * dy
+    pz = oz + h.t * dz
+    j = it.bvh.seg_a[h.prim]
+    fr = yarn_hit_frame(it.cv, it.pieces, j, px, py, pz)
+    o, d = to_yarn(fr, px, py, pz, dx, dy, dz)
+    R = it.types[it.yarn_type[fr.curve]].radius
+    u0, u1 = cylinder_span(o, d, R)
+    if not (u1 > u0) or not math.isfinite(u0) or not math.isfinite(u1):
+        return fr, o, d, -1.0
+    for k in range(3):
+        o[k] += u0 * d[k]
+    return fr, o, d, u1 - u0
+
+
+@njit(cache=True)
+def world_point(fr, q):
+    dz = q[2] - fr.s
+    return (fr.px + q[0] * fr.nx + q[1] * fr.bx + dz * fr.tx,
+            fr.py + q[0] * fr.ny + q[1] * fr.by + dz * fr.ty,
+            fr.pz + q[0] * fr.nz + q[1] * fr.bz + dz * fr.tz)
+
+
+@njit(cache=True)
+def world_dir(fr, v, out):
+    out[0] = v[0] * fr.nx + v[1] * fr.bx + v[2] * fr.tx
+    out[1] = v[0] * fr.ny + v[1] * fr.by + v[2] * fr.ty
+    out[2] = v[0] * fr.nz + v[1] * fr.bz + v[2] * fr.tz
+
+
+@njit(cache=True)
+def yarn_dir(fr, w, out):
+    out[0] = w[0] * fr.nx + w[1] * fr.ny + w[2] * fr.nz
+    out[1] = w[0] * fr.bx + w[1] * fr.by + w[2] * fr.bz
+    out[2] = w[0] * fr.tx + w[1] * fr.ty + w[2] * fr.tz
+
+
+@njit(cache=True)
+def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
+    """(visible, rays): True when the ray reaches infinity: every yarn tube on its way is passed
+    through (its plies missed) and the ground is not in the way."""
+    rays = 0
+    if ground_intersect(it.ground, it.has_ground, oz, dz, it.eps) < np.inf:
+        return False, rays
+    for _ in range(it.max_passes):
+        h = surface_hit(it.bvh, -1, ox, oy, oz, dx, dy, dz, it.eps, np.inf, ign_y, ign_s, it.window)
+        rays += 1
+        if h.prim < 0:
+            return True, rays
+        fr, o, d, um = enter_yarn(it, h, ox, oy, oz, dx, dy, dz)
+        if um > 0.0:
+            yt = it.types[it.yarn_type[fr.curve]]
+            ph = ply_hit(yt.tp, o, d, um, yt.tol, yt.max_iter)
+            if ph.hit:
+                return False, rays
+            for k in range(3):
+                o[k] += um * d[k]
+        ox, oy, oz = world_point(fr, o)
+        ign_y = fr.curve
+        ign_s = h.prim
+    return False, rays
+
+
+@njit(cache=True)
+def trace_path(it, o, d, seed, key):
+    """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
+    lights = it.lights.lights
+    env = it.lights.env
+    marg = it.lights.marginal
+    cond = it.lights.conditional
+    nl = lights.shape[0]
+    D = EVENT_DIMS + 2 * nl
+    K = it.K
+    tp = np.ones(3)
+    L = np.zeros(3)
+    first_t = 0.0
+    rays = 0
+    ign_y = -1
+    ign_s = -1
+    pdf_prev = 0.0
+    path_len = 0.0
+    depth = 0
+    event = 0
+    passes = 0
+    xs = np.empty((K, 3))
+    ts = np.empty((K, 3))
+    ns = np.empty((K, 3))
+    shadow = np.empty(K)
+    hit = np.empty(K, np.bool_)
+    slot_x = np.empty((K, 3))
+    slot_t = np.empty((K, 3))
+    slot_n = np.empty((K, 3))
+    slot_s = np.empty(K)
+    prow = np.empty(it.params.shape[1])
+    wi = np.empty(3)
+    wl = np.empty(3)
+    wo = np.empty(3)
+    wow = np.empty(3)
+    gn = np.zeros(3)
+    while True:
+        h = surface_hit(it.bvh, -1, o[0], o[1], o[2], d[0], d[1], d[2], it.eps, np.inf, ign_y, ign_s, it.window)
+        rays += 1
+        t_hit = h.t
+        on_ground = False
+        tg = ground_intersect(it.ground, it.has_ground, o[2], d[2], it.eps)
+        if tg < t_hit:
+            t_hit = tg
+            on_ground = True
+        if h.prim < 0 and not on_ground:  # escaped: environment, MIS-weighted against the last NEE
+            for k in range(nl):
+                lr, lg, lb = light_eval(lights, k, env, marg, cond, d)
+                if lr == 0.0 and lg == 0.0 and lb == 0.0:
+                    continue
+                w = 1.0
+                if depth > 0:
+                    pl = light_pdf(lights, k, env, marg, cond, d)
+                    w = pdf_prev * pdf_prev / (pdf_prev * pdf_prev + pl * pl)
+                L[0] += tp[0] * lr * w
+                L[1] += tp[1] * lg * w
+                L[2] += tp[2] * lb * w
+            break
+        if depth == 0 and first_t == 0.0:
+            first_t = path_len + t_hit
+        path_len += t_hit
+        base = 2 + event * D
+        event += 1
+        if on_ground:
+            if depth >= it.max_depth:
+                break
+            px = o[0] + t_hit * d[0]
+            py = o[1] + t_hit * d[1]
+            pz = o[2] + t_hit * d[2]
+            gn[2] = 1.0 if d[2] < 0.0 else -1.0
+            for k in range(3):
+                wi[k] = -d[k]
+            sx = px
+            sy = py
+            sz = pz + it.eps * gn[2]
+            for k in range(nl):
+                wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                          uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
+                if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+                    continue
+                f0, f1, f2 = lambert_eval(it.ground_albedo, gn, wi, wlk)
+                if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
+                    continue
+                pf = lambert_pdf(it.ground_albedo, gn, wi, wlk)
+                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], -1, -1)
+                rays += nr
+                if not vis:
+                    continue
+                w = 1.0 if delta else pl * pl / (pl * pl + pf * pf) / pl
+                L[0] += tp[0] * f0 * lr * w
+                L[1] += tp[1] * f1 * lg * w
+                L[2] += tp[2] * f2 * lb * w
+            wo2, w0, w1, w2, pf = lambert_sample(it.ground_albedo, gn, wi, 0.0, uniform(seed, key, base + D_DIR1),
+                                                 uniform(seed, key, base + D_DIR2))
+            if pf <= 0.0:
+                break
+            tp[0] *= w0
+            tp[1] *= w1
+            tp[2] *= w2
+            o[0] = sx; o[1] = sy; o[2] = sz
+            for k in range(3):
+                d[k] = wo2[k]
+            ign_y = -1
+            ign_s = -1
+        else:
+            fr, oy, dy, um = enter_yarn(it, h, o[0], o[1], o[2], d[0], d[1], d[2])
+            c = fr.curve
+            yt = it.types[it.yarn_type[c]]
+            R = yt.radius
+            ykey = it.yarn_key[c]
+            # the offsets this vertex shades (slots); m = 0: the ray passes on through the yarn
+            m = 0
+            if um > 0.0:
+                if it.mode == MODE_FAR:
+                    h0 = offset_of(oy, dy, R)
+                    nh = offset_points(yt, ykey, oy, dy, h0, -1.0, 1.0, K, uniform(seed, key, base + D_JITTER),
+                                       xs, ts, ns, shadow, hit)
+                    if nh > 0 and uniform(seed, key, base + D_PASS) * K < nh:
+                        for k in range(K):
+                            if hit[k]:
+                                for q in range(3):
+                                    slot_x[m, q] = xs[k, q]
+                                    slot_t[m, q] = ts[k, q]
+                                    slot_n[m, q] = ns[k, q]
+                                slot_s[m] = shadow[k]
+                                m += 1
+                    for q in range(it.params.shape[1]):
+                        prow[q] = it.params[c, q]
+                else:
+                    sp = near_point(yt, ykey, oy, dy, um)
+                    for q in range(it.params.shape[1]):
+                        prow[q] = it.params[c, q]
+                    if sp.hit:
+                        m = 1
+                        for q in range(3):
+                            slot_x[0, q] = sp.x[q]
+                            slot_t[0, q] = sp.t[q]
+                            slot_n[0, q] = sp.n[q]
+                        slot_s[0] = sp.shadow
+                        if it.mode == MODE_MULTISCALE:
+                            h0 = offset_of(oy, dy, R)
+                            dh = path_len * it.pixel_angle / R
+                            lo = max(-1.0, h0 - 0.5 * dh)
+                            hi = min(1.0, h0 + 0.5 * dh)
+                            offset_points(yt, ykey, oy, dy, h0, lo, hi, K, uniform(seed, key, base + D_JITTER),
+                                          xs, ts, ns, shadow, hit)
+                            at, an, ash = aggregate(sp.x, xs, ts, ns, shadow, hit, K, R, it.falloff)
+                            if ash > 0.0:
+                                for q in range(3):
+                                    slot_t[0, q] = at[q]
+                                    slot_n[0, q] = an[q]
+                                slot_s[0] = ash
+                            prow[B.ALPHA_U] += (hi - lo) / 10.0
+                            prow[B.ALPHA_V] += (hi - lo) / 10.0
+            if m == 0:  # pass through: continue from where the ray leaves the envelope
+                passes += 1
+                if passes > it.max_passes:
+                    break
+                if um > 0.0:
+                    for q in range(3):
+                        oy[q] += um * dy[q]
+                ex, ey, ez = world_point(fr, oy)
+                path_len -= t_hit  # the path length is measured to the next hit from the origin
+                path_len += math.sqrt((ex - o[0]) ** 2 + (ey - o[1]) ** 2 + (ez - o[2]) ** 2)
+                o[0] = ex; o[1] = ey; o[2] = ez
+                ign_y = c
+                ign_s = h.prim
+                continue
+            if depth >= it.max_depth:
+                break
+            for q in range(3):
+                wi[q] = -dy[q]
+            # the side: reflection at x, or transmission to y
+            pr = 0.0
+            for k in range(m):
+                pr += B.reflect_probability(prow, wi, slot_n[k])
+            pr /= m
+            pick = min(m - 1, int(uniform(seed, key, base + D_PICK) * m))
+            if uniform(seed, key, base + D_SIDE) < pr:
+                side_w = 1.0 / pr
+                x = slot_x[pick]
+                sx, sy, sz = world_point(fr, x)
+                for k in range(nl):
+                    wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond,
+                                                              uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                              uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
+                    if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+                        continue
+                    yarn_dir(fr, wlk, wl)
+                    f0 = 0.0
+                    f1 = 0.0
+                    f2 = 0.0
+                    pf = 0.0
+                    for s in range(m):
+                        a0, a1, a2, ap = B.reflect_eval_pdf(prow, slot_t[s], slot_n[s], wi, wl, slot_s[s])
+                        f0 += a0; f1 += a1; f2 += a2; pf += ap
+                    f0 /= m; f1 /= m; f2 /= m; pf /= m
+                    if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
+                        continue
+                    vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], c, h.prim)
+                    rays += nr
+                    if not vis:
+                        continue
+                    w = side_w if delta else side_w * pl * pl / (pl * pl + pf * pf) / pl
+                    L[0] += tp[0] * f0 * lr * w
+                    L[1] += tp[1] * f1 * lg * w
+                    L[2] += tp[2] * f2 * lb * w
+                wv, w0, w1, w2, pf = B.reflect_sample(prow, slot_t[pick], slot_n[pick], wi, slot_s[pick],
+                                                      uniform(seed, key, base + D_LOBE), uniform(seed, key, base + D_DIR1),
+                                                      uniform(seed, key, base + D_DIR2))
+                if pf <= 0.0:
+                    break
+                if m > 1:  # the mixture over the offsets
+                    f0 = 0.0; f1 = 0.0; f2 = 0.0; pm = 0.0
+                    for s in range(m):
+                        a0, a1, a2, ap = B.reflect_eval_pdf(prow, slot_t[s], slot_n[s], wi, wv, slot_s[s])
+                        f0 += a0; f1 += a1; f2 += a2; pm += ap
+                    if pm <= 0.0:
+                        break
+                    w0 = f0 / pm; w1 = f1 / pm; w2 = f2 / pm
+                    pf = pm / m
+                tp[0] *= w0 * side_w
+                tp[1] *= w1 * side_w
+                tp[2] *= w2 * side_w
+                world_dir(fr, wv, wow)
+                o[0] = sx; o[1] = sy; o[2] = sz
+            else:
+                side_w = 1.0 / (1.0 - pr)
+                x = slot_x[pick]
+                din, w_in, p_in = B.enter_sample(prow, slot_t[pick], slot_n[pick], wi,
+                                                 uniform(seed, key, base + D_ENTER1), uniform(seed, key, base + D_ENTER2))
+                if p_in <= 0.0 or w_in <= 0.0:
+                    break
+                u_lo, u_hi = cylinder_span(x, din, R)
+                if not (u_hi > 0.0) or not math.isfinite(u_hi):
+                    break
+                yq = np.empty(3)
+                for q in range(3):
+                    yq[q] = x[q] + u_hi * din[q]
+                crossed = ply_hit(yt.tp, x, din, u_hi, yt.tol, yt.max_iter).plies_crossed
+                crossed = max(1, crossed)
+                ell = u_hi / R
+                att_s = math.exp(-prow[B.SIGMA_SPEC] * ell * crossed)
+                att_d = math.exp(-prow[B.SIGMA_BODY] * ell * crossed)
+                nr_ = math.sqrt(yq[0] * yq[0] + yq[1] * yq[1])
+                ny = np.zeros(3)
+                ny[0] = yq[0] / nr_
+                ny[1] = yq[1] / nr_
+                ty = np.zeros(3)
+                ty[2] = 1.0
+                s_y = ply_shadow_lookup(yt.tables, yt.tp, math.atan2(yq[1], yq[0]), yq[2])
+                tp[0] *= w_in * side_w
+                tp[1] *= w_in * side_w
+                tp[2] *= w_in * side_w
+                sx, sy, sz = world_point(fr, yq)
+                for k in range(nl):
+                    wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond,
+                                                              uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                              uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
+                    if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+                        continue
+                    yarn_dir(fr, wlk, wl)
+                    f0, f1, f2, pf = B.exit_eval_pdf(prow, ty, ny, din, wl, att_s, att_d, s_y)
+                    if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
+                        continue
+                    vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], c, h.prim)
+                    rays += nr
+                    if not vis:
+                        continue
+                    w = 1.0 if delta else pl * pl / (pl * pl + pf * pf) / pl
+                    L[0] += tp[0] * f0 * lr * w
+                    L[1] += tp[1] * f1 * lg * w
+                    L[2] += tp[2] * f2 * lb * w
+                wv, w0, w1, w2, pf = B.exit_sample(prow, ty, ny, din, att_s, att_d, s_y,
+                                                   uniform(seed, key, base + D_LOBE), uniform(seed, key, base + D_DIR1),
+                                                   uniform(seed, key, base + D_DIR2))
+                if pf <= 0.0:
+                    break
+                tp[0] *= w0
+                tp[1] *= w1
+                tp[2] *= w2
+                world_dir(fr, wv, wow)
+                o[0] = sx; o[1] = sy; o[2] = sz
+            for q in range(3):
+                d[q] = wow[q]
+            ign_y = c
+            ign_s = h.prim
+            pdf_prev = pf
+        depth += 1
+        passes = 0
+        if depth >= it.rr_depth:
+            qv = min(0.95, max(tp[0], max(tp[1], tp[2])))
+            if uniform(seed, key, base + D_RR) >= qv:
+                break
+            tp[0] /= qv
+            tp[1] /= qv
+            tp[2] /= qv
+        if on_ground:
+            pdf_prev = pf
+    return PathSample(L[0], L[1], L[2], 1.0 if first_t > 0.0 else 0.0, first_t, 0, rays)
+
+
+@overload(radiance)
+def _bysdf_radiance(integ, o, d, seed, index):
+    if is_tuple_class(integ, BysdfIntegrator):
+        return lambda integ, o, d, seed, index: trace_path(integ, o, d, seed, index)

@@ -1,0 +1,229 @@
+"""``--method bysdf`` end to end (seed 004): the yarn-level path tracer on yarn curves alone.
+
+References, per test: a white furnace (non-absorbing BYSDF, uniform environment: a ball of yarns returns at
+most the environment's radiance); far = near averaged over the yarn's width (a pixel that spans a yarn
+sees it uniformly in the azimuthal offset h, so near's pixel mean over many samples and far's agree within
+Monte Carlo error); multiscale with a vanishing footprint = near; the same bytes at 1 and 2 threads; the
+CLI contract for bad input (exit 2, one line).
+"""
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.scene import load_scene
+
+SCENE = """
+[scene]
+name = "{name}"
+seed = 3
+
+[fabric]
+source = "file"
+path = "yarns.txt"
+radius = {radius}
+
+[yarns.default]
+preset = "cotton1"
+radius = {radius}
+color = [0.7, 0.5, 0.3]
+{bysdf}
+
+[camera]
+origin = {origin}
+target = {target}
+up = [0.0, 1.0, 0.0]
+fov = {fov}
+width = {w}
+height = {h}
+
+{lights}
+
+[render]
+spp = 4
+seed = 3
+"""
+KEY_LIGHTS = """[[lights]]
+type = "directional"
+direction = [-0.3, 0.4, -0.86]
+irradiance = 3.0
+
+[[lights]]
+type = "constant"
+radiance = 0.2
+"""
+
+
+def _write_yarns(path, curves):
+    with open(path, "w") as f:
+        for c in curves:
+            for p in c:
+                f.write(f"{p[0]:.9g} {p[1]:.9g} {p[2]:.9g}\n")
+            f.write("\n")
+
+
+def _make(tmp_path, name, curves, radius=0.02, origin=(0.0, 0.0, 1.0), target=(0.0, 0.0, 0.0), fov=30.0, w=16,
+          h=12, lights=KEY_LIGHTS, bysdf=""):
+    from pipeline.runners.ingest import run_ingest
+
+    d = tmp_path / name
+    d.mkdir()
+    _write_yarns(d / "yarns.txt", curves)
+    (d / "scene.toml").write_text(SCENE.format(name=name, radius=radius, origin=list(origin), target=list(target),
+                                               fov=fov, w=w, h=h, lights=lights, bysdf=bysdf))
+    run_ingest(d / "scene.toml", d / "yarns.zarr")
+    return load_scene(d / "scene.toml"), str(d / "yarns.zarr")
+
+
+def _render(scene, yarns, spp=4, threads=None, max_depth=None, W=None, H=None, **extra):
+    from pipeline.renderers import method
+    from pipeline.runners.render import resolve_options
+
+    m = method("bysdf")
+    opts = resolve_options(scene, m, width=W, height=H, spp=spp, threads=threads, max_depth=max_depth,
+                           extra={"yarns": yarns, **{k: str(v) for k, v in extra.items()}})
+    return m.run(scene, opts)
+
+
+def _weave(n=4, L=0.4, r=0.02):
+    xs = np.linspace(-L / 2, L / 2, 9)
+    curves = []
+    for i in range(n):
+        y = -L / 2 + (i + 0.5) * L / n
+        curves.append(np.stack([xs, np.full_like(xs, y), r * np.cos(np.pi * (xs / (L / n)) + i * np.pi)], 1))
+        curves.append(np.stack([np.full_like(xs, y), xs, -r * np.cos(np.pi * (xs / (L / n)) + i * np.pi)], 1))
+    return curves
+
+
+@pytest.fixture(scope="module")
+def weave(tmp_path_factory):
+    return _make(tmp_path_factory.mktemp("bysdf"), "weave", _weave(), origin=(0.1, -0.35, 0.45))
+
+
+def test_same_bytes_at_one_and_two_threads(weave):
+    """Counter-based random numbers per camera sample: the image is independent of the thread count."""
+    scene, yarns = weave
+    a = _render(scene, yarns, threads=1)
+    b = _render(scene, yarns, threads=2)
+    assert np.asarray(a.rgb).tobytes() == np.asarray(b.rgb).tobytes()
+    assert float(np.asarray(a.extra["A"]).mean()) > 0.3      # the cloth fills a good part of the frame
+    assert float(np.asarray(a.rgb).mean()) > 0.0
+
+
+def test_multiscale_with_vanishing_footprint_is_near(weave):
+    """With the camera's pixel angle -> 0 the multiscale offset range collapses onto the ray's own offset:
+    the aggregated frame and shadowing are the near point's and the roughness is not widened."""
+    scene, yarns = weave
+    from pipeline.renderers import bysdf as R
+    from pipeline.renderers import method
+    from pipeline.renderers.film import render_film, sampling_of
+    from pipeline.runners.render import resolve_options
+
+    m = method("bysdf")
+    imgs = {}
+    for mode in ("near", "multiscale"):
+        opts = resolve_options(scene, m, spp=4, extra={"yarns": yarns, "mode": mode})
+        s = R.film_setup(scene, opts)
+        integ = s.integ._replace(pixel_angle=1e-12)
+        run = render_film(s.label, integ, s.cam, opts["width"], opts["height"], sampling_of(opts), opts["seed"],
+                          opts["tile_size"], s.variance, None, None)
+        imgs[mode] = np.asarray(run.rgb, np.float64)
+    diff = np.abs(imgs["near"] - imgs["multiscale"]).max(axis=2)
+    # the K offsets coincide with the ray's own up to rounding (1e-16 of the radius), which can tip a
+    # discrete choice (lobe, roulette) in a rare sample: nearly every pixel is equal, the rest barely differ
+    assert np.mean(diff > 1e-9) < 0.02, np.mean(diff > 1e-9)
+    assert diff.mean() < 1e-6 and diff.max() < 1e-3, (diff.mean(), diff.max())
+
+
+def test_far_is_near_averaged_over_the_yarn_width(tmp_path):
+    """One straight yarn seen from far away by one pixel wider than the yarn: near's pixel mean (samples
+    spread uniformly over the yarn's width, i.e. uniformly in h) equals far's (every hit shades the mean
+    over stratified h) within 4 standard errors, per channel."""
+    xs = np.linspace(-0.3, 0.3, 7)
+    curves = [np.stack([xs, np.zeros_like(xs), np.zeros_like(xs)], 1)]
+    scene, yarns = _make(tmp_path, "one", curves, origin=(0.0, 0.0, 2.0), target=(0.0, 0.0, 0.0), fov=2.0, w=1, h=1)
+    res = {}
+    for mode in ("near", "far"):
+        r = _render(scene, yarns, spp=4096, mode=mode, k=16)
+        res[mode] = (np.asarray(r.rgb, np.float64).reshape(3), float(np.asarray(r.extra["variance"]).reshape(-1)[0]))
+    (a, va), (b, vb) = res["near"], res["far"]
+    assert a.mean() > 0.0
+    sigma = math.sqrt(va + vb)
+    assert np.all(np.abs(a - b) <= 4.0 * sigma + 1e-9), (a, b, sigma)
+    assert vb < va    # far integrates the width analytically: less noise at equal samples
+
+
+def _ball(n_lat=14, R=0.2, r=0.02):
+    curves = []
+    for i in range(n_lat):
+        th = math.pi * (i + 0.5) / n_lat
+        rho = R * math.sin(th)
+        z = R * math.cos(th)
+        n = max(6, int(2 * math.pi * rho / (2 * r)))
+        a = np.linspace(0, 2 * math.pi, n + 1)
+        curves.append(np.stack([rho * np.cos(a), rho * np.sin(a), np.full_like(a, z)], 1))
+    return curves
+
+
+WHITE = """
+[yarns.default.bysdf]
+ks = 1.0
+kt_exit = 1.0
+body_r = 1.0
+body_t = 1.0
+sigma_spec = 0.0
+sigma_body = 0.0
+ls_mix = 0.0
+"""
+
+
+def test_white_furnace(tmp_path):
+    """Non-absorbing BYSDF (specular colours 1, body colours 1 with the diffusion term alone -- the
+    Lommel-Seeliger term is single scattering and loses the rest by design --, no attenuation, shadowing
+    off) on a ball of yarns in a uniform environment of radiance 1, 64 bounces: every pixel's mean
+    radiance is at most 1 (within 4 standard errors); the loss (microfacet single scattering, the exit
+    lobe's total internal reflection, paths cut at 64 bounces) is stated by the mean over the ball:
+    0.367 measured, a 63 % loss."""
+    scene, yarns = _make(tmp_path, "ball", _ball(), origin=(0.0, 0.0, 1.2), fov=24.0, w=12, h=12,
+                         lights='[[lights]]\ntype = "constant"\nradiance = 1.0\n', bysdf=WHITE)
+    r = _render(scene, yarns, spp=256, max_depth=64, fibre_threshold=1, ply_threshold=1)
+    rgb = np.asarray(r.rgb, np.float64)
+    var = np.asarray(r.extra["variance"], np.float64)
+    cov = np.asarray(r.extra["A"]) > 0.999
+    assert cov.sum() >= 20
+    lum = rgb[cov].mean(axis=1)
+    assert np.all(lum <= 1.0 + 4.0 * np.sqrt(var[cov]) + 1e-9), lum.max()
+    mean = float(lum.mean())
+    print(f"white furnace: mean radiance over the ball {mean:.4f} (loss {100 * (1 - mean):.1f} %)")
+    # measured: 0.367 (loss 63 %): per scattering event the model keeps about 0.72 of the energy (the exit
+    # lobe's total internal reflection is dropped, GGX at alpha 0.9 loses to single scattering), and a
+    # ball's paths scatter a few times before they escape. A lost lobe or side would fall below this:
+    assert mean > 0.3
+
+
+def test_bad_input_exits_2(cli, weave):
+    """Mode names, K <= 0, negative roughness, a missing yarns artifact: exit code 2 and one line."""
+    scene, yarns = weave
+    cases = [["--set", "mode=medium"], ["--set", "k=0"], ["--set", "k=-3"], ["--set", f"yarns={yarns}x"],
+             ["--set", "ply_iter=1"], ["--set", "ply_tol=nan"]]
+    for args in cases:
+        extra = [] if any(a.startswith("yarns=") for a in args) else ["--set", f"yarns={yarns}"]
+        code, out, err = cli("render", str(scene.path), "--method", "bysdf", *extra, *args, "-o",
+                             str(scene.path.parent / "x.exr"))
+        assert code == 2, (args, out, err)
+        assert len(err.strip().splitlines()) == 1, err
+        assert not (scene.path.parent / "x.exr").exists()
+
+
+def test_negative_roughness_in_scene_exits_2(cli, tmp_path):
+    """A scene whose BYSDF roughness is negative is refused when read: exit 2 naming the key."""
+    d = tmp_path / "rough"
+    d.mkdir()
+    _write_yarns(d / "yarns.txt", _weave(2))
+    (d / "scene.toml").write_text(SCENE.format(name="rough", radius=0.02, origin=[0, 0, 1], target=[0, 0, 0], fov=30,
+                                               w=8, h=6, lights=KEY_LIGHTS,
+                                               bysdf="[yarns.default.bysdf]\nalpha_u = -0.1\n"))
+    code, out, err = cli("render", str(d / "scene.toml"), "--method", "bysdf", "--set", "yarns=whatever.zarr", "-o",
+                         str(d / "x.exr"))
+    assert code == 2, (out, err)
+    assert "alpha_u" in err and len(err.strip().splitlines()) == 1, err
