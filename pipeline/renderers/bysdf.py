@@ -20,6 +20,8 @@ Settings (``--set KEY=VALUE``):
   ``[other]``, ``[default]`` tables; ``loomlight fit-bysdf`` writes one), applied over the scene's.
 - ``ply_tol``, ``ply_iter``: the implicit ply iteration's tolerance (in ply radii, default 1e-3) and
   iteration cap (default 10, at least 3).
+- ``falloff``: multiscale aggregation weights exp(-falloff |x_k - x_0| / R) (default 40, the reference
+  implementation's; smaller values average over more of the footprint).
 - ``fibre_threshold``, ``ply_threshold``: the shadowing tables' remap s (1 - thr) + thr (defaults 0.5 and
   0.6, the reference implementation's; 1 turns that shadowing off).
 
@@ -43,6 +45,7 @@ from . import RenderResult
 MODES = ("near", "far", "multiscale")
 DEFAULT_K = 16
 DEFAULT_DEPTH = 4
+DEFAULT_FALLOFF = 40.0   # multiscale weights exp(-falloff |x_k - x_0| / R): the reference's exp(-20 |dx|) at radius 2
 GROUPS = ("warp", "weft", "knit", "other")
 # attenuation per yarn radius: the reference implementation's 5.5 and 0.1 per unit length at its yarn radius 2
 SCALE_DEFAULTS = {"sigma_spec": 11.0, "sigma_body": 0.2}
@@ -178,6 +181,7 @@ def film_setup(scene, options: dict):
     max_iter = int(_number(extra, "ply_iter", 10, int, 3, 100))
     fibre_thr = _number(extra, "fibre_threshold", 0.5, float, 0.0, 1.0)
     ply_thr = _number(extra, "ply_threshold", 0.6, float, 0.0, 1.0)
+    falloff = _number(extra, "falloff", DEFAULT_FALLOFF, float, 0.0, 1e6)
     lights = pack_lights(scene.lights, scene.path)
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
@@ -200,7 +204,7 @@ def film_setup(scene, options: dict):
     max_depth = int(options["max_depth"])
     integ = BysdfIntegrator(bvh, cv, pieces, types, np.ascontiguousarray(ytypes.yarn_type, np.int32), keys, params,
                             lights.table(), ground, has_ground, np.ascontiguousarray(ground[1:4]),
-                            KMODES.index(mode), K, 40.0, pixel_angle, max_depth, int(options["rr_depth"]), window,
+                            KMODES.index(mode), K, falloff, pixel_angle, max_depth, int(options["rr_depth"]), window,
                             ray_eps(pieces.points.min(axis=0), pieces.points.max(axis=0)), 64)
     geometry_bytes = int(sum(a.nbytes for a in (pieces.points, pieces.offsets, pieces.piece_seg, pieces.piece_t0,
                                                  pieces.piece_t1, pieces.piece_curve, pieces.radius))

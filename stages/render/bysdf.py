@@ -35,7 +35,9 @@ ray on with the fraction of offsets that meet no ply, and otherwise is the mixtu
 that do (evaluation: their mean; sampling: one of them, uniformly; pdf: the mean); ``multiscale``
 takes the offsets of the ray cone's footprint (width = path length x ``pixel_angle``), aggregates
 normal, tangent and shadowing (``yarn_point.aggregate``) and widens the specular roughness by the
-offset range / 10; a vanishing footprint gives back ``near``.
+offset range / 10; a vanishing footprint gives back ``near``, and a footprint as wide as the yarn (an
+offset range of 2 or more) shades as ``far`` (seed 004: near when the range is small, far when the
+pixel spans the yarn).
 
 Random numbers: ``uniform(seed, key, dim)``, dimensions 0-1 for the pixel, then EVENT_DIMS + 2 NL per
 event (a scattering vertex or a pass through a yarn): side, offset pick, lobe and direction, roulette,
@@ -160,20 +162,20 @@ def trace_path(it, o, d, seed, key):
     depth = 0
     event = 0
     passes = 0
-    xs = np.empty((K, 3))
-    ts = np.empty((K, 3))
-    ns = np.empty((K, 3))
-    shadow = np.empty(K)
-    hit = np.empty(K, np.bool_)
-    slot_x = np.empty((K, 3))
-    slot_t = np.empty((K, 3))
-    slot_n = np.empty((K, 3))
-    slot_s = np.empty(K)
-    prow = np.empty(it.params.shape[1])
-    wi = np.empty(3)
-    wl = np.empty(3)
-    wo = np.empty(3)
-    wow = np.empty(3)
+    xs = np.zeros((K, 3))
+    ts = np.zeros((K, 3))
+    ns = np.zeros((K, 3))
+    shadow = np.zeros(K)
+    hit = np.zeros(K, np.bool_)
+    slot_x = np.zeros((K, 3))
+    slot_t = np.zeros((K, 3))
+    slot_n = np.zeros((K, 3))
+    slot_s = np.zeros(K)
+    prow = np.zeros(it.params.shape[1])
+    wi = np.zeros(3)
+    wl = np.zeros(3)
+    wo = np.zeros(3)
+    wow = np.zeros(3)
     gn = np.zeros(3)
     while True:
         h = surface_hit(it.bvh, -1, o[0], o[1], o[2], d[0], d[1], d[2], it.eps, np.inf, ign_y, ign_s, it.window)
@@ -251,8 +253,9 @@ def trace_path(it, o, d, seed, key):
             ykey = it.yarn_key[c]
             # the offsets this vertex shades (slots); m = 0: the ray passes on through the yarn
             m = 0
+            dh = path_len * it.pixel_angle / R   # the ray cone's footprint in offsets (h spans 2 across the yarn)
             if um > 0.0:
-                if it.mode == MODE_FAR:
+                if it.mode == MODE_FAR or (it.mode == MODE_MULTISCALE and dh >= 2.0):
                     h0 = offset_of(oy, dy, R)
                     nh = offset_points(yt, ykey, oy, dy, h0, -1.0, 1.0, K, uniform(seed, key, base + D_JITTER),
                                        xs, ts, ns, shadow, hit)
@@ -280,7 +283,6 @@ def trace_path(it, o, d, seed, key):
                         slot_s[0] = sp.shadow
                         if it.mode == MODE_MULTISCALE:
                             h0 = offset_of(oy, dy, R)
-                            dh = path_len * it.pixel_angle / R
                             lo = max(-1.0, h0 - 0.5 * dh)
                             hi = min(1.0, h0 + 0.5 * dh)
                             offset_points(yt, ykey, oy, dy, h0, lo, hi, K, uniform(seed, key, base + D_JITTER),
