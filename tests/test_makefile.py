@@ -47,7 +47,7 @@ def test_demo_quick_is_the_whole_demo_small_in_its_own_directory():
 def test_demo_renders_at_the_documented_size_and_precompute():
     demo = _dry_run("-B", "demo")
     main_renders = [r for r in _commands(demo, "render") if "/eval/" not in r]
-    assert len(main_renders) == 5   # volpath, fiberpath, damask fiberpath, prt, btf
+    assert len(main_renders) == 7   # volpath, fiberpath, damask fiberpath, prt, btf, knit bysdf, knit fiberpath
     assert all("--width 240 --height 180" in r for r in main_renders)
     (btf,) = [c for c in _commands(demo, "precompute") if " btf " in c]
     assert "--exemplar 0" in btf and "--resolution 16" in btf

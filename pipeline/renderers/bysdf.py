@@ -158,14 +158,15 @@ def film_setup(scene, options: dict):
     """The ``FilmSetup`` of a bysdf render (``pipeline.renderers.film``)."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.procedural.tables import yarn_key
-    from stages.render.bysdf import MODES as KMODES, BysdfIntegrator
+    from stages.render.bysdf import MODES as KMODES
+    from stages.render.bysdf import BysdfIntegrator
     from stages.render.film import VARIANCE_CHANNELS
     from stages.render.yarn_tubes import tube_pieces
 
     from ..render_setup import ground_array, pack_lights
     from ..scene import camera_array
-    from .film import FilmSetup
     from .fiberpath import ray_eps
+    from .film import FilmSetup
 
     extra = options.get("extra") or {}
     path = options.get("yarns") or extra.get("yarns")
@@ -186,7 +187,7 @@ def film_setup(scene, options: dict):
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
     t0 = time.perf_counter()
-    art, cv, ytypes, groups = yarn_setup(path, options)
+    _, cv, ytypes, groups = yarn_setup(path, options)
     types, tables_s = build_types(ytypes.tparams, tol, max_iter, fibre_thr, ply_thr)
     radius = np.array([types[t].radius for t in ytypes.yarn_type])
     pieces = tube_pieces(cv, radius)
@@ -210,8 +211,8 @@ def film_setup(scene, options: dict):
                                                  pieces.piece_t1, pieces.piece_curve, pieces.radius))
                          + sum(a.nbytes for a in bvh if isinstance(a, np.ndarray))
                          + sum(a.nbytes for a in cv if isinstance(a, np.ndarray)))
-    stats = {"setup_s": time.perf_counter() - t0, "tables_s": tables_s, "yarns": int(len(groups)),
-             "yarn_types": len(types), "tube_pieces": int(len(bvh.seg_a)), "geometry_bytes": geometry_bytes,
+    stats = {"setup_s": time.perf_counter() - t0, "tables_s": tables_s, "yarns": len(groups),
+             "yarn_types": len(types), "tube_pieces": len(bvh.seg_a), "geometry_bytes": geometry_bytes,
              "mode": mode, "k": K, "max_depth": max_depth, "envelope_radius": [t.radius for t in types]}
     return FilmSetup(f"bysdf ({mode})", integ, cam, VARIANCE_CHANNELS, stats)
 

@@ -61,7 +61,13 @@ from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import light_eval, light_pdf, light_sample
 from stages.render.yarn_point import aggregate, near_point, offset_of, offset_points
-from stages.render.yarn_tubes import cylinder_span, to_yarn, yarn_hit_frame
+from stages.render.yarn_tubes import (
+    cylinder_span,
+    dir_from_yarn,
+    point_from_yarn,
+    to_yarn,
+    yarn_hit_frame,
+)
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
 MODES = ("near", "far", "multiscale")
@@ -94,21 +100,6 @@ def enter_yarn(it, h, ox, oy, oz, dx, dy, dz):
 
 
 @njit(cache=True)
-def world_point(fr, q):
-    dz = q[2] - fr.s
-    return (fr.px + q[0] * fr.nx + q[1] * fr.bx + dz * fr.tx,
-            fr.py + q[0] * fr.ny + q[1] * fr.by + dz * fr.ty,
-            fr.pz + q[0] * fr.nz + q[1] * fr.bz + dz * fr.tz)
-
-
-@njit(cache=True)
-def world_dir(fr, v, out):
-    out[0] = v[0] * fr.nx + v[1] * fr.bx + v[2] * fr.tx
-    out[1] = v[0] * fr.ny + v[1] * fr.by + v[2] * fr.ty
-    out[2] = v[0] * fr.nz + v[1] * fr.bz + v[2] * fr.tz
-
-
-@njit(cache=True)
 def yarn_dir(fr, w, out):
     out[0] = w[0] * fr.nx + w[1] * fr.ny + w[2] * fr.nz
     out[1] = w[0] * fr.bx + w[1] * fr.by + w[2] * fr.bz
@@ -135,10 +126,61 @@ def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
                 return False, rays
             for k in range(3):
                 o[k] += um * d[k]
-        ox, oy, oz = world_point(fr, o)
+        ox, oy, oz = point_from_yarn(fr, o)
         ign_y = fr.curve
         ign_s = h.prim
     return False, rays
+
+
+@njit(cache=True)
+def side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y):
+    """(f cos r, g, b, pdf) of the chosen side towards wl (yarn space): the reflection side's mean over the
+    m shaded offsets, or the transmission side at the exit point."""
+    if not reflect:
+        v = B.exit_eval_pdf(prow, ty, ny, din, wl, att_s, att_d, s_y)
+        return v.r, v.g, v.b, v.pdf
+    f0 = 0.0
+    f1 = 0.0
+    f2 = 0.0
+    pf = 0.0
+    for s in range(m):
+        a0, a1, a2, ap = B.reflect_eval_pdf(prow, slot_t[s], slot_n[s], wi, wl, slot_s[s])
+        f0 += a0
+        f1 += a1
+        f2 += a2
+        pf += ap
+    return f0 / m, f1 / m, f2 / m, pf / m
+
+
+@njit(cache=True)
+def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w, prow, reflect, wi, m, slot_t, slot_n,
+               slot_s, ty, ny, din, att_s, att_d, s_y):
+    """Next-event estimation at a yarn vertex from (sx, sy, sz): one sample of each light, MIS-weighted
+    against the side's sampling, added to L; returns the rays traced."""
+    lights = it.lights.lights
+    env = it.lights.env
+    marg = it.lights.marginal
+    cond = it.lights.conditional
+    wl = np.empty(3)
+    rays = 0
+    for k in range(lights.shape[0]):
+        wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                  uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
+        if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+            continue
+        yarn_dir(fr, wlk, wl)
+        f0, f1, f2, pf = side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y)
+        if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
+            continue
+        vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], ign_y, ign_s)
+        rays += nr
+        if not vis:
+            continue
+        w = side_w if delta else side_w * pl * pl / (pl * pl + pf * pf) / pl
+        L[0] += tp[0] * f0 * lr * w
+        L[1] += tp[1] * f1 * lg * w
+        L[2] += tp[2] * f2 * lb * w
+    return rays
 
 
 @njit(cache=True)
@@ -173,8 +215,6 @@ def trace_path(it, o, d, seed, key):
     slot_s = np.zeros(K)
     prow = np.zeros(it.params.shape[1])
     wi = np.zeros(3)
-    wl = np.zeros(3)
-    wo = np.zeros(3)
     wow = np.zeros(3)
     gn = np.zeros(3)
     while True:
@@ -302,7 +342,7 @@ def trace_path(it, o, d, seed, key):
                 if um > 0.0:
                     for q in range(3):
                         oy[q] += um * dy[q]
-                ex, ey, ez = world_point(fr, oy)
+                ex, ey, ez = point_from_yarn(fr, oy)
                 path_len -= t_hit  # the path length is measured to the next hit from the origin
                 path_len += math.sqrt((ex - o[0]) ** 2 + (ey - o[1]) ** 2 + (ez - o[2]) ** 2)
                 o[0] = ex; o[1] = ey; o[2] = ez
@@ -322,50 +362,27 @@ def trace_path(it, o, d, seed, key):
             if uniform(seed, key, base + D_SIDE) < pr:
                 side_w = 1.0 / pr
                 x = slot_x[pick]
-                sx, sy, sz = world_point(fr, x)
-                for k in range(nl):
-                    wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond,
-                                                              uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                              uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
-                    if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
-                        continue
-                    yarn_dir(fr, wlk, wl)
-                    f0 = 0.0
-                    f1 = 0.0
-                    f2 = 0.0
-                    pf = 0.0
-                    for s in range(m):
-                        a0, a1, a2, ap = B.reflect_eval_pdf(prow, slot_t[s], slot_n[s], wi, wl, slot_s[s])
-                        f0 += a0; f1 += a1; f2 += a2; pf += ap
-                    f0 /= m; f1 /= m; f2 /= m; pf /= m
-                    if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
-                        continue
-                    vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], c, h.prim)
-                    rays += nr
-                    if not vis:
-                        continue
-                    w = side_w if delta else side_w * pl * pl / (pl * pl + pf * pf) / pl
-                    L[0] += tp[0] * f0 * lr * w
-                    L[1] += tp[1] * f1 * lg * w
-                    L[2] += tp[2] * f2 * lb * w
+                sx, sy, sz = point_from_yarn(fr, x)
+                rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, side_w, prow, True, wi, m,
+                                   slot_t, slot_n, slot_s, wi, wi, wi, 1.0, 1.0, 1.0)
                 wv, w0, w1, w2, pf = B.reflect_sample(prow, slot_t[pick], slot_n[pick], wi, slot_s[pick],
                                                       uniform(seed, key, base + D_LOBE), uniform(seed, key, base + D_DIR1),
                                                       uniform(seed, key, base + D_DIR2))
                 if pf <= 0.0:
                     break
                 if m > 1:  # the mixture over the offsets
-                    f0 = 0.0; f1 = 0.0; f2 = 0.0; pm = 0.0
-                    for s in range(m):
-                        a0, a1, a2, ap = B.reflect_eval_pdf(prow, slot_t[s], slot_n[s], wi, wv, slot_s[s])
-                        f0 += a0; f1 += a1; f2 += a2; pm += ap
+                    f0, f1, f2, pm = side_eval_pdf(prow, True, wi, wv, m, slot_t, slot_n, slot_s, wi, wi, wi, 1.0, 1.0,
+                                                   1.0)
                     if pm <= 0.0:
                         break
-                    w0 = f0 / pm; w1 = f1 / pm; w2 = f2 / pm
-                    pf = pm / m
+                    w0 = f0 / pm
+                    w1 = f1 / pm
+                    w2 = f2 / pm
+                    pf = pm
                 tp[0] *= w0 * side_w
                 tp[1] *= w1 * side_w
                 tp[2] *= w2 * side_w
-                world_dir(fr, wv, wow)
+                dir_from_yarn(fr, wv, wow)
                 o[0] = sx; o[1] = sy; o[2] = sz
             else:
                 side_w = 1.0 / (1.0 - pr)
@@ -374,7 +391,7 @@ def trace_path(it, o, d, seed, key):
                                                  uniform(seed, key, base + D_ENTER1), uniform(seed, key, base + D_ENTER2))
                 if p_in <= 0.0 or w_in <= 0.0:
                     break
-                u_lo, u_hi = cylinder_span(x, din, R)
+                _, u_hi = cylinder_span(x, din, R)
                 if not (u_hi > 0.0) or not math.isfinite(u_hi):
                     break
                 yq = np.empty(3)
@@ -395,25 +412,9 @@ def trace_path(it, o, d, seed, key):
                 tp[0] *= w_in * side_w
                 tp[1] *= w_in * side_w
                 tp[2] *= w_in * side_w
-                sx, sy, sz = world_point(fr, yq)
-                for k in range(nl):
-                    wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond,
-                                                              uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                              uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
-                    if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
-                        continue
-                    yarn_dir(fr, wlk, wl)
-                    f0, f1, f2, pf = B.exit_eval_pdf(prow, ty, ny, din, wl, att_s, att_d, s_y)
-                    if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
-                        continue
-                    vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], c, h.prim)
-                    rays += nr
-                    if not vis:
-                        continue
-                    w = 1.0 if delta else pl * pl / (pl * pl + pf * pf) / pl
-                    L[0] += tp[0] * f0 * lr * w
-                    L[1] += tp[1] * f1 * lg * w
-                    L[2] += tp[2] * f2 * lb * w
+                sx, sy, sz = point_from_yarn(fr, yq)
+                rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, 1.0, prow, False, wi, m,
+                                   slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y)
                 wv, w0, w1, w2, pf = B.exit_sample(prow, ty, ny, din, att_s, att_d, s_y,
                                                    uniform(seed, key, base + D_LOBE), uniform(seed, key, base + D_DIR1),
                                                    uniform(seed, key, base + D_DIR2))
@@ -422,7 +423,7 @@ def trace_path(it, o, d, seed, key):
                 tp[0] *= w0
                 tp[1] *= w1
                 tp[2] *= w2
-                world_dir(fr, wv, wow)
+                dir_from_yarn(fr, wv, wow)
                 o[0] = sx; o[1] = sy; o[2] = sz
             for q in range(3):
                 d[q] = wow[q]

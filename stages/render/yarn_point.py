@@ -31,7 +31,11 @@ import numpy as np
 from numba import njit
 
 from stages.core.yarn.implicit_plies import ply_hit
-from stages.core.yarn.implicit_tables import fibre_frame, fibre_lookup, ply_shadow_lookup
+from stages.core.yarn.implicit_tables import (
+    fibre_frame,
+    fibre_lookup,
+    ply_shadow_lookup,
+)
 from stages.render.yarn_tubes import cylinder_span
 
 # one yarn type: tp (NPARAM,), tables (ImplicitTables), envelope radius, ply tolerance, ply iterations, key
@@ -73,7 +77,7 @@ def near_point(yt, yarn_key, o, d, u_max):
         return ShadingPoint(False, x, t, n, 1.0, -1)
     for k in range(3):
         x[k] = ph.point[k]
-    normal_angle, phase, s_fibre = fibre_lookup(yt.tables, yt.tp, yarn_key, ph.ply, ph.ply_angle, x[2])
+    normal_angle, _, s_fibre = fibre_lookup(yt.tables, yt.tp, yarn_key, ph.ply, ph.ply_angle, x[2])
     s_ply = ply_shadow_lookup(yt.tables, yt.tp, math.atan2(x[1], x[0]), x[2])
     ft, fn = fibre_frame(yt.tp, ph.ply, x[2], ph.ply_angle, ph.tangent, ph.normal, normal_angle)
     for k in range(3):

@@ -50,7 +50,7 @@ YarnFrame = namedtuple("YarnFrame", ["px", "py", "pz", "tx", "ty", "tz", "nx", "
 @njit(cache=True)
 def pieces_per_segment(cv, i, eps):
     """Number of equal-t pieces of spline segment i whose chords stay within eps of the curve."""
-    ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = coeffs_s(cv, i)
+    ax, ay, az, bx, by, bz, _, _, _, _, _, _ = coeffs_s(cv, i)
     m0 = 2.0 * math.sqrt(bx * bx + by * by + bz * bz)
     ex = 6.0 * ax + 2.0 * bx
     ey = 6.0 * ay + 2.0 * by
@@ -189,12 +189,12 @@ def dir_from_yarn(fr, v, out):
 
 
 @njit(cache=True)
-def point_from_yarn(fr, q, out):
-    """World point of the yarn-space point q (x, y, z = arc length), written into out."""
+def point_from_yarn(fr, q):
+    """World point (x, y, z) of the yarn-space point q (x, y, z = arc length)."""
     dz = q[2] - fr.s
-    out[0] = fr.px + q[0] * fr.nx + q[1] * fr.bx + dz * fr.tx
-    out[1] = fr.py + q[0] * fr.ny + q[1] * fr.by + dz * fr.ty
-    out[2] = fr.pz + q[0] * fr.nz + q[1] * fr.bz + dz * fr.tz
+    return (fr.px + q[0] * fr.nx + q[1] * fr.bx + dz * fr.tx,
+            fr.py + q[0] * fr.ny + q[1] * fr.by + dz * fr.ty,
+            fr.pz + q[0] * fr.nz + q[1] * fr.bz + dz * fr.tz)
 
 
 @njit(cache=True)

@@ -13,7 +13,13 @@ from stages.core.curves.frames import curve_frame_at
 from stages.core.curves.spline import segment_point
 from stages.core.geometry.bvh import build_fiber_bvh, intersect
 from stages.ingest.spline_process import curves_from_arrays, process_curves
-from stages.render.yarn_tubes import cylinder_span, point_from_yarn, to_yarn, tube_pieces, yarn_hit_frame
+from stages.render.yarn_tubes import (
+    cylinder_span,
+    point_from_yarn,
+    to_yarn,
+    tube_pieces,
+    yarn_hit_frame,
+)
 
 
 def _curves(points_list, closed):
@@ -84,14 +90,12 @@ def test_hit_maps_to_the_rmf_frame_at_its_arc_length():
         pos, tan, n, b = curve_frame_at(cv, fr.curve, fr.s)
         assert np.allclose([fr.px, fr.py, fr.pz], pos, atol=1e-9)
         assert np.allclose([fr.nx, fr.ny, fr.nz], n, atol=1e-9)
-        q, dy = to_yarn(fr, p[0], p[1], p[2], d[0], d[1], d[2])
+        q, _ = to_yarn(fr, p[0], p[1], p[2], d[0], d[1], d[2])
         if not (1e-9 < fr.s < cv.curve_length[fr.curve] - 1e-9):
             continue   # an open yarn's end cap
         assert abs(math.hypot(q[0], q[1]) - R) < 0.011 * R       # on the tube (the polyline bound)
         assert abs(q[2] - fr.s) < 0.01 * R    # the closest point (within the piece's spline segment)
-        back = np.empty(3)
-        point_from_yarn(fr, q, back)
-        assert np.allclose(back, p, atol=1e-12)
+        assert np.allclose(point_from_yarn(fr, q), p, atol=1e-12)
         checked += 1
     assert checked > 100
 
