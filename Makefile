@@ -36,6 +36,12 @@ IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis
 # texels, 8x8 views and lights, 16 rays) and dressed on the draped cloth
 BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8
 
+# seed 004 in the demo: the yarn-level model fitted to fiberpath on the demo swatch (front / back / both lights,
+# small renders), then the knitted swatch (data/scenes/knit.toml) with bysdf beside fiberpath on its realized
+# fibres, and the woven swatch in the evaluation set
+KNIT_SCENE ?= data/scenes/knit.toml
+FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 4
+
 # make agreement: both swatches, fiberpath against realized volpath, converged (README: One look)
 AGREE ?= out/agreement
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
@@ -127,6 +133,26 @@ $(OUT)/damask_btf.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_SCENE)
 	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
 	    --set btf=$(OUT)/damask_btf_fit.zarr --spp $(SPP) $(DEMO_SIZE) -o $@
 
+$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(wildcard stages/render/*.py stages/core/shading/bysdf.py)
+	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FIT_ARGS)
+
+$(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed
+	$(LL) ingest $(KNIT_SCENE) -o $(OUT)/knit_yarns.zarr
+
+$(OUT)/knit_fibers.zarr/zarr.json: $(OUT)/knit_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
+	$(LL) realize $(OUT)/knit_yarns.zarr -o $(OUT)/knit_fibers.zarr
+
+$(OUT)/knit_bysdf.exr: $(OUT)/knit_yarns.zarr/zarr.json $(OUT)/bysdf_fit.toml $(KNIT_SCENE)
+	$(LL) render $(KNIT_SCENE) --method bysdf --set yarns=$(OUT)/knit_yarns.zarr --set params=$(OUT)/bysdf_fit.toml \
+	    --spp $(FIBERPATH_SPP) $(DEMO_SIZE) -o $@
+
+$(OUT)/knit_fiberpath.exr: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE)
+	$(LL) render $(KNIT_SCENE) --method fiberpath --fibers $(OUT)/knit_fibers.zarr --spp $(FIBERPATH_SPP) \
+	    $(DEMO_SIZE) -o $@
+
+$(OUT)/eval/knit/report.md: $(OUT)/knit_fiberpath.exr $(OUT)/knit_bysdf.exr
+	$(LL) evaluate --ref $(OUT)/knit_fiberpath.exr --test $(OUT)/knit_bysdf.exr -o $(OUT)/eval/knit
+
 # precomputed light transport and the fitted texture against their reference on the same view, error maps
 # and times
 $(OUT)/eval/damask/report.md: $(OUT)/damask.exr $(OUT)/damask_prt.exr $(OUT)/damask_btf.exr
@@ -143,13 +169,17 @@ $(OUT)/eval/volpath-realized.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
 $(OUT)/eval/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
 	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr $(EVAL_ARGS) -o $@
 
-$(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(OUT)/eval/fiberpath.exr
+$(OUT)/eval/bysdf.exr: $(OUT)/yarns.zarr/zarr.json $(OUT)/bysdf_fit.toml $(SCENE)
+	$(LL) render $(SCENE) --method bysdf --set yarns=$(OUT)/yarns.zarr --set params=$(OUT)/bysdf_fit.toml $(EVAL_ARGS) -o $@
+
+$(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(OUT)/eval/fiberpath.exr \
+	    $(OUT)/eval/bysdf.exr
 	$(LL) evaluate --ref $(OUT)/eval/volpath-realized.exr --test $(OUT)/eval/volpath-procedural.exr \
-	    --test $(OUT)/eval/fiberpath.exr -o $(OUT)/eval/report
+	    --test $(OUT)/eval/fiberpath.exr --test $(OUT)/eval/bysdf.exr -o $(OUT)/eval/report
 
 # the longest chains first: with DEMO_JOBS stages at a time, numba compilation (one core) overlaps
 # another stage's two-thread work
-DEMO_OUTPUTS = $(OUT)/eval/report/report.md $(OUT)/damask_prt.exr $(OUT)/eval/damask/report.md \
+DEMO_OUTPUTS = $(OUT)/eval/report/report.md $(OUT)/damask_prt.exr $(OUT)/eval/damask/report.md $(OUT)/eval/knit/report.md \
 	$(OUT)/volpath.exr $(OUT)/fiberpath.exr $(OUT)/damask.exr \
 	$(OUT)/yarns.png $(OUT)/cross_section.png $(OUT)/fibers.png $(OUT)/damask_tiling.png \
 	$(OUT)/damask_svf.png $(OUT)/damask_iirtf.png $(OUT)/damask_btf_fit.png
@@ -162,7 +192,8 @@ demo-outputs: $(DEMO_OUTPUTS)
 # the tables and fibres first, so the longest chain (procedural volpath, ~3.5 min of compilation on a
 # cold cache) starts at once beside the rest
 demo: $(VENV)/.installed
-	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json
+	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json \
+	    $(OUT)/knit_fibers.zarr/zarr.json
 	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target demo-outputs
 	@echo "demo outputs:"
 	@echo "  yarn curves          : $(OUT)/yarns.zarr ($(OUT)/yarns.png)"
@@ -178,6 +209,10 @@ demo: $(VENV)/.installed
 	@echo "  damask texture (seed 002): $(OUT)/damask_btf_fit.zarr ($(OUT)/damask_btf_fit.png)"
 	@echo "  damask, btf (seed 002): $(OUT)/damask_btf.exr ($(OUT)/damask_btf.png)"
 	@echo "  prt, btf vs fiberpath: $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
+	@echo "  bysdf fitted to fiberpath (seed 004): $(OUT)/bysdf_fit.toml ($(OUT)/bysdf_fit.json)"
+	@echo "  knit, bysdf (seed 004): $(OUT)/knit_bysdf.exr ($(OUT)/knit_bysdf.png)"
+	@echo "  knit, fiberpath      : $(OUT)/knit_fiberpath.exr ($(OUT)/knit_fiberpath.png)"
+	@echo "  knit, bysdf vs fiberpath: $(OUT)/eval/knit/report.md ($(OUT)/eval/knit/report.html)"
 	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
 # the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
@@ -185,7 +220,8 @@ demo-quick:
 	@$(MAKE) --no-print-directory demo OUT=out/quick DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
 	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
 	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
-	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4"
+	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4" \
+	    FIT_ARGS="--width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3"
 
 # make test: everything but the tests marked slow (under 10 minutes on 2 cores from a fresh clone);
 # make test-all: all of them

@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "bench_bysdf"
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
-import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads: bench/run.py)
+import stages  # noqa: F401  (NUMBA_CACHE_DIR before numba loads: bench/run.py)
 
 
 def _cli(*args):

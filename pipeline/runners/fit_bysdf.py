@@ -65,8 +65,8 @@ def _render(scene, method_name, lights, options, extra):
 def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, ref_spp=32, iterations=4,
             max_depth=None, threads=None, progress=print) -> dict:
     from ..artifacts import Artifact
-    from ..scene import load_scene
     from ..renderers.bysdf import yarn_setup
+    from ..scene import load_scene
 
     scene = load_scene(scene_path)
     if scene.camera is None:

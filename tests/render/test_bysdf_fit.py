@@ -8,7 +8,6 @@ times (make test-all).
 import math
 import tomllib
 
-import numpy as np
 import pytest
 
 from tests.render.test_bysdf_render import _make, _weave

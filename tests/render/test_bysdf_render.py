@@ -57,8 +57,7 @@ radiance = 0.2
 def _write_yarns(path, curves):
     with open(path, "w") as f:
         for c in curves:
-            for p in c:
-                f.write(f"{p[0]:.9g} {p[1]:.9g} {p[2]:.9g}\n")
+            f.writelines(f"{p[0]:.9g} {p[1]:.9g} {p[2]:.9g}\n" for p in c)
             f.write("\n")
 
 
