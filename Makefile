@@ -36,9 +36,9 @@ IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis
 # texels, 8x8 views and lights, 16 rays) and dressed on the draped cloth
 BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8
 
-# seed 004 in the demo: the yarn-level model fitted to fiberpath on the demo swatch (front / back / both lights,
-# small renders), then the knitted swatch (data/scenes/knit.toml) with bysdf beside fiberpath on its realized
-# fibres, and the woven swatch in the evaluation set
+# seed 004 in the demo: the yarn-level model fitted to fiberpath (front / back / both lights, small renders) on
+# the demo swatch and on the knitted swatch (data/scenes/knit.toml: its own yarn colour and fleece BCSDF), the
+# knit rendered with bysdf beside fiberpath on its realized fibres, and the woven swatch in the evaluation set
 KNIT_SCENE ?= data/scenes/knit.toml
 FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 4
 
@@ -142,8 +142,11 @@ $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed
 $(OUT)/knit_fibers.zarr/zarr.json: $(OUT)/knit_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/knit_yarns.zarr -o $(OUT)/knit_fibers.zarr
 
-$(OUT)/knit_bysdf.exr: $(OUT)/knit_yarns.zarr/zarr.json $(OUT)/bysdf_fit.toml $(KNIT_SCENE)
-	$(LL) render $(KNIT_SCENE) --method bysdf --set yarns=$(OUT)/knit_yarns.zarr --set params=$(OUT)/bysdf_fit.toml \
+$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) $(wildcard stages/render/*.py stages/core/shading/bysdf.py)
+	$(LL) fit-bysdf $(KNIT_SCENE) --yarns $(OUT)/knit_yarns.zarr --fibers $(OUT)/knit_fibers.zarr -o $@ $(FIT_ARGS)
+
+$(OUT)/knit_bysdf.exr: $(OUT)/knit_yarns.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml $(KNIT_SCENE)
+	$(LL) render $(KNIT_SCENE) --method bysdf --set yarns=$(OUT)/knit_yarns.zarr --set params=$(OUT)/knit_bysdf_fit.toml \
 	    --spp $(FIBERPATH_SPP) $(DEMO_SIZE) -o $@
 
 $(OUT)/knit_fiberpath.exr: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE)
@@ -209,7 +212,7 @@ demo: $(VENV)/.installed
 	@echo "  damask texture (seed 002): $(OUT)/damask_btf_fit.zarr ($(OUT)/damask_btf_fit.png)"
 	@echo "  damask, btf (seed 002): $(OUT)/damask_btf.exr ($(OUT)/damask_btf.png)"
 	@echo "  prt, btf vs fiberpath: $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
-	@echo "  bysdf fitted to fiberpath (seed 004): $(OUT)/bysdf_fit.toml ($(OUT)/bysdf_fit.json)"
+	@echo "  bysdf fitted to fiberpath (seed 004): $(OUT)/bysdf_fit.toml, $(OUT)/knit_bysdf_fit.toml (.json reports)"
 	@echo "  knit, bysdf (seed 004): $(OUT)/knit_bysdf.exr ($(OUT)/knit_bysdf.png)"
 	@echo "  knit, fiberpath      : $(OUT)/knit_fiberpath.exr ($(OUT)/knit_fiberpath.png)"
 	@echo "  knit, bysdf vs fiberpath: $(OUT)/eval/knit/report.md ($(OUT)/eval/knit/report.html)"

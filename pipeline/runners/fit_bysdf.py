@@ -48,18 +48,34 @@ def setup_lights(scene) -> dict:
     return {"front": [front], "back": [back], "front+back": [front, back]}
 
 
-def _render(scene, method_name, lights, options, extra):
-    from ..render_setup import pack_lights  # noqa: F401  (validates the lights below)
-    from ..renderers import method
-    from ..runners.render import resolve_options
+class _Renderer:
+    """One method's integrator, set up once (the fibres' BVH is the costly part), rendered under each light
+    setup by swapping the integrator's light table."""
 
-    sc = dataclasses.replace(scene, lights=lights)
-    m = method(method_name)
-    opts = resolve_options(sc, m, width=options["width"], height=options["height"], spp=options["spp"],
-                           seed=options["seed"], fibers=options.get("fibers"), max_depth=options.get("max_depth"),
-                           threads=options.get("threads"), extra=dict(extra))
-    res = m.run(sc, opts)
-    return np.asarray(res.rgb, np.float64).reshape(-1, 3).mean(axis=0), res.stats
+    def __init__(self, scene, method_name, options, extra):
+        import importlib
+
+        from ..renderers import method
+        from ..runners.render import resolve_options
+
+        sc = dataclasses.replace(scene, lights=next(iter(setup_lights(scene).values())))
+        m = method(method_name)
+        self.scene = sc
+        self.opts = resolve_options(sc, m, width=options["width"], height=options["height"], spp=options["spp"],
+                                    seed=options["seed"], fibers=options.get("fibers"),
+                                    max_depth=options.get("max_depth"), threads=options.get("threads"),
+                                    extra=dict(extra))
+        self.setup = importlib.import_module(f"pipeline.renderers.{m.module}").film_setup(sc, self.opts)
+
+    def mean(self, lights) -> np.ndarray:
+        from ..render_setup import pack_lights
+        from ..renderers.film import render_film, sampling_of
+
+        s, o = self.setup, self.opts
+        integ = s.integ._replace(lights=pack_lights(lights, self.scene.path).table())
+        run = render_film(s.label, integ, s.cam, o["width"], o["height"], sampling_of(o), o["seed"], o["tile_size"],
+                          s.variance, o.get("threads"), None)
+        return np.asarray(run.rgb, np.float64).reshape(-1, 3).mean(axis=0)
 
 
 def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, ref_spp=32, iterations=4,
@@ -75,12 +91,11 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     yarn_setup(yarns, {})
     lights = setup_lights(scene)
     t0 = time.perf_counter()
-    ref = {}
-    for name in SETUPS:
-        progress(f"fiberpath reference, {name} light")
-        ref[name], _ = _render(scene, "fiberpath", lights[name], {"width": width, "height": height, "spp": ref_spp,
-                                                                  "seed": scene.seed, "fibers": str(fibers),
-                                                                  "max_depth": max_depth, "threads": threads}, {})
+    progress("fiberpath reference: front, back and front+back light")
+    fp = _Renderer(scene, "fiberpath", {"width": width, "height": height, "spp": ref_spp, "seed": scene.seed,
+                                        "fibers": str(fibers), "max_depth": max_depth, "threads": threads}, {})
+    ref = {name: fp.mean(lights[name]) for name in SETUPS}
+    del fp
     ref_s = time.perf_counter() - t0
     from stages.core.shading.bysdf import pack_bysdf
 
@@ -98,10 +113,10 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     def bysdf_means(setups):
         write_params(tmp_params, x, y)
         try:
-            return {n: _render(scene, "bysdf", lights[n], base, {"yarns": str(yarns), "params": str(tmp_params)})[0]
-                    for n in setups}
+            by = _Renderer(scene, "bysdf", base, {"yarns": str(yarns), "params": str(tmp_params)})
         finally:
             tmp_params.unlink(missing_ok=True)
+        return {n: by.mean(lights[n]) for n in setups}
 
     t1 = time.perf_counter()
     for it in range(iterations):
