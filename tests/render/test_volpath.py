@@ -286,6 +286,7 @@ def small(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow  # compiles the procedural volpath integrator (~3.3 min of one core on a cold cache): make test-all
 def test_procedural_and_realized_sources_agree(small):
     """The same fabric through on-the-fly lookups and through realized fibres in a BVH: per 2 x 2
     pixel block the difference of the means over its standard error (independent seeds) is

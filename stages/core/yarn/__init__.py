@@ -9,4 +9,6 @@
 ``accel``          the derived lookup acceleration, rebuilt whenever tables are loaded
 ``fibre_tests``    closest points and exact coverage tests of one regular fibre or hair
 ``lookup``         Algorithm 1: which fibre covers a point, in which yarn
+``implicit_plies`` seed 004 §3.3: the first ply of the model a ray meets inside a yarn (bysdf)
+``implicit_tables`` seed 004 §3.4: the fibre and shadowing tables' layout and lookups, the fibre frame
 """
