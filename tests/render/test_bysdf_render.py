@@ -27,6 +27,7 @@ radius = {radius}
 preset = "cotton1"
 radius = {radius}
 color = [0.7, 0.5, 0.3]
+bcsdf = "cotton"
 {bysdf}
 
 [camera]
