@@ -121,8 +121,8 @@ def bysdf_rows(scene, groups, albedo, options) -> np.ndarray:
     return np.ascontiguousarray(np.stack(rows))
 
 
-def yarn_setup(yarns_path, options):
-    """(Curves, YarnTypes, groups (Y,), tables per type, build seconds) of a yarns artifact."""
+def yarn_setup(yarns_path):
+    """(artifact, Curves, YarnTypes, yarn groups (Y,)) of a yarns artifact."""
     from ..artifacts import Artifact
     from ..runners.yarn_types import yarn_types_of
     from ..yarns import load_curves
@@ -187,7 +187,7 @@ def film_setup(scene, options: dict):
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
     t0 = time.perf_counter()
-    _, cv, ytypes, groups = yarn_setup(path, options)
+    _, cv, ytypes, groups = yarn_setup(path)
     types, tables_s = build_types(ytypes.tparams, tol, max_iter, fibre_thr, ply_thr)
     radius = np.array([types[t].radius for t in ytypes.yarn_type])
     pieces = tube_pieces(cv, radius)

@@ -67,12 +67,13 @@ class _Renderer:
                                     extra=dict(extra))
         self.setup = importlib.import_module(f"pipeline.renderers.{m.module}").film_setup(sc, self.opts)
 
-    def mean(self, lights) -> np.ndarray:
+    def mean(self, lights, **fields) -> np.ndarray:
+        """The image mean under ``lights``, with any other integrator ``fields`` replaced too."""
         from ..render_setup import pack_lights
         from ..renderers.film import render_film, sampling_of
 
         s, o = self.setup, self.opts
-        integ = s.integ._replace(lights=pack_lights(lights, self.scene.path).table())
+        integ = s.integ._replace(lights=pack_lights(lights, self.scene.path).table(), **fields)
         run = render_film(s.label, integ, s.cam, o["width"], o["height"], sampling_of(o), o["seed"], o["tile_size"],
                           s.variance, o.get("threads"), None)
         return np.asarray(run.rgb, np.float64).reshape(-1, 3).mean(axis=0)
@@ -80,15 +81,16 @@ class _Renderer:
 
 def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, ref_spp=32, iterations=4,
             max_depth=None, threads=None, progress=print) -> dict:
+    from stages.core.shading import bysdf as B
+
     from ..artifacts import Artifact
-    from ..renderers.bysdf import yarn_setup
     from ..scene import load_scene
 
     scene = load_scene(scene_path)
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
     Artifact(fibers, kind="fibers")
-    yarn_setup(yarns, {})
+    Artifact(yarns, kind="yarns")
     lights = setup_lights(scene)
     t0 = time.perf_counter()
     progress("fiberpath reference: front, back and front+back light")
@@ -97,26 +99,22 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     ref = {name: fp.mean(lights[name]) for name in SETUPS}
     del fp
     ref_s = time.perf_counter() - t0
-    from stages.core.shading.bysdf import pack_bysdf
-
-    p0 = pack_bysdf()
-    from stages.core.shading import bysdf as B
-
+    p0 = B.pack_bysdf()
     x = (1.0 - p0[B.SPEC_WEIGHT]) * p0[B.REFLECT_WEIGHT]
     y = (1.0 - p0[B.SPEC_WEIGHT]) * (1.0 - p0[B.REFLECT_WEIGHT])
     capped = False
     history = []
     base = {"width": width, "height": height, "spp": spp, "seed": scene.seed, "max_depth": max_depth,
             "threads": threads}
-    tmp_params = Path(out).with_suffix(".fitting.toml")
+    by = _Renderer(scene, "bysdf", base, {"yarns": str(yarns)})   # tubes, BVH and tables built once
 
     def bysdf_means(setups):
-        write_params(tmp_params, x, y)
-        try:
-            by = _Renderer(scene, "bysdf", base, {"yarns": str(yarns), "params": str(tmp_params)})
-        finally:
-            tmp_params.unlink(missing_ok=True)
-        return {n: by.mean(lights[n]) for n in setups}
+        # the rows --set params= would give: the split's two weights (as written, 6 digits) over the rest
+        params = by.setup.integ.params.copy()
+        sp = {k: float(f"{v:.6g}") for k, v in split(x, y).items()}
+        params[:, B.SPEC_WEIGHT] = sp["spec_weight"]
+        params[:, B.REFLECT_WEIGHT] = sp["reflect_weight"]
+        return {n: by.mean(lights[n], params=params) for n in setups}
 
     t1 = time.perf_counter()
     for it in range(iterations):
