@@ -19,42 +19,44 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.bvh import leaf_range
 from stages.core.geometry.capsule import point_segment_dist2
+from stages.core.geometry.stack import STACK_SIZE, stack_array
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness"])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def covering_segment(bvh, x, y, z):
-    """Segment of the lowest-index fibre whose capsule contains (x, y, z), or -1. Walks the BVH's
-    cache-line packed ``nodes`` / ``prims`` (see ``stages.core.geometry.bvh``)."""
-    nodes = bvh.nodes
+    """Segment of the lowest-index fibre whose capsule contains (x, y, z) (of its segments that do, the
+    lowest: the answer does not depend on the tree), or -1. Walks the BVH's 4-wide nodes and
+    leaf-ordered ``prims`` (see ``stages.core.geometry.bvh``)."""
+    box = bvh.wide_box
+    child = bvh.wide_child
     prims = bvh.prims
     if prims.shape[0] == 0:
         return -1
-    stack = np.empty(128, np.int64)
+    stack = stack_array(STACK_SIZE, np.int64)
     stack[0] = 0
     sp = 1
     best = -1
     best_f = np.iinfo(np.int64).max
     while sp > 0:
         sp -= 1
-        nd = stack[sp]
-        if (x < nodes[nd, 0] or x > nodes[nd, 3] or y < nodes[nd, 1] or y > nodes[nd, 4]
-                or z < nodes[nd, 2] or z > nodes[nd, 5]):
+        ref = stack[sp]
+        if ref >= 0:
+            for q in range(4):
+                if (box[ref, q] <= x <= box[ref, 12 + q] and box[ref, 4 + q] <= y <= box[ref, 16 + q]
+                        and box[ref, 8 + q] <= z <= box[ref, 20 + q]):
+                    stack[sp] = child[ref, q]
+                    sp += 1
             continue
-        a = int(nodes[nd, 6])
-        if a >= 0:
-            stack[sp] = a
-            stack[sp + 1] = int(nodes[nd, 7])
-            sp += 2
-            continue
-        start = -1 - a
-        for q in range(start, start + int(nodes[nd, 7])):
+        start, n = leaf_range(ref)
+        for q in range(start, start + n):
             s = int(prims[q, 7])
             f = bvh.seg_fiber[s]
-            if f >= best_f:
+            if f > best_f or (f == best_f and s > best):
                 continue
             r = prims[q, 6]
             if point_segment_dist2(x, y, z, prims[q, 0], prims[q, 1], prims[q, 2],

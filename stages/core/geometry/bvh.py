@@ -13,13 +13,31 @@ Top-down binned SAH (16 bins per axis, all three axes), leaves of at most ``LEAF
 splitting is no cheaper; segments whose centroids coincide are split by count. Boxes are the
 capsules' exact bounds padded by a relative 1e-9 so rounding never culls a true hit.
 
-Nodes (``FiberBVH``): ``node_lo``/``node_hi`` (N, 3) float64 bounds, ``node_left``/``node_right``
-child indices (-1 at leaves), ``node_start``/``node_count`` the leaf's range in ``prim``
-(segment indices). Node 0 is the root. The traversal reads cache-line packed copies (random
-secondary rays in 10^5 dense segments are memory-bound): ``nodes`` (N, 8) float64 = bounds lo(3),
-hi(3), then (left, right) for inner nodes or (-1 - start, count) for leaves; ``prims`` (S, 8)
-float64 in leaf order = capsule end points a(3), b(3), radius, segment index.
-``fiber_seg_offsets`` (F + 1) is the CSR of segments per fibre.
+Nodes (``FiberBVH``): the binary tree the builder makes -- ``node_lo``/``node_hi`` (N, 3) float64
+bounds, ``node_left``/``node_right`` child indices (-1 at leaves), ``node_start``/``node_count`` the
+leaf's range in ``prim`` (segment indices), node 0 the root -- and the form the queries walk:
+
+Wide nodes
+----------
+``collapse_wide`` turns the binary tree into a 4-wide one: a wide node takes its binary node's two
+children and opens the largest-area inner one among them until it holds four (or only leaves are
+left), so a query visits about a third as many nodes and tests four child boxes per visit.
+``wide_box`` (M, 24) float32 per node: lo x of children 0-3, lo y, lo z, hi x, hi y, hi z (4 each),
+rounded outward to float32 (a box never shrinks, so no true hit is culled; the box test itself runs
+in float64); unused slots hold an empty box (lo = +inf, hi = -inf) that no ray enters.
+``wide_child`` (M, 4) int64: a child >= 0 is a wide node; a leaf is -1 - (first * LEAF_CODE + count),
+its segments ``prims[first : first + count]``. Wide node 0 is the root. Both arrays start on a
+64-byte boundary. ``prims`` (S, 8) float64 in leaf order = capsule end points a(3), b(3), radius,
+segment index. ``fiber_seg_offsets`` (F + 1) is the CSR of segments per fibre.
+
+The box test picks each slab's near plane by the sign of the ray's direction (``direction_signs``),
+so it takes no min / max per axis; the nearest-hit query sorts the entered children by a
+5-comparator network and visits them nearest first, skipping a popped node that starts beyond the
+best hit found since it was pushed; the any-hit query visits nearest first too (in dense cloth it
+meets an occluder sooner: 8 % faster fiberpath renders than visiting children in slot order). Traversal stacks live on the machine stack
+(``stages.core.geometry.stack``). The same wide nodes serve the shell's exemplar queries
+(``stages.core.shell.traversal``) and the realized volume's point queries
+(``stages.render.realized_medium``).
 
 Traversal
 ---------
@@ -35,14 +53,17 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.capsule import capsule_intersect
-from stages.core.geometry.slab import safe_inverse, slab_enter
+from stages.core.geometry.slab import safe_inverse
+from stages.core.geometry.stack import STACK_SIZE, stack_array
 
-LEAF_MAX = 4
+LEAF_MAX = 2
 N_BINS = 16
+LEAF_CODE = 32   # a leaf child reference is -1 - (first prim * LEAF_CODE + count), count < LEAF_CODE
+EMPTY = -1       # an unused slot of a wide node (an empty leaf behind an empty box)
 
 FiberBVH = namedtuple("FiberBVH", ["points", "seg_a", "seg_r", "seg_fiber",
                                    "node_lo", "node_hi", "node_left", "node_right", "node_start", "node_count", "prim",
-                                   "fiber_seg_offsets", "nodes", "prims"])
+                                   "fiber_seg_offsets", "prims", "wide_box", "wide_child"])
 
 
 @njit(cache=True)
@@ -231,19 +252,8 @@ def build_bvh_nodes(lo, hi):
 
 
 @njit(cache=True)
-def pack_nodes(nlo, nhi, left, right, start, count, prim, points, seg_a, seg_r):
-    N = nlo.shape[0]
-    nodes = np.empty((N, 8))
-    for n in range(N):
-        for k in range(3):
-            nodes[n, k] = nlo[n, k]
-            nodes[n, 3 + k] = nhi[n, k]
-        if left[n] < 0:
-            nodes[n, 6] = -1.0 - start[n]
-            nodes[n, 7] = count[n]
-        else:
-            nodes[n, 6] = left[n]
-            nodes[n, 7] = right[n]
+def pack_prims(prim, points, seg_a, seg_r):
+    """(S, 8) float64 in leaf order: capsule end points a(3), b(3), radius, segment index."""
     S = prim.shape[0]
     prims = np.empty((S, 8))
     for j in range(S):
@@ -254,7 +264,94 @@ def pack_nodes(nlo, nhi, left, right, start, count, prim, points, seg_a, seg_r):
             prims[j, 3 + k] = points[i + 1, k]
         prims[j, 6] = seg_r[s]
         prims[j, 7] = s
-    return nodes, prims
+    return prims
+
+
+@njit(cache=True)
+def _round_down32(x):
+    """The largest float32 <= x (as float64): a box rounded outward never culls a true hit."""
+    f = np.float32(x)
+    if np.float64(f) > x:
+        f = np.nextafter(f, np.float32(-np.inf))
+    return f
+
+
+@njit(cache=True)
+def _round_up32(x):
+    f = np.float32(x)
+    if np.float64(f) < x:
+        f = np.nextafter(f, np.float32(np.inf))
+    return f
+
+
+@njit(cache=True)
+def collapse_wide(nlo, nhi, left, right, start, count):
+    """The 4-wide tree of a binary tree (module doc "Wide nodes"): (wide_box (M, 24) float32,
+    wide_child (M, 4) int64). A wide node takes its binary node's children and opens the largest-area
+    inner one among them until it has 4 (or only leaves are left)."""
+    N = nlo.shape[0]
+    M = max(1, N)
+    box = np.empty((M, 24), np.float32)
+    child = np.empty((M, 4), np.int64)
+    queue = np.empty(M, np.int64)   # binary node of each wide node
+    queue[0] = 0
+    nw = 1
+    w = 0
+    slots = np.empty(4, np.int64)
+    while w < nw:
+        b = queue[w]
+        ns = 0
+        if left[b] < 0:          # the root is a leaf: one leaf child
+            slots[0] = b
+            ns = 1
+        else:
+            slots[0] = left[b]
+            slots[1] = right[b]
+            ns = 2
+            while ns < 4:
+                best = -1
+                best_area = -1.0
+                for q in range(ns):
+                    c = slots[q]
+                    if left[c] >= 0:
+                        ar = _area(nlo[c, 0], nlo[c, 1], nlo[c, 2], nhi[c, 0], nhi[c, 1], nhi[c, 2])
+                        if ar > best_area:
+                            best_area = ar
+                            best = q
+                if best < 0:
+                    break
+                c = slots[best]
+                slots[best] = left[c]
+                slots[ns] = right[c]
+                ns += 1
+        for q in range(4):
+            if q < ns:
+                c = slots[q]
+                for k in range(3):
+                    box[w, 4 * k + q] = _round_down32(nlo[c, k])
+                    box[w, 12 + 4 * k + q] = _round_up32(nhi[c, k])
+                if left[c] < 0:
+                    child[w, q] = -1 - (start[c] * LEAF_CODE + count[c])
+                else:
+                    child[w, q] = nw
+                    queue[nw] = c
+                    nw += 1
+            else:   # empty slot: a box no ray enters
+                for k in range(3):
+                    box[w, 4 * k + q] = np.inf
+                    box[w, 12 + 4 * k + q] = -np.inf
+                child[w, q] = EMPTY
+        w += 1
+    return box[:nw].copy(), child[:nw].copy()
+
+
+def cache_aligned(rows):
+    """A copy of a C-contiguous array whose data starts on a 64-byte boundary."""
+    buf = np.empty(rows.nbytes + 64, np.uint8)
+    off = (-buf.ctypes.data) % 64
+    out = buf[off:off + rows.nbytes].view(rows.dtype).reshape(rows.shape)
+    out[...] = rows
+    return out
 
 
 def build_fiber_bvh(points, fiber_offsets, point_radius):
@@ -264,19 +361,18 @@ def build_fiber_bvh(points, fiber_offsets, point_radius):
                                                         np.asarray(point_radius, np.float64))
     lo, hi = segment_bounds(points, seg_a, seg_r)
     nlo, nhi, left, right, start, count, prim = build_bvh_nodes(lo, hi)
-    nodes, prims = pack_nodes(nlo, nhi, left, right, start, count, prim, points, seg_a, seg_r)
-    return FiberBVH(points, seg_a, seg_r, seg_fiber, nlo, nhi, left, right, start, count, prim, fso, nodes, prims), fso
+    prims = pack_prims(prim, points, seg_a, seg_r)
+    leaf_max = int(count[left < 0].max()) if len(count) else 0
+    if leaf_max >= LEAF_CODE:
+        raise ValueError(f"a BVH leaf holds {leaf_max} segments, more than a wide node encodes ({LEAF_CODE - 1})")
+    wide_box, wide_child = collapse_wide(nlo, nhi, left, right, start, count)
+    wide_box, wide_child = cache_aligned(wide_box), cache_aligned(wide_child)
+    return FiberBVH(points, seg_a, seg_r, seg_fiber, nlo, nhi, left, right, start, count, prim, fso, prims,
+                    wide_box, wide_child), fso
 
 
 # ------------------------------------------------------------------------------------------------
-@njit(cache=True)
-def _node_enter(nodes, node, ox, oy, oz, ix, iy, iz, tmax):
-    """Entry distance of a ray into box ``node`` of the packed node array (``slab_enter``, tmin 0)."""
-    return slab_enter(nodes[node, 0], nodes[node, 1], nodes[node, 2], nodes[node, 3], nodes[node, 4], nodes[node, 5],
-                      ox, oy, oz, ix, iy, iz, 0.0, tmax)
-
-
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def ignore_range(bvh, ign_fiber, ign_seg, ign_window):
     """Segment index range [lo, hi] skipped by a query (empty when ign_fiber < 0)."""
     if ign_fiber < 0:
@@ -299,16 +395,100 @@ def _seg_hit(bvh, s, ox, oy, oz, dx, dy, dz, tmin):
                              P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], bvh.seg_r[s], tmin)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _prim_hit(prims, j, ox, oy, oz, dx, dy, dz, tmin):
     return capsule_intersect(ox, oy, oz, dx, dy, dz, prims[j, 0], prims[j, 1], prims[j, 2],
                              prims[j, 3], prims[j, 4], prims[j, 5], prims[j, 6], tmin)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def direction_signs(ix, iy, iz):
+    """The near-plane column offsets (0 or 12) of ``_child_enter`` for a ray's reciprocal direction."""
+    return 0 if ix >= 0.0 else 12, 0 if iy >= 0.0 else 12, 0 if iz >= 0.0 else 12
+
+
+@njit(cache=True, inline="always")
+def push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax, stack, stack_t, sp):
+    """Push the children of wide node ``ref`` that the ray meets within [tmin, tmax], farthest first (so the
+    nearest is visited next), with their entry distances; returns the new stack size. The four entry
+    distances are sorted by a 5-comparator network (misses are inf and sort last)."""
+    ct0 = _child_enter(box, ref, 0, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
+    ct1 = _child_enter(box, ref, 1, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
+    ct2 = _child_enter(box, ref, 2, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
+    ct3 = _child_enter(box, ref, 3, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
+    cr0 = child[ref, 0]
+    cr1 = child[ref, 1]
+    cr2 = child[ref, 2]
+    cr3 = child[ref, 3]
+    if ct1 < ct0:
+        ct0, ct1 = ct1, ct0
+        cr0, cr1 = cr1, cr0
+    if ct3 < ct2:
+        ct2, ct3 = ct3, ct2
+        cr2, cr3 = cr3, cr2
+    if ct2 < ct0:
+        ct0, ct2 = ct2, ct0
+        cr0, cr2 = cr2, cr0
+    if ct3 < ct1:
+        ct1, ct3 = ct3, ct1
+        cr1, cr3 = cr3, cr1
+    if ct2 < ct1:
+        ct1, ct2 = ct2, ct1
+        cr1, cr2 = cr2, cr1
+    if ct3 != np.inf:
+        stack[sp] = cr3
+        stack_t[sp] = ct3
+        sp += 1
+    if ct2 != np.inf:
+        stack[sp] = cr2
+        stack_t[sp] = ct2
+        sp += 1
+    if ct1 != np.inf:
+        stack[sp] = cr1
+        stack_t[sp] = ct1
+        sp += 1
+    if ct0 != np.inf:
+        stack[sp] = cr0
+        stack_t[sp] = ct0
+        sp += 1
+    return sp
+
+
+@njit(cache=True, inline="always")
+def leaf_range(ref):
+    """(first prim, count) of a leaf child reference (< 0)."""
+    code = -1 - ref
+    return code // LEAF_CODE, code % LEAF_CODE
+
+
+@njit(cache=True, inline="always")
+def _child_enter(box, w, q, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax):
+    """Entry distance of the ray into child box q of wide node w (inf when it misses it, leaves it
+    before tmin or enters beyond tmax). s* = 0 for a non-negative direction component, else 12:
+    the near plane of each slab is picked by the direction's sign, so no min / max per axis."""
+    tn = (box[w, sx + q] - ox) * ix
+    tf = (box[w, 12 - sx + q] - ox) * ix
+    t0 = (box[w, 4 + sy + q] - oy) * iy
+    t1 = (box[w, 16 - sy + q] - oy) * iy
+    if t0 > tn:
+        tn = t0
+    if t1 < tf:
+        tf = t1
+    t0 = (box[w, 8 + sz + q] - oz) * iz
+    t1 = (box[w, 20 - sz + q] - oz) * iz
+    if t0 > tn:
+        tn = t0
+    if t1 < tf:
+        tf = t1
+    hit = (tf >= tn) & (tf >= tmin) & (tn <= tmax)
+    return tn if hit else np.inf
+
+
+@njit(cache=True, _nrt=False)
 def intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Nearest hit (t, segment) with tmin < t < tmax; (inf, -1) when none."""
-    nodes = bvh.nodes
+    box = bvh.wide_box
+    child = bvh.wide_child
     prims = bvh.prims
     if prims.shape[0] == 0:
         return np.inf, -1
@@ -316,26 +496,23 @@ def intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_w
     ix = safe_inverse(dx)
     iy = safe_inverse(dy)
     iz = safe_inverse(dz)
-    stack = np.empty(256, np.int64)
-    stack_t = np.empty(256)  # entry distance of each pushed node: skipped if a nearer hit was found since
+    sx, sy, sz = direction_signs(ix, iy, iz)
+    # node stack and entry distances (a popped node that starts beyond the best hit is skipped), on the machine stack
+    stack = stack_array(STACK_SIZE, np.int64)
+    stack_t = stack_array(STACK_SIZE, np.float64)
     best_t = tmax
     best_s = -1
-    t_root = _node_enter(nodes, 0, ox, oy, oz, ix, iy, iz, best_t)
-    if t_root == np.inf:
-        return np.inf, -1
     stack[0] = 0
-    stack_t[0] = t_root
+    stack_t[0] = -np.inf
     sp = 1
     while sp > 0:
         sp -= 1
-        node = stack[sp]
+        ref = stack[sp]
         if stack_t[sp] > best_t:
             continue
-        a = int(nodes[node, 6])
-        b = int(nodes[node, 7])
-        if a < 0:
-            j0 = -1 - a
-            for j in range(j0, j0 + b):
+        if ref < 0:
+            j0, n = leaf_range(ref)
+            for j in range(j0, j0 + n):
                 s = int(prims[j, 7])
                 if s >= ilo and s <= ihi:
                     continue
@@ -344,36 +521,17 @@ def intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_w
                     best_t = t
                     best_s = s
             continue
-        tl = _node_enter(nodes, a, ox, oy, oz, ix, iy, iz, best_t)
-        tr = _node_enter(nodes, b, ox, oy, oz, ix, iy, iz, best_t)
-        # push the far child first so the near one is visited first
-        if tl <= tr:
-            if tr != np.inf:
-                stack[sp] = b
-                stack_t[sp] = tr
-                sp += 1
-            if tl != np.inf:
-                stack[sp] = a
-                stack_t[sp] = tl
-                sp += 1
-        else:
-            if tl != np.inf:
-                stack[sp] = a
-                stack_t[sp] = tl
-                sp += 1
-            if tr != np.inf:
-                stack[sp] = b
-                stack_t[sp] = tr
-                sp += 1
+        sp = push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, 0.0, best_t, stack, stack_t, sp)
     if best_s < 0:
         return np.inf, -1
     return best_t, best_s
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def occluded(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """True when any segment is hit with tmin < t < tmax."""
-    nodes = bvh.nodes
+    box = bvh.wide_box
+    child = bvh.wide_child
     prims = bvh.prims
     if prims.shape[0] == 0:
         return False
@@ -381,31 +539,24 @@ def occluded(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_wi
     ix = safe_inverse(dx)
     iy = safe_inverse(dy)
     iz = safe_inverse(dz)
-    if _node_enter(nodes, 0, ox, oy, oz, ix, iy, iz, tmax) == np.inf:
-        return False
-    stack = np.empty(256, np.int64)
+    sx, sy, sz = direction_signs(ix, iy, iz)
+    stack = stack_array(STACK_SIZE, np.int64)
+    stack_t = stack_array(STACK_SIZE, np.float64)
     stack[0] = 0
     sp = 1
     while sp > 0:
         sp -= 1
-        node = stack[sp]
-        a = int(nodes[node, 6])
-        b = int(nodes[node, 7])
-        if a < 0:
-            j0 = -1 - a
-            for j in range(j0, j0 + b):
+        ref = stack[sp]
+        if ref < 0:
+            j0, n = leaf_range(ref)
+            for j in range(j0, j0 + n):
                 s = int(prims[j, 7])
                 if s >= ilo and s <= ihi:
                     continue
                 if _prim_hit(prims, j, ox, oy, oz, dx, dy, dz, tmin) < tmax:
                     return True
             continue
-        if _node_enter(nodes, a, ox, oy, oz, ix, iy, iz, tmax) != np.inf:
-            stack[sp] = a
-            sp += 1
-        if _node_enter(nodes, b, ox, oy, oz, ix, iy, iz, tmax) != np.inf:
-            stack[sp] = b
-            sp += 1
+        sp = push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, 0.0, tmax, stack, stack_t, sp)
     return False
 
 

@@ -14,6 +14,12 @@ in multiple scattering). The renderers skip the fibre a ray leaves by its segmen
 (``stages.core.geometry.bvh``), so a fibre's own capsule chain never stops it; a point on a
 capsule's surface is not inside it (``INSIDE``).
 
+Cost
+----
+Most capsule tests of a traversal are misses. ``_misses_cylinder`` rejects a ray whose line stays
+farther than r from the axis line (the body and both end spheres lie inside that infinite cylinder)
+before any square root; the inside test and the three roots run only for the rest.
+
 Robustness
 ----------
 - Far origins: the ray origin is first moved along the ray to the point nearest the segment's
@@ -80,6 +86,33 @@ def _body_root(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r, sign):
     return INF, -1.0, baba
 
 
+@njit(cache=True, inline="always")
+def _misses_cylinder(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r):
+    """True when the ray's line stays farther than r from the axis line a -> b: it then misses the body
+    and both end spheres (they lie inside that infinite cylinder). The early rejection of most capsule
+    tests in a traversal: ~20 flops and no square root. Never true for a line (nearly) parallel to the
+    axis (``_body_root``'s threshold), whose distance to it is left to the full test."""
+    bax = bx - ax
+    bay = by - ay
+    baz = bz - az
+    baba = bax * bax + bay * bay + baz * baz
+    oax = px - ax
+    oay = py - ay
+    oaz = pz - az
+    bard = bax * dx + bay * dy + baz * dz
+    a = baba - bard * bard
+    if not a > 1e-12 * baba:
+        return False
+    baoa = bax * oax + bay * oay + baz * oaz
+    k = baoa / baba
+    ux = oax - k * bax
+    uy = oay - k * bay
+    uz = oaz - k * baz
+    b = baba * (dx * oax + dy * oay + dz * oaz) - baoa * bard
+    c = baba * (ux * ux + uy * uy + uz * uz - r * r)
+    return b * b - a * c < 0.0
+
+
 @njit(cache=True)
 def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
     """Distance t > tmin to the first entering hit of the capsule (a, b, r) along unit direction d, or
@@ -92,6 +125,8 @@ def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
     px = ox + t0 * dx
     py = oy + t0 * dy
     pz = oz + t0 * dz
+    if _misses_cylinder(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r):
+        return INF
     if point_segment_dist2(ox + tmin * dx, oy + tmin * dy, oz + tmin * dz,
                            ax, ay, az, bx, by, bz) < INSIDE * r * r:
         # inside: the largest far root of the pieces (a capsule is convex)

@@ -2,7 +2,7 @@
 
 A ``TriangleMesh`` is built once from vertices V (NV, 3) and triangles F (T, 3) (``build_triangle_mesh``):
 the boxes of the triangles go through the binned-SAH builder of the fibre BVH
-(``stages.core.geometry.bvh.build_bvh_nodes``) and are packed for traversal like its nodes:
+(``stages.core.geometry.bvh.build_bvh_nodes``) and packed for traversal:
 
 - ``nodes`` (N, 8) float64: bounds lo(3), hi(3), then (left, right) for inner nodes or (-1 - start, count)
   for leaves, node 0 the root;
@@ -30,19 +30,16 @@ from its texture coordinates: the tangent frame of a uv-parameterised surface).
 """
 from collections import namedtuple
 
-import numba
 import numpy as np
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import njit
 
 from stages.core.geometry.bvh import build_bvh_nodes
 from stages.core.geometry.slab import safe_inverse, slab_enter
+from stages.core.geometry.stack import traversal_stack
 
 TriangleMesh = namedtuple("TriangleMesh", ["vertices", "triangles", "nodes", "tris"])
 TriangleHit = namedtuple("TriangleHit", ["t", "tri", "b1", "b2"])
 
-STACK_SIZE = 128
 TRI_SIZE = 10
 BARY_EPS = 1e-10     # barycentric slack: neighbours overlap by it, so rounding never opens a crack
 
@@ -140,26 +137,6 @@ def build_triangle_mesh(V, F) -> TriangleMesh:
 
 
 # ------------------------------------------------------------------------------------------------
-@intrinsic
-def _stack_buffer(typingctx, n, dtype):
-    """A pointer to n elements of ``dtype`` on the calling function's stack (n a literal integer)."""
-    if not isinstance(n, types.IntegerLiteral):
-        return None
-    size = n.literal_value
-
-    def codegen(context, builder, sig, args):
-        return cgutils.alloca_once(builder, context.get_data_type(dtype.dtype), size=size)
-    return types.CPointer(dtype.dtype)(n, dtype), codegen
-
-
-@njit(cache=True, inline="always")
-def traversal_stack():
-    """(node stack, entry-distance stack) of STACK_SIZE each, on the stack of the function that inlines it:
-    a query per camera ray allocates nothing on the heap."""
-    return (numba.carray(_stack_buffer(STACK_SIZE, np.int64), STACK_SIZE),
-            numba.carray(_stack_buffer(STACK_SIZE, np.float64), STACK_SIZE))
-
-
 @njit(cache=True, inline="always")
 def ray_triangle(tris, j, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Moller-Trumbore: (t, b1, b2) of the ray's hit with packed triangle j, t = inf when it misses or

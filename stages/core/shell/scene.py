@@ -3,12 +3,13 @@ arrays of a ``tiling`` artifact (stage ``tile``).
 
 ``build_shell_scene(a)`` takes a mapping name -> array with the tiling artifact's arrays and builds
 the boundary-face BVH and one SAH capsule BVH per exemplar (stages.core.geometry.bvh) over its wrapped fibre
-pieces; node arrays of all exemplars are concatenated with ``ex_root[k]`` the root of exemplar k.
+pieces; node arrays of all exemplars are concatenated with ``ex_root[k]`` the root of exemplar k (and
+their 4-wide forms, ``fw_box`` / ``fw_child``, with ``ex_wide_root[k]``).
 Both BVH builds are deterministic, so a scene rebuilt from the same artifact traces identically.
 """
 import numpy as np
 
-from stages.core.geometry.bvh import build_bvh_nodes, build_fiber_bvh
+from stages.core.geometry.bvh import LEAF_CODE, build_bvh_nodes, build_fiber_bvh, cache_aligned
 from stages.core.shell.traversal import ShellScene
 
 
@@ -32,8 +33,10 @@ def build_shell_scene(a) -> ShellScene:
     pts, seg_a, seg_r, src, srcf = [], [], [], [], []
     nodes = {k: [] for k in ("lo", "hi", "left", "right", "start", "count")}
     prim = []
+    wide_box, wide_child = [], []
     roots = np.zeros(K, np.int64)
-    p_off = s_off = n_off = 0
+    wide_roots = np.zeros(K, np.int64)
+    p_off = s_off = n_off = w_off = 0
     for k in range(K):
         p0, p1 = piece_ex[k], piece_ex[k + 1]
         o = W_off[p0:p1 + 1]
@@ -53,9 +56,16 @@ def build_shell_scene(a) -> ShellScene:
         nodes["start"].append(bvh.node_start + len(np.concatenate(prim)) if prim else bvh.node_start)
         nodes["count"].append(bvh.node_count)
         prim.append(bvh.prim + s_off)
+        # 4-wide nodes: inner references shift by the wide nodes before, leaf ranges by the prims before
+        ch = bvh.wide_child
+        leaf = -1 - np.where(ch < 0, ch, -1)
+        wide_child.append(np.where(ch >= 0, ch + w_off, -1 - ((leaf // LEAF_CODE + s_off) * LEAF_CODE + leaf % LEAF_CODE)))
+        wide_box.append(bvh.wide_box)
+        wide_roots[k] = w_off
         p_off += len(bvh.points)
         s_off += len(bvh.seg_a)
         n_off += len(bvh.node_lo)
+        w_off += len(bvh.wide_box)
     cat = np.concatenate
     return ShellScene(
         _f64(a["planes"]), np.asarray(a["tet_neighbours"], np.int64), _f64(a["w2f"]), _f64(a["f2w"]),
@@ -66,5 +76,6 @@ def build_shell_scene(a) -> ShellScene:
         cat(pts), cat(seg_a), cat(seg_r), cat(src), cat(srcf).astype(np.int64),
         cat(nodes["lo"]), cat(nodes["hi"]), cat(nodes["left"]).astype(np.int64),
         cat(nodes["right"]).astype(np.int64), cat(nodes["start"]).astype(np.int64),
-        cat(nodes["count"]).astype(np.int64), cat(prim).astype(np.int64), roots)
+        cat(nodes["count"]).astype(np.int64), cat(prim).astype(np.int64), roots,
+        cache_aligned(cat(wide_box)), cache_aligned(cat(wide_child).astype(np.int64)), wide_roots)
 

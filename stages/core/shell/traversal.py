@@ -11,7 +11,9 @@
   fibres     the wrapped fibre pieces of every exemplar (stages.tile.exemplar.wrap_pieces), as capsule
              segments: ``points``, ``seg_a``, ``seg_r``, ``seg_src`` (exemplar segment id),
              ``seg_srcfiber`` (exemplar fibre id); one SAH BVH per exemplar, nodes concatenated
-             (``fn_*``, ``fprim``), exemplar k's root at ``ex_root[k]``.
+             (``fn_*``, ``fprim``), exemplar k's root at ``ex_root[k]``; the same trees 4-wide
+             (``fw_box``, ``fw_child``: stages.core.geometry.bvh "Wide nodes"; root ``ex_wide_root[k]``),
+             which the ray queries walk.
 
 ``shell_trace(sc, start_tet, o, d, tmin, tmax, ign_fiber, ign_seg, ign_window)`` (unit d; ``shell_intersect``
 is its form for primary rays from outside the shell) walks the ray:
@@ -43,8 +45,10 @@ from numba import njit, prange
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.bvh import direction_signs, leaf_range, push_children_sorted
 from stages.core.geometry.capsule import capsule_intersect, capsule_normal
 from stages.core.geometry.slab import safe_inverse, slab_enter
+from stages.core.geometry.stack import STACK_SIZE, stack_array
 from stages.core.geometry.surface import SurfaceHit, surface_hit, surface_occluded
 
 ShellScene = namedtuple("ShellScene", [
@@ -52,7 +56,8 @@ ShellScene = namedtuple("ShellScene", [
     "btri", "btet", "bnrm", "bn_lo", "bn_hi", "bn_left", "bn_right", "bn_start", "bn_count", "bprim",
     "block_size", "block_map", "ex_nblocks",
     "points", "seg_a", "seg_r", "seg_src", "seg_srcfiber",
-    "fn_lo", "fn_hi", "fn_left", "fn_right", "fn_start", "fn_count", "fprim", "ex_root"])
+    "fn_lo", "fn_hi", "fn_left", "fn_right", "fn_start", "fn_count", "fprim", "ex_root",
+    "fw_box", "fw_child", "ex_wide_root"])
 
 ShellHit = namedtuple("ShellHit", ["t", "tet", "segment", "fibre", "exemplar", "block_i", "block_j", "hit",
                                    "tangent", "normal", "flat", "radius"])
@@ -146,71 +151,80 @@ def tet_exit(sc, tet, ox, oy, oz, dx, dy, dz, t_in):
     return best, face
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _skipped(sc, s, ign_fiber, ign_seg, ign_window):
+    return ign_fiber >= 0 and sc.seg_srcfiber[s] == ign_fiber and abs(sc.seg_src[s] - ign_seg) <= ign_window
+
+
+@njit(cache=True, inline="always")
+def _segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin):
+    i = sc.seg_a[s]
+    P = sc.points
+    return capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
+                             P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], sc.seg_r[s], tmin)
+
+
+@njit(cache=True, _nrt=False)
 def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
-    """Nearest capsule hit (t, segment) with tmin < t < tmax in the BVH rooted at ``root`` (ties: lower
-    index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar segment
-    ``ign_seg`` (-1: test everything)."""
+    """Nearest capsule hit (t, segment) with tmin < t < tmax in the wide BVH rooted at ``root`` (ties:
+    lower index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar
+    segment ``ign_seg`` (-1: test everything)."""
     ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
-    stack = np.empty(256, np.int64)
+    sx, sy, sz = direction_signs(ix, iy, iz)
+    stack = stack_array(STACK_SIZE, np.int64)
+    stack_t = stack_array(STACK_SIZE, np.float64)
     stack[0] = root
+    stack_t[0] = -np.inf
     sp = 1
     best = tmax
     bs = -1
     while sp > 0:
         sp -= 1
-        node = stack[sp]
-        if _box(sc.fn_lo, sc.fn_hi, node, ox, oy, oz, ix, iy, iz, tmin, best) == np.inf:
+        ref = stack[sp]
+        if stack_t[sp] > best:
             continue
-        if sc.fn_left[node] < 0:
-            for j in range(sc.fn_start[node], sc.fn_start[node] + sc.fn_count[node]):
+        if ref < 0:
+            j0, n = leaf_range(ref)
+            for j in range(j0, j0 + n):
                 s = sc.fprim[j]
-                if ign_fiber >= 0 and sc.seg_srcfiber[s] == ign_fiber and abs(sc.seg_src[s] - ign_seg) <= ign_window:
+                if _skipped(sc, s, ign_fiber, ign_seg, ign_window):
                     continue
-                i = sc.seg_a[s]
-                P = sc.points
-                t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
-                                      P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], sc.seg_r[s], tmin)
+                t = _segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin)
                 if t < best or (t == best and bs >= 0 and s < bs):
                     best = t
                     bs = s
             continue
-        stack[sp] = sc.fn_left[node]
-        stack[sp + 1] = sc.fn_right[node]
-        sp += 2
+        sp = push_children_sorted(sc.fw_box, sc.fw_child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, best,
+                                  stack, stack_t, sp)
     if bs < 0:
         return np.inf, -1
     return best, bs
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def fiber_any(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
-    """Is there a capsule hit with tmin < t < tmax in the BVH rooted at ``root`` (skips as
+    """Is there a capsule hit with tmin < t < tmax in the wide BVH rooted at ``root`` (skips as
     ``fiber_nearest``)? Stops at the first one found: shadow rays need no nearest hit."""
     ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
-    stack = np.empty(256, np.int64)
+    sx, sy, sz = direction_signs(ix, iy, iz)
+    stack = stack_array(STACK_SIZE, np.int64)
+    stack_t = stack_array(STACK_SIZE, np.float64)
     stack[0] = root
     sp = 1
     while sp > 0:
         sp -= 1
-        node = stack[sp]
-        if _box(sc.fn_lo, sc.fn_hi, node, ox, oy, oz, ix, iy, iz, tmin, tmax) == np.inf:
-            continue
-        if sc.fn_left[node] < 0:
-            for j in range(sc.fn_start[node], sc.fn_start[node] + sc.fn_count[node]):
+        ref = stack[sp]
+        if ref < 0:
+            j0, n = leaf_range(ref)
+            for j in range(j0, j0 + n):
                 s = sc.fprim[j]
-                if ign_fiber >= 0 and sc.seg_srcfiber[s] == ign_fiber and abs(sc.seg_src[s] - ign_seg) <= ign_window:
+                if _skipped(sc, s, ign_fiber, ign_seg, ign_window):
                     continue
-                i = sc.seg_a[s]
-                P = sc.points
-                t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
-                                      P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], sc.seg_r[s], tmin)
-                if t < tmax:
+                if _segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin) < tmax:
                     return True
             continue
-        stack[sp] = sc.fn_left[node]
-        stack[sp + 1] = sc.fn_right[node]
-        sp += 2
+        sp = push_children_sorted(sc.fw_box, sc.fw_child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax,
+                                  stack, stack_t, sp)
     return False
 
 
@@ -257,11 +271,11 @@ def block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, an
                 shx = (i - (i % nx)) * bw
                 shy = (j - (j % ny)) * bh
                 if any_hit:
-                    if fiber_any(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1, ign_fiber, ign_seg,
+                    if fiber_any(sc, sc.ex_wide_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1, ign_fiber, ign_seg,
                                  ign_window):
                         return s, 0, k, i, j, 0.0, 0.0, 0.0
                 else:
-                    t, seg = fiber_nearest(sc, sc.ex_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1,
+                    t, seg = fiber_nearest(sc, sc.ex_wide_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1,
                                            ign_fiber, ign_seg, ign_window)
                     if seg >= 0:
                         return t, seg, k, i, j, ax - shx + t * ux, ay - shy + t * uy, az + t * uz

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from stages.core.geometry.bvh import build_fiber_bvh, intersect, intersect_brute, occluded
+from stages.core.geometry.bvh import LEAF_CODE, build_fiber_bvh, intersect, intersect_brute, occluded
 from stages.core.geometry.capsule import capsule_intersect, capsule_normal
 
 
@@ -90,6 +90,57 @@ def test_bvh_matches_brute_force(seed):
     # occluded over [tmin, t_hit/2) is false when there is a hit; over [tmin, 10) true iff a hit exists
     assert not np.any(res[hits, 4] > 0)
     np.testing.assert_array_equal(res[~hits, 4], 0.0)
+
+
+def _wide_leaves(bvh, ref, out):
+    """Collect (node, slot, first, count) of every leaf under wide node ``ref``, recursively."""
+    for q in range(4):
+        c = int(bvh.wide_child[ref, q])
+        if c >= 0:
+            _wide_leaves(bvh, c, out)
+        else:
+            code = -1 - c
+            out.append((ref, q, code // LEAF_CODE, code % LEAF_CODE))
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_wide_nodes_hold_every_segment_in_outward_rounded_boxes(seed):
+    """Contract of the 4-wide tree the queries walk: every segment lies in exactly one leaf; each child
+    box (float32) contains the exact float64 bounds of every capsule below it (rounded outward, never
+    inward); unused slots are empty boxes (lo > hi, no ray enters them); both arrays start on a 64-byte
+    boundary; a wide tree has about a third as many nodes as the binary one."""
+    from stages.core.geometry.bvh import segment_bounds
+
+    pts, offs, rad = random_fibres(seed, n_fibres=60)
+    bvh, _ = build_fiber_bvh(pts, offs, rad)
+    lo, hi = segment_bounds(bvh.points, bvh.seg_a, bvh.seg_r)
+    leaves = []
+    _wide_leaves(bvh, 0, leaves)
+    segs = [int(bvh.prims[j, 7]) for _, _, first, n in leaves for j in range(first, first + n)]
+    assert sorted(segs) == list(range(len(bvh.seg_a)))
+    box = bvh.wide_box.astype(np.float64)
+
+    def below(ref, q):
+        c = int(bvh.wide_child[ref, q])
+        if c < 0:
+            code = -1 - c
+            return [int(bvh.prims[j, 7]) for j in range(code // LEAF_CODE, code // LEAF_CODE + code % LEAF_CODE)]
+        return [s for qq in range(4) for s in below(c, qq)]
+
+    checked = 0
+    for ref in range(len(box)):
+        for q in range(4):
+            s = below(ref, q)
+            blo = box[ref, [q, 4 + q, 8 + q]]
+            bhi = box[ref, [12 + q, 16 + q, 20 + q]]
+            if not s:
+                assert np.all(blo > bhi)
+                continue
+            assert np.all(blo <= lo[s].min(axis=0)) and np.all(bhi >= hi[s].max(axis=0))
+            checked += 1
+    assert checked > len(box)   # the tree is wider than binary
+    assert len(bvh.wide_box) < 0.5 * len(bvh.node_left)
+    assert bvh.wide_box.ctypes.data % 64 == 0 and bvh.wide_child.ctypes.data % 64 == 0
 
 
 def test_capsule_closed_forms():
