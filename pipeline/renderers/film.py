@@ -114,7 +114,7 @@ class RemoteFilm:
         import importlib
 
         from stages.render.film import new_film
-        from stages.render.tiles import render_tile
+        from stages.render.tiles import tile_kernel
 
         from ..scene import load_scene
 
@@ -122,7 +122,7 @@ class RemoteFilm:
         s = importlib.import_module(self.module).film_setup(load_scene(self.scene_path), self.options)
         t1 = time.perf_counter()
         counts = np.zeros((1, 1), np.int64)
-        render_tile(s.integ, s.cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
+        tile_kernel(s.integ)(s.integ, s.cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
         return s, t1 - t0, time.perf_counter() - t1
 
     def key(self) -> str:
@@ -244,11 +244,11 @@ def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile
         def cleanup():
             shutil.rmtree(scratch, ignore_errors=True)
     else:
-        from stages.render.tiles import render_tile
+        from stages.render.tiles import tile_kernel
 
         tiles = tile_grid(width, height, int(tile_size))
         t0 = time.perf_counter()
-        render_tile(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
+        tile_kernel(integ)(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
         spent["compile_s"] = time.perf_counter() - t0
 
         def run_pass(text, first, cnt, film, name):

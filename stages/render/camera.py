@@ -37,18 +37,26 @@ def pack_camera(origin, target, up, fov_deg, width, height):
 @njit(cache=True, fastmath=False)
 def camera_ray(cam, row, col, u, v):
     """Ray through image point (col + u, row + v), u, v in [0, 1). Returns (origin, unit direction)."""
+    o = np.empty(3)
+    d = np.empty(3)
+    camera_ray_into(cam, row, col, u, v, o, d)
+    return o, d
+
+
+@njit(cache=True, fastmath=False)
+def camera_ray_into(cam, row, col, u, v, o, d):
+    """``camera_ray`` writing the origin and unit direction into ``o`` and ``d``."""
     w = cam[13]
     h = cam[14]
     t = cam[12]
     sx = (2.0 * (col + u) / w - 1.0) * t
     sy = (1.0 - 2.0 * (row + v) / h) * t * h / w
-    d = np.empty(3)
     for k in range(3):
         d[k] = cam[3 + k] + sx * cam[6 + k] + sy * cam[9 + k]
     n = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    d /= n
-    o = cam[0:3].copy()
-    return o, d
+    for k in range(3):
+        d[k] /= n
+        o[k] = cam[k]
 
 
 @njit(cache=True)

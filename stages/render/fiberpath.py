@@ -32,6 +32,13 @@ the hit.
 Random numbers: ``uniform(seed, index, dim)`` for camera sample ``index`` (``stages.render.tiles``):
 dimensions 0-1 place the sample in its pixel, then 4 + 2 NL per scattering event (lobe, direction,
 roulette, one pair per light), so the image is identical for any thread count and tile order.
+
+Speed: on realized fibres the estimator is compiled without numba's reference counting
+(``trace_path_borrowed``, and the tile loop with it: ``stages.render.tiles.tile_kernel``). The path's
+vectors live on the machine stack and the BVH queries take no references, so no atomic
+reference-count update touches the scene's arrays per ray; with two threads those updates had cost
+more than the shading (``bench/bench_mitsuba.py``). Shell scenes keep reference counting (the shell
+walk allocates its hit records).
 """
 from collections import namedtuple
 
@@ -40,21 +47,23 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.bvh import FiberBVH
+from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit, surface_occluded
 from stages.core.rng import uniform
 from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_is_curve, material_prepare,
                                           material_sample)
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import light_eval, light_pdf, light_sample
+from stages.render.lights import light_eval, light_pdf, light_sample_into
 
 FiberpathIntegrator = namedtuple("FiberpathIntegrator", [
     "scene", "mat_of_fiber", "mats", "ground_mat", "lights", "ground", "has_ground",
     "max_depth", "rr_depth", "ign_window", "eps"])
 
 
-@njit(cache=True)
-def trace_path(it, o, d, seed, key):
+@njit(cache=True, inline="always")
+def _trace(it, o, d, seed, key):
     """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
     lights = it.lights.lights
     env = it.lights.env
@@ -75,13 +84,17 @@ def trace_path(it, o, d, seed, key):
     ign_s = -1
     cell = -1
     pdf_prev = 0.0
-    t_tan = np.zeros(3)
-    n = np.zeros(3)
-    wi = np.empty(3)
-    p = np.empty(3)
-    so = np.empty(3)
-    wo = np.empty(3)
-    ctx = np.empty(CTX_SIZE)
+    t_tan = stack_vector3()   # per-path vectors live on the machine stack, not the heap
+    n = stack_vector3()
+    for k in range(3):
+        t_tan[k] = 0.0
+        n[k] = 0.0
+    wi = stack_vector3()
+    p = stack_vector3()
+    so = stack_vector3()
+    wo = stack_vector3()
+    ctx = stack_array(CTX_SIZE, np.float64)
+    wl = stack_vector3()
     depth = 0
     while True:
         h = surface_hit(it.scene, cell, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, ign_f, ign_s,
@@ -142,9 +155,9 @@ def trace_path(it, o, d, seed, key):
         base = 2 + depth * dims_per_bounce
         # next-event estimation: one sample per light
         for k in range(nl):
-            wl, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond,
-                                                     uniform(seed, key, base + 4 + 2 * k),
-                                                     uniform(seed, key, base + 5 + 2 * k))
+            lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
+                                                      uniform(seed, key, base + 4 + 2 * k),
+                                                      uniform(seed, key, base + 5 + 2 * k), wl)
             if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                 continue
             f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
@@ -191,7 +204,31 @@ def trace_path(it, o, d, seed, key):
     return PathSample(L0, L1, L2, 1.0 if first_t > 0.0 else 0.0, first_t, 0, rays)
 
 
+@njit(cache=True)
+def trace_path(it, o, d, seed, key):
+    """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
+    return _trace(it, o, d, seed, key)
+
+
+@njit(cache=True, _nrt=False)
+def trace_path_borrowed(it, o, d, seed, key):
+    """``trace_path`` compiled without reference counting, for realized fibres (a ``FiberBVH``, whose
+    queries allocate nothing): no atomic reference-count updates on the scene's arrays per call,
+    which with two threads cost more than the shading."""
+    return _trace(it, o, d, seed, key)
+
+
+def _reference_free(self):
+    return isinstance(self.scene, FiberBVH)
+
+
+# stages.render.tiles.tile_kernel: the tile loop may be compiled without reference counting too
+FiberpathIntegrator.reference_free = property(_reference_free)
+
+
 @overload(radiance)
 def _fiberpath_radiance(integ, o, d, seed, index):
     if is_tuple_class(integ, FiberpathIntegrator):
+        if is_tuple_class(integ.types[integ.fields.index("scene")], FiberBVH):
+            return lambda integ, o, d, seed, index: trace_path_borrowed(integ, o, d, seed, index)
         return lambda integ, o, d, seed, index: trace_path(integ, o, d, seed, index)

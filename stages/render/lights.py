@@ -173,13 +173,20 @@ def light_sample(lights, k, env, marg, cond, u1, u2):
 
     Non-delta lights return the radiance from w and its solid-angle pdf; a directional light returns
     its irradiance, pdf 1 and delta = True (the caller multiplies without dividing)."""
-    t = lights[k, 0]
     w = np.empty(3)
+    r, g, b, pdf, delta = light_sample_into(lights, k, env, marg, cond, u1, u2, w)
+    return w, r, g, b, pdf, delta
+
+
+@njit(cache=True)
+def light_sample_into(lights, k, env, marg, cond, u1, u2, w):
+    """``light_sample`` writing the direction into ``w``: (r, g, b, pdf, delta)."""
+    t = lights[k, 0]
     if t == DIRECTIONAL:
         w[0] = lights[k, 4]
         w[1] = lights[k, 5]
         w[2] = lights[k, 6]
-        return w, lights[k, 1], lights[k, 2], lights[k, 3], 1.0, True
+        return lights[k, 1], lights[k, 2], lights[k, 3], 1.0, True
     if t == CONSTANT:
         z = 1.0 - 2.0 * u1
         s = math.sqrt(max(0.0, 1.0 - z * z))
@@ -187,7 +194,7 @@ def light_sample(lights, k, env, marg, cond, u1, u2):
         w[0] = s * math.cos(ph)
         w[1] = s * math.sin(ph)
         w[2] = z
-        return w, lights[k, 1], lights[k, 2], lights[k, 3], INV_4PI, False
+        return lights[k, 1], lights[k, 2], lights[k, 3], INV_4PI, False
     if t == SG:
         lam = lights[k, 7]
         c = 1.0 + math.log(u1 + (1.0 - u1) * math.exp(-2.0 * lam)) / lam
@@ -206,7 +213,7 @@ def light_sample(lights, k, env, marg, cond, u1, u2):
         n = math.sqrt(w[0] * w[0] + w[1] * w[1] + w[2] * w[2])
         w /= n
         r, g, b = light_eval(lights, k, env, marg, cond, w)
-        return w, r, g, b, light_pdf(lights, k, env, marg, cond, w), False
+        return r, g, b, light_pdf(lights, k, env, marg, cond, w), False
     # envmap: row from the marginal, column from that row's conditional, uniform inside the pixel
     H = env.shape[0]
     W = env.shape[1]
@@ -227,9 +234,9 @@ def light_sample(lights, k, env, marg, cond, u1, u2):
     w[1] = math.cos(ph) * st
     w[2] = math.cos(th)
     if st <= 0.0:
-        return w, 0.0, 0.0, 0.0, 0.0, False
+        return 0.0, 0.0, 0.0, 0.0, False
     pdf = pm * pc * H * W / (2.0 * math.pi * math.pi * st)
-    return w, lights[k, 1] * env[i, j, 0], lights[k, 2] * env[i, j, 1], lights[k, 3] * env[i, j, 2], pdf, False
+    return lights[k, 1] * env[i, j, 0], lights[k, 2] * env[i, j, 1], lights[k, 3] * env[i, j, 2], pdf, False
 
 
 @njit(cache=True)

@@ -1,6 +1,7 @@
 """The tile loop every render method shares: camera samples, the integrator, the film, threads.
 
-``render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off)`` renders
+``render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off)`` (or
+``render_tile_borrowed``, the same compiled without reference counting; ``tile_kernel(integ)`` picks) renders
 pixels [row0, row1) x [col0, col1): pixel (row, col) takes the ``counts[row - row_off, col]`` samples s = first,
 first + 1, ...; camera sample ``index = (row W + col) stride + s`` jitters its position inside the
 pixel with ``uniform(seed, index, 0)`` and ``uniform(seed, index, 1)`` (a box filter,
@@ -21,15 +22,18 @@ that nest namedtuples of namedtuples, such as the procedural tables inside a med
 import numpy as np
 from numba import njit
 
+from stages.core.geometry.stack import stack_vector3
 from stages.core.rng import uniform
-from stages.render.camera import camera_ray
+from stages.render.camera import camera_ray_into
 from stages.render.film import add_pixel
 from stages.render.integrator import radiance
 
 
-@njit(cache=True, nogil=True)
-def render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off):
+@njit(cache=True, inline="always")
+def _render_pixels(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off):
     W = int(cam[13])
+    o = stack_vector3()   # the camera ray, refilled per sample (integrators may move it along the path)
+    d = stack_vector3()
     for row in range(row0, row1):
         for col in range(col0, col1):
             n = counts[row - row_off, col]
@@ -50,7 +54,7 @@ def render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1,
             sn = 0.0
             for s in range(first, first + n):
                 index = pix * stride + s
-                o, d = camera_ray(cam, row, col, uniform(seed, index, 0), uniform(seed, index, 1))
+                camera_ray_into(cam, row, col, uniform(seed, index, 0), uniform(seed, index, 1), o, d)
                 ps = radiance(integ, o, d, seed, index)
                 sr += ps.r
                 sg += ps.g
@@ -68,6 +72,26 @@ def render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1,
             add_pixel(film, row - row_off, col, sr, sg, sb, srr, sgg, sbb, sy, syy, sh, sd, sl, sn)
 
 
+@njit(cache=True, nogil=True)
+def render_tile(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off):
+    _render_pixels(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off)
+
+
+@njit(cache=True, nogil=True, _nrt=False)
+def render_tile_borrowed(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off):
+    """``render_tile`` compiled without reference counting, for integrators whose kernels take no
+    references (``integ.reference_free``): passing the integrator's arrays down costs no atomic
+    reference-count updates per sample (with two threads on the same arrays those dominated fiberpath's
+    shading)."""
+    _render_pixels(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off)
+
+
+def tile_kernel(integ):
+    """The compiled tile loop for this integrator: ``render_tile_borrowed`` when its class says
+    ``reference_free``, else ``render_tile``. Calling it on an empty tile compiles (or loads) it."""
+    return render_tile_borrowed if getattr(integ, "reference_free", False) else render_tile
+
+
 def render_tiles(integ, cam, seed, stride, first, counts, tiles, film, threads=None, row_off=0):
     """Render the tiles (rows of (row0, col0, row1, col1)) into ``film``; returns it. ``counts``: an
     int array of samples per pixel shaped as ``film``'s first two axes (or an int: every pixel);
@@ -79,12 +103,13 @@ def render_tiles(integ, cam, seed, stride, first, counts, tiles, film, threads=N
     if np.ndim(counts) == 0:
         counts = np.full(film.shape[:2], int(counts), np.int64)
     args = (integ, cam, int(seed), int(stride), int(first), np.ascontiguousarray(counts, np.int64))
+    tile = tile_kernel(integ)
     if n <= 1 or len(tiles) <= 1:
         for t in tiles:
-            render_tile(*args, t[0], t[1], t[2], t[3], film, int(row_off))
+            tile(*args, t[0], t[1], t[2], t[3], film, int(row_off))
         return film
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(max_workers=n) as ex:
-        list(ex.map(lambda t: render_tile(*args, t[0], t[1], t[2], t[3], film, int(row_off)), tiles))
+        list(ex.map(lambda t: tile(*args, t[0], t[1], t[2], t[3], film, int(row_off)), tiles))
     return film

@@ -45,7 +45,7 @@ def surface_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber,
 
 # ------------------------------------------------------------------------------------------------
 # realized fibres in one BVH
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def bvh_surface_hit(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
     t, s = intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
     if s < 0:

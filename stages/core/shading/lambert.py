@@ -43,17 +43,24 @@ def lambert_pdf(albedo, n, wi, wo):
 @njit(cache=True)
 def lambert_sample(albedo, n, wi, u0, u1, u2):
     """(wo, weight r, g, b, pdf) by cosine-weighted hemisphere sampling (Malley's method)."""
+    wo = np.empty(3)
+    r, g, b, pdf = lambert_sample_into(albedo, n, wi, u1, u2, wo)
+    return wo, r, g, b, pdf
+
+
+@njit(cache=True)
+def lambert_sample_into(albedo, n, wi, u1, u2, wo):
+    """``lambert_sample`` writing the direction into ``wo``: (weight r, g, b, pdf)."""
     r = math.sqrt(u1)
     ph = 2.0 * math.pi * u2
     x = r * math.cos(ph)
     y = r * math.sin(ph)
     z = math.sqrt(max(0.0, 1.0 - u1))
     (t0, t1, t2), (b0, b1, b2) = orthonormal_basis(n[0], n[1], n[2])
-    wo = np.empty(3)
     wo[0] = x * t0 + y * b0 + z * n[0]
     wo[1] = x * t1 + y * b1 + z * n[1]
     wo[2] = x * t2 + y * b2 + z * n[2]
     pdf = z / math.pi
     if pdf <= 0.0:
-        return wo, 0.0, 0.0, 0.0, 0.0
-    return wo, albedo[0], albedo[1], albedo[2], pdf
+        return 0.0, 0.0, 0.0, 0.0
+    return albedo[0], albedo[1], albedo[2], pdf

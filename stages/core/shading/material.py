@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.shading import bcsdf as B
-from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 
 MAT_SIZE = 14
 MAT_BCSDF = 0
@@ -73,7 +73,4 @@ def material_eval_pdf(mat, ctx, t, n, wi, wo):
 def material_sample(mat, ctx, t, n, wi, u0, u1, u2, wo):
     if int(mat[0]) == MAT_BCSDF:
         return B.bcsdf_sample_ctx(mat[1:11], ctx, t, u0, u1, u2, wo)
-    ws, w0, w1, w2, pdf = lambert_sample(mat[11:14], n, wi, u0, u1, u2)
-    for k in range(3):
-        wo[k] = ws[k]
-    return w0, w1, w2, pdf
+    return lambert_sample_into(mat[11:14], n, wi, u1, u2, wo)
