@@ -236,6 +236,8 @@ test-all: $(VENV)/.installed
 
 bench: $(VENV)/.installed
 	@mkdir -p bench/results
+	@# the optional peer renderer for bench_mitsuba (skipped with a message when it cannot be installed)
+	@$(PIP) install -q -e '.[test,dask,bench]' > $(VENV)/pip-bench.log 2>&1 || echo "note: Mitsuba 3 not installed (see $(VENV)/pip-bench.log); bench_mitsuba will be skipped"
 	$(BIN)/python bench/run.py --out bench/results
 
 table1: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr

@@ -46,7 +46,12 @@ def run(out_dir) -> dict:
     W, H, spp = (int(x) for x in os.environ.get("LOOMLIGHT_BENCH_VOLPATH", "48,36,2").split(","))
     tables, fibers, where = _artifacts(Path(out_dir))
     scene = load_scene(SCENE)
-    base = {"width": W, "height": H, "spp": spp, "seed": 7, "extra": {}, "tables": str(tables), "fibers": str(fibers)}
+    from pipeline.renderers import method
+    from pipeline.runners.render import resolve_options
+
+    # the options the CLI would pass (`render --width W --height H --spp N --seed 7`), as it resolves them
+    base = resolve_options(scene, method("volpath"), width=W, height=H, spp=spp, seed=7, fibers=fibers,
+                           tables=tables)
     res = {"scene": str(SCENE.relative_to(ROOT)), "image": f"{W}x{H} @ {spp} spp", "artifacts": where,
            "threads": int(numba.get_num_threads())}
     for source in ("procedural", "realized"):
