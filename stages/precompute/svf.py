@@ -93,8 +93,10 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from stages.core.geometry.bvh import direction_signs, leaf_range, push_children_sorted
 from stages.core.geometry.capsule import INSIDE, capsule_intersect, point_segment_dist2
-from stages.core.geometry.slab import safe_inverse, slab_enter
+from stages.core.geometry.slab import safe_inverse
+from stages.core.geometry.stack import stack_array
 from stages.core.rng import normal, uniform
 from stages.core.sg import spherical_fibonacci_axes
 from stages.core.svf import pixel_direction, pixel_solid_angle
@@ -163,12 +165,6 @@ def exemplar_segments(ex_points, ex_radius, ex_offsets, ex_fibers, ex_period, k:
 # The hot helpers take arrays, never the ShellScene: passing the namedtuple of ~30 arrays to a call
 # costs ~0.5 us (reference counts of every array), twenty times a capsule test.
 @njit(cache=True, inline="always")
-def _box(lo, hi, node, ox, oy, oz, ix, iy, iz, tmin, tmax):
-    return slab_enter(lo[node, 0], lo[node, 1], lo[node, 2], hi[node, 0], hi[node, 1], hi[node, 2],
-                      ox, oy, oz, ix, iy, iz, tmin, tmax)
-
-
-@njit(cache=True, inline="always")
 def _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Does the ray from the midpoint (origin already shifted into the capsule's period) enter wrapped
     capsule s beyond tmin before tmax? A capsule that contains the origin lets it through
@@ -183,49 +179,32 @@ def _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True, inline="always")
-def _any_hit_period(P, seg_a, seg_r, srcfib, lo, hi, left_, right_, start, count, prim, root,
+def _any_hit_period(P, seg_a, seg_r, srcfib, box, child, prim, root,
                     ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, tmax, ign_fiber, stack):
     """Any wrapped capsule (not of ign_fiber) hit in (tmin, tmax) by the ray in one period: its index or -1.
-    Children are visited nearer first."""
-    if _box(lo, hi, root, ox, oy, oz, ix, iy, iz, tmin, tmax) == np.inf:
-        return -1
+    Walks the exemplar's 4-wide nodes (``stages.core.geometry.bvh``), children nearer first."""
+    sx, sy, sz = direction_signs(ix, iy, iz)
+    stack_t = stack_array(STACK, np.float64)
     stack[0] = root
     sp = 1
     while sp > 0:
         sp -= 1
-        node = stack[sp]
-        left = left_[node]
-        if left < 0:
-            for j in range(start[node], start[node] + count[node]):
+        ref = stack[sp]
+        if ref < 0:
+            j0, n = leaf_range(ref)
+            for j in range(j0, j0 + n):
                 s = prim[j]
                 if srcfib[s] == ign_fiber:
                     continue
                 if _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
                     return s
             continue
-        right = right_[node]
-        tl = _box(lo, hi, left, ox, oy, oz, ix, iy, iz, tmin, tmax)
-        tr = _box(lo, hi, right, ox, oy, oz, ix, iy, iz, tmin, tmax)
-        if tl < np.inf:
-            if tr < np.inf:
-                if tl <= tr:
-                    stack[sp] = right
-                    stack[sp + 1] = left
-                else:
-                    stack[sp] = left
-                    stack[sp + 1] = right
-                sp += 2
-            else:
-                stack[sp] = left
-                sp += 1
-        elif tr < np.inf:
-            stack[sp] = right
-            sp += 1
+        sp = push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax, stack, stack_t, sp)
     return -1
 
 
 @njit(cache=True, inline="always")
-def _periodic_any_hit(P, seg_a, seg_r, srcfib, lo, hi, left_, right_, start, count, prim, root,
+def _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root,
                       bw, bh, nx, ny, ox, oy, oz, dx, dy, dz, L, ign_fiber, stack):
     ci = int(math.floor(ox / bw)) // nx
     cj = int(math.floor(oy / bh)) // ny
@@ -248,7 +227,7 @@ def _periodic_any_hit(P, seg_a, seg_r, srcfib, lo, hi, left_, right_, start, cou
         if s1 > s:
             shx = (ci * nx) * bw
             shy = (cj * ny) * bh
-            p = _any_hit_period(P, seg_a, seg_r, srcfib, lo, hi, left_, right_, start, count, prim, root,
+            p = _any_hit_period(P, seg_a, seg_r, srcfib, box, child, prim, root,
                                 ox - shx, oy - shy, oz, dx, dy, dz, ix, iy, iz, s, s1, ign_fiber, stack)
             if p >= 0:
                 return p, ci, cj
@@ -270,8 +249,8 @@ def periodic_any_hit(sc, k, ox, oy, oz, dx, dy, dz, L, ign_fiber, stack):
     0 < t < L, hits in the exemplar repeated without end, found in period (ci, cj) (shift
     (ci nx bw, cj ny bh)); piece = -1 when none. Hit or not agrees with ``periodic_hit_outside`` (a walk over
     whole periods instead of blocks: the same capsules, the same roots)."""
-    return _periodic_any_hit(sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber, sc.fn_lo, sc.fn_hi, sc.fn_left,
-                             sc.fn_right, sc.fn_start, sc.fn_count, sc.fprim, sc.ex_root[k],
+    return _periodic_any_hit(sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber, sc.fw_box, sc.fw_child, sc.fprim,
+                             sc.ex_wide_root[k],
                              sc.block_size[0], sc.block_size[1], sc.ex_nblocks[k, 0], sc.ex_nblocks[k, 1],
                              ox, oy, oz, dx, dy, dz, L, ign_fiber, stack)
 
@@ -293,9 +272,8 @@ def segment_image(sc, k, z_lo, z_hi, ox, oy, oz, fibre, dirs, max_dist, out, sta
     """Bit-packed visibility image of the point o (skipping fibre ``fibre``) into ``out`` (bytes);
     ``dirs`` from _direction_table; scratch: ``stack`` (STACK,) int64, ``col_cache`` (res_phi, 3) int64."""
     P, seg_a, seg_r, srcfib = sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber
-    lo, hi, left, right, start, count, prim = sc.fn_lo, sc.fn_hi, sc.fn_left, sc.fn_right, sc.fn_start, \
-        sc.fn_count, sc.fprim
-    root = sc.ex_root[k]
+    box, child, prim = sc.fw_box, sc.fw_child, sc.fprim
+    root = sc.ex_wide_root[k]
     bw = sc.block_size[0]
     bh = sc.block_size[1]
     nx = sc.ex_nblocks[k, 0]
@@ -329,9 +307,8 @@ def segment_image(sc, k, z_lo, z_hi, ox, oy, oz, fibre, dirs, max_dist, out, sta
                         blocked = True
                         pp, pi, pj = q, qi, qj
                     else:
-                        q, qi, qj = _periodic_any_hit(P, seg_a, seg_r, srcfib, lo, hi, left, right, start, count,
-                                                      prim, root, bw, bh, nx, ny, ox, oy, oz, dx, dy, dz, L,
-                                                      fibre, stack)
+                        q, qi, qj = _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root, bw, bh, nx,
+                                                      ny, ox, oy, oz, dx, dy, dz, L, fibre, stack)
                         if q >= 0:
                             blocked = True
                             pp, pi, pj = q, qi, qj
