@@ -139,14 +139,6 @@ def _export(fibers: Path, work: Path) -> Path:
     return txt
 
 
-def _camera(scene_path: Path | None, scene_text: str | None, work: Path):
-    from pipeline.scene import load_scene
-
-    if scene_path is None:
-        scene_path = work / "scene.toml"
-    return load_scene(scene_path).camera
-
-
 def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=4, radius_scale=1.0) -> dict:
     import numba
 

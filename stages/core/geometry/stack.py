@@ -1,33 +1,20 @@
-"""Traversal stacks on the machine stack: a BVH query per ray allocates nothing on the heap.
+"""Arrays on the machine stack: a BVH query or a path allocates nothing on the heap.
 
-``traversal_stack()`` (inline) gives (node stack int64[STACK_SIZE], entry-distance stack
-float64[STACK_SIZE]) in the stack frame of the function that inlines it (an LLVM ``alloca``); the
-triangle mesh queries use it. ``stack_array(n, dtype)`` (n a literal) is the same as one intrinsic: an
-array with no memory manager, which functions compiled without numba's reference counting
-(``_nrt=False``: the fibre BVH queries, so no atomic reference-count traffic on the scene's arrays
-from two threads) can make; ``numba.carray`` cannot be called there. STACK_SIZE bounds a traversal's pending nodes: a binary
-SAH tree over 10^8 primitives is well under 128 deep, and a 4-wide query pushes at most 3 nodes per
-level it descends.
+``stack_array(n, dtype)`` (n a literal integer) is an n-element array in the stack frame of the
+function that calls it (an LLVM ``alloca``), with no memory manager, so functions compiled without
+numba's reference counting (``_nrt=False``: the fibre BVH queries and fiberpath's path tracer, no
+atomic reference-count traffic on the scene's arrays from two threads) can make it, where
+``numba.carray`` cannot be called. ``traversal_stack()`` (inline) gives (node stack int64[STACK_SIZE],
+entry-distance stack float64[STACK_SIZE]); ``stack_vector3()`` a float64[3] scratch vector.
+STACK_SIZE bounds a traversal's pending nodes: a binary SAH tree over 10^8 primitives is well under
+128 deep, and a 4-wide query pushes at most 3 nodes per level it descends.
 """
-import numba
 import numpy as np
 from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
 STACK_SIZE = 128
-
-
-@intrinsic
-def stack_buffer(typingctx, n, dtype):
-    """A pointer to n elements of ``dtype`` on the calling function's stack (n a literal integer)."""
-    if not isinstance(n, types.IntegerLiteral):
-        return None
-    size = n.literal_value
-
-    def codegen(context, builder, sig, args):
-        return cgutils.alloca_once(builder, context.get_data_type(dtype.dtype), size=size)
-    return types.CPointer(dtype.dtype)(n, dtype), codegen
 
 
 @intrinsic
@@ -55,9 +42,7 @@ def stack_array(typingctx, n, dtype):
 @njit(cache=True, inline="always")
 def traversal_stack():
     """(node stack, entry-distance stack) of STACK_SIZE each, on the stack of the function that inlines it."""
-    return (numba.carray(stack_buffer(STACK_SIZE, np.int64), STACK_SIZE),
-            numba.carray(stack_buffer(STACK_SIZE, np.float64), STACK_SIZE))
-
+    return stack_array(STACK_SIZE, np.int64), stack_array(STACK_SIZE, np.float64)
 
 
 @njit(cache=True, inline="always")
