@@ -12,7 +12,9 @@ ordered as the lookups rank them: yarn, ply, regular/loop pieces (by fibre index
 (by hair index), so "the lowest covering fibre" is the lookup's answer.
 
 ``realize_plan`` lists the pieces (no geometry) so the size is known before anything is
-allocated; ``realize_fill`` writes the vertices of a plan.
+allocated; ``realize_fill`` writes the vertices of a plan. A render's fibre cache realizes windows
+of yarns only (``window_pieces``, ``realize_fill_window``): runs of the same pieces' vertices, the
+same floats, so its segments are a subset of the full realization's.
 """
 import math
 
@@ -154,9 +156,19 @@ def yarn_counts(tab, c, L, spacing):
     return verts, pieces
 
 
-@njit(cache=True, parallel=True)
 def realize_fill(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, offsets, points, radius):
-    """Vertices of every planned piece (prange over pieces), fabric space via Eq. 7."""
+    """Vertices of every planned piece (prange over pieces), fabric space via Eq. 7. (A Python
+    function: numba's cache cannot hold a compiled caller of a parallel kernel.)"""
+    offsets = np.asarray(offsets, np.int64)
+    realize_fill_window(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, np.zeros(len(yarn), np.int64),
+                        np.ascontiguousarray(offsets[1:] - offsets[:-1]), offsets, points, radius)
+
+
+@njit(cache=True, parallel=True)
+def realize_fill_window(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, nfull, offsets, points, radius):
+    """Vertices first[q] .. first[q] + (offsets[q + 1] - offsets[q]) - 1 of planned piece q, a piece of
+    nfull[q] vertices (prange over pieces): the same floats as the whole piece's vertices there, so a
+    window of a piece is a run of the full realization's segments (``window_pieces``)."""
     F = yarn.shape[0]
     for q in prange(F):
         c = yarn[q]
@@ -167,11 +179,13 @@ def realize_fill(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, offsets, point
         j = idx[q]
         lo = offsets[q]
         n = offsets[q + 1] - lo
+        m0 = first[q]
+        nf = nfull[q]
         rf = tp[FIBER_RADIUS]
         if kind[q] == 3:
             r0, r1, th1, pe = hair_params(tp, yseed, k, j)
             for m in range(n):
-                u = m / (n - 1)
+                u = (m0 + m) / (nf - 1)
                 x, y, z = hair_point(tp, k, r0, r1, th1, pe, hz1[q], hze[q], u)
                 pos, tan, nn, bn = curve_frame_at(cv, c, z)
                 for d in range(3):
@@ -180,12 +194,63 @@ def realize_fill(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, offsets, point
         else:
             f = tab.type_fib_off[t] + k * int(tp[FIBER_NUM]) + j
             for m in range(n):
-                z = a0[q] + (a1[q] - a0[q]) * (m / (n - 1))
+                z = a0[q] + (a1[q] - a0[q]) * ((m0 + m) / (nf - 1))
                 x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], z)
                 pos, tan, nn, bn = curve_frame_at(cv, c, z)
                 for d in range(3):
                     points[lo + m, d] = pos[d] + x * nn[d] + y * bn[d]
                 radius[lo + m] = rf
+
+
+@njit(cache=True)
+def window_pieces(kind, a0, a1, hz1, hze, nv, w0, w1, spacing, length, period):
+    """The runs of one yarn's planned pieces (``yarn_plan``) that a fibre cache realizes: for windows
+    [w0[i], w1[i]] of the yarn's arc length (sorted, disjoint), every segment of a regular or loop
+    piece with an end in a window (its vertices first .. first + count - 1), and every hair whose
+    z range [z1, z1 + ze] meets a window widened by ``spacing`` (whole; an open yarn's hair range
+    clamped to [0, length] first, as its frames are). ``period`` > 0: a closed yarn's length (hair
+    ranges are compared shifted by +-period too). Returns (piece, first, count)
+    in plan order, windows in order within a piece: the cache ranks its fibres as the full
+    realization does."""
+    P = kind.shape[0]
+    W = w0.shape[0]
+    cap = P * W + 1
+    piece = np.empty(cap, np.int64)
+    first = np.empty(cap, np.int64)
+    count = np.empty(cap, np.int64)
+    n = 0
+    for q in range(P):
+        if kind[q] == 3:
+            za = min(hz1[q], hz1[q] + hze[q])
+            zb = max(hz1[q], hz1[q] + hze[q])
+            if period == 0.0:
+                za = min(max(za, 0.0), length)
+                zb = min(max(zb, 0.0), length)
+            za -= spacing
+            zb += spacing
+            hit = False
+            for i in range(W):
+                for sh in (-period, 0.0, period):
+                    if za + sh <= w1[i] and zb + sh >= w0[i]:
+                        hit = True
+            if hit:
+                piece[n] = q
+                first[n] = 0
+                count[n] = nv[q]
+                n += 1
+            continue
+        dz = (a1[q] - a0[q]) / (nv[q] - 1)
+        for i in range(W):
+            if w1[i] < a0[q] or w0[i] > a1[q]:
+                continue
+            m0 = max(0, int(math.floor((w0[i] - a0[q]) / dz)) - 1)
+            m1 = min(nv[q] - 1, int(math.ceil((w1[i] - a0[q]) / dz)) + 1)
+            if m1 > m0:
+                piece[n] = q
+                first[n] = m0
+                count[n] = m1 - m0 + 1
+                n += 1
+    return piece[:n], first[:n], count[:n]
 
 
 def realize_plan(tab, curve_length, spacing):
