@@ -34,6 +34,7 @@ def register(app: typer.Typer) -> None:
                material: str = typer.Option(None, "--material", metavar=material_metavar(), help=material_help()),
                max_depth: int = typer.Option(None, "--max-depth", help=f"Maximum scattering events per path (default: render.max_depth, else {COMMON_DEFAULTS['max_depth']})."),
                max_spp: int = typer.Option(None, "--max-spp", min=0, help="Adaptive sampling: pixels whose relative error after --spp samples exceeds render.target_error (default 0.05) are rendered again with up to this many new samples (default: render.max_spp, else 0 = off)."),
+               cache: float = typer.Option(None, "--cache", metavar="MiB", help="volpath --source procedural: the render-time fibre cache budget in MiB: the fibres of the bricks the camera sees, realized into a capsule BVH; 0 = every lookup procedural (default: render.cache, else 2048; clamped to the available memory)."),
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
                exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops (finite, within +-64)."),
                set_: list[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help=settings_help()),
@@ -59,6 +60,6 @@ def register(app: typer.Typer) -> None:
         result = run_render(scene, method=method, out=out, width=width, height=height, spp=spp, seed=seed,
                             source=source, fibers=fibers, tables=tables, grid=grid, bcsdf=bcsdf, material=material, max_depth=max_depth,
                             threads=threads, exposure=exposure, settings=set_ or [], max_spp=max_spp,
-                            scheduler=scheduler, workers=workers, threads_per_worker=threads_per_worker)
+                            scheduler=scheduler, workers=workers, threads_per_worker=threads_per_worker, cache=cache)
         for line in result:
             typer.echo(line)

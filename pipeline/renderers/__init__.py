@@ -287,6 +287,9 @@ def render_schema() -> dict:
                                        "target_error are rendered again with up to max_spp samples (0: off)"},
             "target_error": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
                              "description": "adaptive sampling: relative standard error of a pixel's mean aimed at"},
+            "cache": {"type": "number", "minimum": 0,
+                      "description": "volpath --source procedural: the render-time fibre cache budget in MiB "
+                                     "(0: every lookup procedural; default 2048); --cache overrides it"},
             "ground": {
                 "type": "object",
                 "additionalProperties": False,

@@ -1,8 +1,10 @@
 """``--method volpath``: volumetric path tracing of the fibre medium (seed 000 §5.4, App. A).
 
 Sources (``--source``, default the scene's ``render.source``, else procedural):
-- ``procedural``: lookups on the fly from a ``tables`` artifact (``--set tables=PATH.zarr``, which
-  carries its own copy of the yarn curves).
+- ``procedural``: lookups on the fly from a ``tables`` artifact (``--tables PATH.zarr``, which
+  carries its own copy of the yarn curves), with the render-time fibre cache (``--cache MiB``,
+  ``render.cache``; ``pipeline.fibre_cache``): the fibres of the bricks the camera sees, realized into
+  a capsule BVH within the budget, answer there; 0 caches nothing.
 - ``realized``: fibres of a ``fibers`` artifact (``--fibers PATH.zarr``) in a BVH; per-yarn density
   and roughness from the yarn types the fibres were realized with.
 - ``grid``: a ``grid`` artifact of ``loomlight voxelize`` (``--set grid=PATH.zarr``).
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -61,13 +64,14 @@ def _majorant_res(lo, hi, cell):
     return np.maximum(1, np.ceil(ext / cell)).astype(np.int64)
 
 
-def procedural_source(tables_path, cell=None, optics=None):
+def procedural_source(tables_path, cell=None, optics=None, view=None):
     """(ProceduralMedium, MajorantGrid, info, mats) from a tables artifact, scattering as ``optics``;
-    without optics (voxelize) the tables' own colours and micro-flake roughness, no fibre phase."""
+    without optics (voxelize) the tables' own colours and micro-flake roughness, no fibre phase.
+    ``view`` (``CacheView``): a render's camera and fibre cache budget; then the medium is the
+    ``FibreCacheMedium`` of that view (``pipeline.fibre_cache``; budget 0: every lookup procedural)."""
     from stages.core.shading.material import MAT_SIZE
     from stages.core.yarn.model import ROUGHNESS
-    from stages.render.procedural_medium import ProceduralMedium, fiber_capsules
-    from stages.render.tracking import majorants_from_capsules, make_majorant_grid
+    from stages.render.procedural_medium import ProceduralMedium
 
     from ..runners.tables import load_tables
 
@@ -86,11 +90,27 @@ def procedural_source(tables_path, cell=None, optics=None):
             if np.any(tab.yarn_type == t) and np.all(has[tab.yarn_type == t]):
                 tparams[t, ROUGHNESS] = 0.0
         tab = tab._replace(yarn_albedo=np.ascontiguousarray(optics.albedo(tab.yarn_albedo, groups)), tparams=tparams)
+    maj = procedural_majorant(cv, tab, cell)
+    info = {"yarns": int(len(tab.yarn_type))}
+    if view is None:
+        return ProceduralMedium(cv, tab), maj, info, mats
+    from ..fibre_cache import build_fibre_cache
+
+    built = build_fibre_cache(cv, tab, maj, view.camera, view.width, view.height, view.budget_mib)
+    return built.medium, built.majorant, {**info, **built.info}, mats
+
+
+def procedural_majorant(cv, tab, cell=None):
+    """The ``MajorantGrid`` of procedural tables: the largest density of the capsules that hold every
+    fibre surface (``stages.render.procedural_medium.fiber_capsules``) per cell of ``cell`` (default
+    a quarter of the mean yarn extent bound, at most 128 cells along an axis)."""
+    from stages.render.procedural_medium import fiber_capsules
+    from stages.render.tracking import majorants_from_capsules, make_majorant_grid
+
     a, b, r, bound = fiber_capsules(cv, tab, 0.25)
     lo, hi = _box_of_capsules(a, b, r)
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * float(np.mean(tab.yarn_extent)))
-    mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)
-    return ProceduralMedium(cv, tab), make_majorant_grid(lo, hi, res, mu), {"yarns": int(len(tab.yarn_type))}, mats
+    return make_majorant_grid(lo, hi, res, majorants_from_capsules(a, b, r, bound, lo, hi, res))
 
 
 def realized_source(fibers_path, cell, optics):
@@ -206,7 +226,16 @@ class FibreOptics:
         return mats, mats[:, 0] >= 0.0
 
 
-def open_source(source, options, optics):
+class CacheView(NamedTuple):
+    """What the procedural source's fibre cache is built for: the render's camera array and size, the
+    budget in MiB (``--cache``)."""
+    camera: np.ndarray
+    width: int
+    height: int
+    budget_mib: float
+
+
+def open_source(source, options, optics, view=None):
     extra = options.get("extra") or {}
     tables = options.get("tables") or extra.get("tables")
     cell = extra.get("majorant_cell")
@@ -218,7 +247,7 @@ def open_source(source, options, optics):
         if not cell > 0:
             raise LoomError(None, "--set majorant_cell", f"must be positive, got {cell}")
     if source == "procedural":
-        return procedural_source(tables, cell, optics)
+        return procedural_source(tables, cell, optics, view)
     if source == "realized":
         return realized_source(options.get("fibers"), cell, optics)
     if source == "grid":
@@ -260,7 +289,13 @@ def film_setup(scene, options: dict):
     cam = camera_array(scene.camera, W, H)
 
     t0 = time.perf_counter()
-    med, maj, info, mats = open_source(source, options, FibreOptics(scene, options))
+    view = None
+    if source == "procedural":
+        from ..fibre_cache import default_cache_mib
+
+        budget = options.get("cache")
+        view = CacheView(cam, W, H, default_cache_mib() if budget is None else float(budget))
+    med, maj, info, mats = open_source(source, options, FibreOptics(scene, options), view)
     build_s = time.perf_counter() - t0
     if not _sees_fabric(maj, cam, W, H):
         warn(f"the camera of {scene.path} sees no fabric (source {source}); rendering anyway")

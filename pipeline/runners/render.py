@@ -42,6 +42,10 @@ def render_estimate(options: dict, inputs: dict) -> Estimate:
         art = Artifact(path)
         if art.kind == "tables":
             est.extend(accel_estimate(art, est.what)).add("majorant grid", MAJORANT_BYTES)
+            from ..fibre_cache import default_cache_mib
+
+            mib = float(default_cache_mib() if options.get("cache") is None else options["cache"])
+            est.add("fibre cache (at most its budget)", mib * 2**20, f"--cache {mib:g} MiB")
         elif art.kind in ("fibers", "tiling"):
             points = art.arrays()["points" if art.kind == "fibers" else "ex_points"]
             est.add(f"{art.kind} and their BVH", VERTEX_BYTES * points.shape[0] + 2 * art.nbytes(),
@@ -80,7 +84,7 @@ def parse_settings(settings, m) -> dict:
 
 def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, source=None, fibers=None, tables=None,
                     grid=None, bcsdf=None, material=None, max_depth=None, threads=None, extra=None,
-                    max_spp=None) -> dict:
+                    max_spp=None, cache=None) -> dict:
     from ..renderers import COMMON_DEFAULTS
 
     extra = extra or {}
@@ -104,6 +108,7 @@ def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, sour
         "source": source, "fibers": str(fibers) if fibers else extra.get("tiling"),
         "tables": str(tables) if tables else extra.get("tables"), "grid": str(grid) if grid else extra.get("grid"),
         "bcsdf": bcsdf, "material": material, "threads": threads, "extra": extra,
+        "cache": _cache_budget(cache, rs),
     }
     from ..renderers import CLI_INPUTS
 
@@ -117,6 +122,18 @@ def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, sour
         raise LoomError(None, "--material", f"unknown fibre material {material!r} (known: {', '.join(m.materials)})"
                         + did_you_mean(material, m.materials))
     return options
+
+
+def _cache_budget(cli, rs):
+    """The fibre cache budget in MiB (``--cache``, else ``render.cache``, else None: the default),
+    checked and clamped to the available memory (``pipeline.fibre_cache.cache_budget_mib``)."""
+    from ..fibre_cache import cache_budget_mib
+
+    if cli is not None:
+        return cache_budget_mib(cli, "--cache")
+    if rs.get("cache") is not None:
+        return cache_budget_mib(rs["cache"], "render.cache")
+    return None
 
 
 def check_inputs(scene, m, options) -> None:
@@ -164,7 +181,7 @@ def check_bcsdf_names(scene, options) -> None:
 def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
                fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None,
                exposure=0.0, settings=(), max_spp=None, budget=None, scheduler=None, workers=None,
-               threads_per_worker=None):
+               threads_per_worker=None, cache=None):
     """Render and publish; returns the lines to print (output paths and statistics). ``budget``
     (``pipeline.memory.budget``, default a fraction of the available memory): refuse before rendering
     when the estimated peak memory exceeds it. ``scheduler``: where the tile tasks run (``--scheduler``;
@@ -195,7 +212,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     m = registered(method)
     extra = parse_settings(settings, m)
     options = resolve_options(scene, m, width, height, spp, seed, source, fibers, tables, grid, bcsdf, material,
-                              max_depth, threads, extra, max_spp)
+                              max_depth, threads, extra, max_spp, cache)
     check_inputs(scene, m, options)
     if threads:
         import numba

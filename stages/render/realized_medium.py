@@ -32,9 +32,12 @@ def covering_segment(bvh, x, y, z):
     """Segment of the lowest-index fibre whose capsule contains (x, y, z) (of its segments that do, the
     lowest: the answer does not depend on the tree), or -1. Walks the BVH's 4-wide nodes and
     leaf-ordered ``prims`` (see ``stages.core.geometry.bvh``)."""
-    box = bvh.wide_box
-    child = bvh.wide_child
-    prims = bvh.prims
+    return covering_segment_arrays(bvh.wide_box, bvh.wide_child, bvh.prims, bvh.seg_fiber, x, y, z)
+
+
+@njit(cache=True, _nrt=False)
+def covering_segment_arrays(box, child, prims, seg_fiber, x, y, z):
+    """``covering_segment`` on the BVH arrays it reads (for callers that hold them apart)."""
     if prims.shape[0] == 0:
         return -1
     stack = stack_array(STACK_SIZE, np.int64)
@@ -55,7 +58,7 @@ def covering_segment(bvh, x, y, z):
         start, n = leaf_range(ref)
         for q in range(start, start + n):
             s = int(prims[q, 7])
-            f = bvh.seg_fiber[s]
+            f = seg_fiber[s]
             if f > best_f or (f == best_f and s > best):
                 continue
             r = prims[q, 6]
@@ -66,23 +69,25 @@ def covering_segment(bvh, x, y, z):
     return best
 
 
+@njit(cache=True, inline="always")
+def segment_tangent(points, seg_a, s):
+    """Unit tangent of segment s (from its first vertex to the next; +z for a degenerate segment)."""
+    i = seg_a[s]
+    tx = points[i + 1, 0] - points[i, 0]
+    ty = points[i + 1, 1] - points[i, 1]
+    tz = points[i + 1, 2] - points[i, 2]
+    n = np.sqrt(tx * tx + ty * ty + tz * tz)
+    if n > 0.0:
+        return tx / n, ty / n, tz / n
+    return 0.0, 0.0, 1.0
+
+
 @njit(cache=True)
 def realized_lookup(med, x, y, z):
     s = covering_segment(med.bvh, x, y, z)
     if s < 0:
         return NO_MEDIUM
-    pts = med.bvh.points
-    i = med.bvh.seg_a[s]
-    tx = pts[i + 1, 0] - pts[i, 0]
-    ty = pts[i + 1, 1] - pts[i, 1]
-    tz = pts[i + 1, 2] - pts[i, 2]
-    n = np.sqrt(tx * tx + ty * ty + tz * tz)
-    if n > 0.0:
-        tx /= n
-        ty /= n
-        tz /= n
-    else:
-        tx, ty, tz = 0.0, 0.0, 1.0
+    tx, ty, tz = segment_tangent(med.bvh.points, med.bvh.seg_a, s)
     f = med.bvh.seg_fiber[s]
     c = med.fiber_yarn[f]
     a = med.yarn_albedo
@@ -99,7 +104,12 @@ def _realized_overload(med, x, y, z):
 @njit(cache=True)
 def fiber_capsules(med):
     """(a, b, radius, bound) of every fibre segment, bound = its yarn's density."""
-    bvh = med.bvh
+    return segment_capsules(med.bvh, med.yarn_density, med.fiber_yarn)
+
+
+@njit(cache=True)
+def segment_capsules(bvh, yarn_density, fiber_yarn):
+    """(a, b, radius, bound) of every segment of ``bvh``, bound = yarn_density[fiber_yarn[its fibre]]."""
     n = bvh.seg_a.shape[0]
     a = np.empty((n, 3))
     b = np.empty((n, 3))
@@ -108,5 +118,5 @@ def fiber_capsules(med):
         i = bvh.seg_a[s]
         a[s] = bvh.points[i]
         b[s] = bvh.points[i + 1]
-        bound[s] = med.yarn_density[med.fiber_yarn[bvh.seg_fiber[s]]]
+        bound[s] = yarn_density[fiber_yarn[bvh.seg_fiber[s]]]
     return a, b, bvh.seg_r.copy(), bound

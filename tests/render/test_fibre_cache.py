@@ -1,0 +1,302 @@
+"""The procedural source's render-time fibre cache (``stages.render.fibre_cache``, ``pipeline.fibre_cache``).
+
+Contracts: in a cached brick the cache answers exactly as the realized fibres' BVH does (the cached
+segments are the full realization's, same floats), so both describe the procedural fabric; outside
+cached bricks the exact lookups answer; the budget bounds what is cached; the same scene gives the
+same cache and the same image bytes at 1 and 2 threads, and images at cache 0 (lookups only), a
+small and a large cache agree within Monte Carlo error.
+"""
+import numpy as np
+import pytest
+from numba import njit
+
+from tests.helpers import EXACTNESS_SWATCH
+from pipeline.artifacts import Artifact
+from pipeline.fibre_cache import build_fibre_cache
+from pipeline.renderers.volpath import procedural_majorant
+from pipeline.runners.realize import run_realize
+from pipeline.runners.tables import build
+from pipeline.scene import camera_array
+from stages.core.geometry.bvh import build_fiber_bvh
+from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
+from stages.render.medium import medium_lookup
+from stages.render.procedural_medium import ProceduralMedium
+from stages.render.realized_medium import RealizedMedium
+
+SPACING = 0.002
+CAMERA = {"origin": [0.35, -0.6, 0.5], "target": [0.0, 0.0, 0.0], "up": [0.0, 0.0, 1.0], "fov": 50.0}
+
+
+@njit(cache=True)
+def _lookups(med, Q):
+    """(den, yarn, fibre, tx, ty, tz) of medium_lookup at every row of Q."""
+    out = np.empty((Q.shape[0], 6))
+    for i in range(Q.shape[0]):
+        m = medium_lookup(med, Q[i, 0], Q[i, 1], Q[i, 2])
+        out[i, 0] = m.den
+        out[i, 1] = m.yarn
+        out[i, 2] = m.fibre
+        out[i, 3] = m.tx
+        out[i, 4] = m.ty
+        out[i, 5] = m.tz
+    return out
+
+
+def _fabric(tmp, toml, seed=3):
+    from pipeline.cli import main
+
+    (tmp / "s.toml").write_text(toml)
+    assert main(["ingest", str(tmp / "s.toml"), "-o", str(tmp / "yarns.zarr")]) == 0
+    run_realize(tmp / "yarns.zarr", tmp / "fibers.zarr", seed=seed, spacing=SPACING)
+    fib = Artifact(tmp / "fibers.zarr", kind="fibers")
+    cv, tab, info, _, _ = build(tmp / "yarns.zarr", seed=seed, hair_mode="hybrid")
+    return fib, cv, tab, info
+
+
+def _realized(fib, tab):
+    pts = np.asarray(fib["points"], np.float64)
+    bvh, _ = build_fiber_bvh(pts, np.asarray(fib["fiber_offsets"]), np.asarray(fib["point_radius"], np.float64))
+    from stages.core.yarn.model import DENSITY, ROUGHNESS
+
+    yt = tab.yarn_type
+    return RealizedMedium(bvh, np.asarray(fib["fiber_yarn"], np.int32), tab.tparams[yt, DENSITY].copy(),
+                          np.ascontiguousarray(tab.yarn_albedo), tab.tparams[yt, ROUGHNESS].copy())
+
+
+def _points(fib, n_uniform, n_near, seed=0):
+    pts = np.asarray(fib["points"], np.float64)
+    rng = np.random.default_rng(seed)
+    lo, hi = pts.min(0) - 0.01, pts.max(0) + 0.01
+    rf = float(np.max(fib["point_radius"]))
+    return np.concatenate([rng.uniform(lo, hi, (n_uniform, 3)),
+                           pts[rng.integers(0, len(pts), n_near)] + rng.normal(0.0, 1.5 * rf, (n_near, 3))])
+
+
+def _clear(fib, Q):
+    """Points farther than the realization's tolerance from every fibre surface (and no kind tie):
+    there the procedural lookup must equal the realized fibres (tests/core/yarn/test_lookup_exactness)."""
+    pts32 = np.asarray(fib["points"])
+    rad = np.asarray(fib["point_radius"])
+    off = np.asarray(fib["fiber_offsets"])
+    tol = 2.0 * fib.summary["max_chord_error"] + 4 * np.finfo(np.float32).eps * float(np.abs(pts32).max())
+    lo, cell, dims, start, items = build_segment_grid(pts32, off, rad, tol)
+    ref = query_realized(pts32, rad, segment_fiber(off), np.asarray(fib["fiber_yarn"]), np.asarray(fib["fiber_ply"]),
+                         np.asarray(fib["fiber_kind"]), np.asarray(fib["fiber_index"]), lo, cell, dims, start, items, Q, tol)
+    return (ref.surface_gap > tol) & ~ref.kind_tie
+
+
+def _check_exact(fib, cv, tab, budget_mib, Q, W=64, H=48):
+    """Cache lookups: equal to the realized BVH's in cached bricks (all fields), equal to the procedural
+    lookups everywhere away from surfaces (inside, yarn, fibre number)."""
+    maj = procedural_majorant(cv, tab)
+    built = build_fibre_cache(cv, tab, maj, camera_array(CAMERA, W, H), W, H, budget_mib, spacing=SPACING)
+    med = built.medium
+    got = _lookups(med, Q)
+    real = _lookups(_realized(fib, tab), Q)
+    b = np.floor((Q - med.brick_lo) * med.brick_inv).astype(np.int64)
+    ok = np.all((b >= 0) & (b < med.brick_res), axis=1)
+    flat = np.full(len(Q), -1)
+    flat[ok] = (b[ok, 2] * med.brick_res[1] + b[ok, 1]) * med.brick_res[0] + b[ok, 0]
+    in_cache = flat >= 0
+    in_cache[in_cache] = med.cached[flat[in_cache]] == 1
+    # the realized fibres' BVH: the same answer, bit for bit, but the fibre number (piece vs fibre)
+    assert np.array_equal(got[in_cache][:, [0, 1, 3, 4, 5]], real[in_cache][:, [0, 1, 3, 4, 5]])
+    # the procedural lookups, away from surfaces, cached or not
+    proc = _lookups(ProceduralMedium(cv, tab), Q)
+    clear = _clear(fib, Q)
+    assert clear.mean() > 0.85  # the band is wider than at the exactness test's spacing of 0.001
+    inside = got[:, 0] > 0
+    assert np.array_equal(inside[clear], proc[clear, 0] > 0)
+    both = clear & inside
+    assert np.array_equal(got[both, 1:3], proc[both, 1:3])  # yarn and the fibre's number
+    return built, in_cache, inside
+
+
+@pytest.fixture(scope="module")
+def swatch(tmp_path_factory):
+    fib, cv, tab, info = _fabric(tmp_path_factory.mktemp("cache"), EXACTNESS_SWATCH)
+    assert not info["folded"].any()
+    return fib, cv, tab
+
+
+def test_cache_answers_as_the_realized_fibres_and_the_lookups(swatch):
+    fib, cv, tab = swatch
+    Q = _points(fib, 20000, 80000)
+    built, in_cache, inside = _check_exact(fib, cv, tab, 512.0, Q)
+    assert built.info["cache_complete"] and built.info["cache_bricks_cached"] == built.info["cache_bricks_occupied"]
+    assert in_cache[inside].all() and inside.sum() > 20000  # every fibre point was answered by the cache
+    assert set(np.unique(np.asarray(fib["fiber_kind"]))) == {1, 2, 3}
+
+
+def test_small_budget_caches_the_nearest_bricks_and_stays_exact(swatch):
+    fib, cv, tab = swatch
+    full = build_fibre_cache(cv, tab, procedural_majorant(cv, tab), camera_array(CAMERA, 64, 48), 64, 48, 512.0,
+                             spacing=SPACING).info
+    budget = 0.3 * full["cache_estimate_bytes"] / 2**20
+    Q = _points(fib, 10000, 40000, seed=1)
+    built, in_cache, inside = _check_exact(fib, cv, tab, budget, Q)
+    info = built.info
+    assert 0 < info["cache_bricks_cached"] < full["cache_bricks_cached"]
+    assert info["cache_estimate_bytes"] <= budget * 2**20
+    assert 0 < in_cache[inside].mean() < 1  # some fibre points from the cache, some from the lookups
+    # the cached bricks are the ones the pilot rays crossed most
+    from stages.render.fibre_cache import PILOT_DEPTH, pilot_bricks
+
+    med = built.medium
+    maj = procedural_majorant(cv, tab)
+    steps, _ = pilot_bricks(maj, camera_array(CAMERA, 64, 48), 64, 48, 1, med.brick_lo, 1.0 / med.brick_inv[0],
+                            med.brick_res, PILOT_DEPTH)
+    assert steps[med.cached == 1].min() >= steps[med.cached == 0].max() > 0
+
+
+def test_zero_budget_caches_nothing(swatch):
+    fib, cv, tab = swatch
+    built = build_fibre_cache(cv, tab, procedural_majorant(cv, tab), camera_array(CAMERA, 32, 24), 32, 24, 0.0)
+    assert built.info["cache_bricks_cached"] == 0 and isinstance(built.medium, ProceduralMedium)
+
+
+@pytest.mark.slow
+def test_closed_yarn_cache_is_exact_at_the_seam(tmp_path):
+    """A closed ring (tests/core/yarn/test_lookup_exactness): the cached pieces at both ends of the
+    seam and the hairs that cross it are the realized ones."""
+    from pipeline.curveset import CurveSet
+    from pipeline.io import bcc
+
+    th = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
+    ring = np.c_[0.6 * np.cos(th), 0.6 * np.sin(th), 0.02 * np.sin(3.0 * th)]
+    bcc.write(tmp_path / "ring.bcc", CurveSet(points=[ring], closed=[True], group=["other"],
+                                               point_radius=[np.full(len(ring), 0.03)], curve_type="catmull-rom",
+                                               source_format="bcc", notes={}))
+    fib, cv, tab, info = _fabric(tmp_path, '[scene]\nname = "ring"\n[fabric]\nsource = "file"\n'
+                                 f'path = "{tmp_path / "ring.bcc"}"\nradius = 0.03\n[yarns.default]\npreset = "cotton2"\n')
+    assert bool(cv.closed[0]) and not info["folded"].any()
+    pts = np.asarray(fib["points"], np.float64)
+    rf = float(np.max(fib["point_radius"]))
+    rng = np.random.default_rng(0)
+    seam = pts[np.linalg.norm(pts - ring[0], axis=1) < 0.08]
+    Q = np.concatenate([seam[rng.integers(0, len(seam), 40000)], pts[rng.integers(0, len(pts), 10000)]])
+    Q = Q + rng.normal(0.0, 1.5 * rf, Q.shape)
+    built, in_cache, inside = _check_exact(fib, cv, tab, 512.0, Q)
+    assert in_cache[inside].all()
+
+
+VIEW = f"""
+[camera]
+origin = {CAMERA["origin"]}
+target = {CAMERA["target"]}
+fov = 24.0
+width = 8
+height = 8
+
+[[lights]]
+type = "directional"
+direction = [-0.3, 0.4, -1.0]
+irradiance = 3.0
+
+[[lights]]
+type = "constant"
+radiance = 0.3
+
+[render]
+method = "volpath"
+max_depth = 4
+rr_depth = 3
+"""
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """The exactness swatch seen by CAMERA at 8 x 8 pixels: scene, yarns and tables."""
+    from tests.render.test_volpath import _cli
+
+    d = tmp_path_factory.mktemp("cache_small")
+    (d / "s.toml").write_text(EXACTNESS_SWATCH + VIEW)
+    for args in (("ingest", d / "s.toml", "-o", d / "y.zarr"), ("tables", d / "y.zarr", "-o", d / "t.zarr")):
+        code, out, err = _cli(*args)
+        assert code == 0, err
+    return d
+
+
+def _render(small, cache, seed, threads=None):
+    import numba
+
+    from pipeline.renderers.volpath import render
+    from pipeline.scene import load_scene
+
+    scene = load_scene(small / "s.toml")
+    opts = {"width": 8, "height": 8, "spp": 16, "max_depth": 4, "rr_depth": 3, "tile_size": 4, "extra": {},
+            "seed": seed, "source": "procedural", "tables": str(small / "t.zarr"), "cache": cache}
+    n0 = numba.get_num_threads()
+    try:
+        numba.set_num_threads(threads or n0)
+        return render(scene, opts)
+    finally:
+        numba.set_num_threads(n0)
+
+
+def _partial_budget(small, full) -> float:
+    """A budget (MiB) that caches some of the bricks the full cache holds, not all."""
+    from pipeline.runners.tables import load_tables
+    from pipeline.scene import load_scene
+
+    scene = load_scene(small / "s.toml")
+    cv, tab, _ = load_tables(small / "t.zarr")
+    maj = procedural_majorant(cv, tab)
+    for f in (0.3, 0.5, 0.7, 0.8, 0.9, 0.95):
+        mib = f * full["cache_estimate_bytes"] / 2**20
+        info = build_fibre_cache(cv, tab, maj, camera_array(scene.camera, 8, 8), 8, 8, mib).info
+        if 0 < info["cache_bricks_cached"] < full["cache_bricks_cached"]:
+            return mib
+    raise AssertionError("no budget caches part of the bricks")
+
+
+@pytest.mark.slow  # compiles the procedural volpath integrator (minutes on a cold cache): make test-all
+def test_images_agree_whatever_the_cache_and_threads(small):
+    """Cache 0 (lookups only), a cache of some bricks and a complete cache render one fabric: per
+    2 x 2 pixel block the difference of the means over its standard error (independent seeds) passes
+    the z-score test (tests/chisquare.py); and a given cache gives the same bytes at 1 and 2 threads."""
+    from tests.chisquare import z_score_test
+
+    full = _render(small, 512.0, 3)
+    assert full.stats["cache_complete"] and full.stats["cache_bricks_cached"] > 1
+    part_mib = _partial_budget(small, full.stats)
+    part = _render(small, part_mib, 2)
+    assert 0 < part.stats["cache_bricks_cached"] < full.stats["cache_bricks_cached"]
+    none = _render(small, 0.0, 1)
+    assert none.stats["cache_bricks_cached"] == 0 and none.extra["A"].mean() > 0.3  # the fabric fills the view
+
+    def blocks(a):
+        return a.reshape(4, 2, 4, 2).sum(axis=(1, 3))
+
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    for other in (full, part):
+        d = (blocks(other.rgb @ lum) - blocks(none.rgb @ lum)) / 4.0
+        se = np.sqrt(blocks(other.extra["variance"]) + blocks(none.extra["variance"])) / 4.0
+        assert np.all(se > 0)
+        res = z_score_test((d / se).ravel(), alpha=1e-3)
+        assert res.passed, res.message
+    for cache, seed, img in ((512.0, 3, full), (part_mib, 2, part)):
+        one = _render(small, cache, seed, threads=1)
+        two = _render(small, cache, seed, threads=2)
+        assert one.rgb.tobytes() == two.rgb.tobytes() == img.rgb.tobytes()
+
+
+def test_cache_budget_bad_input(small, tmp_path, capsys):
+    """A negative or non-finite budget: exit 2 with a one-line reason and nothing written; one past the
+    available memory: a warning and the available memory instead."""
+    from pipeline.fibre_cache import cache_budget_mib
+    from pipeline.memory import available_bytes
+    from tests.render.test_volpath import _cli
+
+    out = tmp_path / "v.exr"
+    for bad in ("-5", "nan", "inf"):
+        code, _, err = _cli("render", small / "s.toml", "--method", "volpath", "--source", "procedural", "--tables",
+                            small / "t.zarr", "--cache", bad, "-o", out)
+        assert code == 2, err
+        assert err.strip().count("\n") == 0 and "--cache" in err and "Traceback" not in err
+        assert not out.exists() and not out.with_suffix(".zarr").exists()
+    capsys.readouterr()
+    got = cache_budget_mib(1e12)
+    assert got <= available_bytes() / 2**20
+    assert "available memory" in capsys.readouterr().err
+    assert cache_budget_mib(0) == 0.0
