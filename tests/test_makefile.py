@@ -49,6 +49,12 @@ def test_demo_renders_at_the_documented_size_and_precompute():
     main_renders = [r for r in _commands(demo, "render") if "/eval/" not in r]
     assert len(main_renders) == 7   # volpath, fiberpath, damask fiberpath, prt, btf, knit bysdf, knit fiberpath
     assert all("--width 240 --height 180" in r for r in main_renders)
+    # the main volpath picture: procedural lookups with the fibre cache (issue 21); the evaluation's
+    # procedural render: lookups only, against the realized source
+    (vol,) = [r for r in main_renders if "--method volpath" in r]
+    assert "--source procedural" in vol and "--cache" not in vol
+    (ev,) = [r for r in _commands(demo, "render") if "/eval/volpath-procedural" in r]
+    assert "--cache 0" in ev
     (btf,) = [c for c in _commands(demo, "precompute") if " btf " in c]
     assert "--exemplar 0" in btf and "--resolution 16" in btf
     readme = (ROOT / "README.md").read_text()
