@@ -10,7 +10,7 @@ puts them in a capsule BVH (``stages.core.geometry.bvh``) of which only the 4-wi
 Memory: ``CACHE_VERTEX_BYTES`` per cached vertex is the peak of the build (float64 vertices and
 radii, segment arrays, the SAH build's boxes and the wide nodes), measured on the demo swatch
 (``bench/bench_volpath.py`` reports the measured bytes next to the estimate). The budget is compared
-with that estimate before anything is realized; the windows are chosen so that it holds.
+with that estimate before anything is realized: bricks are taken while their estimated bytes fit.
 """
 from __future__ import annotations
 
@@ -25,6 +25,10 @@ from .progress import warn
 CACHE_VERTEX_BYTES = 320   # peak bytes of a cached vertex during the build (see the module doc)
 DEFAULT_CACHE_MIB = 2048   # --cache default (render.cache in the scene), at most a quarter of the available memory
 DEFAULT_SPACING = 0.002    # cm between cached vertices: ``loomlight realize``'s default
+# A partial cache pays on every uncached lookup (opening the procedural medium's box counts references
+# to its ~80 arrays: 2-4x the bare lookup, bench_volpath's budget curve), so a cache is used only when
+# its bricks hold at least this share of the pilot's steps in fibre material; else the bare lookups.
+MIN_SEEN_SHARE = 0.8
 
 
 class CacheBuild(NamedTuple):
@@ -80,20 +84,21 @@ def _vertices_per_length(tab, curve_length, spacing) -> np.ndarray:
     return out
 
 
-def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFAULT_SPACING) -> CacheBuild:
+def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFAULT_SPACING,
+                      min_seen_share=None) -> CacheBuild:
     """The ``FibreCacheMedium`` of the procedural source ``(cv, tab)`` seen by ``cam`` at width x height,
-    within ``budget_mib``; where nothing is cached (budget 0, or too small for one brick) the bare
-    ``ProceduralMedium``, whose lookups skip the cache's indirection."""
+    within ``budget_mib``; where nothing is cached (budget 0, too small for one brick, or for
+    ``min_seen_share`` of what the pilot saw: default ``MIN_SEEN_SHARE``) the bare ``ProceduralMedium``,
+    whose lookups skip the cache's indirection (``info['cache_declined']`` says why)."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.procedural.realize import realize_fill_window, window_pieces, yarn_plan
     from stages.render.camera import camera_ray
-    from stages.render.fibre_cache import (PILOT_DEPTH, brick_grid, brick_ranks, choose_prefix, fibre_ids,
-                                           occupied_bricks, pilot_bricks, sample_bricks, windows, yarn_samples)
+    from stages.render.fibre_cache import (PILOT_DEPTH, brick_grid, brick_order, brick_samples, choose_bricks, fibre_ids,
+                                           occupied_bricks, pilot_bricks, windows, yarn_samples)
 
     t0 = time.perf_counter()
     Y = len(tab.yarn_type)
     grid = brick_grid(maj.lo, maj.hi, float(np.max(tab.yarn_extent)) if Y else 1.0)
-    nb = int(np.prod(grid.res))
     budget = float(budget_mib) * 2**20
     info = {"cache_budget_mib": float(budget_mib), "cache_bricks": [int(v) for v in grid.res],
             "cache_brick_size": float(grid.size), "cache_spacing": float(spacing)}
@@ -109,18 +114,21 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     stride = max(1, max(int(width), int(height)) // 128)
     steps, seen = pilot_bricks(maj, cam, int(width), int(height), stride, grid.lo, grid.size, grid.res, PILOT_DEPTH)
     eye, _ = camera_ray(cam, 0.5 * height, 0.5 * width, 0.0, 0.0)
-    rank = brick_ranks(occ, steps, seen, grid.lo, grid.size, grid.res, eye)
-    n_ranked = int(np.sum(rank < nb))
+    order = brick_order(occ, steps, seen, grid.lo, grid.size, grid.res, eye)
     samples = yarn_samples(cv, tab, 0.5 * grid.size, float(spacing))
-    best = sample_bricks(samples, grid.lo, grid.size, grid.res, rank)
+    off, items = brick_samples(samples, grid.lo, grid.size, grid.res)
     vpl = _vertices_per_length(tab, cv.curve_length, spacing)
     sample_bytes = vpl[samples.yarn] * (samples.s1 - samples.s0) * CACHE_VERTEX_BYTES
-    K = choose_prefix(best, sample_bytes, budget, n_ranked)
-    if K == 0:
-        return build_fibre_cache(cv, tab, maj, cam, width, height, 0.0, spacing)
-    cached = (rank < K).astype(np.uint8)
-    need = best < K
-    est = float(np.sum(sample_bytes[need]))
+    cached, need, est = choose_bricks(order, off, items, sample_bytes, budget)
+    share = float(steps[cached == 1].sum()) / max(float(steps.sum()), 1.0)
+    floor = MIN_SEEN_SHARE if min_seen_share is None else float(min_seen_share)
+    if not cached.any() or share < floor:
+        built = build_fibre_cache(cv, tab, maj, cam, width, height, 0.0, spacing)
+        built.info.update({"cache_budget_mib": float(budget_mib), "cache_seen_share": share,
+                           "cache_declined": f"the {budget_mib:g} MiB budget holds {100 * share:.0f} % of what the "
+                                             f"camera sees (needs {100 * floor:.0f} %): every lookup procedural"})
+        return built
+    need = need.astype(bool)
 
     cols = {k: [] for k in ("yarn", "ply", "idx", "kind", "a0", "a1", "hz1", "hze", "first", "nfull", "count")}
     for c, (w0, w1) in enumerate(windows(samples, need, Y)):
@@ -158,8 +166,9 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     held = sum(int(np.asarray(a).nbytes) for a in bvh) + cached.nbytes + ids.nbytes + cat["yarn"].nbytes
     info.update({"cache_bricks_cached": int(cached.sum()), "cache_bricks_occupied": int(np.sum(occ)),
                  "cache_bricks_seen": int(np.sum(steps > 0)), "cache_fibres": int(len(ids)), "cache_vertices": V,
-                 "cache_segments": int(len(bvh.seg_a)), "cache_bytes": held, "cache_estimate_bytes": est,
-                 "cache_complete": bool(K >= n_ranked), "cache_build_s": time.perf_counter() - t0})
+                 "cache_segments": int(len(bvh.seg_a)), "cache_bytes": held, "cache_estimate_bytes": float(est),
+                 "cache_complete": bool(cached.sum() == len(order)), "cache_seen_share": share,
+                 "cache_build_s": time.perf_counter() - t0})
     return CacheBuild(med, cached_majorant(med, maj), info)
 
 

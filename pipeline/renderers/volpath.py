@@ -97,6 +97,8 @@ def procedural_source(tables_path, cell=None, optics=None, view=None):
     from ..fibre_cache import build_fibre_cache
 
     built = build_fibre_cache(cv, tab, maj, view.camera, view.width, view.height, view.budget_mib)
+    if built.info.get("cache_declined"):
+        warn(f"fibre cache: {built.info['cache_declined']}")
     return built.medium, built.majorant, {**info, **built.info}, mats
 
 

@@ -22,12 +22,12 @@ realizes every segment with an end in it, and the hairs whose z range meets it.
 
 Which bricks. A pilot (``pilot_bricks``, no lookups, no random numbers) marches camera rays through
 the majorant grid until the majorant optical depth passes ``PILOT_DEPTH`` and counts its steps in
-fibre material per brick. Bricks with fibre material are ranked (``brick_ranks``): those the pilot
+fibre material per brick. Bricks with fibre material are ordered (``brick_order``): those the pilot
 marched through, most steps first (where the camera looks longest), then their neighbours (the first
-bounce stays near), then every other, ties by distance to the camera. A prefix of that ranking is
-cached: the longest whose samples' estimated bytes fit the budget (``choose_prefix``;
-a sample is needed by the prefix when the best-ranked brick its ball meets is in it). So the cost
-grows with what the camera sees, not with the scene, and a budget of 0 caches nothing.
+bounce stays near), then every other, ties by distance to the camera. In that order a brick is
+cached when the samples it needs (``brick_samples``) that are not yet taken fit what is left of the
+budget, their estimated bytes (``choose_bricks``; a brick that does not fit is passed over). So the
+cost grows with what the camera sees, not with the scene, and a budget of 0 caches nothing.
 
 ``FibreCacheMedium`` fields: ``proc`` (a ``ProceduralBox`` holding the ``ProceduralMedium`` that
 answers elsewhere), ``brick_lo``
@@ -224,11 +224,10 @@ def pilot_bricks(maj, cam, width, height, stride, lo, size, res, depth):
     return steps, seen
 
 
-def brick_ranks(occupied, steps, seen, lo, size, res, eye) -> np.ndarray:
-    """Rank of every brick in caching order (int64; len(occupied) for bricks that are never cached:
-    no fibre material, so no lookup there). Occupied bricks only: those the pilot rays marched
-    through, most steps first; then their neighbours; then the others; ties by distance of the
-    brick's centre to ``eye``. A stable sort: the same scene gives the same ranks."""
+def brick_order(occupied, steps, seen, lo, size, res, eye) -> np.ndarray:
+    """The bricks with fibre material (no lookup happens elsewhere) in caching order (int64): those
+    the pilot rays marched through, most steps first; then their neighbours; then the others; ties
+    by distance of the brick's centre to ``eye``. A stable sort: the same scene, the same order."""
     nx, ny, nz = (int(v) for v in res)
     iz, iy, ix = np.meshgrid(np.arange(nz), np.arange(ny), np.arange(nx), indexing="ij")
     centre = np.stack([ix.ravel(), iy.ravel(), iz.ravel()], 1) * size + lo + 0.5 * size
@@ -236,9 +235,7 @@ def brick_ranks(occupied, steps, seen, lo, size, res, eye) -> np.ndarray:
     cls = np.where(steps > 0, 0, np.where(seen.astype(bool), 1, 2))
     order = np.lexsort((dist, -steps, cls))
     order = order[occupied.astype(bool)[order]]
-    rank = np.full(len(occupied), len(occupied), np.int64)
-    rank[order] = np.arange(len(order))
-    return rank
+    return order
 
 
 # ------------------------------------------------------------------------------------------------
@@ -274,46 +271,64 @@ def yarn_samples(cv, tab, ds, spacing):
 
 
 @njit(cache=True)
-def sample_bricks(samples, lo, size, res, rank):
-    """Per sample, the best (lowest) rank of the bricks its ball's box meets (len(rank): none)."""
+def _sample_brick_range(samples, m, lo, size, res):
+    """The brick index box (b0, b1 inclusive, per axis) that sample m's ball's box meets; empty: b1 < b0."""
+    r = samples.radius[m]
+    b0 = np.empty(3, np.int64)
+    b1 = np.empty(3, np.int64)
+    for d in range(3):
+        b0[d] = max(0, int(math.floor((samples.centre[m, d] - r - lo[d]) / size)))
+        b1[d] = min(res[d] - 1, int(math.floor((samples.centre[m, d] + r - lo[d]) / size)))
+    return b0, b1
+
+
+@njit(cache=True)
+def brick_samples(samples, lo, size, res):
+    """CSR (offsets per brick, sample indices) of the samples whose ball's box meets each brick."""
     n = samples.yarn.shape[0]
-    best = np.full(n, rank.shape[0], np.int64)
+    nb = res[0] * res[1] * res[2]
+    count = np.zeros(nb + 1, np.int64)
     for m in range(n):
-        r = samples.radius[m]
-        b0 = np.empty(3, np.int64)
-        b1 = np.empty(3, np.int64)
-        empty = False
-        for d in range(3):
-            b0[d] = max(0, int(math.floor((samples.centre[m, d] - r - lo[d]) / size)))
-            b1[d] = min(res[d] - 1, int(math.floor((samples.centre[m, d] + r - lo[d]) / size)))
-            if b1[d] < b0[d]:
-                empty = True
-        if empty:
-            continue
-        v = best[m]
+        b0, b1 = _sample_brick_range(samples, m, lo, size, res)
         for bz in range(b0[2], b1[2] + 1):
             for by in range(b0[1], b1[1] + 1):
                 for bx in range(b0[0], b1[0] + 1):
-                    v = min(v, rank[(bz * res[1] + by) * res[0] + bx])
-        best[m] = v
-    return best
+                    count[(bz * res[1] + by) * res[0] + bx + 1] += 1
+    off = np.cumsum(count)
+    fill = off[:-1].copy()
+    items = np.empty(off[-1], np.int64)
+    for m in range(n):
+        b0, b1 = _sample_brick_range(samples, m, lo, size, res)
+        for bz in range(b0[2], b1[2] + 1):
+            for by in range(b0[1], b1[1] + 1):
+                for bx in range(b0[0], b1[0] + 1):
+                    b = (bz * res[1] + by) * res[0] + bx
+                    items[fill[b]] = m
+                    fill[b] += 1
+    return off, items
 
 
-def choose_prefix(best_rank, sample_bytes, budget, n_ranked) -> int:
-    """The longest prefix K of the brick ranking whose samples (best rank < K) fit ``budget`` bytes."""
-    order = np.argsort(best_rank, kind="stable")
-    r = best_rank[order]
-    cum = np.cumsum(sample_bytes[order])
-    keep = r < n_ranked
-    r, cum = r[keep], cum[keep]
-    if not len(r) or budget <= 0:
-        return 0
-    # cost(K) = cum[number of samples with rank < K - 1]; the prefix grows while the cost fits
-    fits = cum <= budget
-    if fits.all():
-        return int(n_ranked)
-    first_over = int(np.argmin(fits))
-    return int(r[first_over])  # bricks ranked below the first sample that does not fit
+@njit(cache=True)
+def choose_bricks(order, off, items, sample_bytes, budget):
+    """Greedy in ranking order: a brick is cached when the samples it needs that are not yet taken
+    fit what is left of ``budget`` (bytes); one that does not fit is passed over. Returns (cached
+    uint8 per brick, needed uint8 per sample, bytes used)."""
+    nb = off.shape[0] - 1
+    cached = np.zeros(nb, np.uint8)
+    need = np.zeros(sample_bytes.shape[0], np.uint8)
+    used = 0.0
+    for b in order:
+        add = 0.0
+        for q in range(off[b], off[b + 1]):
+            if need[items[q]] == 0:
+                add += sample_bytes[items[q]]
+        if used + add > budget:
+            continue
+        for q in range(off[b], off[b + 1]):
+            need[items[q]] = 1
+        cached[b] = 1
+        used += add
+    return cached, need, used
 
 
 def windows(samples: YarnSamples, need: np.ndarray, n_yarns: int) -> list:
