@@ -102,13 +102,17 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     budget = float(budget_mib) * 2**20
     info = {"cache_budget_mib": float(budget_mib), "cache_bricks": [int(v) for v in grid.res],
             "cache_brick_size": float(grid.size), "cache_spacing": float(spacing)}
-    if budget <= 0 or Y == 0:  # nothing cached: the bare procedural medium (its lookups are the fastest)
+
+    def bare(**why):
+        """Nothing cached: the bare procedural medium (its lookups skip the cache's indirection)."""
         from stages.render.procedural_medium import ProceduralMedium
 
-        med = ProceduralMedium(cv, tab)
         info.update({"cache_bricks_cached": 0, "cache_fibres": 0, "cache_segments": 0, "cache_bytes": 0,
-                     "cache_estimate_bytes": 0, "cache_build_s": time.perf_counter() - t0})
-        return CacheBuild(med, maj, info)
+                     "cache_estimate_bytes": 0, **why, "cache_build_s": time.perf_counter() - t0})
+        return CacheBuild(ProceduralMedium(cv, tab), maj, info)
+
+    if budget <= 0 or Y == 0:
+        return bare()
 
     occ = occupied_bricks(maj, grid.lo, grid.size, grid.res)
     stride = max(1, max(int(width), int(height)) // 128)
@@ -123,11 +127,9 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     share = float(steps[cached == 1].sum()) / max(float(steps.sum()), 1.0)
     floor = MIN_SEEN_SHARE if min_seen_share is None else float(min_seen_share)
     if not cached.any() or share < floor:
-        built = build_fibre_cache(cv, tab, maj, cam, width, height, 0.0, spacing)
-        built.info.update({"cache_budget_mib": float(budget_mib), "cache_seen_share": share,
-                           "cache_declined": f"the {budget_mib:g} MiB budget holds {100 * share:.0f} % of what the "
-                                             f"camera sees (needs {100 * floor:.0f} %): every lookup procedural"})
-        return built
+        return bare(cache_seen_share=share,
+                    cache_declined=f"the {budget_mib:g} MiB budget holds {100 * share:.0f} % of what the camera sees "
+                                   f"(needs {100 * floor:.0f} %): every lookup procedural")
     need = need.astype(bool)
 
     cols = {k: [] for k in ("yarn", "ply", "idx", "kind", "a0", "a1", "hz1", "hze", "first", "nfull", "count")}
@@ -145,7 +147,7 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
         cols["first"].append(first)
         cols["count"].append(count)
     if not cols["yarn"]:
-        return build_fibre_cache(cv, tab, maj, cam, width, height, 0.0, spacing)
+        return bare()
     cat = {k: np.concatenate(v) for k, v in cols.items()}
     offsets = np.zeros(len(cat["yarn"]) + 1, np.int64)
     np.cumsum(cat["count"], out=offsets[1:])
@@ -175,10 +177,11 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
 def cached_majorant(med, maj):
     """``maj`` with the cells inside cached bricks bounded by the cached capsules (tighter than the
     procedural tubes: as many null collisions as the realized source)."""
-    from stages.render.fibre_cache import cache_capsules, cells_in_cached_bricks
+    from stages.render.fibre_cache import cells_in_cached_bricks
+    from stages.render.realized_medium import segment_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
     inner = cells_in_cached_bricks(maj, med.brick_lo, 1.0 / med.brick_inv[0], med.brick_res, med.cached)
-    a, b, r, bound = cache_capsules(med)
+    a, b, r, bound = segment_capsules(med.bvh, med.yarn_density, med.fibre_yarn)
     mu = np.where(inner, majorants_from_capsules(a, b, r, bound, maj.lo, maj.hi, maj.res), maj.mu)
     return make_majorant_grid(maj.lo, maj.hi, maj.res, mu)

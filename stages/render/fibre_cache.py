@@ -61,7 +61,7 @@ from stages.core.yarn.lookup import FIBRE_ID_STRIDE, ORDER_STRIDE
 from stages.render.camera import camera_ray_into
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 from stages.render.procedural_medium import procedural_lookup
-from stages.render.realized_medium import covering_segment_arrays, segment_capsules, segment_tangent
+from stages.render.realized_medium import covering_segment_arrays, segment_tangent
 from stages.render.tracking import ray_box
 
 MAX_BRICKS_PER_AXIS = 256
@@ -356,11 +356,6 @@ def fibre_ids(yarn, ply, kind, index) -> np.ndarray:
 
 # ------------------------------------------------------------------------------------------------
 # majorants
-def cache_capsules(med):
-    """(a, b, radius, bound) of every cached segment, bound = its yarn's density."""
-    return segment_capsules(med.bvh, med.yarn_density, med.fibre_yarn)
-
-
 @njit(cache=True)
 def cells_in_cached_bricks(maj, lo, size, res, cached):
     """bool (nz, ny, nx): majorant cells that lie inside cached bricks only (there the cached
