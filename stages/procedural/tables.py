@@ -38,6 +38,12 @@ from stages.core.yarn.model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RAD
                                     transverse_speed_bound)
 from stages.core.yarn.tables import DERIVED_FIELDS, PAD_FRACTION, Tables, empty_accel, hair_node_seed_nb
 
+# A yarn whose curvature x fibre extent reaches FOLD_CAP has its axial stretch bound g_min capped at
+# 1 - FOLD_CAP and is flagged folded (lookups not guaranteed exact). Below it g_min = 1 - kappa x extent
+# > 0.1 is a true bound: the map of Eq. 7 has no fold (that needs kappa x extent >= 1); the reach
+# factor and the z windows grow as 1 / g_min, so lookups in tightly bent yarns test more fibres.
+FOLD_CAP = 0.9
+
 
 def type_key(seed: int, t: int) -> int:
     return int(hash_u64(seed, 7919, t))
@@ -200,7 +206,7 @@ def curvature_max(cv, c, step):
     return 1.25 * best
 
 
-def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=0, fold_cap=0.5):
+def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=0, fold_cap=FOLD_CAP):
     """Tables for all yarns. tparams (T, NPARAM) packed types (U_MAX, HAIR_RMAX filled in),
     yarn_type (Y,), yarn_albedo (Y, 3). The derived fields (DERIVED_FIELDS) are empty: fill them
     with derive_lookup_accel before looking anything up.
@@ -211,7 +217,7 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
     kap = np.array([curvature_max(cv, c, max(cv.radius[c] * 0.25, cv.curve_length[c] / 4000)) for c in range(Y)])
     g_raw = 1.0 - kap * ext
     # where kappa * extent >= fold_cap the yarn-space map folds (or nearly) within the fibre extent:
-    # the bounds below are capped there and lookups are no longer exact (reported as 'folded')
+    # the bounds below are capped there and lookups are no longer exact (reported as 'folded', FOLD_CAP)
     kr = np.minimum(kap * ext, fold_cap)
     gmin = 1.0 - kr
     type_K = np.ones(T)

@@ -13,13 +13,14 @@ i.e. kappa l^2 / 8 with kappa = theta / l). tol = 2 x max_chord_error (margin fo
 curvature estimate) + float32 rounding of the vertices (4 ulp of the largest coordinate). Points
 within tol of any fibre surface, and points where a fibre's regular and loop pieces are within tol
 of each other (a kind tie at a piece joint), are not compared; all others must agree exactly in
-inside/outside, yarn and kind, and in direction to 1 degree (chord vs tangent: at most
-theta / 2, reported by the realization as ``max_turn_rad``).
+inside/outside, yarn and kind, and in direction to 1 degree or, where the realization turns more
+sharply (the demo's finer fibres), to 0.6 x its largest turn (chord vs tangent: at most theta / 2,
+reported by the realization as ``max_turn_rad``).
 """
 import numpy as np
 import pytest
 
-from tests.helpers import EXACTNESS_SWATCH as SCENE
+from tests.helpers import DATA, EXACTNESS_SWATCH as SCENE
 from pipeline.artifacts import Artifact
 from pipeline.runners.realize import run_realize
 from pipeline.runners.tables import build
@@ -52,8 +53,9 @@ def _points(fib, n_uniform=30000, n_near=90000, seed=0):
     return np.concatenate([q1, q2])
 
 
-def _assert_exact(fib, cv, tab, Q, min_inside):
-    """lookup_points(Q) against the brute-force reference on the realized fibres (module doc)."""
+def _assert_exact(fib, cv, tab, Q, min_inside, min_clear=0.95):
+    """lookup_points(Q) against the brute-force reference on the realized fibres (module doc);
+    at least min_clear of the points lie clear of the tolerance band and take part."""
     pts32 = np.asarray(fib["points"])
     rad = np.asarray(fib["point_radius"])
     off = np.asarray(fib["fiber_offsets"])
@@ -66,7 +68,7 @@ def _assert_exact(fib, cv, tab, Q, min_inside):
                          kinds, np.asarray(fib["fiber_index"]), lo, cell, dims, start, items, Q, tol)
     got = lookup_points(cv, tab, Q)
     clear = (ref.surface_gap > tol) & ~ref.kind_tie
-    assert clear.mean() > 0.95
+    assert clear.mean() > min_clear
     inside_ref = ref.inside[clear]
     assert inside_ref.sum() > min_inside  # many points inside fibres take part
     assert np.array_equal(got.inside[clear], inside_ref)
@@ -74,7 +76,9 @@ def _assert_exact(fib, cv, tab, Q, min_inside):
     assert np.array_equal(got.yarn[both], ref.yarn[both])
     assert np.array_equal(got.kind[both], ref.kind[both])
     cosang = np.einsum("ij,ij->i", got.direction[both], ref.direction[both])
-    assert np.degrees(np.arccos(np.clip(cosang, -1, 1))).max() < 1.0
+    # a chord leaves its arc's tangent by at most half the turn at its ends (max_turn_rad, 20 % margin)
+    max_angle = max(1.0, 0.6 * np.degrees(fib.summary["max_turn_rad"]))
+    assert np.degrees(np.arccos(np.clip(cosang, -1, 1))).max() < max_angle
     assert np.all(got.yarn[~got.inside] == -1) and np.all(got.kind[~got.inside] == 0)
     np.testing.assert_allclose(np.linalg.norm(got.direction[got.inside], axis=1), 1.0, rtol=1e-9)
     return got, both
@@ -130,3 +134,34 @@ def test_hybrid_and_realization_free_hairs_agree(swatch):
     assert (a.kind == 3).sum() > 100
     for x, y in zip(a, b):
         assert np.array_equal(x, y)
+
+
+def _demo_swatch(d):
+    from pipeline.cli import main
+
+    (d / "s.toml").write_text((DATA / "scenes" / "demo.toml").read_text())
+    assert main(["ingest", str(d / "s.toml"), "-o", str(d / "yarns.zarr")]) == 0
+    return d / "yarns.zarr"
+
+
+def test_demo_swatch_tables_are_exact(tmp_path):
+    """The flagship picture is the exact method's (issue 21 item 5): the demo's yarns bend gently
+    enough that the yarn-space map does not fold within their fibre extent (curvature x extent
+    below the tables' fold cap), so its tables guarantee exact lookups."""
+    from stages.procedural.tables import FOLD_CAP
+
+    _, _, info, _, _ = build(_demo_swatch(tmp_path), seed=3, hair_mode="hybrid", derive=False)
+    assert not info["folded"].any()
+    assert (info["curvature_max"] * info["extent"]).max() < FOLD_CAP
+
+
+@pytest.mark.slow
+def test_demo_swatch_lookups_equal_brute_force(tmp_path):
+    """The same exactness check as on the gentle swatch, on the demo's (denser) voile: its fibres
+    are thinner and packed closer, so more of the points near fibres fall in the tolerance band."""
+    yarns = _demo_swatch(tmp_path)
+    run_realize(yarns, tmp_path / "fibers.zarr", seed=3, spacing=0.0005)
+    fib = Artifact(tmp_path / "fibers.zarr", kind="fibers")
+    cv, tab, info, _, _ = build(yarns, seed=3, hair_mode="hybrid")
+    assert not info["folded"].any()
+    _assert_exact(fib, cv, tab, _points(fib, 30000, 90000), 20000, min_clear=0.8)
