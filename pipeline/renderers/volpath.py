@@ -19,7 +19,7 @@ micro-flakes instead, with the tinted BCSDF's mean albedo as single-scattering a
 
 Scene: camera, lights, ``render.max_depth``, ``render.rr_depth``, ``render.tile_size`` and the
 optional ``render.ground``. ``--set majorant_cell=X`` sets the majorant-grid cell size (scene units;
-default: a quarter of the mean yarn extent bound, at most 128 cells along an axis).
+default: a quarter of the mean yarn extent bound, at most MAX_MAJORANT_CELLS cells).
 Statistics: paths, rays (free-flight and shadow queries), medium lookups and lookups/s, the
 majorant grid (cells, occupied fraction), source build time.
 """
@@ -38,8 +38,10 @@ from ..scene import camera_array
 from . import RenderResult
 
 SOURCES = ("procedural", "realized", "grid")
-MAX_CELLS_PER_AXIS = 128
+MAX_MAJORANT_CELLS = 128 ** 3  # majorant grids hold at most this many cells (16 MiB of float64)
+MAX_CELLS_PER_AXIS_HARD = 4096
 CELL_FRACTION = 0.25  # default majorant cell: this fraction of the mean yarn extent bound
+MAJORANT_STEP = 0.25  # procedural majorant: core-tube capsules spaced this fraction of the tube radius apart
 
 
 # ------------------------------------------------------------------------------------------------
@@ -59,8 +61,12 @@ def _box_of_capsules(a, b, r):
 
 
 def _majorant_res(lo, hi, cell):
+    """Cells of about ``cell`` over the box, at most MAX_MAJORANT_CELLS in all (a flat cloth 50 cm
+    wide and 0.2 cm thick gets cells of about its thickness, not a single layer of 128 x 128)."""
     ext = np.maximum(hi - lo, 1e-12)
-    cell = max(float(cell), float(ext.max()) / MAX_CELLS_PER_AXIS)
+    cell = max(float(cell), float(ext.max()) / MAX_CELLS_PER_AXIS_HARD)
+    while np.prod(np.ceil(ext / cell)) > MAX_MAJORANT_CELLS:
+        cell *= 1.05
     return np.maximum(1, np.ceil(ext / cell)).astype(np.int64)
 
 
@@ -104,15 +110,18 @@ def procedural_source(tables_path, cell=None, optics=None, view=None):
 
 def procedural_majorant(cv, tab, cell=None):
     """The ``MajorantGrid`` of procedural tables: the largest density of the capsules that hold every
-    fibre surface (``stages.render.procedural_medium.fiber_capsules``) per cell of ``cell`` (default
-    a quarter of the mean yarn extent bound, at most 128 cells along an axis)."""
-    from stages.render.procedural_medium import fiber_capsules
-    from stages.render.tracking import majorants_from_capsules, make_majorant_grid
+    fibre surface (``stages.render.procedural_medium.capsule_majorants``, walked twice: their box,
+    then the grid; never listed) per cell of ``cell`` (default a quarter of the mean yarn extent
+    bound, at most MAX_MAJORANT_CELLS cells)."""
+    import numba
 
-    a, b, r, bound = fiber_capsules(cv, tab, 0.25)
-    lo, hi = _box_of_capsules(a, b, r)
+    from stages.render.procedural_medium import capsule_box, capsule_majorants
+    from stages.render.tracking import make_majorant_grid
+
+    lo, hi = capsule_box(cv, tab, MAJORANT_STEP)
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * float(np.mean(tab.yarn_extent)))
-    return make_majorant_grid(lo, hi, res, majorants_from_capsules(a, b, r, bound, lo, hi, res))
+    return make_majorant_grid(lo, hi, res, capsule_majorants(cv, tab, MAJORANT_STEP, lo, hi, res,
+                                                                   numba.get_num_threads()))
 
 
 def realized_source(fibers_path, cell, optics):

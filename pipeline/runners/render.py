@@ -24,7 +24,7 @@ INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid
                "iirtf": "iirtf", "btf": "btf", "yarns": "yarns"}  # artifact kinds per option
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
-MAJORANT_BYTES = 32 << 20  # volpath's majorant grid (at most 128 cells per axis)
+MAJORANT_BYTES = 64 << 20  # volpath's majorant grid (at most 128³ float64 cells) and, while built, one per thread
 
 
 def render_estimate(options: dict, inputs: dict) -> Estimate:

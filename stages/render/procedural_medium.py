@@ -7,9 +7,10 @@ albedo; the yarn type gives the SGGX roughness. Nothing is realized.
 ProceduralMedium fields: ``cv`` (``stages.core.curves.spline.Curves`` of the yarns artifact) and ``tab``
 (``stages.core.yarn.tables.Tables``).
 
-Majorants: ``fiber_capsules(cv, tab, step_frac)`` gives capsules that hold every fibre surface,
-each carrying its yarn's density (the majorant grid takes the largest bound of the capsules that
-reach a cell; zero elsewhere): the *core* tube of the regular fibres (radius ply_radius + rho_max
+Majorants: ``capsule_box(cv, tab, step_frac)`` and ``capsule_majorants(cv, tab, step_frac, lo, hi,
+res)`` walk capsules that hold every fibre surface, each carrying its yarn's density, without
+storing them (a 1,000-yarn fabric has some 10^8), and give their box and the majorant grid (a cell
+takes the largest bound of the capsules that reach it; zero elsewhere): the *core* tube of the regular fibres (radius ply_radius + rho_max
 R_max max(e_short, e_long) + the fibre radius, far inside the hair extent) as capsules between axis
 points spaced step_frac x that radius apart (radius + half the spacing: any curve point between
 two samples lies within half the arc length of one), plus every loop cycle and every stored hair
@@ -21,7 +22,7 @@ In the realization-free hair mode (nothing stored per hair) the yarn's full exte
 from collections import namedtuple
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 from numba.extending import overload
 
 import math
@@ -34,6 +35,7 @@ from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_
 
 from stages.core.dispatch import is_tuple_class
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.tracking import cell_half_diagonal, raster_capsule
 
 ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
@@ -60,14 +62,23 @@ def _core_radius(tp):
     return tp[PLY_RADIUS] + U * max(tp[E_SHORT], tp[E_LONG]) + tp[FIBER_RADIUS]
 
 
+BOX_SIZE = 7  # a walk's box: min x, y, z, max x, y, z of the capsules' end points, their largest radius
+BOX, RASTER = 0, 1  # what a walk does with each capsule
+
+
 @njit(cache=True, inline="always")
-def _put_capsule(a, b, rad, bound, m, px, py, pz, qx, qy, qz, r, den):
-    """Write capsule m (segment p-q, radius r, majorant den); returns m + 1."""
-    a[m, 0], a[m, 1], a[m, 2] = px, py, pz
-    b[m, 0], b[m, 1], b[m, 2] = qx, qy, qz
-    rad[m] = r
-    bound[m] = den
-    return m + 1
+def _emit(mode, box, mu, lo, cs, half_diag, res, px, py, pz, qx, qy, qz, r, den):
+    """One capsule (segment p-q, radius r, density bound den) of a walk: grow the box, or raster it."""
+    if mode == BOX:
+        box[0] = min(box[0], px, qx)
+        box[1] = min(box[1], py, qy)
+        box[2] = min(box[2], pz, qz)
+        box[3] = max(box[3], px, qx)
+        box[4] = max(box[4], py, qy)
+        box[5] = max(box[5], pz, qz)
+        box[6] = max(box[6], r)
+    else:
+        raster_capsule(mu, lo, cs, half_diag, res, px, py, pz, qx, qy, qz, r, den)
 
 
 @njit(cache=True)
@@ -78,96 +89,116 @@ def _fabric_point(tab, lo, hi, i, x, y, z):
 
 
 @njit(cache=True)
-def fiber_capsules(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
-    """(a (K, 3), b (K, 3), radius (K,), bound (K,)) capsules covering every fibre surface: core
-    tubes, loop cycles and (hybrid mode) hairs; in the realization-free mode each yarn's full
-    extent tube stands in for its hairs. Needs the tables' derived frame samples."""
-    ncap = 0
-    Y = cv.curve_length.shape[0]
-    # count
-    for c in range(Y):
-        tp = tab.tparams[tab.yarn_type[c]]
-        core = _core_radius(tp)
-        ext = tab.yarn_extent[c]
-        hair_tube = tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0
-        r_tube = ext if hair_tube else core
-        ncap += max(1, int(np.ceil(cv.curve_length[c] / max(step_frac * r_tube, 1e-12))))
-        rf = tp[FIBER_RADIUS]
-        for k in range(int(tp[PLY_NUM])):
-            g = tab.yarn_ply_off[c] + k
-            for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
-                ncap += 1 + _loop_steps(tab, tp, c, k, e, rf * loop_step_fibers)
-            if tab.hair_mode[0] == 0:
-                ncap += tab.hair_count[g] * (hair_samples - 1)
-    a = np.empty((ncap, 3))
-    b = np.empty((ncap, 3))
-    rad = np.empty(ncap)
-    bound = np.empty(ncap)
-    m = 0
-    for c in range(Y):
-        t = tab.yarn_type[c]
-        tp = tab.tparams[t]
-        den = tp[DENSITY]
-        eps = tab.yarn_eps[c]
-        rf = tp[FIBER_RADIUS]
-        gmax = 2.0 - tab.yarn_gmin[c]
-        lo = tab.fs_off[c]
-        hi = tab.fs_off[c + 1]
-        L = cv.curve_length[c]
-        core = _core_radius(tp)
-        hair_tube = tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0
-        r_tube = tab.yarn_extent[c] if hair_tube else core
-        nt = max(1, int(np.ceil(L / max(step_frac * r_tube, 1e-12))))
-        h = L / nt
-        prev = curve_point_at(cv, c, 0.0)
-        for q in range(nt):
-            nxt = curve_point_at(cv, c, min((q + 1) * h, L))
-            a[m] = prev
-            b[m] = nxt
-            rad[m] = r_tube + 0.5 * h + eps
-            bound[m] = den
-            prev = nxt
-            m += 1
-        yseed = np.uint64(tab.yarn_seed[c])
-        # fabric-space speed of a regular/loop fibre: g_max (axial) + its yarn-space transverse speed
-        vfib = gmax + transverse_speed_bound(tp)
-        for k in range(int(tp[PLY_NUM])):
-            g = tab.yarn_ply_off[c] + k
-            for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
-                j, fi, z0, z1 = loop_fibre(tab, tp, c, k, e)
-                ns = _loop_steps(tab, tp, c, k, e, rf * loop_step_fibers)
-                dz = (z1 - z0) / ns
-                x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z0)
+def _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, mode, box, mu, glo, cs, half_diag, res):
+    """Every capsule of yarn c (module doc: core tube, loop cycles, hybrid-mode hairs; the extent
+    tube in the realization-free hair mode), each handed to _emit. Needs the derived frame samples."""
+    t = tab.yarn_type[c]
+    tp = tab.tparams[t]
+    den = tp[DENSITY]
+    eps = tab.yarn_eps[c]
+    rf = tp[FIBER_RADIUS]
+    gmax = 2.0 - tab.yarn_gmin[c]
+    lo = tab.fs_off[c]
+    hi = tab.fs_off[c + 1]
+    L = cv.curve_length[c]
+    core = _core_radius(tp)
+    hair_tube = tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0
+    r_tube = tab.yarn_extent[c] if hair_tube else core
+    nt = max(1, int(np.ceil(L / max(step_frac * r_tube, 1e-12))))
+    h = L / nt
+    prev = curve_point_at(cv, c, 0.0)
+    for q in range(nt):
+        nxt = curve_point_at(cv, c, min((q + 1) * h, L))
+        _emit(mode, box, mu, glo, cs, half_diag, res, prev[0], prev[1], prev[2], nxt[0], nxt[1], nxt[2],
+              r_tube + 0.5 * h + eps, den)
+        prev = nxt
+    yseed = np.uint64(tab.yarn_seed[c])
+    # fabric-space speed of a regular/loop fibre: g_max (axial) + its yarn-space transverse speed
+    vfib = gmax + transverse_speed_bound(tp)
+    for k in range(int(tp[PLY_NUM])):
+        g = tab.yarn_ply_off[c] + k
+        for e in range(tab.lp_off[g], tab.lp_off[g + 1]):
+            j, fi, z0, z1 = loop_fibre(tab, tp, c, k, e)
+            ns = _loop_steps(tab, tp, c, k, e, rf * loop_step_fibers)
+            dz = (z1 - z0) / ns
+            x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z0)
+            i = lo
+            i, px, py, pz = _fabric_point(tab, lo, hi, i, x, y, z0)
+            for q in range(ns):
+                z = min(z0 + (q + 1) * dz, z1)
+                x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
+                i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
+                _emit(mode, box, mu, glo, cs, half_diag, res, px, py, pz, qx, qy, qz,
+                      rf + 0.5 * vfib * dz + 2.0 * eps, den)
+                px, py, pz = qx, qy, qz
+        if tab.hair_mode[0] == 0:
+            base = tab.hair_off[g]
+            for hh in range(base, base + tab.hair_count[g]):
+                r0 = tab.hair_r0[hh]
+                r1 = tab.hair_r1[hh]
+                th1 = tab.hair_th1[hh]
+                pe = tab.hair_pe[hh]
+                z1 = tab.hair_z1[hh]
+                ze = tab.hair_ze[hh]
+                speed = hair_speed_bound(tp, r0, r1, pe, ze) * max(gmax, 1.0)
+                dt = 1.0 / (hair_samples - 1)
                 i = lo
-                i, px, py, pz = _fabric_point(tab, lo, hi, i, x, y, z0)
-                for q in range(ns):
-                    z = min(z0 + (q + 1) * dz, z1)
-                    x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi], z)
+                x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, 0.0)
+                i, px, py, pz = _fabric_point(tab, lo, hi, i, x, y, z)
+                for q in range(hair_samples - 1):
+                    tq = min((q + 1) * dt, 1.0)
+                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tq)
                     i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
-                    m = _put_capsule(a, b, rad, bound, m, px, py, pz, qx, qy, qz, rf + 0.5 * vfib * dz + 2.0 * eps, den)
+                    _emit(mode, box, mu, glo, cs, half_diag, res, px, py, pz, qx, qy, qz,
+                          rf + 0.5 * speed * dt + 2.0 * eps, den)
                     px, py, pz = qx, qy, qz
-            if tab.hair_mode[0] == 0:
-                base = tab.hair_off[g]
-                for hh in range(base, base + tab.hair_count[g]):
-                    r0 = tab.hair_r0[hh]
-                    r1 = tab.hair_r1[hh]
-                    th1 = tab.hair_th1[hh]
-                    pe = tab.hair_pe[hh]
-                    z1 = tab.hair_z1[hh]
-                    ze = tab.hair_ze[hh]
-                    speed = hair_speed_bound(tp, r0, r1, pe, ze) * max(gmax, 1.0)
-                    dt = 1.0 / (hair_samples - 1)
-                    i = lo
-                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, 0.0)
-                    i, px, py, pz = _fabric_point(tab, lo, hi, i, x, y, z)
-                    for q in range(hair_samples - 1):
-                        tq = min((q + 1) * dt, 1.0)
-                        x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tq)
-                        i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
-                        m = _put_capsule(a, b, rad, bound, m, px, py, pz, qx, qy, qz,
-                                         rf + 0.5 * speed * dt + 2.0 * eps, den)
-                        px, py, pz = qx, qy, qz
-    return a[:m], b[:m], rad[:m], bound[:m]
+
+
+@njit(cache=True, parallel=True)
+def capsule_box(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
+    """(lo (3,), hi (3,)): the box of every fibre-holding capsule (module doc), grown by the largest
+    capsule radius. Walks the capsules without storing them (yarns in parallel)."""
+    Y = cv.curve_length.shape[0]
+    boxes = np.empty((Y, BOX_SIZE))
+    dummy_mu = np.zeros((1, 1, 1))
+    dummy3 = np.zeros(3)
+    dummy_res = np.ones(3, np.int64)
+    for c in prange(Y):
+        box = boxes[c]
+        box[:3] = np.inf
+        box[3:] = -np.inf
+        _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, BOX, box, dummy_mu, dummy3, dummy3,
+                   0.0, dummy_res)
+    rmax = boxes[:, 6].max()
+    lo = np.empty(3)
+    hi = np.empty(3)
+    for ax in range(3):
+        lo[ax] = boxes[:, ax].min() - rmax
+        hi[ax] = boxes[:, 3 + ax].max() + rmax
+    return lo, hi
+
+
+@njit(cache=True, parallel=True)
+def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16, loop_step_fibers=2.0):
+    """Majorant densities (nz, ny, nx) over the box lo-hi at resolution res: a cell takes the largest
+    density of the fibre-holding capsules that may reach it (tracking.raster_capsule). The capsules
+    are walked, never stored: memory is one grid per worker (pass numba's thread count), whatever the
+    fabric's size. Workers take yarns round robin and their grids meet by maximum, so the result does
+    not depend on their number."""
+    Y = cv.curve_length.shape[0]
+    T = min(max(workers, 1), max(Y, 1))
+    grids = np.zeros((T, res[2], res[1], res[0]))
+    cs = (hi - lo) / res
+    half_diag = cell_half_diagonal(cs)
+    box = np.empty(BOX_SIZE)
+    for w in prange(T):
+        for c in range(w, Y, T):
+            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, RASTER, box, grids[w], lo, cs,
+                       half_diag, res)
+    mu = grids[0].copy()
+    for w in range(1, T):
+        mu = np.maximum(mu, grids[w])
+    return mu
 
 
 @njit(cache=True)

@@ -46,34 +46,46 @@ def make_majorant_grid(lo, hi, res, mu) -> MajorantGrid:
 @njit(cache=True)
 def majorants_from_capsules(a, b, radius, bound, lo, hi, res):
     """Majorant grid from capsules (segment a[k]-b[k], radius[k]) each carrying a density bound[k]:
-    a cell gets the largest bound of the capsules that may reach it (segment within radius + half the
-    cell diagonal of the cell centre: conservative, at most one cell looser than exact)."""
-    nx, ny, nz = res[0], res[1], res[2]
-    mu = np.zeros((nz, ny, nx))
+    a cell gets the largest bound of the capsules that may reach it (``raster_capsule``)."""
+    mu = np.zeros((res[2], res[1], res[0]))
     cs = (hi - lo) / res
-    half_diag = 0.5 * math.sqrt(cs[0] ** 2 + cs[1] ** 2 + cs[2] ** 2) * (1.0 + 1e-9)
+    half_diag = cell_half_diagonal(cs)
     for k in range(a.shape[0]):
-        r = radius[k]
-        i0 = np.empty(3, np.int64)
-        i1 = np.empty(3, np.int64)
-        for ax in range(3):
-            mn = min(a[k, ax], b[k, ax]) - r
-            mx = max(a[k, ax], b[k, ax]) + r
-            i0[ax] = max(int(math.floor((mn - lo[ax]) / cs[ax])), 0)
-            i1[ax] = min(int(math.floor((mx - lo[ax]) / cs[ax])), res[ax] - 1)
-        for iz in range(i0[2], i1[2] + 1):
-            for iy in range(i0[1], i1[1] + 1):
-                for ix in range(i0[0], i1[0] + 1):
-                    if mu[iz, iy, ix] >= bound[k]:
-                        continue
-                    # conservative: a cell within r of the segment has its centre within r + half diagonal
-                    cx = lo[0] + (ix + 0.5) * cs[0]
-                    cy = lo[1] + (iy + 0.5) * cs[1]
-                    cz = lo[2] + (iz + 0.5) * cs[2]
-                    d2 = point_segment_dist2(cx, cy, cz, a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2])
-                    if d2 <= (r + half_diag) ** 2:
-                        mu[iz, iy, ix] = bound[k]
+        raster_capsule(mu, lo, cs, half_diag, res, a[k, 0], a[k, 1], a[k, 2], b[k, 0], b[k, 1], b[k, 2],
+                       radius[k], bound[k])
     return mu
+
+
+@njit(cache=True, inline="always")
+def cell_half_diagonal(cs):
+    return 0.5 * math.sqrt(cs[0] ** 2 + cs[1] ** 2 + cs[2] ** 2) * (1.0 + 1e-9)
+
+
+@njit(cache=True, inline="always")
+def _cell_range(p, q, r, lo, cs, n):
+    i0 = max(int(math.floor((min(p, q) - r - lo) / cs)), 0)
+    i1 = min(int(math.floor((max(p, q) + r - lo) / cs)), n - 1)
+    return i0, i1
+
+
+@njit(cache=True)
+def raster_capsule(mu, lo, cs, half_diag, res, ax, ay, az, bx, by, bz, r, den):
+    """Raise to ``den`` every cell of ``mu`` (cell size cs, origin lo) the capsule a-b of radius r may
+    reach: conservative, a cell within r of the segment has its centre within r + half its diagonal
+    (at most one cell looser than exact)."""
+    x0, x1 = _cell_range(ax, bx, r, lo[0], cs[0], res[0])
+    y0, y1 = _cell_range(ay, by, r, lo[1], cs[1], res[1])
+    z0, z1 = _cell_range(az, bz, r, lo[2], cs[2], res[2])
+    for iz in range(z0, z1 + 1):
+        for iy in range(y0, y1 + 1):
+            for ix in range(x0, x1 + 1):
+                if mu[iz, iy, ix] >= den:
+                    continue
+                cx = lo[0] + (ix + 0.5) * cs[0]
+                cy = lo[1] + (iy + 0.5) * cs[1]
+                cz = lo[2] + (iz + 0.5) * cs[2]
+                if point_segment_dist2(cx, cy, cz, ax, ay, az, bx, by, bz) <= (r + half_diag) ** 2:
+                    mu[iz, iy, ix] = den
 
 
 @njit(cache=True)

@@ -357,6 +357,28 @@ def test_procedural_majorant_covers_every_fibre(small):
     assert 0.0 < float(np.mean(maj.mu > 0)) < 0.9
 
 
+def test_procedural_majorant_does_not_depend_on_workers(small):
+    """The capsules are walked, not listed, and rastered into one grid per worker merged by maximum:
+    1 or 3 workers give the grid procedural_source built, bit for bit."""
+    from pipeline.renderers.volpath import MAJORANT_STEP, procedural_source
+    from stages.render.procedural_medium import capsule_majorants
+
+    med, maj, _, _ = procedural_source(str(small / "t.zarr"))
+    for workers in (1, 3):
+        mu = capsule_majorants(med.cv, med.tab, MAJORANT_STEP, maj.lo, maj.hi, maj.res, workers)
+        assert np.array_equal(mu, maj.mu)
+
+
+def test_majorant_cells_follow_a_flat_cloth():
+    """A 50 cm cloth 0.2 cm thick gets cells near the asked size in all three axes within the cell
+    budget (not one layer of 128 x 128); a small box keeps the asked cell exactly."""
+    from pipeline.renderers.volpath import MAX_MAJORANT_CELLS, _majorant_res
+
+    res = _majorant_res(np.array([-25.0, -25.0, -0.1]), np.array([25.0, 25.0, 0.1]), 0.02)
+    assert np.prod(res) <= MAX_MAJORANT_CELLS and res[2] >= 3 and res[0] == res[1] > 128
+    assert list(_majorant_res(np.zeros(3), np.array([0.8, 0.8, 0.1]), 0.01)) == [80, 80, 10]
+
+
 def test_render_cli_outputs_and_statistics(small, tmp_path):
     """loomlight render --method volpath writes EXR (RGB + A, depth, variance), PNG and a render artifact
     whose statistics include paths/s and medium lookups/s; the same seed gives the same bytes."""
