@@ -12,7 +12,7 @@ deterministic function of the curves and the stored tables.
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .frame_samples import chord_grid, coarse_knots, sample_all
 from .model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, RHO_MAX, RHO_MIN, USE_MIGRATION,
@@ -45,20 +45,31 @@ def scan_bounds(tab: Tables):
             hi = R * tp[RHO_MAX] if mig else R
             lo = R * tp[RHO_MIN] if mig else R
             fib_v[f] = [transverse_speed(tp, a, b) for a, b in zip(hi, lo)]
-    nz = len(tab.lz_start) - 1
-    lz_rr = np.empty((max(nz, 0), 2))
+    lz_rr = _loop_bin_ranges(tab.yarn_ply_off, tab.yarn_type, tab.type_fib_off, N, tab.lz_off, tab.lz_start,
+                             tab.lz_items, tab.lp_off, tab.lp_fib, tab.lp_U, tab.fib_rlo)
+    return ply_rr, fib_v, lz_rr
+
+
+@njit(cache=True)
+def _loop_bin_ranges(yarn_ply_off, yarn_type, type_fib_off, N, lz_off, lz_start, lz_items, lp_off, lp_fib, lp_U,
+                     fib_rlo):
+    """lz_rr of scan_bounds: per loop z-bin, [smallest r_lo of its loops' fibres, largest U_loop]."""
+    nz = max(len(lz_start) - 1, 0)
+    lz_rr = np.empty((nz, 2))
     lz_rr[:, 0] = np.inf
     lz_rr[:, 1] = -np.inf
-    S = len(tab.lp_off) - 1
-    for g in range(S):
-        c = int(np.searchsorted(tab.yarn_ply_off, g, side="right")) - 1
-        t = tab.yarn_type[c]
-        fo = tab.type_fib_off[t] + (g - tab.yarn_ply_off[c]) * N[t]
-        for zb in range(tab.lz_off[g], tab.lz_off[g + 1]):
-            le = tab.lp_off[g] + tab.lz_items[tab.lz_start[zb]:tab.lz_start[zb + 1]]
-            if len(le):
-                lz_rr[zb] = tab.fib_rlo[fo + tab.lp_fib[le]].min(), tab.lp_U[le].max()
-    return ply_rr, fib_v, lz_rr
+    c = 0
+    for g in range(len(lp_off) - 1):
+        while c + 1 < len(yarn_ply_off) - 1 and yarn_ply_off[c + 1] <= g:  # the yarn of ply g
+            c += 1
+        t = yarn_type[c]
+        fo = type_fib_off[t] + (g - yarn_ply_off[c]) * N[t]
+        for zb in range(lz_off[g], lz_off[g + 1]):
+            for q in range(lz_start[zb], lz_start[zb + 1]):
+                le = lp_off[g] + lz_items[q]
+                lz_rr[zb, 0] = min(lz_rr[zb, 0], fib_rlo[fo + lp_fib[le]])
+                lz_rr[zb, 1] = max(lz_rr[zb, 1], lp_U[le])
+    return lz_rr
 
 
 @njit(cache=True)
@@ -86,7 +97,7 @@ def _mark_ball(bits, base, nb, h, rw, x, y, z, r, w0):
                 bits[base + zb, w0 + (idx >> 6)] |= np.uint64(1) << np.uint64(idx & 63)
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def fringe_occupancy(tab, fo_off, fo_geom):
     """Fringe occupancy bits of every yarn, one set for loops and one for hairs: cell (z-bin, shell,
     sector) of yarn c is set when a loop (its fibre's trajectory over the loop's cycle grown by the
@@ -94,9 +105,10 @@ def fringe_occupancy(tab, fo_off, fo_geom):
     the cell in yarn space. Each curve is sampled at steps of at most fringe_reach of yarn-space
     arc (its speed bound), and every sample marks the cells within fringe_reach plus half a step.
     A lookup point in no set loop cell needs no loop scan, one in no set hair cell no hair test;
-    one in neither, farther than type_rcore from the axis, is covered by no fibre of the yarn."""
+    one in neither, farther than type_rcore from the axis, is covered by no fibre of the yarn.
+    Yarns in parallel (each writes only its own rows)."""
     bits = np.zeros((fo_off[-1], 2 * FO_WORDS), np.uint64)
-    for c in range(tab.yarn_type.shape[0]):
+    for c in prange(tab.yarn_type.shape[0]):
         t = tab.yarn_type[c]
         tp = tab.tparams[t]
         base = fo_off[c]
@@ -167,10 +179,16 @@ def chord_gates(tab: Tables):
     shells over the bracket's z-bins (infinite where the last, open shell is set or, in the
     realization-free mode, where hairs are not stored). Lookups skip such a yarn before its foot
     point: p's axis distance is at least sqrt(lb^2 - w^2) for the chord lower bound lb."""
-    gate = np.full(len(tab.kn_idx), np.inf)
     bits = np.unpackbits(tab.fo_bits.view(np.uint8), axis=1, bitorder="little")
     bits = bits.reshape(len(tab.fo_bits), 2, FO_SHELLS, FO_SECTORS).any(axis=(1, 3))  # (bins, shells)
-    top = np.where(bits.any(axis=1), FO_SHELLS - 1 - np.argmax(bits[:, ::-1], axis=1), -1)
+    top = np.where(bits.any(axis=1), FO_SHELLS - 1 - np.argmax(bits[:, ::-1], axis=1), -1).astype(np.int64)
+    return _gates(tab, top)
+
+
+@njit(cache=True)
+def _gates(tab, top):
+    """chord_gates' loop over yarns and chords, top: the highest set fringe shell per z-bin (-1: none)."""
+    gate = np.full(len(tab.kn_idx), np.inf)
     for c in range(len(tab.yarn_type)):
         t = tab.yarn_type[c]
         tp = tab.tparams[t]
@@ -180,13 +198,14 @@ def chord_gates(tab: Tables):
         rcore = tab.type_rcore[t] + tab.type_K[t] * (tp[FIBER_RADIUS] + 2.0 * tab.yarn_eps[c]) * max(es, el) / min(es, el)
         k0, k1 = tab.kn_off[c], tab.kn_off[c + 1]
         base, nb = tab.fo_off[c], tab.fo_off[c + 1] - tab.fo_off[c]
-        h, rw = tab.fo_geom[c]
+        h = tab.fo_geom[c, 0]
+        rw = tab.fo_geom[c, 1]
         for q in range(k0, k1 - 1):
             sa = tab.fs_s[tab.kn_idx[max(q - 1, k0)]]
             sb = tab.fs_s[tab.kn_idx[min(q + 2, k1 - 1)]]
             b0 = min(max(int(math.floor(sa / h)), 0), nb - 1)
             b1 = min(max(int(math.floor(sb / h)), 0), nb - 1)
-            sh = int(top[base + b0:base + b1 + 1].max())
+            sh = top[base + b0:base + b1 + 1].max()
             rf_ = np.inf if sh == FO_SHELLS - 1 else (sh + 1) * rw
             gate[q] = max(rcore, rf_)
     return gate
