@@ -15,10 +15,13 @@ Sweep (seed 001 §6.3: Fig. 13 and Table 2)
     per image with its speed-up over the reference. ``--no-render`` only evaluates what exists.
 
 Table 1 (seed 000 Table 1)
-    ``loomlight evaluate --table1 --scene A.toml [--scene B.toml] [--procedural P.exr --realized R.exr ...] -o DIR``
+    ``loomlight evaluate --table1 --scene A.toml [--scene B.toml] [--procedural P.exr --realized R.exr ...]
+    [--unrealized U.exr ...] -o DIR``
     Data sizes from ``pipeline.memory_table`` (full realization against the procedural model) and
     the volpath render times of the procedural and realized renders given, the i-th
-    ``--procedural``/``--realized`` pair belonging to the i-th ``--scene``.
+    ``--procedural``/``--realized`` pair belonging to the i-th ``--scene``; each ``--unrealized``
+    (a procedural render of a fabric too large to realize: its time, peak memory and that memory
+    against the full realization) belongs to the next scene after the pairs.
 
 Exit code 2 with one line naming the file on bad input (missing file, not an EXR, size mismatch).
 """
@@ -40,6 +43,7 @@ def register(app: typer.Typer) -> None:
         scene: Optional[List[Path]] = typer.Option(None, "--scene", help="--table1: a scene file; repeat for several."),
         procedural: Optional[List[Path]] = typer.Option(None, "--procedural", help="--table1: procedural volpath render (EXR) of the matching --scene."),
         realized: Optional[List[Path]] = typer.Option(None, "--realized", help="--table1: realized volpath render (EXR) of the matching --scene."),
+        unrealized: Optional[List[Path]] = typer.Option(None, "--unrealized", help="--table1: procedural volpath render (EXR) of a scene too large to realize; these follow the --procedural/--realized pairs' scenes."),
         out: Path = typer.Option(..., "-o", "--out", help="Output directory for metrics, pictures and the report."),
         force: bool = typer.Option(False, "--force", help="Recompute even when the inputs are unchanged."),
         no_render: bool = typer.Option(False, "--no-render", help="--sweep: do not render; evaluate the renders that exist."),
@@ -72,7 +76,7 @@ def register(app: typer.Typer) -> None:
         if modes[0] == "--table1":
             from ..runners.table1 import run_table1
 
-            md = run_table1(scene or [], procedural or [], realized or [], out, force=force)
+            md = run_table1(scene or [], procedural or [], realized or [], out, force=force, unrealized=unrealized or [])
             typer.echo(f"report: {md}")
             return
         if ref is None:

@@ -24,7 +24,6 @@ INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid
                "iirtf": "iirtf", "btf": "btf", "yarns": "yarns"}  # artifact kinds per option
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
-MAJORANT_BYTES = 64 << 20  # volpath's majorant grid (at most 128³ float64 cells) and, while built, one per thread
 
 
 def render_estimate(options: dict, inputs: dict) -> Estimate:
@@ -41,7 +40,7 @@ def render_estimate(options: dict, inputs: dict) -> Estimate:
             continue
         art = Artifact(path)
         if art.kind == "tables":
-            est.extend(accel_estimate(art, est.what)).add("majorant grid", MAJORANT_BYTES)
+            est.extend(accel_estimate(art, est.what)).add("majorant grid", _majorant_bytes(art))
             from ..fibre_cache import default_cache_mib
 
             mib = float(default_cache_mib() if options.get("cache") is None else options["cache"])
@@ -53,6 +52,20 @@ def render_estimate(options: dict, inputs: dict) -> Estimate:
         else:
             est.add(f"{art.kind} arrays", 3 * art.nbytes(), art.path.name)
     return est
+
+
+def _majorant_bytes(art) -> float:
+    """volpath's procedural majorant grid over the tables' curves box grown by the largest extent."""
+    import numba
+    import numpy as np
+
+    from ..renderers.volpath import procedural_majorant_bytes
+
+    pts, ext = np.asarray(art["curves/points"]), np.asarray(art["yarn_extent"])
+    if not len(pts) or not len(ext):
+        return 0.0
+    return procedural_majorant_bytes(pts.min(0) - ext.max(), pts.max(0) + ext.max(), float(ext.mean()),
+                                     numba.get_num_threads())
 
 
 def _positive(value, name):

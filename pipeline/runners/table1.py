@@ -5,7 +5,8 @@ realization against the procedural model from ``pipeline.memory_table.table1_row
 (imported on demand: it belongs to the procedural stage) and the render times and peak memory of
 the i-th procedural and realized volpath renders for the i-th scene (``render_stats`` of the render
 artifact beside each image), with the image difference between the two (they render the same
-fibres). Writes ``table1.json``, ``report.md``/``.html`` and the ``evaluation`` artifact
+fibres); then, for the scenes after those, procedural renders alone (``unrealized``: fabrics too
+large to realize), with their wall time and their peak memory against the full realization. Writes ``table1.json``, ``report.md``/``.html`` and the ``evaluation`` artifact
 ``evaluation.zarr``; unchanged inputs are not recomputed unless ``force``.
 """
 from __future__ import annotations
@@ -31,6 +32,8 @@ TABLE1_COLUMNS = [  # (row key, header) in the order of seed 000 Table 1
     ("speed_ratio", "realized / procedural time"),
     ("procedural_peak_memory_bytes", "Peak memory (procedural)"),
     ("realized_peak_memory_bytes", "Peak memory (realized)"),
+    ("procedural_wall_s", "Wall time (procedural, setup included)"),
+    ("peak_over_full", "Peak memory / full realization"),
 ]
 
 
@@ -63,11 +66,15 @@ def _table1_cell(key: str, v) -> str:
         return fmt_seconds(v)
     if key == "speed_ratio":
         return f"{float(v):.2f}"
+    if key == "peak_over_full":
+        return f"1/{1.0 / float(v):.1f}" if 0 < v < 1 else f"{float(v):.1f}x"
+    if key == "procedural_wall_s":
+        return fmt_seconds(v)
     return fmt_num(v) if isinstance(v, (int, float)) else str(v)
 
 
 def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], realized: Sequence[str | Path],
-               out_dir: str | Path, force: bool = False) -> Path:
+               out_dir: str | Path, force: bool = False, unrealized: Sequence[str | Path] = ()) -> Path:
     """Seed 000 Table 1 for ``scenes``: data sizes from ``pipeline.memory_table.table1_rows(scenes)``
     and the render times of the i-th procedural and realized volpath renders for the i-th scene,
     with the image difference between the two (they render the same fibres)."""
@@ -78,6 +85,7 @@ def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], r
     scenes = [Path(s) for s in scenes]
     procedural = [Path(p) for p in procedural]
     realized = [Path(p) for p in realized]
+    unrealized = [Path(p) for p in unrealized]
     out = Path(out_dir)
     if not scenes:
         raise LoomError(None, "--scene", "--table1 needs at least one --scene")
@@ -86,7 +94,10 @@ def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], r
                         "give them in pairs, one pair per --scene in order")
     if len(procedural) > len(scenes):
         raise LoomError(None, "--procedural", f"{len(procedural)} render pairs for {len(scenes)} scenes")
-    for p in [*scenes, *procedural, *realized]:
+    if len(procedural) + len(unrealized) > len(scenes):
+        raise LoomError(None, "--unrealized", f"{len(procedural)} render pairs and {len(unrealized)} unrealized renders "
+                        f"for {len(scenes)} scenes (the unrealized ones belong to the scenes after the pairs)")
+    for p in [*scenes, *procedural, *realized, *unrealized]:
         if not p.exists():
             raise LoomError(p, None, "file not found")
     mt = load_memory_table()
@@ -99,6 +110,20 @@ def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], r
         row.setdefault("scene", scenes[i].stem)
         if "saving" not in row and row.get("full_total_bytes") and row.get("ours_total_bytes"):
             row["saving"] = row["full_total_bytes"] / row["ours_total_bytes"]
+        if len(procedural) <= i < len(procedural) + len(unrealized):
+            uu = unrealized[i - len(procedural)]
+            load_image(uu)  # an image, readable
+            su = render_stats(uu)
+            inputs[f"unrealized:{i}"] = uu
+            if "render_artifact" in su:
+                inputs[f"unrealized_render:{i}"] = Path(su["render_artifact"])
+            row["procedural_time_s"] = su.get("time_s")
+            row["procedural_wall_s"] = su.get("wall_time_s")
+            row["procedural_peak_memory_bytes"] = su.get("peak_memory_bytes")
+            if su.get("peak_memory_bytes") and row.get("full_total_bytes"):
+                row["peak_over_full"] = su["peak_memory_bytes"] / row["full_total_bytes"]
+            times[i, 0] = row["procedural_time_s"] or np.nan
+            continue
         if i >= len(procedural):
             continue
         pp, rr = procedural[i], realized[i]
@@ -118,6 +143,8 @@ def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], r
             times[i] = [row["procedural_time_s"], row["realized_time_s"]]
         row["procedural_peak_memory_bytes"] = sp.get("peak_memory_bytes")
         row["realized_peak_memory_bytes"] = sr.get("peak_memory_bytes")
+        if sp.get("peak_memory_bytes") and row.get("full_total_bytes"):
+            row["peak_over_full"] = sp["peak_memory_bytes"] / row["full_total_bytes"]
         row["procedural_vs_realized"] = {k: agree[k] for k in METRIC_KEYS}
     from ..artifacts import jsonable
 

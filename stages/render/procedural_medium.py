@@ -187,17 +187,21 @@ def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16,
     not depend on their number."""
     Y = cv.curve_length.shape[0]
     T = min(max(workers, 1), max(Y, 1))
-    grids = np.zeros((T, res[2], res[1], res[0]))
+    mu = np.zeros((res[2], res[1], res[0]))  # worker 0's grid, and the result
+    extra = np.zeros((T - 1, res[2], res[1], res[0]))
     cs = (hi - lo) / res
     half_diag = cell_half_diagonal(cs)
     box = np.empty(BOX_SIZE)
     for w in prange(T):
+        grid = mu if w == 0 else extra[w - 1]
         for c in range(w, Y, T):
-            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, RASTER, box, grids[w], lo, cs,
+            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, RASTER, box, grid, lo, cs,
                        half_diag, res)
-    mu = grids[0].copy()
-    for w in range(1, T):
-        mu = np.maximum(mu, grids[w])
+    for w in range(T - 1):
+        for iz in prange(res[2]):
+            for iy in range(res[1]):
+                for ix in range(res[0]):
+                    mu[iz, iy, ix] = max(mu[iz, iy, ix], extra[w, iz, iy, ix])
     return mu
 
 

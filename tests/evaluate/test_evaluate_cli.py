@@ -179,6 +179,32 @@ def test_table1_rows_times_and_agreement(cli, tmp_path, monkeypatch):
     assert str(out / "report.md") in stdout
 
 
+def test_table1_unrealized_scale_row(cli, tmp_path, monkeypatch):
+    """A fabric too large to realize gets its procedural render alone (--unrealized, after the pairs'
+    scenes): render and wall time, peak memory and that memory against the full realization."""
+    _fake_memory_table(monkeypatch, [{"full_total_bytes": 1_000_000, "ours_total_bytes": 10_000},
+                                     {"full_total_bytes": 80_000_000_000, "ours_total_bytes": 500_000_000}])
+    for n in ("demo", "large"):
+        (tmp_path / f"{n}.toml").write_text("# scene\n")
+    img = _scene_image(seed=5)
+    for n, t, m in (("proc", 5.0, 2_000_000), ("real", 6.0, 9_000_000), ("large", 80.0, 4_000_000_000)):
+        write_render(tmp_path / f"{n}.exr", img)
+        _fake_render_artifact(tmp_path / f"{n}.exr", t, m)
+    out = tmp_path / "t1"
+    code, _, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "--scene", tmp_path / "large.toml",
+                       "--procedural", tmp_path / "proc.exr", "--realized", tmp_path / "real.exr",
+                       "--unrealized", tmp_path / "large.exr", "-o", out)
+    assert code == 0, err
+    got = json.loads((out / "table1.json").read_text())
+    assert got[1]["procedural_time_s"] == 80.0 and "realized_time_s" not in got[1]
+    assert got[1]["procedural_peak_memory_bytes"] == 4_000_000_000
+    assert got[1]["peak_over_full"] == pytest.approx(0.05)
+    assert "1/20.0" in (out / "report.md").read_text()
+    code, _, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "--procedural", tmp_path / "proc.exr",
+                       "--realized", tmp_path / "real.exr", "--unrealized", tmp_path / "large.exr", "-o", tmp_path / "o2")
+    assert code == 2 and "--unrealized" in err
+
+
 def test_table1_bad_inputs(cli, tmp_path, monkeypatch):
     import sys
 
