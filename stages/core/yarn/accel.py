@@ -236,6 +236,8 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
         if not over.any():
             break
         deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
+        if attempt < 2:  # resampled next: let this round's samples go first (they are GB on a large fabric)
+            del fs_off, fs_s, fs_fr, err
     mean_step = float(np.mean(deltas))
     stride = max(1, int(0.5 * float(ext.min()) / mean_step))
     kn_off, kn_idx, kn_sag = coarse_knots(fs_s, fs_fr, fs_off, stride)
