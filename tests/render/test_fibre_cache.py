@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from tests.helpers import EXACTNESS_SWATCH
+from tests.helpers import EXACTNESS_SWATCH, closed_ring_scene, seam_points
 from pipeline.artifacts import Artifact
 from pipeline.fibre_cache import build_fibre_cache
 from pipeline.renderers.volpath import procedural_majorant
@@ -173,23 +173,10 @@ def test_zero_budget_caches_nothing(swatch):
 def test_closed_yarn_cache_is_exact_at_the_seam(tmp_path):
     """A closed ring (tests/core/yarn/test_lookup_exactness): the cached pieces at both ends of the
     seam and the hairs that cross it are the realized ones."""
-    from pipeline.curveset import CurveSet
-    from pipeline.io import bcc
-
-    th = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
-    ring = np.c_[0.6 * np.cos(th), 0.6 * np.sin(th), 0.02 * np.sin(3.0 * th)]
-    bcc.write(tmp_path / "ring.bcc", CurveSet(points=[ring], closed=[True], group=["other"],
-                                               point_radius=[np.full(len(ring), 0.03)], curve_type="catmull-rom",
-                                               source_format="bcc", notes={}))
-    fib, cv, tab, info = _fabric(tmp_path, '[scene]\nname = "ring"\n[fabric]\nsource = "file"\n'
-                                 f'path = "{tmp_path / "ring.bcc"}"\nradius = 0.03\n[yarns.default]\npreset = "cotton2"\n')
+    ring, scene = closed_ring_scene(tmp_path)
+    fib, cv, tab, info = _fabric(tmp_path, scene)
     assert bool(cv.closed[0]) and not info["folded"].any()
-    pts = np.asarray(fib["points"], np.float64)
-    rf = float(np.max(fib["point_radius"]))
-    rng = np.random.default_rng(0)
-    seam = pts[np.linalg.norm(pts - ring[0], axis=1) < 0.08]
-    Q = np.concatenate([seam[rng.integers(0, len(seam), 40000)], pts[rng.integers(0, len(pts), 10000)]])
-    Q = Q + rng.normal(0.0, 1.5 * rf, Q.shape)
+    Q = seam_points(fib, ring, 40000, 10000)
     built, in_cache, inside = _check_exact(fib, cv, tab, 512.0, Q)
     assert in_cache[inside].all()
 

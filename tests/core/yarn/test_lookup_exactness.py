@@ -20,7 +20,7 @@ reported by the realization as ``max_turn_rad``).
 import numpy as np
 import pytest
 
-from tests.helpers import DATA, EXACTNESS_SWATCH as SCENE
+from tests.helpers import DATA, EXACTNESS_SWATCH as SCENE, closed_ring_scene, seam_points
 from pipeline.artifacts import Artifact
 from pipeline.runners.realize import run_realize
 from pipeline.runners.tables import build
@@ -99,28 +99,15 @@ def test_closed_yarn_seam_is_exact(tmp_path):
     meet at the seam without joining; points around the seam are covered by the pieces at both
     ends. Same brute-force reference and tolerance as above, points concentrated at the seam."""
     from pipeline.cli import main
-    from pipeline.curveset import CurveSet
-    from pipeline.io import bcc
 
-    th = np.linspace(0.0, 2.0 * np.pi, 24, endpoint=False)
-    ring = np.c_[0.6 * np.cos(th), 0.6 * np.sin(th), 0.02 * np.sin(3.0 * th)]
-    bcc.write(tmp_path / "ring.bcc", CurveSet(points=[ring], closed=[True], group=["other"],
-                                               point_radius=[np.full(len(ring), 0.03)], curve_type="catmull-rom",
-                                               source_format="bcc", notes={}))
-    (tmp_path / "s.toml").write_text('[scene]\nname = "ring"\n[fabric]\nsource = "file"\n'
-                                     f'path = "{tmp_path / "ring.bcc"}"\nradius = 0.03\n'
-                                     '[yarns.default]\npreset = "cotton2"\n')
+    ring, scene = closed_ring_scene(tmp_path)
+    (tmp_path / "s.toml").write_text(scene)
     assert main(["ingest", str(tmp_path / "s.toml"), "-o", str(tmp_path / "yarns.zarr")]) == 0
     run_realize(tmp_path / "yarns.zarr", tmp_path / "fibers.zarr", seed=3, spacing=0.001)
     fib = Artifact(tmp_path / "fibers.zarr", kind="fibers")
     cv, tab, info, _, _ = build(tmp_path / "yarns.zarr", seed=3, hair_mode="hybrid")
     assert bool(cv.closed[0]) and not info["folded"].any()
-    pts = np.asarray(fib["points"], np.float64)
-    rf = float(np.max(fib["point_radius"]))
-    rng = np.random.default_rng(0)
-    seam = pts[np.linalg.norm(pts - ring[0], axis=1) < 0.08]
-    Q = np.concatenate([seam[rng.integers(0, len(seam), 60000)], pts[rng.integers(0, len(pts), 20000)]])
-    Q = Q + rng.normal(0.0, 1.5 * rf, Q.shape)
+    Q = seam_points(fib, ring, 60000, 20000)
     _assert_exact(fib, cv, tab, Q, 10000)
 
 
