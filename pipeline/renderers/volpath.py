@@ -142,6 +142,18 @@ def procedural_majorant(cv, tab, cell=None):
                                                                    numba.get_num_threads()))
 
 
+def _fibre_numbers(fart) -> np.ndarray:
+    """The procedural lookup's fibre numbers of a realization's polylines (pieces of one fibre share
+    one: ``stages.render.realized_medium``), or empty where the artifact does not say (each polyline
+    its own fibre)."""
+    from stages.render.fibre_cache import fibre_ids
+
+    keys = ("fiber_yarn", "fiber_ply", "fiber_kind", "fiber_index")
+    if not all(k in fart for k in keys):
+        return np.zeros(0, np.int64)
+    return fibre_ids(*(np.asarray(fart[k]) for k in keys))
+
+
 def realized_source(fibers_path, cell, optics):
     """(RealizedMedium, MajorantGrid, info, mats) from a fibers artifact; per-yarn density and
     roughness from the yarn types the fibres were realized with (their yarns artifact and
@@ -176,7 +188,7 @@ def realized_source(fibers_path, cell, optics):
     t0 = time.perf_counter()
     bvh, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
     med = RealizedMedium(bvh, fibers.fiber_yarn.astype(np.int32), np.ascontiguousarray(tp[:, DENSITY]),
-                         np.ascontiguousarray(albedo), np.ascontiguousarray(roughness))
+                         np.ascontiguousarray(albedo), np.ascontiguousarray(roughness), _fibre_numbers(fart))
     a, b, r, bound = fiber_capsules(med)
     lo, hi = _box_of_capsules(a, b, r)
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * extent)

@@ -131,13 +131,14 @@ def _box_med(box):
 
 
 @njit(cache=True)
-def fibre_cache_lookup(med, x, y, z):
-    """The cache's answer in a cached brick (the covering segment of the lowest fibre, its tangent),
-    else the procedural lookup's."""
+def fibre_cache_lookup(med, x, y, z, skip=-1):
+    """The cache's answer in a cached brick (the covering segment of the lowest fibre but ``skip``, its
+    tangent), else the procedural lookup's."""
     b = _brick_index(med.brick_lo, med.brick_inv, med.brick_res, x, y, z)
     if b < 0 or med.cached[b] == 0:
-        return procedural_lookup(med.proc.med, x, y, z)
-    s = covering_segment_arrays(med.wide_box, med.wide_child, med.prims, med.seg_fiber, x, y, z)
+        return procedural_lookup(med.proc.med, x, y, z, skip)
+    s = covering_segment_arrays(med.wide_box, med.wide_child, med.prims, med.seg_fiber, x, y, z, skip,
+                                med.fibre_id)
     if s < 0:
         return NO_MEDIUM
     tx, ty, tz = segment_tangent(med.points, med.seg_a, s)
@@ -148,9 +149,9 @@ def fibre_cache_lookup(med, x, y, z):
 
 
 @overload(medium_lookup)
-def _fibre_cache_overload(med, x, y, z):
+def _fibre_cache_overload(med, x, y, z, skip):
     if is_tuple_class(med, FibreCacheMedium):
-        return lambda med, x, y, z: fibre_cache_lookup(med, x, y, z)
+        return lambda med, x, y, z, skip: fibre_cache_lookup(med, x, y, z, skip)
 
 
 # ------------------------------------------------------------------------------------------------

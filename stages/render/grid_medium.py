@@ -79,9 +79,9 @@ def grid_lookup(med, x, y, z):
 
 
 @overload(medium_lookup)
-def _grid_overload(med, x, y, z):
+def _grid_overload(med, x, y, z, skip):
     if is_tuple_class(med, GridMedium):
-        return lambda med, x, y, z: grid_lookup(med, x, y, z)
+        return lambda med, x, y, z, skip: grid_lookup(med, x, y, z)  # voxels know no fibres
 
 
 @njit(cache=True)
@@ -161,7 +161,7 @@ def voxelize_slice(med, lo, hi, res, ss, iz, lz, density, direction, albedo, rou
                         x = lo[0] + (ix + (a + 0.5) / ss) * cx
                         y = lo[1] + (iy + (b + 0.5) / ss) * cy
                         z = lo[2] + (iz + (c + 0.5) / ss) * cz
-                        m = medium_lookup(med, x, y, z)
+                        m = medium_lookup(med, x, y, z, -1)
                         den = m.den
                         if den <= 0.0:
                             continue

@@ -13,13 +13,17 @@ distance serves all three channels. Because sigma_S(w) <= 1, den(p) itself bound
 every direction: a majorant for den bounds the extinction.
 
 A *density source* is a namedtuple class whose numba implementation of
-``medium_lookup(med, x, y, z)`` is registered with ``numba.extending.overload``; it returns a
+``medium_lookup(med, x, y, z, skip)`` is registered with ``numba.extending.overload``; it returns a
 ``MediumPoint``
 
     (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness, yarn, fibre)
 
 (float64 but for the int64 yarn and fibre: the covering fibre's yarn and a number that tells the
-fibres apart, -1 where the source does not know them) with den = 0 outside every fibre (``NO_MEDIUM``; other fields then unused). The integrator
+fibres apart, -1 where the source does not know them) with den = 0 outside every fibre (``NO_MEDIUM``; other fields then unused).
+``skip`` is such a fibre number (-1: none) whose fibre counts as empty: where it and others cover the
+point, the first of the others in the source's order answers. A ray leaving a fibre that scattered it
+as a whole meets every fibre but that one, so a fibre overlapping it stays solid (fiberpath's rays
+meet it too), and the fibres' overlaps, a third of the covered volume at packing 0.5, are no holes. The integrator
 (``stages.render.volpath``) is compiled once per source class. Sources: ``HomogeneousMedium``
 (below; a box of constant fibre material, for closed-form tests), ``stages.render.grid_medium``,
 ``stages.render.procedural_medium``, ``stages.render.realized_medium``.
@@ -41,8 +45,9 @@ the source does not know them: voxels, boxes)."""
 NO_MEDIUM = MediumPoint(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, np.int64(-1), np.int64(-1))  # outside every fibre
 
 
-def medium_lookup(med, x, y, z):
-    """``MediumPoint`` at (x, y, z); numba-only (overloaded per source)."""
+def medium_lookup(med, x, y, z, skip):
+    """``MediumPoint`` at (x, y, z) of the fibres but ``skip`` (module doc); numba-only (overloaded per
+    source)."""
     raise TypeError("medium_lookup is only callable from numba-compiled code")
 
 
@@ -77,6 +82,6 @@ def homogeneous_lookup(med, x, y, z):
 
 
 @overload(medium_lookup)
-def _homogeneous_overload(med, x, y, z):
+def _homogeneous_overload(med, x, y, z, skip):
     if is_tuple_class(med, HomogeneousMedium):
-        return lambda med, x, y, z: homogeneous_lookup(med, x, y, z)
+        return lambda med, x, y, z, skip: homogeneous_lookup(med, x, y, z)  # no fibres to tell apart

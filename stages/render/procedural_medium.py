@@ -41,8 +41,8 @@ ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
 
 @njit(cache=True)
-def procedural_lookup(med, x, y, z):
-    r = lookup_point(med.cv, med.tab, x, y, z)
+def procedural_lookup(med, x, y, z, skip=-1):
+    r = lookup_point(med.cv, med.tab, x, y, z, skip)
     if not r.inside:
         return NO_MEDIUM
     rough = med.tab.tparams[med.tab.yarn_type[r.yarn], ROUGHNESS]
@@ -51,9 +51,9 @@ def procedural_lookup(med, x, y, z):
 
 
 @overload(medium_lookup)
-def _procedural_overload(med, x, y, z):
+def _procedural_overload(med, x, y, z, skip):
     if is_tuple_class(med, ProceduralMedium):
-        return lambda med, x, y, z: procedural_lookup(med, x, y, z)
+        return lambda med, x, y, z, skip: procedural_lookup(med, x, y, z, skip)
 
 
 @njit(cache=True)

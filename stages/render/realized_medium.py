@@ -8,7 +8,12 @@ with the lowest fibre index answers (the realization orders fibres as the lookup
 regular before hair), so both sources describe the same medium.
 
 RealizedMedium fields: ``bvh`` (``FiberBVH``), ``fiber_yarn`` (F,) int32, ``yarn_density`` (Y,),
-``yarn_albedo`` (Y, 3), ``yarn_roughness`` (Y,) float64.
+``yarn_albedo`` (Y, 3), ``yarn_roughness`` (Y,) float64, ``fibre_id`` (F,) int64 or empty: the number
+a ``MediumPoint`` gives the covering fibre and ``medium_lookup``'s skip names. The procedural
+realization cuts one fibre into pieces (runs of regular cycles, each loop cycle) that meet end to
+end; with the procedural lookup's numbers (``fibre_cache.fibre_ids``) a ray leaving a fibre skips all
+its pieces, as the procedural source and its cache do. Empty: each polyline is its own fibre (its
+index).
 
 ``fiber_capsules(med)`` gives the capsules and density bounds for a majorant grid.
 """
@@ -24,20 +29,27 @@ from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.geometry.stack import STACK_SIZE, stack_array
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
-RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness"])
+RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness",
+                                               "fibre_id"])
 
 
 @njit(cache=True, _nrt=False)
-def covering_segment(bvh, x, y, z):
+def covering_segment(bvh, x, y, z, skip=-1, fibre_id=None):
     """Segment of the lowest-index fibre whose capsule contains (x, y, z) (of its segments that do, the
-    lowest: the answer does not depend on the tree), or -1. Walks the BVH's 4-wide nodes and
-    leaf-ordered ``prims`` (see ``stages.core.geometry.bvh``)."""
-    return covering_segment_arrays(bvh.wide_box, bvh.wide_child, bvh.prims, bvh.seg_fiber, x, y, z)
+    lowest: the answer does not depend on the tree), or -1; fibre ``skip`` (-1: none; numbered by
+    ``fibre_id``, else by index) counts as empty. Walks the BVH's 4-wide nodes and leaf-ordered
+    ``prims`` (see ``stages.core.geometry.bvh``)."""
+    if fibre_id is None:
+        return covering_segment_arrays(bvh.wide_box, bvh.wide_child, bvh.prims, bvh.seg_fiber, x, y, z, skip,
+                                       bvh.seg_fiber[:0])
+    return covering_segment_arrays(bvh.wide_box, bvh.wide_child, bvh.prims, bvh.seg_fiber, x, y, z, skip, fibre_id)
 
 
 @njit(cache=True, _nrt=False)
-def covering_segment_arrays(box, child, prims, seg_fiber, x, y, z):
-    """``covering_segment`` on the BVH arrays it reads (for callers that hold them apart)."""
+def covering_segment_arrays(box, child, prims, seg_fiber, x, y, z, skip, fibre_id):
+    """``covering_segment`` on the BVH arrays it reads (for callers that hold them apart); ``skip``
+    names a fibre by ``fibre_id[f]`` (the fibre cache's numbers, whose pieces share one) or, with
+    ``fibre_id`` empty, by its index f."""
     if prims.shape[0] == 0:
         return -1
     stack = stack_array(STACK_SIZE, np.int64)
@@ -61,6 +73,8 @@ def covering_segment_arrays(box, child, prims, seg_fiber, x, y, z):
             f = seg_fiber[s]
             if f > best_f or (f == best_f and s > best):
                 continue
+            if skip >= 0 and (fibre_id[f] if fibre_id.shape[0] > 0 else f) == skip:
+                continue
             r = prims[q, 6]
             if point_segment_dist2(x, y, z, prims[q, 0], prims[q, 1], prims[q, 2],
                                    prims[q, 3], prims[q, 4], prims[q, 5]) < r * r:
@@ -83,22 +97,23 @@ def segment_tangent(points, seg_a, s):
 
 
 @njit(cache=True)
-def realized_lookup(med, x, y, z):
-    s = covering_segment(med.bvh, x, y, z)
+def realized_lookup(med, x, y, z, skip=-1):
+    s = covering_segment(med.bvh, x, y, z, skip, med.fibre_id)
     if s < 0:
         return NO_MEDIUM
     tx, ty, tz = segment_tangent(med.bvh.points, med.bvh.seg_a, s)
     f = med.bvh.seg_fiber[s]
     c = med.fiber_yarn[f]
     a = med.yarn_albedo
+    fid = med.fibre_id[f] if med.fibre_id.shape[0] > 0 else np.int64(f)
     return MediumPoint(np.float64(med.yarn_density[c]), tx, ty, tz, np.float64(a[c, 0]), np.float64(a[c, 1]),
-                       np.float64(a[c, 2]), np.float64(med.yarn_roughness[c]), np.int64(c), np.int64(f))
+                       np.float64(a[c, 2]), np.float64(med.yarn_roughness[c]), np.int64(c), fid)
 
 
 @overload(medium_lookup)
-def _realized_overload(med, x, y, z):
+def _realized_overload(med, x, y, z, skip):
     if is_tuple_class(med, RealizedMedium):
-        return lambda med, x, y, z: realized_lookup(med, x, y, z)
+        return lambda med, x, y, z, skip: realized_lookup(med, x, y, z, skip)
 
 
 @njit(cache=True)

@@ -143,9 +143,9 @@ def ray_box(lo, hi, ox, oy, oz, dx, dy, dz):
 
 @njit(cache=True)
 def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_fibre=-1):
-    """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax]; points
-    of fibre ``skip_fibre`` (a MediumPoint.fibre, -1 none) count as empty: a ray leaving a fibre that
-    scattered it as a whole does not meet that fibre again."""
+    """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax] through
+    every fibre but ``skip_fibre`` (a MediumPoint.fibre, -1 none: ``medium_lookup``'s skip): a ray
+    leaving a fibre that scattered it as a whole does not meet that fibre again."""
     T = 1.0
     lookups = 0
     t_near, t_far = ray_box(maj.lo, maj.hi, ox, oy, oz, dx, dy, dz)
@@ -184,11 +184,9 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
                 t -= math.log(1.0 - u) / mu
                 if t >= t_exit:
                     break
-                m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz)
+                m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz, skip_fibre)
                 lookups += 1
                 st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
-                if skip_fibre >= 0 and m.fibre == skip_fibre:
-                    st = 0.0
                 if ratio:
                     T *= 1.0 - st / mu
                     if T < RATIO_RR_THRESHOLD:

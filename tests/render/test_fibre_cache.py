@@ -19,6 +19,7 @@ from pipeline.runners.tables import build
 from pipeline.scene import camera_array
 from stages.core.geometry.bvh import build_fiber_bvh
 from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
+from stages.render.fibre_cache import fibre_ids
 from stages.render.medium import medium_lookup
 from stages.render.procedural_medium import ProceduralMedium
 from stages.render.realized_medium import RealizedMedium
@@ -28,11 +29,11 @@ CAMERA = {"origin": [0.35, -0.6, 0.5], "target": [0.0, 0.0, 0.0], "up": [0.0, 0.
 
 
 @njit(cache=True)
-def _lookups(med, Q):
-    """(den, yarn, fibre, tx, ty, tz) of medium_lookup at every row of Q."""
+def _lookups_skipping(med, Q, skip):
+    """(den, yarn, fibre, tx, ty, tz) of medium_lookup at every row of Q, fibre skip[i] counting as empty."""
     out = np.empty((Q.shape[0], 6))
     for i in range(Q.shape[0]):
-        m = medium_lookup(med, Q[i, 0], Q[i, 1], Q[i, 2])
+        m = medium_lookup(med, Q[i, 0], Q[i, 1], Q[i, 2], skip[i])
         out[i, 0] = m.den
         out[i, 1] = m.yarn
         out[i, 2] = m.fibre
@@ -40,6 +41,10 @@ def _lookups(med, Q):
         out[i, 4] = m.ty
         out[i, 5] = m.tz
     return out
+
+
+def _lookups(med, Q, skip=None):
+    return _lookups_skipping(med, Q, np.full(len(Q), -1, np.int64) if skip is None else skip.astype(np.int64))
 
 
 def _fabric(tmp, toml, seed=3):
@@ -59,8 +64,9 @@ def _realized(fib, tab):
     from stages.core.yarn.model import DENSITY, ROUGHNESS
 
     yt = tab.yarn_type
+    ids = fibre_ids(*(np.asarray(fib[k]) for k in ("fiber_yarn", "fiber_ply", "fiber_kind", "fiber_index")))
     return RealizedMedium(bvh, np.asarray(fib["fiber_yarn"], np.int32), tab.tparams[yt, DENSITY].copy(),
-                          np.ascontiguousarray(tab.yarn_albedo), tab.tparams[yt, ROUGHNESS].copy())
+                          np.ascontiguousarray(tab.yarn_albedo), tab.tparams[yt, ROUGHNESS].copy(), ids)
 
 
 def _points(fib, n_uniform, n_near, seed=0):
@@ -100,8 +106,8 @@ def _check_exact(fib, cv, tab, budget_mib, Q, W=64, H=48):
     flat[ok] = (b[ok, 2] * med.brick_res[1] + b[ok, 1]) * med.brick_res[0] + b[ok, 0]
     in_cache = flat >= 0
     in_cache[in_cache] = med.cached[flat[in_cache]] == 1
-    # the realized fibres' BVH: the same answer, bit for bit, but the fibre number (piece vs fibre)
-    assert np.array_equal(got[in_cache][:, [0, 1, 3, 4, 5]], real[in_cache][:, [0, 1, 3, 4, 5]])
+    # the realized fibres' BVH (numbered as the lookups number fibres): the same answer, bit for bit
+    assert np.array_equal(got[in_cache], real[in_cache])
     # the procedural lookups, away from surfaces, cached or not
     proc = _lookups(ProceduralMedium(cv, tab), Q)
     clear = _clear(fib, Q)
@@ -110,6 +116,17 @@ def _check_exact(fib, cv, tab, budget_mib, Q, W=64, H=48):
     assert np.array_equal(inside[clear], proc[clear, 0] > 0)
     both = clear & inside
     assert np.array_equal(got[both, 1:3], proc[both, 1:3])  # yarn and the fibre's number
+    # every fibre but the one that answered (a ray leaving it): the next covering fibre, if any, in
+    # the same order, from the cache, the realized fibres and the lookups alike
+    got2 = _lookups(med, Q, got[:, 2])
+    real2 = _lookups(_realized(fib, tab), Q, real[:, 2])
+    assert np.array_equal(got2[in_cache], real2[in_cache])
+    proc2 = _lookups(ProceduralMedium(cv, tab), Q, proc[:, 2])
+    inside2 = got2[:, 0] > 0
+    assert np.array_equal(inside2[clear], proc2[clear, 0] > 0)
+    assert np.array_equal(got2[clear & inside2, 1:3], proc2[clear & inside2, 1:3])
+    assert inside2[clear].sum() > 0.1 * inside[clear].sum()  # overlaps were exercised
+    assert not np.any(inside2 & (got2[:, 2] == got[:, 2]))
     return built, in_cache, inside
 
 

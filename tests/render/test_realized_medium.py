@@ -36,7 +36,8 @@ def medium():
     F = len(O) - 1
     yarn = (np.arange(F) % 3).astype(np.int32)
     med = RealizedMedium(bvh, yarn, np.array([100.0, 250.0, 40.0]),
-                         np.array([[0.9, 0.8, 0.7], [0.2, 0.4, 0.6], [0.5, 0.5, 0.1]]), np.array([0.3, 0.6, 1.0]))
+                         np.array([[0.9, 0.8, 0.7], [0.2, 0.4, 0.6], [0.5, 0.5, 0.1]]), np.array([0.3, 0.6, 1.0]),
+                         np.zeros(0, np.int64))
     return med, P, Rr, O
 
 
@@ -65,7 +66,8 @@ def _points(P, n, seed):
 def test_covering_segment_is_the_lowest_covering_fibre(medium):
     """Reference: brute force over all capsules at 4000 points: -1 where none covers; otherwise the
     returned segment is the lowest-index covering segment of the lowest-index covering fibre (so the
-    answer does not depend on how the BVH orders its leaves)."""
+    answer does not depend on how the BVH orders its leaves), and with that fibre skipped, the same
+    of the other covering fibres."""
     med, P, Rr, O = medium
     a, b, r, fib = _brute_segments(P, Rr, O)
     X = _points(P, 4000, 1)
@@ -81,6 +83,14 @@ def test_covering_segment_is_the_lowest_covering_fibre(medium):
         f = fib[cov].min()
         assert med.bvh.seg_fiber[s] == f
         assert s == np.flatnonzero(cov & (fib == f)).min()
+        # skipping that fibre (a ray leaving it): the next covering fibre, or none
+        s2 = covering_segment(med.bvh, *x, f)
+        rest = cov & (fib != f)
+        if not rest.any():
+            assert s2 == -1
+            continue
+        f2 = fib[rest].min()
+        assert med.bvh.seg_fiber[s2] == f2 and s2 == np.flatnonzero(rest & (fib == f2)).min()
     assert n_multi > 100  # overlaps were exercised
 
 
@@ -88,7 +98,7 @@ def test_covering_segment_is_the_lowest_covering_fibre(medium):
 def _lookup(med, X):
     out = np.empty((X.shape[0], 10))
     for k in range(X.shape[0]):
-        r = medium_lookup(med, X[k, 0], X[k, 1], X[k, 2])
+        r = medium_lookup(med, X[k, 0], X[k, 1], X[k, 2], -1)
         out[k, 0], out[k, 1], out[k, 2], out[k, 3] = r.den, r.tx, r.ty, r.tz
         out[k, 4], out[k, 5], out[k, 6], out[k, 7] = r.albedo_r, r.albedo_g, r.albedo_b, r.roughness
         out[k, 8], out[k, 9] = r.yarn, r.fibre

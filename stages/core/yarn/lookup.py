@@ -4,7 +4,8 @@
     (inside, yarn, kind, dir_x, dir_y, dir_z, density, albedo_r, albedo_g, albedo_b, fibre)
 with kind 0 none, 1 regular, 2 loop, 3 hair; dir the unit fibre tangent at the closest point of the
 covering fibre (zero outside); density the yarn type's density (0 outside); ``OUTSIDE`` where no
-fibre covers p; fibre a number that tells the covering fibres apart (-1 outside).
+fibre covers p; fibre a number that tells the covering fibres apart (-1 outside). ``lookup_point(..., skip)`` answers
+for every fibre but the one numbered ``skip`` (volpath's rays leaving a fibre that scattered them).
 ``lookup_points(cv, tab, pts)`` does it for (N, 3) points in parallel and returns
 the same fields as arrays (``FibreLookups``: inside, yarn, kind, direction (N, 3), density,
 albedo (N, 3)).
@@ -102,9 +103,10 @@ def _order_key(k, is_hair, j):
 
 
 @njit(cache=True)
-def yarn_lookup(cv, tab, c, s, i, px, py, pz):
+def yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key=-1):
     """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i):
-    a ``KeyedLookup`` (lookup_point's answer and the order key of the covering fibre)."""
+    a ``KeyedLookup`` (lookup_point's answer and the order key of the covering fibre), the fibre of
+    order key ``skip_key`` (-1: none) counting as empty."""
     t = tab.yarn_type[c]
     tp = tab.tparams[t]
     lo = tab.fs_off[c]
@@ -198,7 +200,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                     # also in the loop scan below, with the yarn type's factor K
                     reach_j = reach_factor(tab.fib_v[fi], gmin) * (rf + w + eps)
                 hit, kind, tx, ty, tz = _regular_test(cv, tab, vis, k, j, fi, reach_j)
-                if hit:
+                if hit and _order_key(k, False, j) != skip_key:
                     jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
                     break
             if zbin >= 0:
@@ -214,7 +216,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                     if (tab.fib_mask[fi] & bit) == 0 or rr < tab.fib_rlo[fi] or rr > tab.lp_U[le] + munit:
                         continue
                     hit, kind, tx, ty, tz = _regular_test(cv, tab, vis, k, j, fi, reach)
-                    if hit:
+                    if hit and _order_key(k, False, j) != skip_key:
                         jbest, kbest, tbx, tby, tbz = j, kind, tx, ty, tz
                         break
         if jbest < N:
@@ -251,12 +253,12 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz):
                 hs = HairShape(tab.hair_r0[hh], tab.hair_r1[hh], tab.hair_th1[hh], tab.hair_pe[hh],
                                tab.hair_z1[hh], tab.hair_ze[hh])
                 hit, tx, ty, tz = _hair_test(cv, vis, k, hs, rho_k, limit)
-                if hit:
+                if hit and _order_key(k, True, tab.hb_items[qq]) != skip_key:
                     return _answer(c, 3, tx, ty, tz, tp, tab, _order_key(k, True, tab.hb_items[qq]))
         else:
             seed = hair_node_seed_nb(np.uint64(tab.yarn_seed[c]), k)
             margin = tab.type_mz[t] + (w + 2.0 * eps) / gmin
-            hit, tx, ty, tz, h = _free_mode_hairs(cv, vis, k, nh, seed, L, margin, rho_k, limit)
+            hit, tx, ty, tz, h = _free_mode_hairs(cv, vis, k, nh, seed, L, margin, rho_k, limit, skip_key)
             if hit:
                 return _answer(c, 3, tx, ty, tz, tp, tab, _order_key(k, True, h))
     return OUTSIDE_KEYED
@@ -301,10 +303,10 @@ def _hair_test(cv, vis, k, hs, rho_k, limit):
 
 
 @njit(cache=True)
-def _free_mode_hairs(cv, vis, k, nh, seed, L, margin, rho_k, limit):
+def _free_mode_hairs(cv, vis, k, nh, seed, L, margin, rho_k, limit, skip_key):
     """Realization-free hair mode (Algorithm 3): the active hairs of ply k at s from the implicit
     quad-tree (scratch arrays of the ply's hair count), then the same tests as the hybrid mode:
-    (covered, tangent, hair index).
+    (covered, tangent, hair index), the hair of order key ``skip_key`` passed over.
     A function of its own so that yarn_lookup allocates nothing."""
     tp = vis.tp
     hidx = np.empty(nh, np.int64)
@@ -314,14 +316,15 @@ def _free_mode_hairs(cv, vis, k, nh, seed, L, margin, rho_k, limit):
     for qq in range(na):
         r0, r1, th1, pe = hair_params(tp, vis.yseed, k, hidx[qq])
         hit, tx, ty, tz = _hair_test(cv, vis, k, HairShape(r0, r1, th1, pe, hz1[qq], hze[qq]), rho_k, limit)
-        if hit:
+        if hit and _order_key(k, True, hidx[qq]) != skip_key:
             return True, tx, ty, tz, hidx[qq]
     return False, 0.0, 0.0, 0.0, 0
 
 
 @njit(cache=True)
-def lookup_point(cv, tab, px, py, pz):
-    """seed 000 Algorithm 1 at fabric-space point p: a ``FibreLookup`` (module doc)."""
+def lookup_point(cv, tab, px, py, pz, skip=-1):
+    """seed 000 Algorithm 1 at fabric-space point p: a ``FibreLookup`` (module doc); the fibre numbered
+    ``skip`` (a FibreLookup.fibre, -1: none) counts as empty, so the first of the others answers."""
     lo3 = tab.fg_lo
     cell = tab.fg_cell[0]
     dims = tab.fg_dims
@@ -357,8 +360,9 @@ def lookup_point(cv, tab, px, py, pz):
         rf = tab.tparams[tab.yarn_type[c], FIBER_RADIUS]
         m = rf + 2.0 * eps
         gated = best > 0.0 and best * best >= gate * gate + m * m
+        skip_key = skip - c * FIBRE_ID_STRIDE if skip >= 0 and skip // FIBRE_ID_STRIDE == c else -1
         if cv.closed[c] and _near_seam(tab, c, bound, rf, eps, px, py, pz):
-            res = _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz)
+            res = _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz, skip_key)
             if res.inside:
                 return _unkeyed(res)
             continue
@@ -374,14 +378,14 @@ def lookup_point(cv, tab, px, py, pz):
         s, i, d2 = foot_point(tab.fs_s, fr, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz, FOOT_TOL * rf)
         if d2 >= bound * bound:
             continue
-        res = yarn_lookup(cv, tab, c, s, i, px, py, pz)
+        res = yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key)
         if res.inside:
             return _unkeyed(res)
     return OUTSIDE
 
 
 @njit(cache=True, inline="always")
-def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz):
+def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz, skip_key):
     """yarn_lookup at p's foot point on yarn c between coarse knots ka and kb (frame-sample hint ia,
     Newton from s0); OUTSIDE_KEYED when the foot point is farther than bound. (lookup_point's main
     visit spells this out: returning the constant from an inlined call costs it ~20 %.)"""
@@ -391,11 +395,11 @@ def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz):
                           FOOT_TOL * rf)
     if d2 >= bound * bound:
         return OUTSIDE_KEYED
-    return yarn_lookup(cv, tab, c, s, i, px, py, pz)
+    return yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key)
 
 
 @njit(cache=True)
-def _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz):
+def _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz, skip_key):
     """Closed yarn c near its seam (a closed yarn's fibres run from s = 0 to L and meet at the seam
     without joining): the main visit at the nearest chord bq unless gated, and each end piece it
     does not cover, visited as an open yarn's end; the first answer in the covering order."""
@@ -407,13 +411,14 @@ def _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz):
     if not gated:
         ia = tab.kn_idx[bq]
         s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
-        res = _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz)
+        res = _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz, skip_key)
     if ka > k0:  # the start of the yarn
-        r2 = _visit(cv, tab, c, k0, min(k0 + 2, k1), tab.kn_idx[k0], 0.0, bound, rf, px, py, pz)
+        r2 = _visit(cv, tab, c, k0, min(k0 + 2, k1), tab.kn_idx[k0], 0.0, bound, rf, px, py, pz, skip_key)
         if r2.key < res.key:
             res = r2
     if kb < k1:  # its end
-        r2 = _visit(cv, tab, c, max(k1 - 2, k0), k1, tab.kn_idx[k1 - 1], tab.yarn_length[c], bound, rf, px, py, pz)
+        r2 = _visit(cv, tab, c, max(k1 - 2, k0), k1, tab.kn_idx[k1 - 1], tab.yarn_length[c], bound, rf, px, py, pz,
+                    skip_key)
         if r2.key < res.key:
             res = r2
     return res
