@@ -154,18 +154,20 @@ def accel_estimate(art: Artifact, what: str) -> Estimate:
     (frame samples at the error-bounded step of every yarn, twice while resampled; the chord grid;
     per-fibre, per-hair and fringe bounds), from the artifact's small per-yarn arrays."""
     from stages.core.yarn import model as M
-    from stages.core.yarn.tables import FO_ZBIN_EXTENTS, FRAME_TOLERANCE
+    from stages.core.yarn.accel import frame_steps
+    from stages.core.yarn.frame_samples import FRAME_COLS
+    from stages.core.yarn.tables import FO_ZBIN_EXTENTS
 
     est = Estimate(what)
     est.add("stored tables", 2 * art.nbytes(), art.path.name)
     tp, ytype = art["tparams"], art["yarn_type"]
     length, ext, kap = art["yarn_length"], art["yarn_extent"], art["yarn_kappa"]
     radius = art["curves/radius"][:len(ytype)]
-    k2 = kap * kap * ext + kap
-    step = np.maximum(np.minimum(0.5 * radius, np.sqrt(8.0 * FRAME_TOLERANCE * tp[ytype, M.FIBER_RADIUS]
-                                                       / np.maximum(k2, 1e-12))), 1e-3 * radius)
-    samples = float(np.sum(length / step + 2))
-    est.add("frame samples", 2 * 120 * samples, f"{int(samples)} samples")
+    step = frame_steps(kap, ext, radius, tp[ytype, M.FIBER_RADIUS])
+    # every spline knot and stored frame sample is a sample too (stages.core.yarn.frame_samples)
+    breaks = float(len(art["curves/points"]) + len(art["curves/frame_s"]))
+    samples = float(np.sum(length / step + 2)) + breaks
+    est.add("frame samples", 2 * (8 + 8 * FRAME_COLS) * samples, f"{int(samples)} samples")
     pts = art["curves/points"]
     if len(pts) and len(ext):
         box = pts.max(0) - pts.min(0) + 2 * ext.max()

@@ -199,10 +199,14 @@ def locate(cv, c, s):
             a = m
         else:
             b = m - 1
-    i = a
+    return a, segment_t_at(cv, a, s - cv.seg_arclen[a])
+
+
+@njit(cache=True)
+def segment_t_at(cv, i, length):
+    """Parameter t of segment i at arc length ``length`` from its start (clamped to the segment)."""
     ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = coeffs_s(cv, i)
-    t = _t_at_length_s(ax, ay, az, bx, by, bz, cx, cy, cz, cv.seg_length[i], s - cv.seg_arclen[i])
-    return i, t
+    return _t_at_length_s(ax, ay, az, bx, by, bz, cx, cy, cz, cv.seg_length[i], length)
 
 
 @njit(cache=True)

@@ -179,10 +179,27 @@ def chord_gates(tab: Tables):
     shells over the bracket's z-bins (infinite where the last, open shell is set or, in the
     realization-free mode, where hairs are not stored). Lookups skip such a yarn before its foot
     point: p's axis distance is at least sqrt(lb^2 - w^2) for the chord lower bound lb."""
-    bits = np.unpackbits(tab.fo_bits.view(np.uint8), axis=1, bitorder="little")
-    bits = bits.reshape(len(tab.fo_bits), 2, FO_SHELLS, FO_SECTORS).any(axis=(1, 3))  # (bins, shells)
-    top = np.where(bits.any(axis=1), FO_SHELLS - 1 - np.argmax(bits[:, ::-1], axis=1), -1).astype(np.int64)
-    return _gates(tab, top)
+    return _gates(tab, _top_shells(tab.fo_bits))
+
+
+@njit(cache=True)
+def _top_shells(fo_bits):
+    """The highest fringe shell with a bit set (loops or hairs, any sector) per z-bin row of fo_bits,
+    -1 where none: bit (set * FO_SHELLS + shell) * FO_SECTORS + sector of a row, little-endian words
+    (tables.fringe_bits), read in place (unpacked, the bits of a 1,000-yarn cloth took 1.3 GB)."""
+    top = np.full(fo_bits.shape[0], -1, np.int64)
+    for i in range(fo_bits.shape[0]):
+        for sh in range(FO_SHELLS - 1, -1, -1):
+            hit = False
+            for st in range(2):
+                for sec in range(FO_SECTORS):
+                    k = (st * FO_SHELLS + sh) * FO_SECTORS + sec
+                    if (fo_bits[i, k >> 6] >> np.uint64(k & 63)) & np.uint64(1):
+                        hit = True
+            if hit:
+                top[i] = sh
+                break
+    return top
 
 
 @njit(cache=True)
@@ -211,10 +228,19 @@ def _gates(tab, top):
     return gate
 
 
+def frame_steps(kappa, extent, radius, fiber_radius, tolerance: float = FRAME_TOLERANCE):
+    """First guess of each yarn's frame-sample step (``derive_lookup_accel`` rescales it on the measured
+    error): the Hermite error h^4 / 384 |f^(4)| of the position and of rho x the frame, with
+    |f^(4)| ~ kappa^3 + rho kappa^4, at ``tolerance`` fibre radii; at most half the yarn radius."""
+    k4 = kappa ** 4 * extent + kappa ** 3
+    step = (384.0 * tolerance * fiber_radius / np.maximum(k4, 1e-12)) ** 0.25
+    return np.maximum(np.minimum(0.5 * radius, step), 1e-3 * radius)
+
+
 def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
     """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
     eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
-    measured error, <= 3 rounds; the error is second order in the step), coarse knots about half
+    measured error, <= 3 rounds; the error is fourth order in the step), coarse knots about half
     an extent apart, and the chord grid (cells half the largest extent, grown to stay under
     max_cells). Deterministic: depends on the curves and the stored tables only."""
     Y = len(tab.yarn_type)
@@ -224,10 +250,9 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
     kap = np.asarray(tab.yarn_kappa, np.float64)
     rf_y = tab.tparams[tab.yarn_type, FIBER_RADIUS]
     target = tolerance * rf_y
-    k2 = kap * kap * ext + kap
     radius = np.asarray(cv.radius[:Y], np.float64)
     rmin = 1e-3 * radius
-    deltas = np.maximum(np.minimum(0.5 * radius, np.sqrt(8.0 * target / np.maximum(k2, 1e-12))), rmin)
+    deltas = frame_steps(kap, ext, radius, rf_y, tolerance)
     for attempt in range(3):
         fs_off, fs_s, fs_fr, err = sample_all(cv, deltas, ext)
         scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
@@ -235,7 +260,7 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
         over = (yeps > target) & (deltas > rmin)
         if not over.any():
             break
-        deltas = np.where(over, np.maximum(0.9 * deltas * np.sqrt(target / np.maximum(yeps, 1e-300)), rmin), deltas)
+        deltas = np.where(over, np.maximum(0.9 * deltas * (target / np.maximum(yeps, 1e-300)) ** 0.25, rmin), deltas)
         if attempt < 2:  # resampled next: let this round's samples go first (they are GB on a large fabric)
             del fs_off, fs_s, fs_fr, err
     mean_step = float(np.mean(deltas))

@@ -21,6 +21,7 @@ from numba import njit
 
 from stages.core.rng import hash_u64
 
+from .frame_samples import FRAME_COLS
 from .model import ALPHA, FIBER_NUM, S_MIG
 
 Tables = namedtuple("Tables", [
@@ -63,7 +64,7 @@ Tables = namedtuple("Tables", [
     # ---- derived when loaded (derive_lookup_accel; never stored): frame samples and chord grid
     "fs_off",           # (Y+1,) int64: frame samples of yarn c at fs_off[c]:fs_off[c+1] (frame_samples.py)
     "fs_s",             # float64 arc length of each frame sample
-    "fs_frame",         # (M, 12) float64 position, tangent, normal, binormal
+    "fs_frame",         # (M, FRAME_COLS) float64 position, tangent, normal, binormal, step derivatives
     "yarn_eps",         # (Y,) float64 bound of |Eq. 7 with sampled frames - Eq. 7| within the extent
     "kn_off",           # (Y+1,) int64: coarse knots of yarn c at kn_off[c]:kn_off[c+1]
     "kn_idx",           # int64 frame-sample index of each coarse knot
@@ -121,7 +122,7 @@ def accel_bytes(tab: Tables) -> int:
 
 def empty_accel(Y):
     z, zi = np.zeros(0), np.zeros(0, np.int64)
-    return (np.zeros(Y + 1, np.int64), z, np.zeros((0, 12)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
+    return (np.zeros(Y + 1, np.int64), z, np.zeros((0, FRAME_COLS)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
             np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi,
             np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0),
             np.zeros(Y + 1, np.int64), np.ones((Y, 2)), np.zeros((0, 2 * FO_WORDS), np.uint64), np.zeros(0))
