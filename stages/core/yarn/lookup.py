@@ -4,8 +4,9 @@
     (inside, yarn, kind, dir_x, dir_y, dir_z, density, albedo_r, albedo_g, albedo_b, fibre)
 with kind 0 none, 1 regular, 2 loop, 3 hair; dir the unit fibre tangent at the closest point of the
 covering fibre (zero outside); density the yarn type's density (0 outside); ``OUTSIDE`` where no
-fibre covers p; fibre a number that tells the covering fibres apart (-1 outside). ``lookup_point(..., skip)`` answers
-for every fibre but the one numbered ``skip`` (volpath's rays leaving a fibre that scattered them).
+fibre covers p; fibre a number that tells the covering fibres apart (-1 outside).
+``lookup_point(..., skip)`` answers for every fibre but the one numbered ``skip`` (volpath's rays
+leaving a fibre that scattered them).
 ``lookup_points(cv, tab, pts)`` does it for (N, 3) points in parallel and returns
 the same fields as arrays (``FibreLookups``: inside, yarn, kind, direction (N, 3), density,
 albedo (N, 3)).
