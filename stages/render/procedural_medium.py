@@ -28,6 +28,7 @@ from numba.extending import overload
 import math
 
 from stages.core.curves.spline import curve_point_at
+from stages.core.yarn.fibre_tests import stored_hair
 from stages.core.yarn.frame_samples import eq7, frame_at
 from stages.core.yarn.lookup import lookup_point
 from stages.core.yarn.tables import loop_fibre
@@ -134,20 +135,15 @@ def _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, mode, box,
         if tab.hair_mode[0] == 0:
             base = tab.hair_off[g]
             for hh in range(base, base + tab.hair_count[g]):
-                r0 = tab.hair_r0[hh]
-                r1 = tab.hair_r1[hh]
-                th1 = tab.hair_th1[hh]
-                pe = tab.hair_pe[hh]
-                z1 = tab.hair_z1[hh]
-                ze = tab.hair_ze[hh]
-                speed = hair_speed_bound(tp, r0, r1, pe, ze) * max(gmax, 1.0)
+                hs = stored_hair(tab, hh)
+                speed = hair_speed_bound(tp, hs.r0, hs.r1, hs.pe, hs.ze) * max(gmax, 1.0)
                 dt = 1.0 / (hair_samples - 1)
                 i = lo
-                x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, 0.0)
+                x, y, z = hair_point(tp, k, hs.r0, hs.r1, hs.th1, hs.pe, hs.z1, hs.ze, 0.0)
                 i, px, py, pz = _fabric_point(tab, lo, hi, i, x, y, z)
                 for q in range(hair_samples - 1):
                     tq = min((q + 1) * dt, 1.0)
-                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1, ze, tq)
+                    x, y, z = hair_point(tp, k, hs.r0, hs.r1, hs.th1, hs.pe, hs.z1, hs.ze, tq)
                     i, qx, qy, qz = _fabric_point(tab, lo, hi, i, x, y, z)
                     _emit(mode, box, mu, glo, cs, half_diag, res, px, py, pz, qx, qy, qz,
                           rf + 0.5 * speed * dt + 2.0 * eps, den)

@@ -14,6 +14,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .fibre_tests import stored_hair
 from .frame_samples import chord_grid, coarse_knots, sample_all
 from .model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, RHO_MAX, RHO_MIN, USE_MIGRATION,
                     hair_point, hair_speed_bound, regular_xy, transverse_speed, transverse_speed_bound)
@@ -138,16 +139,11 @@ def fringe_occupancy(tab, fo_off, fo_geom):
             if tab.hair_mode[0] != 0:
                 continue
             for hh in range(tab.hair_off[g], tab.hair_off[g] + tab.hair_count[g]):
-                r0 = tab.hair_r0[hh]
-                r1 = tab.hair_r1[hh]
-                th1 = tab.hair_th1[hh]
-                pe = tab.hair_pe[hh]
-                z1_ = tab.hair_z1[hh]
-                ze = tab.hair_ze[hh]
-                speed = hair_speed_bound(tp, r0, r1, pe, ze)
+                hs = stored_hair(tab, hh)
+                speed = hair_speed_bound(tp, hs.r0, hs.r1, hs.pe, hs.ze)
                 n = max(1, int(math.ceil(speed / r)))
                 for q in range(n + 1):
-                    x, y, z = hair_point(tp, k, r0, r1, th1, pe, z1_, ze, q / n)
+                    x, y, z = hair_point(tp, k, hs.r0, hs.r1, hs.th1, hs.pe, hs.z1, hs.ze, q / n)
                     _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * speed / n, FO_WORDS)
     return bits
 

@@ -56,6 +56,13 @@ LocalFrames.__doc__ = """Exact frames at arc lengths za < zm < zb: M[i] = (posit
 
 
 @njit(cache=True, inline="always")
+def stored_hair(tab, hh):
+    """The ``HairShape`` of stored (hybrid-mode) hair row hh of the tables."""
+    return HairShape(tab.hair_r0[hh], tab.hair_r1[hh], tab.hair_th1[hh], tab.hair_pe[hh], tab.hair_z1[hh],
+                     tab.hair_ze[hh])
+
+
+@njit(cache=True, inline="always")
 def fibre_xy(tp, yseed, fib, z):
     """Yarn-space (x, y, kind) of regular fibre ``fib`` of the yarn with key yseed at z."""
     return regular_xy(tp, yseed, fib.k, fib.j, fib.R, fib.th, fib.th0, z)

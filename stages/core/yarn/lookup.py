@@ -57,7 +57,7 @@ from numba import njit, prange
 from stages.core.yarn import hair_free
 from stages.core.yarn.fibre_tests import (TWO_PI, HairShape, RegularFibre, YarnVisit, exact_hair, exact_regular,
                                           fibre_xy, hair_closest_s, hair_prefilter, hair_quick_reject,
-                                          regular_closest_s)
+                                          regular_closest_s, stored_hair)
 from stages.core.yarn.frame_samples import chord_lower_bound, foot_point, frame_at
 from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
                                     ZE_MU, ZE_SIG, fiber_twist, hair_params, ply_frame, reach_factor)
@@ -251,8 +251,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key=-1):
                 if (s < tab.hair_box[hh, 0] - limit or s > tab.hair_box[hh, 1] + limit
                         or rho_k < tab.hair_box[hh, 2] - mr or rho_k > tab.hair_box[hh, 3] + mr):
                     continue
-                hs = HairShape(tab.hair_r0[hh], tab.hair_r1[hh], tab.hair_th1[hh], tab.hair_pe[hh],
-                               tab.hair_z1[hh], tab.hair_ze[hh])
+                hs = stored_hair(tab, hh)
                 hit, tx, ty, tz = _hair_test(cv, vis, k, hs, rho_k, limit)
                 if hit and _order_key(k, True, tab.hb_items[qq]) != skip_key:
                     return _answer(c, 3, tx, ty, tz, tp, tab, _order_key(k, True, tab.hb_items[qq]))
