@@ -24,6 +24,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.box4 import box4_contains
 from stages.core.geometry.bvh import leaf_range
 from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.geometry.stack import STACK_SIZE, stack_array
@@ -61,9 +62,9 @@ def covering_segment_arrays(box, child, prims, seg_fiber, x, y, z, skip, fibre_i
         sp -= 1
         ref = stack[sp]
         if ref >= 0:
+            holds = box4_contains(box, ref, x, y, z)
             for q in range(4):
-                if (box[ref, q] <= x <= box[ref, 12 + q] and box[ref, 4 + q] <= y <= box[ref, 16 + q]
-                        and box[ref, 8 + q] <= z <= box[ref, 20 + q]):
+                if holds & (1 << q):
                     stack[sp] = child[ref, q]
                     sp += 1
             continue

@@ -52,6 +52,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from stages.core.geometry.box4 import box4_enter
 from stages.core.geometry.capsule import capsule_intersect
 from stages.core.geometry.slab import safe_inverse
 from stages.core.geometry.stack import STACK_SIZE, stack_array
@@ -403,7 +404,7 @@ def _prim_hit(prims, j, ox, oy, oz, dx, dy, dz, tmin):
 
 @njit(cache=True, inline="always")
 def direction_signs(ix, iy, iz):
-    """The near-plane column offsets (0 or 12) of ``_child_enter`` for a ray's reciprocal direction."""
+    """The near-plane column offsets (0 or 12) of ``box4.box4_enter`` for a ray's reciprocal direction."""
     return 0 if ix >= 0.0 else 12, 0 if iy >= 0.0 else 12, 0 if iz >= 0.0 else 12
 
 
@@ -412,10 +413,7 @@ def push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tm
     """Push the children of wide node ``ref`` that the ray meets within [tmin, tmax], farthest first (so the
     nearest is visited next), with their entry distances; returns the new stack size. The four entry
     distances are sorted by a 5-comparator network (misses are inf and sort last)."""
-    ct0 = _child_enter(box, ref, 0, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
-    ct1 = _child_enter(box, ref, 1, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
-    ct2 = _child_enter(box, ref, 2, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
-    ct3 = _child_enter(box, ref, 3, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax)
+    ct0, ct1, ct2, ct3 = box4_enter(box, ref, sx, sy, sz, ox, oy, oz, ix, iy, iz, tmin, tmax)
     cr0 = child[ref, 0]
     cr1 = child[ref, 1]
     cr2 = child[ref, 2]
@@ -459,29 +457,6 @@ def leaf_range(ref):
     """(first prim, count) of a leaf child reference (< 0)."""
     code = -1 - ref
     return code // LEAF_CODE, code % LEAF_CODE
-
-
-@njit(cache=True, inline="always")
-def _child_enter(box, w, q, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax):
-    """Entry distance of the ray into child box q of wide node w (inf when it misses it, leaves it
-    before tmin or enters beyond tmax). s* = 0 for a non-negative direction component, else 12:
-    the near plane of each slab is picked by the direction's sign, so no min / max per axis."""
-    tn = (box[w, sx + q] - ox) * ix
-    tf = (box[w, 12 - sx + q] - ox) * ix
-    t0 = (box[w, 4 + sy + q] - oy) * iy
-    t1 = (box[w, 16 - sy + q] - oy) * iy
-    if t0 > tn:
-        tn = t0
-    if t1 < tf:
-        tf = t1
-    t0 = (box[w, 8 + sz + q] - oz) * iz
-    t1 = (box[w, 20 - sz + q] - oz) * iz
-    if t0 > tn:
-        tn = t0
-    if t1 < tf:
-        tf = t1
-    hit = (tf >= tn) & (tf >= tmin) & (tn <= tmax)
-    return tn if hit else np.inf
 
 
 @njit(cache=True, _nrt=False)
