@@ -33,7 +33,7 @@ def register(app: typer.Typer) -> None:
                bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset (a name in data/bcsdf/ or a preset file) for yarn groups whose scene entry names none."),
                material: str = typer.Option(None, "--material", metavar=material_metavar(), help=material_help()),
                max_depth: int = typer.Option(None, "--max-depth", help=f"Maximum scattering events per path (default: render.max_depth, else {COMMON_DEFAULTS['max_depth']})."),
-               max_spp: int = typer.Option(None, "--max-spp", min=0, help="Adaptive sampling: pixels whose relative error after --spp samples exceeds render.target_error (default 0.05) are rendered again with up to this many new samples (default: render.max_spp, else 0 = off)."),
+               max_spp: int = typer.Option(None, "--max-spp", min=0, help="Adaptive sampling: a second pass gives each pixel up to this many more samples, as many as its neighbours' relative error after --spp samples asks for to reach render.target_error (default 0.05) (default: render.max_spp, else 0 = off)."),
                cache: float = typer.Option(None, "--cache", metavar="MiB", help="volpath --source procedural: the render-time fibre cache budget in MiB: the fibres of the bricks the camera sees, realized into a capsule BVH; 0 = every lookup procedural (default: render.cache, else 2048; clamped to the available memory)."),
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
                exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops (finite, within +-64)."),

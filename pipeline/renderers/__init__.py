@@ -283,8 +283,9 @@ def render_schema() -> dict:
                           "description": "where the render's tile tasks run: local, processes (a Dask LocalCluster) "
                                          "or tcp://HOST:PORT (a Dask scheduler); --scheduler overrides it"},
             "max_spp": {"type": "integer", "minimum": 0,
-                        "description": "adaptive sampling: pixels whose relative error after spp samples exceeds "
-                                       "target_error are rendered again with up to max_spp samples (0: off)"},
+                        "description": "adaptive sampling: a second pass gives each pixel up to max_spp more samples, "
+                                       "as many as its neighbours' relative error after spp samples asks for "
+                                       "to reach target_error (0: off)"},
             "target_error": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
                              "description": "adaptive sampling: relative standard error of a pixel's mean aimed at"},
             "cache": {"type": "number", "minimum": 0,

@@ -8,14 +8,19 @@ a ``FilmRun``: rgb, extra channels ``A``/``depth``/``variance``, the ``FilmImage
 totals), render and compile seconds, samples traced and pixels refined.
 
 Adaptive sampling (``Sampling``: ``spp``, ``max_spp``, ``target_error``). Every pixel first takes
-``spp`` samples. With ``max_spp`` > ``spp``, a pixel whose relative standard error of the mean
-luminance, sqrt(variance of the mean) / max(mean, 1 % of the image's mean luminance), exceeds
-``target_error`` is rendered again with n = min(max_spp, ceil(spp (error / target)^2)) new samples
-(sample numbers after the first pass, so new random numbers) and its value is the mean of those
-alone: the first pass only decides how many samples a pixel gets, so each pixel's estimate stays
-unbiased (averaging the first pass in would favour pixels whose first samples happened to be
-dark). This is what converges the fireflies of sharp BCSDF lobes under delta lights, which no
-sampling strategy can remove (a directional light is only reached by next-event estimation).
+``spp`` samples. With ``max_spp`` > 0, a second pass gives pixel i up to ``max_spp`` more
+(``refine_counts``): n_i new samples, so that spp + n_i reaches the count its neighbourhood asks for,
+max over the eight neighbours j of s_j^2 / (target_error * max(m_j, floor_i))^2, with m_j and s_j^2 the
+mean and per-sample variance of neighbour j's luminance in the first pass and floor_i 1 % of the
+image's mean luminance without pixel i. Pixel i's value is the mean of all its spp + n_i samples
+(sample numbers after the first pass's for the new ones): n_i is a function of *other* pixels'
+samples only, independent of pixel i's, so the estimate stays unbiased, and no sample is thrown
+away. (Deciding from a pixel's own first pass and keeping those samples would bias it: a pixel whose
+first samples missed a rare bright path would stop early, low; ``tests/pipeline/test_adaptive.py``
+measures that bias and shows this rule has none.) The neighbourhood's max pools eight first passes,
+so glints, which cluster along fibres, are found even where a pixel's own first samples missed them.
+This is what converges the fireflies of sharp BCSDF lobes under delta lights, which no sampling
+strategy can remove (a directional light is only reached by next-event estimation).
 
 On a Dask scheduler (``pipeline.chunks``; ``remote`` given) each pass is a list of chunk tasks, one per
 band of ``tile_size`` image rows: a worker rebuilds the integrator and camera once per command
@@ -41,12 +46,12 @@ from ..progress import progress
 @dataclass(frozen=True)
 class Sampling:
     spp: int
-    max_spp: int | None = None       # None or <= spp: every pixel takes spp samples
+    max_spp: int | None = None       # the most samples a pixel takes in the second pass; None or 0: no second pass
     target_error: float = 0.05
 
     @property
     def adaptive(self) -> bool:
-        return self.max_spp is not None and self.max_spp > self.spp
+        return self.max_spp is not None and self.max_spp > 0
 
 
 @dataclass
@@ -200,18 +205,39 @@ def _pass(label, integ, cam, seed, stride, first, counts, tiles, film, threads):
 
 
 def refine_counts(film, spp, sampling) -> np.ndarray:
-    """Samples each pixel takes in the second pass (0: keep the first pass) -- module doc."""
+    """New samples each pixel takes in the second pass, from its eight neighbours' first passes only
+    (module doc): int64 (H, W), 0 for a pixel whose neighbourhood is converged."""
     from stages.render.film import F_Y, F_YY
 
     n = float(spp)
     mean = film[..., F_Y] / n
-    var_mean = np.maximum(film[..., F_YY] / n - mean * mean, 0.0) / max(n - 1.0, 1.0) if spp > 1 else \
-        np.full(mean.shape, np.inf)
-    floor = max(0.01 * float(mean.mean()), 1e-6)
-    err = np.sqrt(var_mean) / np.maximum(mean, floor)
-    want = np.ceil(spp * (err / sampling.target_error) ** 2)
-    counts = np.where(err > sampling.target_error, np.minimum(want, sampling.max_spp), 0)
-    return counts.astype(np.int64)
+    H, W = mean.shape
+    if spp > 1:
+        var = np.maximum(film[..., F_YY] / n - mean * mean, 0.0) * (n / (n - 1.0))
+    else:
+        var = np.full(mean.shape, np.inf)
+    # floor_i: 1 % of the image's mean luminance without pixel i (so nothing of pixel i enters its count)
+    floor = np.maximum(0.01 * (mean.sum() - mean) / max(mean.size - 1, 1), 1e-6)
+    pm = np.pad(mean, 1, constant_values=np.inf)   # outside the image: no neighbour (0 relative variance)
+    pv = np.pad(var, 1, constant_values=0.0)
+    need = np.zeros(mean.shape)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            if dr == 0 and dc == 0:
+                continue
+            mj = pm[1 + dr:1 + dr + H, 1 + dc:1 + dc + W]
+            vj = pv[1 + dr:1 + dr + H, 1 + dc:1 + dc + W]
+            with np.errstate(invalid="ignore"):
+                rel = np.where(vj > 0.0, vj / np.maximum(mj, floor) ** 2, 0.0)
+            np.maximum(need, rel, out=need)
+    want = np.ceil(np.minimum(need / sampling.target_error ** 2, 1e18)) - spp
+    return np.clip(want, 0, sampling.max_spp).astype(np.int64)
+
+
+def add_pass(film, counts, film2, more):
+    """The film and per-pixel counts after a second pass ``film2`` of ``more`` samples per pixel: the
+    film's sums add up, so each pixel's mean is over all its samples."""
+    return film + film2, counts + more
 
 
 def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile_size, variance,
@@ -268,10 +294,8 @@ def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile
             refined = int(np.count_nonzero(more))
             if refined:
                 film2 = new_film(width, height)
-                run_pass(f"{label}: {refined} pixels to at most {sampling.max_spp} spp", spp, more, film2, "pass1")
-                sel = more > 0
-                film[sel] = film2[sel]
-                counts = np.where(sel, more, counts)
+                run_pass(f"{label}: {refined} pixels, up to {sampling.max_spp} more spp", spp, more, film2, "pass1")
+                film, counts = add_pass(film, counts, film2, more)
                 samples += int(more.sum())
         wall = time.perf_counter() - t0
     finally:
