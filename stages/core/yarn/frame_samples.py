@@ -355,8 +355,8 @@ def chord_grid(fr, koff, kidx, sag, radius, cell):
     last = np.empty(ncell, np.int64)
     cursor = np.empty(ncell, np.int64)
     ryarn = np.empty(0, np.int32)
-    ra = np.empty(0, np.int64)
-    rb = np.empty(0, np.int64)
+    ra = np.empty(0, np.int32)      # coarse-chord numbers: int32 (a cloth of 10^9 chords would not fit in memory)
+    rb = np.empty(0, np.int32)
     for pass_ in range(2):
         last[:] = -2
         if pass_ == 1:
@@ -364,8 +364,8 @@ def chord_grid(fr, koff, kidx, sag, radius, cell):
                 start[g + 1] += start[g]
             cursor[:] = start[:-1]
             ryarn = np.empty(start[ncell], np.int32)
-            ra = np.empty(start[ncell], np.int64)
-            rb = np.empty(start[ncell], np.int64)
+            ra = np.empty(start[ncell], np.int32)
+            rb = np.empty(start[ncell], np.int32)
         for c in range(Y):
             for q in range(koff[c], koff[c + 1] - 1):
                 a = kidx[q]

@@ -71,7 +71,7 @@ Tables = namedtuple("Tables", [
     "kn_sag",           # float64 sag bound of the coarse chord starting at each knot
     "fg_lo", "fg_cell", "fg_dims",   # (3,), (1,), (3,) chord grid geometry
     "fg_start",         # (cells+1,) int64 CSR into the runs
-    "fg_yarn", "fg_a", "fg_b",       # runs: yarn, coarse chords [a, b)
+    "fg_yarn", "fg_a", "fg_b",       # runs: yarn, coarse chords [a, b) (int32 each)
     "ply_rr",           # (T, max plies, 2) float64 (min r_lo, max r_hi) over the ply's fibres (unit disc)
     "fib_v",            # (F,) float64 transverse speed bound of each fibre outside loop cycles
     "hair_box",         # (H, 4) float64 hybrid: each hair's z range and radius range (zlo, zhi, Rlo, Rhi)
@@ -123,7 +123,8 @@ def accel_bytes(tab: Tables) -> int:
 def empty_accel(Y):
     z, zi = np.zeros(0), np.zeros(0, np.int64)
     return (np.zeros(Y + 1, np.int64), z, np.zeros((0, FRAME_COLS)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
-            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), zi, zi,
+            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int64), np.zeros(0, np.int32), np.zeros(0, np.int32),
+            np.zeros(0, np.int32),
             np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4)), np.zeros((0, 2)), np.zeros(0),
             np.zeros(Y + 1, np.int64), np.ones((Y, 2)), np.zeros((0, 2 * FO_WORDS), np.uint64), np.zeros(0))
 
