@@ -157,12 +157,11 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     realize_fill_window(cv, tab, cat["yarn"], cat["ply"], cat["idx"], cat["kind"], cat["a0"], cat["a1"], cat["hz1"],
                         cat["hze"], cat["first"], cat["nfull"], offsets, points, radius)
     # the fibers artifact's float32 vertices and radii: the same capsules as the realized source
-    points = points.astype(np.float32).astype(np.float64)
-    radius = radius.astype(np.float32).astype(np.float64)
-    bvh, _ = build_fiber_bvh(points, offsets, radius)
-    # queries walk the wide nodes only: the binary tree goes
-    bvh = bvh._replace(**{k: getattr(bvh, k)[:0].copy() for k in ("node_lo", "node_hi", "node_left", "node_right",
-                                                                  "node_start", "node_count", "prim")})
+    points[...] = points.astype(np.float32)
+    radius[...] = radius.astype(np.float32)
+    del cat["first"], cat["count"], cat["a0"], cat["a1"], cat["hz1"], cat["hze"], cat["nfull"]
+    bvh, _ = build_fiber_bvh(points, offsets, radius, keep_binary=False)  # queries walk the wide nodes only
+    del points, radius
     ids = fibre_ids(cat["yarn"], cat["ply"], cat["kind"], cat["idx"])
     med = _medium(cv, tab, grid, cached, bvh, cat["yarn"], ids)
     held = sum(int(np.asarray(a).nbytes) for a in bvh) + cached.nbytes + ids.nbytes + cat["yarn"].nbytes
@@ -178,10 +177,9 @@ def cached_majorant(med, maj):
     """``maj`` with the cells inside cached bricks bounded by the cached capsules (tighter than the
     procedural tubes: as many null collisions as the realized source)."""
     from stages.render.fibre_cache import cells_in_cached_bricks
-    from stages.render.realized_medium import segment_capsules
-    from stages.render.tracking import majorants_from_capsules, make_majorant_grid
+    from stages.render.tracking import majorants_from_prims, make_majorant_grid
 
     inner = cells_in_cached_bricks(maj, med.brick_lo, 1.0 / med.brick_inv[0], med.brick_res, med.cached)
-    a, b, r, bound = segment_capsules(med.bvh, med.yarn_density, med.fibre_yarn)
-    mu = np.where(inner, majorants_from_capsules(a, b, r, bound, maj.lo, maj.hi, maj.res), maj.mu)
+    mu = majorants_from_prims(med.prims, med.seg_fiber, med.fibre_yarn, med.yarn_density, maj.lo, maj.hi, maj.res)
+    mu = np.where(inner, mu, maj.mu)
     return make_majorant_grid(maj.lo, maj.hi, maj.res, mu)

@@ -13,7 +13,7 @@ from numba import njit
 from stages.core.geometry.bvh import build_fiber_bvh
 from stages.render.medium import medium_lookup
 from stages.render.realized_medium import RealizedMedium, covering_segment, fiber_capsules
-from stages.render.tracking import majorants_from_capsules
+from stages.render.tracking import majorants_from_capsules, majorants_from_prims
 
 
 def _fibres(seed=0, F=40):
@@ -127,6 +127,18 @@ def test_medium_lookup_returns_the_yarn_and_the_segment_tangent(medium):
         cand = np.flatnonzero(cov & (fib == f))
         dirs = (b[cand] - a[cand]) / np.linalg.norm(b[cand] - a[cand], axis=1)[:, None]
         assert np.min(np.linalg.norm(dirs - o[1:4], axis=1)) < 1e-12
+
+
+def test_majorants_read_from_the_packed_capsules_are_the_listed_ones(medium):
+    """Reference: majorants_from_capsules over fiber_capsules' list. Reading the BVH's packed capsules in
+    place (leaf order, the fibre cache's majorant) gives the same grid, bit for bit."""
+    med, P, Rr, O = medium
+    ca, cb, cr, bound = fiber_capsules(med)
+    lo, hi = P.min(axis=0) - 0.1, P.max(axis=0) + 0.1
+    for res in (np.array([7, 6, 5]), np.array([31, 29, 11])):
+        want = majorants_from_capsules(ca, cb, cr, bound, lo, hi, res)
+        got = majorants_from_prims(med.bvh.prims, med.bvh.seg_fiber, med.fiber_yarn, med.yarn_density, lo, hi, res)
+        assert np.array_equal(got, want) and (want > 0).mean() > 0.1
 
 
 def test_fiber_capsules_bound_every_fibre(medium):

@@ -74,7 +74,7 @@ def build_shell_scene(a) -> ShellScene:
         _f64(a["block_size"]), np.ascontiguousarray(a["block_map"], np.int32),
         np.ascontiguousarray(a["ex_nblocks"], np.int64),
         cat(pts), cat(seg_a), cat(seg_r), cat(src), cat(srcf).astype(np.int64),
-        cat(nodes["lo"]), cat(nodes["hi"]), cat(nodes["left"]).astype(np.int64),
+        cat(nodes["lo"]).astype(np.float64), cat(nodes["hi"]).astype(np.float64), cat(nodes["left"]).astype(np.int64),
         cat(nodes["right"]).astype(np.int64), cat(nodes["start"]).astype(np.int64),
         cat(nodes["count"]).astype(np.int64), cat(prim).astype(np.int64), roots,
         cache_aligned(cat(wide_box)), cache_aligned(cat(wide_child).astype(np.int64)), wide_roots)
