@@ -224,6 +224,17 @@ def _gates(tab, top):
     return gate
 
 
+def _down32(x):
+    """x rounded down to float32 (the hair boxes: a reject test stays conservative, at half the bytes)."""
+    f = x.astype(np.float32)
+    return np.where(f.astype(np.float64) > x, np.nextafter(f, np.float32(-np.inf)), f)
+
+
+def _up32(x):
+    f = x.astype(np.float32)
+    return np.where(f.astype(np.float64) < x, np.nextafter(f, np.float32(np.inf)), f)
+
+
 def frame_steps(kappa, extent, radius, fiber_radius, tolerance: float = FRAME_TOLERANCE):
     """First guess of each yarn's frame-sample step (``derive_lookup_accel`` rescales it on the measured
     error): the Hermite error h^4 / 384 |f^(4)| of the position and of rho x the frame, with
@@ -269,8 +280,9 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
     glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
     ply_rr, fib_v, lz_rr = scan_bounds(tab)
     z2 = tab.hair_z1 + tab.hair_ze
-    hair_box = np.stack([np.minimum(tab.hair_z1, z2), np.maximum(tab.hair_z1, z2),
-                         np.minimum(tab.hair_r0, tab.hair_r1), np.maximum(tab.hair_r0, tab.hair_r1)], axis=1)
+    hair_box = np.stack([_down32(np.minimum(tab.hair_z1, z2)), _up32(np.maximum(tab.hair_z1, z2)),
+                         _down32(np.minimum(tab.hair_r0, tab.hair_r1)), _up32(np.maximum(tab.hair_r0, tab.hair_r1))],
+                        axis=1)
     tab = tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=np.ascontiguousarray(hair_box), lz_rr=lz_rr,
                        fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
                        kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,

@@ -391,7 +391,9 @@ def chord_grid(fr, koff, kidx, sag, radius, cell):
                                 cursor[g] = k + 1
                             else:
                                 rb[cursor[g] - 1] = q + 1
-    return lo, cell, dims, start, ryarn, ra, rb
+    if start[ncell] >= 2 ** 31:
+        raise ValueError("chord grid: more than 2^31 runs")
+    return lo, cell, dims, start.astype(np.int32), ryarn, ra, rb   # int32 offsets: half the bytes
 
 
 @njit(cache=True, inline="always")
