@@ -16,9 +16,10 @@ to float32 (``segment_bounds32``: the wide nodes are float32 anyway, and the bui
 nodes take half the memory). The queries are exact whatever the tree, so a different tree changes
 no hit, only the order nodes are visited in.
 
-Nodes (``FiberBVH``): the binary tree the builder makes -- ``node_lo``/``node_hi`` (N, 3) float64
+Nodes (``FiberBVH``): the binary tree the builder makes -- ``node_lo``/``node_hi`` (N, 3) float32
 bounds, ``node_left``/``node_right`` child indices (-1 at leaves), ``node_start``/``node_count`` the
-leaf's range in ``prim`` (segment indices), node 0 the root -- and the form the queries walk:
+leaf's range in ``prim`` (segment indices), node 0 the root; all empty when built with
+``keep_binary=False`` -- and the form the queries walk:
 
 Wide nodes
 ----------
@@ -162,11 +163,12 @@ def _grow_nodes(nlo, nhi, left, right, start, count, cap):
 @njit(cache=True)
 def build_bvh_nodes(lo, hi):
     """Binned-SAH BVH over boxes (S, 3): returns (node_lo, node_hi, left, right, start, count, prim),
-    node bounds of the boxes' dtype (float32 boxes: float32 nodes, exactly their mins and maxes). Memory: the centroids are computed where they are read (0.5 (lo + hi), the same bits as an array of
-    them), and the node arrays start with room for 1.25 S nodes (a tree with leaves of up to
+    node bounds of the boxes' dtype (float32 boxes: float32 nodes, exactly their mins and maxes).
+    Memory: the centroids are computed where they are read (0.5 (lo + hi), the same bits as an array
+    of them), and the node arrays start with room for 1.25 S nodes (a tree with leaves of up to
     ``LEAF_MAX`` has ~1.2 S; at most 2 S - 1), grow by half when full and are returned as views of
-    their first nodes, not copied: a 6.7 M-segment build peaks ~1 GB lower than with 2 S - 1 nodes
-    allocated and copied (the fibre cache of a 1,000-yarn close-up)."""
+    their first nodes instead of being allocated for 2 S - 1 nodes and copied (part of the 1,000-yarn
+    close-up's lower peak, README *Status*)."""
     S = lo.shape[0]
     prim = np.arange(S).astype(np.int64)
     maxn = max(1, 2 * S - 1)
