@@ -128,8 +128,8 @@ def segment_bounds32(points, seg_a, seg_r):
     for s in range(S):
         for k in range(3):
             l, h = _capsule_bound(points, seg_a, seg_r, s, k)
-            lo[s, k] = _round_down32(l)
-            hi[s, k] = _round_up32(h)
+            lo[s, k] = round_down32(l)
+            hi[s, k] = round_up32(h)
     return lo, hi
 
 
@@ -321,7 +321,7 @@ def pack_prims(prim, points, seg_a, seg_r):
 
 
 @njit(cache=True)
-def _round_down32(x):
+def round_down32(x):
     """The largest float32 <= x (as float64): a box rounded outward never culls a true hit."""
     f = np.float32(x)
     if np.float64(f) > x:
@@ -330,7 +330,7 @@ def _round_down32(x):
 
 
 @njit(cache=True)
-def _round_up32(x):
+def round_up32(x):
     f = np.float32(x)
     if np.float64(f) < x:
         f = np.nextafter(f, np.float32(np.inf))
@@ -382,8 +382,8 @@ def collapse_wide(nlo, nhi, left, right, start, count, box, child, fill):
                 c = slots[q]
                 if fill:
                     for k in range(3):
-                        box[w, 4 * k + q] = _round_down32(nlo[c, k])
-                        box[w, 12 + 4 * k + q] = _round_up32(nhi[c, k])
+                        box[w, 4 * k + q] = round_down32(nlo[c, k])
+                        box[w, 12 + 4 * k + q] = round_up32(nhi[c, k])
                 if left[c] < 0:
                     if fill:
                         child[w, q] = -1 - (start[c] * LEAF_CODE + count[c])

@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from stages.core.geometry.bvh import round_down32, round_up32
+
 from .fibre_tests import stored_hair
 from .frame_samples import chord_grid, coarse_knots, sample_all
 from .model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, RHO_MAX, RHO_MIN, USE_MIGRATION,
@@ -224,15 +226,18 @@ def _gates(tab, top):
     return gate
 
 
-def _down32(x):
-    """x rounded down to float32 (the hair boxes: a reject test stays conservative, at half the bytes)."""
-    f = x.astype(np.float32)
-    return np.where(f.astype(np.float64) > x, np.nextafter(f, np.float32(-np.inf)), f)
-
-
-def _up32(x):
-    f = x.astype(np.float32)
-    return np.where(f.astype(np.float64) < x, np.nextafter(f, np.float32(np.inf)), f)
+@njit(cache=True)
+def hair_boxes(z1, ze, r0, r1):
+    """(H, 4) float32 per hair: its z range and radius range (zlo, zhi, Rlo, Rhi), rounded outward to
+    float32 (the lookups' quick reject stays conservative at half the bytes)."""
+    box = np.empty((z1.shape[0], 4), np.float32)
+    for h in range(z1.shape[0]):
+        z2 = z1[h] + ze[h]
+        box[h, 0] = round_down32(min(z1[h], z2))
+        box[h, 1] = round_up32(max(z1[h], z2))
+        box[h, 2] = round_down32(min(r0[h], r1[h]))
+        box[h, 3] = round_up32(max(r0[h], r1[h]))
+    return box
 
 
 def frame_steps(kappa, extent, radius, fiber_radius, tolerance: float = FRAME_TOLERANCE):
@@ -279,11 +284,8 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
         cell *= 1.25
     glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
     ply_rr, fib_v, lz_rr = scan_bounds(tab)
-    z2 = tab.hair_z1 + tab.hair_ze
-    hair_box = np.stack([_down32(np.minimum(tab.hair_z1, z2)), _up32(np.maximum(tab.hair_z1, z2)),
-                         _down32(np.minimum(tab.hair_r0, tab.hair_r1)), _up32(np.maximum(tab.hair_r0, tab.hair_r1))],
-                        axis=1)
-    tab = tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=np.ascontiguousarray(hair_box), lz_rr=lz_rr,
+    hair_box = hair_boxes(tab.hair_z1, tab.hair_ze, tab.hair_r0, tab.hair_r1)
+    tab = tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=hair_box, lz_rr=lz_rr,
                        fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
                        kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
                        fg_yarn=gyarn, fg_a=ga, fg_b=gb)
