@@ -39,6 +39,13 @@ offset range / 10; a vanishing footprint gives back ``near``, and a footprint as
 offset range of 2 or more) shades as ``far`` (seed 004: near when the range is small, far when the
 pixel spans the yarn).
 
+Speed: the estimator (``trace_path`` and everything it calls per ray) is compiled without numba's
+reference counting, as ``stages.render.fiberpath`` is on realized fibres: the path's vectors and the
+K offsets' scratch live on the machine stack, the shading model and the implicit ply and fibre kernels
+return 3-tuples, and the yarn frames are read without taking references on the curves' arrays. With
+reference counting, the atomic updates of every array of every namedtuple a kernel unpacks (a yarn
+type's tables, the curves, the tube pieces) took about half of the render's time.
+
 Random numbers: ``uniform(seed, key, dim)``, dimensions 0-1 for the pixel, then EVENT_DIMS + 2 NL per
 event (a scattering vertex or a pass through a yarn): side, offset pick, lobe and direction, roulette,
 refraction, far pass-through, offset jitter, and one pair per light.
@@ -51,27 +58,30 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit
 from stages.core.rng import uniform
 from stages.core.shading import bysdf as B
-from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample
+from stages.core.shading.bysdf import BYSDF_SIZE
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 from stages.core.yarn.implicit_plies import ply_hit
 from stages.core.yarn.implicit_tables import ply_shadow_lookup
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import light_eval, light_pdf, light_sample
+from stages.render.lights import light_eval, light_pdf, light_sample_into
 from stages.render.yarn_point import aggregate, near_point, offset_of, offset_points
 from stages.render.yarn_tubes import (
     cylinder_span,
     dir_from_yarn,
     point_from_yarn,
-    to_yarn,
+    to_yarn_into,
     yarn_hit_frame,
 )
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
 MODES = ("near", "far", "multiscale")
 K_MAX = 256
+K3_MAX = 3 * K_MAX   # a literal size for the stack arrays of K_MAX points
 EVENT_DIMS = 12
 D_SIDE, D_PICK, D_LOBE, D_DIR1, D_DIR2, D_RR, D_ENTER1, D_ENTER2, D_PASS, D_JITTER = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 
@@ -80,36 +90,38 @@ BysdfIntegrator = namedtuple("BysdfIntegrator", [
     "ground_albedo", "mode", "K", "falloff", "pixel_angle", "max_depth", "rr_depth", "window", "eps", "max_passes"])
 
 
-@njit(cache=True)
-def enter_yarn(it, h, ox, oy, oz, dx, dy, dz):
-    """(frame, yarn-space entry o (3), direction d (3), length inside, curve) of the ray that hit
-    tube piece h.prim at h.t; length < 0 when the straight envelope at the hit misses the ray (a bend)."""
+@njit(cache=True, _nrt=False)
+def enter_yarn(it, h, ox, oy, oz, dx, dy, dz, o, d):
+    """(frame, length inside) of the ray that hit tube piece h.prim at h.t, its yarn-space entry written
+    into o and direction into d; length < 0 when the straight envelope at the hit misses the ray (a bend)."""
     px = ox + h.t * dx
     py = oy + h.t * dy
     pz = oz + h.t * dz
     j = it.bvh.seg_a[h.prim]
     fr = yarn_hit_frame(it.cv, it.pieces, j, px, py, pz)
-    o, d = to_yarn(fr, px, py, pz, dx, dy, dz)
+    to_yarn_into(fr, px, py, pz, dx, dy, dz, o, d)
     R = it.types[it.yarn_type[fr.curve]].radius
     u0, u1 = cylinder_span(o, d, R)
     if not (u1 > u0) or not math.isfinite(u0) or not math.isfinite(u1):
-        return fr, o, d, -1.0
+        return fr, -1.0
     for k in range(3):
         o[k] += u0 * d[k]
-    return fr, o, d, u1 - u0
+    return fr, u1 - u0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def yarn_dir(fr, w, out):
     out[0] = w[0] * fr.nx + w[1] * fr.ny + w[2] * fr.nz
     out[1] = w[0] * fr.bx + w[1] * fr.by + w[2] * fr.bz
     out[2] = w[0] * fr.tx + w[1] * fr.ty + w[2] * fr.tz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
     """(visible, rays): True when the ray reaches infinity: every yarn tube on its way is passed
     through (its plies missed) and the ground is not in the way."""
+    o = stack_vector3()
+    d = stack_vector3()
     rays = 0
     if ground_intersect(it.ground, it.has_ground, oz, dz, it.eps) < np.inf:
         return False, rays
@@ -118,7 +130,7 @@ def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
         rays += 1
         if h.prim < 0:
             return True, rays
-        fr, o, d, um = enter_yarn(it, h, ox, oy, oz, dx, dy, dz)
+        fr, um = enter_yarn(it, h, ox, oy, oz, dx, dy, dz, o, d)
         if um > 0.0:
             yt = it.types[it.yarn_type[fr.curve]]
             ph = ply_hit(yt.tp, o, d, um, yt.tol, yt.max_iter)
@@ -132,7 +144,7 @@ def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
     return False, rays
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y):
     """(f cos r, g, b, pdf) of the chosen side towards wl (yarn space): the reflection side's mean over the
     m shaded offsets, or the transmission side at the exit point."""
@@ -152,7 +164,7 @@ def side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din,
     return f0 / m, f1 / m, f2 / m, pf / m
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w, prow, reflect, wi, m, slot_t, slot_n,
                slot_s, ty, ny, din, att_s, att_d, s_y):
     """Next-event estimation at a yarn vertex from (sx, sy, sz): one sample of each light, MIS-weighted
@@ -161,11 +173,12 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
     env = it.lights.env
     marg = it.lights.marginal
     cond = it.lights.conditional
-    wl = np.empty(3)
+    wl = stack_vector3()
+    wlk = stack_vector3()
     rays = 0
     for k in range(lights.shape[0]):
-        wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                  uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
+        lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                  uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
         if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
             continue
         yarn_dir(fr, wlk, wl)
@@ -183,7 +196,7 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
     return rays
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def trace_path(it, o, d, seed, key):
     """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
     lights = it.lights.lights
@@ -193,8 +206,11 @@ def trace_path(it, o, d, seed, key):
     nl = lights.shape[0]
     D = EVENT_DIMS + 2 * nl
     K = it.K
-    tp = np.ones(3)
-    L = np.zeros(3)
+    tp = stack_vector3()
+    L = stack_vector3()
+    for q in range(3):
+        tp[q] = 1.0
+        L[q] = 0.0
     first_t = 0.0
     rays = 0
     ign_y = -1
@@ -204,19 +220,26 @@ def trace_path(it, o, d, seed, key):
     depth = 0
     event = 0
     passes = 0
-    xs = np.zeros((K, 3))
-    ts = np.zeros((K, 3))
-    ns = np.zeros((K, 3))
-    shadow = np.zeros(K)
-    hit = np.zeros(K, np.bool_)
-    slot_x = np.zeros((K, 3))
-    slot_t = np.zeros((K, 3))
-    slot_n = np.zeros((K, 3))
-    slot_s = np.zeros(K)
-    prow = np.zeros(it.params.shape[1])
-    wi = np.zeros(3)
-    wow = np.zeros(3)
-    gn = np.zeros(3)
+    # per-path scratch on the machine stack (K <= K_MAX offsets; filled before it is read)
+    xs = stack_array(K3_MAX, np.float64).reshape((K_MAX, 3))
+    ts = stack_array(K3_MAX, np.float64).reshape((K_MAX, 3))
+    ns = stack_array(K3_MAX, np.float64).reshape((K_MAX, 3))
+    shadow = stack_array(K_MAX, np.float64)
+    hit = stack_array(K_MAX, np.bool_)
+    slot_x = stack_array(K3_MAX, np.float64).reshape((K_MAX, 3))
+    slot_t = stack_array(K3_MAX, np.float64).reshape((K_MAX, 3))
+    slot_n = stack_array(K3_MAX, np.float64).reshape((K_MAX, 3))
+    slot_s = stack_array(K_MAX, np.float64)
+    prow = stack_array(BYSDF_SIZE, np.float64)
+    wi = stack_vector3()
+    wow = stack_vector3()
+    wlk = stack_vector3()
+    gn = stack_vector3()
+    gn[0] = 0.0
+    gn[1] = 0.0
+    oy = stack_vector3()
+    dy = stack_vector3()
+    no_exit = (0.0, 0.0, 0.0)   # the exit-point arguments of the reflection side (unused there)
     while True:
         h = surface_hit(it.bvh, -1, o[0], o[1], o[2], d[0], d[1], d[2], it.eps, np.inf, ign_y, ign_s, it.window)
         rays += 1
@@ -257,8 +280,9 @@ def trace_path(it, o, d, seed, key):
             sy = py
             sz = pz + it.eps * gn[2]
             for k in range(nl):
-                wlk, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                          uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k))
+                lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
+                                                          uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                          uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
                 if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                     continue
                 f0, f1, f2 = lambert_eval(it.ground_albedo, gn, wi, wlk)
@@ -273,8 +297,8 @@ def trace_path(it, o, d, seed, key):
                 L[0] += tp[0] * f0 * lr * w
                 L[1] += tp[1] * f1 * lg * w
                 L[2] += tp[2] * f2 * lb * w
-            wo2, w0, w1, w2, pf = lambert_sample(it.ground_albedo, gn, wi, 0.0, uniform(seed, key, base + D_DIR1),
-                                                 uniform(seed, key, base + D_DIR2))
+            w0, w1, w2, pf = lambert_sample_into(it.ground_albedo, gn, wi, uniform(seed, key, base + D_DIR1),
+                                                 uniform(seed, key, base + D_DIR2), wow)
             if pf <= 0.0:
                 break
             tp[0] *= w0
@@ -282,11 +306,11 @@ def trace_path(it, o, d, seed, key):
             tp[2] *= w2
             o[0] = sx; o[1] = sy; o[2] = sz
             for k in range(3):
-                d[k] = wo2[k]
+                d[k] = wow[k]
             ign_y = -1
             ign_s = -1
         else:
-            fr, oy, dy, um = enter_yarn(it, h, o[0], o[1], o[2], d[0], d[1], d[2])
+            fr, um = enter_yarn(it, h, o[0], o[1], o[2], d[0], d[1], d[2], oy, dy)
             c = fr.curve
             yt = it.types[it.yarn_type[c]]
             R = yt.radius
@@ -364,15 +388,15 @@ def trace_path(it, o, d, seed, key):
                 x = slot_x[pick]
                 sx, sy, sz = point_from_yarn(fr, x)
                 rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, side_w, prow, True, wi, m,
-                                   slot_t, slot_n, slot_s, wi, wi, wi, 1.0, 1.0, 1.0)
+                                   slot_t, slot_n, slot_s, no_exit, no_exit, no_exit, 1.0, 1.0, 1.0)
                 wv, w0, w1, w2, pf = B.reflect_sample(prow, slot_t[pick], slot_n[pick], wi, slot_s[pick],
                                                       uniform(seed, key, base + D_LOBE), uniform(seed, key, base + D_DIR1),
                                                       uniform(seed, key, base + D_DIR2))
                 if pf <= 0.0:
                     break
                 if m > 1:  # the mixture over the offsets
-                    f0, f1, f2, pm = side_eval_pdf(prow, True, wi, wv, m, slot_t, slot_n, slot_s, wi, wi, wi, 1.0, 1.0,
-                                                   1.0)
+                    f0, f1, f2, pm = side_eval_pdf(prow, True, wi, wv, m, slot_t, slot_n, slot_s, no_exit, no_exit,
+                                                   no_exit, 1.0, 1.0, 1.0)
                     if pm <= 0.0:
                         break
                     w0 = f0 / pm
@@ -394,20 +418,15 @@ def trace_path(it, o, d, seed, key):
                 _, u_hi = cylinder_span(x, din, R)
                 if not (u_hi > 0.0) or not math.isfinite(u_hi):
                     break
-                yq = np.empty(3)
-                for q in range(3):
-                    yq[q] = x[q] + u_hi * din[q]
+                yq = (x[0] + u_hi * din[0], x[1] + u_hi * din[1], x[2] + u_hi * din[2])
                 crossed = ply_hit(yt.tp, x, din, u_hi, yt.tol, yt.max_iter).plies_crossed
                 crossed = max(1, crossed)
                 ell = u_hi / R
                 att_s = math.exp(-prow[B.SIGMA_SPEC] * ell * crossed)
                 att_d = math.exp(-prow[B.SIGMA_BODY] * ell * crossed)
                 nr_ = math.sqrt(yq[0] * yq[0] + yq[1] * yq[1])
-                ny = np.zeros(3)
-                ny[0] = yq[0] / nr_
-                ny[1] = yq[1] / nr_
-                ty = np.zeros(3)
-                ty[2] = 1.0
+                ny = (yq[0] / nr_, yq[1] / nr_, 0.0)
+                ty = (0.0, 0.0, 1.0)
                 s_y = ply_shadow_lookup(yt.tables, yt.tp, math.atan2(yq[1], yq[0]), yq[2])
                 tp[0] *= w_in * side_w
                 tp[1] *= w_in * side_w
@@ -442,6 +461,10 @@ def trace_path(it, o, d, seed, key):
         if on_ground:
             pdf_prev = pf
     return PathSample(L[0], L[1], L[2], 1.0 if first_t > 0.0 else 0.0, first_t, 0, rays)
+
+
+# stages.render.tiles.tile_kernel: trace_path takes no references, so the tile loop need not either
+BysdfIntegrator.reference_free = True
 
 
 @overload(radiance)

@@ -20,6 +20,10 @@ geometry (``aggregate``: seed 004 Eq. 8-9): the normal and tangent are the weigh
 fibre frames with weights exp(-falloff |x_k - x_0| / R) (x_0: the point of the ray's own offset),
 the shadowing their weighted mean, and the specular roughness is widened by (h_hi - h_lo) / 10.
 
+Nothing here allocates: points and frames are 3-tuples (``ShadingPoint``'s x, t, n too), and
+``offset_points`` fills the caller's arrays, so ``stages.render.bysdf`` calls these without reference
+counting.
+
 ``YarnType`` holds what the kernels need of one yarn type: ``tp`` (the packed procedural yarn model,
 ``stages.core.yarn.model``), its tables, the envelope radius, the ply iteration's tolerance and
 iteration cap.
@@ -27,7 +31,6 @@ iteration cap.
 import math
 from collections import namedtuple
 
-import numpy as np
 from numba import njit
 
 from stages.core.yarn.implicit_plies import ply_hit
@@ -68,39 +71,27 @@ def offset_of(o, d, R):
 def near_point(yt, yarn_key, o, d, u_max):
     """``ShadingPoint`` of the yarn-space ray o + u d, u in [0, u_max], through yarn type ``yt``."""
     ph = ply_hit(yt.tp, o, d, u_max, yt.tol, yt.max_iter)
-    x = np.empty(3)
-    t = np.zeros(3)
-    n = np.zeros(3)
     if not ph.hit:
-        for k in range(3):
-            x[k] = o[k] + u_max * d[k]
-        return ShadingPoint(False, x, t, n, 1.0, -1)
-    for k in range(3):
-        x[k] = ph.point[k]
+        zero = (0.0, 0.0, 0.0)
+        x = (o[0] + u_max * d[0], o[1] + u_max * d[1], o[2] + u_max * d[2])
+        return ShadingPoint(False, x, zero, zero, 1.0, -1)
+    x = ph.point
     normal_angle, _, s_fibre = fibre_lookup(yt.tables, yt.tp, yarn_key, ph.ply, ph.ply_angle, x[2])
     s_ply = ply_shadow_lookup(yt.tables, yt.tp, math.atan2(x[1], x[0]), x[2])
     ft, fn = fibre_frame(yt.tp, ph.ply, x[2], ph.ply_angle, ph.tangent, ph.normal, normal_angle)
-    for k in range(3):
-        t[k] = ft[k]
-        n[k] = fn[k]
-    return ShadingPoint(True, x, t, n, s_ply * s_fibre, ph.ply)
+    return ShadingPoint(True, x, ft, fn, s_ply * s_fibre, ph.ply)
 
 
 @njit(cache=True)
 def shifted_entry(o, d, R, dh):
-    """(o', u_max') of the ray moved across the yarn by dh R (its entry on the envelope and length
-    inside); u_max' < 0 when the moved ray misses the envelope."""
+    """(o', u_max') of the ray moved across the yarn by dh R (its entry on the envelope, a 3-tuple, and
+    length inside); u_max' < 0 when the moved ray misses the envelope."""
     wx, wy = across(d)
-    q = np.empty(3)
-    q[0] = o[0] + dh * R * wx
-    q[1] = o[1] + dh * R * wy
-    q[2] = o[2]
+    q = (o[0] + dh * R * wx, o[1] + dh * R * wy, float(o[2]))
     u0, u1 = cylinder_span(q, d, R)
     if u1 <= u0 or not math.isfinite(u0) or not math.isfinite(u1):
         return q, -1.0
-    for k in range(3):
-        q[k] += u0 * d[k]
-    return q, u1 - u0
+    return (q[0] + u0 * d[0], q[1] + u0 * d[1], q[2] + u0 * d[2]), u1 - u0
 
 
 @njit(cache=True)
@@ -137,10 +128,11 @@ def offset_points(yt, yarn_key, o, d, h0, h_lo, h_hi, K, jitter, xs, ts, ns, sha
 
 @njit(cache=True)
 def aggregate(x0, xs, ts, ns, shadow, hit, K, R, falloff):
-    """Multiscale geometry (seed 004 Eq. 8-9): (t (3), n (3), shadow) as the means of the K points'
-    fibre frames and shadowing weighted by exp(-falloff |x_k - x0| / R); n orthonormalised against t."""
-    t = np.zeros(3)
-    n = np.zeros(3)
+    """Multiscale geometry (seed 004 Eq. 8-9): (t, n, shadow), t and n 3-tuples, as the means of the K
+    points' fibre frames and shadowing weighted by exp(-falloff |x_k - x0| / R); n orthonormalised
+    against t."""
+    t0 = t1 = t2 = 0.0
+    n0 = n1 = n2 = 0.0
     s = 0.0
     wsum = 0.0
     for k in range(K):
@@ -152,18 +144,21 @@ def aggregate(x0, xs, ts, ns, shadow, hit, K, R, falloff):
         w = math.exp(-falloff * math.sqrt(dx * dx + dy * dy + dz * dz) / R)
         wsum += w
         s += w * shadow[k]
-        for c in range(3):
-            t[c] += w * ts[k, c]
-            n[c] += w * ns[k, c]
+        t0 += w * ts[k, 0]
+        t1 += w * ts[k, 1]
+        t2 += w * ts[k, 2]
+        n0 += w * ns[k, 0]
+        n1 += w * ns[k, 1]
+        n2 += w * ns[k, 2]
     if wsum <= 0.0:
-        return t, n, 0.0
-    tl = math.sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2])
-    for c in range(3):
-        t[c] /= tl
-    dn = n[0] * t[0] + n[1] * t[1] + n[2] * t[2]
-    for c in range(3):
-        n[c] -= dn * t[c]
-    nl = math.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
-    for c in range(3):
-        n[c] /= nl
-    return t, n, s / wsum
+        return (t0, t1, t2), (n0, n1, n2), 0.0
+    tl = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    t0 /= tl
+    t1 /= tl
+    t2 /= tl
+    dn = n0 * t0 + n1 * t1 + n2 * t2
+    n0 -= dn * t0
+    n1 -= dn * t1
+    n2 -= dn * t2
+    nl = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    return (t0, t1, t2), (n0 / nl, n1 / nl, n2 / nl), s / wsum

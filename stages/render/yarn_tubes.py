@@ -24,9 +24,10 @@ z = arc length. ``yarn_hit_frame`` returns a ``YarnFrame``; ``to_yarn`` / ``from
 and directions between world and yarn space with the frame at the hit (the yarn treated as straight
 over the few radii a ray spends inside it).
 
-Kernels: ``tube_pieces`` (subdivision), ``yarn_hit_frame``, ``to_yarn``, ``dir_from_yarn``,
-``point_from_yarn``, ``cylinder_span`` (entry and exit of a ray through the straight envelope in yarn
-space).
+Kernels: ``tube_pieces`` (subdivision), ``yarn_hit_frame``, ``to_yarn`` (``to_yarn_into`` writes into
+the caller's vectors), ``dir_from_yarn``, ``point_from_yarn``, ``cylinder_span`` (entry and exit of a
+ray through the straight envelope in yarn space). The per-ray kernels allocate nothing but ``to_yarn``'s
+result, and ``yarn_hit_frame`` is compiled without reference counting, for ``stages.render.bysdf``.
 """
 import math
 from collections import namedtuple
@@ -124,7 +125,7 @@ def tube_pieces(cv, radius, rel_err=0.01) -> TubePieces:
     return TubePieces(points, offsets, seg, t0, t1, pc, radius[pc].copy(), eps)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def yarn_hit_frame(cv, pieces, j, px, py, pz):
     """``YarnFrame`` at the hit point p on piece j: the spline parameter of p's closest point (from its
     projection on the piece's chord, then three Newton steps on the spline segment), then the stored
@@ -168,16 +169,22 @@ def yarn_hit_frame(cv, pieces, j, px, py, pz):
 @njit(cache=True)
 def to_yarn(fr, px, py, pz, dx, dy, dz):
     """Yarn-space (point (3), direction (3)) of the world point p and direction d."""
-    rx = px - fr.px; ry = py - fr.py; rz = pz - fr.pz
     o = np.empty(3)
     d = np.empty(3)
+    to_yarn_into(fr, px, py, pz, dx, dy, dz, o, d)
+    return o, d
+
+
+@njit(cache=True)
+def to_yarn_into(fr, px, py, pz, dx, dy, dz, o, d):
+    """``to_yarn`` writing the yarn-space point into o and the direction into d."""
+    rx = px - fr.px; ry = py - fr.py; rz = pz - fr.pz
     o[0] = rx * fr.nx + ry * fr.ny + rz * fr.nz
     o[1] = rx * fr.bx + ry * fr.by + rz * fr.bz
     o[2] = fr.s + rx * fr.tx + ry * fr.ty + rz * fr.tz
     d[0] = dx * fr.nx + dy * fr.ny + dz * fr.nz
     d[1] = dx * fr.bx + dy * fr.by + dz * fr.bz
     d[2] = dx * fr.tx + dy * fr.ty + dz * fr.tz
-    return o, d
 
 
 @njit(cache=True)

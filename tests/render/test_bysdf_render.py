@@ -110,6 +110,41 @@ def test_same_bytes_at_one_and_two_threads(weave):
     assert float(np.asarray(a.rgb).mean()) > 0.0
 
 
+@pytest.mark.parametrize("mode", ["near", "multiscale", "far"])
+def test_reference_free_paths_release_everything(weave, mode):
+    """The estimator runs without reference counting (``stages.render.bysdf``, "Speed"): the tile loop is
+    the borrowed one, and numba's runtime statistics balance over a render (every allocation a kernel
+    makes is freed). numba itself refuses, at compile time, code without reference counting that takes a
+    new array (or a tuple holding one) from a call: tried with ``to_yarn`` and with a kernel returning
+    ``(np.empty(3), 1.0)`` inside ``trace_path``."""
+    from numba.core.runtime import _nrt_python, rtsys
+
+    from pipeline.renderers import method
+    from pipeline.renderers.bysdf import film_setup
+    from pipeline.runners.render import resolve_options
+    from stages.render.film import new_film
+    from stages.render.tiles import render_tile_borrowed, render_tiles, tile_kernel
+
+    scene, yarns = weave
+    opts = resolve_options(scene, method("bysdf"), width=16, height=12, spp=4, extra={"yarns": yarns, "mode": mode})
+    s = film_setup(scene, opts)
+    assert tile_kernel(s.integ) is render_tile_borrowed
+    tiles = [(0, 0, 12, 16)]
+    render_tiles(s.integ, s.cam, 3, 4, 0, 4, tiles, new_film(16, 12), threads=1)    # compile or load
+    was_enabled = _nrt_python.memsys_stats_enabled()
+    _nrt_python.memsys_enable_stats()
+    try:
+        a = rtsys.get_allocation_stats()
+        film = render_tiles(s.integ, s.cam, 3, 4, 0, 4, tiles, new_film(16, 12), threads=1)
+        b = rtsys.get_allocation_stats()
+    finally:
+        if not was_enabled:
+            _nrt_python.memsys_disable_stats()
+    assert film[..., 0].sum() > 0.0
+    assert b.alloc - a.alloc == b.free - a.free
+    assert b.mi_alloc - a.mi_alloc == b.mi_free - a.mi_free
+
+
 def test_multiscale_with_vanishing_footprint_is_near(weave):
     """With the camera's pixel angle -> 0 the multiscale offset range collapses onto the ray's own offset:
     the aggregated frame and shadowing are the near point's and the roughness is not widened."""

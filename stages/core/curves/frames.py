@@ -8,7 +8,9 @@ closes up. The binormal is b = t x n.
 curve_frame_at(cv, c, s)        (position, tangent, normal, binormal) at arc length s
 frame_at_segment(cv, c, i, t)   the same frame at segment i, parameter t (no arc-length inversion:
                                 the stored RMF sample before it is found from (i, t) directly)
-curve_frame_at_s / frame_at_segment_s   allocation-free forms (12 scalars) for hot loops
+curve_frame_at_s / frame_at_segment_s   allocation-free forms (12 scalars) for hot loops, compiled
+                                without reference counting (``_nrt=False``: reading the curves' arrays
+                                costs no atomic reference-count updates per call)
 double_reflection(x0, t0, r0, x1, t1)   one step of the method (used by the ingest stage too)
 """
 import math
@@ -40,7 +42,7 @@ def double_reflection(x0, t0, r0, x1, t1):
     return normalize3(r1)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _frame_sample_index(cv, c, i, t, s):
     """Index of the stored RMF sample at or before (segment i, t) = arc length s on curve c, and that
     sample's (segment, t). Samples sit at t = q/K of every segment (stages/ingest/spline_process.py
@@ -70,7 +72,7 @@ def _frame_sample_index(cv, c, i, t, s):
     return a, j, t0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def frame_s(cv, c, i, t, s):
     """The RMF at (segment i, t) = arc length s (s already wrapped) as 12 scalars: position, unit
     tangent, normal, binormal (double reflection from the stored sample at or before it, closed
@@ -174,7 +176,7 @@ def _frame_arrays(f):
     return pos, tan, n, bn
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def curve_frame_at_s(cv, c, s):
     """curve_frame_at as 12 scalars (px, py, pz, tx, ty, tz, nx, ny, nz, bx, by, bz)."""
     s = wrap_s(cv, c, s)
@@ -182,7 +184,7 @@ def curve_frame_at_s(cv, c, s):
     return frame_s(cv, c, i, t, s)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def frame_at_segment_s(cv, c, i, t):
     """The frame at segment i, parameter t (no arc-length inversion) as 12 scalars, and its arc
     length s: (frame tuple, s)."""

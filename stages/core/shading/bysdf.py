@@ -79,7 +79,8 @@ is picked by u0 with probability proportional to its energy estimate:
 (positive for every lobe with nonzero energy); the returned pdf is the lobe mixture's and the weight
 is f cos / pdf of the side. A side whose lobes all carry zero energy returns zeros and pdf 0.
 
-Interface (all @njit; vectors float64[3]; returned values are namedtuples)
+Interface (all @njit; vectors float64[3] or 3-tuples; returned values are namedtuples whose directions
+are 3-tuples, so nothing here allocates and the integrator may call it without reference counting)
 -------------------------------------------------------------------------
     reflect_probability(p, wi, n) -> P_R
     reflect_eval_pdf(p, t, n, wi, wo, shadow) -> BysdfValue(r, g, b, pdf)
@@ -118,7 +119,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
-from stages.core.shading.lambert import lambert_sample
+from stages.core.shading.lambert import cosine_direction
 
 SPEC_WEIGHT = 0
 REFLECT_WEIGHT = 1
@@ -333,20 +334,14 @@ def to_local(fr, w):
 
 @njit(cache=True)
 def to_world(fr, x, y, z):
-    w = np.empty(3)
-    w[0] = x * fr[0] + y * fr[3] + z * fr[6]
-    w[1] = x * fr[1] + y * fr[4] + z * fr[7]
-    w[2] = x * fr[2] + y * fr[5] + z * fr[8]
-    return w
+    return (x * fr[0] + y * fr[3] + z * fr[6],
+            x * fr[1] + y * fr[4] + z * fr[7],
+            x * fr[2] + y * fr[5] + z * fr[8])
 
 
 @njit(cache=True)
 def _unit_copy(v):
-    w = np.empty(3)
-    w[0] = v[0]
-    w[1] = v[1]
-    w[2] = v[2]
-    return w
+    return float(v[0]), float(v[1]), float(v[2])
 
 
 # ------------------------------------------------------------------------------------------------
@@ -543,7 +538,7 @@ def body_reflect_eval_pdf(p, n, wi, wo):
 @njit(cache=True)
 def body_reflect_sample(p, n, wi, u1, u2):
     """Cosine-weighted about n: BysdfSample(wo, f_bR cos / pdf, pdf)."""
-    wo, _, _, _, _ = lambert_sample(p[BODY_R_R:BODY_R_B + 1], n, wi, 0.0, u1, u2)
+    wo = cosine_direction(n, u1, u2)
     v = body_reflect_eval_pdf(p, n, wi, wo)
     if v.pdf <= 0.0:
         return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
@@ -563,7 +558,7 @@ def body_exit_eval_pdf(p, n_y, wo):
 @njit(cache=True)
 def body_exit_sample(p, n_y, u1, u2):
     """Cosine-weighted about n_y: BysdfSample(wo, BODY_T, pdf)."""
-    wo, _, _, _, _ = lambert_sample(p[BODY_T_R:BODY_T_B + 1], n_y, n_y, 0.0, u1, u2)
+    wo = cosine_direction(n_y, u1, u2)
     v = body_exit_eval_pdf(p, n_y, wo)
     if v.pdf <= 0.0:
         return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)

@@ -15,6 +15,8 @@ view-independent), wo towards the light.
     lambert_eval(p, n, wi, wo) -> (r, g, b)              f cos
     lambert_pdf(p, n, wi, wo) -> pdf                      solid-angle density of lambert_sample
     lambert_sample(p, n, wi, u0, u1, u2) -> (wo, r, g, b, pdf)   weight f cos / pdf; u0 unused
+    lambert_sample_into(p, n, wi, u1, u2, wo) -> (r, g, b, pdf)  the same, writing wo
+    cosine_direction(n, u1, u2) -> (x, y, z)             the sampled direction alone, as a 3-tuple
 """
 import math
 
@@ -49,18 +51,24 @@ def lambert_sample(albedo, n, wi, u0, u1, u2):
 
 
 @njit(cache=True)
-def lambert_sample_into(albedo, n, wi, u1, u2, wo):
-    """``lambert_sample`` writing the direction into ``wo``: (weight r, g, b, pdf)."""
+def cosine_direction(n, u1, u2):
+    """(x, y, z): a cosine-weighted direction about the unit n (Malley's method); its pdf is (wo . n) / pi."""
     r = math.sqrt(u1)
     ph = 2.0 * math.pi * u2
     x = r * math.cos(ph)
     y = r * math.sin(ph)
     z = math.sqrt(max(0.0, 1.0 - u1))
     (t0, t1, t2), (b0, b1, b2) = orthonormal_basis(n[0], n[1], n[2])
-    wo[0] = x * t0 + y * b0 + z * n[0]
-    wo[1] = x * t1 + y * b1 + z * n[1]
-    wo[2] = x * t2 + y * b2 + z * n[2]
-    pdf = z / math.pi
+    return (x * t0 + y * b0 + z * n[0],
+            x * t1 + y * b1 + z * n[1],
+            x * t2 + y * b2 + z * n[2])
+
+
+@njit(cache=True)
+def lambert_sample_into(albedo, n, wi, u1, u2, wo):
+    """``lambert_sample`` writing the direction into ``wo``: (weight r, g, b, pdf)."""
+    wo[0], wo[1], wo[2] = cosine_direction(n, u1, u2)
+    pdf = math.sqrt(max(0.0, 1.0 - u1)) / math.pi
     if pdf <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
     return albedo[0], albedo[1], albedo[2], pdf
