@@ -64,11 +64,11 @@ def cache_budget_mib(value, place: str = "--cache") -> float:
 
 def _medium(cv, tab, grid, cached, bvh, fibre_yarn, fibre_id):
     from stages.core.yarn.model import DENSITY, ROUGHNESS
-    from stages.render.fibre_cache import FibreCacheMedium, ProceduralBox
+    from stages.render.fibre_cache import FibreCacheMedium
     from stages.render.procedural_medium import ProceduralMedium
 
     tp = tab.tparams[tab.yarn_type]
-    return FibreCacheMedium(ProceduralBox(ProceduralMedium(cv, tab)), grid.lo, np.full(3, 1.0 / grid.size), grid.res, cached, bvh,
+    return FibreCacheMedium(ProceduralMedium(cv, tab), grid.lo, np.full(3, 1.0 / grid.size), grid.res, cached, bvh,
                             fibre_yarn, fibre_id, np.ascontiguousarray(tp[:, DENSITY]), np.ascontiguousarray(tab.yarn_albedo),
                             np.ascontiguousarray(tp[:, ROUGHNESS]), bvh.wide_box, bvh.wide_child, bvh.prims,
                             bvh.seg_fiber, bvh.points, bvh.seg_a)

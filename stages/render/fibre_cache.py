@@ -29,20 +29,16 @@ cached when the samples it needs (``brick_samples``) that are not yet taken fit 
 budget, their estimated bytes (``choose_bricks``; a brick that does not fit is passed over). So the
 cost grows with what the camera sees, not with the scene, and a budget of 0 caches nothing.
 
-``FibreCacheMedium`` fields: ``proc`` (a ``ProceduralBox`` holding the ``ProceduralMedium`` that
-answers elsewhere), ``brick_lo``
+``FibreCacheMedium`` fields: ``proc`` (the ``ProceduralMedium`` that answers elsewhere), ``brick_lo``
 (3,), ``brick_inv`` (3,) (1 / brick size), ``brick_res`` (3,) int64, ``cached`` (nz * ny * nx,) uint8,
 ``bvh`` (``FiberBVH`` of the cached fibres), ``fibre_yarn`` (F,) int32, ``fibre_id`` (F,) int64 (the
 procedural lookup's fibre number: yarn, ply, regular or hair, index; the pieces of one fibre share
 it), per yarn ``yarn_density``, ``yarn_albedo`` (Y, 3), ``yarn_roughness`` (the tables' values), and
 the BVH arrays a lookup reads (``wide_box``, ``wide_child``, ``prims``, ``seg_fiber``, ``points``,
-``seg_a``) again at the top level. Reference counting decides the speed: numba counts a reference to
-every array of a tuple passed down a call or taken out of another tuple (``med.tab``), and with the
-tables' ~80 arrays in the medium those atomic counts (two threads on the same arrays) were 80 % of a
-render. Behind the box the tables cost one count, and the cached branch reads top-level arrays only.
-The uncached branch pays for taking the medium out of the box (the lookups run about 1.9x slower than
-through a bare ``ProceduralMedium``); a render that caches nothing uses the bare medium instead
-(``pipeline.fibre_cache``). Its ``medium_lookup`` returns the procedural source's
+``seg_a``) again at the top level. The lookup is compiled without reference counting (as the whole
+volpath estimator is, ``stages.render.volpath``), so nesting the tables' ~80 arrays in the medium costs
+nothing per lookup (with reference counting, the atomic counts on them had been 80 % of a render). Its
+``medium_lookup`` returns the procedural source's
 ``MediumPoint``: the yarn type's density and roughness, the yarn's albedo, the segment's tangent.
 """
 from collections import namedtuple
@@ -51,8 +47,6 @@ import math
 
 import numpy as np
 from numba import njit
-from numba.core import types
-from numba.experimental import structref
 from numba.extending import overload
 
 from stages.core.curves.spline import curve_point_at
@@ -102,41 +96,13 @@ def _brick_index(lo, inv, res, x, y, z):
     return (iz * res[1] + iy) * res[0] + ix
 
 
-@structref.register
-class ProceduralBoxType(types.StructRef):
-    """numba type of ``ProceduralBox``."""
-
-    def preprocess_fields(self, fields):
-        return tuple((name, types.unliteral(typ)) for name, typ in fields)
-
-
-class ProceduralBox(structref.StructRefProxy):
-    """A ``ProceduralMedium`` behind one reference: a tuple holding the box counts one reference for
-    it where the medium itself would add its ~80 arrays."""
-
-    def __new__(cls, med):
-        return structref.StructRefProxy.__new__(cls, med)
-
-    @property
-    def med(self):
-        return _box_med(self)
-
-
-structref.define_proxy(ProceduralBox, ProceduralBoxType, ["med"])
-
-
-@njit(cache=True)
-def _box_med(box):
-    return box.med
-
-
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def fibre_cache_lookup(med, x, y, z, skip=-1):
     """The cache's answer in a cached brick (the covering segment of the lowest fibre but ``skip``, its
     tangent), else the procedural lookup's."""
     b = _brick_index(med.brick_lo, med.brick_inv, med.brick_res, x, y, z)
     if b < 0 or med.cached[b] == 0:
-        return procedural_lookup(med.proc.med, x, y, z, skip)
+        return procedural_lookup(med.proc, x, y, z, skip)
     s = covering_segment_arrays(med.wide_box, med.wide_child, med.prims, med.seg_fiber, x, y, z, skip,
                                 med.fibre_id)
     if s < 0:

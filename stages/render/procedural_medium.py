@@ -41,7 +41,7 @@ from stages.render.tracking import cell_half_diagonal, raster_capsule
 ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def procedural_lookup(med, x, y, z, skip=-1):
     r = lookup_point(med.cv, med.tab, x, y, z, skip)
     if not r.inside:

@@ -157,7 +157,7 @@ def ray_box(lo, hi, ox, oy, oz, dx, dy, dz):
     return t0, t1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_fibre=-1):
     """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax] through
     every fibre but ``skip_fibre`` (a MediumPoint.fibre, -1 none: ``medium_lookup``'s skip): a ray
@@ -237,7 +237,7 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
     return Flight(False, tmax, T, dim, lookups, NO_MEDIUM)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def ray_meets_majorant(maj, ox, oy, oz, dx, dy, dz):
     """True when the ray passes through a cell with a non-zero majorant (it may meet fibres)."""
     t_near, t_far = ray_box(maj.lo, maj.hi, ox, oy, oz, dx, dy, dz)

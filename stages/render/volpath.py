@@ -32,6 +32,11 @@ and ``has_ground`` (``stages.render.ground``), ``max_depth``, ``rr_depth``, ``ma
 material rows per yarn (0 rows: micro-flakes everywhere). Its ``radiance``
 (``stages.render.integrator``) reports the medium lookups and rays (free-flight and shadow queries)
 of each path; the tile loop is ``stages.render.tiles``.
+Speed: ``trace_path``, the free-flight tracking and the density sources' lookups (procedural, cached,
+realized) are compiled without numba's reference counting, as fiberpath is: the path's vectors live on
+the machine stack and no kernel returns an array, so the tile loop (``stages.render.tiles.tile_kernel``)
+takes no references either. With reference counting, the atomic updates for every array of every
+namedtuple a lookup unpacks (the procedural tables, the curves) took about half of the render's time.
 Random numbers: uniform(seed, pixel * spp + sample, dim) with pixel jitter in dims 0-1, so the image
 is a pure function of the inputs, whatever the number of threads or the tiling.
 """
@@ -44,12 +49,13 @@ from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.rng import uniform
-from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample
+from stages.core.geometry.stack import stack_array, stack_vector3
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import environment_radiance, light_eval, light_pdf, light_sample
+from stages.render.lights import environment_radiance, light_eval, light_pdf, light_sample_into
 from stages.render.tracking import track
 
 VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
@@ -62,7 +68,7 @@ def _power(a, b):
     return a2 / (a2 + b * b) if a2 > 0.0 else 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, index, dim, skip_fibre):
     """Ratio-tracked transmittance toward direction w (an infinitely far light), not counting fibre
     ``skip_fibre``; the ground occludes."""
@@ -72,12 +78,12 @@ def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, in
     return fl.transmittance, fl.dim, fl.lookups
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _escaped(lt, n, prev_pdf, dx, dy, dz):
     """Radiance of the lights a ray leaving the scene sees, MIS-weighted per light against the
     light-sampling strategy (light k picked with probability 1/NL, then its own pdf)."""
     lights, env, marg, cond = lt
-    w = np.empty(3)
+    w = stack_vector3()
     w[0] = dx
     w[1] = dy
     w[2] = dz
@@ -105,7 +111,7 @@ def fibre_phase(yarn, mats):
     return 0 <= yarn < mats.shape[0] and mats[yarn, 0] >= 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def trace_path(it, o, d, seed, index):
     """``PathSample`` of the camera ray (o, d) of camera sample ``index`` (see the module doc)."""
     med = it.medium
@@ -137,12 +143,17 @@ def trace_path(it, o, d, seed, index):
     prev_pdf = 0.0  # pdf of the direction sampled at the previous interaction
     hit = 0.0
     first_t = 0.0
-    nrm = np.zeros(3)
-    wi = np.empty(3)
-    tan = np.empty(3)
-    wsc = np.empty(3)
-    ctx = np.empty(CTX_SIZE)
-    alb = np.empty(3)
+    # per-path vectors on the machine stack (the estimator takes no references: module doc, "Speed")
+    nrm = stack_vector3()
+    wi = stack_vector3()
+    tan = stack_vector3()
+    wsc = stack_vector3()
+    lw = stack_vector3()
+    ctx = stack_array(CTX_SIZE, np.float64)
+    alb = stack_vector3()
+    for k in range(3):
+        nrm[k] = 0.0
+        lw[k] = 0.0
     alb[0] = ground[1]
     alb[1] = ground[2]
     alb[2] = ground[3]
@@ -176,10 +187,9 @@ def trace_path(it, o, d, seed, index):
         next_skip = np.int64(-1)
         if nl > 0:
             k = min(int(u3 * nl), nl - 1)
-            lw, ler, leg, leb, lpdf, ldelta = light_sample(lights, k, env, marg, cond, u1, u2)
+            ler, leg, leb, lpdf, ldelta = light_sample_into(lights, k, env, marg, cond, u1, u2, lw)
             lpdf /= nl
         else:
-            lw = nrm
             ler = leg = leb = lpdf = 0.0
             ldelta = False
         if collided and fibre_phase(fl.point.yarn, mats):
@@ -269,15 +279,15 @@ def trace_path(it, o, d, seed, index):
                         Lr += br * ler * fr * c
                         Lg += bg * leg * fg * c
                         Lb += bb * leb * fb * c
-            wo, wr, wg, wb, pdf = lambert_sample(alb, nrm, wi, 0.0, u4, u5)
+            wr, wg, wb, pdf = lambert_sample_into(alb, nrm, wi, u4, u5, wsc)
             if pdf <= 0.0:
                 break
             br *= wr
             bg *= wg
             bb *= wb
-            wx = wo[0]
-            wy = wo[1]
-            wz = wo[2]
+            wx = wsc[0]
+            wy = wsc[1]
+            wz = wsc[2]
             prev_pdf = pdf
         ox = px
         oy = py
@@ -296,6 +306,10 @@ def trace_path(it, o, d, seed, index):
             bg /= q
             bb /= q
     return PathSample(Lr, Lg, Lb, hit, first_t, lookups, rays)
+
+
+# stages.render.tiles.tile_kernel: trace_path takes no references, so the tile loop need not either
+VolpathIntegrator.reference_free = True
 
 
 @overload(radiance)

@@ -384,7 +384,7 @@ def hair_closest_s(vis, k, hs, t0, tol):
 
 # ------------------------------------------------------------------------------------------------
 # exact-frame decisions (within eps_c of a fibre surface)
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # allocates: keeps reference counting under a caller without it
 def exact_regular(cv, vis, fib, zs):
     """(covered, kind) of regular fibre ``fib`` under the exact frames, near z*."""
     p = np.array([vis.px, vis.py, vis.pz])
@@ -397,7 +397,7 @@ def exact_regular(cv, vis, fib, zs):
     return D < vis.rf, kind
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # allocates: keeps reference counting under a caller without it
 def exact_hair(cv, vis, k, hs, ts):
     """Whether hair ``hs`` of ply k covers p under the exact frames, near t*."""
     p = np.array([vis.px, vis.py, vis.pz])

@@ -103,7 +103,7 @@ def _order_key(k, is_hair, j):
     return (2 * k + (1 if is_hair else 0)) * ORDER_STRIDE + j
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key=-1):
     """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i):
     a ``KeyedLookup`` (lookup_point's answer and the order key of the covering fibre), the fibre of
@@ -302,7 +302,7 @@ def _hair_test(cv, vis, k, hs, rho_k, limit):
     return True, tx, ty, tz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # allocates: keeps reference counting under a caller without it
 def _free_mode_hairs(cv, vis, k, nh, seed, L, margin, rho_k, limit, skip_key):
     """Realization-free hair mode (Algorithm 3): the active hairs of ply k at s from the implicit
     quad-tree (scratch arrays of the ply's hair count), then the same tests as the hybrid mode:
@@ -321,7 +321,7 @@ def _free_mode_hairs(cv, vis, k, nh, seed, L, margin, rho_k, limit, skip_key):
     return False, 0.0, 0.0, 0.0, 0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def lookup_point(cv, tab, px, py, pz, skip=-1):
     """seed 000 Algorithm 1 at fabric-space point p: a ``FibreLookup`` (module doc); the fibre numbered
     ``skip`` (a FibreLookup.fibre, -1: none) counts as empty, so the first of the others answers."""
@@ -398,7 +398,7 @@ def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz, skip_key):
     return yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz, skip_key):
     """Closed yarn c near its seam (a closed yarn's fibres run from s = 0 to L and meet at the seam
     without joining): the main visit at the nearest chord bq unless gated, and each end piece it
