@@ -33,12 +33,11 @@ Random numbers: ``uniform(seed, index, dim)`` for camera sample ``index`` (``sta
 dimensions 0-1 place the sample in its pixel, then 4 + 2 NL per scattering event (lobe, direction,
 roulette, one pair per light), so the image is identical for any thread count and tile order.
 
-Speed: on realized fibres the estimator is compiled without numba's reference counting
-(``trace_path_borrowed``, and the tile loop with it: ``stages.render.tiles.tile_kernel``). The path's
-vectors live on the machine stack and the BVH queries take no references, so no atomic
-reference-count update touches the scene's arrays per ray; with two threads those updates had cost
-more than the shading (``bench/bench_mitsuba.py``). Shell scenes keep reference counting (the shell
-walk allocates its hit records).
+Speed: the estimator is compiled without numba's reference counting (``trace_path``, and the tile
+loop with it: ``stages.render.tiles.tile_kernel``). The path's vectors live on the machine stack and
+the BVH and shell queries take no references and allocate nothing, so no atomic reference-count
+update touches the scene's arrays per ray; with two threads those updates had cost more than the
+shading (``bench/bench_mitsuba.py``).
 """
 from collections import namedtuple
 
@@ -47,7 +46,6 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.core.geometry.bvh import FiberBVH
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit, surface_occluded
 from stages.core.rng import uniform
@@ -204,31 +202,19 @@ def _trace(it, o, d, seed, key):
     return PathSample(L0, L1, L2, 1.0 if first_t > 0.0 else 0.0, first_t, 0, rays)
 
 
-@njit(cache=True)
-def trace_path(it, o, d, seed, key):
-    """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
-    return _trace(it, o, d, seed, key)
-
-
 @njit(cache=True, _nrt=False)
-def trace_path_borrowed(it, o, d, seed, key):
-    """``trace_path`` compiled without reference counting, for realized fibres (a ``FiberBVH``, whose
-    queries allocate nothing): no atomic reference-count updates on the scene's arrays per call,
+def trace_path(it, o, d, seed, key):
+    """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc), compiled
+    without reference counting: no atomic reference-count updates on the scene's arrays per call,
     which with two threads cost more than the shading."""
     return _trace(it, o, d, seed, key)
 
 
-def _reference_free(self):
-    return isinstance(self.scene, FiberBVH)
-
-
 # stages.render.tiles.tile_kernel: the tile loop may be compiled without reference counting too
-FiberpathIntegrator.reference_free = property(_reference_free)
+FiberpathIntegrator.reference_free = True
 
 
 @overload(radiance)
 def _fiberpath_radiance(integ, o, d, seed, index):
     if is_tuple_class(integ, FiberpathIntegrator):
-        if is_tuple_class(integ.types[integ.fields.index("scene")], FiberBVH):
-            return lambda integ, o, d, seed, index: trace_path_borrowed(integ, o, d, seed, index)
         return lambda integ, o, d, seed, index: trace_path(integ, o, d, seed, index)

@@ -47,6 +47,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
 from stages.core.sg import sg_sh_coefficients, spherical_fibonacci_axes
 from stages.core.sh import sh_eval, sh_rotation
@@ -58,7 +59,7 @@ from stages.core.shell.traversal import enter_shell, shell_intersect
 from stages.core.svf import ssdf_at
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import DIRECTIONAL, SG, light_eval, light_sample
+from stages.render.lights import DIRECTIONAL, SG, light_eval, light_sample_into
 
 PrtIntegrator = namedtuple("PrtIntegrator", [
     "scene", "top", "mat_of_fiber", "mats", "lights", "ground", "has_ground", "ground_mat",
@@ -135,7 +136,40 @@ def _multi(it, row, m, tf, vf, cL, D, R, cT, cs, out):
         out[c] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
+def _multi_scatter(it, row, m, tf, vf, lf, lam, E0, E1, E2):
+    """(r, g, b): multiple scattering c_S . (R_wo a_C^T c_L) of a light of power (E0, E1, E2) from the
+    flat direction lf: a directional light (lam <= 0: c_L = Y(lf)) or an SG lobe of sharpness lam
+    (c_L its SH coefficients). Keeps reference counting (its SH work arrays are allocated per call)
+    under the estimator that has none."""
+    L = it.order
+    J = (L + 1) * (L + 1)
+    Ysh = np.empty(J)
+    if lam > 0.0:
+        sg_sh_coefficients(lf, lam, L, Ysh)
+    else:
+        sh_eval(L, lf[0], lf[1], lf[2], Ysh)
+    cL = np.zeros((3, J))
+    for j in range(J):
+        cL[0, j] = E0 * Ysh[j]
+        cL[1, j] = E1 * Ysh[j]
+        cL[2, j] = E2 * Ysh[j]
+    mo = np.zeros(3)
+    _multi(it, row, m, tf, vf, cL, np.empty((J, J)), np.empty((3, 3)), np.empty(J), np.empty((J, 3)), mo)
+    return mo[0], mo[1], mo[2]
+
+
+@njit(cache=True, _nrt=True)
+def _single_scatter_sg(it, e, srow, lf, mat, tf, vf, lam):
+    """(r, g, b): single scattering from a unit-power SG lobe (axis lf in flat space, sharpness lam) at
+    segment row srow of exemplar e (``sg_single_scatter`` with the segment's SSDF and SG fit)."""
+    dk = ssdf_at(it.svf_mean[e], it.svf_basis[e], it.svf_coeffs[srow], it.svf_res[0], it.svf_res[1], lf)
+    axes = spherical_fibonacci_axes(it.sg_weights.shape[1], float(it.sg_angle[srow]))
+    return sg_single_scatter(mat[1:11], tf, vf, lf, lam, dk, axes, it.sg_weights[srow].astype(np.float64),
+                             it.lam_svf)
+
+
+@njit(cache=True, _nrt=False)
 def prt_radiance(it, o, d, seed, key):
     lights = it.lights.lights
     env = it.lights.env
@@ -150,18 +184,22 @@ def prt_radiance(it, o, d, seed, key):
     rays = 1
     if tg < h.t:
         # the ground: Lambertian, lit directly, shadowed by the cloth's shell (a macroscopic object)
-        wi = np.empty(3)
-        n = np.array([0.0, 0.0, 1.0 if d[2] < 0.0 else -1.0])
-        p = np.empty(3)
+        wi = stack_vector3()
+        n = stack_vector3()
+        n[0] = 0.0
+        n[1] = 0.0
+        n[2] = 1.0 if d[2] < 0.0 else -1.0
+        p = stack_vector3()
         for k in range(3):
             p[k] = o[k] + tg * d[k] + it.eps * n[k]
             wi[k] = -d[k]
-        ctx = np.empty(CTX_SIZE)
+        ctx = stack_array(CTX_SIZE, np.float64)
+        wl = stack_vector3()
         material_prepare(it.ground_mat, n, n, wi, ctx)
         for k in range(nl):
             base = 2 + DIMS_PER_LIGHT * k
-            wl, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base),
-                                                     uniform(seed, key, base + 1))
+            lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base),
+                                                      uniform(seed, key, base + 1), wl)
             if pl <= 0.0:
                 continue
             f0, f1, f2, _pf = material_eval_pdf(it.ground_mat, ctx, n, n, wi, wl)
@@ -186,16 +224,20 @@ def prt_radiance(it, o, d, seed, key):
     e = h.exemplar
     m = it.mat_of_fiber[h.fibre]
     mat = it.mats[m]
-    t_w = h.tangent
-    wv = np.empty(3)
+    t_w = stack_vector3()
+    n_w = stack_vector3()
+    wv = stack_vector3()
     for k in range(3):
+        t_w[k] = h.tangent[k]
+        n_w[k] = h.normal[k]
         wv[k] = -d[k]
-    ctx = np.empty(CTX_SIZE)
-    material_prepare(mat, t_w, h.normal, wv, ctx)
+    ctx = stack_array(CTX_SIZE, np.float64)
+    material_prepare(mat, t_w, n_w, wv, ctx)
     w2f = it.scene.w2f
-    tf = np.empty(3)
-    vf = np.empty(3)
-    lf = np.empty(3)
+    tf = stack_vector3()
+    vf = stack_vector3()
+    lf = stack_vector3()
+    wl = stack_vector3()
     _to_flat(w2f, h.tet, t_w, tf)
     _to_flat(w2f, h.tet, wv, vf)
     X, Y_ = _flat_point(w2f, h.tet, h.hit)
@@ -205,16 +247,7 @@ def prt_radiance(it, o, d, seed, key):
     mrow = it.seg_row[s]
     R_res = it.svf_res[0]
     C_res = it.svf_res[1]
-    L = it.order
-    J = (L + 1) * (L + 1)
-    Ysh = np.empty(J)
-    D = np.empty((J, J))
-    Rm = np.empty((3, 3))
-    cT = np.empty(J)
-    cs = np.empty((J, 3))
-    cL = np.zeros((3, J))
-    mo = np.zeros(3)
-    axes_w = np.empty(3)
+    axes_w = stack_vector3()
     for k in range(nl):
         base = 2 + DIMS_PER_LIGHT * k
         typ = int(lights[k, 0])
@@ -228,36 +261,28 @@ def prt_radiance(it, o, d, seed, key):
             for q in range(3):
                 axes_w[q] = lights[k, 4 + q]
             # the lobe's global visibility: one shadow ray towards a direction sampled from it
-            wl, _lr, _lg, _lb, pl, _delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base + 4),
-                                                          uniform(seed, key, base + 5))
+            _lr, _lg, _lb, pl, _delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base + 4),
+                                                          uniform(seed, key, base + 5), wl)
             rays += 1
             vglo = global_visibility(it, u, v, wl) if pl > 0.0 else 0.0
             if it.terms & SINGLE and vglo > 0.0:
                 _to_flat(w2f, h.tet, axes_w, lf)
-                dk = ssdf_at(it.svf_mean[e], it.svf_basis[e], it.svf_coeffs[srow], R_res, C_res, lf)
-                axes = spherical_fibonacci_axes(it.sg_weights.shape[1], float(it.sg_angle[srow]))
-                g0, g1, g2 = sg_single_scatter(mat[1:11], tf, vf, lf, lam, dk, axes,
-                                               it.sg_weights[srow].astype(np.float64), it.lam_svf)
+                g0, g1, g2 = _single_scatter_sg(it, e, srow, lf, mat, tf, vf, lam)
                 L0 += P0 * g0 * vglo
                 L1 += P1 * g1 * vglo
                 L2 += P2 * g2 * vglo
             if it.terms & MULTI:
                 _to_flat(w2f, h.tet, axes_w, lf)
-                sg_sh_coefficients(lf, lam, L, Ysh)
-                for j in range(J):
-                    cL[0, j] = P0 * Ysh[j]
-                    cL[1, j] = P1 * Ysh[j]
-                    cL[2, j] = P2 * Ysh[j]
                 vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl) if pl > 0.0 else 0.0
                 rays += 1
                 if vt > 0.0:
-                    _multi(it, mrow, m, tf, vf, cL, D, Rm, cT, cs, mo)
-                    L0 += mo[0] * vt
-                    L1 += mo[1] * vt
-                    L2 += mo[2] * vt
+                    m0, m1, m2 = _multi_scatter(it, mrow, m, tf, vf, lf, lam, P0, P1, P2)
+                    L0 += m0 * vt
+                    L1 += m1 * vt
+                    L2 += m2 * vt
             continue
-        wl, lr, lg, lb, pl, delta = light_sample(lights, k, env, marg, cond, uniform(seed, key, base),
-                                                 uniform(seed, key, base + 1))
+        lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base),
+                                                  uniform(seed, key, base + 1), wl)
         if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
             continue
         sc = 1.0 if delta else 1.0 / pl
@@ -266,7 +291,7 @@ def prt_radiance(it, o, d, seed, key):
         E2 = lb * sc
         _to_flat(w2f, h.tet, wl, lf)
         if it.terms & SINGLE:
-            f0, f1, f2, _pf = material_eval_pdf(mat, ctx, t_w, h.normal, wv, wl)
+            f0, f1, f2, _pf = material_eval_pdf(mat, ctx, t_w, n_w, wv, wl)
             if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
                 if ssdf_at(it.svf_mean[e], it.svf_basis[e], it.svf_coeffs[srow], R_res, C_res, lf) > 0.0:
                     rays += 1
@@ -275,18 +300,13 @@ def prt_radiance(it, o, d, seed, key):
                         L1 += f1 * E1
                         L2 += f2 * E2
         if it.terms & MULTI and lf[2] > 0.0:
-            sh_eval(L, lf[0], lf[1], lf[2], Ysh)
-            for j in range(J):
-                cL[0, j] = E0 * Ysh[j]
-                cL[1, j] = E1 * Ysh[j]
-                cL[2, j] = E2 * Ysh[j]
             rays += 1
             vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
             if vt > 0.0:
-                _multi(it, mrow, m, tf, vf, cL, D, Rm, cT, cs, mo)
-                L0 += mo[0] * vt
-                L1 += mo[1] * vt
-                L2 += mo[2] * vt
+                m0, m1, m2 = _multi_scatter(it, mrow, m, tf, vf, lf, 0.0, E0, E1, E2)
+                L0 += m0 * vt
+                L1 += m1 * vt
+                L2 += m2 * vt
     return PathSample(L0, L1, L2, 1.0, h.t, 0, rays)
 
 
@@ -300,6 +320,10 @@ def _filtered_visibility(it, seed, key, dim, u, v, w):
         u = u + r * math.cos(a) / it.flat_size[0]
         v = v + r * math.sin(a) / it.flat_size[1]
     return global_visibility(it, u, v, w)
+
+
+# stages.render.tiles.tile_kernel: prt_radiance takes no references, so the tile loop need not either
+PrtIntegrator.reference_free = True
 
 
 @overload(radiance)

@@ -29,10 +29,12 @@ is its form for primary rays from outside the shell) walks the ray:
     the linear part of f2w applied to the flat segment direction; leaving the shell through a
     boundary face resumes at 1 (a ray can cross a curved shell several times). A ray that starts inside
     the shell (a scattered or shadow ray leaving a fibre) starts at 2 in the tetrahedron it starts in.
-Returns a ``ShellHit`` (t, tet, segment, fibre, exemplar, block_i, block_j, hit (3,), tangent (3,),
-normal (3,), flat (3,), radius) with segment / fibre the exemplar's ids, normal the capsule's outward
+Returns a ``ShellHit`` (t, tet, segment, fibre, exemplar, block_i, block_j, and the 3-tuples hit,
+tangent, normal, flat, then radius) with segment / fibre the exemplar's ids, normal the capsule's outward
 normal mapped by the inverse transpose of the shell map, flat the hit in the exemplar's own space,
-radius the hit capsule's radius in flat space; t = inf and ids -1 on a miss.
+radius the hit capsule's radius in flat space; t = inf and ids -1 on a miss. The queries allocate
+nothing (vectors are tuples, the node stack is on the machine stack), so callers compiled without
+numba's reference counting (fiberpath on a tiling) can use them.
 Skipped fibre segments: every periodic copy of ``ign_fiber`` near ``ign_seg`` (copies lie at least one
 exemplar period apart, far beyond a scattering vertex's neighbourhood in practice).
 """
@@ -61,7 +63,7 @@ ShellScene = namedtuple("ShellScene", [
 
 ShellHit = namedtuple("ShellHit", ["t", "tet", "segment", "fibre", "exemplar", "block_i", "block_j", "hit",
                                    "tangent", "normal", "flat", "radius"])
-ShellHit.__doc__ = """shell_trace's result (module doc): ids int64, t and radius float64, the vectors float64[3]."""
+ShellHit.__doc__ = """shell_trace's result (module doc): ids int64, t and radius float64, the vectors 3-tuples."""
 
 MAX_STEPS = 1 << 20
 
@@ -105,7 +107,7 @@ def enter_shell(sc, ox, oy, oz, dx, dy, dz, tmin, tmax):
     if sc.bprim.shape[0] == 0:
         return np.inf, -1
     ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
-    stack = np.empty(128, np.int64)
+    stack = stack_array(STACK_SIZE, np.int64)
     stack[0] = 0
     sp = 1
     best = tmax
@@ -310,10 +312,7 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
     """The general query (see the module doc): a ray starting inside tetrahedron ``start_tet`` (-1: outside
     the shell) at t = tmin; fibre segments of ``ign_fiber`` near ``ign_seg`` skipped. Returns a
     ``ShellHit``."""
-    hit = np.zeros(3)
-    tan = np.zeros(3)
-    nrm = np.zeros(3)
-    flat = np.zeros(3)
+    zero = (0.0, 0.0, 0.0)
     tcur = tmin
     w2f = sc.w2f
     tet = start_tet
@@ -347,7 +346,7 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                                                                      ign_fiber, ign_seg, ign_window)
                     if seg >= 0:
                         t = t_in + (s / L) * (t_end - t_in)
-                        hit[0], hit[1], hit[2] = ox + t * dx, oy + t * dy, oz + t * dz
+                        hit = (ox + t * dx, oy + t * dy, oz + t * dz)
                         a = sc.seg_a[seg]
                         P = sc.points
                         vx, vy, vz = P[a + 1, 0] - P[a, 0], P[a + 1, 1] - P[a, 1], P[a + 1, 2] - P[a, 2]
@@ -356,8 +355,7 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                         wy = f2w[tet, 1, 0] * vx + f2w[tet, 1, 1] * vy + f2w[tet, 1, 2] * vz
                         wz = f2w[tet, 2, 0] * vx + f2w[tet, 2, 1] * vy + f2w[tet, 2, 2] * vz
                         n = math.sqrt(wx * wx + wy * wy + wz * wz)
-                        if n > 0.0:
-                            tan[0], tan[1], tan[2] = wx / n, wy / n, wz / n
+                        tan = (wx / n, wy / n, wz / n) if n > 0.0 else zero
                         # capsule normal in flat space, carried by the inverse transpose (w2f^T)
                         nfx, nfy, nfz, _u = capsule_normal(fx, fy, fz, P[a, 0], P[a, 1], P[a, 2],
                                                            P[a + 1, 0], P[a + 1, 1], P[a + 1, 2])
@@ -365,14 +363,12 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                         my = w2f[tet, 0, 1] * nfx + w2f[tet, 1, 1] * nfy + w2f[tet, 2, 1] * nfz
                         mz = w2f[tet, 0, 2] * nfx + w2f[tet, 1, 2] * nfy + w2f[tet, 2, 2] * nfz
                         n = math.sqrt(mx * mx + my * my + mz * mz)
-                        if n > 0.0:
-                            nrm[0], nrm[1], nrm[2] = mx / n, my / n, mz / n
-                        flat[0], flat[1], flat[2] = fx, fy, fz
+                        nrm = (mx / n, my / n, mz / n) if n > 0.0 else zero
                         return ShellHit(t, np.int64(tet), np.int64(sc.seg_src[seg]), np.int64(sc.seg_srcfiber[seg]),
-                                        np.int64(k), np.int64(bi), np.int64(bj), hit, tan, nrm, flat,
+                                        np.int64(k), np.int64(bi), np.int64(bj), hit, tan, nrm, (fx, fy, fz),
                                         np.float64(sc.seg_r[seg]))
             if t_end >= tmax:
-                return ShellHit(np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
+                return ShellHit(np.inf, -1, -1, -1, -1, 0, 0, zero, zero, zero, zero, 0.0)
             nb = sc.nbr[tet, face] if face >= 0 else -1
             if nb < 0:
                 tcur = t_out
@@ -380,7 +376,7 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
                 break
             tet = nb
             t_in = t_out
-    return ShellHit(np.inf, -1, -1, -1, -1, 0, 0, hit, tan, nrm, flat, 0.0)
+    return ShellHit(np.inf, -1, -1, -1, -1, 0, 0, zero, zero, zero, zero, 0.0)
 
 
 @njit(cache=True)
