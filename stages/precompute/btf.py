@@ -35,6 +35,7 @@ import numpy as np
 from numba import njit, prange
 
 from stages.core.geometry.capsule import capsule_normal
+from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_vertex
@@ -55,24 +56,26 @@ def _first_normal(sc, h, out):
     out[2] += nz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx, vy, vz, light_dirs, spp, seed,
                        key0, max_depth, rr_depth, max_dist, eps, radiance, normal):
     """Radiance sums (L, 3) of texel ``texel`` seen from v over ``spp`` samples into ``radiance`` (zeroed
-    here) and the first-hit normals into ``normal`` (added); returns (hits, rays)."""
+    here) and the first-hit normals into ``normal`` (added); returns (hits, rays). Compiled without
+    reference counting (its vectors on the machine stack): the two workers of ``acquire_texels`` would
+    otherwise count references on the same arrays for every ray."""
     L = light_dirs.shape[0]
     for k in range(L):
         for c in range(3):
             radiance[k, c] = 0.0
     iy = texel // res
     ix = texel - iy * res
-    t_tan = np.empty(3)
-    n = np.empty(3)
-    so = np.empty(3)
-    wi = np.empty(3)
-    wo = np.empty(3)
-    wl = np.empty(3)
-    ctx = np.empty(CTX_SIZE)
+    t_tan = stack_vector3()
+    n = stack_vector3()
+    so = stack_vector3()
+    wi = stack_vector3()
+    wo = stack_vector3()
+    wl = stack_vector3()
+    ctx = stack_array(CTX_SIZE, np.float64)
     hits = 0
     rays = 0
     for s in range(spp):
