@@ -6,8 +6,7 @@ Targets (issue 21; seed 000 §6.1 reports 15.0 s procedural against 15.8 s reali
   against ``realize`` + BVH build, then the render) at most 1.0x;
 - the cache at 0 (every lookup procedural): recorded;
 - a curve of render time, cache build time and peak memory against the cache budget (each budget in
-  its own process, so its peak resident memory is its own; partial caches kept even where a render
-  would decline them, ``pipeline.fibre_cache.MIN_SEEN_SHARE``): ``volpath_cache_budget.png``.
+  its own process, so its peak resident memory is its own): ``volpath_cache_budget.png``.
 All renders use the same integrator, camera, lights, seed and image; only the density source differs.
 Artifacts: ``out/demo/{tables,fibers}.zarr`` when ``make demo`` wrote them, else built here from
 data/scenes/demo.toml into the results directory; the build times are measured here by rebuilding
@@ -93,7 +92,6 @@ def _budget_point(tables: str, fibers: str, W: int, H: int, spp: int, cache: flo
 def _budget_child(tables, fibers, W, H, spp, cache) -> dict:
     import pipeline.fibre_cache
 
-    pipeline.fibre_cache.MIN_SEEN_SHARE = 0.0  # the curve shows what a partial cache costs (renders decline one below 80 %)
     from pipeline.renderers import method
     from pipeline.runners.render import resolve_options
     from pipeline.scene import load_scene

@@ -25,10 +25,6 @@ from .progress import warn
 CACHE_VERTEX_BYTES = 320   # peak bytes of a cached vertex during the build (see the module doc)
 DEFAULT_CACHE_MIB = 2048   # --cache default (render.cache in the scene), at most a quarter of the available memory
 DEFAULT_SPACING = 0.002    # cm between cached vertices: ``loomlight realize``'s default
-# A partial cache pays on every uncached lookup (opening the procedural medium's box counts references
-# to its ~80 arrays: 2-4x the bare lookup, bench_volpath's budget curve), so a cache is used only when
-# its bricks hold at least this share of the pilot's steps in fibre material; else the bare lookups.
-MIN_SEEN_SHARE = 0.8
 
 
 class CacheBuild(NamedTuple):
@@ -84,12 +80,12 @@ def _vertices_per_length(tab, curve_length, spacing) -> np.ndarray:
     return out
 
 
-def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFAULT_SPACING,
-                      min_seen_share=None) -> CacheBuild:
+def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFAULT_SPACING) -> CacheBuild:
     """The ``FibreCacheMedium`` of the procedural source ``(cv, tab)`` seen by ``cam`` at width x height,
-    within ``budget_mib``; where nothing is cached (budget 0, too small for one brick, or for
-    ``min_seen_share`` of what the pilot saw: default ``MIN_SEEN_SHARE``) the bare ``ProceduralMedium``,
-    whose lookups skip the cache's indirection (``info['cache_declined']`` says why)."""
+    within ``budget_mib``; where nothing is cached (budget 0, or too small for one brick) the bare
+    ``ProceduralMedium``, whose lookups skip the cache's indirection. A partial cache is kept however
+    little of the view it holds: every brick it holds answers faster than the lookups, and an uncached
+    lookup through it costs what a bare one does (``bench_volpath``'s budget curve)."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.procedural.realize import realize_fill_window, window_pieces, yarn_plan
     from stages.render.camera import camera_ray
@@ -125,11 +121,8 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     sample_bytes = vpl[samples.yarn] * (samples.s1 - samples.s0) * CACHE_VERTEX_BYTES
     cached, need, est = choose_bricks(order, off, items, sample_bytes, budget)
     share = float(steps[cached == 1].sum()) / max(float(steps.sum()), 1.0)
-    floor = MIN_SEEN_SHARE if min_seen_share is None else float(min_seen_share)
-    if not cached.any() or share < floor:
-        return bare(cache_seen_share=share,
-                    cache_declined=f"the {budget_mib:g} MiB budget holds {100 * share:.0f} % of what the camera sees "
-                                   f"(needs {100 * floor:.0f} %): every lookup procedural")
+    if not cached.any():
+        return bare(cache_seen_share=share)
     need = need.astype(bool)
 
     cols = {k: [] for k in ("yarn", "ply", "idx", "kind", "a0", "a1", "hz1", "hze", "first", "nfull", "count")}

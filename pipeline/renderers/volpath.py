@@ -121,8 +121,6 @@ def _procedural_source(tables_path, cell, optics, view, advance):
 
     built = build_fibre_cache(cv, tab, maj, view.camera, view.width, view.height, view.budget_mib)
     advance()
-    if built.info.get("cache_declined"):
-        warn(f"fibre cache: {built.info['cache_declined']}")
     return built.medium, built.majorant, {**info, **built.info}, mats
 
 
