@@ -21,13 +21,12 @@ DAMASK_SCENE ?= data/scenes/draped_damask.toml
 # make demo stays under 10 minutes on an idle 2-core machine from a fresh clone (README: Status), so
 # its pictures are 240x180 (the scenes' cameras say 320x240: DEMO_SIZE= renders those) and its
 # precomputes are reduced (below). Main pictures adaptive (a second pass gives a pixel up to MAX_SPP more
-# samples, VOLPATH_MAX_SPP for volpath, as many as its neighbours' relative error asks for to reach
-# render.target_error); the evaluation set is smaller because procedural volpath is slow.
+# samples, as many as its neighbours' relative error asks for to reach render.target_error); the
+# evaluation set is smaller because procedural volpath without the fibre cache is slow.
 DEMO_SIZE ?= --width 240 --height 180
 SPP ?= 8
 FIBERPATH_SPP ?= 16
 MAX_SPP ?= 128
-VOLPATH_MAX_SPP ?= 24
 EVAL_W ?= 64
 EVAL_H ?= 48
 EVAL_SPP ?= 8
@@ -120,7 +119,7 @@ $(OUT)/damask_iirtf.png: $(OUT)/damask_iirtf.zarr/zarr.json
 # the main volpath picture: procedural lookups with the render-time fibre cache (--cache, default 2048 MiB)
 $(OUT)/volpath.exr: $(OUT)/tables.zarr/zarr.json $(SCENE)
 	$(LL) render $(SCENE) --method volpath --source procedural --tables $(OUT)/tables.zarr --spp $(SPP) \
-	    --max-spp $(VOLPATH_MAX_SPP) $(DEMO_SIZE) -o $@
+	    --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
 $(OUT)/fiberpath.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
 	$(LL) render $(SCENE) --method fiberpath --fibers $(OUT)/fibers.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
@@ -231,7 +230,7 @@ demo: $(VENV)/.installed
 # the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
 demo-quick:
 	@$(MAKE) --no-print-directory demo OUT=out/quick DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
-	    MAX_SPP=0 VOLPATH_MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
+	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
 	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
 	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4" \
 	    FIT_ARGS="--width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3"
