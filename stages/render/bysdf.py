@@ -40,7 +40,7 @@ offset range of 2 or more) shades as ``far`` (seed 004: near when the range is s
 pixel spans the yarn).
 
 Speed: the estimator (``trace_path`` and everything it calls per ray) is compiled without numba's
-reference counting, as ``stages.render.fiberpath`` is on realized fibres: the path's vectors and the
+reference counting, as ``stages.render.fiberpath`` is: the path's vectors and the
 K offsets' scratch live on the machine stack, the shading model and the implicit ply and fibre kernels
 return 3-tuples, and the yarn frames are read without taking references on the curves' arrays. With
 reference counting, the atomic updates of every array of every namedtuple a kernel unpacks (a yarn
