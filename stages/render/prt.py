@@ -112,15 +112,33 @@ def global_visibility(it, u, v, w):
     return 1.0
 
 
-@njit(cache=True)
-def _multi(it, row, m, tf, vf, cL, D, R, cT, cs, out):
-    """out[c] = c_S(theta_o) . (R_wo a_C^T c_L[c]) for the three channels (c_L (3, J) in flat space)."""
+@njit(cache=True, _nrt=True)
+def _multi_scatter(it, row, m, tf, vf, lf, lam, E0, E1, E2):
+    """(r, g, b) = c_S(theta_o) . (R_wo a_C^T c_L[c]) per channel: multiple scattering of a light of power
+    (E0, E1, E2) from the flat direction lf, a directional light (lam <= 0: c_L = Y(lf)) or an SG lobe of
+    sharpness lam (c_L its SH coefficients). Keeps reference counting (its SH work arrays are allocated
+    per call) under the estimator that has none."""
     L = it.order
     J = (L + 1) * (L + 1)
+    Ysh = np.empty(J)
+    if lam > 0.0:
+        sg_sh_coefficients(lf, lam, L, Ysh)
+    else:
+        sh_eval(L, lf[0], lf[1], lf[2], Ysh)
+    cL = np.empty((3, J))
+    for j in range(J):
+        cL[0, j] = E0 * Ysh[j]
+        cL[1, j] = E1 * Ysh[j]
+        cL[2, j] = E2 * Ysh[j]
+    R = np.empty((3, 3))
+    D = np.empty((J, J))
+    cs = np.empty((J, 3))
+    cT = np.empty(J)
     theta_v = omega_o_frame(tf, vf, R)
     sh_rotation(L, R, D)
     bcsdf_sh_lookup(it.cs_table[it.mat_cs[m]], theta_v, L, cs)
     a = it.transfer
+    out = np.empty(3)
     for c in range(3):
         for j1 in range(J):
             s = 0.0
@@ -134,29 +152,7 @@ def _multi(it, row, m, tf, vf, cL, D, R, cT, cs, out):
                 s += D[i, j] * cT[j]
             acc += cs[i, c] * s
         out[c] = acc
-
-
-@njit(cache=True, _nrt=True)
-def _multi_scatter(it, row, m, tf, vf, lf, lam, E0, E1, E2):
-    """(r, g, b): multiple scattering c_S . (R_wo a_C^T c_L) of a light of power (E0, E1, E2) from the
-    flat direction lf: a directional light (lam <= 0: c_L = Y(lf)) or an SG lobe of sharpness lam
-    (c_L its SH coefficients). Keeps reference counting (its SH work arrays are allocated per call)
-    under the estimator that has none."""
-    L = it.order
-    J = (L + 1) * (L + 1)
-    Ysh = np.empty(J)
-    if lam > 0.0:
-        sg_sh_coefficients(lf, lam, L, Ysh)
-    else:
-        sh_eval(L, lf[0], lf[1], lf[2], Ysh)
-    cL = np.zeros((3, J))
-    for j in range(J):
-        cL[0, j] = E0 * Ysh[j]
-        cL[1, j] = E1 * Ysh[j]
-        cL[2, j] = E2 * Ysh[j]
-    mo = np.zeros(3)
-    _multi(it, row, m, tf, vf, cL, np.empty((J, J)), np.empty((3, 3)), np.empty(J), np.empty((J, 3)), mo)
-    return mo[0], mo[1], mo[2]
+    return out[0], out[1], out[2]
 
 
 @njit(cache=True, _nrt=True)

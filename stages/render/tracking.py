@@ -237,7 +237,7 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
     return Flight(False, tmax, T, dim, lookups, NO_MEDIUM)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True)
 def ray_meets_majorant(maj, ox, oy, oz, dx, dy, dz):
     """True when the ray passes through a cell with a non-zero majorant (it may meet fibres)."""
     t_near, t_far = ray_box(maj.lo, maj.hi, ox, oy, oz, dx, dy, dz)
