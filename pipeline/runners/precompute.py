@@ -186,7 +186,8 @@ def _svf_visibility_task(tiling, tiling_hash, store, k, a, b, p: dict):
     seg = _segments(art, k)
     R = p["resolution"]
     t0 = time.perf_counter()
-    packed = visibility_images(periodic_scene(sc, k), k, seg.z_lo, seg.z_hi, seg.mids[a:b], seg.fibre[a:b], R, R)
+    packed = visibility_images(periodic_scene(sc, k), k, seg.z_lo, seg.z_hi, seg.mids[a:b], seg.fibre[a:b], R, R,
+                               capsules=seg.capsules[a:b])
     t1 = time.perf_counter()
     angle, weights = sg_fit(packed, seg.ids[a:b], R, R, p["sg_count"], p["seed"])
     g = f"exemplar_{k}/"
@@ -219,7 +220,8 @@ def _svf_warm_up(tiling, tiling_hash, k, seg, p: SvfParams) -> float:
 
     t0 = time.perf_counter()
     sc, _ = periodic_scenes(tiling, tiling_hash)
-    packed = visibility_images(periodic_scene(sc, k), k, seg.z_lo, seg.z_hi, seg.mids[:1], seg.fibre[:1], 8, 8)
+    packed = visibility_images(periodic_scene(sc, k), k, seg.z_lo, seg.z_hi, seg.mids[:1], seg.fibre[:1], 8, 8,
+                               capsules=seg.capsules[:1])
     sg_fit(packed, seg.ids[:1], 8, 8, 2, 0)
     pca = ssdf_pca(packed, 8, 8, 1, 0, chunk=1, hold=True)
     ssdf_project(packed, 8, 8, pca.mean, pca.basis)

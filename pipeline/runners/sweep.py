@@ -90,11 +90,14 @@ def _arg_hashes(args: list[str]) -> dict[str, str]:
 
     out = {}
     for a in args:
-        try:
-            if Path(a).exists():
-                out[a] = content_hash(a)
-        except (LoomError, OSError, ValueError):
-            continue
+        # a path, or a --set KEY=PATH option (prt's svf= and iirtf=, bysdf's yarns=): a render is stale
+        # once the artifact it reads changes
+        for p in (a, a.split("=", 1)[1]) if "=" in a else (a,):
+            try:
+                if p and Path(p).exists():
+                    out[p] = content_hash(p)
+            except (LoomError, OSError, ValueError):
+                continue
     return out
 
 

@@ -2,8 +2,10 @@
 SSDFs and sums of spherical Gaussians, for the fibre segments of one exemplar.
 
 The SVF V_k(w) of segment k is 1 when the ray from its midpoint mu_k in direction w hits no fibre but
-segment k's own, else 0. It is traced in the flat fabric made of the exemplar repeated without end
-(``stages.precompute.periodic``), in exemplar space (z up).
+segment k's own, else 0 (§4.1); the ray starts where it leaves segment k's capsule, on the side facing
+w (*Rays from a segment* in ``stages.precompute.periodic``: the procedural fibres overlap). It is traced
+in the flat fabric made of the exemplar repeated without end (``stages.precompute.periodic``), in
+exemplar space (z up).
 
 Pixel grid (every function takes ``res_theta`` x ``res_phi``; the paper uses 128 x 128)
 ---------------------------------------------------------------------------------------
@@ -14,7 +16,8 @@ direction (sin theta cos phi, sin theta sin phi, cos theta) (``pixel_direction``
 ``(S, ceil(D / 8))`` uint8 with D = res_theta res_phi, 1 = visible.
 
 1. Visibility images (chunk level): ``visibility_images(psc, k, z_lo, z_hi, mids, fibres, ...)``
-   One ray per pixel centre from mu_k, skipping the segment's whole fibre (and its periodic copies),
+   One ray per pixel centre from mu_k (from its capsule's surface: ``capsules``; ``max_dist`` counts
+   from mu_k), skipping the segment's whole fibre (and its periodic copies),
    until it leaves the slab z_lo <= z <= z_hi or has run ``max_dist`` (default 32 max(W, H)); a ray
    that hits nothing there is visible. The answer is ``periodic_hit_outside(...).t == inf`` (identical bits
    in the tests) by an any-hit walk over whole exemplar periods through the same wrapped capsules (a hit is any capsule
@@ -100,15 +103,16 @@ from stages.core.geometry.stack import stack_array
 from stages.core.rng import normal, uniform
 from stages.core.sg import spherical_fibonacci_axes
 from stages.core.svf import pixel_direction, pixel_solid_angle
-from stages.precompute.periodic import slab_length
+from stages.precompute.periodic import ray_start, slab_length
 
 MAX_DIST_PERIODS = 32.0     # default max_dist = 32 max(W, H)
 SG_ANGLE_DIM = 0x5356       # rng dimension of the per-segment SG rotation angle ("SV")
 STACK = 256
 
-ExemplarSegments = namedtuple("ExemplarSegments", ["ids", "fibre", "mids", "z_lo", "z_hi", "period"])
+ExemplarSegments = namedtuple("ExemplarSegments", ["ids", "fibre", "mids", "capsules", "z_lo", "z_hi", "period"])
 ExemplarSegments.__doc__ = """Segments of one exemplar: global ids (S,) int64, fibre (S,) int64 (global fibre id),
-midpoints (S, 3) float64, the slab z_lo, z_hi and the period (W, H)."""
+midpoints (S, 3) float64, capsules (S, 7) float64 (end points a, b and radius: the mean of the two
+point radii, as the BVH's), the slab z_lo, z_hi and the period (W, H)."""
 
 SsdfPca = namedtuple("SsdfPca", ["mean", "basis", "eigenvalues", "variance", "segments"])
 SsdfPca.__doc__ = """ssdf_pca's result: mean (D,) float32, basis (n, D) float32 (orthonormal rows),
@@ -156,9 +160,10 @@ def exemplar_segments(ex_points, ex_radius, ex_offsets, ex_fibers, ex_period, k:
     ids = np.arange(int(O[f0]) - f0, int(O[f1]) - f1, dtype=np.int64)
     a = ids - first + O[fibre]                                     # first point of each segment
     mids = 0.5 * (P[a] + P[a + 1])
+    capsules = np.concatenate([P[a], P[a + 1], (0.5 * (R[a] + R[a + 1]))[:, None]], axis=1)
     zs, rs = P[O[f0]:O[f1], 2], R[O[f0]:O[f1]]
     W, H = (float(v) for v in ex_period[k])
-    return ExemplarSegments(ids, fibre, mids, float((zs - rs).min()), float((zs + rs).max()), (W, H))
+    return ExemplarSegments(ids, fibre, mids, capsules, float((zs - rs).min()), float((zs + rs).max()), (W, H))
 
 
 # ------------------------------------------------------------------------------------------------ 1. visibility
@@ -268,9 +273,10 @@ def _direction_table(res_theta, res_phi):
 
 
 @njit(cache=True)
-def segment_image(sc, k, z_lo, z_hi, ox, oy, oz, fibre, dirs, max_dist, out, stack, col_cache):
-    """Bit-packed visibility image of the point o (skipping fibre ``fibre``) into ``out`` (bytes);
-    ``dirs`` from _direction_table; scratch: ``stack`` (STACK,) int64, ``col_cache`` (res_phi, 3) int64."""
+def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist, out, stack, col_cache):
+    """Bit-packed visibility image of segment midpoint m (skipping fibre ``fibre``; rays start on the
+    surface of ``capsule``, see ``ray_start``) into ``out`` (bytes); ``dirs`` from _direction_table;
+    scratch: ``stack`` (STACK,) int64, ``col_cache`` (res_phi, 3) int64."""
     P, seg_a, seg_r, srcfib = sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber
     box, child, prim = sc.fw_box, sc.fw_child, sc.fprim
     root = sc.ex_wide_root[k]
@@ -284,12 +290,13 @@ def segment_image(sc, k, z_lo, z_hi, ox, oy, oz, fibre, dirs, max_dist, out, sta
     col_cache[:, 0] = -1
     pp, pi, pj = -1, 0, 0
     for r in range(R):
-        L = slab_length(oz, dirs[r, 0, 2], z_lo, z_hi, max_dist)
         for cc in range(C):
             c = cc if r % 2 == 0 else C - 1 - cc
             dx = dirs[r, c, 0]
             dy = dirs[r, c, 1]
             dz = dirs[r, c, 2]
+            ox, oy, oz, t_start = ray_start(mx, my, mz, capsule, dx, dy, dz)
+            L = slab_length(oz, dz, z_lo, z_hi, max_dist - t_start)
             visible = True
             if L > 0.0:
                 blocked = False
@@ -323,13 +330,13 @@ def segment_image(sc, k, z_lo, z_hi, ox, oy, oz, fibre, dirs, max_dist, out, sta
 
 
 @njit(cache=True, parallel=True)
-def _visibility_kernel(sc, k, z_lo, z_hi, mids, fibres, dirs, max_dist, out):
+def _visibility_kernel(sc, k, z_lo, z_hi, mids, capsules, fibres, dirs, max_dist, out):
     C = dirs.shape[1]
     for s in prange(mids.shape[0]):
         stack = np.empty(STACK, np.int64)
         col_cache = np.empty((C, 3), np.int64)
-        segment_image(sc, k, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], fibres[s], dirs, max_dist,
-                      out[s], stack, col_cache)
+        segment_image(sc, k, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], capsules[s], fibres[s], dirs,
+                      max_dist, out[s], stack, col_cache)
 
 
 def default_max_dist(psc, k: int) -> float:
@@ -340,21 +347,27 @@ def default_max_dist(psc, k: int) -> float:
 
 
 def visibility_images(psc, k: int, z_lo: float, z_hi: float, mids, fibres, res_theta: int = 128,
-                      res_phi: int = 128, max_dist: float | None = None):
+                      res_phi: int = 128, max_dist: float | None = None, capsules=None):
     """Chunk level. Bit-packed visibility images (S, ceil(D/8)) uint8 of the points ``mids`` (S, 3)
     (segment midpoints, exemplar space), each skipping its fibre ``fibres`` (S,) (global fibre ids; -1
     skips nothing), in exemplar k repeated without end; ``psc`` is the tiling's ``ShellScene`` or its
-    ``periodic_scene(sc, k)`` (only exemplar k's fibres are read). S * D rays; segments are taken one
-    at a time by the threads."""
+    ``periodic_scene(sc, k)`` (only exemplar k's fibres are read). With ``capsules`` (S, 7: the
+    segments' ``ExemplarSegments.capsules``) each ray starts where it leaves its segment's capsule
+    (module doc, 1.), without them at the point itself. ``max_dist`` counts from the point. S * D
+    rays; segments are taken one at a time by the threads."""
     mids = np.ascontiguousarray(mids, np.float64).reshape(-1, 3)
     fibres = np.ascontiguousarray(fibres, np.int64).reshape(-1)
+    if capsules is None:
+        capsules = np.zeros((mids.shape[0], 7))
+    capsules = np.ascontiguousarray(capsules, np.float64).reshape(-1, 7)
     if max_dist is None:
         max_dist = default_max_dist(psc, k)
     out = np.zeros((mids.shape[0], packed_bytes(res_theta, res_phi)), np.uint8)
     if mids.shape[0]:
         dirs = _direction_table(res_theta, res_phi)
         with numba.parallel_chunksize(1):
-            _visibility_kernel(psc, int(k), float(z_lo), float(z_hi), mids, fibres, dirs, float(max_dist), out)
+            _visibility_kernel(psc, int(k), float(z_lo), float(z_hi), mids, capsules, fibres, dirs, float(max_dist),
+                               out)
     return out
 
 

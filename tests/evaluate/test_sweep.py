@@ -269,3 +269,16 @@ def test_sweep_checks_its_base_scene_names_when_read(cli, sweep_file, tmp_path):
     assert code == 2, err
     assert "scene.toml: yarns.warp.preset: unknown preset 'coton1'" in err and "did you mean 'cotton1'" in err
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_render_key_follows_artifacts_named_in_set_options(tmp_path):
+    """A render that reads an artifact through ``--set KEY=PATH`` (prt's svf= and iirtf=) is stale once that
+    artifact changes: the artifact's content hash is part of the render's key (a plain path already was)."""
+    art = tmp_path / "svf.bin"
+    art.write_bytes(b"one")
+    args = ["--set", f"svf={art}", "--set", "terms=single", str(art)]
+    before = sw._arg_hashes(args)
+    assert set(before) == {str(art)}
+    art.write_bytes(b"two")
+    assert sw._arg_hashes(args) != before
+    assert sw._arg_hashes(["--set", "svf=no/such/file", "--set", "sg=mc"]) == {}

@@ -19,12 +19,13 @@ RES = 32
 
 
 @njit(cache=True)
-def _reference_images(psc, z_lo, z_hi, mids, fibres, R, C, max_dist, out):
+def _reference_images(psc, z_lo, z_hi, mids, capsules, fibres, R, C, max_dist, out):
     for s in range(mids.shape[0]):
         for r in range(R):
             for c in range(C):
                 x, y, z = core_svf.pixel_direction(r, c, R, C)
-                h = periodic_hit_outside(psc, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], x, y, z, fibres[s], max_dist)
+                ox, oy, oz, t = svf.ray_start(mids[s, 0], mids[s, 1], mids[s, 2], capsules[s], x, y, z)
+                h = periodic_hit_outside(psc, z_lo, z_hi, ox, oy, oz, x, y, z, fibres[s], max_dist - t)
                 out[s, r, c] = 1 if h.t == np.inf else 0
 
 
@@ -39,7 +40,7 @@ def tiny_svf(tiny_tiling):
     _, sc, art = tiny_tiling
     seg = _segments(art, 0)
     psc = periodic_scene(sc, 0)
-    packed = svf.visibility_images(psc, 0, seg.z_lo, seg.z_hi, seg.mids, seg.fibre, RES, RES)
+    packed = svf.visibility_images(psc, 0, seg.z_lo, seg.z_hi, seg.mids, seg.fibre, RES, RES, capsules=seg.capsules)
     return seg, psc, packed
 
 
@@ -64,22 +65,29 @@ def test_exemplar_segments_follow_the_global_numbering(tiny_tiling):
 
 
 # ------------------------------------------------------------------------------------------------ 1. visibility
-def test_visibility_images_match_periodic_hit_per_pixel(tiny_tiling):
-    """Reference: one ``periodic_hit_outside`` per pixel centre (visible iff it escapes), both exemplars, 32 x 24
-    pixels, every fourth segment: identical bits."""
+@pytest.mark.parametrize("from_surface", [True, False])
+def test_visibility_images_match_periodic_hit_per_pixel(tiny_tiling, from_surface):
+    """Reference: one ``periodic_hit_outside`` per pixel centre (visible iff it escapes) from where the ray
+    starts (the segment's surface, ``svf.ray_start``, or its midpoint), both exemplars, 32 x 24 pixels,
+    every fourth segment: identical bits. Starting on the surface sees more (the midpoint's rays also
+    meet the fibres that pass through the segment's own capsule)."""
     _, sc, art = tiny_tiling
     R, C = 32, 24
     for k in range(2):
         seg = _segments(art, k)
         psc = periodic_scene(sc, k)
         sel = np.arange(0, len(seg.ids), 4 if k == 0 else 25)
-        packed = svf.visibility_images(psc, k, seg.z_lo, seg.z_hi, seg.mids[sel], seg.fibre[sel], R, C)
+        caps = seg.capsules[sel] if from_surface else np.zeros((len(sel), 7))
+        packed = svf.visibility_images(psc, k, seg.z_lo, seg.z_hi, seg.mids[sel], seg.fibre[sel], R, C, capsules=caps)
         ref = np.zeros((len(sel), R, C), np.uint8)
-        _reference_images(psc, seg.z_lo, seg.z_hi, seg.mids[sel], seg.fibre[sel], R, C,
+        _reference_images(psc, seg.z_lo, seg.z_hi, seg.mids[sel], caps, seg.fibre[sel], R, C,
                           svf.default_max_dist(psc, k), ref)
         assert np.array_equal(svf.unpack_images(packed, R, C), ref)
         assert np.array_equal(packed, svf.pack_images(ref))
         assert 0.02 < ref.mean() < 0.9        # neither trivially visible nor trivially occluded
+        if from_surface:
+            mid = svf.visibility_images(psc, k, seg.z_lo, seg.z_hi, seg.mids[sel], seg.fibre[sel], R, C)
+            assert svf.unpack_images(mid, R, C).mean() < ref.mean()
 
 
 def test_visibility_hand_cases(tiny_tiling):
@@ -114,7 +122,8 @@ def test_visibility_chunks_are_independent(tiny_svf):
     """Reference: the images of the whole exemplar; any contiguous chunk gives the same rows."""
     seg, psc, packed = tiny_svf
     a, b = 37, 101
-    part = svf.visibility_images(psc, 0, seg.z_lo, seg.z_hi, seg.mids[a:b], seg.fibre[a:b], RES, RES)
+    part = svf.visibility_images(psc, 0, seg.z_lo, seg.z_hi, seg.mids[a:b], seg.fibre[a:b], RES, RES,
+                                 capsules=seg.capsules[a:b])
     assert np.array_equal(part, packed[a:b])
 
 
