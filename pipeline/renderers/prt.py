@@ -62,13 +62,18 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
     from stages.core.shell.top import build_top_surface
 
     from ..artifacts import input_identity
-    from ..runners.precompute import tiling_materials
+    from ..progress import warn
+    from ..runners.precompute import SVF_RAY_START, tiling_materials
     from ..runners.tile import load_tiling
 
     sc, art = load_tiling(tiling_path)
     tid = input_identity(tiling_path, "tiling")
     svf = _check_precompute(svf_path, "svf", tiling_path, tid)
     ii = _check_precompute(iirtf_path, "iirtf", tiling_path, tid)
+    if (svf.meta.get("params") or {}).get("ray_start") != SVF_RAY_START:
+        warn(f"{svf_path}: an SVF made before 2026-12-02, its rays from the segments' midpoints, which shadows "
+             "light the segments' surfaces receive (single scattering ~5-10 % darker); run loomlight precompute "
+             "svf again")
     used = _used_exemplars(art)
     for a, what in ((svf, "svf"), (ii, "iirtf")):
         have = {e["exemplar"] for e in a.summary["exemplars"]}

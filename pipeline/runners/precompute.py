@@ -37,6 +37,9 @@ MIN_RESOLUTION = 8
 
 
 # ------------------------------------------------------------------------------------------------ parameters
+SVF_RAY_START = "segment surface"  # the SVF's rays leave from the segment's side facing them
+
+
 @dataclass(frozen=True)
 class SvfParams:
     resolution: int = 128          # R x R pixels over (theta, phi)
@@ -240,7 +243,10 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     tiling = Path(tiling)
     art = tiling_input(tiling)
     ks = pick_exemplars(art, exemplars, tiling)
-    w = ArtifactWriter(out, kind="svf", stage="precompute svf", params={**asdict(p), "exemplars": ks},
+    # ray_start: where a segment's visibility rays start (stages.precompute.periodic, "Rays from a segment");
+    # artifacts without it were made from the midpoint, and the renderer says so
+    w = ArtifactWriter(out, kind="svf", stage="precompute svf",
+                       params={**asdict(p), "exemplars": ks, "ray_start": SVF_RAY_START},
                        inputs={"tiling": (tiling, "tiling")}, started=t_start)
     if not force and w.up_to_date():
         return {"skipped": True}

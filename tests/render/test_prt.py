@@ -475,3 +475,21 @@ def test_bad_input_exit_2_nothing_written(swatch):
         code, _, err = _cli("render", scene, "-o", keep, *args, *small)
         assert code == 2, (needle, err)
     assert _digest(keep) == before
+
+
+def test_svf_from_the_midpoint_is_named(swatch, monkeypatch):
+    """Contract: an SVF artifact made before its rays started on the segments' surfaces (no ``ray_start``
+    of this loomlight in its params) still renders, with a warning that names it and says what to run;
+    this module's own SVF gets none."""
+    import pipeline.progress
+    import pipeline.runners.precompute
+
+    said = []
+    monkeypatch.setattr(pipeline.progress, "warn", said.append)
+    scene = swatch.scene(DIRECTIONAL.format(d=LIGHT_1))
+    small = ["--spp", "1", "--width", "8", "--height", "6", *swatch.prt_args()]
+    swatch.render(scene, *small)
+    assert not [m for m in said if "precompute svf" in m]
+    monkeypatch.setattr(pipeline.runners.precompute, "SVF_RAY_START", "another start")
+    swatch.render(scene, *small)
+    assert [m for m in said if str(swatch.svf) in m and "precompute svf" in m], said
