@@ -58,7 +58,7 @@ def main(argv=None) -> dict:
            "segments_exemplar": S, "segments_total": total, "sample": n, "components": a.components,
            "sg": a.sg, "power_iters": a.power_iters, "resolutions": {}}
     # compile outside the timings
-    p0 = svf.visibility_images(psc, k, seg.z_lo, seg.z_hi, seg.mids[:4], seg.fibre[:4], 8, 8)
+    p0 = svf.visibility_images(psc, k, seg.z_lo, seg.z_hi, seg.mids[:4], seg.fibre[:4], 8, 8, capsules=seg.capsules[:4])
     svf.ssdf_images(p0, 8, 8)
     pc = svf.ssdf_pca(p0, 8, 8, 2, hold=True)
     svf.ssdf_project(p0, 8, 8, pc.mean, pc.basis)
@@ -67,7 +67,8 @@ def main(argv=None) -> dict:
     for R in (int(x) for x in a.res.split(",")):
         D = R * R
         wall0, cpu0 = time.perf_counter(), time.process_time()
-        packed, t_vis = _timed(svf.visibility_images, psc, k, seg.z_lo, seg.z_hi, seg.mids[idx], seg.fibre[idx], R, R)
+        packed, t_vis = _timed(svf.visibility_images, psc, k, seg.z_lo, seg.z_hi, seg.mids[idx], seg.fibre[idx], R, R,
+                                capsules=seg.capsules[idx])
         img = svf.unpack_images(packed, R, R)
         vis_frac = img.mean(axis=(1, 2))
         _, t_ssdf = _timed(svf.ssdf_images, packed, R, R)
