@@ -189,6 +189,9 @@ METHODS = {m.name: m for m in (
                   Setting("params", "a TOML of BYSDF parameters per yarn group (loomlight fit-bysdf writes one)"),
                   Setting("ply_tol", "implicit ply iteration tolerance, in ply radii (default 1e-3)"),
                   Setting("ply_iter", "implicit ply iteration cap (default 10)"),
+                  Setting("ply_search", "how ply entries are found: march (default: the certified march alone) "
+                                        "or iteration (the paper's ellipse-plane iteration, then the march); "
+                                        "the same entries", ("march", "iteration")),
                   Setting("falloff", "multiscale aggregation weights exp(-falloff |dx| / R) (default 40)"),
                   Setting("fibre_threshold", "fibre shadowing floor: s (1 - thr) + thr (default 0.5; 1: off)"),
                   Setting("ply_threshold", "ply shadowing floor (default 0.6; 1: off)")),

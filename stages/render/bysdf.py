@@ -64,7 +64,7 @@ from stages.core.rng import uniform
 from stages.core.shading import bysdf as B
 from stages.core.shading.bysdf import BYSDF_SIZE
 from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
-from stages.core.yarn.implicit_plies import ply_hit
+from stages.core.yarn.implicit_plies import plies_crossed, ply_blocks
 from stages.core.yarn.implicit_tables import ply_shadow_lookup
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
@@ -133,8 +133,7 @@ def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
         fr, um = enter_yarn(it, h, ox, oy, oz, dx, dy, dz, o, d)
         if um > 0.0:
             yt = it.types[it.yarn_type[fr.curve]]
-            ph = ply_hit(yt.tp, o, d, um, yt.tol, yt.max_iter)
-            if ph.hit:
+            if ply_blocks(yt.tp, o, d, um, yt.tol, yt.max_iter, yt.search):
                 return False, rays
             for k in range(3):
                 o[k] += um * d[k]
@@ -419,7 +418,7 @@ def trace_path(it, o, d, seed, key):
                 if not (u_hi > 0.0) or not math.isfinite(u_hi):
                     break
                 yq = (x[0] + u_hi * din[0], x[1] + u_hi * din[1], x[2] + u_hi * din[2])
-                crossed = ply_hit(yt.tp, x, din, u_hi, yt.tol, yt.max_iter).plies_crossed
+                crossed = plies_crossed(yt.tp, x, din, u_hi, yt.tol, yt.max_iter, yt.search)
                 crossed = max(1, crossed)
                 ell = u_hi / R
                 att_s = math.exp(-prow[B.SIGMA_SPEC] * ell * crossed)

@@ -42,7 +42,7 @@ from stages.core.yarn.implicit_tables import (
 from stages.render.yarn_tubes import cylinder_span
 
 # one yarn type: tp (NPARAM,), tables (ImplicitTables), envelope radius, ply tolerance, ply iterations, key
-YarnType = namedtuple("YarnType", ["tp", "tables", "radius", "tol", "max_iter"])
+YarnType = namedtuple("YarnType", ["tp", "tables", "radius", "tol", "max_iter", "search"])
 
 # shading point in yarn space: hit (bool), x (3) the ply hit, t (3) fibre tangent, n (3) fibre normal,
 # shadow S_ply S_fibre, ply the ply index
@@ -70,7 +70,7 @@ def offset_of(o, d, R):
 @njit(cache=True)
 def near_point(yt, yarn_key, o, d, u_max):
     """``ShadingPoint`` of the yarn-space ray o + u d, u in [0, u_max], through yarn type ``yt``."""
-    ph = ply_hit(yt.tp, o, d, u_max, yt.tol, yt.max_iter)
+    ph = ply_hit(yt.tp, o, d, u_max, yt.tol, yt.max_iter, False, yt.search)
     if not ph.hit:
         zero = (0.0, 0.0, 0.0)
         x = (o[0] + u_max * d[0], o[1] + u_max * d[1], o[2] + u_max * d[2])

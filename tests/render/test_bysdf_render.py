@@ -237,10 +237,11 @@ def test_white_furnace(tmp_path):
 
 
 def test_bad_input_exits_2(cli, weave):
-    """Mode names, K <= 0, negative roughness, a missing yarns artifact: exit code 2 and one line."""
+    """Mode names, K <= 0, ply iteration settings, an unknown ply search, a missing yarns artifact: exit
+    code 2 and one line."""
     scene, yarns = weave
     cases = [["--set", "mode=medium"], ["--set", "k=0"], ["--set", "k=-3"], ["--set", f"yarns={yarns}x"],
-             ["--set", "ply_iter=1"], ["--set", "ply_tol=nan"]]
+             ["--set", "ply_iter=1"], ["--set", "ply_tol=nan"], ["--set", "ply_search=newton"]]
     for args in cases:
         extra = [] if any(a.startswith("yarns=") for a in args) else ["--set", f"yarns={yarns}"]
         code, out, err = cli("render", str(scene.path), "--method", "bysdf", *extra, *args, "-o",

@@ -72,7 +72,31 @@ meet a ply. For each ply k:
    at an angle; the brute-force march of the tests agrees on every ray but those grazing a ply within
    1e-5 ply radii.
 
-The nearest ply entry wins. ``PlyHit`` fields:
+The nearest ply entry wins. Every ply's own entry (steps 1-2) is found first; an entry they find is a
+true one (G = 0, G' < 0), so only its being first is left to the march, and the march of every other
+ply stops once it has passed the earliest entry known (that ply cannot come first). A ply whose
+iteration found no entry is marched over the whole chord when ``plies_crossed`` is asked for
+(``count=True``, the default), and only up to the earliest entry otherwise.
+
+Queries for a renderer (same answers as ``ply_hit``, less work):
+  ``ply_hit(..., count=False)``  the first hit without ``plies_crossed`` (-1): the shading point
+  ``plies_crossed(tp, o, d, u_max, tol, max_iter)``  the count alone (Beer-Lambert along a chord); a ply
+             with an entry of its own needs no march
+  ``ply_blocks(tp, o, d, u_max, tol, max_iter)``  whether any ply is entered (shadow rays): the first
+             entry found settles it; the march runs only where no iteration found one
+  On 20,000 random rays of four presets all three agree with ``ply_hit`` bit for bit (tests).
+
+Search (the last argument of the three queries and of ``ply_hit``): ``SEARCH_ITERATION`` (the paper's
+iteration, steps 1-3, the default here) or ``SEARCH_MARCH`` (step 3 alone: every ply marched from
+u_lo with no target, stopping at its first entry or at the earliest entry of a ply marched before it).
+The march is what makes either search exact, and on its own it is cheaper: 5.4 steps per ply on
+uniformly random rays (cotton1) to its first entry or the chord's end, against the iteration's 3-5
+ellipse-plane steps plus 3-4 Newton steps before its (shorter) march; 0.78 against 1.44 us per first
+hit on one core; bysdf renders 1.15x faster with it in ``near`` mode, 1.37x in ``far``. Both find the same entries (within 1e-15 on
+10,000 random rays); they can differ on a ray that starts on a ply's surface within rounding of G = 0
+(the own ply counted or not). ``bysdf`` uses the march unless ``--set ply_search=iteration``.
+
+``PlyHit`` fields:
   hit            False: the ray passes through the yarn between the plies
   ply            the ply k hit (-1 without hit)
   u              ray parameter of the hit (u_max without hit)
@@ -87,16 +111,21 @@ The nearest ply entry wins. ``PlyHit`` fields:
                  ply_angle - model.fiber_twist(z) is the fibre pattern's angle theta the fibre tables
                  (implicit_tables.fibre_lookup) are indexed by
   plies_crossed  how many plies the ray enters on [0, u_max] (each counted once)
-  iterations     ellipse-plane steps of the hit ply (the largest over the plies without hit)
-  converged      every ply's iteration met ``tol`` within ``max_iter``
+  iterations     ellipse-plane steps of the hit ply (the largest over the plies without hit; 0 with
+                 SEARCH_MARCH)
+  converged      every ply's iteration met ``tol`` within ``max_iter`` (True with SEARCH_MARCH)
   corrections    plies whose first entry the certification moved (or found where the cylinder missed)
-                 (diagnostic: how often the paper's iteration alone would have been wrong)
+                 (diagnostic: how often the paper's iteration alone would have been wrong; a ply
+                 whose march stopped at another ply's earlier entry is not looked at)
 Degenerate rays (along the axis, grazing a ply, tangent to the envelope) return finite values.
 """
 import math
 from collections import namedtuple
 
+import numpy as np
 from numba import njit
+
+from stages.core.geometry.stack import stack_array
 
 from .model import E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, TWO_PI, YARN_ALPHA, YARN_SGN, ply_angle
 
@@ -108,6 +137,9 @@ NEWTON_STEPS = 8       # exact refinement of the cylinder's entry
 MARCH_STEPS = 256      # certified march (module doc, step 3)
 GRAZE = 1e-6           # clips shallower than this (in G; about half of it in ply radii) count as misses
 HIT_EPS = 1e-10        # entries are exact to HIT_EPS ply radii along the ray
+PLY_MAX = 16           # plies a yarn type may have (per-ply scratch of ply_hit on the machine stack)
+SEARCH_ITERATION, SEARCH_MARCH = 0, 1   # how the queries find entries (module doc, "Search")
+SEARCHES = ("iteration", "march")
 
 
 @njit(cache=True)
@@ -259,12 +291,15 @@ def exact_entry(tp, k, ox, oy, oz, dx, dy, dz, u0, u_max, eps_u):
 
 
 @njit(cache=True)
-def certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, u_c, slope_c, K, eps_u):
+def certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, u_c, slope_c, K, eps_u, u_stop):
     """(u, status): the first entry of the ray into ply k on [u_lo, u_hi] (step 3; no ply point lies
     outside it) at least GRAZE deep. u_c: the iteration's entry (-1: none) with slope_c = -G'(u_c).
     status 0: the march confirmed u_c (or no entry), 1: it found an earlier entry (or one where there
-    was none), 2: it ran out of steps (u_c kept)."""
+    was none), 2: it ran out of steps (u_c kept). u_stop: the march also ends (status 0, u_c returned)
+    once it has proved that no entry lies before u_stop (an entry of another ply already known: this
+    ply cannot come first); math.inf to march to u_c's neighbourhood or u_hi."""
     target = u_c - 2.0 * slope_c / K if u_c >= 0.0 else math.inf
+    target = min(target, u_stop)
     a = u_lo
     G, dG, _, _ = ray_membership(tp, k, ox, oy, oz, dx, dy, dz, a)
     if G <= 0.0:
@@ -305,42 +340,75 @@ def certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, u_c, slope_
 
 
 @njit(cache=True)
-def ply_hit(tp, o, d, u_max, tol, max_iter):
-    """The first ply the ray o + u d (u in [0, u_max]) meets inside the yarn: a ``PlyHit`` (module doc)."""
-    u_max = float(u_max)
-    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
-    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
-    P = int(tp[PLY_NUM])
+def ply_chord(tp, ox, oy, oz, dx, dy, dz):
+    """(u_lo, u_hi, |d_xy|, eps_u): the part [u_lo, u_hi] of the ray within ply_reach_radius of the axis
+    (u_hi < u_lo: none; unclipped: the callers clip it to [0, u_max]) and the entry tolerance eps_u
+    (HIT_EPS ply radii) along the ray."""
     ar, at = ply_half_axes(tp)
     amin = min(ar, at)
     dn = math.sqrt(dx * dx + dy * dy + dz * dz)
     dxy = math.sqrt(dx * dx + dy * dy)
     eps_u = HIT_EPS * amin / dn
-    # the part of the chord within the plies' reach (no ply point lies farther from the axis)
     reach = ply_reach_radius(tp)
-    u_lo = 0.0
-    u_hi = u_max
+    u_lo = -math.inf
+    u_hi = math.inf
     oo = ox * ox + oy * oy
     if dxy < AXIAL_EPS * dn:
         if oo > reach * reach:
-            u_hi = -1.0
+            u_hi = -math.inf
     else:
         qa = dx * dx + dy * dy
         qb = ox * dx + oy * dy
         disc = qb * qb - qa * (oo - reach * reach)
         if disc < 0.0:
-            u_hi = -1.0
+            u_hi = -math.inf
         else:
             sq = math.sqrt(disc)
-            u_lo = max(u_lo, (-qb - sq) / qa)
-            u_hi = min(u_hi, (-qb + sq) / qa)
-    # |G''| bound along [u_lo, u_hi] (module doc, step 3)
+            u_lo = (-qb - sq) / qa
+            u_hi = (-qb + sq) / qa
+    return u_lo, u_hi, dxy, eps_u
+
+
+@njit(cache=True)
+def march_bound(tp, ox, oy, oz, dx, dy, dz, dxy, u_lo, u_hi):
+    """K, the bound of |G''| along [u_lo, u_hi] (module doc, step 3)."""
+    ar, at = ply_half_axes(tp)
+    amin = min(ar, at)
     rp = max(math.sqrt((ox + u_lo * dx) ** 2 + (oy + u_lo * dy) ** 2),
              math.sqrt((ox + u_hi * dx) ** 2 + (oy + u_hi * dy) ** 2))
     w = TWO_PI / tp[YARN_ALPHA] * abs(dz)
     v1 = dxy + w * rp
     v2 = w * w * rp + 2.0 * w * dxy
-    K = max(2.0 * (v1 * v1 + (rp + tp[PLY_RADIUS]) * v2) / (amin * amin), 1e-300)
+    return max(2.0 * (v1 * v1 + (rp + tp[PLY_RADIUS]) * v2) / (amin * amin), 1e-300)
+
+
+@njit(cache=True)
+def ply_candidate(tp, k, ox, oy, oz, dx, dy, dz, u_max, tol, max_iter, eps_u):
+    """(u_c, slope, iterations, converged): ply k's entry found by the ellipse-plane iteration, the local
+    cylinder and Newton on the exact membership (steps 1-2; u_c = -1: none), slope = -G'(u_c). An entry
+    found here is a true entry (G = 0, G' < 0); only that it is the first is left to the march."""
+    zs, its, conv = ellipse_plane_centre(tp, k, ox, oy, oz, dx, dy, dz, tol, max_iter)
+    uc = local_tube_entry(tp, k, ox, oy, oz, dx, dy, dz, zs, u_max)
+    slope = 0.0
+    if uc >= 0.0:
+        uc, slope = exact_entry(tp, k, ox, oy, oz, dx, dy, dz, uc, u_max, eps_u)
+    return uc, slope, its, conv
+
+
+@njit(cache=True)
+def ply_hit(tp, o, d, u_max, tol, max_iter, count=True, search=SEARCH_ITERATION):
+    """The first ply the ray o + u d (u in [0, u_max]) meets inside the yarn: a ``PlyHit`` (module doc).
+    count=False leaves out ``plies_crossed`` (-1): plies without an entry of their own are then marched
+    only as far as the first entry found, which a caller that shades the first hit is all it needs.
+    search: SEARCH_ITERATION (steps 1-3) or SEARCH_MARCH (step 3 alone; module doc, "Search")."""
+    u_max = float(u_max)
+    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
+    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
+    P = int(tp[PLY_NUM])
+    ar, at = ply_half_axes(tp)
+    u_lo, u_hi, dxy, eps_u = ply_chord(tp, ox, oy, oz, dx, dy, dz)
+    u_lo = max(u_lo, 0.0)
+    u_hi = min(u_hi, u_max)
     best_u = math.inf
     best_k = -1
     best_it = 0
@@ -349,29 +417,47 @@ def ply_hit(tp, o, d, u_max, tol, max_iter):
     converged = True
     corrections = 0
     if u_hi >= u_lo:
-        for k in range(P):
-            zs, its, conv = ellipse_plane_centre(tp, k, ox, oy, oz, dx, dy, dz, tol, max_iter)
+        K = march_bound(tp, ox, oy, oz, dx, dy, dz, dxy, u_lo, u_hi)
+        cand_u = stack_array(PLY_MAX, np.float64)
+        cand_s = stack_array(PLY_MAX, np.float64)
+        cand_it = stack_array(PLY_MAX, np.int64)
+        for k in range(P):   # every ply's own entry first: the earliest bounds the others' marches
+            if search == SEARCH_MARCH:
+                uc, slope, its, conv = -1.0, 0.0, 0, True
+            else:
+                uc, slope, its, conv = ply_candidate(tp, k, ox, oy, oz, dx, dy, dz, u_max, tol, max_iter, eps_u)
             converged = converged and conv
             max_it = max(max_it, its)
-            uc = local_tube_entry(tp, k, ox, oy, oz, dx, dy, dz, zs, u_max)
-            slope = 0.0
-            if uc >= 0.0:
-                uc, slope = exact_entry(tp, k, ox, oy, oz, dx, dy, dz, uc, u_max, eps_u)
-            u, status = certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, uc, slope, K, eps_u)
+            cand_u[k] = uc
+            cand_s[k] = slope
+            cand_it[k] = its
+            if uc >= 0.0 and uc < best_u:
+                best_u = uc
+                best_k = k
+        for k in range(P):
+            uc = cand_u[k]
+            if k == best_k or (count and uc < 0.0):
+                stop = math.inf
+            else:
+                stop = best_u
+            u, status = certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, uc, cand_s[k], K, eps_u,
+                                              stop)
             if status == 1:
                 corrections += 1
             if u >= 0.0 and u <= u_max:
                 crossed += 1
-                if u < best_u:
+                if u < best_u or (k == best_k and u <= best_u):
                     best_u = u
                     best_k = k
-                    best_it = its
+    if not count:
+        crossed = -1
     if best_k < 0:
         ex = ox + u_max * dx
         ey = oy + u_max * dy
         ez = oz + u_max * dz
         zero = (0.0, 0.0, 0.0)
-        return PlyHit(False, -1, u_max, (ex, ey, ez), zero, zero, 0.0, 0, max_it, converged, corrections)
+        return PlyHit(False, -1, u_max, (ex, ey, ez), zero, zero, 0.0, crossed, max_it, converged, corrections)
+    best_it = cand_it[best_k]
     u = best_u
     px = ox + u * dx
     py = oy + u * dy
@@ -394,3 +480,54 @@ def ply_hit(tp, o, d, u_max, tol, max_iter):
     psi = math.atan2(b / tp[E_LONG], a / tp[E_SHORT])
     return PlyHit(True, best_k, u, (px, py, pz), (tx, ty, tz), (nx, ny, nz), psi, crossed, best_it, converged,
                   corrections)
+
+
+@njit(cache=True)
+def plies_crossed(tp, o, d, u_max, tol, max_iter, search=SEARCH_ITERATION):
+    """How many plies the ray o + u d (u in [0, u_max]) enters, each counted once: ``ply_hit``'s
+    ``plies_crossed`` without its first hit (a ply whose own entry the iteration finds needs no march)."""
+    u_max = float(u_max)
+    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
+    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
+    u_lo, u_hi, dxy, eps_u = ply_chord(tp, ox, oy, oz, dx, dy, dz)
+    u_lo = max(u_lo, 0.0)
+    u_hi = min(u_hi, u_max)
+    if not (u_hi >= u_lo):
+        return 0
+    K = march_bound(tp, ox, oy, oz, dx, dy, dz, dxy, u_lo, u_hi)
+    crossed = 0
+    for k in range(int(tp[PLY_NUM])):
+        uc = -1.0
+        if search == SEARCH_ITERATION:
+            uc, _, _, _ = ply_candidate(tp, k, ox, oy, oz, dx, dy, dz, u_max, tol, max_iter, eps_u)
+        if uc < 0.0:
+            uc, _ = certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, -1.0, 0.0, K, eps_u, math.inf)
+        if uc >= 0.0 and uc <= u_max:
+            crossed += 1
+    return crossed
+
+
+@njit(cache=True)
+def ply_blocks(tp, o, d, u_max, tol, max_iter, search=SEARCH_ITERATION):
+    """True when the ray o + u d (u in [0, u_max]) enters any ply (``ply_hit``'s ``hit``, for shadow rays):
+    a ply entry the iteration finds settles it; the march runs only when none does."""
+    u_max = float(u_max)
+    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
+    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
+    u_lo, u_hi, dxy, eps_u = ply_chord(tp, ox, oy, oz, dx, dy, dz)
+    u_lo = max(u_lo, 0.0)
+    u_hi = min(u_hi, u_max)
+    if not (u_hi >= u_lo):
+        return False
+    P = int(tp[PLY_NUM])
+    if search == SEARCH_ITERATION:
+        for k in range(P):
+            uc, _, _, _ = ply_candidate(tp, k, ox, oy, oz, dx, dy, dz, u_max, tol, max_iter, eps_u)
+            if uc >= 0.0 and uc <= u_max:
+                return True
+    K = march_bound(tp, ox, oy, oz, dx, dy, dz, dxy, u_lo, u_hi)
+    for k in range(P):
+        u, _ = certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, -1.0, 0.0, K, eps_u, math.inf)
+        if u >= 0.0 and u <= u_max:
+            return True
+    return False

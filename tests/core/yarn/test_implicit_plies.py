@@ -195,7 +195,7 @@ def random_rays(tp, n, rng, min_axial_deg=1.0):
     return out
 
 
-def compare_with_brute_force(tp, rays):
+def compare_with_brute_force(tp, rays, search=IP.SEARCH_ITERATION):
     """Per ray: (ok, grazing, |du| |d| / A_min (nan unless both hit the same ply), iterations, converged,
     kind, q) with q = |d_z| / |d_xy| ply_radius 2 pi / yarn_alpha (the helix crosses the ray's ellipse
     plane once where q < 1). ok: same hit / no hit, same ply, same plies_crossed and u within 1e-6 ply radii (unless the
@@ -205,7 +205,7 @@ def compare_with_brute_force(tp, rays):
     amin = min(ar, at)
     rows = []
     for o, d, um, kind in rays:
-        h = IP.ply_hit(tp, o, d, um, TOL, MAX_ITER)
+        h = IP.ply_hit(tp, o, d, um, TOL, MAX_ITER, True, search)
         dn = float(np.linalg.norm(d))
         step = tp[M.FIBER_RADIUS] / 20 / dn
         first, seg_min, gmin = brute_force(tp, o, d, um, step)
@@ -347,3 +347,48 @@ def test_degenerate_rays_are_finite():
             assert h.u == pytest.approx(first[first >= 0].min(), abs=1e-9)
             assert np.linalg.norm(h.tangent) == pytest.approx(1.0) and np.linalg.norm(h.normal) == pytest.approx(1.0)
     assert IP.ply_hit(tp, *cases[0][:2], 0.3, TOL, MAX_ITER).u == 0.0
+
+
+@pytest.mark.parametrize("name", ["cotton1", "polyester1"])
+def test_render_queries_agree_with_ply_hit(name):
+    """The renderer's queries against ``ply_hit`` (iteration, full count) on the fast test's rays (module
+    doc, "Queries"): ``ply_hit(count=False)`` gives the same first hit bit for bit, ``plies_crossed`` the same
+    count, ``ply_blocks`` the same hit / no hit. With SEARCH_MARCH (the march alone) the same hit, ply and
+    count, u within 1e-9 ply radii, on every ray not built to graze a ply, and no iterations reported."""
+    tp = _tp(name)
+    ar, at = IP.ply_half_axes(tp)
+    amin = min(ar, at)
+    n_hits = 0
+    for o, d, um, kind in random_rays(tp, 1200, np.random.default_rng(4)):
+        full = IP.ply_hit(tp, o, d, um, TOL, MAX_ITER)
+        first = IP.ply_hit(tp, o, d, um, TOL, MAX_ITER, False)
+        assert (first.hit, first.ply, first.u, first.point, first.normal, first.plies_crossed) == \
+               (full.hit, full.ply, full.u, full.point, full.normal, -1)
+        assert IP.plies_crossed(tp, o, d, um, TOL, MAX_ITER) == full.plies_crossed
+        assert IP.ply_blocks(tp, o, d, um, TOL, MAX_ITER) == full.hit
+        n_hits += full.hit
+        if kind == 3:
+            continue
+        dn = float(np.linalg.norm(d))
+        for count in (True, False):
+            m = IP.ply_hit(tp, o, d, um, TOL, MAX_ITER, count, IP.SEARCH_MARCH)
+            assert m.hit == full.hit and m.ply == full.ply
+            assert abs(m.u - full.u) * dn <= 1e-9 * amin
+            assert m.iterations == 0 and m.converged
+            assert m.plies_crossed == (full.plies_crossed if count else -1)
+        assert IP.plies_crossed(tp, o, d, um, TOL, MAX_ITER, IP.SEARCH_MARCH) == full.plies_crossed
+        assert IP.ply_blocks(tp, o, d, um, TOL, MAX_ITER, IP.SEARCH_MARCH) == full.hit
+    assert n_hits > 400
+
+
+@pytest.mark.parametrize("name", ["cotton1", "polyester1"])
+def test_march_search_agrees_with_brute_force_march(name):
+    """SEARCH_MARCH against the brute-force march on the fast test's rays, with its criteria (same hit,
+    ply, count, u within 1e-6 ply radii unless grazing)."""
+    tp = _tp(name)
+    rows = compare_with_brute_force(tp, random_rays(tp, 1200, np.random.default_rng(4)), IP.SEARCH_MARCH)
+    agree = np.array([r[0] for r in rows])
+    grazing = np.array([r[1] for r in rows])
+    kind = np.array([r[5] for r in rows])
+    assert np.all(agree | grazing), np.nonzero(~(agree | grazing))
+    assert np.mean(~agree[kind != 3]) <= 0.002
