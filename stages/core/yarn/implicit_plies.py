@@ -292,17 +292,22 @@ def exact_entry(tp, k, ox, oy, oz, dx, dy, dz, u0, u_max, eps_u):
 
 
 @njit(cache=True)
-def certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, u_c, slope_c, K, eps_u, u_stop):
+def certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, u_c, slope_c, K, eps_u, u_stop,
+                          G0=math.nan, dG0=math.nan):
     """(u, status): the first entry of the ray into ply k on [u_lo, u_hi] (step 3; no ply point lies
     outside it) at least GRAZE deep. u_c: the iteration's entry (-1: none) with slope_c = -G'(u_c).
     status 0: the march confirmed u_c (or no entry), 1: it found an earlier entry (or one where there
     was none), 2: it ran out of steps (u_c kept). u_stop: the march also ends (status 0, u_c returned)
     once it has proved that no entry lies before u_stop (an entry of another ply already known: this
-    ply cannot come first); math.inf to march to u_c's neighbourhood or u_hi."""
+    ply cannot come first); math.inf to march to u_c's neighbourhood or u_hi. (G0, dG0): G and G' at
+    u_lo when the caller has them (``ray_membership``), else NaN."""
     target = u_c - 2.0 * slope_c / K if u_c >= 0.0 else math.inf
     target = min(target, u_stop)
     a = u_lo
-    G, dG, _, _ = ray_membership(tp, k, ox, oy, oz, dx, dy, dz, a)
+    if G0 == G0:
+        G, dG = G0, dG0
+    else:
+        G, dG, _, _ = ray_membership(tp, k, ox, oy, oz, dx, dy, dz, a)
     if G <= 0.0:
         return a, 0 if (u_c >= 0.0 and abs(a - u_c) <= 1e3 * eps_u) else 1
     a_out = a    # the last march point outside the ply
@@ -397,6 +402,22 @@ def ply_candidate(tp, k, ox, oy, oz, dx, dy, dz, u_max, tol, max_iter, eps_u):
 
 
 @njit(cache=True)
+def order_by_membership(tp, ox, oy, oz, dx, dy, dz, u_lo, order, g0, dg0):
+    """G and G' of every ply at u_lo into g0, dg0, and the plies by increasing G into ``order`` (the ply
+    the ray starts nearest first: marched first, its entry cuts the others' marches short)."""
+    P = int(tp[PLY_NUM])
+    for k in range(P):
+        G, dG, _, _ = ray_membership(tp, k, ox, oy, oz, dx, dy, dz, u_lo)
+        g0[k] = G
+        dg0[k] = dG
+        i = k
+        while i > 0 and g0[order[i - 1]] > G:
+            order[i] = order[i - 1]
+            i -= 1
+        order[i] = k
+
+
+@njit(cache=True)
 def ply_hit(tp, o, d, u_max, tol, max_iter, count=True, search=SEARCH_ITERATION):
     """The first ply the ray o + u d (u in [0, u_max]) meets inside the yarn: a ``PlyHit`` (module doc).
     count=False leaves out ``plies_crossed`` (-1): plies without an entry of their own are then marched
@@ -422,6 +443,9 @@ def ply_hit(tp, o, d, u_max, tol, max_iter, count=True, search=SEARCH_ITERATION)
         cand_u = stack_array(PLY_MAX, np.float64)
         cand_s = stack_array(PLY_MAX, np.float64)
         cand_it = stack_array(PLY_MAX, np.int64)
+        order = stack_array(PLY_MAX, np.int64)
+        g0 = stack_array(PLY_MAX, np.float64)
+        dg0 = stack_array(PLY_MAX, np.float64)
         for k in range(P):   # every ply's own entry first: the earliest bounds the others' marches
             if search == SEARCH_MARCH:
                 uc, slope, its, conv = -1.0, 0.0, 0, True
@@ -432,22 +456,29 @@ def ply_hit(tp, o, d, u_max, tol, max_iter, count=True, search=SEARCH_ITERATION)
             cand_u[k] = uc
             cand_s[k] = slope
             cand_it[k] = its
+            order[k] = k
+            g0[k] = math.nan
+            dg0[k] = math.nan
             if uc >= 0.0 and uc < best_u:
                 best_u = uc
                 best_k = k
-        for k in range(P):
+        if search == SEARCH_MARCH:
+            order_by_membership(tp, ox, oy, oz, dx, dy, dz, u_lo, order, g0, dg0)
+        for i in range(P):
+            k = order[i]
             uc = cand_u[k]
             if k == best_k or (count and uc < 0.0):
                 stop = math.inf
             else:
                 stop = best_u
             u, status = certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, uc, cand_s[k], K, eps_u,
-                                              stop)
+                                              stop, g0[k], dg0[k])
             if status == 1:
                 corrections += 1
             if u >= 0.0 and u <= u_max:
                 crossed += 1
-                if u < best_u or (k == best_k and u <= best_u):
+                # ties (a ray starting inside two overlapping plies, u = 0): the lower ply index, whatever the order
+                if u < best_u or (u == best_u and k < best_k) or (k == best_k and u <= best_u):
                     best_u = u
                     best_k = k
     if not count:
@@ -527,8 +558,14 @@ def ply_blocks(tp, o, d, u_max, tol, max_iter, search=SEARCH_ITERATION):
             if uc >= 0.0 and uc <= u_max:
                 return True
     K = march_bound(tp, ox, oy, oz, dx, dy, dz, dxy, u_lo, u_hi)
-    for k in range(P):
-        u, _ = certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, -1.0, 0.0, K, eps_u, math.inf)
+    order = stack_array(PLY_MAX, np.int64)
+    g0 = stack_array(PLY_MAX, np.float64)
+    dg0 = stack_array(PLY_MAX, np.float64)
+    order_by_membership(tp, ox, oy, oz, dx, dy, dz, u_lo, order, g0, dg0)
+    for i in range(P):
+        k = order[i]
+        u, _ = certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, -1.0, 0.0, K, eps_u, math.inf,
+                                     g0[k], dg0[k])
         if u >= 0.0 and u <= u_max:
             return True
     return False
