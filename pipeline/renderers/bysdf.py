@@ -21,8 +21,8 @@ Settings (``--set KEY=VALUE``):
 - ``ply_search`` = march (default) | iteration: how the implicit ply entries are found
   (``stages.core.yarn.implicit_plies``, "Search"): the certified march alone, or the paper's ellipse-plane
   iteration (seed 004 §3.3) followed by the march that certifies it. Both give the same entries (the march
-  makes either exact); the march alone is cheaper (on the demo, near: 1.14x faster renders, far: 1.32x,
-  multiscale: 1.35x).
+  makes either exact); the march alone is cheaper (on the demo, near: 1.2x faster renders, far: 1.7x,
+  multiscale: 1.8x).
 - ``ply_tol``, ``ply_iter``: the implicit ply iteration's tolerance (in ply radii, default 1e-3) and
   iteration cap (default 10, at least 3); used with ``ply_search=iteration``.
 - ``falloff``: multiscale aggregation weights exp(-falloff |x_k - x_0| / R) (default 40, the reference
