@@ -148,6 +148,10 @@ def btf(
     threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "
                                                              "mean change is below this (seed 002: 0.1)."),
     max_rounds: int = typer.Option(10, "--max-rounds", help="At most this many lobe/table alternations."),
+    directions: str = typer.Option("cell", "--directions", metavar="<cell | grid>",
+                                   help="cell: each sample's view and light uniform over its grid cell (the texture "
+                                        "holds cell averages, so fibre glints between grid directions are not lost "
+                                        "or aliased); grid: the grid directions themselves (seed 002's point samples)."),
     max_depth: int = typer.Option(16, "--max-depth", help="Largest number of scattering events on a path."),
     rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
     bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset for yarn groups the scene names none for."),
@@ -173,7 +177,8 @@ def btf(
 
     check_output(out, "-o", ARTIFACT)
     p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=parse_grid(lights, "--lights"),
-                  spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, max_depth=max_depth,
+                  spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, directions=directions,
+                  max_depth=max_depth,
                   rr_depth=rr_depth, seed=seed, material=parse_material_options(set_ or [], bcsdf))
     res = run_btf(tiling, out, p, scene=scene, exemplar=exemplar, force=force, budget=memory_budget(budget),
                   threads=threads, scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))

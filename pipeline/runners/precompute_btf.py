@@ -5,7 +5,9 @@ the scene gives it (the same as ``fiberpath`` renders and ``precompute iirtf`` u
 ``pipeline.runners.precompute.tiling_materials``), and
 
 1. **acquires** (seed 002 §4, ``stages.precompute.btf``) per texel of a res x res grid over the repeat's
-   top face, per view of the view grid and per light of the light grid the radiance per unit
+   top face, per view cell of the view grid and per light cell of the light grid (``--directions cell``,
+   the default: each sample's view and each path's lights uniform over their cells, so the table holds
+   cell averages; ``grid``: the grid directions themselves, seed 002's point samples) the radiance per unit
    irradiance r(l, v), the alpha of each view and the texel's average normal and tangent, path traced
    in the repeat repeated without end. One chunk task per texel row (``pipeline.chunks``: here or on a
    Dask scheduler); each writes its row of ``samples`` (float16) and ``alpha`` into the artifact.
@@ -32,6 +34,9 @@ from ..errors import LoomError
 from ..memory import Estimate, budget as memory_budget
 
 
+DIRECTIONS = ("cell", "grid")
+
+
 @dataclass
 class BtfParams:
     resolution: int = 32
@@ -41,6 +46,7 @@ class BtfParams:
     lobes: int = 2
     threshold: float = 0.1
     max_rounds: int = 10
+    directions: str = "cell"         # cell: view and light uniform over each grid cell (averages); grid: the grid's
     max_depth: int = 16
     rr_depth: int = 5
     seed: int = 0
@@ -57,6 +63,8 @@ class BtfParams:
                         ("--max-rounds", self.max_rounds)):
             if v < 1:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
+        if self.directions not in DIRECTIONS:
+            raise LoomError(None, "--directions", f"must be one of {', '.join(DIRECTIONS)}, got {self.directions!r}")
         if self.lobes not in (1, 2):
             raise LoomError(None, "--lobes", f"must be 1 or 2 (seed 002 §7), got {self.lobes}")
         if not (math.isfinite(self.threshold) and self.threshold > 0):
@@ -80,6 +88,14 @@ def btf_estimate(res, V, L, segments) -> Estimate:
     return est
 
 
+def direction_grids(p: dict) -> tuple:
+    """(view_grid, light_grid) for ``acquire_texels``: the grids with ``directions = "cell"`` (averages over
+    each grid cell), (0, 0) each with "grid" (the grid directions themselves)."""
+    if p.get("directions", "cell") == "grid":
+        return (0, 0), (0, 0)
+    return tuple(int(x) for x in p["views"]), tuple(int(x) for x in p["lights"])
+
+
 def _btf_row_task(tiling, tiling_hash, store, k, iy, mof, mats, view_dirs, light_dirs, p: dict):
     """Chunk task: texel row iy -- samples and alpha into the artifact; returns normal sums and timings."""
     from stages.precompute.btf import acquire_texels
@@ -96,7 +112,8 @@ def _btf_row_task(tiling, tiling_hash, store, k, iy, mof, mats, view_dirs, light
     t0 = time.perf_counter()
     rad, alpha, nsum, rays = acquire_texels(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats,
                                             res, iy * res, (iy + 1) * res, view_dirs, light_dirs, p["spp"], p["seed"],
-                                            p["max_depth"], p["rr_depth"], _max_dist(W, H, slab), _eps(W, H, slab))
+                                            p["max_depth"], p["rr_depth"], _max_dist(W, H, slab), _eps(W, H, slab),
+                                            *direction_grids(p))
     open_for_chunk(store, "samples")[iy] = rad.astype(np.float16)
     open_for_chunk(store, "alpha")[iy] = alpha
     return {"normal": nsum, "rays": int(rays.sum()), "s": time.perf_counter() - t0}

@@ -21,6 +21,23 @@ path's vertices of throughput x f cos x visibility is r(l, v): the radiance per 
 the fit's f_r(l, v) models (``stages.core.btf``). Russian roulette from ``rr_depth``; at most
 ``max_depth`` vertices.
 
+Cell averages (``view_grid``, ``light_grid`` given; ``precompute btf --directions cell``, the default)
+------------------------------------------------------------------------------------------------------
+The texture is a table over the view and light grids, and the renderer looks it up (and its lobes) at
+every direction in between. A point sample at the grid direction stands for its whole cell only if the
+radiance is smooth over the cell, which fibre glints are not: the 1-degree R lobes of the fibres make
+r(l, v) change by tens of per cent within a few degrees. Measured on the flat 4/1 satin at the grid's
+view (0.22, -0.54, 0.81) and light (0.32, 0.13, 0.94), single scattering: the acquisition's point sample
+0.115 (luminance per unit irradiance) equals fiberpath seen from far away (0.1153, a 0.45 degree field of
+view), but fiberpath with the sweep's kind of camera, whose view changes by +-6 degrees across the image,
+gives 0.0738: the grid direction sits on a glint. So each sample s takes its view uniformly over the
+view's grid cell (``cell_direction``: uniform in cos theta and phi over the ring and azimuth range,
+i.e. uniform in solid angle), and each path takes one direction per light uniformly over that light's
+cell, used at all its vertices: a texel's sample for (view cell, light cell) estimates the mean of
+r(l, v) over both cells. Random dimensions: 2-3 the view, 4 + 2k and 5 + 2k light k, then the
+vertices'. Without the grids (``--directions grid``) the samples are the paper's point samples and the
+dimensions as before (the same bytes as before 2026-12-02).
+
 Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
 is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
 ``alpha`` = hits / spp. Per texel: the sum of the first hits' surface normals (the capsule's outward
@@ -41,7 +58,7 @@ from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_p
 from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_vertex
 
 DIMS_PER_VERTEX = 4      # lobe, two for the direction, Russian roulette
-FIRST_DIMS = 2           # the point's jitter
+FIRST_DIMS = 2           # the point's jitter (then, for cell averages, the view's and every light's cell jitter)
 
 
 @njit(cache=True)
@@ -56,17 +73,39 @@ def _first_normal(sc, h, out):
     out[2] += nz
 
 
+@njit(cache=True)
+def cell_direction(index, n_theta, n_phi, u0, u1):
+    """(x, y, z): the direction at (u0, u1) in [0, 1)^2 of cell ``index`` of the hemisphere grid
+    (``stages.core.btf.hemisphere_grid``: ring i = index // n_phi, cos theta in [1 - (i+1)/n_theta,
+    1 - i/n_theta]; azimuth j = index % n_phi, phi in [2 pi j/n_phi, 2 pi (j+1)/n_phi]); uniform (u0, u1)
+    give directions uniform in the cell's solid angle, (0.5, 0.5) the grid direction itself."""
+    i = index // n_phi
+    j = index - i * n_phi
+    ct = 1.0 - (i + u0) / n_theta
+    st = math.sqrt(max(0.0, 1.0 - ct * ct))
+    phi = 2.0 * math.pi * (j + u1) / n_phi
+    return st * math.cos(phi), st * math.sin(phi), ct
+
+
 @njit(cache=True, _nrt=False)
 def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx, vy, vz, light_dirs, spp, seed,
-                       key0, max_depth, rr_depth, max_dist, eps, radiance, normal):
+                       key0, max_depth, rr_depth, max_dist, eps, radiance, normal, view_cell, view_grid, light_grid,
+                       lights_now):
     """Radiance sums (L, 3) of texel ``texel`` seen from v over ``spp`` samples into ``radiance`` (zeroed
-    here) and the first-hit normals into ``normal`` (added); returns (hits, rays). Compiled without
-    reference counting (its vectors on the machine stack): the two workers of ``acquire_texels`` would
-    otherwise count references on the same arrays for every ray."""
+    here) and the first-hit normals into ``normal`` (added); returns (hits, rays). With view_grid[0] > 0
+    each sample's view is uniform in grid cell ``view_cell`` and each light's direction uniform in its
+    cell of light_grid (module doc, "Cell averages"; ``lights_now`` (L, 3) scratch), else v and
+    ``light_dirs`` themselves. Compiled without reference counting (its vectors on the machine stack):
+    the two workers of ``acquire_texels`` would otherwise count references on the same arrays for every
+    ray."""
     L = light_dirs.shape[0]
     for k in range(L):
         for c in range(3):
             radiance[k, c] = 0.0
+        for c in range(3):
+            lights_now[k, c] = light_dirs[k, c]
+    jitter = view_grid[0] > 0
+    first_dims = FIRST_DIMS + (2 + 2 * L if jitter else 0)
     iy = texel // res
     ix = texel - iy * res
     t_tan = stack_vector3()
@@ -82,6 +121,15 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
         key = key0 + s
         px = (ix + uniform(seed, key, 0)) * W / res
         py = (iy + uniform(seed, key, 1)) * H / res
+        if jitter:   # this sample's view and light directions, uniform over their grid cells
+            vx, vy, vz = cell_direction(view_cell, view_grid[0], view_grid[1], uniform(seed, key, FIRST_DIMS),
+                                        uniform(seed, key, FIRST_DIMS + 1))
+            for k in range(L):
+                lx, ly, lz = cell_direction(k, light_grid[0], light_grid[1], uniform(seed, key, FIRST_DIMS + 2 + 2 * k),
+                                            uniform(seed, key, FIRST_DIMS + 3 + 2 * k))
+                lights_now[k, 0] = lx
+                lights_now[k, 1] = ly
+                lights_now[k, 2] = lz
         rays += 1
         h = periodic_hit(sc, z_lo, z_hi, px, py, z_hi, -vx, -vy, -vz, -1, max_dist)
         if math.isinf(h.t):
@@ -100,9 +148,9 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
             mat = mats[row]
             material_prepare(mat, t_tan, n, wi, ctx)
             for k in range(L):  # next-event estimation towards every light (unit irradiance)
-                wl[0] = light_dirs[k, 0]
-                wl[1] = light_dirs[k, 1]
-                wl[2] = light_dirs[k, 2]
+                wl[0] = lights_now[k, 0]
+                wl[1] = lights_now[k, 1]
+                wl[2] = lights_now[k, 2]
                 f0, f1, f2, _pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
                 if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                     continue
@@ -113,7 +161,7 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
                     radiance[k, 2] += tp2 * f2
             if depth >= max_depth:
                 break
-            base = FIRST_DIMS + DIMS_PER_VERTEX * (depth - 1)
+            base = first_dims + DIMS_PER_VERTEX * (depth - 1)
             s0, s1, s2, pf = material_sample(mat, ctx, t_tan, n, wi, uniform(seed, key, base),
                                              uniform(seed, key, base + 1), uniform(seed, key, base + 2), wo)
             if pf <= 0.0:
@@ -141,9 +189,11 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
 
 @njit(cache=True, parallel=True)
 def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_dirs, light_dirs, spp, seed,
-                   max_depth, rr_depth, max_dist, eps):
+                   max_depth, rr_depth, max_dist, eps, view_grid=(0, 0), light_grid=(0, 0)):
     """Texels t0..t1-1 (row-major ids of the res x res grid): (radiance (T, V, L, 3) float32 mean over the
-    hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc."""
+    hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc. ``view_grid`` and
+    ``light_grid`` (n_theta, n_phi) of the grids that ``view_dirs`` and ``light_dirs`` are: cell averages
+    (module doc); (0, 0): the directions themselves."""
     T = t1 - t0
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
@@ -156,10 +206,11 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
         v = job - i * V
         texel = t0 + i
         acc = np.empty((L, 3))
+        now = np.empty((L, 3))
         key0 = (texel * V + v) * spp
         hits, r = texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, view_dirs[v, 0],
                                      view_dirs[v, 1], view_dirs[v, 2], light_dirs, spp, seed, key0, max_depth,
-                                     rr_depth, max_dist, eps, acc, normal[i, v])
+                                     rr_depth, max_dist, eps, acc, normal[i, v], v, view_grid, light_grid, now)
         rays[i, v] = r
         alpha[i, v] = hits / spp
         if hits > 0:

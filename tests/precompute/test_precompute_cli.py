@@ -112,3 +112,16 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
         code, _, err = cli("precompute", sub, d / "svf.zarr", "-o", tmp_path / "x.zarr", *args)
         assert code == 2 and "tiling" in err and len(err.strip().splitlines()) == 1, err
         assert not (tmp_path / "x.zarr").exists()
+
+
+@pytest.mark.parametrize("extra,needle", [(["--directions", "diagonal"], "--directions"),
+                                          (["--lobes", "3"], "--lobes")])
+def test_btf_bad_options_exit_2_nothing_written(built, cli, tmp_path, extra, needle):
+    """precompute btf: an unknown direction scheme or lobe count is refused before any work: exit 2, one
+    line naming the option, no artifact."""
+    tiling, _ = built
+    fresh = tmp_path / "fresh_btf.zarr"
+    code, out, err = cli("precompute", "btf", tiling, "-o", fresh, "--resolution", "2", *extra)
+    assert code == 2, (out, err)
+    assert needle in err and len(err.strip().splitlines()) == 1, err
+    assert not fresh.exists()
