@@ -378,6 +378,16 @@ def ply_chord(tp, ox, oy, oz, dx, dy, dz):
 
 
 @njit(cache=True)
+def ray_chord(tp, o, d, u_max):
+    """(ox, oy, oz, dx, dy, dz, u_lo, u_hi, |d_xy|, eps_u): the ray as floats and the part of [0, u_max]
+    within the plies' reach (``ply_chord``, clipped; u_hi < u_lo: none)."""
+    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
+    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
+    u_lo, u_hi, dxy, eps_u = ply_chord(tp, ox, oy, oz, dx, dy, dz)
+    return ox, oy, oz, dx, dy, dz, max(u_lo, 0.0), min(u_hi, u_max), dxy, eps_u
+
+
+@njit(cache=True)
 def march_bound(tp, ox, oy, oz, dx, dy, dz, dxy, u_lo, u_hi):
     """K, the bound of |G''| along [u_lo, u_hi] (module doc, step 3)."""
     ar, at = ply_half_axes(tp)
@@ -426,13 +436,9 @@ def ply_hit(tp, o, d, u_max, tol, max_iter, count=True, search=SEARCH_ITERATION)
     only as far as the first entry found, which a caller that shades the first hit is all it needs.
     search: SEARCH_ITERATION (steps 1-3) or SEARCH_MARCH (step 3 alone; module doc, "Search")."""
     u_max = float(u_max)
-    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
-    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
     P = int(tp[PLY_NUM])
     ar, at = ply_half_axes(tp)
-    u_lo, u_hi, dxy, eps_u = ply_chord(tp, ox, oy, oz, dx, dy, dz)
-    u_lo = max(u_lo, 0.0)
-    u_hi = min(u_hi, u_max)
+    ox, oy, oz, dx, dy, dz, u_lo, u_hi, dxy, eps_u = ray_chord(tp, o, d, u_max)
     best_u = math.inf
     best_k = -1
     best_it = 0
@@ -521,11 +527,7 @@ def plies_crossed(tp, o, d, u_max, tol, max_iter, search=SEARCH_ITERATION):
     """How many plies the ray o + u d (u in [0, u_max]) enters, each counted once: ``ply_hit``'s
     ``plies_crossed`` without its first hit (a ply whose own entry the iteration finds needs no march)."""
     u_max = float(u_max)
-    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
-    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
-    u_lo, u_hi, dxy, eps_u = ply_chord(tp, ox, oy, oz, dx, dy, dz)
-    u_lo = max(u_lo, 0.0)
-    u_hi = min(u_hi, u_max)
+    ox, oy, oz, dx, dy, dz, u_lo, u_hi, dxy, eps_u = ray_chord(tp, o, d, u_max)
     if not (u_hi >= u_lo):
         return 0
     K = march_bound(tp, ox, oy, oz, dx, dy, dz, dxy, u_lo, u_hi)
@@ -546,11 +548,7 @@ def ply_blocks(tp, o, d, u_max, tol, max_iter, search=SEARCH_ITERATION):
     """True when the ray o + u d (u in [0, u_max]) enters any ply (``ply_hit``'s ``hit``, for shadow rays):
     a ply entry the iteration finds settles it; the march runs only when none does."""
     u_max = float(u_max)
-    ox, oy, oz = float(o[0]), float(o[1]), float(o[2])
-    dx, dy, dz = float(d[0]), float(d[1]), float(d[2])
-    u_lo, u_hi, dxy, eps_u = ply_chord(tp, ox, oy, oz, dx, dy, dz)
-    u_lo = max(u_lo, 0.0)
-    u_hi = min(u_hi, u_max)
+    ox, oy, oz, dx, dy, dz, u_lo, u_hi, dxy, eps_u = ray_chord(tp, o, d, u_max)
     if not (u_hi >= u_lo):
         return False
     P = int(tp[PLY_NUM])
