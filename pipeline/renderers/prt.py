@@ -74,6 +74,10 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
         warn(f"{svf_path}: an SVF made before 2026-12-02, its rays from the segments' midpoints, which shadows "
              "light the segments' surfaces receive (single scattering ~5-10 % darker); run loomlight precompute "
              "svf again")
+    from stages.render.prt import MAX_SH_ORDER
+
+    if not 0 <= int(ii.summary["order"]) <= MAX_SH_ORDER:
+        raise LoomError(ii.path, "summary.order", f"SH order {ii.summary['order']} is outside 0..{MAX_SH_ORDER}")
     used = _used_exemplars(art)
     for a, what in ((svf, "svf"), (ii, "iirtf")):
         have = {e["exemplar"] for e in a.summary["exemplars"]}

@@ -49,7 +49,10 @@ import math
 import numpy as np
 from numba import njit
 
+from stages.core.geometry.stack import stack_array
 from stages.core.sh import SH_LMAX, sh_eval
+
+SH_LMAX1 = SH_LMAX + 1
 
 TWO_PI = 2.0 * math.pi
 FOUR_PI = 4.0 * math.pi
@@ -203,7 +206,7 @@ def sg_table_lookup(grid, table, lam, L, out):
 def sg_sh_coefficients(axis, lam, L, out):
     """out[:(L+1)^2]: SH coefficients of the normalised SG G(w; axis, lam)/M(lam) (direct, exact)."""
     sh_eval(L, axis[0], axis[1], axis[2], out)
-    r = np.empty(L + 1)
+    r = stack_array(SH_LMAX1, np.float64)   # (on the machine stack: callable without reference counting)
     sg_bessel_ratios(lam, L, r)
     for l in range(1, L + 1):
         for j in range(l * l, (l + 1) * (l + 1)):

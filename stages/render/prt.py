@@ -112,47 +112,65 @@ def global_visibility(it, u, v, w):
     return 1.0
 
 
-@njit(cache=True, _nrt=True)
-def _multi_scatter(it, row, m, tf, vf, lf, lam, E0, E1, E2):
+MAX_SH_ORDER = 8                  # the IIRTF's largest SH order (precompute iirtf --order)
+MAX_SH_J = (MAX_SH_ORDER + 1) ** 2
+MAX_SH_J2 = MAX_SH_J * MAX_SH_J
+MAX_SH_J3 = 3 * MAX_SH_J
+
+
+@njit(cache=True, _nrt=False)
+def _hit_sh_frame(it, m, tf, vf, D, cs):
+    """What multiple scattering needs of the hit alone, once per hit for all its lights: D = R_wo, the SH
+    rotation into the frame of the view and the fibre (``omega_o_frame``), and cs = c_S(theta_o), the
+    BCSDF's SH coefficients per channel for material m."""
+    R = stack_array(9, np.float64).reshape((3, 3))
+    theta_v = omega_o_frame(tf, vf, R)
+    sh_rotation(it.order, R, D)
+    bcsdf_sh_lookup(it.cs_table[it.mat_cs[m]], theta_v, it.order, cs)
+
+
+@njit(cache=True, _nrt=False)
+def _multi_scatter(it, row, lf, lam, E0, E1, E2, D, cs):
     """(r, g, b) = c_S(theta_o) . (R_wo a_C^T c_L[c]) per channel: multiple scattering of a light of power
     (E0, E1, E2) from the flat direction lf, a directional light (lam <= 0: c_L = Y(lf)) or an SG lobe of
-    sharpness lam (c_L its SH coefficients). Keeps reference counting (its SH work arrays are allocated
-    per call) under the estimator that has none."""
+    sharpness lam (c_L its SH coefficients); D and cs from ``_hit_sh_frame``. Its SH work arrays live on
+    the machine stack (orders up to MAX_SH_ORDER), so it runs without reference counting like the
+    estimator around it."""
     L = it.order
     J = (L + 1) * (L + 1)
-    Ysh = np.empty(J)
+    Ysh = stack_array(MAX_SH_J, np.float64)
     if lam > 0.0:
         sg_sh_coefficients(lf, lam, L, Ysh)
     else:
         sh_eval(L, lf[0], lf[1], lf[2], Ysh)
-    cL = np.empty((3, J))
-    for j in range(J):
-        cL[0, j] = E0 * Ysh[j]
-        cL[1, j] = E1 * Ysh[j]
-        cL[2, j] = E2 * Ysh[j]
-    R = np.empty((3, 3))
-    D = np.empty((J, J))
-    cs = np.empty((J, 3))
-    cT = np.empty(J)
-    theta_v = omega_o_frame(tf, vf, R)
-    sh_rotation(L, R, D)
-    bcsdf_sh_lookup(it.cs_table[it.mat_cs[m]], theta_v, L, cs)
+    cT = stack_array(MAX_SH_J, np.float64)
     a = it.transfer
-    out = np.empty(3)
+    r0 = 0.0
+    r1 = 0.0
+    r2 = 0.0
     for c in range(3):
-        for j1 in range(J):
+        E = E0 if c == 0 else (E1 if c == 1 else E2)
+        for j1 in range(J):   # c_T = a_C^T c_L, summed over j0 in order
             s = 0.0
             for j0 in range(J):
-                s += a[row, c, j0, j1] * cL[c, j0]
+                s += a[row, c, j0, j1] * (E * Ysh[j0])
             cT[j1] = s
         acc = 0.0
-        for i in range(J):
-            s = 0.0
-            for j in range(J):
-                s += D[i, j] * cT[j]
-            acc += cs[i, c] * s
-        out[c] = acc
-    return out[0], out[1], out[2]
+        for l in range(L + 1):   # D is block diagonal by band: (D c_T)_i sums over i's band only
+            lo = l * l
+            hi = lo + 2 * l + 1
+            for i in range(lo, hi):
+                s = 0.0
+                for j in range(lo, hi):
+                    s += D[i, j] * cT[j]
+                acc += cs[i, c] * s
+        if c == 0:
+            r0 = acc
+        elif c == 1:
+            r1 = acc
+        else:
+            r2 = acc
+    return r0, r1, r2
 
 
 @njit(cache=True, _nrt=True)
@@ -244,6 +262,9 @@ def prt_radiance(it, o, d, seed, key):
     R_res = it.svf_res[0]
     C_res = it.svf_res[1]
     axes_w = stack_vector3()
+    D = stack_array(MAX_SH_J2, np.float64).reshape((MAX_SH_J, MAX_SH_J))
+    cs = stack_array(MAX_SH_J3, np.float64).reshape((MAX_SH_J, 3))
+    have_frame = False   # D and cs, made when the first light needs them
     for k in range(nl):
         base = 2 + DIMS_PER_LIGHT * k
         typ = int(lights[k, 0])
@@ -272,7 +293,10 @@ def prt_radiance(it, o, d, seed, key):
                 vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl) if pl > 0.0 else 0.0
                 rays += 1
                 if vt > 0.0:
-                    m0, m1, m2 = _multi_scatter(it, mrow, m, tf, vf, lf, lam, P0, P1, P2)
+                    if not have_frame:
+                        _hit_sh_frame(it, m, tf, vf, D, cs)
+                        have_frame = True
+                    m0, m1, m2 = _multi_scatter(it, mrow, lf, lam, P0, P1, P2, D, cs)
                     L0 += m0 * vt
                     L1 += m1 * vt
                     L2 += m2 * vt
@@ -299,7 +323,10 @@ def prt_radiance(it, o, d, seed, key):
             rays += 1
             vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
             if vt > 0.0:
-                m0, m1, m2 = _multi_scatter(it, mrow, m, tf, vf, lf, 0.0, E0, E1, E2)
+                if not have_frame:
+                    _hit_sh_frame(it, m, tf, vf, D, cs)
+                    have_frame = True
+                m0, m1, m2 = _multi_scatter(it, mrow, lf, 0.0, E0, E1, E2, D, cs)
                 L0 += m0 * vt
                 L1 += m1 * vt
                 L2 += m2 * vt
