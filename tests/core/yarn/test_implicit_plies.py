@@ -255,12 +255,14 @@ def test_ply_hit_agrees_with_brute_force_march(name):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("search", [IP.SEARCH_ITERATION, IP.SEARCH_MARCH])
 @pytest.mark.parametrize("name", ["cotton1", "silk1", "polyester1", "rayon1"])
-def test_ply_hit_agrees_with_brute_force_march_many_rays(name):
+def test_ply_hit_agrees_with_brute_force_march_many_rays(name, search):
     """As the fast test with 5000 rays per preset and near-axial rays down to 0.1 degree; four presets
-    (silk1 and cotton1: 3 plies; polyester1, rayon1: 2 plies; rayon1's plies turn clockwise)."""
+    (silk1 and cotton1: 3 plies; polyester1, rayon1: 2 plies; rayon1's plies turn clockwise); both
+    searches (the paper's iteration and the march alone)."""
     tp = _tp(name)
-    rows = compare_with_brute_force(tp, random_rays(tp, 5000, np.random.default_rng(11), min_axial_deg=0.1))
+    rows = compare_with_brute_force(tp, random_rays(tp, 5000, np.random.default_rng(11), min_axial_deg=0.1), search)
     agree = np.array([r[0] for r in rows])
     grazing = np.array([r[1] for r in rows])
     kind = np.array([r[5] for r in rows])
