@@ -26,7 +26,7 @@ counting.
 
 ``YarnType`` holds what the kernels need of one yarn type: ``tp`` (the packed procedural yarn model,
 ``stages.core.yarn.model``), its tables, the envelope radius, the ply iteration's tolerance and
-iteration cap.
+iteration cap, and the ply search (the paper's iteration or the march alone; same entries).
 """
 import math
 from collections import namedtuple
@@ -41,7 +41,8 @@ from stages.core.yarn.implicit_tables import (
 )
 from stages.render.yarn_tubes import cylinder_span
 
-# one yarn type: tp (NPARAM,), tables (ImplicitTables), envelope radius, ply tolerance, ply iterations, key
+# one yarn type: tp (NPARAM,), tables (ImplicitTables), envelope radius, ply tolerance, ply iterations, ply search
+# (stages.core.yarn.implicit_plies.SEARCH_ITERATION or SEARCH_MARCH)
 YarnType = namedtuple("YarnType", ["tp", "tables", "radius", "tol", "max_iter", "search"])
 
 # shading point in yarn space: hit (bool), x (3) the ply hit, t (3) fibre tangent, n (3) fibre normal,
