@@ -198,6 +198,12 @@ def film_setup(scene, options: dict):
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
     t0 = time.perf_counter()
     _, cv, ytypes, groups = yarn_setup(path)
+    from stages.core.yarn.implicit_plies import PLY_MAX
+
+    for t, d in enumerate(ytypes.dicts):   # the ply search keeps its per-ply scratch on the machine stack
+        if int(d["ply_num"]) > PLY_MAX:
+            raise LoomError(path, f"yarn type {t} ({d.get('name', '?')}).ply_num",
+                            f"{int(d['ply_num'])} plies; bysdf's implicit plies handle at most {PLY_MAX}")
     types, tables_s = build_types(ytypes.tparams, tol, max_iter, fibre_thr, ply_thr, search)
     radius = np.array([types[t].radius for t in ytypes.yarn_type])
     pieces = tube_pieces(cv, radius)

@@ -140,7 +140,7 @@ NEWTON_STEPS = 8       # exact refinement of the cylinder's entry
 MARCH_STEPS = 256      # certified march (module doc, step 3)
 GRAZE = 1e-6           # clips shallower than this (in G; about half of it in ply radii) count as misses
 HIT_EPS = 1e-10        # entries are exact to HIT_EPS ply radii along the ray
-PLY_MAX = 16           # plies a yarn type may have (per-ply scratch of ply_hit on the machine stack)
+PLY_MAX = 16           # plies a yarn type may have (per-ply scratch on the machine stack; bysdf refuses more)
 SEARCH_ITERATION, SEARCH_MARCH = 0, 1   # how the queries find entries (module doc, "Search")
 SEARCHES = ("iteration", "march")
 
@@ -441,7 +441,6 @@ def ply_hit(tp, o, d, u_max, tol, max_iter, count=True, search=SEARCH_ITERATION)
     ox, oy, oz, dx, dy, dz, u_lo, u_hi, dxy, eps_u = ray_chord(tp, o, d, u_max)
     best_u = math.inf
     best_k = -1
-    best_it = 0
     max_it = 0
     crossed = 0
     converged = True
