@@ -50,6 +50,20 @@ def hemisphere_grid(n_theta: int, n_phi: int) -> np.ndarray:
 
 
 @njit(cache=True)
+def cell_direction(index, n_theta, n_phi, u0, u1):
+    """(x, y, z): the direction at (u0, u1) in [0, 1)^2 of cell ``index`` of the hemisphere grid
+    (``hemisphere_grid``: ring i = index // n_phi, cos theta in [1 - (i+1)/n_theta,
+    1 - i/n_theta]; azimuth j = index % n_phi, phi in [2 pi j/n_phi, 2 pi (j+1)/n_phi]); uniform (u0, u1)
+    give directions uniform in the cell's solid angle, (0.5, 0.5) the grid direction itself."""
+    i = index // n_phi
+    j = index - i * n_phi
+    ct = 1.0 - (i + u0) / n_theta
+    st = math.sqrt(max(0.0, 1.0 - ct * ct))
+    phi = 2.0 * math.pi * (j + u1) / n_phi
+    return st * math.cos(phi), st * math.sin(phi), ct
+
+
+@njit(cache=True)
 def grid_weights(n_theta, n_phi, vx, vy, vz):
     """Bilinear weights of direction v (pattern space, need not be normalised) on the hemisphere grid:
     (i0, i1, i2, i3, w0, w1, w2, w3), indices into the ring-major table."""

@@ -51,6 +51,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from stages.core.btf import cell_direction
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
@@ -71,20 +72,6 @@ def _first_normal(sc, h, out):
     out[0] += nx
     out[1] += ny
     out[2] += nz
-
-
-@njit(cache=True)
-def cell_direction(index, n_theta, n_phi, u0, u1):
-    """(x, y, z): the direction at (u0, u1) in [0, 1)^2 of cell ``index`` of the hemisphere grid
-    (``stages.core.btf.hemisphere_grid``: ring i = index // n_phi, cos theta in [1 - (i+1)/n_theta,
-    1 - i/n_theta]; azimuth j = index % n_phi, phi in [2 pi j/n_phi, 2 pi (j+1)/n_phi]); uniform (u0, u1)
-    give directions uniform in the cell's solid angle, (0.5, 0.5) the grid direction itself."""
-    i = index // n_phi
-    j = index - i * n_phi
-    ct = 1.0 - (i + u0) / n_theta
-    st = math.sqrt(max(0.0, 1.0 - ct * ct))
-    phi = 2.0 * math.pi * (j + u1) / n_phi
-    return st * math.cos(phi), st * math.sin(phi), ct
 
 
 @njit(cache=True, _nrt=False)

@@ -114,7 +114,7 @@ def test_cell_direction_covers_its_grid_cell():
     directions inside the cell (ring's cos theta range, azimuth range) whose cos theta is uniform (equal
     solid angle): its mean is the ring's middle and its variance (width^2 / 12)."""
     from stages.core.btf import hemisphere_grid
-    from stages.precompute.btf import cell_direction
+    from stages.core.btf import cell_direction
 
     nt, nph = 4, 6
     grid = hemisphere_grid(nt, nph)
@@ -145,7 +145,7 @@ def test_cell_averages_are_the_mean_over_the_cell(acquired):
     from pipeline.renderers.fiberpath import fiber_materials, tiling_fibers
     from pipeline.scene import load_scene
     from stages.core.btf import hemisphere_grid
-    from stages.precompute.btf import cell_direction
+    from stages.core.btf import cell_direction
     from tests.helpers import ROOT
 
     art, k, W, H, args = acquired
