@@ -6,7 +6,14 @@ Targets (issue 21; seed 000 §6.1 reports 15.0 s procedural against 15.8 s reali
   against ``realize`` + BVH build, then the render) at most 1.0x;
 - the cache at 0 (every lookup procedural): recorded;
 - a curve of render time, cache build time and peak memory against the cache budget (each budget in
-  its own process, so its peak resident memory is its own): ``volpath_cache_budget.png``.
+  its own process, so its peak resident memory is its own): ``volpath_cache_budget.png``;
+- scale (``scale_*``): the 1,000-yarn ``woven_large`` close-up (``make table1``'s view at 320x240 @ 16
+  spp, its own process, so its peak memory is its own) against the demo view at 48x36 @ 1024 spp, both
+  procedural with the default cache: time per path at most 2x the demo's (cost grows with what is
+  seen, not with the scene's size). Reported beside it: time per ray, rays per path, the share of
+  camera paths that meet the cloth (alpha) and the time per such path. Its tables come from
+  ``out/large`` when ``make table1`` built them, else are built here (about 70 s, 2.6 GB);
+  ``LOOMLIGHT_BENCH_SCALE=0`` skips it.
 All renders use the same integrator, camera, lights, seed and image; only the density source differs.
 Artifacts: ``out/demo/{tables,fibers}.zarr`` when ``make demo`` wrote them, else built here from
 data/scenes/demo.toml into the results directory; the build times are measured here by rebuilding
@@ -22,6 +29,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENE = ROOT / "data" / "scenes" / "demo.toml"
@@ -122,6 +131,78 @@ def _reset_peak_rss() -> int:
     return _status_bytes("VmRSS")
 
 
+LARGE_SCENE = ROOT / "data" / "scenes" / "woven_large.toml"
+LARGE_CLOSE = ROOT / "data" / "scenes" / "woven_large_close.toml"
+
+
+def _large_tables(out_dir: Path) -> Path:
+    """woven_large's tables: ``make table1``'s (rebuilt where stale), else built into the results."""
+    from pipeline.runners.ingest import run_ingest
+    from pipeline.runners.tables import run_tables
+
+    work = ROOT / "out" / "large"
+    if not (work / "yarns.zarr" / "zarr.json").exists():
+        work = Path(out_dir) / "volpath_large"
+        work.mkdir(parents=True, exist_ok=True)
+    run_ingest(LARGE_SCENE, work / "yarns.zarr", frame_samples=1)  # as make table1 (LARGE_INGEST_ARGS)
+    run_tables(work / "yarns.zarr", work / "tables.zarr")
+    return work / "tables.zarr"
+
+
+def _render_stats(art: Path) -> dict:
+    from pipeline.artifacts import Artifact
+
+    a = Artifact(art, kind="render")
+    su = a.summary
+    ms = su["method_stats"]
+    alpha = float(np.asarray(a["channels/A"]).mean())
+    return {"render_s": su["render_time_s"], "paths": su["paths"], "rays": su["rays"], "alpha_mean": alpha,
+            "medium_lookups": ms["medium_lookups"], "peak_memory_bytes": su["peak_memory_bytes"],
+            "wall_s": su["wall_time_s"], "majorant_cells": ms["majorant_cells"],
+            "majorant_fine_k": ms.get("majorant_fine_k"), "majorant_fine_cells": ms.get("majorant_fine_cells"),
+            "cache_bricks_cached": ms.get("cache_bricks_cached"), "cache_bytes": ms.get("cache_bytes")}
+
+
+def _cli_render(scene: Path, tables: Path, out: Path, W: int, H: int, spp: int) -> dict:
+    """``loomlight render ... --method volpath --source procedural`` in its own process (kernels cached;
+    the artifact reports compilation apart from the render time)."""
+    subprocess.run([sys.executable, "-m", "pipeline.cli", "render", str(scene), "--method", "volpath", "--source",
+                    "procedural", "--tables", str(tables), "--width", str(W), "--height", str(H), "--spp", str(spp),
+                    "--seed", "7", "-o", str(out)], check=True, capture_output=True, text=True,
+                   env={**os.environ, "PYTHONPATH": str(ROOT)}, cwd=ROOT)
+    return _render_stats(out.with_suffix(".zarr"))
+
+
+def _scale(out_dir: Path, demo_tables: Path, fibers: Path) -> dict:
+    """woven_large's close-up against the demo view, time per path (module doc)."""
+    out_dir = Path(out_dir)
+    large_tables = _large_tables(out_dir)
+    # renders of ~15 s (the demo view at 1024 spp, the close-up at 16), the demo's before and after the
+    # close-up's, their times averaged: the machine's speed drifts by 20 % between minutes
+    before = _cli_render(SCENE, Path(demo_tables), out_dir / "scale_demo_view.exr", 48, 36, 1024)
+    large = _cli_render(LARGE_CLOSE, large_tables, out_dir / "scale_woven_large_close.exr", 320, 240, 16)
+    demo = _cli_render(SCENE, Path(demo_tables), out_dir / "scale_demo_view.exr", 48, 36, 1024)
+    demo["render_s_runs"] = [before["render_s"], demo["render_s"]]
+    demo["render_s"] = 0.5 * (before["render_s"] + demo["render_s"])
+    res = {f"scale_demo_{k}": v for k, v in demo.items()}
+    res.update({f"scale_large_{k}": v for k, v in large.items()})
+
+    def per(r, what):
+        return r["render_s"] / r[what]
+
+    res["scale_demo_paths_per_s"] = demo["paths"] / demo["render_s"]
+    res["scale_large_paths_per_s"] = large["paths"] / large["render_s"]
+    res["scale_time_per_path_ratio"] = per(large, "paths") / per(demo, "paths")
+    res["scale_time_per_ray_ratio"] = per(large, "rays") / per(demo, "rays")
+    res["scale_rays_per_path"] = [demo["rays"] / demo["paths"], large["rays"] / large["paths"]]
+    # per camera path that meets the cloth: the demo view's background paths cost one ray each
+    res["scale_time_per_cloth_path_ratio"] = (res["scale_time_per_path_ratio"] * demo["alpha_mean"]
+                                              / max(large["alpha_mean"], 1e-12))
+    res["scale_target_time_per_path_ratio_max"] = 2.0
+    res["scale_target_met"] = bool(res["scale_time_per_path_ratio"] <= 2.0)
+    return res
+
+
 def _plot_budget(points, path: Path) -> None:
     import matplotlib
 
@@ -189,6 +270,8 @@ def run(out_dir) -> dict:
                                                   "cache_bricks_cached", "cache_estimate_bytes")} for p in points]
     _plot_budget(points, out_dir / "volpath_cache_budget.png")
     res["budget_plot"] = "volpath_cache_budget.png"
+    if os.environ.get("LOOMLIGHT_BENCH_SCALE", "1") != "0":
+        res.update(_scale(out_dir, tables, fibers))
     res["seed000_procedural_s"] = 15.0
     res["seed000_realized_s"] = 15.8
     res["paths_per_s"] = res["cached_paths_per_s"]

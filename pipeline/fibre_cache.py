@@ -25,6 +25,8 @@ from .progress import warn
 CACHE_VERTEX_BYTES = 320   # peak bytes of a cached vertex during the build (see the module doc)
 DEFAULT_CACHE_MIB = 2048   # --cache default (render.cache in the scene), at most a quarter of the available memory
 DEFAULT_SPACING = 0.002    # cm between cached vertices: ``loomlight realize``'s default
+MAX_FINE_K = 16            # a refined majorant cell holds at most 16^3 sub-cells (``cached_majorant``)
+MAX_FINE_BYTES = 64 * 2**20  # the refined cells' sub-cell majorants hold at most this (k shrinks to fit)
 
 
 class CacheBuild(NamedTuple):
@@ -80,7 +82,8 @@ def _vertices_per_length(tab, curve_length, spacing) -> np.ndarray:
     return out
 
 
-def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFAULT_SPACING) -> CacheBuild:
+def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFAULT_SPACING,
+                      fine_cell=None) -> CacheBuild:
     """The ``FibreCacheMedium`` of the procedural source ``(cv, tab)`` seen by ``cam`` at width x height,
     within ``budget_mib``; where nothing is cached (budget 0, or too small for one brick) the bare
     ``ProceduralMedium``, whose lookups skip the cache's indirection. A partial cache is kept however
@@ -163,16 +166,35 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
                  "cache_segments": int(len(bvh.seg_a)), "cache_bytes": held, "cache_estimate_bytes": float(est),
                  "cache_complete": bool(cached.sum() == len(order)), "cache_seen_share": share,
                  "cache_build_s": time.perf_counter() - t0})
-    return CacheBuild(med, cached_majorant(med, maj), info)
+    majorant, fine_info = cached_majorant(med, maj, fine_cell)
+    info.update(fine_info)
+    return CacheBuild(med, majorant, info)
 
 
-def cached_majorant(med, maj):
+def cached_majorant(med, maj, fine_cell=None):
     """``maj`` with the cells inside cached bricks bounded by the cached capsules (tighter than the
-    procedural tubes: as many null collisions as the realized source)."""
+    procedural tubes: as many null collisions as the realized source), and, where ``maj``'s cells are
+    coarser than ``fine_cell`` (a large cloth's grid is capped at MAX_MAJORANT_CELLS), those cells
+    refined into k^3 sub-cells of about ``fine_cell`` (k <= MAX_FINE_K; ``stages.render.tracking``):
+    (MajorantGrid, info)."""
     from stages.render.fibre_cache import cells_in_cached_bricks
-    from stages.render.tracking import majorants_from_prims, make_majorant_grid
+    from stages.render.tracking import fine_majorants_from_prims, majorants_from_prims, make_majorant_grid
 
     inner = cells_in_cached_bricks(maj, med.brick_lo, 1.0 / med.brick_inv[0], med.brick_res, med.cached)
     mu = majorants_from_prims(med.prims, med.seg_fiber, med.fibre_yarn, med.yarn_density, maj.lo, maj.hi, maj.res)
     mu = np.where(inner, mu, maj.mu)
-    return make_majorant_grid(maj.lo, maj.hi, maj.res, mu)
+    cs = float(np.max((maj.hi - maj.lo) / maj.res))
+    refine = inner & (mu > 0)
+    blocks = int(refine.sum())
+    k = min(MAX_FINE_K, int(np.ceil(cs / fine_cell - 1e-9))) if fine_cell else 1
+    while k > 1 and blocks * k ** 3 * 8 > MAX_FINE_BYTES:
+        k -= 1
+    if k < 2 or blocks == 0:
+        return make_majorant_grid(maj.lo, maj.hi, maj.res, mu), {"majorant_fine_k": 1, "majorant_fine_cells": 0}
+    fine = np.full(refine.shape, -1, np.int32)
+    fine[refine] = np.arange(blocks, dtype=np.int32)
+    fine_mu = fine_majorants_from_prims(med.prims, med.seg_fiber, med.fibre_yarn, med.yarn_density, maj.lo, maj.hi,
+                                        maj.res, fine, blocks, k)
+    info = {"majorant_fine_k": k, "majorant_fine_cells": blocks * k ** 3,
+            "majorant_fine_occupied": float(np.mean(fine_mu > 0))}
+    return make_majorant_grid(maj.lo, maj.hi, maj.res, mu, fine, fine_mu), info

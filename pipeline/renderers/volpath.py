@@ -19,9 +19,11 @@ micro-flakes instead, with the tinted BCSDF's mean albedo as single-scattering a
 
 Scene: camera, lights, ``render.max_depth``, ``render.rr_depth``, ``render.tile_size`` and the
 optional ``render.ground``. ``--set majorant_cell=X`` sets the majorant-grid cell size (scene units;
-default: a quarter of the mean yarn extent bound, at most MAX_MAJORANT_CELLS cells).
+default: a quarter of the mean yarn extent bound, at most MAX_MAJORANT_CELLS cells). Where that cap
+makes the grid coarser than asked (a large cloth), the fibre cache refines the cells it holds to
+FINE_CELL_FRACTION of the mean extent bound (``pipeline.fibre_cache.cached_majorant``).
 Statistics: paths, rays (free-flight and shadow queries), medium lookups and lookups/s, the
-majorant grid (cells, occupied fraction), source build time.
+majorant grid (cells, occupied fraction, refined sub-cells and k), source build time.
 """
 from __future__ import annotations
 
@@ -41,6 +43,9 @@ SOURCES = ("procedural", "realized", "grid")
 MAX_MAJORANT_CELLS = 128 ** 3  # majorant grids hold at most this many cells (16 MiB of float64)
 MAX_CELLS_PER_AXIS_HARD = 4096
 CELL_FRACTION = 0.25  # default majorant cell: this fraction of the mean yarn extent bound
+# where the grid is capped (a large cloth), the fibre cache refines the cells it holds to this fraction
+# of the mean extent bound (a quarter of the default cell: 8 bytes a sub-cell, only where the camera looks)
+FINE_CELL_FRACTION = 0.0625
 MAJORANT_STEP = 0.25  # procedural majorant: core-tube capsules spaced this fraction of the tube radius apart
 
 
@@ -119,7 +124,10 @@ def _procedural_source(tables_path, cell, optics, view, advance):
         return ProceduralMedium(cv, tab), maj, info, mats
     from ..fibre_cache import build_fibre_cache
 
-    built = build_fibre_cache(cv, tab, maj, view.camera, view.width, view.height, view.budget_mib)
+    asked = cell or CELL_FRACTION * float(np.mean(tab.yarn_extent))
+    capped = float(np.max((maj.hi - maj.lo) / maj.res)) > asked * (1.0 + 1e-9)  # MAX_MAJORANT_CELLS made it coarser
+    built = build_fibre_cache(cv, tab, maj, view.camera, view.width, view.height, view.budget_mib,
+                              fine_cell=FINE_CELL_FRACTION * float(np.mean(tab.yarn_extent)) if capped else None)
     advance()
     return built.medium, built.majorant, {**info, **built.info}, mats
 

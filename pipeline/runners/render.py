@@ -45,6 +45,10 @@ def render_estimate(options: dict, inputs: dict) -> Estimate:
 
             mib = float(default_cache_mib() if options.get("cache") is None else options["cache"])
             est.add("fibre cache (at most its budget)", mib * 2**20, f"--cache {mib:g} MiB")
+            if mib > 0:
+                from ..fibre_cache import MAX_FINE_BYTES
+
+                est.add("refined majorant cells (at most)", float(MAX_FINE_BYTES), "where the grid is capped")
         elif art.kind in ("fibers", "tiling"):
             points = art.arrays()["points" if art.kind == "fibers" else "ex_points"]
             est.add(f"{art.kind} and their BVH", VERTEX_BYTES * points.shape[0] + 2 * art.nbytes(),

@@ -9,8 +9,15 @@ Majorants are piecewise constant on a ``MajorantGrid`` (a coarse grid of cells o
 box, walked with a 3D DDA): a cell's majorant is the largest density any source can give inside it
 (per yarn: the yarn's density bound where its tube reaches the cell) and **zero where no yarn tube
 reaches**, so rays skip empty space without a single lookup, and outside the box nothing happens.
+A cell may be *refined*: cut into k x k x k sub-cells with majorants of their own, walked by a
+second DDA inside the cell. A grid over a large cloth is capped in cells (far coarser than the
+fibres), and a close camera's paths then pay a null collision for every empty corner of a coarse
+cell; refining the cells the camera sees (``pipeline.fibre_cache``) takes that back where it counts.
 
-MajorantGrid fields: lo, hi (float64[3], the box), res (int64[3]: nx, ny, nz), mu (float64[nz, ny, nx]).
+MajorantGrid fields: lo, hi (float64[3], the box), res (int64[3]: nx, ny, nz), mu (float64[nz, ny, nx]),
+fine (int32[nz, ny, nx]: a refined cell's block of sub-cells, -1 for none; empty when no cell is
+refined) and fine_mu (float64[blocks, k, k, k], z, y, x order; zero blocks when none is). Where a
+cell is refined its ``mu`` is still a bound of its whole volume (pilots and tests read it).
 
 ``track(med, maj, o, d, tmax, seed, index, dim, ratio, skip_fibre=-1)`` returns a ``Flight``
     (collided, t, transmittance, dim, lookups, point)
@@ -31,16 +38,20 @@ from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.rng import uniform
 from stages.render.medium import NO_MEDIUM, extinction, medium_lookup
 
-MajorantGrid = namedtuple("MajorantGrid", ["lo", "hi", "res", "mu"])
+MajorantGrid = namedtuple("MajorantGrid", ["lo", "hi", "res", "mu", "fine", "fine_mu"])
 Flight = namedtuple("Flight", ["collided", "t", "transmittance", "dim", "lookups", "point"])
 Flight.__doc__ = """track's result (module doc)."""
 
 RATIO_RR_THRESHOLD = 0.1  # ratio tracking plays Russian roulette below this transmittance
 
 
-def make_majorant_grid(lo, hi, res, mu) -> MajorantGrid:
+def make_majorant_grid(lo, hi, res, mu, fine=None, fine_mu=None) -> MajorantGrid:
+    """A ``MajorantGrid``; without ``fine`` / ``fine_mu`` no cell is refined."""
+    if fine is None:
+        fine, fine_mu = np.zeros((0, 0, 0), np.int32), np.zeros((0, 1, 1, 1))
     return MajorantGrid(np.asarray(lo, np.float64), np.asarray(hi, np.float64),
-                        np.asarray(res, np.int64), np.ascontiguousarray(mu, np.float64))
+                        np.asarray(res, np.int64), np.ascontiguousarray(mu, np.float64),
+                        np.ascontiguousarray(fine, np.int32), np.ascontiguousarray(fine_mu, np.float64))
 
 
 @njit(cache=True)
@@ -70,6 +81,35 @@ def majorants_from_prims(prims, seg_fiber, fiber_yarn, yarn_density, lo, hi, res
         raster_capsule(mu, lo, cs, half_diag, res, prims[j, 0], prims[j, 1], prims[j, 2], prims[j, 3], prims[j, 4],
                        prims[j, 5], prims[j, 6], den)
     return mu
+
+
+@njit(cache=True)
+def fine_majorants_from_prims(prims, seg_fiber, fiber_yarn, yarn_density, lo, hi, res, fine, blocks, k):
+    """float64[blocks, k, k, k]: the sub-cell majorants of the refined cells (``fine`` >= 0) from a
+    fibre BVH's packed capsules, as ``majorants_from_prims`` on the grid k times finer restricted to
+    those cells; sub-cells of unrefined cells are skipped."""
+    out = np.zeros((blocks, k, k, k))
+    fres = np.array([res[0] * k, res[1] * k, res[2] * k], np.int64)
+    cs = (hi - lo) / fres
+    half_diag = cell_half_diagonal(cs)
+    for j in range(prims.shape[0]):
+        den = yarn_density[fiber_yarn[seg_fiber[int(prims[j, 7])]]]
+        ax, ay, az, bx, by, bz, r = prims[j, 0], prims[j, 1], prims[j, 2], prims[j, 3], prims[j, 4], prims[j, 5], prims[j, 6]
+        x0, x1 = _cell_range(ax, bx, r, lo[0], cs[0], fres[0])
+        y0, y1 = _cell_range(ay, by, r, lo[1], cs[1], fres[1])
+        z0, z1 = _cell_range(az, bz, r, lo[2], cs[2], fres[2])
+        for iz in range(z0, z1 + 1):
+            for iy in range(y0, y1 + 1):
+                for ix in range(x0, x1 + 1):
+                    b = fine[iz // k, iy // k, ix // k]
+                    if b < 0 or out[b, iz % k, iy % k, ix % k] >= den:
+                        continue
+                    cx = lo[0] + (ix + 0.5) * cs[0]
+                    cy = lo[1] + (iy + 0.5) * cs[1]
+                    cz = lo[2] + (iz + 0.5) * cs[2]
+                    if point_segment_dist2(cx, cy, cz, ax, ay, az, bx, by, bz) <= (r + half_diag) ** 2:
+                        out[b, iz % k, iy % k, ix % k] = den
+    return out
 
 
 @njit(cache=True, inline="always")
@@ -157,6 +197,38 @@ def ray_box(lo, hi, ox, oy, oz, dx, dy, dz):
     return t0, t1
 
 
+_PASSED, _COLLIDED, _ENDED = 0, 1, 2  # _collide: reached t_exit; a real collision; ratio tracking's roulette ended it
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _collide(med, mu, t, t_exit, ox, oy, oz, dx, dy, dz, T, dim, lookups, seed, index, ratio, skip_fibre):
+    """Tentative collisions at rate ``mu`` from t until t_exit (``track``'s inner loop): (state, t, T,
+    dim, lookups, point) with state _PASSED (t past t_exit), _COLLIDED (delta tracking, point there)
+    or _ENDED (ratio tracking's Russian roulette)."""
+    while True:
+        u = uniform(seed, index, dim)
+        dim += 1
+        t -= math.log(1.0 - u) / mu
+        if t >= t_exit:
+            return _PASSED, t, T, dim, lookups, NO_MEDIUM
+        m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz, skip_fibre)
+        lookups += 1
+        st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
+        if ratio:
+            T *= 1.0 - st / mu
+            if T < RATIO_RR_THRESHOLD:
+                q = uniform(seed, index, dim)
+                dim += 1
+                if q >= 0.5:
+                    return _ENDED, t, 0.0, dim, lookups, NO_MEDIUM
+                T *= 2.0
+        else:
+            v = uniform(seed, index, dim)
+            dim += 1
+            if v * mu < st:
+                return _COLLIDED, t, T, dim, lookups, m
+
+
 @njit(cache=True, _nrt=False)
 def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_fibre=-1):
     """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax] through
@@ -189,33 +261,62 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
     tdx = cs0 / abs(dx) if dx != 0.0 else big
     tdy = cs1 / abs(dy) if dy != 0.0 else big
     tdz = cs2 / abs(dz) if dz != 0.0 else big
+    refined = maj.fine_mu.shape[0] > 0
+    k = maj.fine_mu.shape[1]
     t = t_near
     while True:
         t_exit = min(tnx, tny, tnz, t_far)
         mu = maj.mu[iz, iy, ix]
         if mu > 0.0:
-            while True:
-                u = uniform(seed, index, dim)
-                dim += 1
-                t -= math.log(1.0 - u) / mu
-                if t >= t_exit:
-                    break
-                m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz, skip_fibre)
-                lookups += 1
-                st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
-                if ratio:
-                    T *= 1.0 - st / mu
-                    if T < RATIO_RR_THRESHOLD:
-                        q = uniform(seed, index, dim)
-                        dim += 1
-                        if q >= 0.5:
+            b = maj.fine[iz, iy, ix] if refined else -1
+            if b < 0:
+                state, t, T, dim, lookups, m = _collide(med, mu, t, t_exit, ox, oy, oz, dx, dy, dz, T, dim, lookups,
+                                                        seed, index, ratio, skip_fibre)
+                if state == _COLLIDED:
+                    return Flight(True, t, T, dim, lookups, m)
+                if state == _ENDED:
+                    return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
+            else:  # the cell's k^3 sub-cells, by their own DDA from t to t_exit
+                f0, f1, f2 = cs0 / k, cs1 / k, cs2 / k
+                c0, c1, c2 = lo[0] + ix * cs0, lo[1] + iy * cs1, lo[2] + iz * cs2
+                tm = t + 1e-9 * (t_exit - t)
+                jx = min(max(int(math.floor((ox + tm * dx - c0) / f0)), 0), k - 1)
+                jy = min(max(int(math.floor((oy + tm * dy - c1) / f1)), 0), k - 1)
+                jz = min(max(int(math.floor((oz + tm * dz - c2) / f2)), 0), k - 1)
+                fnx = (c0 + (jx + (1 if dx > 0.0 else 0)) * f0 - ox) / dx if dx != 0.0 else big
+                fny = (c1 + (jy + (1 if dy > 0.0 else 0)) * f1 - oy) / dy if dy != 0.0 else big
+                fnz = (c2 + (jz + (1 if dz > 0.0 else 0)) * f2 - oz) / dz if dz != 0.0 else big
+                fdx = f0 / abs(dx) if dx != 0.0 else big
+                fdy = f1 / abs(dy) if dy != 0.0 else big
+                fdz = f2 / abs(dz) if dz != 0.0 else big
+                while True:
+                    s_exit = min(fnx, fny, fnz, t_exit)
+                    fmu = maj.fine_mu[b, jz, jy, jx]
+                    if fmu > 0.0:
+                        state, t, T, dim, lookups, m = _collide(med, fmu, t, s_exit, ox, oy, oz, dx, dy, dz, T, dim,
+                                                                lookups, seed, index, ratio, skip_fibre)
+                        if state == _COLLIDED:
+                            return Flight(True, t, T, dim, lookups, m)
+                        if state == _ENDED:
                             return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
-                        T *= 2.0
-                else:
-                    v = uniform(seed, index, dim)
-                    dim += 1
-                    if v * mu < st:
-                        return Flight(True, t, T, dim, lookups, m)
+                    t = s_exit
+                    if s_exit >= t_exit:
+                        break
+                    if fnx <= fny and fnx <= fnz:
+                        jx += sx
+                        fnx += fdx
+                        if jx < 0 or jx >= k:
+                            break
+                    elif fny <= fnz:
+                        jy += sy
+                        fny += fdy
+                        if jy < 0 or jy >= k:
+                            break
+                    else:
+                        jz += sz
+                        fnz += fdz
+                        if jz < 0 or jz >= k:
+                            break
         t = t_exit
         if t_exit >= t_far:
             break

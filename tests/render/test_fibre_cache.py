@@ -180,6 +180,46 @@ def test_a_partial_cache_is_kept(swatch):
     assert 0.0 < part.info["cache_seen_share"] < 1.0
 
 
+def test_refined_majorant_cells_bound_the_cached_fibres(swatch):
+    """Where the majorant grid is coarser than the fine cell asked for, the cells inside cached bricks are
+    refined (``cached_majorant``): each sub-cell's majorant equals the cached capsules' majorant on the
+    grid k times finer (the brute-force raster of every capsule, ``majorants_from_prims``), cells outside
+    cached bricks stay unrefined, and every cached fibre point lies in a sub-cell whose majorant is at
+    least its density."""
+    from pipeline.fibre_cache import cached_majorant
+    from stages.render.tracking import majorants_from_prims
+
+    fib, cv, tab = swatch
+    maj = procedural_majorant(cv, tab)
+    cam = camera_array(CAMERA, 32, 24)
+    full = build_fibre_cache(cv, tab, maj, cam, 32, 24, 512.0, spacing=SPACING).info
+    built = build_fibre_cache(cv, tab, maj, cam, 32, 24, 0.3 * full["cache_estimate_bytes"] / 2**20, spacing=SPACING)
+    med = built.medium
+    assert built.info["majorant_fine_cells"] == 0  # the swatch's grid is as fine as asked: nothing to refine
+    cs = float(np.max((maj.hi - maj.lo) / maj.res))
+    grid, info = cached_majorant(med, maj, cs / 3.0)
+    k = info["majorant_fine_k"]
+    assert k == 3 and info["majorant_fine_cells"] > 0
+    brute = majorants_from_prims(med.prims, med.seg_fiber, med.fibre_yarn, med.yarn_density, maj.lo, maj.hi,
+                                 maj.res * k)
+    refined = np.argwhere(grid.fine >= 0)
+    assert 0 < len(refined) < np.sum(grid.mu > 0)  # a partial cache: some occupied cells stay coarse
+    for z, y, x in refined:
+        b = grid.fine[z, y, x]
+        assert np.array_equal(grid.fine_mu[b], brute[z * k:(z + 1) * k, y * k:(y + 1) * k, x * k:(x + 1) * k])
+        assert grid.fine_mu[b].max() <= grid.mu[z, y, x]
+    Q = _points(fib, 0, 40000, seed=2)
+    got = _lookups(med, Q)
+    cell = np.floor((Q - maj.lo) / ((maj.hi - maj.lo) / (maj.res * k))).astype(np.int64)
+    ok = np.all((cell >= 0) & (cell < maj.res * k), axis=1) & (got[:, 0] > 0)
+    c = cell[ok]
+    blk = grid.fine[c[:, 2] // k, c[:, 1] // k, c[:, 0] // k]
+    sub = blk >= 0
+    assert sub.sum() > 1000
+    bound = grid.fine_mu[blk[sub], c[sub, 2] % k, c[sub, 1] % k, c[sub, 0] % k]
+    assert np.all(bound >= got[ok][sub, 0])
+
+
 def test_zero_budget_caches_nothing(swatch):
     fib, cv, tab = swatch
     built = build_fibre_cache(cv, tab, procedural_majorant(cv, tab), camera_array(CAMERA, 32, 24), 32, 24, 0.0)

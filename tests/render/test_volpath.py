@@ -83,6 +83,53 @@ def test_transmittance_heterogeneous_grid():
     _check_transmittance(g, maj, o, d, 0.9, math.exp(-tau_half))
 
 
+def _refine(den, lo, hi, res, k, which):
+    """The grid's majorants with the cells ``which`` (bool nz, ny, nx) refined into k^3 sub-cells whose
+    majorants are those of the grid k times finer (``majorants_from_voxels``)."""
+    fine_full = majorants_from_voxels(den, lo, hi, np.asarray(res) * k)
+    fine = np.full(which.shape, -1, np.int32)
+    cells = np.argwhere(which)
+    fine[which] = np.arange(len(cells), dtype=np.int32)
+    fine_mu = np.stack([fine_full[z * k:(z + 1) * k, y * k:(y + 1) * k, x * k:(x + 1) * k] for z, y, x in cells])
+    return make_majorant_grid(lo, hi, res, majorants_from_voxels(den, lo, hi, res), fine, fine_mu)
+
+
+@njit
+def _tentative(med, maj, o, d, n, seed):
+    total = 0
+    for k in range(n):
+        total += track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, 0, True).lookups
+    return total
+
+
+def test_transmittance_through_refined_cells():
+    """A grid whose cells are partly refined into 3^3 sub-cells (the fibre cache's refinement of a coarse
+    grid, ``tracking`` module doc): delta and ratio tracking still estimate exp(-tau), with fewer
+    tentative collisions than the coarse grid's."""
+    rng = np.random.default_rng(9)
+    den = (6.0 * rng.random((9, 12, 14)) * (rng.random((9, 12, 14)) > 0.6)).astype(np.float32)
+    den[4:, :, :] = 0.0  # a layer of fibres with empty space above it, as a cloth in a coarse grid
+    dirs = rng.normal(size=(9, 12, 14, 3))
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.8, 0.6])
+    g = GridMedium(lo, hi, den, dirs.astype(np.float32), np.ones((9, 12, 14, 3), np.float32),
+                   (0.2 + 0.8 * rng.random((9, 12, 14))).astype(np.float32))
+    res = np.array([4, 3, 3])
+    coarse = make_majorant_grid(lo, hi, res, majorants_from_voxels(den, lo, hi, res))
+    which = rng.random((3, 3, 4)) < 0.8
+    maj = _refine(den, lo, hi, res, 3, which)
+    assert np.all(maj.fine_mu.max(axis=(1, 2, 3)) <= coarse.mu[which])
+    fewer = coarse_n = 0
+    for o, d in (([-0.3, 0.1, 0.05], [1.0, 0.5, 0.35]), ([1.2, 0.9, 0.7], [-1.0, -0.7, -0.55]),
+                 ([0.5, -0.2, 0.3], [0.0, 1.0, 0.0])):
+        o, d = np.array(o), np.array(d) / np.linalg.norm(d)
+        tau = _optical_depth_grid(g, o, d, 0.0, 3.0, 400000)
+        _check_transmittance(g, maj, o, d, np.inf, math.exp(-tau))
+        fewer += _tentative(g, maj, o, d, 2000, 3)
+        coarse_n += _tentative(g, coarse, o, d, 2000, 3)
+    assert fewer < 0.9 * coarse_n
+
+
 def _slab(density, tangent, rough, albedo, h=1.0):
     med = HomogeneousMedium(np.array([-50.0, -50.0, 0.0]), np.array([50.0, 50.0, h]), density,
                             np.asarray(tangent, float), rough, np.asarray(albedo, float))
