@@ -104,10 +104,7 @@ def fine_majorants_from_prims(prims, seg_fiber, fiber_yarn, yarn_density, lo, hi
                     b = fine[iz // k, iy // k, ix // k]
                     if b < 0 or out[b, iz % k, iy % k, ix % k] >= den:
                         continue
-                    cx = lo[0] + (ix + 0.5) * cs[0]
-                    cy = lo[1] + (iy + 0.5) * cs[1]
-                    cz = lo[2] + (iz + 0.5) * cs[2]
-                    if point_segment_dist2(cx, cy, cz, ax, ay, az, bx, by, bz) <= (r + half_diag) ** 2:
+                    if _cell_reached(lo, cs, half_diag, ix, iy, iz, ax, ay, az, bx, by, bz, r):
                         out[b, iz % k, iy % k, ix % k] = den
     return out
 
@@ -115,6 +112,15 @@ def fine_majorants_from_prims(prims, seg_fiber, fiber_yarn, yarn_density, lo, hi
 @njit(cache=True, inline="always")
 def cell_half_diagonal(cs):
     return 0.5 * math.sqrt(cs[0] ** 2 + cs[1] ** 2 + cs[2] ** 2) * (1.0 + 1e-9)
+
+
+@njit(cache=True, inline="always")
+def _cell_reached(lo, cs, half_diag, ix, iy, iz, ax, ay, az, bx, by, bz, r):
+    """The capsule a-b of radius r may reach cell (ix, iy, iz): its centre within r + half the diagonal."""
+    cx = lo[0] + (ix + 0.5) * cs[0]
+    cy = lo[1] + (iy + 0.5) * cs[1]
+    cz = lo[2] + (iz + 0.5) * cs[2]
+    return point_segment_dist2(cx, cy, cz, ax, ay, az, bx, by, bz) <= (r + half_diag) ** 2
 
 
 @njit(cache=True, inline="always")
@@ -135,12 +141,7 @@ def raster_capsule(mu, lo, cs, half_diag, res, ax, ay, az, bx, by, bz, r, den):
     for iz in range(z0, z1 + 1):
         for iy in range(y0, y1 + 1):
             for ix in range(x0, x1 + 1):
-                if mu[iz, iy, ix] >= den:
-                    continue
-                cx = lo[0] + (ix + 0.5) * cs[0]
-                cy = lo[1] + (iy + 0.5) * cs[1]
-                cz = lo[2] + (iz + 0.5) * cs[2]
-                if point_segment_dist2(cx, cy, cz, ax, ay, az, bx, by, bz) <= (r + half_diag) ** 2:
+                if mu[iz, iy, ix] < den and _cell_reached(lo, cs, half_diag, ix, iy, iz, ax, ay, az, bx, by, bz, r):
                     mu[iz, iy, ix] = den
 
 

@@ -61,16 +61,24 @@ def _check_transmittance(med, maj, o, d, tmax, T_exact, n=40000):
     assert abs(rat.mean() - T_exact) < Z * se_r + 1e-12, (rat.mean(), T_exact)
 
 
+def _random_grid(rng, shape, empty, layer=None):
+    """(GridMedium, density, lo, hi): random anisotropic voxels over [0,1]x[0,0.8]x[0,0.6], a share
+    ``empty`` of them empty, and every voxel from z index ``layer`` up when given."""
+    den = (6.0 * rng.random(shape) * (rng.random(shape) > empty)).astype(np.float32)
+    if layer is not None:
+        den[layer:] = 0.0
+    dirs = rng.normal(size=(*shape, 3))
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.8, 0.6])
+    g = GridMedium(lo, hi, den, dirs.astype(np.float32), np.ones((*shape, 3), np.float32),
+                   (0.2 + 0.8 * rng.random(shape)).astype(np.float32))
+    return g, den, lo, hi
+
+
 def test_transmittance_heterogeneous_grid():
     """Delta-tracking escape probability and the ratio-tracking mean equal exp(-tau), tau by quadrature
     of sigma_t(w) = den x SGGX projected area through a random anisotropic grid with empty cells."""
-    rng = np.random.default_rng(4)
-    den = (6.0 * rng.random((5, 6, 7)) * (rng.random((5, 6, 7)) > 0.4)).astype(np.float32)
-    dirs = rng.normal(size=(5, 6, 7, 3))
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.8, 0.6])
-    g = GridMedium(lo, hi, den, dirs.astype(np.float32), np.ones((5, 6, 7, 3), np.float32),
-                   (0.2 + 0.8 * rng.random((5, 6, 7))).astype(np.float32))
+    g, den, lo, hi = _random_grid(np.random.default_rng(4), (5, 6, 7), 0.4)
     res = np.array([4, 3, 3])
     maj = make_majorant_grid(lo, hi, res, majorants_from_voxels(den, lo, hi, res))
     o = np.array([-0.3, 0.1, 0.05])
@@ -107,13 +115,7 @@ def test_transmittance_through_refined_cells():
     grid, ``tracking`` module doc): delta and ratio tracking still estimate exp(-tau), with fewer
     tentative collisions than the coarse grid's."""
     rng = np.random.default_rng(9)
-    den = (6.0 * rng.random((9, 12, 14)) * (rng.random((9, 12, 14)) > 0.6)).astype(np.float32)
-    den[4:, :, :] = 0.0  # a layer of fibres with empty space above it, as a cloth in a coarse grid
-    dirs = rng.normal(size=(9, 12, 14, 3))
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.8, 0.6])
-    g = GridMedium(lo, hi, den, dirs.astype(np.float32), np.ones((9, 12, 14, 3), np.float32),
-                   (0.2 + 0.8 * rng.random((9, 12, 14))).astype(np.float32))
+    g, den, lo, hi = _random_grid(rng, (9, 12, 14), 0.6, layer=4)  # fibres below, empty space above
     res = np.array([4, 3, 3])
     coarse = make_majorant_grid(lo, hi, res, majorants_from_voxels(den, lo, hi, res))
     which = rng.random((3, 3, 4)) < 0.8
