@@ -358,3 +358,35 @@ def test_cache_budget_bad_input(small, tmp_path, capsys):
     assert got <= available_bytes() / 2**20
     assert "available memory" in capsys.readouterr().err
     assert cache_budget_mib(0) == 0.0
+
+
+@pytest.mark.slow  # compiles the procedural volpath integrator (minutes on a cold cache): make test-all
+def test_refined_majorant_renders_the_same_fabric(small, monkeypatch):
+    """With the majorant grid capped at a few cells (as a large cloth's is), the cached cells are refined
+    (``cached_majorant``): the image agrees with the uncapped grid's within Monte Carlo error per 2 x 2
+    pixel block (z-score test, independent seeds) and is the same bytes at 1 and 2 threads."""
+    import pipeline.fibre_cache
+    import pipeline.renderers.volpath as volpath
+    from tests.chisquare import z_score_test
+
+    plain = _render(small, 512.0, 5)
+    assert plain.stats["majorant_fine_cells"] == 0
+    monkeypatch.setattr(volpath, "MAX_MAJORANT_CELLS", 6 ** 3)
+    refined = _render(small, 512.0, 6)
+    assert refined.stats["majorant_fine_cells"] > 0 and refined.stats["majorant_fine_k"] >= 2
+
+    def blocks(a):
+        return a.reshape(4, 2, 4, 2).sum(axis=(1, 3))
+
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    d = (blocks(refined.rgb @ lum) - blocks(plain.rgb @ lum)) / 4.0
+    se = np.sqrt(blocks(refined.extra["variance"]) + blocks(plain.extra["variance"])) / 4.0
+    assert np.all(se > 0)
+    res = z_score_test((d / se).ravel(), alpha=1e-3)
+    assert res.passed, res.message
+    one = _render(small, 512.0, 6, threads=1)
+    assert one.rgb.tobytes() == refined.rgb.tobytes()
+    monkeypatch.setattr(pipeline.fibre_cache, "MAX_FINE_K", 1)
+    capped = _render(small, 512.0, 6)  # the capped grid unrefined: 212k lookups against 19k refined
+    assert capped.stats["majorant_fine_cells"] == 0
+    assert refined.stats["medium_lookups"] < 0.5 * capped.stats["medium_lookups"]
