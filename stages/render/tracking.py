@@ -212,22 +212,32 @@ def _collide(med, mu, t, t_exit, ox, oy, oz, dx, dy, dz, T, dim, lookups, seed, 
         t -= math.log(1.0 - u) / mu
         if t >= t_exit:
             return _PASSED, t, T, dim, lookups, NO_MEDIUM
-        m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz, skip_fibre)
+        state, T, dim, m = _tentative(med, mu, t, ox, oy, oz, dx, dy, dz, T, dim, seed, index, ratio, skip_fibre)
         lookups += 1
-        st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
-        if ratio:
-            T *= 1.0 - st / mu
-            if T < RATIO_RR_THRESHOLD:
-                q = uniform(seed, index, dim)
-                dim += 1
-                if q >= 0.5:
-                    return _ENDED, t, 0.0, dim, lookups, NO_MEDIUM
-                T *= 2.0
-        else:
-            v = uniform(seed, index, dim)
+        if state != _PASSED:
+            return state, t, T, dim, lookups, m
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _tentative(med, mu, t, ox, oy, oz, dx, dy, dz, T, dim, seed, index, ratio, skip_fibre):
+    """One tentative collision at t under majorant mu: (state, T, dim, point), state _PASSED (a null
+    collision: go on), _COLLIDED (delta tracking accepted it) or _ENDED (ratio tracking's roulette)."""
+    m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz, skip_fibre)
+    st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
+    if ratio:
+        T *= 1.0 - st / mu
+        if T < RATIO_RR_THRESHOLD:
+            q = uniform(seed, index, dim)
             dim += 1
-            if v * mu < st:
-                return _COLLIDED, t, T, dim, lookups, m
+            if q >= 0.5:
+                return _ENDED, 0.0, dim, NO_MEDIUM
+            T *= 2.0
+    else:
+        v = uniform(seed, index, dim)
+        dim += 1
+        if v * mu < st:
+            return _COLLIDED, T, dim, m
+    return _PASSED, T, dim, NO_MEDIUM
 
 
 @njit(cache=True, _nrt=False)
@@ -290,16 +300,30 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
                 fdx = f0 / abs(dx) if dx != 0.0 else big
                 fdy = f1 / abs(dy) if dy != 0.0 else big
                 fdz = f2 / abs(dz) if dz != 0.0 else big
+                # one exponential optical depth carried across sub-cells (a piecewise-constant rate:
+                # the collision where the integral of fmu reaches tau), fresh after each tentative collision;
+                # what is left at the cell's exit is dropped (the process is memoryless)
+                tau = -math.log(1.0 - uniform(seed, index, dim))
+                dim += 1
                 while True:
                     s_exit = min(fnx, fny, fnz, t_exit)
                     fmu = maj.fine_mu[b, jz, jy, jx]
                     if fmu > 0.0:
-                        state, t, T, dim, lookups, m = _collide(med, fmu, t, s_exit, ox, oy, oz, dx, dy, dz, T, dim,
-                                                                lookups, seed, index, ratio, skip_fibre)
-                        if state == _COLLIDED:
-                            return Flight(True, t, T, dim, lookups, m)
-                        if state == _ENDED:
-                            return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
+                        while True:
+                            span = fmu * max(s_exit - t, 0.0)
+                            if tau >= span:
+                                tau -= span
+                                break
+                            t += tau / fmu
+                            state, T, dim, m = _tentative(med, fmu, t, ox, oy, oz, dx, dy, dz, T, dim, seed, index,
+                                                          ratio, skip_fibre)
+                            lookups += 1
+                            if state == _COLLIDED:
+                                return Flight(True, t, T, dim, lookups, m)
+                            if state == _ENDED:
+                                return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
+                            tau = -math.log(1.0 - uniform(seed, index, dim))
+                            dim += 1
                     t = s_exit
                     if s_exit >= t_exit:
                         break
