@@ -88,7 +88,8 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     within ``budget_mib``; where nothing is cached (budget 0, or too small for one brick) the bare
     ``ProceduralMedium``, whose lookups skip the cache's indirection. A partial cache is kept however
     little of the view it holds: every brick it holds answers faster than the lookups, and an uncached
-    lookup through it costs what a bare one does (``bench_volpath``'s budget curve)."""
+    lookup through it costs what a bare one does (``bench_volpath``'s budget curve). ``fine_cell``: refine
+    the majorant's cells inside cached bricks to about this size (``cached_majorant``; None: never)."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.procedural.realize import realize_fill_window, window_pieces, yarn_plan
     from stages.render.camera import camera_ray
