@@ -95,9 +95,7 @@ def fine_majorants_from_prims(prims, seg_fiber, fiber_yarn, yarn_density, lo, hi
     for j in range(prims.shape[0]):
         den = yarn_density[fiber_yarn[seg_fiber[int(prims[j, 7])]]]
         ax, ay, az, bx, by, bz, r = prims[j, 0], prims[j, 1], prims[j, 2], prims[j, 3], prims[j, 4], prims[j, 5], prims[j, 6]
-        x0, x1 = _cell_range(ax, bx, r, lo[0], cs[0], fres[0])
-        y0, y1 = _cell_range(ay, by, r, lo[1], cs[1], fres[1])
-        z0, z1 = _cell_range(az, bz, r, lo[2], cs[2], fres[2])
+        x0, x1, y0, y1, z0, z1 = _capsule_cells(lo, cs, fres, ax, ay, az, bx, by, bz, r)
         for iz in range(z0, z1 + 1):
             for iy in range(y0, y1 + 1):
                 for ix in range(x0, x1 + 1):
@@ -130,14 +128,47 @@ def _cell_range(p, q, r, lo, cs, n):
     return i0, i1
 
 
+@njit(cache=True, inline="always")
+def _capsule_cells(lo, cs, res, ax, ay, az, bx, by, bz, r):
+    """(x0, x1, y0, y1, z0, z1): the cells of a grid (origin lo, cell cs, res cells) the capsule's box covers."""
+    x0, x1 = _cell_range(ax, bx, r, lo[0], cs[0], res[0])
+    y0, y1 = _cell_range(ay, by, r, lo[1], cs[1], res[1])
+    z0, z1 = _cell_range(az, bz, r, lo[2], cs[2], res[2])
+    return x0, x1, y0, y1, z0, z1
+
+
+@njit(cache=True, inline="always")
+def _dda_axis(o, d, c, cs, tm, n):
+    """One axis of a DDA through cells of size cs from c (n of them), entered at ray parameter tm:
+    (cell, t of its far boundary, t per cell)."""
+    i = min(max(int(math.floor((o + tm * d - c) / cs)), 0), n - 1)
+    if d == 0.0:
+        return i, np.inf, np.inf
+    return i, (c + (i + (1 if d > 0.0 else 0)) * cs - o) / d, cs / abs(d)
+
+
+@njit(cache=True, inline="always")
+def _dda_step(i, j, l, ti, tj, tl, si, sj, sl, di, dj, dl, ni, nj, nl):
+    """The DDA's next cell across the nearest boundary: (i, j, l, ti, tj, tl, inside the ni x nj x nl cells)."""
+    if ti <= tj and ti <= tl:
+        i += si
+        ti += di
+        return i, j, l, ti, tj, tl, 0 <= i < ni
+    if tj <= tl:
+        j += sj
+        tj += dj
+        return i, j, l, ti, tj, tl, 0 <= j < nj
+    l += sl
+    tl += dl
+    return i, j, l, ti, tj, tl, 0 <= l < nl
+
+
 @njit(cache=True)
 def raster_capsule(mu, lo, cs, half_diag, res, ax, ay, az, bx, by, bz, r, den):
     """Raise to ``den`` every cell of ``mu`` (cell size cs, origin lo) the capsule a-b of radius r may
     reach: conservative, a cell within r of the segment has its centre within r + half its diagonal
     (at most one cell looser than exact)."""
-    x0, x1 = _cell_range(ax, bx, r, lo[0], cs[0], res[0])
-    y0, y1 = _cell_range(ay, by, r, lo[1], cs[1], res[1])
-    z0, z1 = _cell_range(az, bz, r, lo[2], cs[2], res[2])
+    x0, x1, y0, y1, z0, z1 = _capsule_cells(lo, cs, res, ax, ay, az, bx, by, bz, r)
     for iz in range(z0, z1 + 1):
         for iy in range(y0, y1 + 1):
             for ix in range(x0, x1 + 1):
@@ -259,19 +290,12 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
     cs2 = (maj.hi[2] - lo[2]) / res[2]
     # entry cell
     tm = t_near + 1e-9 * (t_far - t_near)
-    ix = min(max(int(math.floor((ox + tm * dx - lo[0]) / cs0)), 0), res[0] - 1)
-    iy = min(max(int(math.floor((oy + tm * dy - lo[1]) / cs1)), 0), res[1] - 1)
-    iz = min(max(int(math.floor((oz + tm * dz - lo[2]) / cs2)), 0), res[2] - 1)
-    big = np.inf
+    ix, tnx, tdx = _dda_axis(ox, dx, lo[0], cs0, tm, res[0])
+    iy, tny, tdy = _dda_axis(oy, dy, lo[1], cs1, tm, res[1])
+    iz, tnz, tdz = _dda_axis(oz, dz, lo[2], cs2, tm, res[2])
     sx = 1 if dx > 0.0 else -1
     sy = 1 if dy > 0.0 else -1
     sz = 1 if dz > 0.0 else -1
-    tnx = (lo[0] + (ix + (1 if dx > 0.0 else 0)) * cs0 - ox) / dx if dx != 0.0 else big
-    tny = (lo[1] + (iy + (1 if dy > 0.0 else 0)) * cs1 - oy) / dy if dy != 0.0 else big
-    tnz = (lo[2] + (iz + (1 if dz > 0.0 else 0)) * cs2 - oz) / dz if dz != 0.0 else big
-    tdx = cs0 / abs(dx) if dx != 0.0 else big
-    tdy = cs1 / abs(dy) if dy != 0.0 else big
-    tdz = cs2 / abs(dz) if dz != 0.0 else big
     refined = maj.fine_mu.shape[0] > 0
     k = maj.fine_mu.shape[1]
     t = t_near
@@ -288,18 +312,10 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
                 if state == _ENDED:
                     return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
             else:  # the cell's k^3 sub-cells, by their own DDA from t to t_exit
-                f0, f1, f2 = cs0 / k, cs1 / k, cs2 / k
-                c0, c1, c2 = lo[0] + ix * cs0, lo[1] + iy * cs1, lo[2] + iz * cs2
                 tm = t + 1e-9 * (t_exit - t)
-                jx = min(max(int(math.floor((ox + tm * dx - c0) / f0)), 0), k - 1)
-                jy = min(max(int(math.floor((oy + tm * dy - c1) / f1)), 0), k - 1)
-                jz = min(max(int(math.floor((oz + tm * dz - c2) / f2)), 0), k - 1)
-                fnx = (c0 + (jx + (1 if dx > 0.0 else 0)) * f0 - ox) / dx if dx != 0.0 else big
-                fny = (c1 + (jy + (1 if dy > 0.0 else 0)) * f1 - oy) / dy if dy != 0.0 else big
-                fnz = (c2 + (jz + (1 if dz > 0.0 else 0)) * f2 - oz) / dz if dz != 0.0 else big
-                fdx = f0 / abs(dx) if dx != 0.0 else big
-                fdy = f1 / abs(dy) if dy != 0.0 else big
-                fdz = f2 / abs(dz) if dz != 0.0 else big
+                jx, fnx, fdx = _dda_axis(ox, dx, lo[0] + ix * cs0, cs0 / k, tm, k)
+                jy, fny, fdy = _dda_axis(oy, dy, lo[1] + iy * cs1, cs1 / k, tm, k)
+                jz, fnz, fdz = _dda_axis(oz, dz, lo[2] + iz * cs2, cs2 / k, tm, k)
                 # one exponential optical depth carried across sub-cells (a piecewise-constant rate:
                 # the collision where the integral of fmu reaches tau), fresh after each tentative collision;
                 # what is left at the cell's exit is dropped (the process is memoryless)
@@ -327,39 +343,17 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
                     t = s_exit
                     if s_exit >= t_exit:
                         break
-                    if fnx <= fny and fnx <= fnz:
-                        jx += sx
-                        fnx += fdx
-                        if jx < 0 or jx >= k:
-                            break
-                    elif fny <= fnz:
-                        jy += sy
-                        fny += fdy
-                        if jy < 0 or jy >= k:
-                            break
-                    else:
-                        jz += sz
-                        fnz += fdz
-                        if jz < 0 or jz >= k:
-                            break
+                    jx, jy, jz, fnx, fny, fnz, inside = _dda_step(jx, jy, jz, fnx, fny, fnz, sx, sy, sz, fdx, fdy, fdz,
+                                                                   k, k, k)
+                    if not inside:
+                        break
         t = t_exit
         if t_exit >= t_far:
             break
-        if tnx <= tny and tnx <= tnz:
-            ix += sx
-            tnx += tdx
-            if ix < 0 or ix >= res[0]:
-                break
-        elif tny <= tnz:
-            iy += sy
-            tny += tdy
-            if iy < 0 or iy >= res[1]:
-                break
-        else:
-            iz += sz
-            tnz += tdz
-            if iz < 0 or iz >= res[2]:
-                break
+        ix, iy, iz, tnx, tny, tnz, inside = _dda_step(ix, iy, iz, tnx, tny, tnz, sx, sy, sz, tdx, tdy, tdz,
+                                                       res[0], res[1], res[2])
+        if not inside:
+            break
     return Flight(False, tmax, T, dim, lookups, NO_MEDIUM)
 
 
