@@ -16,6 +16,14 @@ LARGE_SCENE ?= data/scenes/woven_large.toml
 LARGE_CLOSE_SCENE ?= data/scenes/woven_large_close.toml
 LARGE_ARGS ?= --width 320 --height 240 --spp 4
 LARGE_OUT ?= out/large
+# make table1's 10x row: woven_huge (3,200 yarns, 160 cm square, ~750 GB if realized), procedural only,
+# from its close-up camera: about 40 minutes and 20 GB on 2 cores (README, "Scale"). Its tables build
+# and render estimate 19-20 GiB, over the default budget (75 % of the available memory): the row allows
+# HUGE_BUDGET MiB, 95 % of the memory available when make starts (a smaller machine still refuses)
+HUGE_SCENE ?= data/scenes/woven_huge.toml
+HUGE_ARGS ?= --width 320 --height 240 --spp 4 --cache 1024
+HUGE_OUT ?= out/huge
+HUGE_BUDGET ?= $(shell awk '/MemAvailable/ {print int($$2 / 1024 * 0.95)}' /proc/meminfo 2>/dev/null)
 TILING ?= data/tilings/damask.toml
 DAMASK_SCENE ?= data/scenes/draped_damask.toml
 # make demo stays under 10 minutes on an idle 2-core machine from a fresh clone (README: Status), so
@@ -61,7 +69,7 @@ help:
 	@echo "make demo-quick - the same at small sizes and reduced precomputes, a first look in a few minutes (out/quick)"
 	@echo "make test    - set up .venv if needed, run the test suite (make test-all: with the slow tests)"
 	@echo "make bench   - benchmarks -> bench/results/*.json and bench/results/summary.md"
-	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time, the 1,000-yarn close-up) -> out/table1/report.md"
+	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time, the 1,000- and 3,200-yarn close-ups; ~50 min, 20 GB) -> out/table1/report.md"
 	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
 	@echo "make agreement - fiberpath vs volpath on the demo and twill swatches, demo light and sweep lights"
 	@echo "make btf-sweep - seed 002 fitted textures of the damask's two satins against fiberpath (out/btf)"
@@ -266,10 +274,22 @@ $(LARGE_OUT)/close.exr: $(LARGE_OUT)/tables.zarr/zarr.json $(LARGE_CLOSE_SCENE)
 	$(LL) render $(LARGE_CLOSE_SCENE) --method volpath --source procedural --tables $(LARGE_OUT)/tables.zarr \
 	    $(LARGE_ARGS) -o $@
 
-table1: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(LARGE_OUT)/close.exr
-	$(LL) evaluate --table1 --scene $(SCENE) --scene $(LARGE_SCENE) \
+$(HUGE_OUT)/yarns.zarr/zarr.json: $(HUGE_SCENE) $(VENV)/.installed
+	$(LL) ingest $(HUGE_SCENE) -o $(HUGE_OUT)/yarns.zarr $(LARGE_INGEST_ARGS)
+
+$(HUGE_OUT)/tables.zarr/zarr.json: $(HUGE_OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
+	$(LL) tables $(HUGE_OUT)/yarns.zarr -o $(HUGE_OUT)/tables.zarr $(if $(HUGE_BUDGET),--budget $(HUGE_BUDGET))
+
+$(HUGE_OUT)/close.exr: $(HUGE_OUT)/tables.zarr/zarr.json $(HUGE_SCENE)
+	$(if $(HUGE_BUDGET),LOOMLIGHT_MEMORY_BUDGET=$(HUGE_BUDGET)) $(LL) render $(HUGE_SCENE) --method volpath \
+	    --source procedural --tables $(HUGE_OUT)/tables.zarr $(HUGE_ARGS) -o $@
+
+# HUGE_SCENE= leaves the 10x row out
+table1: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(LARGE_OUT)/close.exr \
+	    $(if $(HUGE_SCENE),$(HUGE_OUT)/close.exr)
+	$(LL) evaluate --table1 --scene $(SCENE) --scene $(LARGE_SCENE) $(if $(HUGE_SCENE),--scene $(HUGE_SCENE)) \
 	    --procedural $(OUT)/eval/volpath-procedural.exr --realized $(OUT)/eval/volpath-realized.exr \
-	    --unrealized $(LARGE_OUT)/close.exr -o out/table1
+	    --unrealized $(LARGE_OUT)/close.exr $(if $(HUGE_SCENE),--unrealized $(HUGE_OUT)/close.exr) -o out/table1
 	@echo "report: out/table1/report.md"
 
 sweep: $(OUT)/fibers.zarr/zarr.json

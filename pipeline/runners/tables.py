@@ -150,33 +150,68 @@ def tables_estimate(prep: Prepared, nbins: int, hair_mode: str, what: str = "loo
 
 
 def accel_estimate(art: Artifact, what: str) -> Estimate:
-    """Memory of loading a tables artifact: its stored arrays plus what derive_lookup_accel builds
-    (frame samples at the error-bounded step of every yarn, twice while resampled; the chord grid;
-    per-fibre, per-hair and fringe bounds), from the artifact's small per-yarn arrays."""
+    """Memory of loading a tables artifact: its stored arrays (curves included) plus what
+    derive_lookup_accel builds (``stages.core.yarn.accel``), counted from the artifact's curve and
+    per-yarn arrays without loading the tables: the frame samples of every yarn at its first-guess
+    step between its breakpoints (``frame_sample_count``, +10 % for a refinement round), the coarse
+    knots, the chord grid's cells and runs (cells as derive_lookup_accel sizes them, runs per yarn
+    length / cell x (2 r / cell + 1.2)^2 for r its extent), the fringe bits and the per-hair, per-fibre
+    and per-loop-bin bounds. Within 10-25 % of the measured peak on the 1,000-yarn cloth (README,
+    "Scale")."""
     from stages.core.yarn import model as M
     from stages.core.yarn.accel import frame_steps
     from stages.core.yarn.frame_samples import FRAME_COLS
-    from stages.core.yarn.tables import FO_ZBIN_EXTENTS
+    from stages.core.yarn.tables import FO_WORDS, FO_ZBIN_EXTENTS
 
     est = Estimate(what)
-    est.add("stored tables", 2 * art.nbytes(), art.path.name)
+    est.add("stored tables", art.nbytes(), art.path.name)
     tp, ytype = art["tparams"], art["yarn_type"]
-    length, ext, kap = art["yarn_length"], art["yarn_extent"], art["yarn_kappa"]
-    radius = art["curves/radius"][:len(ytype)]
+    length, ext, kap = (np.asarray(art[k], np.float64) for k in ("yarn_length", "yarn_extent", "yarn_kappa"))
+    Y = len(ytype)
+    if Y == 0:
+        return est
+    radius = np.asarray(art["curves/radius"][:Y], np.float64)
     step = frame_steps(kap, ext, radius, tp[ytype, M.FIBER_RADIUS])
-    # every spline knot and stored frame sample is a sample too (stages.core.yarn.frame_samples)
-    breaks = float(len(art["curves/points"]) + len(art["curves/frame_s"]))
-    samples = float(np.sum(length / step + 2)) + breaks
-    est.add("frame samples", 2 * (8 + 8 * FRAME_COLS) * samples, f"{int(samples)} samples")
-    pts = art["curves/points"]
-    if len(pts) and len(ext):
-        box = pts.max(0) - pts.min(0) + 2 * ext.max()
-        cells = float(min(1 << 23, np.prod(np.ceil(box / (0.5 * ext.max())))))
-        stride = max(1.0, 0.5 * float(ext.min()) / float(np.mean(step)))
-        est.add("chord grid", 8 * cells + 27 * 24 * samples / stride, f"{int(cells)} cells")
-        est.add("fringe and bounds", 64 * float(np.sum(length / (FO_ZBIN_EXTENTS * ext) + 1))
-                + 8 * len(art["fib_R"]) + 40 * len(art["hair_z1"]) + 24 * len(art["lz_start"]))
+    samples = 1.1 * frame_sample_count(art, step)
+    est.add("frame samples", (8 + 8 * FRAME_COLS) * samples, f"{int(samples):,} samples")
+    stride = max(1, int(0.5 * float(ext.min()) / float(np.mean(step))))
+    knots = samples / stride + 2 * Y
+    pts = np.asarray(art["curves/points"])
+    box = pts.max(0) - pts.min(0) + 2 * ext.max()
+    cell = 0.5 * float(ext.max())
+    while np.prod(np.ceil(box / cell)) > ACCEL_MAX_CELLS:
+        cell *= 1.25
+    cells = float(np.prod(np.ceil(box / cell)))
+    runs = float(np.sum((length / cell + 1) * (2 * ext / cell + 1.2) ** 2))
+    est.add("chord grid", 28 * cells + 12 * runs + 24 * knots, f"{int(cells):,} cells, ~{int(runs):,} runs")
+    zbins = float(np.sum(np.ceil(length / (FO_ZBIN_EXTENTS * ext)) + 1))
+    est.add("fringe and bounds", 8 * (2 * FO_WORDS + 3) * zbins + 16 * len(art["hair_z1"]) + 8 * len(art["fib_R"])
+            + 16 * len(art["lz_start"]), f"{int(zbins):,} fringe z-bins")
     return est
+
+
+ACCEL_MAX_CELLS = 1 << 23  # derive_lookup_accel's default max_cells
+
+
+def frame_sample_count(art: Artifact, step: np.ndarray) -> float:
+    """The frame samples ``stages.core.yarn.frame_samples.sample_all`` makes at ``step`` per yarn: per
+    yarn 1 + sum over the gaps between its breakpoints (spline knots, stored frame samples, both ends)
+    of max(1, ceil(gap / step)), from the artifact's curve arrays."""
+    off = np.asarray(art["curves/curve_offsets"], np.int64)
+    foff = np.asarray(art["curves/frame_offsets"], np.int64)
+    closed = np.asarray(art["curves/closed"]).astype(bool)
+    L = np.asarray(art["curves/curve_length"], np.float64)
+    arclen, frame_s = np.asarray(art["curves/seg_arclen"], np.float64), np.asarray(art["curves/frame_s"], np.float64)
+    total = 0.0
+    for c in range(len(step)):
+        nseg = off[c + 1] - off[c] - (0 if closed[c] else 1)
+        tol = 1e-12 * (1.0 + L[c])
+        s = np.concatenate([arclen[off[c]:off[c] + nseg], frame_s[foff[c]:foff[c + 1]], [L[c]]])
+        s = np.sort(s[(s >= -tol) & (s <= L[c] + tol)])
+        gaps = np.diff(s)
+        gaps = gaps[gaps > tol]
+        total += 1.0 + float(np.sum(np.maximum(1.0, np.ceil(gaps / step[c]))))
+    return total
 
 
 def check_options(preset, radius, nbins=None, spacing=None, budget=None):

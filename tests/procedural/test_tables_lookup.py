@@ -303,3 +303,28 @@ def test_cross_section_inspector(built, cli):
     assert (d / "xs.png").stat().st_size > 10_000
     code, out, err = cli("inspect", d / "tables.zarr", "--png", d / "xs2.png", "--z", "99")
     assert code == 2 and "--z" in err
+
+
+def test_accel_estimate_counts_what_loading_derives(built):
+    """The render's memory estimate of loading tables (runners.tables.accel_estimate) against the
+    arrays derive_lookup_accel makes: frame_sample_count equals sample_all's count at the same steps
+    exactly, and the estimate of the derived parts holds their bytes without exceeding them twice."""
+    from pipeline.artifacts import Artifact
+    from pipeline.runners.tables import accel_estimate, frame_sample_count
+    from stages.core.yarn.accel import frame_steps
+    from stages.core.yarn.frame_samples import sample_all
+
+    cv, tab, _ = load_tables(built / "tables.zarr")
+    art = Artifact(built / "tables.zarr", kind="tables")
+    Y = len(tab.yarn_type)
+    rf = tab.tparams[tab.yarn_type, M.FIBER_RADIUS]
+    for scale in (1.0, 0.2):  # the first-guess steps (breakpoints decide) and finer ones (steps decide)
+        step = scale * frame_steps(tab.yarn_kappa, tab.yarn_extent, cv.radius[:Y], rf)
+        off, _, _, _ = sample_all(cv, step, tab.yarn_extent)
+        assert frame_sample_count(art, step) == off[-1]
+    parts = {label: b for label, b, _ in accel_estimate(art, "test").parts}
+    derived = {"frame samples": ("fs_s", "fs_frame"), "chord grid": ("fg_yarn", "fg_a", "fg_b", "fg_start"),
+               "fringe and bounds": ("fo_bits", "hair_box")}
+    for label, fields in derived.items():
+        held = sum(getattr(tab, f).nbytes for f in fields)
+        assert held <= parts[label] <= 2.0 * held + 2**20, (label, held, parts[label])
