@@ -159,7 +159,7 @@ def accel_estimate(art: Artifact, what: str) -> Estimate:
     and per-loop-bin bounds. Within 10-25 % of the measured peak on the 1,000-yarn cloth (README,
     "Scale")."""
     from stages.core.yarn import model as M
-    from stages.core.yarn.accel import frame_steps
+    from stages.core.yarn.accel import chord_grid_cell, frame_steps
     from stages.core.yarn.frame_samples import FRAME_COLS
     from stages.core.yarn.tables import FO_WORDS, FO_ZBIN_EXTENTS
 
@@ -178,9 +178,7 @@ def accel_estimate(art: Artifact, what: str) -> Estimate:
     knots = samples / stride + 2 * Y
     pts = np.asarray(art["curves/points"])
     box = pts.max(0) - pts.min(0) + 2 * ext.max()
-    cell = 0.5 * float(ext.max())
-    while np.prod(np.ceil(box / cell)) > ACCEL_MAX_CELLS:
-        cell *= 1.25
+    cell = chord_grid_cell(box, float(ext.max()))
     cells = float(np.prod(np.ceil(box / cell)))
     runs = float(np.sum((length / cell + 1) * (2 * ext / cell + 1.2) ** 2))
     est.add("chord grid", 28 * cells + 12 * runs + 24 * knots, f"{int(cells):,} cells, ~{int(runs):,} runs")
@@ -190,28 +188,16 @@ def accel_estimate(art: Artifact, what: str) -> Estimate:
     return est
 
 
-ACCEL_MAX_CELLS = 1 << 23  # derive_lookup_accel's default max_cells
-
-
 def frame_sample_count(art: Artifact, step: np.ndarray) -> float:
-    """The frame samples ``stages.core.yarn.frame_samples.sample_all`` makes at ``step`` per yarn: per
-    yarn 1 + sum over the gaps between its breakpoints (spline knots, stored frame samples, both ends)
-    of max(1, ceil(gap / step)), from the artifact's curve arrays."""
-    off = np.asarray(art["curves/curve_offsets"], np.int64)
-    foff = np.asarray(art["curves/frame_offsets"], np.int64)
-    closed = np.asarray(art["curves/closed"]).astype(bool)
-    L = np.asarray(art["curves/curve_length"], np.float64)
-    arclen, frame_s = np.asarray(art["curves/seg_arclen"], np.float64), np.asarray(art["curves/frame_s"], np.float64)
-    total = 0.0
-    for c in range(len(step)):
-        nseg = off[c + 1] - off[c] - (0 if closed[c] else 1)
-        tol = 1e-12 * (1.0 + L[c])
-        s = np.concatenate([arclen[off[c]:off[c] + nseg], frame_s[foff[c]:foff[c + 1]], [L[c]]])
-        s = np.sort(s[(s >= -tol) & (s <= L[c] + tol)])
-        gaps = np.diff(s)
-        gaps = gaps[gaps > tol]
-        total += 1.0 + float(np.sum(np.maximum(1.0, np.ceil(gaps / step[c]))))
-    return total
+    """The frame samples ``stages.core.yarn.frame_samples.sample_all`` makes at ``step`` per yarn
+    (``sample_counts``), from the artifact's curve arrays alone."""
+    from stages.core.yarn.frame_samples import sample_counts
+
+    get = lambda name, dtype: np.ascontiguousarray(art[f"curves/{name}"], dtype)  # noqa: E731
+    counts = sample_counts(get("curve_offsets", np.int64), get("closed", np.bool_), get("seg_arclen", np.float64),
+                           get("frame_offsets", np.int64), get("frame_s", np.float64),
+                           get("curve_length", np.float64), np.ascontiguousarray(step, np.float64))
+    return float(counts.sum())
 
 
 def check_options(preset, radius, nbins=None, spacing=None, budget=None):

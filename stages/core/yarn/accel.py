@@ -249,7 +249,20 @@ def frame_steps(kappa, extent, radius, fiber_radius, tolerance: float = FRAME_TO
     return np.maximum(np.minimum(0.5 * radius, step), 1e-3 * radius)
 
 
-def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max_cells: int = 1 << 23) -> Tables:
+CHORD_GRID_MAX_CELLS = 1 << 23  # derive_lookup_accel's chord grid grows its cell to stay under this
+
+
+def chord_grid_cell(box, max_extent: float, max_cells: int = CHORD_GRID_MAX_CELLS) -> float:
+    """The chord grid's cell over a box of size ``box`` (3,): half the largest yarn extent, grown by
+    1.25 until the grid has at most max_cells cells."""
+    cell = 0.5 * float(max_extent)
+    while np.prod(np.ceil(np.asarray(box) / cell)) > max_cells:
+        cell *= 1.25
+    return cell
+
+
+def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE,
+                        max_cells: int = CHORD_GRID_MAX_CELLS) -> Tables:
     """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
     eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
     measured error, <= 3 rounds; the error is fourth order in the step), coarse knots about half
@@ -279,9 +292,7 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE, max
     stride = max(1, int(0.5 * float(ext.min()) / mean_step))
     kn_off, kn_idx, kn_sag = coarse_knots(fs_s, fs_fr, fs_off, stride)
     lo, hi = fs_fr[:, :3].min(0) - ext.max(), fs_fr[:, :3].max(0) + ext.max()
-    cell = 0.5 * float(ext.max())
-    while np.prod(np.ceil((hi - lo) / cell)) > max_cells:
-        cell *= 1.25
+    cell = chord_grid_cell(hi - lo, float(ext.max()), max_cells)
     glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
     ply_rr, fib_v, lz_rr = scan_bounds(tab)
     hair_box = hair_boxes(tab.hair_z1, tab.hair_ze, tab.hair_r0, tab.hair_r1)

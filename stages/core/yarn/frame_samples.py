@@ -53,20 +53,26 @@ FRAME_COLS = 17
 def _breakpoints(cv, c):
     """Sorted distinct arc lengths of yarn c where the frame may be only C0 in its derivative: the
     spline knots, the stored RMF samples (double reflection restarts there) and both ends."""
-    lo = cv.offsets[c]
-    nseg = cv.offsets[c + 1] - lo - (0 if cv.closed[c] else 1)
-    f0 = cv.frame_offsets[c]
-    f1 = cv.frame_offsets[c + 1]
+    return breakpoints_of(cv.offsets, cv.closed, cv.seg_arclen, cv.frame_offsets, cv.frame_s, cv.curve_length, c)
+
+
+@njit(cache=True)
+def breakpoints_of(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, c):
+    """_breakpoints from the curve arrays it reads (Curves' fields of those names)."""
+    lo = offsets[c]
+    nseg = offsets[c + 1] - lo - (0 if closed[c] else 1)
+    f0 = frame_offsets[c]
+    f1 = frame_offsets[c + 1]
     raw = np.empty(nseg + (f1 - f0) + 1)
     for i in range(nseg):
-        raw[i] = cv.seg_arclen[lo + i]
+        raw[i] = seg_arclen[lo + i]
     for i in range(f0, f1):
-        raw[nseg + i - f0] = cv.frame_s[i]
-    raw[-1] = cv.curve_length[c]
+        raw[nseg + i - f0] = frame_s[i]
+    raw[-1] = curve_length[c]
     raw = np.sort(raw)
     out = np.empty(raw.shape[0])
     n = 0
-    L = cv.curve_length[c]
+    L = curve_length[c]
     tol = 1e-12 * (1.0 + L)
     for v in raw:
         if v < -tol or v > L + tol:
@@ -75,6 +81,18 @@ def _breakpoints(cv, c):
             out[n] = min(max(v, 0.0), L)
             n += 1
     return out[:n]
+
+
+@njit(cache=True, parallel=True)
+def sample_counts(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, deltas):
+    """The number of frame samples sample_all makes per yarn at steps ``deltas``, from the curve arrays
+    alone (a memory estimate reads them without loading the curves)."""
+    Y = deltas.shape[0]
+    counts = np.zeros(Y, np.int64)
+    for c in prange(Y):
+        counts[c] = _n_samples(breakpoints_of(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, c),
+                               deltas[c])
+    return counts
 
 
 @njit(cache=True)
