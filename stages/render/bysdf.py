@@ -288,7 +288,8 @@ def trace_path(it, o, d, seed, key):
                 if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                     continue
                 pf = lambert_pdf(it.ground_albedo, gn, wi, wlk)
-                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], -1, -1)
+                # nothing to skip, typed as a yarn hit's (yarn, segment) so visible compiles once
+                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1))
                 rays += nr
                 if not vis:
                     continue

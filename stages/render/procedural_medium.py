@@ -43,7 +43,7 @@ ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
 @njit(cache=True, _nrt=False)
 def procedural_lookup(med, x, y, z, skip=-1):
-    r = lookup_point(med.cv, med.tab, x, y, z, skip)
+    r = lookup_point(med.cv, med.tab, x, y, z, np.int64(skip))  # a literal skip would compile it again
     if not r.inside:
         return NO_MEDIUM
     rough = med.tab.tparams[med.tab.yarn_type[r.yarn], ROUGHNESS]
@@ -163,8 +163,9 @@ def capsule_box(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
         box = boxes[c]
         box[:3] = np.inf
         box[3:] = -np.inf
-        _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, BOX, box, dummy_mu, dummy3, dummy3,
-                   0.0, dummy_res)
+        # c and mode typed as capsule_majorants passes them, so _walk_yarn compiles once
+        _walk_yarn(cv, tab, np.int64(c), step_frac, hair_samples, loop_step_fibers, np.int64(BOX), box, dummy_mu,
+                   dummy3, dummy3, 0.0, dummy_res)
     rmax = boxes[:, 6].max()
     lo = np.empty(3)
     hi = np.empty(3)
@@ -191,7 +192,7 @@ def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16,
     for w in prange(T):
         grid = mu if w == 0 else extra[w - 1]
         for c in range(w, Y, T):
-            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, RASTER, box, grid, lo, cs,
+            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, np.int64(RASTER), box, grid, lo, cs,
                        half_diag, res)
     for w in range(T - 1):
         for iz in prange(res[2]):

@@ -269,7 +269,7 @@ def _regular_test(cv, tab, vis, k, j, fi, reach):
     """(covered, kind, tangent) of regular fibre j of ply k (fi its global index) at the visit's point:
     cross-section reach test at s, Gauss-Newton under the sampled frames, exact frames within eps_c
     of the surface."""
-    fib = RegularFibre(k, j, tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi])
+    fib = RegularFibre(k, np.int64(j), tab.fib_R[fi], tab.fib_th[fi], tab.fib_th0[fi])  # one typing for both callers
     X, Y, kind = fibre_xy(vis.tp, vis.yseed, fib, vis.s)
     dx = vis.x - X
     dy = vis.y - Y
@@ -340,7 +340,7 @@ def lookup_point(cv, tab, px, py, pz, skip=-1):
     while q < qe:
         c = tab.fg_yarn[q]
         best = 1e300
-        bq = -1
+        bq = np.int64(-1)  # not a literal: _seam_visits gets one typing
         bt = 0.0
         while q < qe and tab.fg_yarn[q] == c:  # every run of yarn c in the cell
             for ch in range(tab.fg_a[q], tab.fg_b[q]):
@@ -451,7 +451,8 @@ def lookup_points(cv, tab, pts):
     density = np.zeros(N)
     albedo = np.zeros((N, 3))
     for i in prange(N):
-        r = lookup_point(cv, tab, pts[i, 0], pts[i, 1], pts[i, 2])
+        # skip typed as volpath passes it (not a literal): lookup_point compiles once for both
+        r = lookup_point(cv, tab, pts[i, 0], pts[i, 1], pts[i, 2], np.int64(-1))
         inside[i] = r.inside
         yarn[i] = r.yarn
         kind[i] = r.kind
