@@ -82,9 +82,7 @@ def periodic_hit(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_dist):
     L = slab_length(oz, dz, z_lo, z_hi, max_dist)
     if L <= 0.0:
         return PeriodicHit(np.inf, -1, -1, -1, ox, oy, oz, 0.0, 0.0, 0.0, ox, oy, oz)
-    # the ignore arguments typed as the shell traversal passes them (no literals): one compile for both
-    t, w, _k, _i, _j, fx, fy, fz = flat_segment_hit(sc, ox, oy, oz, dx, dy, dz, L, np.int64(ign_fiber), np.int64(0),
-                                                    np.int64(1 << 30))
+    t, w, _k, _i, _j, fx, fy, fz = flat_segment_hit(sc, ox, oy, oz, dx, dy, dz, L, ign_fiber, 0, 1 << 30)
     if w < 0:
         return PeriodicHit(np.inf, -1, -1, -1, ox, oy, oz, 0.0, 0.0, 0.0, ox, oy, oz)
     a = sc.seg_a[w]
@@ -108,7 +106,7 @@ def periodic_occluded(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_dis
     L = slab_length(oz, dz, z_lo, z_hi, max_dist)
     if L <= 0.0:
         return False
-    return flat_segment_occluded(sc, ox, oy, oz, dx, dy, dz, L, np.int64(ign_fiber), np.int64(0), np.int64(1 << 30))
+    return flat_segment_occluded(sc, ox, oy, oz, dx, dy, dz, L, ign_fiber, 0, 1 << 30)
 
 
 @njit(cache=True)

@@ -328,3 +328,21 @@ def test_accel_estimate_counts_what_loading_derives(built):
     for label, fields in derived.items():
         held = sum(getattr(tab, f).nbytes for f in fields)
         assert held <= parts[label] <= 2.0 * held + 2**20, (label, held, parts[label])
+
+
+def test_lookups_compile_once_for_every_caller(built):
+    """lookup_point is the costliest kernel to compile (about a minute): the batch lookups and volpath's
+    medium (with and without a fibre to skip) must call it with one typing, or every process compiles it
+    again (a literal -1 for ``skip`` once did that)."""
+    from stages.core.yarn.lookup import lookup_point
+    from stages.render.procedural_medium import ProceduralMedium, procedural_lookup
+
+    cv, tab, _ = load_tables(built / "tables.zarr")
+    pts = np.random.default_rng(8).uniform([-0.3, -0.2, -0.05], [0.3, 0.2, 0.05], (500, 3))
+    r = lookup_points(cv, tab, pts)
+    med = ProceduralMedium(cv, tab)
+    for i in np.nonzero(r.inside)[0][:20]:
+        x, y, z = pts[i]
+        assert procedural_lookup(med, x, y, z).den == r.density[i]
+        assert procedural_lookup(med, x, y, z, -1).den == r.density[i]
+    assert len(lookup_point.signatures) == 1, lookup_point.signatures

@@ -408,14 +408,16 @@ def test_procedural_majorant_covers_every_fibre(small):
 
 def test_procedural_majorant_does_not_depend_on_workers(small):
     """The capsules are walked, not listed, and rastered into one grid per worker merged by maximum:
-    1 or 3 workers give the grid procedural_source built, bit for bit."""
+    1 or 3 workers give the grid procedural_source built, bit for bit. The box walk and the raster walk
+    share one compiled walk (one typing of _walk_yarn)."""
     from pipeline.renderers.volpath import MAJORANT_STEP, procedural_source
-    from stages.render.procedural_medium import capsule_majorants
+    from stages.render.procedural_medium import _walk_yarn, capsule_majorants
 
     med, maj, _, _ = procedural_source(str(small / "t.zarr"))
     for workers in (1, 3):
         mu = capsule_majorants(med.cv, med.tab, MAJORANT_STEP, maj.lo, maj.hi, maj.res, workers)
         assert np.array_equal(mu, maj.mu)
+    assert len(_walk_yarn.signatures) == 1, _walk_yarn.signatures
 
 
 def test_majorant_cells_follow_a_flat_cloth():

@@ -382,8 +382,7 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
 @njit(cache=True)
 def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
     """Primary rays (origin outside the shell): the ``ShellHit`` of shell_trace from t = 0."""
-    none = np.int64(-1)  # not literals: shell_trace compiles once for primary and secondary rays
-    return shell_trace(sc, none, ox, oy, oz, dx, dy, dz, 0.0, tmax, none, none, np.int64(0))
+    return shell_trace(sc, -1, ox, oy, oz, dx, dy, dz, 0.0, tmax, -1, -1, 0)
 
 
 @njit(cache=True, parallel=True)
