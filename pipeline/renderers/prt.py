@@ -63,7 +63,7 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
 
     from ..artifacts import input_identity
     from ..progress import warn
-    from ..runners.precompute import SVF_RAY_START, tiling_materials
+    from ..runners.precompute import IIRTF_FIRST_RAY, SVF_RAY_START, tiling_materials
     from ..runners.tile import load_tiling
 
     sc, art = load_tiling(tiling_path)
@@ -74,6 +74,9 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
         warn(f"{svf_path}: an SVF made before 2026-12-02, its rays from the segments' midpoints, which shadows "
              "light the segments' surfaces receive (single scattering ~5-10 % darker); run loomlight precompute "
              "svf again")
+    if (ii.meta.get("params") or {}).get("first_ray") != IIRTF_FIRST_RAY:
+        warn(f"{iirtf_path}: an IIRTF made before 2026-12-02, whose paths passed through the fibres containing "
+             "a segment's midpoint (multiple scattering ~10-20 % darker); run loomlight precompute iirtf again")
     from stages.render.prt import MAX_SH_ORDER
 
     if not 0 <= int(ii.summary["order"]) <= MAX_SH_ORDER:

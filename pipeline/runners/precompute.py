@@ -38,6 +38,7 @@ MIN_RESOLUTION = 8
 
 # ------------------------------------------------------------------------------------------------ parameters
 SVF_RAY_START = "segment surface"  # the SVF's rays leave from the segment's side facing them
+IIRTF_FIRST_RAY = "meets containing capsules"  # the IIRTF's first ray stops at a fibre containing the midpoint
 
 
 @dataclass(frozen=True)
@@ -418,7 +419,9 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     ks = pick_exemplars(art, exemplars, tiling)
     scene_path, sc_obj = materials_scene(tiling, art, scene)
     mof, mats = tiling_materials(sc_obj, art, p.material)
-    w = ArtifactWriter(out, kind="iirtf", stage="precompute iirtf", params={**asdict(p), "exemplars": ks},
+    # first_ray: how the paths leave a segment's midpoint (stages.precompute.periodic, "Rays from a segment")
+    w = ArtifactWriter(out, kind="iirtf", stage="precompute iirtf",
+                       params={**asdict(p), "exemplars": ks, "first_ray": IIRTF_FIRST_RAY},
                        inputs={"tiling": (tiling, "tiling"), "scene": (scene_path, FILE)}, started=t_start)
     if not force and w.up_to_date():
         return {"skipped": True}

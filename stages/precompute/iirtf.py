@@ -36,9 +36,10 @@ entry sqrt((sum x^2 - (sum x)^2 / N) / (N (N - 1))) (stored beside a_C). Two est
   and the BCSDF-sampled continuation when it escapes upwards, combined by the power heuristic. Same
   expectation; far less variance for sharp lobes (a 1-degree R lobe is rarely met by a uniform w0).
 
-T^ is one path-traced sample: the ray from mu_k along w1 passes through the capsules that contain mu_k
-(``stages.precompute.periodic.periodic_hit_outside``) and skips k's whole fibre (the BCSDF integrates
-over the fibre's cross-section, ``stages.core.shading.bcsdf`` "Measure"); no fibre hit before it
+T^ is one path-traced sample: the ray from mu_k along w1 (``stages.precompute.periodic.periodic_hit``)
+skips k's whole fibre (the BCSDF integrates over the fibre's cross-section, ``stages.core.shading.bcsdf``
+"Measure") and meets a capsule that contains mu_k at its way out, as fiberpath's rays meet a capsule
+they start in (module doc of ``stages.precompute.periodic``, "Rays from a segment"); no fibre hit before it
 leaves the slab: T^ = 0. At each fibre vertex y (wi = the direction back towards the previous vertex)
 next-event estimation to the light -- the only estimator of a delta light -- adds
 throughput * (S cos)(wi, w0) if the shadow ray from y along w0 (skipping y's fibre) leaves the slab
@@ -109,8 +110,7 @@ from stages.core.rng import uniform
 from stages.core.sh import sh_eval
 from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_prepare,
                                           material_sample)
-from stages.precompute.periodic import (periodic_hit, periodic_hit_outside, periodic_occluded, periodic_scene,
-                                        periodic_vertex)
+from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_scene, periodic_vertex
 
 MAX_ORDER = 8
 TWO_PI = 2.0 * math.pi
@@ -241,7 +241,7 @@ def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ig
     for ch in range(3):
         for j in range(J):
             u[ch, j] = 0.0
-    h = periodic_hit_outside(sc, z_lo, z_hi, ox, oy, oz, w1[0], w1[1], w1[2], ign0, max_dist)
+    h = periodic_hit(sc, z_lo, z_hi, ox, oy, oz, w1[0], w1[1], w1[2], ign0, max_dist)
     rays = 1
     if math.isinf(h.t):
         return rays

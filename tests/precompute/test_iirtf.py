@@ -20,7 +20,7 @@ from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_
                                           pack_material_bcsdf, pack_material_lambert)
 from stages.precompute.iirtf import (build_cells, cell_box, cells_per_side, exemplar_slabs, iirtf_chunk,
                                      iirtf_reconstruct, mean_free_path)
-from stages.precompute.periodic import periodic_hit, periodic_hit_outside, periodic_scene, slab_length
+from stages.precompute.periodic import periodic_hit, periodic_scene, slab_length
 
 MAX_DEPTH = 8  # kept short so the independent estimator (no roulette) stays cheap; both use the same
 
@@ -184,7 +184,7 @@ def _independent_T(sc, z_lo, z_hi, mof, mats, mids, fibres, w0s, w1s, U, max_dis
     wi = np.empty(3)
     wo = np.empty(3)
     for s in range(mids.shape[0]):
-        h = periodic_hit_outside(sc, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], w1s[s, 0], w1s[s, 1], w1s[s, 2],
+        h = periodic_hit(sc, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], w1s[s, 0], w1s[s, 1], w1s[s, 2],
                          fibres[s], max_dist)
         tp = np.ones(3)
         acc = np.zeros(3)
@@ -343,8 +343,8 @@ def test_albedo_order_and_the_non_absorbing_bound(tiny):
     g /= np.linalg.norm(g, axis=1, keepdims=True)
     s = segs[np.arange(m) % len(segs)]
     psc = periodic_scene(sc, k)
-    esc = np.array([math.isinf(periodic_hit_outside(psc, slabs[k, 0], slabs[k, 1], *cells.seg_mid[q], *d,
-                                            int(cells.seg_fibre[q]), 20.0 * W).t) for q, d in zip(s, g)], float)
+    esc = np.array([math.isinf(periodic_hit(psc, slabs[k, 0], slabs[k, 1], *cells.seg_mid[q], *d,
+                                    int(cells.seg_fibre[q]), 20.0 * W).t) for q, d in zip(s, g)], float)
     e, se_e = esc.mean(), esc.std(ddof=1) / math.sqrt(m)
     assert a00[i, 0] <= 1.0 - e + 4.0 * math.hypot(res.se[i, 0, 0, 0], se_e), (a00[i], e)
     white = pack_material_lambert([1.0, 1.0, 1.0])[None]

@@ -493,3 +493,21 @@ def test_svf_from_the_midpoint_is_named(swatch, monkeypatch):
     monkeypatch.setattr(pipeline.runners.precompute, "SVF_RAY_START", "another start")
     swatch.render(scene, *small)
     assert [m for m in said if str(swatch.svf) in m and "precompute svf" in m], said
+
+
+def test_iirtf_passing_through_containing_fibres_is_named(swatch, monkeypatch):
+    """Contract: an IIRTF made while its first rays passed through the fibres containing a segment's
+    midpoint (no ``first_ray`` of this loomlight in its params) still renders, with a warning that names
+    it and says what to run; this module's own IIRTF gets none."""
+    import pipeline.progress
+    import pipeline.runners.precompute
+
+    said = []
+    monkeypatch.setattr(pipeline.progress, "warn", said.append)
+    scene = swatch.scene(DIRECTIONAL.format(d=LIGHT_1))
+    small = ["--spp", "1", "--width", "8", "--height", "6", *swatch.prt_args()]
+    swatch.render(scene, *small)
+    assert not [m for m in said if "precompute iirtf" in m]
+    monkeypatch.setattr(pipeline.runners.precompute, "IIRTF_FIRST_RAY", "another rule")
+    swatch.render(scene, *small)
+    assert [m for m in said if str(swatch.iirtf) in m and "precompute iirtf" in m], said
