@@ -477,10 +477,15 @@ def test_bad_input_exit_2_nothing_written(swatch):
     assert _digest(keep) == before
 
 
-def test_svf_from_the_midpoint_is_named(swatch, monkeypatch):
-    """Contract: an SVF artifact made before its rays started on the segments' surfaces (no ``ray_start``
-    of this loomlight in its params) still renders, with a warning that names it and says what to run;
-    this module's own SVF gets none."""
+@pytest.mark.parametrize("constant, artifact, command", [
+    ("SVF_RAY_START", "svf", "precompute svf"),       # rays from the segments' midpoints (before 2026-12-02)
+    ("IIRTF_FIRST_RAY", "iirtf", "precompute iirtf"),  # first rays through the fibres containing a midpoint
+])
+def test_precompute_made_by_an_older_rule_is_named(swatch, monkeypatch, constant, artifact, command):
+    """Contract: an SVF whose rays started at the segments' midpoints (no ``ray_start`` of this loomlight
+    in its params), or an IIRTF whose first rays passed through the fibres containing a midpoint (no
+    ``first_ray``), still renders, with a warning that names it and says what to run; this module's own
+    precomputes get none."""
     import pipeline.progress
     import pipeline.runners.precompute
 
@@ -489,25 +494,7 @@ def test_svf_from_the_midpoint_is_named(swatch, monkeypatch):
     scene = swatch.scene(DIRECTIONAL.format(d=LIGHT_1))
     small = ["--spp", "1", "--width", "8", "--height", "6", *swatch.prt_args()]
     swatch.render(scene, *small)
-    assert not [m for m in said if "precompute svf" in m]
-    monkeypatch.setattr(pipeline.runners.precompute, "SVF_RAY_START", "another start")
+    assert not [m for m in said if command in m]
+    monkeypatch.setattr(pipeline.runners.precompute, constant, "another rule")
     swatch.render(scene, *small)
-    assert [m for m in said if str(swatch.svf) in m and "precompute svf" in m], said
-
-
-def test_iirtf_passing_through_containing_fibres_is_named(swatch, monkeypatch):
-    """Contract: an IIRTF made while its first rays passed through the fibres containing a segment's
-    midpoint (no ``first_ray`` of this loomlight in its params) still renders, with a warning that names
-    it and says what to run; this module's own IIRTF gets none."""
-    import pipeline.progress
-    import pipeline.runners.precompute
-
-    said = []
-    monkeypatch.setattr(pipeline.progress, "warn", said.append)
-    scene = swatch.scene(DIRECTIONAL.format(d=LIGHT_1))
-    small = ["--spp", "1", "--width", "8", "--height", "6", *swatch.prt_args()]
-    swatch.render(scene, *small)
-    assert not [m for m in said if "precompute iirtf" in m]
-    monkeypatch.setattr(pipeline.runners.precompute, "IIRTF_FIRST_RAY", "another rule")
-    swatch.render(scene, *small)
-    assert [m for m in said if str(swatch.iirtf) in m and "precompute iirtf" in m], said
+    assert [m for m in said if str(getattr(swatch, artifact)) in m and command in m], said
