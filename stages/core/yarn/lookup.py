@@ -104,7 +104,7 @@ def _order_key(k, is_hair, j):
 
 
 @njit(cache=True, _nrt=False)
-def yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key=-1):
+def yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key):
     """Steps 2-4 of Algorithm 1 in yarn c, p's foot point at arc length s (frame-sample step i):
     a ``KeyedLookup`` (lookup_point's answer and the order key of the covering fibre), the fibre of
     order key ``skip_key`` (-1: none) counting as empty."""
