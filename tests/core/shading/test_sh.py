@@ -135,6 +135,32 @@ def test_rotation_of_a_direction_kernel():
         np.testing.assert_allclose(D @ yv, yr, atol=1e-12)
 
 
+@pytest.mark.parametrize("L", [0, 1, 4, 8, 16])
+def test_rotate_rows_equals_the_rotation_matrix(L):
+    """Reference: D(R) @ c of ``sh_rotation`` (itself checked against projection above) for random
+    rotations (1e-12) and for rotations at and near the Euler angles' poles, b = 0 and pi (1e-7, the
+    documented 1e-8 per entry); a table of a higher order serves a lower one."""
+    n = sh.sh_count(L)
+    X = sh.quarter_turn_x(L)
+    X16 = sh.quarter_turn_x(16)
+    rng = np.random.default_rng(L)
+    D = np.empty((n, n))
+
+    def rz(t):
+        return Rotation.from_euler("z", t).as_matrix()
+
+    poles = [rz(0.3) @ Rotation.from_euler("y", b).as_matrix() @ rz(1.1)
+             for b in (0.0, math.pi, 1e-9, math.pi - 1e-9, 3e-8, 1e-6)]
+    for R, tol in [(R, 1e-12) for R in _rotations(8, 40 + L)] + [(R, 1e-7) for R in poles]:
+        R = np.ascontiguousarray(R)
+        sh.sh_rotation(L, R, D)
+        C = rng.normal(size=(3, n))
+        for table in (X, X16):
+            out = np.empty((3, n))
+            sh.sh_rotate_rows(L, R, table, C, out)
+            assert np.abs(out - C @ D.T).max() <= tol * max(1.0, np.abs(C).max())
+
+
 def test_blockwise_rotate_equals_matrix_product():
     """Reference: numpy's D @ c (sh_rotate applies only the diagonal blocks, also of a larger D)."""
     D = np.empty((sh.sh_count(8), sh.sh_count(8)))
