@@ -154,8 +154,9 @@ METHODS = {m.name: m for m in (
         settings=(Setting("svf", "the svf artifact (loomlight precompute svf)"),
                   Setting("iirtf", "the iirtf artifact (loomlight precompute iirtf)"),
                   Setting("tiling", "a tiling artifact (same as --fibers TILING.zarr)"),
-                  Setting("terms", "all (default), single or multi: which scattering terms to render",
-                          ("all", "single", "multi")),
+                  Setting("terms", "all (default), single or multi: which scattering terms to render; hits: "
+                                   "none (fibre hits left black: times the eye rays' walk alone)",
+                          ("all", "single", "multi", "hits")),
                   Setting("sg", "mc (default): SG lights sampled into directions (the paper's CPU version); "
                                 "analytic: §5.2.2's Gamma with sum-of-SGs / erf-SSDF visibility", ("mc", "analytic")),
                   Setting("sigma_glo", "std. dev. of the Gaussian filtering multiple scattering's global "

@@ -7,7 +7,8 @@ input identity equals the tiling's) and cover every exemplar its block map uses,
 materials must be the ones the scene gives the tiling now (the yarn BCSDFs and colours), since single
 scattering shades with them and multiple scattering was precomputed with them.
 
-Settings (``--set``): ``terms`` all (default) | single | multi; ``sg`` mc (default: SG lights sampled into
+Settings (``--set``): ``terms`` all (default) | single | multi | hits (fibre hits left black: the eye rays
+walk to their first fibre hit and no more, which times the walk every prt sample pays); ``sg`` mc (default: SG lights sampled into
 directions, the paper's CPU version) | analytic (§5.2.2's Gamma, sum of SGs and erf-smoothed SSDF);
 ``sigma_glo`` the standard deviation of the Gaussian that filters the global visibility of multiple
 scattering, in flat-fabric units (default: the tiling's exemplar thickness, the depth over which light
@@ -23,7 +24,7 @@ import numpy as np
 from ..errors import LoomError
 from . import RenderResult
 
-TERMS = {"all": 3, "single": 1, "multi": 2}
+TERMS = {"all": 3, "single": 1, "multi": 2, "hits": 0}
 SG_MODES = {"mc": 0, "analytic": 1}
 
 
@@ -140,6 +141,7 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
 
 def film_setup(scene, options: dict):
     """The ``FilmSetup`` of a prt render (``pipeline.renderers.film``): integrator, camera, label."""
+    from stages.core.sh import quarter_turn_x
     from stages.core.shading.material import pack_material_lambert
     from stages.render.film import VARIANCE_CHANNELS
     from stages.render.prt import PrtIntegrator
@@ -172,7 +174,8 @@ def film_setup(scene, options: dict):
     integ = PrtIntegrator(sc, arr["top"], arr["mat_of_fiber"], arr["mats"], lights.table(), ground, has_ground,
                           pack_material_lambert(ground[1:4]), arr["svf_row"], arr["svf_mean"], arr["svf_basis"],
                           arr["svf_coeffs"], arr["svf_res"], arr["sg_angle"], arr["sg_weights"], arr["lam_svf"],
-                          arr["seg_row"], arr["transfer"], arr["order"], arr["cs_table"], arr["mat_cs"],
+                          arr["seg_row"], arr["transfer"], arr["order"], quarter_turn_x(arr["order"]),
+                          arr["cs_table"], arr["mat_cs"],
                           flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]))
     stats = {"load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"),
              "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"])}

@@ -37,7 +37,8 @@ over error maps, each titled with its mean-intensity ratios to fiberpath), DIR/s
 ``loomlight study prt-terms SWEEP.toml --sweep-dir D -o DIR`` (``run_terms``): which term of prt holds a
 sweep's error. From the sweep's methods ``fiberpath`` and ``prt`` it derives DIR/terms_sweep.toml with
 ``fiberpath_single`` (the same render, ``max_depth = 1``: direct light only, i.e. single scattering),
-``prt_single`` (``--set terms=single``) and ``prt_multi`` (``--set terms=multi``), renders it through the
+``prt_single`` (``--set terms=single``), ``prt_multi`` (``--set terms=multi``) and ``prt_hits`` (``--set
+terms=hits``: eye rays only, whose time bounds prt's speed-up at equal spp), renders it through the
 sweep machinery (``pipeline.runners.sweep``, its report in DIR/report.md compares prt_single with
 fiberpath_single), then reads the full renders' mean intensities from D/sweep.json and writes
 DIR/terms.json and DIR/attribution.md/.html: per configuration the ratios prt/fiberpath,
@@ -568,7 +569,9 @@ def run_terms(sweep_path: str | Path, sweep_dir: str | Path, out_dir: str | Path
                        {"name": f"{prt}_single", "method": pm_.method, "render": dict(pm_.render),
                         "args": [*pargs, "--set", "terms=single"]},
                        {"name": f"{prt}_multi", "method": pm_.method, "render": dict(pm_.render),
-                        "args": [*pargs, "--set", "terms=multi"]}]}
+                        "args": [*pargs, "--set", "terms=multi"]},
+                       {"name": f"{prt}_hits", "method": pm_.method, "render": dict(pm_.render),
+                        "args": [*pargs, "--set", "terms=hits"]}]}
     for k in ("grid", "configurations"):
         if k in raw:
             doc[k] = raw[k]
@@ -598,13 +601,16 @@ def run_terms(sweep_path: str | Path, sweep_dir: str | Path, out_dir: str | Path
                      "multi_share": float(np.sum(fp - fp1) / max(float(np.sum(fp)), 1e-300)),
                      "both_terms": (ps + pm - p).tolist(),
                      "time_s": {reference: tf.get(reference), prt: tf.get(prt), f"{reference}_single": t.get(f"{reference}_single"),
-                                f"{prt}_single": t.get(f"{prt}_single"), f"{prt}_multi": t.get(f"{prt}_multi")}})
+                                f"{prt}_single": t.get(f"{prt}_single"), f"{prt}_multi": t.get(f"{prt}_multi"),
+                                f"{prt}_hits": t.get(f"{prt}_hits")}})
     if not rows:
         raise LoomError(sweep_dir, "sweep.json", "no configuration has all five renders")
     summary = attribute(*(np.array(arrs[k]) for k in ("fp", "fp1", "prt", "ps", "pm")))
     summary["configurations"] = len(rows)
     mean_t = lambda k: float(np.mean([r["time_s"][k] for r in rows if r["time_s"].get(k) is not None] or [np.nan]))
-    summary["time_per_image_s"] = {k: mean_t(k) for k in rows[0]["time_s"]}
+    summary["time_per_image_s"] = tpi = {k: mean_t(k) for k in rows[0]["time_s"]}
+    summary["speedup"] = tpi[reference] / tpi[prt]
+    summary["speedup_bound"] = tpi[reference] / tpi[f"{prt}_hits"]   # nan where a time is missing
 
     rep = rp.Report(f"Which term holds prt back: {sweep.name}")
     rep.paragraph(f"Sweep {sweep.path} (full renders in {sweep_dir}); term renders in {out}/renders. Single "
@@ -628,7 +634,11 @@ def run_terms(sweep_path: str | Path, sweep_dir: str | Path, out_dir: str | Path
                       f"taken as prt - prt_single: light that both term renders carry (misses that see the light, "
                       f"the ground; mean {s['both_terms_mean']:.3g}) cancels there. Multiple scattering is "
                       f"{s['multi_share_reference']:.0%} of fiberpath's light.")
-    rep.table(["render", "time per image"], [[k, rp.fmt_seconds(v)] for k, v in summary["time_per_image_s"].items()])
+    rep.table(["render", "time per image"], [[k, rp.fmt_seconds(v)] for k, v in summary["time_per_image_s"].items()],
+              caption=f"{prt}_hits (--set terms=hits) walks the eye rays to their first fibre hit and shades nothing: "
+                      f"every {prt} sample pays that walk, so at equal spp {prt} cannot be more than "
+                      f"{reference} / {prt}_hits = {s['speedup_bound']:.1f}x faster than {reference} here (it is "
+                      f"{s['speedup']:.1f}x).")
     md, _ = rep.write(out, stem="attribution")
     rp.write_text(out / "terms.json", json.dumps({"sweep": str(sweep.path), "summary": summary, "configurations": rows},
                                                  indent=2) + "\n")

@@ -22,7 +22,8 @@ Multiple scattering (§5.3): L_multi = c_S(theta_o) . (R_wo a_C^T c_L) V~_glo pe
 coefficients of the light's radiance in the exemplar's (flat) space (directional: E Y(w_d); SG: P times
 the normalised SG's zonal expansion rotated to its axis, ``stages.core.sg``; mc lights: the sample's
 E Y(w)), a_C the cell's transfer matrices (``seg_row``), R_wo the exact SH rotation into the w_o-space
-of §4.3 (x = the fibre tangent, the view in the xy-plane; ``stages.core.sh.sh_rotation``), c_S the
+of §4.3 (x = the fibre tangent, the view in the xy-plane; applied to c_S instead, as D(R_wo)^T c_S, by
+``stages.core.sh.sh_rotate_rows`` through R_wo's Euler angles and ``quarter_turn``), c_S the
 BCSDF's SH table at theta_o (``stages.core.shading.bcsdf_sh``), and V~_glo the global visibility
 filtered by a 2D Gaussian of sigma_glo in the flat fabric's plane, estimated as the paper's CPU version
 does: one shadow ray from the top surface above a point x' drawn from the Gaussian around x.
@@ -36,8 +37,8 @@ single-scattering BCSDF is evaluated in world space with the world tangent, as f
 Random numbers: ``uniform(seed, index, dim)``: dims 0-1 place the sample in its pixel, then 6 per
 light (2 light sample, 2 Gaussian offset, 2 lobe sample for the analytic SG's shadow).
 
-``PrtIntegrator`` fields: see the namedtuple; ``terms`` bit 1 single, bit 2 multi; ``sg_mode`` 0 mc,
-1 analytic.
+``PrtIntegrator`` fields: see the namedtuple; ``terms`` bit 1 single, bit 2 multi (0: fibre hits stay
+black, which times the eye rays alone); ``sg_mode`` 0 mc, 1 analytic.
 """
 import math
 from collections import namedtuple
@@ -50,7 +51,7 @@ from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
 from stages.core.sg import sg_sh_coefficients, spherical_fibonacci_axes
-from stages.core.sh import sh_eval, sh_rotation
+from stages.core.sh import sh_eval, sh_rotate_rows
 from stages.core.shading.bcsdf_sg import sg_single_scatter
 from stages.core.shading.bcsdf_sh import bcsdf_sh_lookup, omega_o_frame
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare
@@ -64,7 +65,7 @@ from stages.render.lights import DIRECTIONAL, SG, light_eval, light_sample_into
 PrtIntegrator = namedtuple("PrtIntegrator", [
     "scene", "top", "mat_of_fiber", "mats", "lights", "ground", "has_ground", "ground_mat",
     "svf_row", "svf_mean", "svf_basis", "svf_coeffs", "svf_res", "sg_angle", "sg_weights", "lam_svf",
-    "seg_row", "transfer", "order", "cs_table", "mat_cs",
+    "seg_row", "transfer", "order", "quarter_turn", "cs_table", "mat_cs",
     "flat_size", "sigma_glo", "terms", "sg_mode", "eps"])
 
 SINGLE = 1
@@ -114,28 +115,39 @@ def global_visibility(it, u, v, w):
 
 MAX_SH_ORDER = 8                  # the IIRTF's largest SH order (precompute iirtf --order)
 MAX_SH_J = (MAX_SH_ORDER + 1) ** 2
-MAX_SH_J2 = MAX_SH_J * MAX_SH_J
 MAX_SH_J3 = 3 * MAX_SH_J
 
 
 @njit(cache=True, _nrt=False)
-def _hit_sh_frame(it, m, tf, vf, D, cs):
-    """What multiple scattering needs of the hit alone, once per hit for all its lights: D = R_wo, the SH
-    rotation into the frame of the view and the fibre (``omega_o_frame``), and cs = c_S(theta_o), the
-    BCSDF's SH coefficients per channel for material m."""
+def _hit_sh_frame(it, m, tf, vf, W):
+    """What multiple scattering needs of the hit alone, once per hit for all its lights: W[c] =
+    D(R_wo)^T c_S(theta_o)[c] = D(R_wo^T) c_S[c], the BCSDF's SH coefficients of channel c for material m
+    (``bcsdf_sh_lookup``) carried from the frame of the view and the fibre (``omega_o_frame``) into
+    flat space, so that c_S . (R_wo c_T) = W[c] . c_T (``sh_rotate_rows``, without building D)."""
     R = stack_array(9, np.float64).reshape((3, 3))
+    Rt = stack_array(9, np.float64).reshape((3, 3))
     theta_v = omega_o_frame(tf, vf, R)
-    sh_rotation(it.order, R, D)
+    for i in range(3):
+        for j in range(3):
+            Rt[i, j] = R[j, i]
+    cs = stack_array(MAX_SH_J3, np.float64).reshape((MAX_SH_J, 3))
     bcsdf_sh_lookup(it.cs_table[it.mat_cs[m]], theta_v, it.order, cs)
+    C = stack_array(MAX_SH_J3, np.float64).reshape((3, MAX_SH_J))
+    J = (it.order + 1) * (it.order + 1)
+    for c in range(3):
+        for j in range(J):
+            C[c, j] = cs[j, c]
+    sh_rotate_rows(it.order, Rt, it.quarter_turn, C, W)
 
 
 @njit(cache=True, _nrt=False)
-def _multi_scatter(it, row, lf, lam, E0, E1, E2, D, cs):
-    """(r, g, b) = c_S(theta_o) . (R_wo a_C^T c_L[c]) per channel: multiple scattering of a light of power
-    (E0, E1, E2) from the flat direction lf, a directional light (lam <= 0: c_L = Y(lf)) or an SG lobe of
-    sharpness lam (c_L its SH coefficients); D and cs from ``_hit_sh_frame``. Its SH work arrays live on
-    the machine stack (orders up to MAX_SH_ORDER), so it runs without reference counting like the
-    estimator around it."""
+def _multi_scatter(it, row, lf, lam, E0, E1, E2, W):
+    """(r, g, b) = c_S(theta_o) . (R_wo a_C^T c_L[c]) = W[c] . (a_C^T c_L[c]) per channel: multiple
+    scattering of a light of power (E0, E1, E2) from the flat direction lf, a directional light (lam <= 0:
+    c_L = Y(lf)) or an SG lobe of sharpness lam (c_L its SH coefficients); W from ``_hit_sh_frame``.
+    a_C^T c_L is summed row by row of a_C (contiguous, so the compiler vectorises it). Its SH work arrays
+    live on the machine stack (orders up to MAX_SH_ORDER), so it runs without reference counting like
+    the estimator around it."""
     L = it.order
     J = (L + 1) * (L + 1)
     Ysh = stack_array(MAX_SH_J, np.float64)
@@ -150,20 +162,15 @@ def _multi_scatter(it, row, lf, lam, E0, E1, E2, D, cs):
     r2 = 0.0
     for c in range(3):
         E = E0 if c == 0 else (E1 if c == 1 else E2)
-        for j1 in range(J):   # c_T = a_C^T c_L, summed over j0 in order
-            s = 0.0
-            for j0 in range(J):
-                s += a[row, c, j0, j1] * (E * Ysh[j0])
-            cT[j1] = s
+        for j1 in range(J):
+            cT[j1] = 0.0
+        for j0 in range(J):   # c_T = a_C^T c_L
+            y = E * Ysh[j0]
+            for j1 in range(J):
+                cT[j1] += a[row, c, j0, j1] * y
         acc = 0.0
-        for l in range(L + 1):   # D is block diagonal by band: (D c_T)_i sums over i's band only
-            lo = l * l
-            hi = lo + 2 * l + 1
-            for i in range(lo, hi):
-                s = 0.0
-                for j in range(lo, hi):
-                    s += D[i, j] * cT[j]
-                acc += cs[i, c] * s
+        for j1 in range(J):
+            acc += W[c, j1] * cT[j1]
         if c == 0:
             r0 = acc
         elif c == 1:
@@ -262,9 +269,8 @@ def prt_radiance(it, o, d, seed, key):
     R_res = it.svf_res[0]
     C_res = it.svf_res[1]
     axes_w = stack_vector3()
-    D = stack_array(MAX_SH_J2, np.float64).reshape((MAX_SH_J, MAX_SH_J))
-    cs = stack_array(MAX_SH_J3, np.float64).reshape((MAX_SH_J, 3))
-    have_frame = False   # D and cs, made when the first light needs them
+    W = stack_array(MAX_SH_J3, np.float64).reshape((3, MAX_SH_J))
+    have_frame = False   # W, made when the first light needs it
     for k in range(nl):
         base = 2 + DIMS_PER_LIGHT * k
         typ = int(lights[k, 0])
@@ -280,9 +286,11 @@ def prt_radiance(it, o, d, seed, key):
             # the lobe's global visibility: one shadow ray towards a direction sampled from it
             _lr, _lg, _lb, pl, _delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base + 4),
                                                           uniform(seed, key, base + 5), wl)
-            rays += 1
-            vglo = global_visibility(it, u, v, wl) if pl > 0.0 else 0.0
-            if it.terms & SINGLE and vglo > 0.0:
+            vglo = 0.0
+            if it.terms & SINGLE and pl > 0.0:
+                rays += 1
+                vglo = global_visibility(it, u, v, wl)
+            if vglo > 0.0:
                 _to_flat(w2f, h.tet, axes_w, lf)
                 g0, g1, g2 = _single_scatter_sg(it, e, srow, lf, mat, tf, vf, lam)
                 L0 += P0 * g0 * vglo
@@ -294,9 +302,9 @@ def prt_radiance(it, o, d, seed, key):
                 rays += 1
                 if vt > 0.0:
                     if not have_frame:
-                        _hit_sh_frame(it, m, tf, vf, D, cs)
+                        _hit_sh_frame(it, m, tf, vf, W)
                         have_frame = True
-                    m0, m1, m2 = _multi_scatter(it, mrow, lf, lam, P0, P1, P2, D, cs)
+                    m0, m1, m2 = _multi_scatter(it, mrow, lf, lam, P0, P1, P2, W)
                     L0 += m0 * vt
                     L1 += m1 * vt
                     L2 += m2 * vt
@@ -324,9 +332,9 @@ def prt_radiance(it, o, d, seed, key):
             vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
             if vt > 0.0:
                 if not have_frame:
-                    _hit_sh_frame(it, m, tf, vf, D, cs)
+                    _hit_sh_frame(it, m, tf, vf, W)
                     have_frame = True
-                m0, m1, m2 = _multi_scatter(it, mrow, lf, 0.0, E0, E1, E2, D, cs)
+                m0, m1, m2 = _multi_scatter(it, mrow, lf, 0.0, E0, E1, E2, W)
                 L0 += m0 * vt
                 L1 += m1 * vt
                 L2 += m2 * vt

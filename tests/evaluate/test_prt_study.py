@@ -156,7 +156,7 @@ def standin(calls):
             v = single if sc.render["max_depth"] == 1 else single + multi
         else:
             terms = [a.split("=", 1)[1] for a in args if a.startswith("terms=")]
-            v = {"single": single, "multi": multi}[terms[-1]] if terms else single + multi
+            v = {"single": single, "multi": multi, "hits": 0.0 * single}[terms[-1]] if terms else single + multi
         v = v * _light_value(sc.lights[0]) + BACKGROUND
         write_render(exr, np.broadcast_to(v, (sc.camera["height"], sc.camera["width"], 3)).astype(np.float32))
         calls.append((exr.parent.name, exr.stem, sc.render["max_depth"], tuple(args)))
@@ -179,12 +179,13 @@ def test_terms_attribute_a_sweep_to_single_and_multiple_scattering(tmp_path):
     assert len(calls) == 8
     calls.clear()
     res = ps.run_terms(sweep, tmp_path / "full", tmp_path / "terms", renderer=standin(calls))
-    # the derived sweep: fiberpath at max_depth 1 with its own arguments, prt with terms=single / multi
+    # the derived sweep: fiberpath at max_depth 1 with its own arguments, prt with terms=single / multi / hits
     seen = {(c[1], c[2], c[3]) for c in calls}
     assert ("fiberpath_single", 1, ("--fibers", "nowhere.zarr")) in seen
     assert ("prt_single", 32, ("--fibers", "nowhere.zarr", "--set", "svf=s.zarr", "--set", "terms=single")) in seen
     assert ("prt_multi", 32, ("--fibers", "nowhere.zarr", "--set", "svf=s.zarr", "--set", "terms=multi")) in seen
-    assert len(calls) == 12 and len(res.rows) == 4
+    assert ("prt_hits", 32, ("--fibers", "nowhere.zarr", "--set", "svf=s.zarr", "--set", "terms=hits")) in seen
+    assert len(calls) == 16 and len(res.rows) == 4
     lv = {c: _light_value(sc_light) for c, sc_light in _lights(tmp_path / "terms").items()}
     for r in res.rows:
         v = lv[r["configuration"]]
@@ -204,6 +205,8 @@ def test_terms_attribute_a_sweep_to_single_and_multiple_scattering(tmp_path):
     doc = json.loads((tmp_path / "terms" / "terms.json").read_text())
     assert doc["summary"]["configurations"] == 4
     assert "multi / remainder" in (tmp_path / "terms" / "attribution.md").read_text()
+    t = s["time_per_image_s"]
+    assert s["speedup_bound"] == pytest.approx(t["fiberpath"] / t["prt_hits"])
     calls.clear()
     ps.run_terms(sweep, tmp_path / "full", tmp_path / "terms", renderer=standin(calls))
     assert calls == []                                  # the term renders are reused while up to date
