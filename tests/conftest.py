@@ -48,3 +48,28 @@ def offscreen_gl():
         _GL = probe.returncode == 0
     if not _GL:
         pytest.skip("no off-screen OpenGL for pyvista on this machine (EGL/OSMesa missing)")
+
+
+# Test files that compile the same large kernel families. Under ``-n 2 --dist loadfile`` (``make test``)
+# two workers that start such files at the same time both compile the family: the exact procedural
+# lookups (``lookup_points``, ``fringe_occupancy``, ``sample_all``) cost 100-170 s of compilation each
+# time on a cold numba cache, and were compiled twice in every clean run. One work unit per group
+# keeps them on one worker, which compiles the family once and serves the rest from memory.
+SHARED_COMPILE = {
+    "tests/procedural/test_tables_lookup.py": "procedural-lookups",
+    "tests/render/test_volpath.py": "procedural-lookups",
+}
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadfile`` with the files of ``SHARED_COMPILE`` grouped into one work unit each."""
+    if config.getoption("dist", None) != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class SharedCompileScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid):
+            scope = super()._split_scope(nodeid)
+            return SHARED_COMPILE.get(scope, scope)
+
+    return SharedCompileScheduling(config, log)
