@@ -11,6 +11,12 @@ per yarn) under its own lights; ``loomlight ingest`` and ``realize`` write into
    model). Geometry memory: the arrays each traversal holds (fiberpath: fibre points, radii, offsets and
    the capsule BVH; bysdf: the curves, tube pieces and their BVH, and the implicit tables); target
    >= 100x smaller.
+   The bound, as ``study prt-terms`` reports prt's: ``bysdf`` at max depth 0 renders only what every
+   bysdf sample must do before it shades anything (the camera ray's walk over the tube BVH and the
+   implicit ply search on the yarn's cross-section, passing on through yarns whose plies it misses;
+   no light, no shading), so fiberpath / that time bounds the speed-up at equal spp, at depth 4
+   and at the scene's own ``render.max_depth`` (where fiberpath's paths are longer and bysdf's hardly
+   change: its open-cloth paths rarely scatter four times).
 2. A distant view (the demo camera 16x farther away, 96 x 72 @ 256 spp, fastest of 3: the cloth about 8 pixels wide,
    a pixel's footprint wider than a yarn, where multiscale shades as far): ``multiscale`` against
    ``near`` at equal error. Each mode's efficiency is
@@ -42,12 +48,12 @@ def _cli(*args):
                    stdout=subprocess.DEVNULL)
 
 
-def _render(scene, method, W, H, spp, extra, fibers=None):
+def _render(scene, method, W, H, spp, extra, fibers=None, max_depth=4):
     from pipeline.renderers import method as get_method
     from pipeline.runners.render import resolve_options
 
     m = get_method(method)
-    opts = resolve_options(scene, m, width=W, height=H, spp=spp, fibers=fibers, max_depth=4, extra=dict(extra))
+    opts = resolve_options(scene, m, width=W, height=H, spp=spp, fibers=fibers, max_depth=max_depth, extra=dict(extra))
     return m.run(scene, opts)
 
 
@@ -89,9 +95,14 @@ def run(out_dir) -> dict:
     scene = load_scene(scene_path)
     W, H, spp = 128, 96, 16
     near = {"yarns": str(yarns), "mode": "near"}
-    fp, by, by_it = _best_of(REPEATS, lambda: _render(scene, "fiberpath", W, H, spp, {}, fibers=str(fibers)),
-                             lambda: _render(scene, "bysdf", W, H, spp, near),
-                             lambda: _render(scene, "bysdf", W, H, spp, {**near, "ply_search": "iteration"}))
+    depth = int(scene.render.get("max_depth", 4))
+    fp, by, by_it, by_eye, fp_sc, by_sc = _best_of(
+        REPEATS, lambda: _render(scene, "fiberpath", W, H, spp, {}, fibers=str(fibers)),
+        lambda: _render(scene, "bysdf", W, H, spp, near),
+        lambda: _render(scene, "bysdf", W, H, spp, {**near, "ply_search": "iteration"}),
+        lambda: _render(scene, "bysdf", W, H, spp, near, max_depth=0),
+        lambda: _render(scene, "fiberpath", W, H, spp, {}, fibers=str(fibers), max_depth=depth),
+        lambda: _render(scene, "bysdf", W, H, spp, near, max_depth=depth))
     fp_bytes = _fiber_bytes(fibers)
     res = {
         "image": f"{W}x{H} @ {spp} spp, max depth 4, {numba.config.NUMBA_NUM_THREADS} threads",
@@ -108,6 +119,15 @@ def run(out_dir) -> dict:
         "memory_ratio": fp_bytes / by.stats["geometry_bytes"], "memory_target": 100.0,
         "fiberpath_mean_rgb": np.asarray(fp.rgb, float).reshape(-1, 3).mean(0).tolist(),
         "bysdf_mean_rgb": np.asarray(by.rgb, float).reshape(-1, 3).mean(0).tolist(),
+        "bysdf_eye_rays_render_s": by_eye.stats["render_s"],
+        "speedup_bound": fp.stats["render_s"] / by_eye.stats["render_s"],
+        "scene_max_depth": depth,
+        "fiberpath_scene_depth_render_s": fp_sc.stats["render_s"],
+        "bysdf_scene_depth_render_s": by_sc.stats["render_s"],
+        "fiberpath_scene_depth_rays_per_path": fp_sc.stats["rays"] / (W * H * spp),
+        "bysdf_scene_depth_rays_per_path": by_sc.stats["rays"] / (W * H * spp),
+        "speedup_scene_depth": fp_sc.stats["render_s"] / by_sc.stats["render_s"],
+        "speedup_bound_scene_depth": fp_sc.stats["render_s"] / by_eye.stats["render_s"],
         "bysdf_paths_per_s": W * H * spp / by.stats["render_s"],
         "fiberpath_paths_per_s": W * H * spp / fp.stats["render_s"],
     }
