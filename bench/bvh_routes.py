@@ -14,11 +14,25 @@ spatial splits (SBVH) and ray streams sorted by direction. Prints JSON. Not run 
    axis; a capsule goes to every side it reaches, with its box clipped to that side: the part of the
    segment within r of the side, grown by r, cut at the plane). Reported: how often the spatial split
    is cheaper, the median ratio, and the mean cost ratio the SBVH rule (take the cheaper) would give.
-3. **Ray order.** The camera's first fibre hits at 128 x 96 x 16 become bounce rays with uniform random
-   directions (a fibre's scattering is broad); one thread walks them nearest-hit in the order a path
+3. **Ray order.** The camera's first fibre hits at 128 x 96 x 16 become bounce rays, 1e-4 off the
+   surface in cosine-distributed directions about the normal (a diffuse bounce); one thread walks them nearest-hit in the order a path
    tracer makes them (pixel by pixel), in random order, by origin alone (Morton order), sorted by
    direction octant then origin, and by 64 direction bins then origin. Sorting is what ray-stream tracers do to share node visits
    between rays; loomlight's traversal takes one ray at a time.
+4. **A library: Embree 4.** The ``embreex`` wheel on PyPI (an optional bench dependency, ``pip install -e
+   .[bench]``) carries a whole ``libembree4``, though its Python API only builds triangle meshes. The same
+   fibres go in as Embree round linear curves (a vertex and radius per fibre point, a segment per capsule),
+   and a numba loop calls ``rtcIntersect1`` through ctypes one ray at a time, beside the same loop over
+   loomlight's ``surface_hit``, on the camera rays and the bounce rays above (no segments skipped). Reported: both build times, ns per ray, hit counts and the summed
+   hit distances. Embree reports no hit from inside a curve, loomlight meets the far side of a fibre
+   that holds the origin (``capsule.py``), so bounce rays leaving a fibre inside another fibre differ; the
+   camera rays start outside every fibre and must agree. (numba cannot cache a kernel that calls a ctypes
+   function: these two compile every run.) Skipped with the reason when ``embreex`` is missing.
+5. **The same, end to end.** One Lambertian path tracer (unit sky, albedo 0.75, max depth 16, cosine
+   sampling, 64 x 48 @ 16 spp, one thread) written twice, identical but for the traversal: loomlight's
+   ``surface_hit`` (the normal from the capsule's axis) or ``rtcIntersect1`` (Embree's geometric normal).
+   Reported: both times, rays and mean radiances (they differ only where a path leaves a fibre inside
+   another, see 4).
 """
 from __future__ import annotations
 
@@ -118,9 +132,51 @@ def spatial_splits(bvh, samples=(600, 600, 200), seed=0) -> list[dict]:
 
 
 @njit(cache=True)
+def _cosine_direction(n, u1, u2, out):
+    """Cosine-weighted direction about the unit normal n (Malley)."""
+    if abs(n[0]) > 0.5:
+        t0, t1, t2 = -n[1], n[0], 0.0
+    else:
+        t0, t1, t2 = 0.0, -n[2], n[1]
+    tl = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+    t0 /= tl
+    t1 /= tl
+    t2 /= tl
+    b0, b1, b2 = n[1] * t2 - n[2] * t1, n[2] * t0 - n[0] * t2, n[0] * t1 - n[1] * t0
+    r = np.sqrt(u1)
+    x, y, z = r * np.cos(2.0 * np.pi * u2), r * np.sin(2.0 * np.pi * u2), np.sqrt(max(0.0, 1.0 - u1))
+    out[0] = x * t0 + y * b0 + z * n[0]
+    out[1] = x * t1 + y * b1 + z * n[1]
+    out[2] = x * t2 + y * b2 + z * n[2]
+
+
+@njit(cache=True)
+def _capsule_normal(G, prim, o, d, t, n):
+    """Unit normal of segment ``prim``'s capsule at o + t d (from its axis), faced against d."""
+    a = G.seg_a[prim]
+    w = 0.0
+    ab2 = 0.0
+    for k in range(3):
+        ab = G.points[a + 1, k] - G.points[a, k]
+        w += (o[k] + t * d[k] - G.points[a, k]) * ab
+        ab2 += ab * ab
+    w = min(1.0, max(0.0, w / max(ab2, 1e-300)))
+    nl = 0.0
+    for k in range(3):
+        n[k] = o[k] + t * d[k] - (G.points[a, k] + w * (G.points[a + 1, k] - G.points[a, k]))
+        nl += n[k] * n[k]
+    flip = -1.0 if n[0] * d[0] + n[1] * d[1] + n[2] * d[2] > 0.0 else 1.0
+    for k in range(3):
+        n[k] *= flip / np.sqrt(nl)
+
+
+@njit(cache=True)
 def _bounce_rays(G, cam, W, H, spp, eps, win, O, D, F, S):
-    """First fibre hits of the camera's rays, each with a uniform random direction: (count)."""
+    """First fibre hits of the camera's rays, each leaving 1e-4 off the surface in a cosine-distributed
+    direction about the normal (a diffuse bounce): (count)."""
     n = 0
+    nrm = np.empty(3)
+    dn = np.empty(3)
     for row in range(H):
         for col in range(W):
             for s in range(spp):
@@ -129,18 +185,27 @@ def _bounce_rays(G, cam, W, H, spp, eps, win, O, D, F, S):
                 h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, -1, -1, win)
                 if h.prim < 0:
                     continue
+                _capsule_normal(G, h.prim, o, d, h.t, nrm)
+                _cosine_direction(nrm, uniform(1, idx, 0), uniform(1, idx, 1), dn)
                 for k in range(3):
-                    O[n, k] = o[k] + h.t * d[k]
-                z = 1.0 - 2.0 * uniform(1, idx, 0)
-                phi = 2.0 * np.pi * uniform(1, idx, 1)
-                sr = np.sqrt(max(0.0, 1.0 - z * z))
-                D[n, 0] = sr * np.cos(phi)
-                D[n, 1] = sr * np.sin(phi)
-                D[n, 2] = z
+                    O[n, k] = o[k] + h.t * d[k] + 1e-4 * nrm[k]
+                    D[n, k] = dn[k]
                 F[n] = h.fiber
                 S[n] = h.prim
                 n += 1
     return n
+
+
+@njit(cache=True)
+def _camera_rays(cam, W, H, spp, O, D):
+    for row in range(H):
+        for col in range(W):
+            for s in range(spp):
+                idx = (row * W + col) * spp + s
+                o, d = camera_ray(cam, row, col, uniform(0, idx, 0), uniform(0, idx, 1))
+                for k in range(3):
+                    O[idx, k] = o[k]
+                    D[idx, k] = d[k]
 
 
 @njit(cache=True)
@@ -192,10 +257,251 @@ def ray_order(scene_path, fibers, W=128, H=96, spp=16, repeats=3) -> dict:
             t0 = time.perf_counter()
             _walk(G, O, D, F, S, order, it.eps, it.ign_window)
             best[k] = min(best.get(k, np.inf), time.perf_counter() - t0)
-    return {"bounce_rays": int(n), "threads": 1, "sort_s_octant_then_origin": sort_s,
-            **{f"{k}_s": v for k, v in best.items()},
-            **{f"{k}_ns_per_ray": v / n * 1e9 for k, v in best.items()},
-            **{f"{k}_over_pixel": v / best["pixel"] for k, v in best.items()}}
+    res = {"bounce_rays": int(n), "threads": 1, "sort_s_octant_then_origin": sort_s,
+           **{f"{k}_s": v for k, v in best.items()},
+           **{f"{k}_ns_per_ray": v / n * 1e9 for k, v in best.items()},
+           **{f"{k}_over_pixel": v / best["pixel"] for k, v in best.items()}}
+    Oc, Dc = np.zeros((N, 3)), np.zeros((N, 3))
+    _camera_rays(setup.cam, W, H, spp, Oc, Dc)
+    # the library comparison's rays: the camera's, and the bounce rays (already 1e-4 off the surface)
+    rays = {"camera": (Oc, Dc), "bounce": (O, D)}
+    return res, rays, G, it.ign_window
+
+
+def _embree():
+    """ctypes bindings of the libembree4 inside the embreex wheel: (library, rtcIntersect1 taking addresses)."""
+    import ctypes
+    import glob
+
+    import embreex
+
+    libs = glob.glob(os.path.join(os.path.dirname(embreex.__file__), os.pardir, "embreex.libs", "libembree4*"))
+    if not libs:
+        raise ImportError("the embreex wheel carries no libembree4")
+    E = ctypes.CDLL(libs[0])
+    vp, c_int, c_uint, c_size = ctypes.c_void_p, ctypes.c_int, ctypes.c_uint, ctypes.c_size_t
+    for name, res, args in (("rtcNewDevice", vp, [ctypes.c_char_p]), ("rtcNewScene", vp, [vp]),
+                            ("rtcNewGeometry", vp, [vp, c_int]),
+                            ("rtcSetNewGeometryBuffer", vp, [vp, c_int, c_uint, c_int, c_size, c_size]),
+                            ("rtcCommitGeometry", None, [vp]), ("rtcAttachGeometry", c_uint, [vp, vp]),
+                            ("rtcReleaseGeometry", None, [vp]), ("rtcCommitScene", None, [vp]),
+                            ("rtcGetDeviceError", c_int, [vp]), ("rtcReleaseScene", None, [vp]),
+                            ("rtcReleaseDevice", None, [vp])):
+        fn = getattr(E, name)
+        fn.restype, fn.argtypes = res, args
+    # pointers as size_t, so that numba can pass array addresses
+    return E, ctypes.CFUNCTYPE(None, c_size, c_size, c_size)(("rtcIntersect1", E))
+
+
+ROUND_LINEAR_CURVE, BUFFER_INDEX, BUFFER_VERTEX, FORMAT_UINT, FORMAT_FLOAT4 = 16, 0, 1, 0x5001, 0x9004
+NO_HIT = 0xFFFFFFFF
+
+
+def _embree_walker(intersect1):
+    @njit
+    def walk(scene, O, D, rayhit):
+        """Nearest hits of rays (O, D) through rtcIntersect1; RTCRayHit in ``rayhit`` (float32[32]):
+        (summed hit distance, hits)."""
+        acc = 0.0
+        hits = 0
+        addr = rayhit.ctypes.data
+        u = rayhit.view(np.uint32)
+        for i in range(O.shape[0]):
+            for k in range(3):
+                rayhit[k] = O[i, k]
+                rayhit[4 + k] = D[i, k]
+            rayhit[3] = 0.0      # tnear
+            rayhit[7] = 0.0      # time
+            rayhit[8] = np.inf   # tfar
+            u[9] = NO_HIT        # mask
+            u[10] = 0
+            u[11] = 0
+            u[18] = NO_HIT       # geomID
+            u[19] = NO_HIT       # instID
+            intersect1(scene, addr, 0)
+            if u[18] != NO_HIT:
+                acc += rayhit[8]
+                hits += 1
+        return acc, hits
+    return walk
+
+
+@njit
+def _loomlight_walk(G, O, D, win):
+    acc = 0.0
+    hits = 0
+    for i in range(O.shape[0]):
+        h = surface_hit(G, -1, O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1], D[i, 2], 0.0, np.inf, -1, -1, win)
+        if h.prim >= 0:
+            acc += h.t
+            hits += 1
+    return acc, hits
+
+
+def _embree_scene(E, bvh):
+    """(device, committed scene) of the fibres as one geometry of Embree round linear curves, one thread."""
+    import ctypes
+
+    P, rad = bvh.points, np.zeros(len(bvh.points))
+    rad[bvh.seg_a] = bvh.seg_r      # a segment's radius at its first point (loomlight capsules: one radius each)
+    rad[bvh.seg_a + 1] = np.maximum(rad[bvh.seg_a + 1], bvh.seg_r)
+    dev = E.rtcNewDevice(b"threads=1")
+    scene = E.rtcNewScene(dev)
+    geom = E.rtcNewGeometry(dev, ROUND_LINEAR_CURVE)
+    nv, ns = len(P), len(bvh.seg_a)
+    vb = E.rtcSetNewGeometryBuffer(geom, BUFFER_VERTEX, 0, FORMAT_FLOAT4, 16, nv)
+    V = np.ctypeslib.as_array((ctypes.c_float * (4 * nv)).from_address(vb)).reshape(nv, 4)
+    V[:, :3] = P
+    V[:, 3] = rad
+    ib = E.rtcSetNewGeometryBuffer(geom, BUFFER_INDEX, 0, FORMAT_UINT, 4, ns)
+    np.ctypeslib.as_array((ctypes.c_uint32 * ns).from_address(ib))[:] = bvh.seg_a.astype(np.uint32)
+    E.rtcCommitGeometry(geom)
+    E.rtcAttachGeometry(scene, geom)
+    E.rtcReleaseGeometry(geom)
+    E.rtcCommitScene(scene)
+    return dev, scene
+
+
+ALBEDO, DEPTH = 0.75, 16   # the Lambertian path tracer: bench_mitsuba's fibre albedo and depth
+
+
+@njit(cache=True)
+def _path_loomlight(G, cam, W, H, spp, win):
+    """Mean radiance and rays of a Lambertian path tracer under a unit sky on loomlight's BVH."""
+    total, rays = 0.0, 0
+    n = np.empty(3)
+    for row in range(H):
+        for col in range(W):
+            for s in range(spp):
+                idx = (row * W + col) * spp + s
+                o, d = camera_ray(cam, row, col, uniform(0, idx, 0), uniform(0, idx, 1))
+                tp = 1.0
+                for depth in range(DEPTH + 1):
+                    h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], 0.0, np.inf, -1, -1, win)
+                    rays += 1
+                    if h.prim < 0:
+                        total += tp
+                        break
+                    if depth == DEPTH:
+                        break
+                    _capsule_normal(G, h.prim, o, d, h.t, n)
+                    _path_step(o, d, n, h.t, uniform(2, idx, 2 * depth), uniform(2, idx, 2 * depth + 1))
+                    tp *= ALBEDO
+    return total / (W * H * spp), rays
+
+
+@njit(cache=True)
+def _path_step(o, d, n, t, u1, u2):
+    """Move the path to its hit, 1e-4 off along the unit normal n (faced to the ray), and draw its next
+    direction."""
+    for k in range(3):
+        o[k] = o[k] + t * d[k] + 1e-4 * n[k]
+    _cosine_direction(n, u1, u2, d)
+
+
+def _embree_path_tracer(intersect1):
+    @njit
+    def path(scene, cam, W, H, spp, rayhit):
+        """``_path_loomlight`` with Embree's rtcIntersect1 (its geometric normal) for the traversal."""
+        total, rays = 0.0, 0
+        addr = rayhit.ctypes.data
+        u = rayhit.view(np.uint32)
+        n = np.empty(3)
+        for row in range(H):
+            for col in range(W):
+                for s in range(spp):
+                    idx = (row * W + col) * spp + s
+                    o, d = camera_ray(cam, row, col, uniform(0, idx, 0), uniform(0, idx, 1))
+                    tp = 1.0
+                    for depth in range(DEPTH + 1):
+                        for k in range(3):
+                            rayhit[k] = o[k]
+                            rayhit[4 + k] = d[k]
+                        rayhit[3] = 0.0
+                        rayhit[7] = 0.0
+                        rayhit[8] = np.inf
+                        u[9] = NO_HIT
+                        u[10] = 0
+                        u[11] = 0
+                        u[18] = NO_HIT
+                        u[19] = NO_HIT
+                        intersect1(scene, addr, 0)
+                        rays += 1
+                        if u[18] == NO_HIT:
+                            total += tp
+                            break
+                        if depth == DEPTH:
+                            break
+                        nl = np.sqrt(float(rayhit[12]) ** 2 + float(rayhit[13]) ** 2 + float(rayhit[14]) ** 2)
+                        flip = -1.0 if rayhit[12] * d[0] + rayhit[13] * d[1] + rayhit[14] * d[2] > 0.0 else 1.0
+                        for k in range(3):
+                            n[k] = flip * rayhit[12 + k] / nl
+                        _path_step(o, d, n, float(rayhit[8]), uniform(2, idx, 2 * depth), uniform(2, idx, 2 * depth + 1))
+                        tp *= ALBEDO
+        return total / (W * H * spp), rays
+    return path
+
+
+def embree_path_tracer(bvh, G, win, scene_path, W=64, H=48, spp=16, repeats=3) -> dict:
+    """One Lambertian path tracer (unit sky, albedo 0.75, max depth 16, one thread), its traversal swapped."""
+    from pipeline.scene import camera_array, load_scene
+
+    cam = camera_array(load_scene(scene_path).camera, W, H)
+    try:
+        E, intersect1 = _embree()
+    except ImportError as e:
+        return {"skipped": f"embreex not installed or unusable ({e}); pip install -e .[bench]"}
+    dev, scene = _embree_scene(E, bvh)
+    path = _embree_path_tracer(intersect1)
+    rayhit = np.zeros(32, np.float32)
+    path(scene, cam, 2, 2, 1, rayhit)
+    _path_loomlight(G, cam, 2, 2, 1, win)
+    best = {}
+    for _ in range(repeats):
+        for name, run in (("loomlight", lambda: _path_loomlight(G, cam, W, H, spp, win)),
+                          ("embree", lambda: path(scene, cam, W, H, spp, rayhit))):
+            t0 = time.perf_counter()
+            mean, rays = run()
+            dt = time.perf_counter() - t0
+            if dt < best.get(name, (np.inf,))[0]:
+                best[name] = (dt, mean, rays)
+    E.rtcReleaseScene(scene)
+    E.rtcReleaseDevice(dev)
+    return {"image": f"{W}x{H} @ {spp} spp, one thread", **{f"{k}_s": v[0] for k, v in best.items()},
+            **{f"{k}_mean": v[1] for k, v in best.items()}, **{f"{k}_rays": v[2] for k, v in best.items()},
+            "loomlight_over_embree": best["loomlight"][0] / best["embree"][0]}
+
+
+def embree_library(bvh, G, win, rays: dict, repeats=3) -> dict:
+    """Embree 4 (from embreex) against loomlight's BVH on the same fibres and rays, one thread each."""
+    try:
+        E, intersect1 = _embree()
+    except ImportError as e:
+        return {"skipped": f"embreex not installed or unusable ({e}); pip install -e .[bench]"}
+    t0 = time.perf_counter()
+    dev, scene = _embree_scene(E, bvh)
+    build_s = time.perf_counter() - t0
+    out = {"embree_build_s_1_thread": build_s, "embree_error": int(E.rtcGetDeviceError(dev)), "threads": 1}
+    walk = _embree_walker(intersect1)
+    rayhit = np.zeros(32, np.float32)
+    for name, (O, D) in rays.items():
+        walk(scene, O[:4], D[:4], rayhit)
+        _loomlight_walk(G, O[:4], D[:4], win)
+        te = tl = np.inf
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            se, he = walk(scene, O, D, rayhit)
+            te = min(te, time.perf_counter() - t0)
+            t0 = time.perf_counter()
+            sl, hl = _loomlight_walk(G, O, D, win)
+            tl = min(tl, time.perf_counter() - t0)
+        out[name] = {"rays": int(len(O)), "embree_ns_per_ray": te / len(O) * 1e9,
+                     "loomlight_ns_per_ray": tl / len(O) * 1e9, "loomlight_over_embree": tl / te,
+                     "embree_hits": int(he), "loomlight_hits": int(hl),
+                     "embree_sum_t": float(se), "loomlight_sum_t": float(sl)}
+    E.rtcReleaseScene(scene)
+    E.rtcReleaseDevice(dev)
+    return out
 
 
 def main(argv=None) -> dict:
@@ -210,8 +516,10 @@ def main(argv=None) -> dict:
     bvh, _ = build_fiber_bvh(f.points, f.fiber_offsets, f.point_radius)
     A, B = bvh.points[bvh.seg_a], bvh.points[bvh.seg_a + 1]
     res = {"fibers": args.fibers, "segments": int(len(bvh.seg_a)), "binary_nodes": int(len(bvh.node_left)),
-           "capsule_shape": capsule_shape(A, B, bvh.seg_r), "spatial_splits": spatial_splits(bvh),
-           "ray_order": ray_order(args.scene, args.fibers)}
+           "capsule_shape": capsule_shape(A, B, bvh.seg_r), "spatial_splits": spatial_splits(bvh)}
+    res["ray_order"], rays, G, win = ray_order(args.scene, args.fibers)
+    res["embree"] = embree_library(bvh, G, win, rays)
+    res["embree_path_tracer"] = embree_path_tracer(bvh, G, win, args.scene)
     print(json.dumps(res, indent=2))
     return res
 
