@@ -23,7 +23,8 @@ spatial splits (SBVH) and ray streams sorted by direction. Prints JSON. Not run 
    .[bench]``) carries a whole ``libembree4``, though its Python API only builds triangle meshes. The same
    fibres go in as Embree round linear curves (a vertex and radius per fibre point, a segment per capsule),
    and a numba loop calls ``rtcIntersect1`` through ctypes one ray at a time, beside the same loop over
-   loomlight's ``surface_hit``, on the camera rays and the bounce rays above (no segments skipped). Reported: both build times, ns per ray, hit counts and the summed
+   loomlight's ``surface_hit``, on the camera rays and the bounce rays above (no segments skipped; both
+   also compute the hit's normal, as a path tracer must). Reported: both build times, ns per ray, hit counts and the summed
    hit distances. Embree reports no hit from inside a curve, loomlight meets the far side of a fibre
    that holds the origin (``capsule.py``), so bounce rays leaving a fibre inside another fibre differ; the
    camera rays start outside every fibre and must agree. (numba cannot cache a kernel that calls a ctypes
@@ -297,47 +298,6 @@ ROUND_LINEAR_CURVE, BUFFER_INDEX, BUFFER_VERTEX, FORMAT_UINT, FORMAT_FLOAT4 = 16
 NO_HIT = 0xFFFFFFFF
 
 
-def _embree_walker(intersect1):
-    @njit
-    def walk(scene, O, D, rayhit):
-        """Nearest hits of rays (O, D) through rtcIntersect1; RTCRayHit in ``rayhit`` (float32[32]):
-        (summed hit distance, hits)."""
-        acc = 0.0
-        hits = 0
-        addr = rayhit.ctypes.data
-        u = rayhit.view(np.uint32)
-        for i in range(O.shape[0]):
-            for k in range(3):
-                rayhit[k] = O[i, k]
-                rayhit[4 + k] = D[i, k]
-            rayhit[3] = 0.0      # tnear
-            rayhit[7] = 0.0      # time
-            rayhit[8] = np.inf   # tfar
-            u[9] = NO_HIT        # mask
-            u[10] = 0
-            u[11] = 0
-            u[18] = NO_HIT       # geomID
-            u[19] = NO_HIT       # instID
-            intersect1(scene, addr, 0)
-            if u[18] != NO_HIT:
-                acc += rayhit[8]
-                hits += 1
-        return acc, hits
-    return walk
-
-
-@njit
-def _loomlight_walk(G, O, D, win):
-    acc = 0.0
-    hits = 0
-    for i in range(O.shape[0]):
-        h = surface_hit(G, -1, O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1], D[i, 2], 0.0, np.inf, -1, -1, win)
-        if h.prim >= 0:
-            acc += h.t
-            hits += 1
-    return acc, hits
-
-
 def _embree_scene(E, bvh):
     """(device, committed scene) of the fibres as one geometry of Embree round linear curves, one thread."""
     import ctypes
@@ -366,31 +326,6 @@ ALBEDO, DEPTH = 0.75, 16   # the Lambertian path tracer: bench_mitsuba's fibre a
 
 
 @njit(cache=True)
-def _path_loomlight(G, cam, W, H, spp, win):
-    """Mean radiance and rays of a Lambertian path tracer under a unit sky on loomlight's BVH."""
-    total, rays = 0.0, 0
-    n = np.empty(3)
-    for row in range(H):
-        for col in range(W):
-            for s in range(spp):
-                idx = (row * W + col) * spp + s
-                o, d = camera_ray(cam, row, col, uniform(0, idx, 0), uniform(0, idx, 1))
-                tp = 1.0
-                for depth in range(DEPTH + 1):
-                    h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], 0.0, np.inf, -1, -1, win)
-                    rays += 1
-                    if h.prim < 0:
-                        total += tp
-                        break
-                    if depth == DEPTH:
-                        break
-                    _capsule_normal(G, h.prim, o, d, h.t, n)
-                    _path_step(o, d, n, h.t, uniform(2, idx, 2 * depth), uniform(2, idx, 2 * depth + 1))
-                    tp *= ALBEDO
-    return total / (W * H * spp), rays
-
-
-@njit(cache=True)
 def _path_step(o, d, n, t, u1, u2):
     """Move the path to its hit, 1e-4 off along the unit normal n (faced to the ray), and draw its next
     direction."""
@@ -399,13 +334,12 @@ def _path_step(o, d, n, t, u1, u2):
     _cosine_direction(n, u1, u2, d)
 
 
-def _embree_path_tracer(intersect1):
+def _path_tracer(nearest):
+    """A Lambertian path tracer under a unit sky whose traversal is ``nearest(scene, o, d, n)`` (the hit
+    distance, inf on a miss, and the unit normal faced to the ray in n): (mean radiance, rays)."""
     @njit
-    def path(scene, cam, W, H, spp, rayhit):
-        """``_path_loomlight`` with Embree's rtcIntersect1 (its geometric normal) for the traversal."""
+    def path(scene, cam, W, H, spp):
         total, rays = 0.0, 0
-        addr = rayhit.ctypes.data
-        u = rayhit.view(np.uint32)
         n = np.empty(3)
         for row in range(H):
             for col in range(W):
@@ -414,32 +348,78 @@ def _embree_path_tracer(intersect1):
                     o, d = camera_ray(cam, row, col, uniform(0, idx, 0), uniform(0, idx, 1))
                     tp = 1.0
                     for depth in range(DEPTH + 1):
-                        for k in range(3):
-                            rayhit[k] = o[k]
-                            rayhit[4 + k] = d[k]
-                        rayhit[3] = 0.0
-                        rayhit[7] = 0.0
-                        rayhit[8] = np.inf
-                        u[9] = NO_HIT
-                        u[10] = 0
-                        u[11] = 0
-                        u[18] = NO_HIT
-                        u[19] = NO_HIT
-                        intersect1(scene, addr, 0)
+                        t = nearest(scene, o, d, n)
                         rays += 1
-                        if u[18] == NO_HIT:
+                        if t == np.inf:
                             total += tp
                             break
                         if depth == DEPTH:
                             break
-                        nl = np.sqrt(float(rayhit[12]) ** 2 + float(rayhit[13]) ** 2 + float(rayhit[14]) ** 2)
-                        flip = -1.0 if rayhit[12] * d[0] + rayhit[13] * d[1] + rayhit[14] * d[2] > 0.0 else 1.0
-                        for k in range(3):
-                            n[k] = flip * rayhit[12 + k] / nl
-                        _path_step(o, d, n, float(rayhit[8]), uniform(2, idx, 2 * depth), uniform(2, idx, 2 * depth + 1))
+                        _path_step(o, d, n, t, uniform(2, idx, 2 * depth), uniform(2, idx, 2 * depth + 1))
                         tp *= ALBEDO
         return total / (W * H * spp), rays
     return path
+
+
+@njit(cache=True)
+def _nearest_loomlight(scene, o, d, n):
+    """``_path_tracer``'s traversal on loomlight's BVH; scene = (FiberBVH, ignore window)."""
+    G, win = scene
+    h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], 0.0, np.inf, -1, -1, win)
+    if h.prim < 0:
+        return np.inf
+    _capsule_normal(G, h.prim, o, d, h.t, n)
+    return h.t
+
+
+def _embree_nearest(intersect1):
+    @njit
+    def nearest(scene, o, d, n):
+        """``_path_tracer``'s traversal through rtcIntersect1; scene = (Embree scene, RTCRayHit float32[32])."""
+        handle, rayhit = scene
+        u = rayhit.view(np.uint32)
+        for k in range(3):
+            rayhit[k] = o[k]
+            rayhit[4 + k] = d[k]
+        rayhit[3] = 0.0
+        rayhit[7] = 0.0
+        rayhit[8] = np.inf
+        u[9] = NO_HIT
+        u[10] = 0
+        u[11] = 0
+        u[18] = NO_HIT
+        u[19] = NO_HIT
+        intersect1(handle, rayhit.ctypes.data, 0)
+        if u[18] == NO_HIT:
+            return np.inf
+        nl = np.sqrt(float(rayhit[12]) ** 2 + float(rayhit[13]) ** 2 + float(rayhit[14]) ** 2)
+        flip = -1.0 if rayhit[12] * d[0] + rayhit[13] * d[1] + rayhit[14] * d[2] > 0.0 else 1.0
+        for k in range(3):
+            n[k] = flip * rayhit[12 + k] / nl
+        return float(rayhit[8])
+    return nearest
+
+
+def _walker(nearest):
+    """Nearest hits of rays (O, D) through ``nearest`` (``_path_tracer``'s traversal, normal included):
+    (summed hit distance, hits)."""
+    @njit
+    def walk(scene, O, D):
+        acc = 0.0
+        hits = 0
+        o = np.empty(3)
+        d = np.empty(3)
+        n = np.empty(3)
+        for i in range(O.shape[0]):
+            for k in range(3):
+                o[k] = O[i, k]
+                d[k] = D[i, k]
+            t = nearest(scene, o, d, n)
+            if t < np.inf:
+                acc += t
+                hits += 1
+        return acc, hits
+    return walk
 
 
 def embree_path_tracer(bvh, G, win, scene_path, W=64, H=48, spp=16, repeats=3) -> dict:
@@ -452,16 +432,15 @@ def embree_path_tracer(bvh, G, win, scene_path, W=64, H=48, spp=16, repeats=3) -
     except ImportError as e:
         return {"skipped": f"embreex not installed or unusable ({e}); pip install -e .[bench]"}
     dev, scene = _embree_scene(E, bvh)
-    path = _embree_path_tracer(intersect1)
-    rayhit = np.zeros(32, np.float32)
-    path(scene, cam, 2, 2, 1, rayhit)
-    _path_loomlight(G, cam, 2, 2, 1, win)
+    tracers = {"loomlight": (_path_tracer(_nearest_loomlight), (G, win)),
+               "embree": (_path_tracer(_embree_nearest(intersect1)), (scene, np.zeros(32, np.float32)))}
+    for path, arg in tracers.values():
+        path(arg, cam, 2, 2, 1)   # compile apart
     best = {}
     for _ in range(repeats):
-        for name, run in (("loomlight", lambda: _path_loomlight(G, cam, W, H, spp, win)),
-                          ("embree", lambda: path(scene, cam, W, H, spp, rayhit))):
+        for name, (path, arg) in tracers.items():
             t0 = time.perf_counter()
-            mean, rays = run()
+            mean, rays = path(arg, cam, W, H, spp)
             dt = time.perf_counter() - t0
             if dt < best.get(name, (np.inf,))[0]:
                 best[name] = (dt, mean, rays)
@@ -482,19 +461,16 @@ def embree_library(bvh, G, win, rays: dict, repeats=3) -> dict:
     dev, scene = _embree_scene(E, bvh)
     build_s = time.perf_counter() - t0
     out = {"embree_build_s_1_thread": build_s, "embree_error": int(E.rtcGetDeviceError(dev)), "threads": 1}
-    walk = _embree_walker(intersect1)
-    rayhit = np.zeros(32, np.float32)
+    walkers = {"loomlight": (_walker(_nearest_loomlight), (G, win)),
+               "embree": (_walker(_embree_nearest(intersect1)), (scene, np.zeros(32, np.float32)))}
     for name, (O, D) in rays.items():
-        walk(scene, O[:4], D[:4], rayhit)
-        _loomlight_walk(G, O[:4], D[:4], win)
-        te = tl = np.inf
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            se, he = walk(scene, O, D, rayhit)
-            te = min(te, time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            sl, hl = _loomlight_walk(G, O, D, win)
-            tl = min(tl, time.perf_counter() - t0)
+        best = {}
+        for _ in range(repeats + 1):   # the first round compiles (or loads)
+            for key, (walk, arg) in walkers.items():
+                t0 = time.perf_counter()
+                r = walk(arg, O, D)
+                best[key] = (min(best.get(key, (np.inf,))[0], time.perf_counter() - t0), r[0], r[1])
+        (te, se, he), (tl, sl, hl) = best["embree"], best["loomlight"]
         out[name] = {"rays": int(len(O)), "embree_ns_per_ray": te / len(O) * 1e9,
                      "loomlight_ns_per_ray": tl / len(O) * 1e9, "loomlight_over_embree": tl / te,
                      "embree_hits": int(he), "loomlight_hits": int(hl),
