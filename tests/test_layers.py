@@ -82,3 +82,15 @@ def test_every_package_says_what_it_holds():
     missing = [str(p.relative_to(ROOT)) for p in _sources("stages") + _sources("pipeline")
                if p.name == "__init__.py" and not ast.get_docstring(ast.parse(p.read_text()))]
     assert not missing, f"packages without a docstring: {missing}"
+
+
+def test_shared_compile_groups_name_real_test_files():
+    """``tests/conftest.py`` groups test files by path for xdist; a renamed file would silently leave its
+    group and compile the kernel family a second time on the other worker."""
+    from collections import Counter
+
+    from tests.conftest import SHARED_COMPILE
+
+    missing = [p for p in SHARED_COMPILE if not (ROOT / p).is_file()]
+    assert not missing, f"SHARED_COMPILE names files that do not exist: {missing}"
+    assert all(n >= 2 for n in Counter(SHARED_COMPILE.values()).values()), "a group of one file groups nothing"
