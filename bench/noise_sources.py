@@ -76,7 +76,7 @@ def by_light_and_depth(scene, fibers, W, H, spp) -> dict:
     return out, cloth
 
 
-@njit(nogil=True, _nrt=False)
+@njit(cache=True, nogil=True, _nrt=False)
 def _rows(integ, cam, seed, spp, stratified, row0, row1, out):
     """Pixel means of rows [row0, row1): random or rotated-Hammersley pixel positions."""
     W = out.shape[1]
