@@ -172,33 +172,8 @@ def _capsule_normal(G, prim, o, d, t, n):
 
 
 @njit(cache=True)
-def _bounce_rays(G, cam, W, H, spp, eps, win, O, D, F, S):
-    """First fibre hits of the camera's rays, each leaving 1e-4 off the surface in a cosine-distributed
-    direction about the normal (a diffuse bounce): (count)."""
-    n = 0
-    nrm = np.empty(3)
-    dn = np.empty(3)
-    for row in range(H):
-        for col in range(W):
-            for s in range(spp):
-                idx = (row * W + col) * spp + s
-                o, d = camera_ray(cam, row, col, uniform(0, idx, 0), uniform(0, idx, 1))
-                h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, -1, -1, win)
-                if h.prim < 0:
-                    continue
-                _capsule_normal(G, h.prim, o, d, h.t, nrm)
-                _cosine_direction(nrm, uniform(1, idx, 0), uniform(1, idx, 1), dn)
-                for k in range(3):
-                    O[n, k] = o[k] + h.t * d[k] + 1e-4 * nrm[k]
-                    D[n, k] = dn[k]
-                F[n] = h.fiber
-                S[n] = h.prim
-                n += 1
-    return n
-
-
-@njit(cache=True)
 def _camera_rays(cam, W, H, spp, O, D):
+    """The camera's rays, pixel by pixel and sample by sample (the tile loop's jitter)."""
     for row in range(H):
         for col in range(W):
             for s in range(spp):
@@ -207,6 +182,33 @@ def _camera_rays(cam, W, H, spp, O, D):
                 for k in range(3):
                     O[idx, k] = o[k]
                     D[idx, k] = d[k]
+
+
+@njit(cache=True)
+def _bounce_rays(G, Oc, Dc, eps, win, O, D, F, S):
+    """First fibre hits of the camera rays (Oc, Dc), each leaving 1e-4 off the surface in a
+    cosine-distributed direction about the normal (a diffuse bounce): (count)."""
+    n = 0
+    o = np.empty(3)
+    d = np.empty(3)
+    nrm = np.empty(3)
+    dn = np.empty(3)
+    for idx in range(Oc.shape[0]):
+        for k in range(3):
+            o[k] = Oc[idx, k]
+            d[k] = Dc[idx, k]
+        h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, -1, -1, win)
+        if h.prim < 0:
+            continue
+        _capsule_normal(G, h.prim, o, d, h.t, nrm)
+        _cosine_direction(nrm, uniform(1, idx, 0), uniform(1, idx, 1), dn)
+        for k in range(3):
+            O[n, k] = o[k] + h.t * d[k] + 1e-4 * nrm[k]
+            D[n, k] = dn[k]
+        F[n] = h.fiber
+        S[n] = h.prim
+        n += 1
+    return n
 
 
 @njit(cache=True)
@@ -241,7 +243,9 @@ def ray_order(scene_path, fibers, W=128, H=96, spp=16, repeats=3) -> dict:
     N = W * H * spp
     O, D = np.zeros((N, 3)), np.zeros((N, 3))
     F, S = np.zeros(N, np.int64), np.zeros(N, np.int64)
-    n = _bounce_rays(G, setup.cam, W, H, spp, it.eps, it.ign_window, O, D, F, S)
+    Oc, Dc = np.zeros((N, 3)), np.zeros((N, 3))
+    _camera_rays(setup.cam, W, H, spp, Oc, Dc)
+    n = _bounce_rays(G, Oc, Dc, it.eps, it.ign_window, O, D, F, S)
     O, D, F, S = O[:n], D[:n], F[:n], S[:n]
     octant = ((D[:, 0] > 0) * 4 + (D[:, 1] > 0) * 2 + (D[:, 2] > 0)).astype(np.int64)
     zb = np.clip(((D[:, 2] + 1.0) * 4.0).astype(np.int64), 0, 7)
@@ -262,8 +266,6 @@ def ray_order(scene_path, fibers, W=128, H=96, spp=16, repeats=3) -> dict:
            **{f"{k}_s": v for k, v in best.items()},
            **{f"{k}_ns_per_ray": v / n * 1e9 for k, v in best.items()},
            **{f"{k}_over_pixel": v / best["pixel"] for k, v in best.items()}}
-    Oc, Dc = np.zeros((N, 3)), np.zeros((N, 3))
-    _camera_rays(setup.cam, W, H, spp, Oc, Dc)
     # the library comparison's rays: the camera's, and the bounce rays (already 1e-4 off the surface)
     rays = {"camera": (Oc, Dc), "bounce": (O, D)}
     return res, rays, G, it.ign_window
