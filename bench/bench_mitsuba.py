@@ -139,12 +139,14 @@ def _export(fibers: Path, work: Path) -> Path:
     return txt
 
 
-def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=4, radius_scale=1.0) -> dict:
+def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=4, radius_scale=1.0,
+                     accel="embree") -> dict:
     import numba
 
     from pipeline.render_setup import load_fibers, pack_lights
     from pipeline.scene import camera_array
     from stages.core.geometry.bvh import build_fiber_bvh
+    from stages.core.geometry.embree import EmbreeScene
     from stages.core.shading.material import pack_material_lambert
     from stages.render.fiberpath import FiberpathIntegrator
     from stages.render.film import F_RAYS, new_film, tile_grid
@@ -153,9 +155,15 @@ def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=
     numba.set_num_threads(THREADS)
     f = load_fibers(fibers)
     radius = f.point_radius * radius_scale
-    build_fiber_bvh(f.points[:64], np.array([0, 64]), radius[:64])  # compile / load the builder
-    t = time.perf_counter()
-    bvh, _ = build_fiber_bvh(f.points, f.fiber_offsets, radius)
+    keep = None
+    if accel == "embree":
+        t = time.perf_counter()
+        keep = EmbreeScene(f.points, f.fiber_offsets, radius, THREADS)
+        bvh = keep.fibers
+    else:
+        build_fiber_bvh(f.points[:64], np.array([0, 64]), radius[:64])  # compile / load the builder
+        t = time.perf_counter()
+        bvh, _ = build_fiber_bvh(f.points, f.fiber_offsets, radius)
     build_s = time.perf_counter() - t
     cam = camera_array(camera, W, H)
     lights = pack_lights([{"type": "constant", "radiance": ENV}])
@@ -173,8 +181,11 @@ def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=
     rgb = film[..., :3] / spp
     var = (film[..., 3:6] / spp - rgb ** 2) / max(spp - 1, 1)
     rays = float(film[..., F_RAYS].sum())
-    return {"build_s": build_s, "render_s": render_s, "rays": rays, "segments": int(len(bvh.seg_a)),
-            "mean": rgb.reshape(-1, 3).mean(0), "se": np.sqrt(var.reshape(-1, 3).sum(0)) / (W * H)}
+    out = {"build_s": build_s, "render_s": render_s, "rays": rays, "segments": int(len(bvh.seg_a)),
+           "mean": rgb.reshape(-1, 3).mean(0), "se": np.sqrt(var.reshape(-1, 3).sum(0)) / (W * H)}
+    if keep is not None:
+        keep.close()
+    return out
 
 
 def render_mitsuba(txt: Path, camera: dict, W, H, spp, max_depth, rr_depth=5) -> dict:
@@ -220,6 +231,7 @@ def _export_scaled(fibers: Path, work: Path, scale: float) -> Path:
 def run_case(name, fibers: Path, txt: Path, camera: dict) -> dict:
     W, H, spp, depth, scale = CASES[name]
     fp = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale)
+    fb = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale, accel="bvh")
     mi = render_mitsuba(txt, camera, W, H, spp, depth)
     diff = np.abs(fp["mean"] - mi["mean"])
     # Mitsuba reports no variance: its image's standard error is taken equal to fiberpath's
@@ -239,6 +251,13 @@ def run_case(name, fibers: Path, txt: Path, camera: dict) -> dict:
         p + "mean_rel_diff": float(np.max(diff / np.maximum(mi["mean"], 1e-12))),
         p + "mean_diff_in_standard_errors": float(np.max(diff / np.maximum(math.sqrt(2.0) * fp["se"], 1e-300))),
         p + "means_agree": bool(np.all(diff < tol)),
+        # loomlight's own BVH (--set accel=bvh) on the same image
+        p + "fiberpath_bvh_render_s": fb["render_s"], p + "bvh_speed_ratio": mi["render_s"] / fb["render_s"],
+        p + "embree_over_bvh": fb["render_s"] / fp["render_s"],
+        p + "fiberpath_bvh_build_s": fb["build_s"],
+        p + "fiberpath_bvh_mean": [round(float(v), 5) for v in fb["mean"]],
+        p + "embree_bvh_diff_in_standard_errors": float(np.max(np.abs(fp["mean"] - fb["mean"])
+                                                               / np.maximum(math.sqrt(2.0) * fp["se"], 1e-300))),
     }
 
 

@@ -114,6 +114,8 @@ _FIBERPATH_SETTINGS = (
     Setting("tint", "yarn (default): both BCSDF lobe colours times the yarn's colour; none: the presets as fitted",
             ("yarn", "none")),
     Setting("tiling", "a tiling artifact (same as --fibers TILING.zarr)"),
+    Setting("accel", "embree (default): realized fibres traced by Embree 4; bvh: by loomlight's own SAH BVH "
+                     "(a tiling always walks its shell)", ("embree", "bvh")),
 )
 _FIBERPATH_SOURCES = (
     Source("realized", (FIBERS,), "explicit fibres of a fibers artifact, or of a tiling artifact's exemplars "

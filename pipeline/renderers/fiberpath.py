@@ -150,16 +150,34 @@ def ray_eps(lo, hi):
     return 1e-7 * max(float(np.linalg.norm(hi - lo) + np.abs(np.concatenate([lo, hi])).max()), 1e-12)
 
 
-def _realized_scene(path):
-    """(FiberBVH, Fibers, eps, label, stats) of a fibers artifact."""
-    from stages.core.geometry.bvh import build_fiber_bvh
+ACCELS = ("embree", "bvh")
+
+
+def _realized_scene(path, accel: str):
+    """(surface scene, Fibers, eps, label, stats, keep) of a fibers artifact: its fibres in Embree 4
+    (``accel="embree"``: ``EmbreeFibers``; ``keep`` holds the Embree scene, alive while rendering) or in
+    loomlight's own SAH BVH (``"bvh"``: ``FiberBVH``)."""
+    import numba
 
     fibers = load_fibers(path)
     t0 = time.perf_counter()
-    bvh, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
-    stats = {"bvh_build_s": time.perf_counter() - t0, "segments": int(len(bvh.seg_a)), "fibers": fibers.n_fibers,
-             "bvh_nodes": int(len(bvh.node_left))}
-    return bvh, fibers, ray_eps(fibers.points.min(axis=0), fibers.points.max(axis=0)), "fiberpath", stats
+    if accel == "embree":
+        from stages.core.geometry.embree import EmbreeScene, EmbreeUnavailable
+
+        try:
+            es = EmbreeScene(fibers.points, fibers.fiber_offsets, fibers.point_radius, numba.get_num_threads())
+        except EmbreeUnavailable as e:
+            raise LoomError(None, "--set accel", f"{e}; or render with --set accel=bvh") from None
+        geometry, keep, nodes = es.fibers, (es,), {}
+    else:
+        from stages.core.geometry.bvh import build_fiber_bvh
+
+        geometry, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
+        keep, nodes = (), {"bvh_nodes": int(len(geometry.node_left))}
+    stats = {"bvh_build_s": time.perf_counter() - t0, "accel": accel, "segments": int(len(geometry.seg_a)),
+             "fibers": fibers.n_fibers, **nodes}
+    eps = ray_eps(fibers.points.min(axis=0), fibers.points.max(axis=0))
+    return geometry, fibers, eps, "fiberpath", stats, keep
 
 
 def _tiling_scene(scene, path):
@@ -196,10 +214,14 @@ def film_setup(scene, options: dict):
     lights = pack_lights(scene.lights, scene.path)
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
+    accel = (options.get("extra") or {}).get("accel", "embree")
+    if accel not in ACCELS:
+        raise LoomError(None, "--set accel", unknown("accel", accel, ACCELS))
+    keep = ()
     if read_meta(path).get("kind") == "tiling":  # shell-mapped exemplars (stage tile)
         geometry, fibers, eps, label, stats = _tiling_scene(scene, path)
     else:
-        geometry, fibers, eps, label, stats = _realized_scene(path)
+        geometry, fibers, eps, label, stats, keep = _realized_scene(path, accel)
     mat_of_fiber, mats = fiber_materials(scene, fibers, options)
     ground, has_ground = ground_array(scene.render)
     max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
@@ -207,7 +229,7 @@ def film_setup(scene, options: dict):
     integ = FiberpathIntegrator(geometry, mat_of_fiber, mats, pack_material_lambert(ground[1:4]), lights.table(),
                                 ground, has_ground, max_depth, rr_depth, SELF_WINDOW, eps)
     stats = {**stats, "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
-    return FilmSetup(label, integ, cam, VARIANCE_CHANNELS, stats)
+    return FilmSetup(label, integ, cam, VARIANCE_CHANNELS, stats, keep)
 
 
 def render(scene, options: dict) -> RenderResult:

@@ -104,6 +104,7 @@ class FilmSetup:
     cam: np.ndarray
     variance: str
     stats: dict = field(default_factory=dict)
+    keep: tuple = ()   # what the integrator's handles point into (an Embree scene): alive while rendering
 
 
 @dataclass(frozen=True)

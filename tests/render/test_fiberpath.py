@@ -12,6 +12,7 @@ from numba import njit
 from stages.core.shading import bcsdf as B
 from stages.core.shading.bcsdf import pack_bcsdf
 from stages.core.geometry.bvh import build_fiber_bvh
+from stages.core.geometry.embree import EmbreeScene
 from stages.render.camera import pack_camera
 from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
 from stages.render.fiberpath import FiberpathIntegrator
@@ -23,8 +24,16 @@ WHOLE_FIBRE = 1 << 40
 
 
 def render_arrays(pts, offs, rad, mats, mat_of_fiber, light_rows, cam, spp, seed=3, max_depth=10_000, rr_depth=5,
-                  ground=None, tile=8, env_img=None):
+                  ground=None, tile=8, env_img=None, accel="bvh"):
+    if accel == "embree":
+        with EmbreeScene(pts, offs, rad) as es:
+            return _render_on(es.fibers, mats, mat_of_fiber, light_rows, cam, spp, seed, max_depth, rr_depth,
+                              ground, tile, env_img)
     bvh, _ = build_fiber_bvh(pts, offs, rad)
+    return _render_on(bvh, mats, mat_of_fiber, light_rows, cam, spp, seed, max_depth, rr_depth, ground, tile, env_img)
+
+
+def _render_on(bvh, mats, mat_of_fiber, light_rows, cam, spp, seed, max_depth, rr_depth, ground, tile, env_img):
     lights = LightTable(np.asarray(light_rows, np.float64), *envmap_tables(env_img))
     W, H = int(cam[13]), int(cam[14])
     g = np.zeros(4) if ground is None else np.asarray(ground, float)
@@ -56,8 +65,9 @@ def straight_fibre(radius=0.3, n_seg=4, half=2.0):
     return pts, np.array([0, n_seg + 1]), np.full(n_seg + 1, radius)
 
 
-@pytest.mark.parametrize("material", ["bcsdf", "lambert", "bcsdf-envmap"])
-def test_white_furnace(material):
+@pytest.mark.parametrize("material,accel", [("bcsdf", "bvh"), ("lambert", "bvh"), ("bcsdf-envmap", "bvh"),
+                                            ("bcsdf", "embree"), ("lambert", "embree")])
+def test_white_furnace(material, accel):
     """Reference: a cloud of non-absorbing fibres (BCSDF with C_TT = 1, or Lambertian albedo 1, over a
     white ground) in a uniform environment L shows L everywhere, within 4 standard errors. The uniform
     environment is a constant light, or a uniform lat-long map (sampled through its sin(theta)-weighted
@@ -79,7 +89,7 @@ def test_white_furnace(material):
         ground = [-0.7, 1.0, 1.0, 1.0]
     cam = pack_camera(np.array([1.2, -1.6, 1.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 32.0, 16, 16)
     img, var, alpha, rays = render_arrays(pts, offs, rad, mats, np.zeros(F), lights, cam, spp=16, ground=ground,
-                                          env_img=env_img)
+                                          env_img=env_img, accel=accel)
     assert alpha.mean() > 0.3  # the camera sees fibres, not only the background
     covered = alpha > 0.99
     se = math.sqrt(var[covered].sum()) / covered.sum()
@@ -232,7 +242,8 @@ def test_single_fibre_sg_light_against_quadrature():
     assert se < 0.012 * ref.mean()  # the check is sharp: a 5% bias would fail it
 
 
-def test_same_bytes_whatever_the_thread_count():
+@pytest.mark.parametrize("accel", ["bvh", "embree"])
+def test_same_bytes_whatever_the_thread_count(accel):
     """Contract: counter-based random numbers per pixel sample make the image independent of threads."""
     import numba
 
@@ -243,12 +254,34 @@ def test_same_bytes_whatever_the_thread_count():
     n0 = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
-        a = render_arrays(*args, spp=4, tile=4)[0]
+        a = render_arrays(*args, spp=4, tile=4, accel=accel)[0]
         numba.set_num_threads(max(2, n0) if numba.config.NUMBA_NUM_THREADS >= 2 else 1)
-        b = render_arrays(*args, spp=4, tile=4)[0]
+        b = render_arrays(*args, spp=4, tile=4, accel=accel)[0]
     finally:
         numba.set_num_threads(n0)
     assert a.tobytes() == b.tobytes()
+    assert a.max() > 0
+
+
+@pytest.mark.parametrize("material", ["bcsdf", "lambert"])
+def test_embree_and_bvh_render_the_same_image(material):
+    """The same fibres through Embree (--set accel=embree, the default) and loomlight's BVH: the two images
+    agree within noise (per channel, the mean within 4 standard errors of the difference; both carry
+    their own noise, independent of each other only where a path's hits differ), and most pixels are
+    identical bytes (the same random numbers meet the same hits)."""
+    pts, offs, rad = fibre_cloud(7, n_fibres=40)
+    mats = [pack_material_bcsdf(pack_bcsdf([0.3] * 3, [0.8, 0.7, 0.6], 5, 10, 25)) if material == "bcsdf"
+            else pack_material_lambert([0.8, 0.7, 0.6])]
+    lights = [pack_light("constant", [0.5, 0.5, 0.5]), pack_light("directional", [2.0] * 3, [0.3, 0.2, -1.0])]
+    cam = pack_camera(np.array([1.2, -1.6, 1.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 40.0, 24, 20)
+    a, va, _, _ = render_arrays(pts, offs, rad, mats, np.zeros(len(offs) - 1), lights, cam, spp=16, accel="bvh")
+    b, vb, _, _ = render_arrays(pts, offs, rad, mats, np.zeros(len(offs) - 1), lights, cam, spp=16, accel="embree")
+    n = a.shape[0] * a.shape[1]
+    se = math.sqrt((va.sum() + vb.sum())) / n
+    for c in range(3):
+        assert abs(a[..., c].mean() - b[..., c].mean()) < 4 * se, (a[..., c].mean(), b[..., c].mean(), se)
+    same = np.all(np.isclose(a, b, rtol=1e-9, atol=1e-12), axis=-1)
+    assert same.mean() > 0.9, same.mean()
     assert a.max() > 0
 
 

@@ -16,7 +16,8 @@ outward normal at the hit, ``radius`` the capsule radius. Segments of fibre ``ig
 ``ign_window`` of segment ``ign_prim`` are skipped (a ray leaving a fibre through its BCSDF);
 ``cell`` is the ray's starting cell (-1: outside / unknown).
 
-Scene classes: ``FiberBVH`` (``stages.core.geometry.bvh``: realized fibres in one SAH BVH; below) and
+Scene classes: ``FiberBVH`` (``stages.core.geometry.bvh``: realized fibres in one SAH BVH; below),
+``EmbreeFibers`` (``stages.core.geometry.embree``: the same fibres traced by Embree 4) and
 ``ShellScene`` (``stages.core.shell.traversal``: tiled exemplars under a shell map).
 """
 import math
@@ -46,12 +47,13 @@ def surface_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber,
 # ------------------------------------------------------------------------------------------------
 # realized fibres in one BVH
 @njit(cache=True, _nrt=False)
-def bvh_surface_hit(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    t, s = intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+def segment_surface_hit(fibres, t, s, ox, oy, oz, dx, dy, dz):
+    """The ``SurfaceHit`` of a ray (o, d) meeting segment s at t (a miss when s < 0); ``fibres`` is any
+    scene tuple with the segment arrays of ``stages.core.geometry.bvh`` (points, seg_a, seg_r, seg_fiber)."""
     if s < 0:
         return SurfaceHit(t, -1, -1, -1, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
-    ia = bvh.seg_a[s]
-    P = bvh.points
+    ia = fibres.seg_a[s]
+    P = fibres.points
     ax = P[ia, 0]; ay = P[ia, 1]; az = P[ia, 2]
     bx = P[ia + 1, 0]; by = P[ia + 1, 1]; bz = P[ia + 1, 2]
     tl = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
@@ -60,7 +62,13 @@ def bvh_surface_hit(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim
     else:
         tx = 1.0; ty = 0.0; tz = 0.0
     nx, ny, nz, _ = capsule_normal(ox + t * dx, oy + t * dy, oz + t * dz, ax, ay, az, bx, by, bz)
-    return SurfaceHit(t, s, np.int64(bvh.seg_fiber[s]), -1, tx, ty, tz, nx, ny, nz, np.float64(bvh.seg_r[s]))
+    return SurfaceHit(t, s, np.int64(fibres.seg_fiber[s]), -1, tx, ty, tz, nx, ny, nz, np.float64(fibres.seg_r[s]))
+
+
+@njit(cache=True, _nrt=False)
+def bvh_surface_hit(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    t, s = intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+    return segment_surface_hit(bvh, t, s, ox, oy, oz, dx, dy, dz)
 
 
 @overload(surface_hit)
