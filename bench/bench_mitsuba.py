@@ -5,17 +5,23 @@ no ground, 2 threads:
 
 - ``small``: a 4 x 4 plain weave of cotton1 yarns (the agreement swatch's fabric, ~0.5 M capsule
   segments), 96 x 96 @ 256 spp, max depth 16 (the measurement of issue 24);
-- ``thin``: the same fibres at a tenth of their radius, 96 x 96 @ 128 spp: a control on which the
-  two renderers' geometry means the same thing (below);
+- ``thin``: the same fibres at a tenth of their radius, 96 x 96 @ 128 spp (a control with fewer overlaps);
 - ``demo``: the realized demo swatch (``out/demo/fibers.zarr`` when ``make demo`` wrote it, else
-  realized here from ``data/scenes/demo.toml``; ~2 M capsule segments), 96 x 72 @ 256 spp.
+  realized here from ``data/scenes/demo.toml``; ~1.5 M capsule segments), 96 x 72 @ 256 spp.
 
-Realized fibres overlap (cotton1's fibres cover half a ply's cross-section). A ray that leaves one
-fibre from inside another meets that fibre where it leaves it in loomlight
-(``stages.core.geometry.capsule``: the physics the volume renderer agrees with); Mitsuba's curves
-(Embree) do not report a hit for a ray starting inside them. On ``small`` that makes fiberpath's
-direct lighting ~0.4 % darker (measured: 0.41 %, then 0.24 % and 0.16 % with radii x 0.3 and x 0.1,
-the gap closing as the overlaps vanish); ``thin`` is the case whose means must agree within noise.
+fiberpath renders each case twice: on Embree 4 (``--set accel=embree``, its default:
+``stages.core.geometry.embree``) and on loomlight's own 4-wide BVH (``--set accel=bvh``); the ratio is
+Mitsuba's time over fiberpath's on Embree (``bvh_speed_ratio`` on the BVH, ``embree_over_bvh`` the
+speed-up), and ``embree_bvh_diff_in_standard_errors`` says whether the two fiberpath images agree.
+
+Ray offsets: a Lambertian vertex's rays start off the surface along its normal. fiberpath's offset is
+1e-3 of the fibre radius plus 1e-7 of the scene's size; Mitsuba's is (1 + max |p_i|) x 1500 x 2^-24 at
+the hit p (its RayEpsilon), 1.25e-4 here: 13 % of a cotton fibre's radius (9.8e-4), so on realized
+fibres, which overlap, its rays often start inside a neighbouring fibre and leave through it unseen.
+That alone made Mitsuba's image 0.3 % brighter (6-9 standard errors); with Mitsuba's offset
+fiberpath's mean is Mitsuba's within noise (0.52341 against 0.52346 on ``small``, Embree and BVH alike).
+So the bench gives fiberpath Mitsuba's offset (``mitsuba_offset``) for both its renders: the same
+scene, the same rays, and means that must agree (``means_agree``) or the timing means nothing.
 
 Both renderers get the same fibres: realized by ``loomlight realize`` and written for Mitsuba by
 ``loomlight export`` (curve text, loaded as ``linearcurve``: capsule chains, the shape fiberpath
@@ -24,13 +30,13 @@ the same albedo, light, spp and thread count (``drjit.set_thread_count``). Depth
 ``max_depth`` counts scattering events, Mitsuba's ``max_depth`` counts path segments, so Mitsuba
 gets one more (17 for 16; the same for Russian roulette: fiberpath ``rr_depth`` 4, Mitsuba 5; both
 use survival min(0.95, max throughput channel)). Timings are of warm runs (each renderer compiles
-first: numba loads or JITs its kernels, Dr.Jit traces and compiles its megakernel), BVH builds are
-timed separately (fiberpath's SAH build and 4-wide collapse from arrays in memory; Mitsuba's
-``load_dict``: reading the curve text, Embree's scene build and scene setup). Mitsuba's rays/s is
+first: numba loads or JITs its kernels, Dr.Jit traces and compiles its megakernel), builds are timed
+separately (fiberpath's Embree scene, and its SAH build and 4-wide collapse, from arrays in memory;
+Mitsuba's ``load_dict``: reading the curve text, Embree's scene build and scene setup). Mitsuba's rays/s is
 estimated from fiberpath's ray count (a lower bound: Mitsuba also traces the shadow rays of light
 samples below the surface, which fiberpath skips). ``means_agree``: |difference| < 4 standard errors
-per channel (Mitsuba reports no variance; its error is taken equal to fiberpath's); it must hold on
-``thin``, and on ``small`` and ``demo`` the difference stays at the overlap effect above.
+per channel (Mitsuba reports no variance; its error is taken equal to fiberpath's). ``make bench`` also
+writes the README's table of the run (``comparison_table``) to ``bench/results/mitsuba_table.md``.
 
 Mitsuba 3 is an optional, bench-only dependency (``pip install mitsuba``; its ``llvm`` variants need
 LLVM >= 16, e.g. Debian's ``libllvm19``, found through ``DRJIT_LIBLLVM_PATH`` or the usual library
@@ -140,7 +146,7 @@ def _export(fibers: Path, work: Path) -> Path:
 
 
 def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=4, radius_scale=1.0,
-                     accel="embree") -> dict:
+                     accel="embree", eps=None) -> dict:
     import numba
 
     from pipeline.render_setup import load_fibers, pack_lights
@@ -171,7 +177,8 @@ def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=
     mof = np.zeros(len(f.fiber_offsets) - 1, np.int32)
     extent = float(np.linalg.norm(f.points.max(0) - f.points.min(0)))
     integ = FiberpathIntegrator(bvh, mof, mats, pack_material_lambert(np.zeros(3)), lights.table(), np.zeros(4), False,
-                                max_depth, rr_depth, 1 << 40, 1e-7 * extent)
+                                max_depth, rr_depth, 1 << 40, 1e-7 * extent if eps is None else
+                                mitsuba_offset(f.points) if eps == "mitsuba" else eps)
     tiles = tile_grid(W, H, 16)
     render_tiles(integ, cam, 1, 1, 0, 1, tiles[:1], new_film(W, H), THREADS)  # compile / load
     film = new_film(W, H)
@@ -186,6 +193,12 @@ def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=
     if keep is not None:
         keep.close()
     return out
+
+
+def mitsuba_offset(points) -> float:
+    """Mitsuba 3's ray offset at a surface point p, (1 + max |p_i|) x 1500 x 2^-24 (its RayEpsilon), taken at
+    the fibres' largest coordinate: what the bench gives fiberpath's ``eps`` so both spawn rays alike."""
+    return (1.0 + float(np.abs(points).max())) * 1500.0 * 2.0 ** -24
 
 
 def render_mitsuba(txt: Path, camera: dict, W, H, spp, max_depth, rr_depth=5) -> dict:
@@ -230,8 +243,8 @@ def _export_scaled(fibers: Path, work: Path, scale: float) -> Path:
 
 def run_case(name, fibers: Path, txt: Path, camera: dict) -> dict:
     W, H, spp, depth, scale = CASES[name]
-    fp = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale)
-    fb = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale, accel="bvh")
+    fp = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale, eps="mitsuba")
+    fb = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale, accel="bvh", eps="mitsuba")
     mi = render_mitsuba(txt, camera, W, H, spp, depth)
     diff = np.abs(fp["mean"] - mi["mean"])
     # Mitsuba reports no variance: its image's standard error is taken equal to fiberpath's
@@ -244,7 +257,7 @@ def run_case(name, fibers: Path, txt: Path, camera: dict) -> dict:
         p + "speed_ratio": mi["render_s"] / fp["render_s"],
         p + "fiberpath_rays_per_s": fp["rays"] / fp["render_s"],
         p + "mitsuba_rays_per_s_estimated": fp["rays"] / mi["render_s"],
-        p + "fiberpath_bvh_build_s": fp["build_s"], p + "mitsuba_load_s": mi["build_s"],
+        p + "fiberpath_build_s": fp["build_s"], p + "mitsuba_load_s": mi["build_s"],
         p + "build_ratio": mi["build_s"] / fp["build_s"],
         p + "fiberpath_mean": [round(float(v), 5) for v in fp["mean"]],
         p + "mitsuba_mean": [round(float(v), 5) for v in mi["mean"]],
@@ -288,7 +301,34 @@ def run(out_dir) -> dict:
             if not (fibers / "zarr.json").exists():
                 fibers = _realize(None, demo, d)
             res.update(run_case("demo", fibers, _export(fibers, d), load_scene(demo).camera))
+    if out_dir is not None:
+        (Path(out_dir) / "mitsuba_table.md").write_text(comparison_table(res))
     return res
+
+
+CASE_LABELS = {"small": "4×4 plain weave, 96×96 @ 256 spp", "thin": "same fibres, radii × 0.1 (control), 96×96 @ 128 spp",
+               "demo": "realized demo swatch, 96×72 @ 256 spp"}
+
+
+def comparison_table(res: dict) -> str:
+    """The README's table (Status, *Rendering*) of one run: per case, fiberpath on Embree and on
+    loomlight's BVH against Mitsuba 3, builds and means."""
+    lines = ["| case (Lambertian fibres, constant sky, max depth 16, 2 threads) | fiberpath (Embree) | "
+             "fiberpath (`accel=bvh`) | Mitsuba 3 | ratio (≥ 1: loomlight faster) | build: Embree / BVH / Mitsuba load | "
+             "means: fiberpath / Mitsuba (SE) | Embree vs BVH (SE) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for c, label in CASE_LABELS.items():
+        if f"{c}_speed_ratio" not in res:
+            continue
+        g = lambda k: res[f"{c}_{k}"]  # noqa: E731
+        lines.append(
+            f"| {label}, {g('segments') / 1e6:.2f} M segments | {g('fiberpath_render_s'):.2f} s, "
+            f"{g('fiberpath_rays_per_s') / 1e6:.2f} M rays/s | {g('fiberpath_bvh_render_s'):.2f} s | "
+            f"{g('mitsuba_render_s'):.2f} s | **{g('speed_ratio'):.2f}** (BVH {g('bvh_speed_ratio'):.2f}) | "
+            f"{g('fiberpath_build_s'):.2f} / {g('fiberpath_bvh_build_s'):.2f} / {g('mitsuba_load_s'):.2f} s | "
+            f"{g('fiberpath_mean')[0]:.5f} / {g('mitsuba_mean')[0]:.5f} ({g('mean_diff_in_standard_errors'):.1f}) | "
+            f"{g('embree_bvh_diff_in_standard_errors'):.2f} |")
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -338,12 +338,17 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
         t = _segment_t(sc, s, ox, oy, oz, dx, dy, dz, tmin)   # float64, loomlight's capsule test
         if t < tmax:
             # Embree's float32 cone test can put the hit on the next segment of the chain, a few
-            # thousandths of a radius beyond where the two meet: the nearer of s and its neighbours wins
-            # (ties to the lower index, as in loomlight's BVH)
-            f = sc.seg_fiber[s]
-            for k in (s - 1, s + 1):
-                if k < 0 or k >= sc.seg_a.shape[0] or sc.seg_fiber[k] != f or (k >= lo and k <= hi):
-                    continue
+            # thousandths of a radius beyond where the two meet: the nearer of s and the neighbour at
+            # the hit's end of s wins (ties to the lower index, as in loomlight's BVH). Their surfaces
+            # cross within r tan(bend / 2) of the joint, so the other neighbour is not a candidate.
+            i = sc.seg_a[s]
+            P = sc.points
+            ex = P[i + 1, 0] - P[i, 0]
+            ey = P[i + 1, 1] - P[i, 1]
+            ez = P[i + 1, 2] - P[i, 2]
+            along = (ox + t * dx - P[i, 0]) * ex + (oy + t * dy - P[i, 1]) * ey + (oz + t * dz - P[i, 2]) * ez
+            k = s - 1 if 2.0 * along < ex * ex + ey * ey + ez * ez else s + 1
+            if k >= 0 and k < sc.seg_a.shape[0] and sc.seg_fiber[k] == sc.seg_fiber[s] and (k < lo or k > hi):
                 tk = _segment_t(sc, k, ox, oy, oz, dx, dy, dz, tmin)
                 if tk < t or (tk == t and k < s):
                     t = tk
