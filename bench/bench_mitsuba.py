@@ -17,7 +17,8 @@ speed-up), and ``embree_bvh_diff_in_standard_errors`` says whether the two fiber
 Ray offsets: a Lambertian vertex's rays start off the surface along its normal. fiberpath's offset is
 1e-3 of the fibre radius plus 1e-7 of the scene's size; Mitsuba's is (1 + max |p_i|) x 1500 x 2^-24 at
 the hit p (its RayEpsilon), 1.25e-4 here: 13 % of a cotton fibre's radius (9.8e-4), so on realized
-fibres, which overlap, its rays often start inside a neighbouring fibre and leave through it unseen.
+fibres, which touch and overlap, its rays start past whatever lies that close to the surface and
+more of them escape.
 That alone made Mitsuba's image 0.3 % brighter (6-9 standard errors); with Mitsuba's offset
 fiberpath's mean is Mitsuba's within noise (0.52341 against 0.52346 on ``small``, Embree and BVH alike).
 So the bench gives fiberpath Mitsuba's offset (``mitsuba_offset``) for both its renders: the same
@@ -163,6 +164,7 @@ def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=
     radius = f.point_radius * radius_scale
     keep = None
     if accel == "embree":
+        EmbreeScene(f.points[:64], np.array([0, 64]), radius[:64]).close()  # load the library and kernels
         t = time.perf_counter()
         keep = EmbreeScene(f.points, f.fiber_offsets, radius, THREADS)
         bvh = keep.fibers

@@ -19,21 +19,21 @@ spatial splits (SBVH) and ray streams sorted by direction. Prints JSON. Not run 
    tracer makes them (pixel by pixel), in random order, by origin alone (Morton order), sorted by
    direction octant then origin, and by 64 direction bins then origin. Sorting is what ray-stream tracers do to share node visits
    between rays; loomlight's traversal takes one ray at a time.
-4. **A library: Embree 4.** The ``embreex`` wheel on PyPI (an optional bench dependency, ``pip install -e
-   .[bench]``) carries a whole ``libembree4``, though its Python API only builds triangle meshes. The same
+4. **A library: Embree 4.** The ``embreex`` wheel on PyPI (now one of loomlight's dependencies: fiberpath's
+   default tracer, ``stages.core.geometry.embree``, came out of this probe) carries a whole ``libembree4``,
+   though its Python API only builds triangle meshes. The same
    fibres go in as Embree round linear curves (a vertex and radius per fibre point, a segment per capsule),
    and a numba loop calls ``rtcIntersect1`` through ctypes one ray at a time, beside the same loop over
    loomlight's ``surface_hit``, on the camera rays and the bounce rays above (no segments skipped; both
    also compute the hit's normal, as a path tracer must). Reported: both build times, ns per ray, hit counts and the summed
-   hit distances. Embree reports no hit from inside a curve, loomlight meets the far side of a fibre
-   that holds the origin (``capsule.py``), so bounce rays leaving a fibre inside another fibre differ; the
-   camera rays start outside every fibre and must agree. (numba cannot cache a kernel that calls a ctypes
-   function: these two compile every run.) Skipped with the reason when ``embreex`` is missing.
+   hit distances. The hits differ only where Embree's float32 curve test differs from loomlight's float64
+   capsule test (near-ties at joints, grazing rays; the vertices here are shared at joints, where Embree
+   interpolates the points' radii, as ``stages.core.geometry.embree`` does not). (numba cannot cache a
+   kernel that calls a ctypes function: these two compile every run.) Skipped with the reason when ``embreex`` is missing.
 5. **The same, end to end.** One Lambertian path tracer (unit sky, albedo 0.75, max depth 16, cosine
    sampling, 64 x 48 @ 16 spp, one thread) written twice, identical but for the traversal: loomlight's
    ``surface_hit`` (the normal from the capsule's axis) or ``rtcIntersect1`` (Embree's geometric normal).
-   Reported: both times, rays and mean radiances (they differ only where a path leaves a fibre inside
-   another, see 4).
+   Reported: both times, rays and mean radiances (they differ where the hits do, see 4).
 """
 from __future__ import annotations
 
@@ -432,7 +432,7 @@ def embree_path_tracer(bvh, G, win, scene_path, W=64, H=48, spp=16, repeats=3) -
     try:
         E, intersect1 = _embree()
     except ImportError as e:
-        return {"skipped": f"embreex not installed or unusable ({e}); pip install -e .[bench]"}
+        return {"skipped": f"embreex not installed or unusable ({e}); pip install embreex"}
     dev, scene = _embree_scene(E, bvh)
     tracers = {"loomlight": (_path_tracer(_nearest_loomlight), (G, win)),
                "embree": (_path_tracer(_embree_nearest(intersect1)), (scene, np.zeros(32, np.float32)))}
@@ -458,7 +458,7 @@ def embree_library(bvh, G, win, rays: dict, repeats=3) -> dict:
     try:
         E, intersect1 = _embree()
     except ImportError as e:
-        return {"skipped": f"embreex not installed or unusable ({e}); pip install -e .[bench]"}
+        return {"skipped": f"embreex not installed or unusable ({e}); pip install embreex"}
     t0 = time.perf_counter()
     dev, scene = _embree_scene(E, bvh)
     build_s = time.perf_counter() - t0

@@ -1,6 +1,8 @@
 """``--method fiberpath``: explicit fibres (capsule chains) path traced with the Khungurn 2015 BCSDF.
 
-Fibres come from ``--fibers PATH.zarr``: a ``fibers`` artifact (realized fibres, one SAH BVH) or a
+Fibres come from ``--fibers PATH.zarr``: a ``fibers`` artifact (realized fibres, traced by Embree 4 --
+``--set accel=embree``, the default, ``stages.core.geometry.embree`` -- or by loomlight's own SAH BVH,
+``--set accel=bvh``; the two agree within noise, ``bench/bench_mitsuba.py``) or a
 ``tiling`` artifact (``loomlight tile``: exemplar fibres under a shell map, rays walking the shell's
 tetrahedra; ``--method fiberpath_shell`` and ``--set tiling=PATH`` are the same). ``--source
 realized`` is accepted and means the same; it is the only fibre source this method has, so the

@@ -1,13 +1,13 @@
 """Explicit-fibre unidirectional path tracer (``--method fiberpath``).
 
 Geometry: a surface scene (``stages.core.geometry.surface``): realized fibres as chains of capsules
-in a SAH BVH (``FiberBVH``) or tiled exemplars under a shell map (``ShellScene``); the same estimator
-runs on both. Optional ground plane (``stages.render.ground``). Materials: packed rows
+traced by Embree 4 (``EmbreeFibers``, the renderer's default) or in loomlight's SAH BVH (``FiberBVH``),
+or tiled exemplars under a shell map (``ShellScene``); the same estimator runs on all three. Optional ground plane (``stages.render.ground``). Materials: packed rows
 (``stages.core.shading.material``: the BCSDF of Khungurn et al. 2015 or a Lambertian surface), one
 per fibre through ``mat_of_fiber``, and a Lambertian row for the ground. Lights: ``stages.render.lights``
 (all distant).
 
-``FiberpathIntegrator`` fields: ``scene`` (FiberBVH | ShellScene), ``mat_of_fiber`` (F,) int32 row of
+``FiberpathIntegrator`` fields: ``scene`` (EmbreeFibers | FiberBVH | ShellScene), ``mat_of_fiber`` (F,) int32 row of
 each fibre, ``mats`` (NM, MAT_SIZE), ``ground_mat`` (MAT_SIZE,) the ground's Lambertian row,
 ``lights`` (``LightTable``), ``ground`` float64[4] and ``has_ground`` (``stages.render.ground``),
 ``max_depth``, ``rr_depth``, ``ign_window``, ``eps`` (ray offset, scene units).

@@ -27,21 +27,26 @@ What is the same as loomlight's BVH, and what is not
   (``window_filter``, a cached numba ``cfunc``) rejects candidate hits whose ``primID`` lies in the
   skipped range, which travels in the ray's query context. Rays that skip nothing run without it.
 - *Hit distance*: Embree works in float32. The hit it reports is re-intersected in float64 with
-  loomlight's exact capsule test, together with its two neighbours along the fibre (they meet it in
-  a joint sphere: a hit there is a tie, broken towards the lower segment index as loomlight does). So
-  ``t``, the segment and the normal are loomlight's whenever Embree and loomlight pick the same
-  capsule; they differ only where two different capsules lie within float32 rounding of each other
-  along the ray.
-- *A ray that starts inside a capsule*: loomlight meets that capsule where the ray leaves it; Embree
-  reports no hit on it (a curve is only hit from outside, as in Mitsuba 3, which also traces fibres
-  with Embree). fiberpath's rays start on the surface of the fibre they leave (skipped) or off it
-  along its normal, so this only happens where realized fibres overlap and rounding puts a vertex
-  inside a neighbour; the renders then agree within noise (``tests/render/test_fiberpath_embree.py``).
+  loomlight's capsule test, together with the chain neighbour at that end of the segment (Embree's
+  cone test can put the hit on the next segment a few thousandths of a radius beyond where the two
+  meet; their surfaces cross within r tan(bend / 2) of the joint): the nearer wins, ties to the lower
+  index as in loomlight's BVH. A float32 hit the float64 test does not confirm (a grazing ray, or one
+  leaving a surface a few float32 steps off it) is looked past. So ``t``, the segment and the normal
+  are loomlight's wherever Embree finds the same capsule.
+- *A ray that starts inside a capsule* meets it where it leaves it, in Embree as in loomlight
+  (``capsule.py``): Embree's round curves report the way out too (tested against brute force).
+- *Where they differ*: rays within ~1e-3 rad of a segment's axis (Embree's cone test degenerates;
+  a few in a thousand of such rays miss a capsule they pass inside), the float32 any-hit answer of
+  ``embree_occluded`` for rays that start within a few float32 steps of a surface (0.03-0.17 % more
+  occluded bounce rays on the realized demo fibres), and rays from inside a zero-length segment, which
+  ``rtcOccluded1`` does not see leave. Images agree with the BVH's within noise
+  (``tests/render/test_fiberpath.py``, ``bench/bench_mitsuba.py``).
+- *Determinism*: the same bytes whatever the thread count (Embree's build is deterministic); Embree
+  picks its SIMD width from the CPU, so another instruction set may break a float32 near-tie the
+  other way.
 
-Memory
-------
-``embree_bytes(n_segments)`` estimates the scene (vertex and index buffers plus Embree's
-BVH, measured at about 64 bytes per curve segment with the default build quality) before it is built.
+Memory: the render's estimate (``pipeline.runners.render.VERTEX_BYTES`` per fibre vertex) covers
+loomlight's BVH, the larger of the two (peak 545 MiB against Embree's 390 MiB on a demo render).
 """
 from __future__ import annotations
 
@@ -72,7 +77,6 @@ SCENE_FLAG_FILTER_FUNCTION_IN_ARGUMENTS = 1 << 3
 QUERY_INVOKE_ARGUMENT_FILTER = 1 << 1
 FEATURE_ALL = 0xFFFFFFFF
 INVALID_ID = 0xFFFFFFFF
-BVH_BYTES_PER_SEGMENT = 64
 MAX_REQUERIES = 8   # float32 hits not confirmed in float64 that one query looks past
 
 # Byte layout of the per-query scratch block (16-byte aligned, on the machine stack):
@@ -141,11 +145,6 @@ def embree_available() -> str | None:
     except EmbreeUnavailable as e:
         return str(e)
     return None
-
-
-def embree_bytes(n_segments: int) -> int:
-    """Estimated memory of an Embree fibre scene: vertex and index buffers and Embree's BVH."""
-    return (32 + 4 + BVH_BYTES_PER_SEGMENT) * int(n_segments)
 
 
 _ERRORS = {1: "unknown error", 2: "invalid argument", 3: "invalid operation", 4: "out of memory",
