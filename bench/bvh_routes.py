@@ -50,7 +50,7 @@ os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads)
 
 import numpy as np  # noqa: E402
-from numba import njit  # noqa: E402
+from numba import njit, types  # noqa: E402
 
 from stages.core.geometry.surface import surface_hit  # noqa: E402
 from stages.core.rng import uniform  # noqa: E402
@@ -237,7 +237,8 @@ def ray_order(scene_path, fibers, W=128, H=96, spp=16, repeats=3) -> dict:
     from pipeline.scene import load_scene
 
     scene = load_scene(scene_path)
-    opts = resolve_options(scene, method("fiberpath"), width=W, height=H, spp=spp, fibers=str(fibers), extra={})
+    opts = resolve_options(scene, method("fiberpath"), width=W, height=H, spp=spp, fibers=str(fibers),
+                           extra={"accel": "bvh"})   # loomlight's own BVH: the walk measured here
     setup = film_setup(scene, opts)
     G, it = setup.integ.scene, setup.integ
     N = W * H * spp
@@ -482,6 +483,99 @@ def embree_library(bvh, G, win, rays: dict, repeats=3) -> dict:
     return out
 
 
+_intersect1 = types.ExternalFunction("rtcIntersect1", types.void(types.intp, types.intp, types.intp))
+_intersect16 = types.ExternalFunction("rtcIntersect16", types.void(types.intp, types.intp, types.intp, types.intp))
+PACKET = 16
+
+
+@njit(cache=True)
+def _single_rays(handle, O, D, buf):
+    """rtcIntersect1 per ray (``buf``: float32[32], 16-byte aligned, one RTCRayHit): (hits, summed t)."""
+    u = buf.view(np.uint32)
+    hits, acc = 0, 0.0
+    for i in range(O.shape[0]):
+        for k in range(3):
+            buf[k] = O[i, k]
+            buf[4 + k] = D[i, k]
+        buf[3] = 0.0
+        buf[7] = 0.0
+        buf[8] = np.inf
+        u[9] = 0xFFFFFFFF
+        u[10] = 0
+        u[11] = 0
+        u[18] = 0xFFFFFFFF
+        _intersect1(handle, buf.ctypes.data, 0)
+        if u[18] != 0xFFFFFFFF:
+            hits += 1
+            acc += buf[8]
+    return hits, acc
+
+
+@njit(cache=True)
+def _packet_rays(handle, O, D, buf, valid):
+    """rtcIntersect16 on runs of 16 consecutive rays (``buf``: float32[16 * 24], 64-byte aligned, one
+    RTCRayHit16: each field 16 wide; ``valid`` int32[16], 64-byte aligned): (hits, summed t)."""
+    u = buf.view(np.uint32)
+    hits, acc = 0, 0.0
+    n = O.shape[0]
+    for p0 in range(0, n, PACKET):
+        m = min(PACKET, n - p0)
+        for j in range(PACKET):
+            valid[j] = -1 if j < m else 0
+            i = p0 + min(j, m - 1)
+            for k in range(3):
+                buf[k * PACKET + j] = O[i, k]
+                buf[(4 + k) * PACKET + j] = D[i, k]
+            buf[3 * PACKET + j] = 0.0
+            buf[7 * PACKET + j] = 0.0
+            buf[8 * PACKET + j] = np.inf
+            u[9 * PACKET + j] = 0xFFFFFFFF
+            u[10 * PACKET + j] = 0
+            u[11 * PACKET + j] = 0
+            u[18 * PACKET + j] = 0xFFFFFFFF
+        _intersect16(valid.ctypes.data, handle, buf.ctypes.data, 0)
+        for j in range(m):
+            if u[18 * PACKET + j] != 0xFFFFFFFF:
+                hits += 1
+                acc += buf[8 * PACKET + j]
+    return hits, acc
+
+
+def _aligned(n, dtype, align=64):
+    raw = np.zeros(n * np.dtype(dtype).itemsize + align, np.uint8)
+    off = (-raw.ctypes.data) % align
+    return raw[off:off + n * np.dtype(dtype).itemsize].view(dtype)
+
+
+def embree_packets(points, fiber_offsets, point_radius, rays: dict, repeats=3) -> dict:
+    """Embree's packet API against one ray at a time, on fiberpath's own Embree scene
+    (``stages.core.geometry.embree``) and the camera and bounce rays in the order a path tracer makes
+    them (pixel by pixel), one thread: would tracing 16 rays per call, as Mitsuba's vectorised
+    wavefront does, pay?"""
+    from stages.core.geometry.embree import EmbreeScene, EmbreeUnavailable
+
+    try:
+        es = EmbreeScene(points, fiber_offsets, point_radius, 1)
+    except EmbreeUnavailable as e:
+        return {"skipped": str(e)}
+    out = {"threads": 1, "packet": PACKET}
+    one, pkt, valid = _aligned(32, np.float32, 16), _aligned(PACKET * 24, np.float32), _aligned(PACKET, np.int32)
+    with es:
+        h = int(es.fibers.handle)
+        for name, (O, D) in rays.items():
+            best = {}
+            for _ in range(repeats + 1):   # the first round compiles (or loads)
+                for key, fn, args in (("single", _single_rays, (one,)), ("packet16", _packet_rays, (pkt, valid))):
+                    t0 = time.perf_counter()
+                    r = fn(h, O, D, *args)
+                    best[key] = (min(best.get(key, (np.inf,))[0], time.perf_counter() - t0), r)
+            out[name] = {"rays": int(len(O)), **{f"{k}_ns_per_ray": v[0] / len(O) * 1e9 for k, v in best.items()},
+                         "single_over_packet16": best["single"][0] / best["packet16"][0],
+                         **{f"{k}_hits": int(v[1][0]) for k, v in best.items()},
+                         **{f"{k}_sum_t": float(v[1][1]) for k, v in best.items()}}
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--fibers", default=str(ROOT / "out" / "bench_bysdf" / "fibers.zarr"))
@@ -498,6 +592,7 @@ def main(argv=None) -> dict:
     res["ray_order"], rays, G, win = ray_order(args.scene, args.fibers)
     res["embree"] = embree_library(bvh, G, win, rays)
     res["embree_path_tracer"] = embree_path_tracer(bvh, G, win, args.scene)
+    res["embree_packets"] = embree_packets(f.points, f.fiber_offsets, f.point_radius, rays)
     print(json.dumps(res, indent=2))
     return res
 

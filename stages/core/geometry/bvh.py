@@ -460,8 +460,9 @@ def _skip(bvh, s, ign_fiber, ign_seg, ign_window):
     return ign_fiber >= 0 and bvh.seg_fiber[s] == ign_fiber and abs(s - ign_seg) <= ign_window
 
 
-@njit(cache=True)
-def _seg_hit(bvh, s, ox, oy, oz, dx, dy, dz, tmin):
+@njit(cache=True, inline="always")
+def segment_hit(bvh, s, ox, oy, oz, dx, dy, dz, tmin):
+    """The capsule test of segment s of any scene tuple with ``points``, ``seg_a``, ``seg_r`` (float64)."""
     i = bvh.seg_a[s]
     P = bvh.points
     return capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
@@ -615,7 +616,7 @@ def intersect_brute(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
     for s in range(bvh.seg_a.shape[0]):
         if _skip(bvh, s, ign_fiber, ign_seg, ign_window):
             continue
-        t = _seg_hit(bvh, s, ox, oy, oz, dx, dy, dz, tmin)
+        t = segment_hit(bvh, s, ox, oy, oz, dx, dy, dz, tmin)
         if t < best_t or (t == best_t and best_s >= 0 and s < best_s):
             best_t = t
             best_s = s

@@ -62,8 +62,7 @@ from numba import cfunc, njit, types
 from numba.extending import intrinsic, overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.core.geometry.bvh import ignore_range, segments_from_fibers
-from stages.core.geometry.capsule import capsule_intersect
+from stages.core.geometry.bvh import ignore_range, segment_hit, segments_from_fibers
 from stages.core.geometry.surface import segment_surface_hit, surface_hit, surface_occluded
 
 EmbreeFibers = namedtuple("EmbreeFibers", ["handle", "filter", "points", "seg_a", "seg_r", "seg_fiber",
@@ -312,14 +311,6 @@ def _query(sc, base, ox, oy, oz, dx, dy, dz, tmin, tmax, lo, hi):
     poke(base + CTX + CTX_HI, np.int64(hi))
 
 
-@njit(cache=True, inline="always")
-def _segment_t(sc, s, ox, oy, oz, dx, dy, dz, tmin):
-    i = sc.seg_a[s]
-    P = sc.points
-    return capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
-                             P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], sc.seg_r[s], tmin)
-
-
 @njit(cache=True, _nrt=False)
 def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Nearest hit (t, segment) with tmin < t < tmax; (inf, -1) when none (``bvh.intersect``'s contract)."""
@@ -334,7 +325,7 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
         if peek(base + 72, np.uint32) == INVALID_ID:
             return np.inf, -1
         s = np.int64(peek(base + 68, np.uint32))
-        t = _segment_t(sc, s, ox, oy, oz, dx, dy, dz, tmin)   # float64, loomlight's capsule test
+        t = segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin)   # float64, loomlight's capsule test
         if t < tmax:
             # Embree's float32 cone test can put the hit on the next segment of the chain, a few
             # thousandths of a radius beyond where the two meet: the nearer of s and the neighbour at
@@ -348,7 +339,7 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
             along = (ox + t * dx - P[i, 0]) * ex + (oy + t * dy - P[i, 1]) * ey + (oz + t * dz - P[i, 2]) * ez
             k = s - 1 if 2.0 * along < ex * ex + ey * ey + ez * ez else s + 1
             if k >= 0 and k < sc.seg_a.shape[0] and sc.seg_fiber[k] == sc.seg_fiber[s] and (k < lo or k > hi):
-                tk = _segment_t(sc, k, ox, oy, oz, dx, dy, dz, tmin)
+                tk = segment_hit(sc, k, ox, oy, oz, dx, dy, dz, tmin)
                 if tk < t or (tk == t and k < s):
                     t = tk
                     s = k

@@ -47,8 +47,8 @@ from numba import njit, prange
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.core.geometry.bvh import direction_signs, leaf_range, push_children_sorted
-from stages.core.geometry.capsule import capsule_intersect, capsule_normal
+from stages.core.geometry.bvh import direction_signs, leaf_range, push_children_sorted, segment_hit
+from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.slab import safe_inverse, slab_enter
 from stages.core.geometry.stack import STACK_SIZE, stack_array
 from stages.core.geometry.surface import SurfaceHit, surface_hit, surface_occluded
@@ -158,14 +158,6 @@ def _skipped(sc, s, ign_fiber, ign_seg, ign_window):
     return ign_fiber >= 0 and sc.seg_srcfiber[s] == ign_fiber and abs(sc.seg_src[s] - ign_seg) <= ign_window
 
 
-@njit(cache=True, inline="always")
-def _segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin):
-    i = sc.seg_a[s]
-    P = sc.points
-    return capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0], P[i, 1], P[i, 2],
-                             P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], sc.seg_r[s], tmin)
-
-
 @njit(cache=True, _nrt=False)
 def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Nearest capsule hit (t, segment) with tmin < t < tmax in the wide BVH rooted at ``root`` (ties:
@@ -191,7 +183,7 @@ def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_s
                 s = sc.fprim[j]
                 if _skipped(sc, s, ign_fiber, ign_seg, ign_window):
                     continue
-                t = _segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin)
+                t = segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin)
                 if t < best or (t == best and bs >= 0 and s < bs):
                     best = t
                     bs = s
@@ -222,7 +214,7 @@ def fiber_any(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, 
                 s = sc.fprim[j]
                 if _skipped(sc, s, ign_fiber, ign_seg, ign_window):
                     continue
-                if _segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin) < tmax:
+                if segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin) < tmax:
                     return True
             continue
         sp = push_children_sorted(sc.fw_box, sc.fw_child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax,
