@@ -34,6 +34,10 @@ spatial splits (SBVH) and ray streams sorted by direction. Prints JSON. Not run 
    sampling, 64 x 48 @ 16 spp, one thread) written twice, identical but for the traversal: loomlight's
    ``surface_hit`` (the normal from the capsule's axis) or ``rtcIntersect1`` (Embree's geometric normal).
    Reported: both times, rays and mean radiances (they differ where the hits do, see 4).
+6. **Packets.** fiberpath's own Embree scene (``stages.core.geometry.embree``: a curve segment per
+   capsule) traced one ray per ``rtcIntersect1`` call against 16 consecutive rays per ``rtcIntersect16``
+   call (the packet API Mitsuba's vectorised wavefront uses), camera and bounce rays in pixel order, one
+   thread: ns per ray, hits and summed distances of each.
 """
 from __future__ import annotations
 
