@@ -176,7 +176,7 @@ def _realized_scene(path, accel: str):
 
         geometry, _ = build_fiber_bvh(fibers.points, fibers.fiber_offsets, fibers.point_radius)
         keep, nodes = (), {"bvh_nodes": int(len(geometry.node_left))}
-    stats = {"bvh_build_s": time.perf_counter() - t0, "accel": accel, "segments": int(len(geometry.seg_a)),
+    stats = {"accel_build_s": time.perf_counter() - t0, "accel": accel, "segments": int(len(geometry.seg_a)),
              "fibers": fibers.n_fibers, **nodes}
     eps = ray_eps(fibers.points.min(axis=0), fibers.points.max(axis=0))
     return geometry, fibers, eps, "fiberpath", stats, keep

@@ -368,6 +368,31 @@ def test_cli_usage_errors(cli, tmp_path):
     assert not (tmp_path / "o.exr").exists()
 
 
+def test_cli_accel_bvh_and_embree_unavailable(cli, tmp_path, monkeypatch):
+    """--set accel=bvh renders with loomlight's BVH (same image as Embree within noise: the statistics
+    record the accel); an unknown accel, or Embree missing, is a one-line error naming the setting,
+    exit 2, nothing written."""
+    import stages.core.geometry.embree as E
+    from pipeline.artifacts import Artifact
+
+    fib = _fibers_artifact(tmp_path / "fibers.zarr")
+    scene = tmp_path / "s.toml"
+    scene.write_text(SCENE.format(bcsdf="cotton"))
+    for accel in ("embree", "bvh"):
+        code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / f"{accel}.exr",
+                           "--set", f"accel={accel}")
+        assert code == 0, err
+        assert Artifact(tmp_path / f"{accel}.zarr", kind="render").summary["method_stats"]["accel"] == accel
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr",
+                       "--set", "accel=optix")
+    assert code == 2 and "accel" in err and "optix" in err and len(err.strip().splitlines()) == 1
+    monkeypatch.setattr(E, "_LIB", None)
+    monkeypatch.setattr(E.importlib.util, "find_spec", lambda name, *a: None)
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
+    assert code == 2 and "embreex" in err and "accel=bvh" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "x.exr").exists() and not (tmp_path / "x.zarr").exists()
+
+
 def test_cli_renders_exr_png_artifact(cli, tmp_path):
     """Contract: EXR (RGB + A, depth, variance), PNG preview, render artifact with statistics; bad
     preset / empty fibres exit 2 naming the value and leave no output."""

@@ -137,15 +137,6 @@ def load_embree():
     return lib
 
 
-def embree_available() -> str | None:
-    """None when Embree 4 loads, else why not (one line)."""
-    try:
-        load_embree()
-    except EmbreeUnavailable as e:
-        return str(e)
-    return None
-
-
 _ERRORS = {1: "unknown error", 2: "invalid argument", 3: "invalid operation", 4: "out of memory",
            5: "unsupported CPU", 6: "cancelled"}
 
