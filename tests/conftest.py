@@ -58,9 +58,6 @@ def offscreen_gl():
 SHARED_COMPILE = {
     "tests/procedural/test_tables_lookup.py": "procedural-lookups",
     "tests/render/test_volpath.py": "procedural-lookups",
-    # fiberpath on loomlight's own BVH (--set accel=bvh; Embree is the default elsewhere)
-    "tests/render/test_fiberpath.py": "fiberpath-bvh",
-    "tests/render/test_tile_render.py": "fiberpath-bvh",
 }
 
 
