@@ -171,6 +171,38 @@ def test_capsule_closed_forms():
     assert capsule_intersect(0.4, 0.0, r, 0.0, 0.0, 1.0, *a, *b, r, 1e-12) == math.inf
 
 
+def test_capsule_first_hit_is_the_entry():
+    """Contract: from outside, the hit lies on the surface and no point of the ray before it is inside
+    the capsule (the early stop at a body hit skips the end spheres: they must not be nearer); a miss
+    passes no point inside. Random rays at random capsules, marched at 400 points."""
+    rng = np.random.default_rng(11)
+    hits = 0
+    for _ in range(400):
+        a = rng.normal(size=3)
+        b = a + rng.normal(size=3) * rng.choice([0.02, 0.3, 1.0])
+        r = rng.uniform(0.01, 0.2)
+        target = a + rng.uniform(-0.2, 1.2) * (b - a) + rng.normal(size=3) * r
+        o = target + rng.normal(size=3)
+        d = target - o
+        d /= np.linalg.norm(d)
+
+        def dist(p):
+            ab = b - a
+            s = min(max(np.dot(p - a, ab) / np.dot(ab, ab), 0.0), 1.0)
+            return np.linalg.norm(p - (a + s * ab))
+
+        if dist(o) <= r:
+            continue
+        t = capsule_intersect(*o, *d, *a, *b, r, 0.0)
+        end = t if t < math.inf else np.linalg.norm(target - o) + 3.0 + np.linalg.norm(b - a)
+        march = np.linspace(0.0, end, 400, endpoint=False)
+        assert all(dist(o + u * d) > r * (1 - 1e-9) for u in march)
+        if t < math.inf:
+            hits += 1
+            assert dist(o + t * d) == pytest.approx(r, rel=1e-9)
+    assert hits > 100
+
+
 def test_capsule_from_inside_meets_its_way_out():
     """Reference: a ray that starts inside a capsule (a fibre overlapping the one the ray leaves) meets
     it where it leaves: through the body at the radius (closed form), through an end sphere at its
