@@ -31,12 +31,16 @@ the same albedo, light, spp and thread count (``drjit.set_thread_count``). Depth
 ``max_depth`` counts scattering events, Mitsuba's ``max_depth`` counts path segments, so Mitsuba
 gets one more (17 for 16; the same for Russian roulette: fiberpath ``rr_depth`` 4, Mitsuba 5; both
 use survival min(0.95, max throughput channel)). Timings are of warm runs (each renderer compiles
-first: numba loads or JITs its kernels, Dr.Jit traces and compiles its megakernel), builds are timed
+first: numba loads or JITs its kernels, Dr.Jit traces and compiles its megakernel), ``ROUNDS`` of them
+taken in turn (fiberpath on Embree, on the BVH, Mitsuba; again): the machine's speed drifts by ±10 %
+from one minute to the next, Mitsuba's with it, so a ratio is only worth the median over rounds of
+renders made side by side (``speed_ratio``, its spread in ``speed_ratio_range``). Builds are timed
 separately (fiberpath's Embree scene, and its SAH build and 4-wide collapse, from arrays in memory;
 Mitsuba's ``load_dict``: reading the curve text, Embree's scene build and scene setup). Mitsuba's rays/s is
 estimated from fiberpath's ray count (a lower bound: Mitsuba also traces the shadow rays of light
 samples below the surface, which fiberpath skips). ``means_agree``: |difference| < 4 standard errors
-per channel (Mitsuba reports no variance; its error is taken equal to fiberpath's). ``make bench`` also
+per channel (Mitsuba reports no variance; one image's error is taken equal to fiberpath's, and its
+mean is over the rounds' seeds). ``make bench`` also
 writes the README's table of the run (``comparison_table``) to ``bench/results/mitsuba_table.md``.
 
 Mitsuba 3 is an optional, bench-only dependency (``pip install mitsuba``; its ``llvm`` variants need
@@ -56,6 +60,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 THREADS = 2
+ROUNDS = 3   # interleaved renders per renderer and case (the machine's speed drifts by ±10 % between runs)
 ALBEDO = 0.75
 ENV = 1.0
 
@@ -146,55 +151,72 @@ def _export(fibers: Path, work: Path) -> Path:
     return txt
 
 
-def render_fiberpath(fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=4, radius_scale=1.0,
-                     accel="embree", eps=None) -> dict:
-    import numba
+class FiberpathRenderer:
+    """fiberpath on one case's fibres, built once (``build_s``: the Embree scene, or the SAH BVH and its
+    4-wide collapse, from arrays in memory) and compiled; ``render()`` renders the image anew (a fresh
+    film) and returns its seconds, the last image's statistics in ``stats``."""
 
-    from pipeline.render_setup import load_fibers, pack_lights
-    from pipeline.scene import camera_array
-    from stages.core.geometry.bvh import build_fiber_bvh
-    from stages.core.geometry.embree import EmbreeScene
-    from stages.core.shading.material import pack_material_lambert
-    from stages.render.fiberpath import FiberpathIntegrator
-    from stages.render.film import F_RAYS, new_film, tile_grid
-    from stages.render.tiles import render_tiles
+    def __init__(self, fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=4, radius_scale=1.0,
+                 accel="embree", eps=None):
+        import numba
 
-    numba.set_num_threads(THREADS)
-    f = load_fibers(fibers)
-    radius = f.point_radius * radius_scale
-    keep = None
-    if accel == "embree":
-        EmbreeScene(f.points[:64], np.array([0, 64]), radius[:64]).close()  # load the library and kernels
+        from pipeline.render_setup import load_fibers, pack_lights
+        from pipeline.scene import camera_array
+        from stages.core.geometry.bvh import build_fiber_bvh
+        from stages.core.geometry.embree import EmbreeScene
+        from stages.core.shading.material import pack_material_lambert
+        from stages.render.fiberpath import FiberpathIntegrator
+        from stages.render.film import new_film, tile_grid
+        from stages.render.tiles import render_tiles
+
+        numba.set_num_threads(THREADS)
+        f = load_fibers(fibers)
+        radius = f.point_radius * radius_scale
+        self.keep = None
+        if accel == "embree":
+            EmbreeScene(f.points[:64], np.array([0, 64]), radius[:64]).close()  # load the library and kernels
+            t = time.perf_counter()
+            self.keep = EmbreeScene(f.points, f.fiber_offsets, radius, THREADS)
+            bvh = self.keep.fibers
+        else:
+            build_fiber_bvh(f.points[:64], np.array([0, 64]), radius[:64])  # compile / load the builder
+            t = time.perf_counter()
+            bvh, _ = build_fiber_bvh(f.points, f.fiber_offsets, radius)
+        self.build_s = time.perf_counter() - t
+        self.segments = int(len(bvh.seg_a))
+        self.cam = camera_array(camera, W, H)
+        lights = pack_lights([{"type": "constant", "radiance": ENV}])
+        mats = np.stack([pack_material_lambert(np.full(3, ALBEDO))])
+        mof = np.zeros(len(f.fiber_offsets) - 1, np.int32)
+        extent = float(np.linalg.norm(f.points.max(0) - f.points.min(0)))
+        self.integ = FiberpathIntegrator(bvh, mof, mats, pack_material_lambert(np.zeros(3)), lights.table(),
+                                         np.zeros(4), False, max_depth, rr_depth, 1 << 40,
+                                         1e-7 * extent if eps is None else
+                                         mitsuba_offset(f.points) if eps == "mitsuba" else eps)
+        self.tiles = tile_grid(W, H, 16)
+        self.W, self.H, self.spp = W, H, spp
+        self._render_tiles, self._new_film = render_tiles, new_film
+        render_tiles(self.integ, self.cam, 1, 1, 0, 1, self.tiles[:1], new_film(W, H), THREADS)  # compile / load
+        self.stats = None
+
+    def render(self) -> float:
+        from stages.render.film import F_RAYS
+
+        W, H, spp = self.W, self.H, self.spp
+        film = self._new_film(W, H)
         t = time.perf_counter()
-        keep = EmbreeScene(f.points, f.fiber_offsets, radius, THREADS)
-        bvh = keep.fibers
-    else:
-        build_fiber_bvh(f.points[:64], np.array([0, 64]), radius[:64])  # compile / load the builder
-        t = time.perf_counter()
-        bvh, _ = build_fiber_bvh(f.points, f.fiber_offsets, radius)
-    build_s = time.perf_counter() - t
-    cam = camera_array(camera, W, H)
-    lights = pack_lights([{"type": "constant", "radiance": ENV}])
-    mats = np.stack([pack_material_lambert(np.full(3, ALBEDO))])
-    mof = np.zeros(len(f.fiber_offsets) - 1, np.int32)
-    extent = float(np.linalg.norm(f.points.max(0) - f.points.min(0)))
-    integ = FiberpathIntegrator(bvh, mof, mats, pack_material_lambert(np.zeros(3)), lights.table(), np.zeros(4), False,
-                                max_depth, rr_depth, 1 << 40, 1e-7 * extent if eps is None else
-                                mitsuba_offset(f.points) if eps == "mitsuba" else eps)
-    tiles = tile_grid(W, H, 16)
-    render_tiles(integ, cam, 1, 1, 0, 1, tiles[:1], new_film(W, H), THREADS)  # compile / load
-    film = new_film(W, H)
-    t = time.perf_counter()
-    render_tiles(integ, cam, 1, spp, 0, spp, tiles, film, THREADS)
-    render_s = time.perf_counter() - t
-    rgb = film[..., :3] / spp
-    var = (film[..., 3:6] / spp - rgb ** 2) / max(spp - 1, 1)
-    rays = float(film[..., F_RAYS].sum())
-    out = {"build_s": build_s, "render_s": render_s, "rays": rays, "segments": int(len(bvh.seg_a)),
-           "mean": rgb.reshape(-1, 3).mean(0), "se": np.sqrt(var.reshape(-1, 3).sum(0)) / (W * H)}
-    if keep is not None:
-        keep.close()
-    return out
+        self._render_tiles(self.integ, self.cam, 1, spp, 0, spp, self.tiles, film, THREADS)
+        render_s = time.perf_counter() - t
+        rgb = film[..., :3] / spp
+        var = (film[..., 3:6] / spp - rgb ** 2) / max(spp - 1, 1)
+        self.stats = {"rays": float(film[..., F_RAYS].sum()), "mean": rgb.reshape(-1, 3).mean(0),
+                      "se": np.sqrt(var.reshape(-1, 3).sum(0)) / (W * H)}
+        return render_s
+
+    def close(self):
+        if self.keep is not None:
+            self.keep.close()
+            self.keep = None
 
 
 def mitsuba_offset(points) -> float:
@@ -203,33 +225,51 @@ def mitsuba_offset(points) -> float:
     return (1.0 + float(np.abs(points).max())) * 1500.0 * 2.0 ** -24
 
 
-def render_mitsuba(txt: Path, camera: dict, W, H, spp, max_depth, rr_depth=5) -> dict:
-    mi, dr = _mitsuba()
-    dr.set_thread_count(THREADS)
-    T = mi.ScalarTransform4f
-    scene_dict = {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": max_depth + 1, "rr_depth": rr_depth},
-        "sensor": {
-            "type": "perspective", "fov": float(camera["fov"]), "fov_axis": "x",
-            "to_world": T().look_at(origin=list(map(float, camera["origin"])),
-                                    target=list(map(float, camera["target"])), up=list(map(float, camera["up"]))),
-            "film": {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
-        "env": {"type": "constant", "radiance": {"type": "rgb", "value": [ENV] * 3}},
-        "fibres": {"type": "linearcurve", "filename": str(txt),
-                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [ALBEDO] * 3}}},
-    }
-    t = time.perf_counter()
-    scene = mi.load_dict(scene_dict)
-    build_s = time.perf_counter() - t
-    img = np.asarray(mi.render(scene, spp=spp, seed=0))  # warm-up: traces and compiles the kernel
-    t = time.perf_counter()
-    img = mi.render(scene, spp=spp, seed=1)
-    img = np.array(img)
-    render_s = time.perf_counter() - t
-    return {"build_s": build_s, "render_s": render_s, "mean": img.reshape(-1, 3).mean(0)}
+class MitsubaRenderer:
+    """Mitsuba 3 on one case's curve text, loaded once (``build_s``: reading the text, Embree's build and
+    scene setup) and warmed up (Dr.Jit traces and compiles its megakernel); ``render()`` renders with the
+    next seed and returns its seconds; ``stats`` holds the mean of its images."""
+
+    def __init__(self, txt: Path, camera: dict, W, H, spp, max_depth, rr_depth=5):
+        mi, dr = _mitsuba()
+        dr.set_thread_count(THREADS)
+        T = mi.ScalarTransform4f
+        scene_dict = {
+            "type": "scene",
+            "integrator": {"type": "path", "max_depth": max_depth + 1, "rr_depth": rr_depth},
+            "sensor": {
+                "type": "perspective", "fov": float(camera["fov"]), "fov_axis": "x",
+                "to_world": T().look_at(origin=list(map(float, camera["origin"])),
+                                        target=list(map(float, camera["target"])), up=list(map(float, camera["up"]))),
+                "film": {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+                "sampler": {"type": "independent", "sample_count": spp},
+            },
+            "env": {"type": "constant", "radiance": {"type": "rgb", "value": [ENV] * 3}},
+            "fibres": {"type": "linearcurve", "filename": str(txt),
+                       "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [ALBEDO] * 3}}},
+        }
+        t = time.perf_counter()
+        self.scene = mi.load_dict(scene_dict)
+        self.build_s = time.perf_counter() - t
+        self.mi, self.spp, self.seed = mi, spp, 0
+        np.asarray(mi.render(self.scene, spp=spp, seed=0))  # warm-up: traces and compiles the kernel
+        self.means = []
+
+    def render(self) -> float:
+        self.seed += 1
+        t = time.perf_counter()
+        img = np.array(self.mi.render(self.scene, spp=self.spp, seed=self.seed))
+        render_s = time.perf_counter() - t
+        self.means.append(img.reshape(-1, 3).mean(0))
+        return render_s
+
+    @property
+    def stats(self):
+        """The mean of the images rendered so far (each round's seed is new), and how many."""
+        return {"mean": np.mean(self.means, axis=0), "images": len(self.means)}
+
+    def close(self):
+        self.scene = None
 
 
 def _export_scaled(fibers: Path, work: Path, scale: float) -> Path:
@@ -244,35 +284,50 @@ def _export_scaled(fibers: Path, work: Path, scale: float) -> Path:
 
 
 def run_case(name, fibers: Path, txt: Path, camera: dict) -> dict:
+    """The three renderers on one case, built once each, then ``ROUNDS`` rounds of one render each in turn
+    (so a slow spell of the machine falls on all three alike); times are per-round medians and the
+    ratios the medians of the rounds' ratios, with their range across rounds."""
     W, H, spp, depth, scale = CASES[name]
-    fp = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale, eps="mitsuba")
-    fb = render_fiberpath(fibers, camera, W, H, spp, depth, radius_scale=scale, accel="bvh", eps="mitsuba")
-    mi = render_mitsuba(txt, camera, W, H, spp, depth)
-    diff = np.abs(fp["mean"] - mi["mean"])
-    # Mitsuba reports no variance: its image's standard error is taken equal to fiberpath's
-    tol = 4.0 * math.sqrt(2.0) * fp["se"]
+    fp = FiberpathRenderer(fibers, camera, W, H, spp, depth, radius_scale=scale, eps="mitsuba")
+    fb = FiberpathRenderer(fibers, camera, W, H, spp, depth, radius_scale=scale, accel="bvh", eps="mitsuba")
+    mi = MitsubaRenderer(txt, camera, W, H, spp, depth)
+    try:
+        times = np.array([[fp.render(), fb.render(), mi.render()] for _ in range(ROUNDS)])
+    finally:
+        for r in (fp, fb, mi):
+            r.close()
+    t_fp, t_fb, t_mi = np.median(times, axis=0)
+    ratio = times[:, 2] / times[:, 0]
+    bvh_ratio = times[:, 2] / times[:, 1]
+    f, b, m = fp.stats, fb.stats, mi.stats
+    diff = np.abs(f["mean"] - m["mean"])
+    # Mitsuba reports no variance: one of its images is taken to have fiberpath's standard error, and
+    # its mean over the rounds' seeds 1 / sqrt(rounds) of it (fiberpath's rounds repeat its one seed)
+    se = f["se"] * math.sqrt(1.0 + 1.0 / m["images"])
+    tol = 4.0 * se
     p = f"{name}_"
     return {
         p + "image": f"{W}x{H} @ {spp} spp, max depth {depth}" + (f", fibre radii x {scale:g}" if scale != 1.0 else ""),
-        p + "segments": fp["segments"],
-        p + "fiberpath_render_s": fp["render_s"], p + "mitsuba_render_s": mi["render_s"],
-        p + "speed_ratio": mi["render_s"] / fp["render_s"],
-        p + "fiberpath_rays_per_s": fp["rays"] / fp["render_s"],
-        p + "mitsuba_rays_per_s_estimated": fp["rays"] / mi["render_s"],
-        p + "fiberpath_build_s": fp["build_s"], p + "mitsuba_load_s": mi["build_s"],
-        p + "build_ratio": mi["build_s"] / fp["build_s"],
-        p + "fiberpath_mean": [round(float(v), 5) for v in fp["mean"]],
-        p + "mitsuba_mean": [round(float(v), 5) for v in mi["mean"]],
-        p + "mean_rel_diff": float(np.max(diff / np.maximum(mi["mean"], 1e-12))),
-        p + "mean_diff_in_standard_errors": float(np.max(diff / np.maximum(math.sqrt(2.0) * fp["se"], 1e-300))),
+        p + "segments": fp.segments, p + "rounds": ROUNDS,
+        p + "fiberpath_render_s": float(t_fp), p + "mitsuba_render_s": float(t_mi),
+        p + "speed_ratio": float(np.median(ratio)),
+        p + "speed_ratio_range": [round(float(ratio.min()), 3), round(float(ratio.max()), 3)],
+        p + "fiberpath_rays_per_s": f["rays"] / t_fp,
+        p + "mitsuba_rays_per_s_estimated": f["rays"] / t_mi,
+        p + "fiberpath_build_s": fp.build_s, p + "mitsuba_load_s": mi.build_s,
+        p + "build_ratio": mi.build_s / fp.build_s,
+        p + "fiberpath_mean": [round(float(v), 5) for v in f["mean"]],
+        p + "mitsuba_mean": [round(float(v), 5) for v in m["mean"]],
+        p + "mean_rel_diff": float(np.max(diff / np.maximum(m["mean"], 1e-12))),
+        p + "mean_diff_in_standard_errors": float(np.max(diff / np.maximum(se, 1e-300))),
         p + "means_agree": bool(np.all(diff < tol)),
         # loomlight's own BVH (--set accel=bvh) on the same image
-        p + "fiberpath_bvh_render_s": fb["render_s"], p + "bvh_speed_ratio": mi["render_s"] / fb["render_s"],
-        p + "embree_over_bvh": fb["render_s"] / fp["render_s"],
-        p + "fiberpath_bvh_build_s": fb["build_s"],
-        p + "fiberpath_bvh_mean": [round(float(v), 5) for v in fb["mean"]],
-        p + "embree_bvh_diff_in_standard_errors": float(np.max(np.abs(fp["mean"] - fb["mean"])
-                                                               / np.maximum(math.sqrt(2.0) * fp["se"], 1e-300))),
+        p + "fiberpath_bvh_render_s": float(t_fb), p + "bvh_speed_ratio": float(np.median(bvh_ratio)),
+        p + "embree_over_bvh": float(np.median(times[:, 1] / times[:, 0])),
+        p + "fiberpath_bvh_build_s": fb.build_s,
+        p + "fiberpath_bvh_mean": [round(float(v), 5) for v in b["mean"]],
+        p + "embree_bvh_diff_in_standard_errors": float(np.max(np.abs(f["mean"] - b["mean"])
+                                                               / np.maximum(math.sqrt(2.0) * f["se"], 1e-300))),
     }
 
 
@@ -316,7 +371,7 @@ def comparison_table(res: dict) -> str:
     """The README's table (Status, *Rendering*) of one run: per case, fiberpath on Embree and on
     loomlight's BVH against Mitsuba 3, builds and means."""
     lines = ["| case (Lambertian fibres, constant sky, max depth 16, 2 threads) | fiberpath (Embree) | "
-             "fiberpath (`accel=bvh`) | Mitsuba 3 | ratio (≥ 1: loomlight faster) | build: Embree / BVH / Mitsuba load | "
+             "fiberpath (`accel=bvh`) | Mitsuba 3 | ratio (≥ 1: loomlight faster; median of the rounds, range) | build: Embree / BVH / Mitsuba load | "
              "means: fiberpath / Mitsuba (SE) | Embree vs BVH (SE) |",
              "|---|---|---|---|---|---|---|---|"]
     for c, label in CASE_LABELS.items():
@@ -326,7 +381,8 @@ def comparison_table(res: dict) -> str:
         lines.append(
             f"| {label}, {g('segments') / 1e6:.2f} M segments | {g('fiberpath_render_s'):.2f} s, "
             f"{g('fiberpath_rays_per_s') / 1e6:.2f} M rays/s | {g('fiberpath_bvh_render_s'):.2f} s | "
-            f"{g('mitsuba_render_s'):.2f} s | **{g('speed_ratio'):.2f}** (BVH {g('bvh_speed_ratio'):.2f}) | "
+            f"{g('mitsuba_render_s'):.2f} s | **{g('speed_ratio'):.2f}** ({g('speed_ratio_range')[0]:.2f}-"
+            f"{g('speed_ratio_range')[1]:.2f}; BVH {g('bvh_speed_ratio'):.2f}) | "
             f"{g('fiberpath_build_s'):.2f} / {g('fiberpath_bvh_build_s'):.2f} / {g('mitsuba_load_s'):.2f} s | "
             f"{g('fiberpath_mean')[0]:.5f} / {g('mitsuba_mean')[0]:.5f} ({g('mean_diff_in_standard_errors'):.1f}) | "
             f"{g('embree_bvh_diff_in_standard_errors'):.2f} |")
