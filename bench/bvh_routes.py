@@ -37,7 +37,9 @@ spatial splits (SBVH) and ray streams sorted by direction. Prints JSON. Not run 
 6. **Packets.** fiberpath's own Embree scene (``stages.core.geometry.embree``: a curve segment per
    capsule) traced one ray per ``rtcIntersect1`` call against 16 consecutive rays per ``rtcIntersect16``
    call (the packet API Mitsuba's vectorised wavefront uses), camera and bounce rays in pixel order, one
-   thread: ns per ray, hits and summed distances of each.
+   thread: ns per ray, hits and summed distances of each; and fiberpath's whole query on the same rays
+   (``embree_intersect``: ``rtcIntersect1``, then the float64 re-intersection of the hit and its chain
+   neighbour), whose cost over the bare call (``fiberpath_over_single``) is what the float64 answer costs.
 """
 from __future__ import annotations
 
@@ -56,6 +58,7 @@ import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads)
 import numpy as np  # noqa: E402
 from numba import njit, types  # noqa: E402
 
+from stages.core.geometry.embree import embree_intersect  # noqa: E402
 from stages.core.geometry.surface import surface_hit  # noqa: E402
 from stages.core.rng import uniform  # noqa: E402
 from stages.render.camera import camera_ray  # noqa: E402
@@ -545,6 +548,19 @@ def _packet_rays(handle, O, D, buf, valid):
     return hits, acc
 
 
+@njit(cache=True, _nrt=False)
+def _fiberpath_rays(fibers, O, D):
+    """fiberpath's own Embree query per ray (``embree_intersect``: rtcIntersect1, then the hit and its chain
+    neighbour re-intersected in float64): (hits, summed t)."""
+    hits, acc = 0, 0.0
+    for i in range(O.shape[0]):
+        t, s = embree_intersect(fibers, O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1], D[i, 2], 0.0, np.inf, -1, -1, 0)
+        if s >= 0:
+            hits += 1
+            acc += t
+    return hits, acc
+
+
 def _aligned(n, dtype, align=64):
     raw = np.zeros(n * np.dtype(dtype).itemsize + align, np.uint8)
     off = (-raw.ctypes.data) % align
@@ -569,12 +585,15 @@ def embree_packets(points, fiber_offsets, point_radius, rays: dict, repeats=3) -
         for name, (O, D) in rays.items():
             best = {}
             for _ in range(repeats + 1):   # the first round compiles (or loads)
-                for key, fn, args in (("single", _single_rays, (one,)), ("packet16", _packet_rays, (pkt, valid))):
+                for key, fn, args in (("single", _single_rays, (h, O, D, one)),
+                                      ("packet16", _packet_rays, (h, O, D, pkt, valid)),
+                                      ("fiberpath", _fiberpath_rays, (es.fibers, O, D))):
                     t0 = time.perf_counter()
-                    r = fn(h, O, D, *args)
+                    r = fn(*args)
                     best[key] = (min(best.get(key, (np.inf,))[0], time.perf_counter() - t0), r)
             out[name] = {"rays": int(len(O)), **{f"{k}_ns_per_ray": v[0] / len(O) * 1e9 for k, v in best.items()},
                          "single_over_packet16": best["single"][0] / best["packet16"][0],
+                         "fiberpath_over_single": best["fiberpath"][0] / best["single"][0],
                          **{f"{k}_hits": int(v[1][0]) for k, v in best.items()},
                          **{f"{k}_sum_t": float(v[1][1]) for k, v in best.items()}}
     return out
