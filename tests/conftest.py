@@ -54,10 +54,13 @@ def offscreen_gl():
 # two workers that start such files at the same time both compile the family: the exact procedural
 # lookups (``lookup_points``, ``fringe_occupancy``, ``sample_all``) cost 100-170 s of compilation each
 # time on a cold numba cache, and were compiled twice in every clean run. One work unit per group
-# keeps them on one worker, which compiles the family once and serves the rest from memory.
+# keeps them on one worker, which compiles the family once and serves the rest from memory. The
+# hostile-input workspace builds tables too (a cold clean run: 8:34-9:25 with it in the group, 10:26-10:55
+# without, 2026-12-03).
 SHARED_COMPILE = {
     "tests/procedural/test_tables_lookup.py": "procedural-lookups",
     "tests/render/test_volpath.py": "procedural-lookups",
+    "tests/hostile/test_hostile.py": "procedural-lookups",
 }
 
 
