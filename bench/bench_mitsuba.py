@@ -195,17 +195,17 @@ class FiberpathRenderer:
                                          mitsuba_offset(f.points) if eps == "mitsuba" else eps)
         self.tiles = tile_grid(W, H, 16)
         self.W, self.H, self.spp = W, H, spp
-        self._render_tiles, self._new_film = render_tiles, new_film
         render_tiles(self.integ, self.cam, 1, 1, 0, 1, self.tiles[:1], new_film(W, H), THREADS)  # compile / load
         self.stats = None
 
     def render(self) -> float:
-        from stages.render.film import F_RAYS
+        from stages.render.film import F_RAYS, new_film
+        from stages.render.tiles import render_tiles
 
         W, H, spp = self.W, self.H, self.spp
-        film = self._new_film(W, H)
+        film = new_film(W, H)
         t = time.perf_counter()
-        self._render_tiles(self.integ, self.cam, 1, spp, 0, spp, self.tiles, film, THREADS)
+        render_tiles(self.integ, self.cam, 1, spp, 0, spp, self.tiles, film, THREADS)
         render_s = time.perf_counter() - t
         rgb = film[..., :3] / spp
         var = (film[..., 3:6] / spp - rgb ** 2) / max(spp - 1, 1)
