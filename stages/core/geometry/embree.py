@@ -15,11 +15,21 @@ Use
 geometry of round linear curves: a curve segment per capsule, in segment order, so Embree's ``primID``
 is loomlight's segment index, each with two vertices of its own at the capsule's radius) and holds them until ``close()``
 (or the end of a ``with`` block); ``.fibers`` is the ``EmbreeFibers`` namedtuple the kernels take:
-``handle`` (the RTCScene), ``filter`` (the address of ``window_filter``), and the segment arrays of
+``handle`` (the RTCScene), ``filter`` (the address of ``window_filter``), ``rows`` (the address of the
+segment rows below), ``exact32`` (whether every point is a float32 value), and the segment arrays of
 ``stages.core.geometry.bvh`` (``points``, ``seg_a``, ``seg_r``, ``seg_fiber``, ``fiber_seg_offsets``).
 It answers the surface-scene queries ``surface_hit`` / ``surface_occluded``
 (``stages.core.geometry.surface``) and ``embree_intersect`` / ``embree_occluded``, which have the
 signatures and results of ``bvh.intersect`` / ``bvh.occluded``.
+
+*Segment rows* (``segment_rows``): Embree's vertex buffer is loomlight's, one 64-byte row (a cache
+line) per segment: the two float4 vertices Embree reads (stride 32) and, in the gaps, the capsule's
+float64 radius, its fibre and its first point. Embree has just read the hit segment's row, so the
+float64 answer below reads the segment from cache; it missed on ``seg_a``, then ``points``, then
+``seg_r`` and ``seg_fiber`` before, and those dependent misses were a quarter of the query's own
+code in ``perf``. Realized fibres are stored as float32 (``fibers.zarr``), so their points *are*
+Embree's vertices (``exact32``) and the answer is bit for bit what ``points`` give; other points
+(float64 test fibres, transformed copies) are read from ``points``.
 
 What is the same as loomlight's BVH, and what is not
 ----------------------------------------------------
@@ -30,7 +40,10 @@ What is the same as loomlight's BVH, and what is not
   loomlight's capsule test, together with the chain neighbour at that end of the segment (Embree's
   cone test can put the hit on the next segment a few thousandths of a radius beyond where the two
   meet; their surfaces cross within r tan(bend / 2) of the joint): the nearer wins, ties to the lower
-  index as in loomlight's BVH. A float32 hit the float64 test does not confirm (a grazing ray, or one
+  index as in loomlight's BVH; the neighbour is tested only when the hit lies within 1.1 of its radius
+  from its axis, or when it has length zero (Embree can miss such a sphere outright): farther out it
+  cannot be the nearer but by Embree missing it, which the bench's rays never showed (at most 1.028 r
+  on 0.4 M rays of the radius x 0.1 control). A float32 hit the float64 test does not confirm (a grazing ray, or one
   leaving a surface a few float32 steps off it) is looked past. So ``t``, the segment and the normal
   are loomlight's wherever Embree finds the same capsule.
 - *A ray that starts inside a capsule* meets it where it leaves it, in Embree as in loomlight
@@ -46,7 +59,8 @@ What is the same as loomlight's BVH, and what is not
   other way.
 
 Memory: the render's estimate (``pipeline.runners.render.VERTEX_BYTES`` per fibre vertex) covers
-loomlight's BVH, the larger of the two (peak 545 MiB against Embree's 390 MiB on a demo render).
+loomlight's BVH, the larger of the two (peak 545 MiB against Embree's 390 MiB on a demo render, before
+the rows doubled Embree's vertex buffer from 32 to 64 bytes a segment: +47 MiB there).
 """
 from __future__ import annotations
 
@@ -62,11 +76,12 @@ from numba import cfunc, njit, types
 from numba.extending import intrinsic, overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.core.geometry.bvh import ignore_range, segment_hit, segments_from_fibers
-from stages.core.geometry.surface import segment_surface_hit, surface_hit, surface_occluded
+from stages.core.geometry.bvh import ignore_range, segments_from_fibers
+from stages.core.geometry.capsule import capsule_intersect, point_segment_dist2
+from stages.core.geometry.surface import capsule_surface_hit, segment_surface_hit, surface_hit, surface_occluded
 
-EmbreeFibers = namedtuple("EmbreeFibers", ["handle", "filter", "points", "seg_a", "seg_r", "seg_fiber",
-                                           "fiber_seg_offsets"])
+EmbreeFibers = namedtuple("EmbreeFibers", ["handle", "filter", "rows", "exact32", "points", "seg_a", "seg_r",
+                                           "seg_fiber", "fiber_seg_offsets"])
 
 # Embree 4 API constants (rtcore_common.h, rtcore_geometry.h, rtcore_scene.h, rtcore_ray.h)
 GEOMETRY_ROUND_LINEAR_CURVE = 16
@@ -77,6 +92,17 @@ QUERY_INVOKE_ARGUMENT_FILTER = 1 << 1
 FEATURE_ALL = 0xFFFFFFFF
 INVALID_ID = 0xFFFFFFFF
 MAX_REQUERIES = 8   # float32 hits not confirmed in float64 that one query looks past
+# the chain neighbour is re-intersected when s's hit lies within sqrt(NEIGHBOUR_GATE) r_k of its axis: Embree
+# can miss the neighbour's near side a little outside it (up to 1.028 r_k seen at radius x 0.1)
+NEIGHBOUR_GATE = 1.1 ** 2
+
+# One 64-byte row per segment, 64-byte aligned (one cache line), shared with Embree as its vertex buffer
+# (stride 32): Embree's two float4 vertices (x, y, z, float32 radius) at ROW_A and ROW_B, and in the gaps
+# what the float64 answer needs: the capsule radius (float64) at ROW_R, the fibre (int32) at ROW_FIBER,
+# the index of the first point (int64) at ROW_POINT. Embree has just read the hit segment's row, so the
+# float64 answer reads it from cache instead of missing on four arrays.
+ROW_BYTES, VERTEX_STRIDE = 64, 32
+ROW_A, ROW_R, ROW_FIBER, ROW_B, ROW_POINT = 0, 16, 24, 32, 48
 
 # Byte layout of the per-query scratch block (16-byte aligned, on the machine stack):
 #   RTCRayHit at 0 (ray: org 0-8, tnear 12, dir 16-24, time 28, tfar 32, mask 36, id 40, flags 44;
@@ -128,6 +154,7 @@ def load_embree():
                             ("rtcCommitScene", None, [vp]), ("rtcReleaseScene", None, [vp]),
                             ("rtcNewGeometry", vp, [vp, c_int]),
                             ("rtcSetNewGeometryBuffer", vp, [vp, c_int, c_uint, c_int, c_size, c_size]),
+                            ("rtcSetSharedGeometryBuffer", None, [vp, c_int, c_uint, c_int, vp, c_size, c_size, c_size]),
                             ("rtcSetGeometryEnableFilterFunctionFromArguments", None, [vp, c_bool]),
                             ("rtcCommitGeometry", None, [vp]), ("rtcAttachGeometry", c_uint, [vp, vp]),
                             ("rtcReleaseGeometry", None, [vp])):
@@ -153,6 +180,7 @@ class EmbreeScene:
         if 2 * len(seg_a) >= INVALID_ID:
             raise ValueError(f"Embree indexes vertices with 32 bits ({len(seg_a)} segments)")
         self._lib = lib
+        self._rows = None
         self.device = lib.rtcNewDevice(f"threads={max(1, int(threads))}".encode())
         if not self.device:
             raise EmbreeUnavailable("rtcNewDevice failed (unsupported CPU?)")
@@ -165,13 +193,10 @@ class EmbreeScene:
                 # each segment gets two vertices of its own at its capsule radius (the mean of its points'
                 # radii): on shared vertices Embree's cone would interpolate the points' radii instead
                 ns = len(seg_a)
-                vb = lib.rtcSetNewGeometryBuffer(geom, BUFFER_VERTEX, 0, FORMAT_FLOAT4, 16, 2 * ns)
+                self._rows, rows = segment_rows(points, seg_a, seg_r, seg_fiber)
+                lib.rtcSetSharedGeometryBuffer(geom, BUFFER_VERTEX, 0, FORMAT_FLOAT4, rows, 0, VERTEX_STRIDE, 2 * ns)
                 ib = lib.rtcSetNewGeometryBuffer(geom, BUFFER_INDEX, 0, FORMAT_UINT, 4, ns)
                 self._check("allocating the curve buffers")
-                V = np.ctypeslib.as_array((ctypes.c_float * (8 * ns)).from_address(vb)).reshape(ns, 2, 4)
-                V[:, 0, :3] = points[seg_a]
-                V[:, 1, :3] = points[seg_a + 1]
-                V[:, :, 3] = seg_r[:, None]
                 np.ctypeslib.as_array((ctypes.c_uint32 * ns).from_address(ib))[:] = np.arange(0, 2 * ns, 2, dtype=np.uint32)
                 lib.rtcSetGeometryEnableFilterFunctionFromArguments(geom, True)
                 lib.rtcCommitGeometry(geom)
@@ -182,8 +207,12 @@ class EmbreeScene:
         except BaseException:
             self.close()
             raise
-        self.fibers = EmbreeFibers(np.int64(self.scene), np.int64(window_filter.address), points, seg_a, seg_r,
-                                   seg_fiber, fso)
+        # float32 points (realized fibres are stored so) are Embree's vertices exactly: then the float64
+        # answer takes them from the rows, otherwise from ``points``
+        exact32 = bool(np.array_equal(points.astype(np.float32).astype(np.float64), points))
+        rows = np.int64(self._rows.ctypes.data if self._rows is not None else 0)
+        self.fibers = EmbreeFibers(np.int64(self.scene), np.int64(window_filter.address), rows, exact32, points,
+                                   seg_a, seg_r, seg_fiber, fso)
 
     def _check(self, what):
         err = self._lib.rtcGetDeviceError(self.device)
@@ -211,6 +240,25 @@ class EmbreeScene:
             self.close()
         except Exception:
             pass
+
+
+def segment_rows(points, seg_a, seg_r, seg_fiber):
+    """(rows, address): the segments' 64-byte rows (layout at ``ROW_BYTES``) in a 64-byte aligned uint8
+    array, 16 bytes of padding after the last (Embree reads its vertices with 16-byte loads)."""
+    ns = len(seg_a)
+    raw = np.zeros(ns * ROW_BYTES + 16 + 64, np.uint8)
+    skip = -raw.ctypes.data % 64
+    rows = raw[skip:skip + ns * ROW_BYTES + 16]
+    body = rows[:ns * ROW_BYTES]
+    f32 = body.view(np.float32).reshape(ns, ROW_BYTES // 4)
+    f32[:, ROW_A // 4:ROW_A // 4 + 3] = points[seg_a]
+    f32[:, ROW_B // 4:ROW_B // 4 + 3] = points[seg_a + 1]
+    f32[:, ROW_A // 4 + 3] = seg_r
+    f32[:, ROW_B // 4 + 3] = seg_r
+    body.view(np.float64).reshape(ns, ROW_BYTES // 8)[:, ROW_R // 8] = seg_r
+    body.view(np.int32).reshape(ns, ROW_BYTES // 4)[:, ROW_FIBER // 4] = seg_fiber
+    body.view(np.int64).reshape(ns, ROW_BYTES // 8)[:, ROW_POINT // 8] = seg_a
+    return rows, rows.ctypes.data
 
 
 # ------------------------------------------------------------------------------------------------
@@ -302,6 +350,22 @@ def _query(sc, base, ox, oy, oz, dx, dy, dz, tmin, tmax, lo, hi):
     poke(base + CTX + CTX_HI, np.int64(hi))
 
 
+@njit(cache=True, inline="always")
+def segment_capsule(sc, s):
+    """(ax, ay, az, bx, by, bz, r, fibre, first point) of segment s from its row: the points are Embree's
+    float32 vertices where those are exact (``exact32``), else loomlight's float64 ``points``."""
+    row = sc.rows + ROW_BYTES * s
+    r = peek(row + ROW_R, np.float64)
+    f = np.int64(peek(row + ROW_FIBER, np.int32))
+    i = peek(row + ROW_POINT, np.int64)
+    if sc.exact32:
+        return (float(peek(row + ROW_A, np.float32)), float(peek(row + ROW_A + 4, np.float32)),
+                float(peek(row + ROW_A + 8, np.float32)), float(peek(row + ROW_B, np.float32)),
+                float(peek(row + ROW_B + 4, np.float32)), float(peek(row + ROW_B + 8, np.float32)), r, f, i)
+    P = sc.points
+    return P[i, 0], P[i, 1], P[i, 2], P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], r, f, i
+
+
 @njit(cache=True, _nrt=False)
 def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Nearest hit (t, segment) with tmin < t < tmax; (inf, -1) when none (``bvh.intersect``'s contract)."""
@@ -316,21 +380,32 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
         if peek(base + 72, np.uint32) == INVALID_ID:
             return np.inf, -1
         s = np.int64(peek(base + 68, np.uint32))
-        t = segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin)   # float64, loomlight's capsule test
+        ax, ay, az, bx, by, bz, r, f, i = segment_capsule(sc, s)
+        t = capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin)   # float64
         if t < tmax:
             # Embree's float32 cone test can put the hit on the next segment of the chain, a few
-            # thousandths of a radius beyond where the two meet: the nearer of s and the neighbour at
+            # thousandths of a radius beyond where the two meet: the nearer of s and the neighbour k at
             # the hit's end of s wins (ties to the lower index, as in loomlight's BVH). Their surfaces
-            # cross within r tan(bend / 2) of the joint, so the other neighbour is not a candidate.
-            i = sc.seg_a[s]
-            P = sc.points
-            ex = P[i + 1, 0] - P[i, 0]
-            ey = P[i + 1, 1] - P[i, 1]
-            ez = P[i + 1, 2] - P[i, 2]
-            along = (ox + t * dx - P[i, 0]) * ex + (oy + t * dy - P[i, 1]) * ey + (oz + t * dz - P[i, 2]) * ez
+            # cross within r tan(bend / 2) of the joint, so the other neighbour is not a candidate, and
+            # k can be the nearer only where s's hit lies in k or next to it (NEIGHBOUR_GATE). k's row
+            # is the next cache line, so the gate costs no cache miss.
+            px = ox + t * dx
+            py = oy + t * dy
+            pz = oz + t * dz
+            ex = bx - ax
+            ey = by - ay
+            ez = bz - az
+            along = (px - ax) * ex + (py - ay) * ey + (pz - az) * ez
             k = s - 1 if 2.0 * along < ex * ex + ey * ey + ez * ez else s + 1
-            if k >= 0 and k < sc.seg_a.shape[0] and sc.seg_fiber[k] == sc.seg_fiber[s] and (k < lo or k > hi):
-                tk = segment_hit(sc, k, ox, oy, oz, dx, dy, dz, tmin)
+            if k < 0 or k >= sc.seg_a.shape[0] or (k >= lo and k <= hi):
+                return t, s
+            kax, kay, kaz, kbx, kby, kbz, kr, kf, _ = segment_capsule(sc, k)
+            if kf != f:
+                return t, s
+            # a zero-length neighbour (a sphere) is always tested: Embree's cone test can miss it outright
+            if (kax == kbx and kay == kby and kaz == kbz) or \
+                    point_segment_dist2(px, py, pz, kax, kay, kaz, kbx, kby, kbz) < NEIGHBOUR_GATE * kr * kr:
+                tk = capsule_intersect(ox, oy, oz, dx, dy, dz, kax, kay, kaz, kbx, kby, kbz, kr, tmin)
                 if tk < t or (tk == t and k < s):
                     t = tk
                     s = k
@@ -355,8 +430,12 @@ def embree_occluded(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, 
 
 @njit(cache=True, _nrt=False)
 def embree_surface_hit(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    """``surface_hit`` on Embree: ``segment_surface_hit``'s answer, the segment read from its row."""
     t, s = embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
-    return segment_surface_hit(sc, t, s, ox, oy, oz, dx, dy, dz)
+    if s < 0:
+        return segment_surface_hit(sc, t, s, ox, oy, oz, dx, dy, dz)
+    ax, ay, az, bx, by, bz, r, f, _ = segment_capsule(sc, s)
+    return capsule_surface_hit(t, s, f, r, ax, ay, az, bx, by, bz, ox, oy, oz, dx, dy, dz)
 
 
 @overload(surface_hit)

@@ -54,15 +54,21 @@ def segment_surface_hit(fibres, t, s, ox, oy, oz, dx, dy, dz):
         return SurfaceHit(t, -1, -1, -1, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0)
     ia = fibres.seg_a[s]
     P = fibres.points
-    ax = P[ia, 0]; ay = P[ia, 1]; az = P[ia, 2]
-    bx = P[ia + 1, 0]; by = P[ia + 1, 1]; bz = P[ia + 1, 2]
+    return capsule_surface_hit(t, s, np.int64(fibres.seg_fiber[s]), np.float64(fibres.seg_r[s]),
+                               P[ia, 0], P[ia, 1], P[ia, 2], P[ia + 1, 0], P[ia + 1, 1], P[ia + 1, 2],
+                               ox, oy, oz, dx, dy, dz)
+
+
+@njit(cache=True, inline="always")
+def capsule_surface_hit(t, s, fiber, r, ax, ay, az, bx, by, bz, ox, oy, oz, dx, dy, dz):
+    """The ``SurfaceHit`` of a ray (o, d) meeting capsule s (a -> b, radius r, of fibre ``fiber``) at t."""
     tl = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
     if tl > 0.0:
         tx = (bx - ax) / tl; ty = (by - ay) / tl; tz = (bz - az) / tl
     else:
         tx = 1.0; ty = 0.0; tz = 0.0
     nx, ny, nz, _ = capsule_normal(ox + t * dx, oy + t * dy, oz + t * dz, ax, ay, az, bx, by, bz)
-    return SurfaceHit(t, s, np.int64(fibres.seg_fiber[s]), -1, tx, ty, tz, nx, ny, nz, np.float64(fibres.seg_r[s]))
+    return SurfaceHit(t, s, fiber, -1, tx, ty, tz, nx, ny, nz, r)
 
 
 @njit(cache=True, _nrt=False)

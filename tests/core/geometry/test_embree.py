@@ -41,14 +41,17 @@ def _queries(bvh, sc, O, D, tmin, ign_f, ign_s, window):
     return out
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_embree_matches_brute_force(seed):
+@pytest.mark.parametrize("seed, exact32", [(1, False), (2, False), (3, True)])
+def test_embree_matches_brute_force(seed, exact32):
     """Rays from outside, rays leaving a fibre's surface (its chain neighbourhood skipped) and rays from
     inside a capsule (Embree, like loomlight, meets the capsule where the ray leaves it): Embree's first
     hit is brute force's (segment and float64 distance) on every ray, and embree_occluded agrees with the
     brute-force distance; rays within 1e-3 rad of a segment's axis: on all but a few.
-    surface_hit is embree_intersect's hit."""
+    surface_hit is embree_intersect's hit. With float32 points (``exact32``, as realized fibres are
+    stored) the float64 answer reads the segment from Embree's vertex rows, else from ``points``."""
     pts, offs, rad = random_fibres(seed)
+    if exact32:
+        pts = pts.astype(np.float32).astype(np.float64)
     bvh, _ = build_fiber_bvh(pts, offs, rad)
     S = len(bvh.seg_a)
     rng = np.random.default_rng(seed + 100)
@@ -74,6 +77,7 @@ def test_embree_matches_brute_force(seed):
     solid = np.linalg.norm(b - a, axis=1) > 0
     O4, D4 = O4[solid], D4[solid]
     with EmbreeScene(pts, offs, rad, threads=2) as es:
+        assert es.fibers.exact32 == exact32
         for case, (O, D, ign_f, ign_s) in enumerate(((O1, D1, no_skip, no_skip), (O2, D2, fib, s_idx),
                                                     (O4, D4, no_skip[solid], no_skip[solid]), (O3, D3, no_skip, no_skip))):
             out = _queries(bvh, es.fibers, O, D, 1e-9, ign_f, ign_s, WINDOW)
@@ -93,6 +97,36 @@ def test_embree_matches_brute_force(seed):
             if ign_f[0] >= 0:   # skipped segments are never reported
                 skipped = (bvh.seg_fiber[np.maximum(se, 0).astype(int)] == ign_f) & (np.abs(se - ign_s) <= WINDOW)
                 assert not (skipped & (se >= 0)).any()
+
+
+@pytest.mark.parametrize("scale", [1.0, 0.1])
+def test_embree_hits_at_joints_match_brute_force(scale):
+    """Rays aimed at the joints of bent chains (on a sphere of about the smaller radius around the shared
+    point, from four radii away in every direction), where Embree's float32 cone test can pick the
+    wrong one of two segments and the re-intersection of the chain neighbour (or its gate) decides:
+    the first hit is brute force's, segment and float64 distance, on every ray, at the fibres' radii
+    and at a tenth of them (where float32 errors are ten times larger relative to the radius). Where
+    both segments' spheres meet the ray at the same distance, the lower index wins, as in the BVH."""
+    pts, offs, rad = random_fibres(3)
+    pts = pts.astype(np.float32).astype(np.float64)
+    rad = np.full_like(rad, 0.02 * scale)   # one radius, as realized fibres: the joint spheres coincide
+    bvh, _ = build_fiber_bvh(pts, offs, rad)
+    rng = np.random.default_rng(10)
+    inner = np.nonzero(bvh.seg_fiber[:-1] == bvh.seg_fiber[1:])[0]
+    n = 6000
+    s = rng.choice(inner, n)
+    joint = pts[bvh.seg_a[s] + 1]
+    r = np.minimum(bvh.seg_r[s], bvh.seg_r[s + 1])
+    target = joint + _unit(rng.normal(size=(n, 3))) * (r * rng.uniform(0.9, 1.1, n))[:, None]
+    D = _unit(rng.normal(size=(n, 3)))
+    O = target - D * (4.0 * r)[:, None]
+    no_skip = np.full(n, -1, np.int64)
+    with EmbreeScene(pts, offs, rad) as es:
+        out = _queries(bvh, es.fibers, O, D, 1e-9, no_skip, no_skip, WINDOW)
+    tb, sb, te, se = out[:, 0], out[:, 1], out[:, 2], out[:, 3]
+    assert (sb >= 0).mean() > 0.9
+    same = (sb == se) & ((tb == te) | (sb < 0))
+    assert same.all(), np.nonzero(~same)[0]
 
 
 def test_embree_skips_the_whole_fibre_a_ray_leaves():
