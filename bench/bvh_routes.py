@@ -40,6 +40,14 @@ spatial splits (SBVH) and ray streams sorted by direction. Prints JSON. Not run 
    thread: ns per ray, hits and summed distances of each; and fiberpath's whole query on the same rays
    (``embree_intersect``: ``rtcIntersect1``, then the float64 re-intersection of the hit and its chain
    neighbour), whose cost over the bare call (``fiberpath_over_single``) is what the float64 answer costs.
+7. **Point queries** (the realized volpath source: ``realized_medium.covering_segment``, the segment of
+   the lowest-index fibre whose capsule holds a point, walked in loomlight's 4-wide tree). Embree's
+   ``rtcPointQuery`` on fiberpath's curve scene (reported: how many times it calls back, which is never:
+   Embree 4 does not visit curve primitives in point queries, embree issue 480), and on a user geometry
+   of the same capsules (a bounds callback per capsule; the point-query callback keeps the lowest fibre,
+   as ``covering_segment`` does), against ``covering_segment_arrays`` on 300,000 points near fibres
+   (within about a radius of a random segment) and 300,000 uniform in the fibres' box, one thread:
+   ns per query, the answers that agree, and both builds.
 """
 from __future__ import annotations
 
@@ -62,6 +70,7 @@ from stages.core.geometry.embree import embree_intersect  # noqa: E402
 from stages.core.geometry.surface import surface_hit  # noqa: E402
 from stages.core.rng import uniform  # noqa: E402
 from stages.render.camera import camera_ray  # noqa: E402
+from stages.render.realized_medium import covering_segment_arrays  # noqa: E402
 
 PLANES = 16   # spatial split bins per axis (15 planes)
 
@@ -599,6 +608,156 @@ def embree_packets(points, fiber_offsets, point_radius, rays: dict, repeats=3) -
     return out
 
 
+def _point_query_kernels():
+    """(covering callback, capsule bounds callback, the query loop), compiled on first use. The query's
+    user block: x, y, z (float64) at 0, 8, 16, the best segment and its fibre (int64) at 24 and 32, the
+    rows' address at 40 and a count of callbacks at 48; segments are read from fiberpath's Embree rows
+    (``stages.core.geometry.embree``: float32 points, float64 radius, fibre)."""
+    from numba import cfunc
+
+    from stages.core.geometry import embree as E
+    from stages.core.geometry.capsule import point_segment_dist2
+
+    peek, poke = E.peek, E.poke
+
+    @cfunc(types.boolean(types.intp))
+    def covering(args):   # RTCPointQueryFunctionArguments: userPtr 8, primID 16
+        user = peek(args + 8, np.int64)
+        poke(user + 48, peek(user + 48, np.int64) + 1)
+        s = np.int64(peek(args + 16, np.uint32))
+        row = peek(user + 40, np.int64) + E.ROW_BYTES * s
+        f = np.int64(peek(row + E.ROW_FIBER, np.int32))
+        best = peek(user + 24, np.int64)
+        best_f = peek(user + 32, np.int64)
+        if f > best_f or (f == best_f and s > best):
+            return False
+        r = peek(row + E.ROW_R, np.float64)
+        a, b = row + E.ROW_A, row + E.ROW_B
+        if point_segment_dist2(peek(user, np.float64), peek(user + 8, np.float64), peek(user + 16, np.float64),
+                               float(peek(a, np.float32)), float(peek(a + 4, np.float32)),
+                               float(peek(a + 8, np.float32)), float(peek(b, np.float32)),
+                               float(peek(b + 4, np.float32)), float(peek(b + 8, np.float32))) < r * r:
+            poke(user + 24, s)
+            poke(user + 32, f)
+        return False
+
+    @cfunc(types.void(types.intp))
+    def bounds(args):   # RTCBoundsFunctionArguments: geometryUserPtr 0, primID 8, bounds_o 16
+        row = peek(args, np.int64) + E.ROW_BYTES * np.int64(peek(args + 8, np.uint32))
+        out = peek(args + 16, np.int64)
+        r = peek(row + E.ROW_R, np.float64)
+        for k in range(3):
+            a = float(peek(row + E.ROW_A + 4 * k, np.float32))
+            b = float(peek(row + E.ROW_B + 4 * k, np.float32))
+            lo = np.float32(min(a, b) - r)
+            hi = np.float32(max(a, b) + r)
+            if float(lo) > min(a, b) - r:
+                lo = np.nextafter(lo, np.float32(-np.inf))
+            if float(hi) < max(a, b) + r:
+                hi = np.nextafter(hi, np.float32(np.inf))
+            poke(out + 4 * k, lo)
+            poke(out + 16 + 4 * k, hi)
+
+    point_query = types.ExternalFunction("rtcPointQuery", types.void(types.intp, types.intp, types.intp, types.intp,
+                                                                      types.intp))
+
+    @njit(_nrt=False)
+    def run(handle, rows, callback, X, out):
+        calls = 0
+        for j in range(X.shape[0]):
+            q = E.scratch_address()    # RTCPointQuery at 0 (x, y, z, time, radius), the user block at 32
+            ctx = E.scratch_address()  # RTCPointQueryContext: no instance (instStackSize 0, instID[0] invalid)
+            poke(q, np.float32(X[j, 0]))
+            poke(q + 4, np.float32(X[j, 1]))
+            poke(q + 8, np.float32(X[j, 2]))
+            poke(q + 12, np.float32(0.0))
+            poke(q + 16, np.float32(0.0))
+            u = q + 32
+            poke(u, X[j, 0])
+            poke(u + 8, X[j, 1])
+            poke(u + 16, X[j, 2])
+            poke(u + 24, np.int64(-1))
+            poke(u + 32, np.int64(1 << 62))
+            poke(u + 40, rows)
+            poke(u + 48, np.int64(0))
+            for k in range(0, 176, 8):
+                poke(ctx + k, np.int64(0))
+            poke(ctx + 128, np.uint32(E.INVALID_ID))
+            point_query(handle, q, ctx, callback, u)
+            out[j] = peek(u + 24, np.int64)
+            calls += peek(u + 48, np.int64)
+        return calls
+
+    return covering, bounds, run
+
+
+@njit(_nrt=False)
+def _covering_bvh(box, child, prims, seg_fiber, X, out):
+    for j in range(X.shape[0]):
+        out[j] = covering_segment_arrays(box, child, prims, seg_fiber, X[j, 0], X[j, 1], X[j, 2], -1, seg_fiber[:0])
+
+
+def point_queries(points, fiber_offsets, point_radius, bvh, n=300_000, repeats=3) -> dict:
+    """Embree's point queries (on the curves, and on a user geometry of the capsules) against loomlight's
+    ``covering_segment_arrays``, one thread (module doc, 7)."""
+    import ctypes
+
+    from stages.core.geometry import embree as E
+
+    try:
+        es = E.EmbreeScene(points, fiber_offsets, point_radius, 1)
+    except E.EmbreeUnavailable as e:
+        return {"skipped": str(e)}
+    lib = E.load_embree()
+    vp = ctypes.c_void_p
+    for name, argt in (("rtcSetGeometryUserPrimitiveCount", [vp, ctypes.c_uint]),
+                       ("rtcSetGeometryBoundsFunction", [vp, vp, vp]), ("rtcSetGeometryUserData", [vp, vp])):
+        getattr(lib, name).restype, getattr(lib, name).argtypes = None, argt
+    covering, bounds, run = _point_query_kernels()
+    rng = np.random.default_rng(0)
+    s = rng.integers(0, len(bvh.seg_a), n)
+    a, b = bvh.points[bvh.seg_a[s]], bvh.points[bvh.seg_a[s] + 1]
+    near = a + rng.random((n, 1)) * (b - a) + rng.normal(size=(n, 3)) * bvh.seg_r[s][:, None]
+    lo, hi = bvh.points.min(0), bvh.points.max(0)
+    sets = {"near_fibres": near, "uniform_in_box": lo + rng.random((n, 3)) * (hi - lo)}
+    out = {"threads": 1, "points": n}
+    with es:
+        rows = es.fibers.rows
+        got = np.empty(n, np.int64)
+        out["curve_scene_callbacks"] = int(run(es.fibers.handle, rows, covering.address, near, got))
+        t0 = time.perf_counter()
+        device = lib.rtcNewDevice(b"threads=1")
+        scene = lib.rtcNewScene(device)
+        geom = lib.rtcNewGeometry(device, 120)   # RTC_GEOMETRY_TYPE_USER
+        lib.rtcSetGeometryUserPrimitiveCount(geom, len(bvh.seg_a))
+        lib.rtcSetGeometryUserData(geom, vp(int(rows)))
+        lib.rtcSetGeometryBoundsFunction(geom, vp(bounds.address), vp(int(rows)))
+        lib.rtcCommitGeometry(geom)
+        lib.rtcAttachGeometry(scene, geom)
+        lib.rtcReleaseGeometry(geom)
+        lib.rtcCommitScene(scene)
+        out["user_geometry_build_s"] = time.perf_counter() - t0
+        try:
+            for name, X in sets.items():
+                mine, theirs = np.empty(n, np.int64), np.empty(n, np.int64)
+                best = {}
+                for _ in range(repeats + 1):   # the first round compiles
+                    for key, fn, args in (("embree_user_geometry", run, (np.int64(scene), rows, covering.address, X,
+                                                                         theirs)),
+                                          ("loomlight", _covering_bvh, (bvh.wide_box, bvh.wide_child, bvh.prims,
+                                                                        bvh.seg_fiber, X, mine))):
+                        t0 = time.perf_counter()
+                        fn(*args)
+                        best[key] = min(best.get(key, np.inf), time.perf_counter() - t0)
+                out[name] = {"covered": float((mine >= 0).mean()), "agree": int((mine == theirs).sum()),
+                             **{f"{k}_ns_per_query": v / n * 1e9 for k, v in best.items()},
+                             "loomlight_over_embree": best["loomlight"] / best["embree_user_geometry"]}
+        finally:
+            lib.rtcReleaseScene(scene)
+            lib.rtcReleaseDevice(device)
+    return out
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--fibers", default=str(ROOT / "out" / "bench_bysdf" / "fibers.zarr"))
@@ -616,6 +775,7 @@ def main(argv=None) -> dict:
     res["embree"] = embree_library(bvh, G, win, rays)
     res["embree_path_tracer"] = embree_path_tracer(bvh, G, win, args.scene)
     res["embree_packets"] = embree_packets(f.points, f.fiber_offsets, f.point_radius, rays)
+    res["point_queries"] = point_queries(f.points, f.fiber_offsets, f.point_radius, bvh)
     print(json.dumps(res, indent=2))
     return res
 
