@@ -59,8 +59,8 @@ What is the same as loomlight's BVH, and what is not
   other way.
 
 Memory: the render's estimate (``pipeline.runners.render.VERTEX_BYTES`` per fibre vertex) covers
-loomlight's BVH, the larger of the two (peak 545 MiB against Embree's 390 MiB on a demo render, before
-the rows doubled Embree's vertex buffer from 32 to 64 bytes a segment: +47 MiB there).
+loomlight's BVH, the larger of the two (peak 545 MiB against Embree's 429-433 MiB on a demo render; 390 MiB
+before the rows doubled Embree's vertex buffer from 32 to 64 bytes a segment).
 """
 from __future__ import annotations
 
@@ -209,7 +209,7 @@ class EmbreeScene:
             raise
         # float32 points (realized fibres are stored so) are Embree's vertices exactly: then the float64
         # answer takes them from the rows, otherwise from ``points``
-        exact32 = bool(np.array_equal(points.astype(np.float32).astype(np.float64), points))
+        exact32 = bool(float32_exact(points))
         rows = np.int64(self._rows.ctypes.data if self._rows is not None else 0)
         self.fibers = EmbreeFibers(np.int64(self.scene), np.int64(window_filter.address), rows, exact32, points,
                                    seg_a, seg_r, seg_fiber, fso)
@@ -250,15 +250,34 @@ def segment_rows(points, seg_a, seg_r, seg_fiber):
     skip = -raw.ctypes.data % 64
     rows = raw[skip:skip + ns * ROW_BYTES + 16]
     body = rows[:ns * ROW_BYTES]
-    f32 = body.view(np.float32).reshape(ns, ROW_BYTES // 4)
-    f32[:, ROW_A // 4:ROW_A // 4 + 3] = points[seg_a]
-    f32[:, ROW_B // 4:ROW_B // 4 + 3] = points[seg_a + 1]
-    f32[:, ROW_A // 4 + 3] = seg_r
-    f32[:, ROW_B // 4 + 3] = seg_r
-    body.view(np.float64).reshape(ns, ROW_BYTES // 8)[:, ROW_R // 8] = seg_r
-    body.view(np.int32).reshape(ns, ROW_BYTES // 4)[:, ROW_FIBER // 4] = seg_fiber
-    body.view(np.int64).reshape(ns, ROW_BYTES // 8)[:, ROW_POINT // 8] = seg_a
+    _fill_rows(body.view(np.float32).reshape(ns, ROW_BYTES // 4), body.view(np.float64).reshape(ns, ROW_BYTES // 8),
+               body.view(np.int32).reshape(ns, ROW_BYTES // 4), body.view(np.int64).reshape(ns, ROW_BYTES // 8),
+               points, seg_a, seg_r, seg_fiber)
     return rows, rows.ctypes.data
+
+
+@njit(cache=True)
+def _fill_rows(f32, f64, i32, i64, points, seg_a, seg_r, seg_fiber):
+    """Write each segment's row through four typed views of the same bytes (no temporaries)."""
+    for s in range(seg_a.shape[0]):
+        i = seg_a[s]
+        for k in range(3):
+            f32[s, ROW_A // 4 + k] = points[i, k]
+            f32[s, ROW_B // 4 + k] = points[i + 1, k]
+        f32[s, ROW_A // 4 + 3] = seg_r[s]
+        f32[s, ROW_B // 4 + 3] = seg_r[s]
+        f64[s, ROW_R // 8] = seg_r[s]
+        i32[s, ROW_FIBER // 4] = seg_fiber[s]
+        i64[s, ROW_POINT // 8] = i
+
+
+@njit(cache=True)
+def float32_exact(x):
+    """True when every value of the float64 array x is a float32 value (no temporaries)."""
+    for v in x.ravel():
+        if np.float64(np.float32(v)) != v:
+            return False
+    return True
 
 
 # ------------------------------------------------------------------------------------------------
