@@ -221,13 +221,15 @@ class EmbreeScene:
                 RuntimeError(f"Embree: {what}: {_ERRORS.get(err, err)}")
 
     def close(self):
-        """Release the scene and the device (the kernels' ``fibers.handle`` is dangling after this)."""
+        """Release the scene, the device and then the rows Embree read (the kernels' ``fibers.handle`` and
+        ``fibers.rows`` are dangling after this)."""
         if self.scene:
             self._lib.rtcReleaseScene(self.scene)
             self.scene = None
         if self.device:
             self._lib.rtcReleaseDevice(self.device)
             self.device = None
+        self._rows = None
 
     def __enter__(self):
         return self
