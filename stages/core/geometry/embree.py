@@ -401,7 +401,7 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
         if peek(base + 72, np.uint32) == INVALID_ID:
             return np.inf, -1
         s = np.int64(peek(base + 68, np.uint32))
-        ax, ay, az, bx, by, bz, r, f, i = segment_capsule(sc, s)
+        ax, ay, az, bx, by, bz, r, f, _i = segment_capsule(sc, s)
         t = capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin)   # float64
         if t < tmax:
             # Embree's float32 cone test can put the hit on the next segment of the chain, a few
@@ -420,7 +420,7 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
             k = s - 1 if 2.0 * along < ex * ex + ey * ey + ez * ez else s + 1
             if k < 0 or k >= sc.seg_a.shape[0] or (k >= lo and k <= hi):
                 return t, s
-            kax, kay, kaz, kbx, kby, kbz, kr, kf, _ = segment_capsule(sc, k)
+            kax, kay, kaz, kbx, kby, kbz, kr, kf, _j = segment_capsule(sc, k)
             if kf != f:
                 return t, s
             # a zero-length neighbour (a sphere) is always tested: Embree's cone test can miss it outright
