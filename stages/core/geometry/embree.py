@@ -193,8 +193,9 @@ class EmbreeScene:
                 # each segment gets two vertices of its own at its capsule radius (the mean of its points'
                 # radii): on shared vertices Embree's cone would interpolate the points' radii instead
                 ns = len(seg_a)
-                self._rows, rows = segment_rows(points, seg_a, seg_r, seg_fiber)
-                lib.rtcSetSharedGeometryBuffer(geom, BUFFER_VERTEX, 0, FORMAT_FLOAT4, rows, 0, VERTEX_STRIDE, 2 * ns)
+                self._rows = segment_rows(points, seg_a, seg_r, seg_fiber)
+                lib.rtcSetSharedGeometryBuffer(geom, BUFFER_VERTEX, 0, FORMAT_FLOAT4, self._rows.ctypes.data, 0,
+                                               VERTEX_STRIDE, 2 * ns)
                 ib = lib.rtcSetNewGeometryBuffer(geom, BUFFER_INDEX, 0, FORMAT_UINT, 4, ns)
                 self._check("allocating the curve buffers")
                 np.ctypeslib.as_array((ctypes.c_uint32 * ns).from_address(ib))[:] = np.arange(0, 2 * ns, 2, dtype=np.uint32)
@@ -245,7 +246,7 @@ class EmbreeScene:
 
 
 def segment_rows(points, seg_a, seg_r, seg_fiber):
-    """(rows, address): the segments' 64-byte rows (layout at ``ROW_BYTES``) in a 64-byte aligned uint8
+    """The segments' 64-byte rows (layout at ``ROW_BYTES``) in a 64-byte aligned uint8
     array, 16 bytes of padding after the last (Embree reads its vertices with 16-byte loads)."""
     ns = len(seg_a)
     raw = np.zeros(ns * ROW_BYTES + 16 + 64, np.uint8)
@@ -255,7 +256,7 @@ def segment_rows(points, seg_a, seg_r, seg_fiber):
     _fill_rows(body.view(np.float32).reshape(ns, ROW_BYTES // 4), body.view(np.float64).reshape(ns, ROW_BYTES // 8),
                body.view(np.int32).reshape(ns, ROW_BYTES // 4), body.view(np.int64).reshape(ns, ROW_BYTES // 8),
                points, seg_a, seg_r, seg_fiber)
-    return rows, rows.ctypes.data
+    return rows
 
 
 @njit(cache=True)
@@ -373,18 +374,18 @@ def _query(sc, base, ox, oy, oz, dx, dy, dz, tmin, tmax, lo, hi):
 
 @njit(cache=True, inline="always")
 def segment_capsule(sc, s):
-    """(ax, ay, az, bx, by, bz, r, fibre, first point) of segment s from its row: the points are Embree's
+    """(ax, ay, az, bx, by, bz, r, fibre) of segment s from its row: the points are Embree's
     float32 vertices where those are exact (``exact32``), else loomlight's float64 ``points``."""
     row = sc.rows + ROW_BYTES * s
     r = peek(row + ROW_R, np.float64)
     f = np.int64(peek(row + ROW_FIBER, np.int32))
-    i = peek(row + ROW_POINT, np.int64)
     if sc.exact32:
         return (float(peek(row + ROW_A, np.float32)), float(peek(row + ROW_A + 4, np.float32)),
                 float(peek(row + ROW_A + 8, np.float32)), float(peek(row + ROW_B, np.float32)),
-                float(peek(row + ROW_B + 4, np.float32)), float(peek(row + ROW_B + 8, np.float32)), r, f, i)
+                float(peek(row + ROW_B + 4, np.float32)), float(peek(row + ROW_B + 8, np.float32)), r, f)
+    i = peek(row + ROW_POINT, np.int64)
     P = sc.points
-    return P[i, 0], P[i, 1], P[i, 2], P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], r, f, i
+    return P[i, 0], P[i, 1], P[i, 2], P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], r, f
 
 
 @njit(cache=True, _nrt=False)
@@ -401,7 +402,7 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
         if peek(base + 72, np.uint32) == INVALID_ID:
             return np.inf, -1
         s = np.int64(peek(base + 68, np.uint32))
-        ax, ay, az, bx, by, bz, r, f, _i = segment_capsule(sc, s)
+        ax, ay, az, bx, by, bz, r, f = segment_capsule(sc, s)
         t = capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin)   # float64
         if t < tmax:
             # Embree's float32 cone test can put the hit on the next segment of the chain, a few
@@ -420,7 +421,7 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
             k = s - 1 if 2.0 * along < ex * ex + ey * ey + ez * ez else s + 1
             if k < 0 or k >= sc.seg_a.shape[0] or (k >= lo and k <= hi):
                 return t, s
-            kax, kay, kaz, kbx, kby, kbz, kr, kf, _j = segment_capsule(sc, k)
+            kax, kay, kaz, kbx, kby, kbz, kr, kf = segment_capsule(sc, k)
             if kf != f:
                 return t, s
             # a zero-length neighbour (a sphere) is always tested: Embree's cone test can miss it outright
@@ -455,7 +456,7 @@ def embree_surface_hit(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_pr
     t, s = embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
     if s < 0:
         return segment_surface_hit(sc, t, s, ox, oy, oz, dx, dy, dz)
-    ax, ay, az, bx, by, bz, r, f, _ = segment_capsule(sc, s)
+    ax, ay, az, bx, by, bz, r, f = segment_capsule(sc, s)
     return capsule_surface_hit(t, s, f, r, ax, ay, az, bx, by, bz, ox, oy, oz, dx, dy, dz)
 
 
