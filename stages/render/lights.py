@@ -178,7 +178,7 @@ def light_sample(lights, k, env, marg, cond, u1, u2):
     return w, r, g, b, pdf, delta
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, inline="always")
 def light_sample_into(lights, k, env, marg, cond, u1, u2, w):
     """``light_sample`` writing the direction into ``w``: (r, g, b, pdf, delta)."""
     t = lights[k, 0]

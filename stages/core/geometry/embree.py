@@ -388,7 +388,7 @@ def segment_capsule(sc, s):
     return P[i, 0], P[i, 1], P[i, 2], P[i + 1, 0], P[i + 1, 1], P[i + 1, 2], r, f
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Nearest hit (t, segment) with tmin < t < tmax; (inf, -1) when none (``bvh.intersect``'s contract)."""
     if sc.seg_a.shape[0] == 0:
@@ -438,7 +438,7 @@ def embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg,
     return np.inf, -1
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def embree_occluded(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """True when any segment is hit with tmin < t < tmax (``bvh.occluded``'s contract), in Embree's float32."""
     if sc.seg_a.shape[0] == 0:
@@ -450,7 +450,7 @@ def embree_occluded(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, 
     return peek(base + 32, np.float32) == -np.inf
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, inline="always")
 def embree_surface_hit(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
     """``surface_hit`` on Embree: ``segment_surface_hit``'s answer, the segment read from its row."""
     t, s = embree_intersect(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)

@@ -50,18 +50,18 @@ def pack_material_lambert(albedo):
     return row
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def material_is_curve(mat):
     return int(mat[0]) == MAT_BCSDF
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def material_prepare(mat, t, n, wi, ctx):
     if int(mat[0]) == MAT_BCSDF:
         B.bcsdf_context(mat[1:11], t, wi, ctx)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def material_eval_pdf(mat, ctx, t, n, wi, wo):
     if int(mat[0]) == MAT_BCSDF:
         return B.bcsdf_eval_pdf_ctx(mat[1:11], ctx, t, wo)
@@ -69,7 +69,7 @@ def material_eval_pdf(mat, ctx, t, n, wi, wo):
     return f0, f1, f2, lambert_pdf(mat[11:14], n, wi, wo)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def material_sample(mat, ctx, t, n, wi, u0, u1, u2, wo):
     if int(mat[0]) == MAT_BCSDF:
         return B.bcsdf_sample_ctx(mat[1:11], ctx, t, u0, u1, u2, wo)
