@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
+from stages.core.turns import sincos_turn
 
 LightTable = namedtuple("LightTable", ["lights", "env", "marginal", "conditional"])
 
@@ -190,9 +191,9 @@ def light_sample_into(lights, k, env, marg, cond, u1, u2, w):
     if t == CONSTANT:
         z = 1.0 - 2.0 * u1
         s = math.sqrt(max(0.0, 1.0 - z * z))
-        ph = TWO_PI * u2
-        w[0] = s * math.cos(ph)
-        w[1] = s * math.sin(ph)
+        sp, cp = sincos_turn(u2)
+        w[0] = s * cp
+        w[1] = s * sp
         w[2] = z
         return lights[k, 1], lights[k, 2], lights[k, 3], INV_4PI, False
     if t == SG:
@@ -200,13 +201,13 @@ def light_sample_into(lights, k, env, marg, cond, u1, u2, w):
         c = 1.0 + math.log(u1 + (1.0 - u1) * math.exp(-2.0 * lam)) / lam
         c = min(1.0, max(-1.0, c))
         s = math.sqrt(max(0.0, 1.0 - c * c))
-        ph = TWO_PI * u2
+        sin_ph, cos_ph = sincos_turn(u2)
         a0 = lights[k, 4]
         a1 = lights[k, 5]
         a2 = lights[k, 6]
         (x0, x1, x2), (y0, y1, y2) = orthonormal_basis(a0, a1, a2)
-        cp = s * math.cos(ph)
-        sp = s * math.sin(ph)
+        cp = s * cos_ph
+        sp = s * sin_ph
         w[0] = cp * x0 + sp * y0 + c * a0
         w[1] = cp * x1 + sp * y1 + c * a1
         w[2] = cp * x2 + sp * y2 + c * a2

@@ -24,9 +24,10 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
+from stages.core.turns import sincos_turn
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lambert_eval(albedo, n, wi, wo):
     """f cos: (r, g, b) factor multiplying radiance arriving from wo."""
     c = n[0] * wo[0] + n[1] * wo[1] + n[2] * wo[2]
@@ -36,7 +37,7 @@ def lambert_eval(albedo, n, wi, wo):
     return albedo[0] * c, albedo[1] * c, albedo[2] * c
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lambert_pdf(albedo, n, wi, wo):
     c = n[0] * wo[0] + n[1] * wo[1] + n[2] * wo[2]
     return c / math.pi if c > 0.0 else 0.0
@@ -50,13 +51,13 @@ def lambert_sample(albedo, n, wi, u0, u1, u2):
     return wo, r, g, b, pdf
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cosine_direction(n, u1, u2):
     """(x, y, z): a cosine-weighted direction about the unit n (Malley's method); its pdf is (wo . n) / pi."""
     r = math.sqrt(u1)
-    ph = 2.0 * math.pi * u2
-    x = r * math.cos(ph)
-    y = r * math.sin(ph)
+    sp, cp = sincos_turn(u2)
+    x = r * cp
+    y = r * sp
     z = math.sqrt(max(0.0, 1.0 - u1))
     (t0, t1, t2), (b0, b1, b2) = orthonormal_basis(n[0], n[1], n[2])
     return (x * t0 + y * b0 + z * n[0],
@@ -64,7 +65,7 @@ def cosine_direction(n, u1, u2):
             x * t2 + y * b2 + z * n[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lambert_sample_into(albedo, n, wi, u1, u2, wo):
     """``lambert_sample`` writing the direction into ``wo``: (weight r, g, b, pdf)."""
     wo[0], wo[1], wo[2] = cosine_direction(n, u1, u2)
