@@ -228,12 +228,11 @@ def light_sample_into(lights, k, env, marg, cond, u1, u2, w):
     fu = min(max(fu, 1e-9), 1.0 - 1e-9)
     v = (i + fv) / H
     u = (j + fu) / W
-    th = v * math.pi
-    ph = u * TWO_PI
-    st = math.sin(th)
-    w[0] = math.sin(ph) * st
-    w[1] = math.cos(ph) * st
-    w[2] = math.cos(th)
+    st, ct = sincos_turn(0.5 * v)   # theta = pi v
+    sp, cp = sincos_turn(u)         # phi = 2 pi u
+    w[0] = sp * st
+    w[1] = cp * st
+    w[2] = ct
     if st <= 0.0:
         return 0.0, 0.0, 0.0, 0.0, False
     pdf = pm * pc * H * W / (2.0 * math.pi * math.pi * st)
