@@ -32,9 +32,9 @@ the same albedo, light, spp and thread count (``drjit.set_thread_count``). Depth
 gets one more (17 for 16; the same for Russian roulette: fiberpath ``rr_depth`` 4, Mitsuba 5; both
 use survival min(0.95, max throughput channel)). Timings are of warm runs (each renderer compiles
 first: numba loads or JITs its kernels, Dr.Jit traces and compiles its megakernel), ``ROUNDS`` of them
-taken in turn (fiberpath on Embree, on the BVH, Mitsuba; again): the machine's speed drifts by ±10 %
-from one minute to the next, Mitsuba's with it, so a ratio is only worth the median over rounds of
-renders made side by side (``speed_ratio``, its spread in ``speed_ratio_range``). Builds are timed
+taken in turn (fiberpath on Embree, on the BVH, Mitsuba; again; five, since three-round medians swung
+by ±0.05 between runs): the machine's speed drifts by ±10 % from one minute to the next, Mitsuba's
+with it, so a ratio is only worth the median over rounds of renders made side by side (``speed_ratio``, its spread in ``speed_ratio_range``). Builds are timed
 separately (fiberpath's Embree scene, and its SAH build and 4-wide collapse, from arrays in memory;
 Mitsuba's ``load_dict``: reading the curve text, Embree's scene build and scene setup). Mitsuba's rays/s is
 estimated from fiberpath's ray count (a lower bound: Mitsuba also traces the shadow rays of light
@@ -60,7 +60,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 THREADS = 2
-ROUNDS = 3   # interleaved renders per renderer and case (the machine's speed drifts by ±10 % between runs)
+ROUNDS = 5   # interleaved renders per renderer and case (the machine's speed drifts by ±10 % between runs)
 ALBEDO = 0.75
 ENV = 1.0
 
