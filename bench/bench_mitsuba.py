@@ -43,6 +43,12 @@ per channel (Mitsuba reports no variance; one image's error is taken equal to fi
 mean is over the rounds' seeds). ``make bench`` also
 writes the README's table of the run (``comparison_table``) to ``bench/results/mitsuba_table.md``.
 
+The kernels alone (``kernel_case``, ``bench/embree_kernels.py``): fiberpath's Embree 4.4 (``embreex``)
+and the Embree 3.13.4 inside Mitsuba's wheel trace the same curves and the same camera, bounce and
+shadow rays of the ``small`` and ``demo`` cases, one ray per call on one thread (a second table).
+Three quarters of a fiberpath render is Embree's, so this ratio is what fiberpath's own code has to
+make up against Mitsuba's.
+
 Mitsuba 3 is an optional, bench-only dependency (``pip install mitsuba``; its ``llvm`` variants need
 LLVM >= 16, e.g. Debian's ``libllvm19``, found through ``DRJIT_LIBLLVM_PATH`` or the usual library
 paths). Without it the benchmark reports ``skipped`` and the reason.
@@ -331,6 +337,20 @@ def run_case(name, fibers: Path, txt: Path, camera: dict) -> dict:
     }
 
 
+def kernel_case(name, fibers: Path, camera: dict) -> dict:
+    """The two ray-tracing kernels alone on one case's rays (``embree_kernels``: Embree 4.4 under
+    fiberpath, Embree 3.13.4 under Mitsuba), or the reason they could not be compared."""
+    import embree_kernels
+    from pipeline.render_setup import load_fibers
+
+    W, H = CASES[name][:2]
+    try:
+        res = embree_kernels.compare(fibers, camera, W, H, mitsuba_offset(load_fibers(fibers).points))
+    except (OSError, KeyError, RuntimeError) as e:   # no libembree3 in this Mitsuba build, or other symbols
+        return {f"{name}_kernels_skipped": f"{type(e).__name__}: {e}".splitlines()[0]}
+    return {f"{name}_kernels": res}
+
+
 def run(out_dir) -> dict:
     try:
         _mitsuba()
@@ -348,6 +368,7 @@ def run(out_dir) -> dict:
             fibers = _realize(SMALL, None, d)
             camera = load_scene(d / "scene.toml").camera
             res.update(run_case("small", fibers, _export(fibers, d), camera))
+            res.update(kernel_case("small", fibers, camera))
             if "thin" in only:
                 res.update(run_case("thin", fibers, _export_scaled(fibers, d, CASES["thin"][4]), camera))
         if "demo" in only:
@@ -358,6 +379,7 @@ def run(out_dir) -> dict:
             if not (fibers / "zarr.json").exists():
                 fibers = _realize(None, demo, d)
             res.update(run_case("demo", fibers, _export(fibers, d), load_scene(demo).camera))
+            res.update(kernel_case("demo", fibers, load_scene(demo).camera))
     if out_dir is not None:
         (Path(out_dir) / "mitsuba_table.md").write_text(comparison_table(res))
     return res
@@ -386,6 +408,23 @@ def comparison_table(res: dict) -> str:
             f"{g('fiberpath_build_s'):.2f} / {g('fiberpath_bvh_build_s'):.2f} / {g('mitsuba_load_s'):.2f} s | "
             f"{g('fiberpath_mean')[0]:.5f} / {g('mitsuba_mean')[0]:.5f} ({g('mean_diff_in_standard_errors'):.1f}) | "
             f"{g('embree_bvh_diff_in_standard_errors'):.2f} |")
+    kernels = [(c, res[f"{c}_kernels"]) for c in CASE_LABELS if f"{c}_kernels" in res]
+    if kernels:
+        lines += ["", "| the ray-tracing kernels alone, one thread (`bench/embree_kernels.py`) | rays: camera / bounce / shadow | "
+                  "Embree 4.4 (fiberpath), ns per ray | Embree 3.13.4 (Mitsuba), ns per ray | "
+                  "Embree 3 / Embree 4 (< 1: Mitsuba's faster) | builds: Embree 4 / 3 | camera rays: same segment (other: its chain neighbour) | "
+                  "rays from inside a capsule meeting a surface: Embree 4 / 3 |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for c, k in kernels:
+            ns = lambda e: " / ".join(f"{k[f'{x}_ns_per_ray'][e]:.0f}" for x in ("camera", "bounce", "shadow"))  # noqa: E731
+            lines.append(
+                f"| {CASE_LABELS[c].split(',')[0]} | {' / '.join(str(v) for v in k['rays'].values())} | {ns('embree4')} | "
+                f"{ns('embree3')} | {k['camera_embree3_over_embree4']:.2f} / {k['bounce_embree3_over_embree4']:.2f} / "
+                f"{k['shadow_embree3_over_embree4']:.2f}; all rays **{k['all_rays_embree3_over_embree4']:.2f}** | "
+                f"{k['embree4_build_s']:.2f} / {k['embree3_build_s']:.2f} s | {100 * k['camera_same_segment']:.2f} % "
+                f"(chain neighbour {100 * k['camera_chain_neighbour']:.2f} %) | "
+                f"{100 * k['inside_rays_meeting_a_surface']['embree4']:.0f} / "
+                f"{100 * k['inside_rays_meeting_a_surface']['embree3']:.0f} % |")
     return "\n".join(lines) + "\n"
 
 
