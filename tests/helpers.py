@@ -48,3 +48,15 @@ def seam_points(fib, ring, n_seam: int, n_all: int):
     seam = pts[np.linalg.norm(pts - ring[0], axis=1) < 0.08]
     Q = np.concatenate([seam[rng.integers(0, len(seam), n_seam)], pts[rng.integers(0, len(pts), n_all)]])
     return Q + rng.normal(0.0, 1.5 * rf, Q.shape)
+
+
+def compiled_typings(dispatcher) -> set:
+    """The typings a numba dispatcher has been compiled for: those compiled in this process
+    (``.signatures``) and those in its on-disk cache index. On a warm cache its callers load their own
+    machine code and never compile it here, so ``.signatures`` alone is empty; the index (in the
+    cache directory ``stages`` keys by the kernel sources) still lists every typing any process compiled."""
+    typings = {str(sig) for sig in dispatcher.signatures}
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    if cache_file is not None:
+        typings |= {str(key[0]) for key in cache_file._load_index()}
+    return typings

@@ -16,6 +16,7 @@ from stages.core.yarn import tables as layout
 from stages.procedural import tables as T
 from stages.core.yarn import model as M
 from stages.core.yarn.lookup import lookup_points
+from tests.helpers import compiled_typings
 
 SCENE = """
 [fabric]
@@ -345,4 +346,4 @@ def test_lookups_compile_once_for_every_caller(built):
         x, y, z = pts[i]
         assert procedural_lookup(med, x, y, z).den == r.density[i]
         assert procedural_lookup(med, x, y, z, -1).den == r.density[i]
-    assert len(lookup_point.signatures) == 1, lookup_point.signatures
+    assert len(compiled_typings(lookup_point)) == 1, compiled_typings(lookup_point)

@@ -25,6 +25,7 @@ from stages.render.lights import LightTable
 from stages.render.tiles import render_tiles
 from stages.core.shading.material import MAT_SIZE
 from stages.render.volpath import VolpathIntegrator
+from tests.helpers import compiled_typings
 
 Z = 5.0  # standard errors allowed
 
@@ -417,7 +418,7 @@ def test_procedural_majorant_does_not_depend_on_workers(small):
     for workers in (1, 3):
         mu = capsule_majorants(med.cv, med.tab, MAJORANT_STEP, maj.lo, maj.hi, maj.res, workers)
         assert np.array_equal(mu, maj.mu)
-    assert len(_walk_yarn.signatures) == 1, _walk_yarn.signatures
+    assert len(compiled_typings(_walk_yarn)) == 1, compiled_typings(_walk_yarn)
 
 
 def test_majorant_cells_follow_a_flat_cloth():
