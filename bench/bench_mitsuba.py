@@ -58,6 +58,7 @@ from __future__ import annotations
 import glob
 import math
 import os
+import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -346,7 +347,7 @@ def kernel_case(name, fibers: Path, camera: dict) -> dict:
     W, H = CASES[name][:2]
     try:
         res = embree_kernels.compare(fibers, camera, W, H, mitsuba_offset(load_fibers(fibers).points))
-    except (OSError, KeyError, RuntimeError) as e:   # no libembree3 in this Mitsuba build, or other symbols
+    except (OSError, KeyError, RuntimeError, subprocess.SubprocessError) as e:   # no libembree3 / nm, other symbols
         return {f"{name}_kernels_skipped": f"{type(e).__name__}: {e}".splitlines()[0]}
     return {f"{name}_kernels": res}
 
