@@ -272,9 +272,9 @@ def compare(fibers_path: Path, camera: dict, W: int, H: int, eps: float, spp: in
     t = time.perf_counter()
     scene4 = EmbreeScene(f.points, f.fiber_offsets, f.point_radius, 1)
     build4 = time.perf_counter() - t
-    ns = len(scene4.fibers.seg_a)
-    dev3, scene3, index3, build3 = e3.curve_scene(int(scene4.fibers.rows), ns)
+    scene3 = None
     try:
+        dev3, scene3, index3, build3 = e3.curve_scene(int(scene4.fibers.rows), len(scene4.fibers.seg_a))
         rays, kind = record_rays(scene4.fibers, camera_array(camera, W, H), eps, spp, 7)
         trace4 = _tracer("rtcIntersect1", "rtcOccluded1", False)
         trace3 = _tracer(e3.intersect1, e3.occluded1, True)
@@ -309,7 +309,8 @@ def compare(fibers_path: Path, camera: dict, W: int, H: int, eps: float, spp: in
             trace(h, ins, ins_kind, CAMERA, out)
             exits[name] = float(np.mean(out[:len(ins)] != INVALID_ID))
     finally:
-        e3.release(dev3, scene3)
+        if scene3 is not None:
+            e3.release(dev3, scene3)
         scene4.close()
     med = np.median(times, axis=0) * 1e9
     ratio = np.median(times[:, :, 1] / times[:, :, 0], axis=0)
