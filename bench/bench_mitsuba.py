@@ -346,7 +346,8 @@ def kernel_case(name, fibers: Path, camera: dict) -> dict:
 
     W, H = CASES[name][:2]
     try:
-        res = embree_kernels.compare(fibers, camera, W, H, mitsuba_offset(load_fibers(fibers).points))
+        f = load_fibers(fibers)
+        res = embree_kernels.compare(f, camera, W, H, mitsuba_offset(f.points))
     except (OSError, KeyError, RuntimeError, subprocess.SubprocessError) as e:   # no libembree3 / nm, other symbols
         return {f"{name}_kernels_skipped": f"{type(e).__name__}: {e}".splitlines()[0]}
     return {f"{name}_kernels": res}

@@ -260,15 +260,14 @@ def _tracer(intersect_symbol: str, occluded_symbol: str, embree3: bool):
     return trace
 
 
-def compare(fibers_path: Path, camera: dict, W: int, H: int, eps: float, spp: int = SPP, rounds: int = ROUNDS) -> dict:
-    """Both kernels on one case's fibres and camera rays (module doc): ns per ray of each class and kernel
-    (medians over rounds), the ratio Embree 3 / Embree 4, builds, and answer agreement."""
-    from pipeline.render_setup import load_fibers
+def compare(f, camera: dict, W: int, H: int, eps: float, spp: int = SPP, rounds: int = ROUNDS) -> dict:
+    """Both kernels on one case's fibres (``load_fibers``' answer) and camera rays (module doc): ns per ray
+    of each class and kernel (medians over rounds), the ratio Embree 3 / Embree 4, builds, and answer
+    agreement."""
     from pipeline.scene import camera_array
     from stages.core.geometry.embree import EmbreeScene
 
     e3 = Embree3()
-    f = load_fibers(fibers_path)
     t = time.perf_counter()
     scene4 = EmbreeScene(f.points, f.fiber_offsets, f.point_radius, 1)
     build4 = time.perf_counter() - t
@@ -336,8 +335,8 @@ def main(argv=None) -> dict:
     from pipeline.render_setup import load_fibers
     from pipeline.scene import load_scene
 
-    eps = mitsuba_offset(load_fibers(args.fibers).points)
-    res = compare(Path(args.fibers), load_scene(args.scene).camera, *args.size, eps)
+    f = load_fibers(args.fibers)
+    res = compare(f, load_scene(args.scene).camera, *args.size, mitsuba_offset(f.points))
     print(json.dumps(res, indent=1))
     return res
 
