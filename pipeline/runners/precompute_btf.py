@@ -168,7 +168,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
     W, H = (float(v) for v in art["ex_period"][k])
     t0 = time.perf_counter()  # compile (or load) the acquisition kernel on one texel, one view, one light
     acquire_texels(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, res, 0, 1, view_dirs[:1],
-                   light_dirs[:1], 1, p.seed, 2, 2, _max_dist(W, H, slab), _eps(W, H, slab))
+                   light_dirs[:1], 1, p.seed, 2, 2, _max_dist(W, H, slab), _eps(W, H, slab),
+                   *direction_grids(asdict(p)))   # the grids the chunk tasks pass: the same specialisation
     compile_s = time.perf_counter() - t0
     pdict = {key: v for key, v in asdict(p).items() if key != "material"}
     with session(scheduler), w:

@@ -15,9 +15,23 @@ not cache a function that takes another compiled function as an argument).
             return lambda med, x, y, z: grid_lookup(med, x, y, z)
 """
 from numba import types
+from numba.extending import intrinsic
 
 
 def is_tuple_class(numba_type, cls) -> bool:
     """True when ``numba_type`` (an overload's argument type) is the namedtuple class ``cls``."""
     return isinstance(numba_type, types.BaseNamedTuple) and numba_type.instance_class is cls
 
+
+
+@intrinsic
+def runtime_value(typingctx, x):
+    """``x`` typed as its non-literal type: a constant passed on through this (``track(..., runtime_value(True))``)
+    does not make numba compile the callee once more for that constant (it specialises a compiled callee
+    on every literal argument: ``Literal[bool](True)``, ``Literal[int](2)``)."""
+    ty = types.unliteral(x)
+
+    def codegen(context, builder, sig, args):
+        return context.cast(builder, args[0], sig.args[0], sig.return_type)
+
+    return ty(x), codegen

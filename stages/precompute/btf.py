@@ -176,11 +176,12 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
 
 @njit(cache=True, parallel=True)
 def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_dirs, light_dirs, spp, seed,
-                   max_depth, rr_depth, max_dist, eps, view_grid=(0, 0), light_grid=(0, 0)):
+                   max_depth, rr_depth, max_dist, eps, view_grid, light_grid):
     """Texels t0..t1-1 (row-major ids of the res x res grid): (radiance (T, V, L, 3) float32 mean over the
     hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc. ``view_grid`` and
     ``light_grid`` (n_theta, n_phi) of the grids that ``view_dirs`` and ``light_dirs`` are: cell averages
-    (module doc); (0, 0): the directions themselves."""
+    (module doc); (0, 0): the directions themselves. Both are always passed (no defaults), so every caller
+    shares one compiled specialisation of this parallel kernel."""
     T = t1 - t0
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]

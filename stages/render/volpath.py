@@ -47,7 +47,7 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from stages.core.dispatch import is_tuple_class
+from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.rng import uniform
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
@@ -74,7 +74,8 @@ def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, in
     ``skip_fibre``; the ground occludes."""
     if ground_intersect(ground, ground_on, pz, wz, 0.0) < np.inf:
         return 0.0, dim, 0
-    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, dim, True, skip_fibre)
+    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, runtime_value(dim), True,
+               runtime_value(skip_fibre))
     return fl.transmittance, fl.dim, fl.lookups
 
 
@@ -160,7 +161,8 @@ def trace_path(it, o, d, seed, index):
     skip = np.int64(-1)  # the fibre the ray leaves after a fibre-phase collision (not met again)
     while True:
         tg = ground_intersect(ground, ground_on, oz, dz, 1e-9)
-        fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, dim, False, skip)
+        fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, runtime_value(dim), False,
+                   runtime_value(skip))
         rays += 1
         collided = fl.collided
         t = fl.t

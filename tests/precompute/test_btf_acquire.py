@@ -61,7 +61,7 @@ def acquired(tiny_tiling):
     views = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
     lights = np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [-0.8, 0.0, 0.6]])
     args = (periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, RES, 0, RES * RES, views, lights,
-            SPP, 5, 6, 3, 64.0 * max(W, H), 1e-9)
+            SPP, 5, 6, 3, 64.0 * max(W, H), 1e-9, (0, 0), (0, 0))
     return art, k, W, H, args
 
 
@@ -159,7 +159,7 @@ def test_cell_averages_are_the_mean_over_the_cell(acquired):
     base = list(args)
     base[5], base[6], base[7], base[9] = mof, mats, res, res * res
     base[12] = 512                                              # spp
-    cell = acquire_texels(*base[:10], grid, grid, *base[12:], (2, 2), (2, 2))
+    cell = acquire_texels(*base[:10], grid, grid, *base[12:18], (2, 2), (2, 2))
     sub = np.array([[cell_direction(c, 2, 2, (a + 0.5) / 3, (b + 0.5) / 3) for a in range(3) for b in range(3)]
                     for c in range(4)])                          # (4 cells, 9, 3)
     base[12] = 64

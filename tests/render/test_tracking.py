@@ -30,7 +30,7 @@ def _collisions(med, maj, o, d, n, seed):
     hit = np.empty(n, np.bool_)
     t = np.empty(n)
     for k in range(n):
-        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, 0, False)
+        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, np.int64(0), False, np.int64(-1))
         hit[k] = r.collided
         t[k] = r.t
     return hit, t

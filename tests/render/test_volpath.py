@@ -36,9 +36,9 @@ def _track_many(med, maj, o, d, tmax, n, seed):
     esc = np.empty(n)
     rat = np.empty(n)
     for k in range(n):
-        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed, k, 0, False)
+        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed, k, np.int64(0), False, np.int64(-1))
         esc[k] = 0.0 if r.collided else 1.0
-        r2 = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed + 1, k, 0, True)
+        r2 = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed + 1, k, np.int64(0), True, np.int64(-1))
         rat[k] = r2.transmittance
     return esc, rat
 
@@ -107,7 +107,8 @@ def _refine(den, lo, hi, res, k, which):
 def _tentative(med, maj, o, d, n, seed):
     total = 0
     for k in range(n):
-        total += track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, 0, True).lookups
+        total += track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, np.int64(0), True,
+                       np.int64(-1)).lookups
     return total
 
 
