@@ -13,6 +13,9 @@ not cache a function that takes another compiled function as an argument).
     def _grid(med, x, y, z):
         if is_tuple_class(med, GridMedium):
             return lambda med, x, y, z: grid_lookup(med, x, y, z)
+
+``runtime_value(x)`` keeps constants from multiplying specialisations: it types a constant as a plain
+value, so a callee is not compiled once more for it.
 """
 from numba import types
 from numba.extending import intrinsic
@@ -23,12 +26,11 @@ def is_tuple_class(numba_type, cls) -> bool:
     return isinstance(numba_type, types.BaseNamedTuple) and numba_type.instance_class is cls
 
 
-
 @intrinsic
 def runtime_value(typingctx, x):
-    """``x`` typed as its non-literal type: a constant passed on through this (``track(..., runtime_value(True))``)
-    does not make numba compile the callee once more for that constant (it specialises a compiled callee
-    on every literal argument: ``Literal[bool](True)``, ``Literal[int](2)``)."""
+    """``x`` typed as its non-literal type. numba compiles a callee once more for every literal argument
+    (``Literal[int](2)``, ``Literal[bool](True)``); a constant passed on through this (volpath's
+    ``track(..., runtime_value(dim), ...)``) reaches the callee as a plain value, one specialisation for all."""
     ty = types.unliteral(x)
 
     def codegen(context, builder, sig, args):
