@@ -51,7 +51,7 @@ import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads)
 import numpy as np  # noqa: E402
 from numba import njit, types  # noqa: E402
 
-from stages.core.geometry.embree import embree_surface_hit, peek, poke, scratch_address  # noqa: E402
+from stages.core.geometry.embree import embree_surface_hit, peek, poke, scratch_address, write_ray  # noqa: E402
 from stages.core.rng import uniform  # noqa: E402
 from stages.core.shading.lambert import cosine_direction  # noqa: E402
 from stages.render.camera import camera_ray  # noqa: E402
@@ -225,20 +225,8 @@ def _tracer(intersect_symbol: str, occluded_symbol: str, embree3: bool):
         for i in range(rays.shape[0]):
             if kind[i] != which:
                 continue
-            poke(base + 0, np.float32(rays[i, 0]))
-            poke(base + 4, np.float32(rays[i, 1]))
-            poke(base + 8, np.float32(rays[i, 2]))
-            poke(base + 12, np.float32(rays[i, 6]))
-            poke(base + 16, np.float32(rays[i, 3]))
-            poke(base + 20, np.float32(rays[i, 4]))
-            poke(base + 24, np.float32(rays[i, 5]))
-            poke(base + 28, np.float32(0.0))
-            poke(base + 32, np.float32(rays[i, 7]))
-            poke(base + 36, inv)
-            poke(base + 40, np.uint32(0))
-            poke(base + 44, np.uint32(0))
-            poke(base + 72, inv)
-            poke(base + 76, inv)
+            write_ray(base, rays[i, 0], rays[i, 1], rays[i, 2], rays[i, 3], rays[i, 4], rays[i, 5], rays[i, 6],
+                      rays[i, 7])
             if embree3:   # RTCIntersectContext: flags (incoherent) 0, filter 8, instID 16
                 poke(ctx, np.uint32(0))
                 poke(ctx + 8, np.int64(0))

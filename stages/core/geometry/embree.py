@@ -342,8 +342,8 @@ def window_filter(args):
 
 
 @njit(cache=True, inline="always")
-def _query(sc, base, ox, oy, oz, dx, dy, dz, tmin, tmax, lo, hi):
-    """Fill the scratch block at ``base``: the ray, an empty hit, the arguments and the context."""
+def write_ray(base, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """The ray (float32) and an empty hit into the RTCRayHit at ``base`` (the same layout in Embree 3 and 4)."""
     poke(base + 0, np.float32(ox))
     poke(base + 4, np.float32(oy))
     poke(base + 8, np.float32(oz))
@@ -359,6 +359,12 @@ def _query(sc, base, ox, oy, oz, dx, dy, dz, tmin, tmax, lo, hi):
     poke(base + 72, np.uint32(INVALID_ID))    # geomID: no hit yet
     poke(base + 76, np.uint32(INVALID_ID))
     poke(base + 80, np.uint32(INVALID_ID))
+
+
+@njit(cache=True, inline="always")
+def _query(sc, base, ox, oy, oz, dx, dy, dz, tmin, tmax, lo, hi):
+    """Fill the scratch block at ``base``: the ray, an empty hit, the arguments and the context."""
+    write_ray(base, ox, oy, oz, dx, dy, dz, tmin, tmax)
     skips = lo <= hi
     poke(base + ARGS, np.uint32(QUERY_INVOKE_ARGUMENT_FILTER if skips else 0))
     poke(base + ARGS + 4, np.uint32(FEATURE_ALL))
