@@ -39,7 +39,6 @@ import json
 import math
 import os
 import re
-import resource
 import shutil
 import sys
 import time
@@ -49,6 +48,7 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 from . import __version__
 from .errors import IncompleteArtifact, LoomError
+from .memory import peak_rss_bytes
 from .schemas import validate
 
 if TYPE_CHECKING:
@@ -664,7 +664,7 @@ class ArtifactWriter:
             "build_key": build_key(self.kind, self.stage, self.params, ids),
             "loomlight_version": __version__,
             "wall_time_s": time.perf_counter() - self._t0,
-            "peak_memory_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+            "peak_memory_bytes": peak_rss_bytes(),
             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "arrays": checksums,
             "content_hash": content_digest(self.kind, summary, checksums),

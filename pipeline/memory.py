@@ -31,6 +31,22 @@ class Budget(NamedTuple):
     how: str          # where it comes from, for the refusal message
 
 
+def peak_rss_bytes() -> int:
+    """This process's peak resident memory: ``VmHWM`` of /proc/self/status, the high-water mark of this
+    program's own address space. ``getrusage``'s ``ru_maxrss`` (the fallback where /proc is missing) is
+    not that on Linux: a child forked from a large process and exec'd keeps the parent's peak as its
+    own, so a render started by another loomlight process would report its parent's memory."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    import resource
+
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
+
+
 def _meminfo_available() -> int | None:
     try:
         for line in Path("/proc/meminfo").read_text().splitlines():

@@ -13,12 +13,11 @@ checked (not an input, not a file or directory in the way) before anything is re
 """
 from __future__ import annotations
 
-import resource
 import time
 from pathlib import Path
 
 from ..errors import LoomError
-from ..memory import Estimate, budget as memory_budget
+from ..memory import Estimate, budget as memory_budget, peak_rss_bytes
 
 INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid", "svf": "svf",
                "iirtf": "iirtf", "btf": "btf", "yarns": "yarns"}  # artifact kinds per option
@@ -264,7 +263,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
         "paths": int(st.get("paths", rgb.shape[0] * rgb.shape[1] * options["spp"])),
         "rays": int(st.get("rays", 0)), "threads": int(numba.get_num_threads()),
         "scheduler": sched.address or sched.kind, "workers": workers,
-        "peak_memory_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        "peak_memory_bytes": peak_rss_bytes(),
         "mean_rgb": [float(x) for x in rgb.reshape(-1, 3).mean(axis=0)],
         "exr": str(out), "png": str(out.with_suffix(".png")),
     }
