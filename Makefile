@@ -62,7 +62,7 @@ AGREE ?= out/agreement
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
 AGREE_ARGS ?= --width 128 --height 96 --spp 64
 
-.PHONY: setup demo demo-quick test test-all bench table1 sweep agreement clean help
+.PHONY: setup demo demo-quick test test-all bench table1 sweep agreement clean help references compare
 
 help:
 	@echo "make demo    - set up .venv if needed, run the demo scene end to end, print output paths"
@@ -73,6 +73,8 @@ help:
 	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
 	@echo "make agreement - fiberpath vs volpath on the demo and twill swatches, demo light and sweep lights"
 	@echo "make btf-sweep - seed 002 fitted textures of the damask's two satins against fiberpath (out/btf)"
+	@echo "make references - render each comparison's converged reference (data/compare/*.toml; kept and reused)"
+	@echo "make compare - every method against the converged references, error against time, speed-up at equal error (out/compare)"
 	@echo "make setup   - create .venv and install loomlight with its test and Dask dependencies"
 
 # pip's output goes to .venv/pip.log and is shown only when the install fails
@@ -374,6 +376,46 @@ $(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/sce
 btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json)
 	@for s in 41 14; do $(LL) evaluate --sweep data/sweeps/btf_flat$$s.toml -o $(BTF_DIR)/flat$$s || exit 1; done
 	@for s in 41 14; do echo "report: $(BTF_DIR)/flat$$s/report.md"; done
+
+# --- which method gives the right picture fastest: every method against a converged reference, error against
+# time (loomlight evaluate --convergence; data/compare/*.toml; README: Choosing a method). make references
+# renders each comparison's reference until its noise is within the file's targets (kept under
+# $(COMPARE)/<name>/reference, reused while scene, settings and code are unchanged; never by make test);
+# make compare renders every method at its budgets and writes $(COMPARE)/<name>/report.html and the summary
+COMPARE := out/compare
+COMPARE_FILES ?= $(filter-out data/compare/demo_quick.toml,$(wildcard data/compare/*.toml))
+COMPARE_ARGS ?=
+COMPARE_IN := $(COMPARE)/inputs
+$(COMPARE_IN)/twill_yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed
+	$(LL) ingest $(TWILL_SCENE) -o $(COMPARE_IN)/twill_yarns.zarr
+
+$(COMPARE_IN)/twill_fibers.zarr/zarr.json: $(COMPARE_IN)/twill_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
+	$(LL) realize $(COMPARE_IN)/twill_yarns.zarr -o $(COMPARE_IN)/twill_fibers.zarr
+
+$(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/scenes/knit_swatch.toml $(VENV)/.installed
+	$(LL) tile data/tilings/knit_swatch.toml -o $(COMPARE_IN)/knit_tiling.zarr
+
+$(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
+	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf.zarr
+
+.PRECIOUS: $(COMPARE_IN)/%.zarr/zarr.json
+COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(OUT)/bysdf_fit.toml \
+	$(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json $(OUT)/damask_btf_fit.zarr/zarr.json \
+	$(OUT)/knit_fibers.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml \
+	$(COMPARE_IN)/twill_fibers.zarr/zarr.json $(COMPARE_IN)/knit_btf.zarr/zarr.json \
+	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
+.PHONY: references compare
+
+references: $(COMPARE_INPUTS)
+	@for f in $(COMPARE_FILES); do \
+	    $(LL) evaluate --convergence $$f -o $(COMPARE)/$$(basename $$f .toml) --reference-only || exit 1; \
+	done
+
+compare: references
+	@for f in $(COMPARE_FILES); do \
+	    $(LL) evaluate --convergence $$f -o $(COMPARE)/$$(basename $$f .toml) $(COMPARE_ARGS) || exit 1; \
+	done
+	@for f in $(COMPARE_FILES); do echo "report: $(COMPARE)/$$(basename $$f .toml)/report.html"; done
 
 prt-study: $(VENV)/.installed
 	$(LL) study prt-params data/studies/prt_params.toml -o $(PRT)/study

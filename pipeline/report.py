@@ -49,7 +49,7 @@ def write_text(path: str | Path, text: str) -> Path:
     return path
 
 
-def _savefig(fig, path: Path) -> Path:
+def save_figure(fig, path: Path) -> Path:
     import matplotlib.pyplot as plt
 
     path = Path(path)
@@ -65,7 +65,7 @@ def _savefig(fig, path: Path) -> Path:
     return path
 
 
-def _plt():
+def pyplot():
     import matplotlib
 
     matplotlib.use("Agg")
@@ -82,7 +82,7 @@ def relative_error(test: np.ndarray, ref: np.ndarray, eps: float = 0.01) -> np.n
     return np.mean(d * d / (np.asarray(ref, float) ** 2 + eps), axis=-1)
 
 
-def _preview(rgb: np.ndarray) -> np.ndarray:
+def preview(rgb: np.ndarray) -> np.ndarray:
     from .images import to_srgb8
 
     return to_srgb8(rgb)
@@ -91,7 +91,7 @@ def _preview(rgb: np.ndarray) -> np.ndarray:
 def error_map_png(test: np.ndarray, ref: np.ndarray, path: str | Path, title: str) -> Path:
     from matplotlib.colors import LogNorm
 
-    plt = _plt()
+    plt = pyplot()
     err = np.clip(relative_error(test, ref), ERR_RANGE[0], ERR_RANGE[1])
     h, w = err.shape
     scale = 6.0 / max(w, h)
@@ -101,7 +101,7 @@ def error_map_png(test: np.ndarray, ref: np.ndarray, path: str | Path, title: st
     ax.set_axis_off()
     cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04)
     cb.set_label("(t - r)^2 / (r^2 + 0.01)", fontsize=8)
-    return _savefig(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def worst_window(err: np.ndarray, size: int) -> tuple[int, int]:
@@ -117,30 +117,30 @@ def worst_window(err: np.ndarray, size: int) -> tuple[int, int]:
 def crops_png(ref: np.ndarray, test: np.ndarray, path: str | Path, title: str, size: int = 96) -> Path:
     from matplotlib.colors import LogNorm
 
-    plt = _plt()
+    plt = pyplot()
     err = relative_error(test, ref)
     h, w = err.shape
     n = int(min(size, h, w))
     i, j = worst_window(err, n)
     sl = (slice(i, i + n), slice(j, j + n))
     fig, axes = plt.subplots(1, 3, figsize=(9.0, 3.3))
-    axes[0].imshow(_preview(ref[sl]), interpolation="nearest")
+    axes[0].imshow(preview(ref[sl]), interpolation="nearest")
     axes[0].set_title("reference", fontsize=9)
-    axes[1].imshow(_preview(test[sl]), interpolation="nearest")
+    axes[1].imshow(preview(test[sl]), interpolation="nearest")
     axes[1].set_title("test", fontsize=9)
     axes[2].imshow(np.clip(err[sl], *ERR_RANGE), cmap="inferno", norm=LogNorm(*ERR_RANGE), interpolation="nearest")
     axes[2].set_title("relative squared error", fontsize=9)
     for a in axes:
         a.set_axis_off()
     fig.suptitle(f"{title}  (crop {n}x{n} at x={j}, y={i})", fontsize=9)
-    return _savefig(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 METRIC_LABELS = {"rmse": "RMSE", "relmse": "relMSE", "ssim": "SSIM", "delta_e2000_mean": "mean ΔE00"}
 
 
 def metric_bars_png(metrics: dict[str, dict], path: str | Path, title: str = "") -> Path:
-    plt = _plt()
+    plt = pyplot()
     names = list(metrics)
     keys = [k for k in METRIC_LABELS if any(k in metrics[n] for n in names)]
     fig, axes = plt.subplots(1, len(keys), figsize=(3.2 * len(keys), 0.4 * len(names) + 1.8), squeeze=False)
@@ -155,11 +155,11 @@ def metric_bars_png(metrics: dict[str, dict], path: str | Path, title: str = "")
     if title:
         fig.suptitle(title, fontsize=10, y=1.02)
     fig.tight_layout()
-    return _savefig(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def sweep_rmse_png(rmse_by_method: dict[str, float], path: str | Path, reference: str, title: str = "") -> Path:
-    plt = _plt()
+    plt = pyplot()
     names = list(rmse_by_method)
     fig, ax = plt.subplots(figsize=(1.2 * len(names) + 2.5, 3.2))
     ax.bar(range(len(names)), [rmse_by_method[n] for n in names], color="#c55a11")
@@ -167,12 +167,12 @@ def sweep_rmse_png(rmse_by_method: dict[str, float], path: str | Path, reference
     ax.set_xticklabels(names, fontsize=8)
     ax.set_ylabel(f"RMSE of mean intensity vs {reference}", fontsize=8)
     ax.set_title(title or "RMSE of mean image intensity over configurations (seed 001 Fig. 13 form)", fontsize=9)
-    return _savefig(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def sweep_scatter_png(pairs: dict[str, tuple[np.ndarray, np.ndarray]], path: str | Path, reference: str) -> Path:
     """pairs[method] = (reference means (N, 3), method means (N, 3)): a point per configuration and channel."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(4.2, 4.0))
     vals = [np.asarray(v) for p in pairs.values() for v in p] or [np.zeros(1)]
     lo = float(min(0.0, min(v.min() for v in vals)))
@@ -185,29 +185,29 @@ def sweep_scatter_png(pairs: dict[str, tuple[np.ndarray, np.ndarray]], path: str
     if pairs:
         ax.legend(fontsize=8)
     ax.set_title("per configuration and channel", fontsize=9)
-    return _savefig(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def side_by_side_png(images: Sequence[np.ndarray], titles: Sequence[str], path: str | Path) -> Path:
     """The full images in one row at their own resolution, sRGB at exposure 0 (as the previews), each
     titled with its name, resolution and mean intensity."""
-    plt = _plt()
+    plt = pyplot()
     n = len(images)
     h, w = images[0].shape[:2]
     scale = max(1.0, 320.0 / w)  # small renders are shown enlarged (nearest neighbour), never shrunk
     fig, axes = plt.subplots(1, n, figsize=(n * w * scale / 100 + 0.3 * n, h * scale / 100 + 0.7), squeeze=False)
     for ax, img, title in zip(axes[0], images, titles):
-        ax.imshow(_preview(img), interpolation="nearest")
+        ax.imshow(preview(img), interpolation="nearest")
         ax.set_xticks([])
         ax.set_yticks([])
         mean = ", ".join(f"{v:.3f}" for v in np.asarray(img, float).reshape(-1, 3).mean(axis=0))
         ax.set_title(f"{title}\n{img.shape[1]}x{img.shape[0]}, mean {mean}", fontsize=8)
-    return _savefig(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def contact_sheet_png(images: list[list[np.ndarray | None]], rows: Sequence[str], cols: Sequence[str],
                       path: str | Path) -> Path:
-    plt = _plt()
+    plt = pyplot()
     nr, nc = len(rows), len(cols)
     fig, axes = plt.subplots(nr, nc, figsize=(1.9 * nc + 0.8, 1.6 * nr + 0.4), squeeze=False)
     for r in range(nr):
@@ -217,12 +217,12 @@ def contact_sheet_png(images: list[list[np.ndarray | None]], rows: Sequence[str]
             ax.set_yticks([])
             img = images[r][c]
             if img is not None:
-                ax.imshow(_preview(img), interpolation="nearest")
+                ax.imshow(preview(img), interpolation="nearest")
             if r == 0:
                 ax.set_title(cols[c], fontsize=8)
             if c == 0:
                 ax.set_ylabel(rows[r], fontsize=7, rotation=0, ha="right", va="center")
-    return _savefig(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 # ------------------------------------------------------------------------------------------------

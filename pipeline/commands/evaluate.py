@@ -23,6 +23,15 @@ Table 1 (seed 000 Table 1)
     (a procedural render of a fabric too large to realize: its time, peak memory and that memory
     against the full realization) belongs to the next scene after the pairs.
 
+Equal error (which method gives the right picture fastest)
+    ``loomlight evaluate --convergence data/compare/demo.toml -o DIR [--ref REF.zarr] [--reference-only]``
+    Makes (or reuses) the comparison's converged reference from independent batches, renders every
+    method at its increasing budgets, fits each method's error against time E(t)^2 = b^2 + c/t against
+    the reference (bias floor b, noise constant c), and reports times to each error level, speed-ups at
+    equal error, an equal-time strip, memory and targets (``pipeline.runners.convergence``).
+    ``--reference-only`` builds the reference and stops (``make references``); ``--ref`` names a
+    reference made elsewhere, refused when made for another scene, settings or code version.
+
 Exit code 2 with one line naming the file on bad input (missing file, not an EXR, size mismatch).
 """
 from __future__ import annotations
@@ -36,9 +45,12 @@ import typer
 def register(app: typer.Typer) -> None:
     @app.command("evaluate")
     def evaluate(
-        ref: Optional[Path] = typer.Option(None, "--ref", help="Reference image (linear EXR)."),
+        ref: Optional[Path] = typer.Option(None, "--ref", help="Reference image (linear EXR); with --convergence the reference artifact (default DIR/reference/reference.zarr)."),
         test: Optional[List[Path]] = typer.Option(None, "--test", help="Test image (EXR); repeat for several."),
         sweep: Optional[Path] = typer.Option(None, "--sweep", help="A sweep file (TOML, schemas/sweep.schema.json)."),
+        convergence: Optional[Path] = typer.Option(None, "--convergence", help="A comparison file (TOML, schemas/compare.schema.json, data/compare/): every method's error against time at equal error."),
+        reference_only: bool = typer.Option(False, "--reference-only", help="--convergence: build (or check) the converged reference and stop."),
+        no_memory: bool = typer.Option(False, "--no-memory", help="--convergence: skip the peak-memory render of each method in a process of its own."),
         table1: bool = typer.Option(False, "--table1", help="Build the seed 000 Table 1 form (data sizes and render times)."),
         scene: Optional[List[Path]] = typer.Option(None, "--scene", help="--table1: a scene file; repeat for several."),
         procedural: Optional[List[Path]] = typer.Option(None, "--procedural", help="--table1: procedural volpath render (EXR) of the matching --scene."),
@@ -52,13 +64,35 @@ def register(app: typer.Typer) -> None:
         from ..errors import LoomError
         from ..outputs import DIRECTORY, check_output
 
-        modes = [m for m, on in (("--ref/--test", ref is not None or bool(test)), ("--sweep", sweep is not None),
-                                 ("--table1", table1)) if on]
+        modes = [m for m, on in (("--ref/--test", (ref is not None and convergence is None) or bool(test)),
+                                 ("--sweep", sweep is not None), ("--table1", table1),
+                                 ("--convergence", convergence is not None)) if on]
         if len(modes) != 1:
             raise LoomError(None, " and ".join(modes) if modes else "--ref/--test",
-                            "give exactly one of --ref/--test, --sweep or --table1"
-                            + (" (got both)" if len(modes) == 2 else " (got all three)" if modes else " (got none)"))
+                            "give exactly one of --ref/--test, --sweep, --table1 or --convergence"
+                            + (f" (got {len(modes)})" if modes else " (got none)"))
+        if reference_only and modes[0] != "--convergence":
+            raise LoomError(None, "--reference-only", "goes with --convergence")
         check_output(out, "-o", DIRECTORY)
+        if modes[0] == "--convergence":
+            from ..runners.convergence import run_convergence
+
+            res = run_convergence(convergence, out, ref_path=ref, reference_only=reference_only, force=force,
+                                  memory=not no_memory, echo=typer.echo)
+            if reference_only:
+                typer.echo(f"reference: {res.reference['path']}")
+                return
+            for name, s in res.methods.items():
+                se = s.get("speedup_at_equal_error")
+                typer.echo(f"  {name:22s} bias floor {s['floor']:.3f} +- {s['floor_se']:.3f}  noise constant "
+                           f"{s['noise_constant']:.3g} s" + (f"  speed-up at {se['level']:.0%}: "
+                                                            f"{se['bound'].replace('~', '~ ')}{se['value']:.3g}x" if se else ""))
+            for t in res.targets:
+                got = "-" if t["value"] is None else f"{t['bound']}{t['value']:.3g}x at {t['level']:.0%}"
+                typer.echo(f"  target {t['method']}: >= {t['target']:g}x at equal error: {got}: "
+                           + ("met" if t["met"] else "NOT met" + (f" ({t['why']})" if t.get("why") else "")))
+            typer.echo(f"report: {res.report_md}")
+            return
         if modes[0] == "--sweep":
             from ..runners.sweep import run_sweep
 

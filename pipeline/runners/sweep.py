@@ -36,7 +36,7 @@ from .sweep_report import SweepImages, summarize_methods, write_report
 
 # ------------------------------------------------------------------------------------------------
 # jobs: a derived scene and a render per (configuration, method), reused while its stamp holds
-def _referenced_files(raw: dict) -> dict[str, str]:
+def referenced_files(raw: dict) -> dict[str, str]:
     from ..artifacts import content_hash
 
     files = {}
@@ -85,7 +85,7 @@ def expand_args(sweep: Sweep, out: Path, args: list[str]) -> list[str]:
     return [a.replace("{sweep_dir}", str(sweep.path.parent.resolve())).replace("{out}", str(out.resolve())) for a in args]
 
 
-def _arg_hashes(args: list[str]) -> dict[str, str]:
+def arg_hashes(args: list[str]) -> dict[str, str]:
     from ..artifacts import content_hash
 
     out = {}
@@ -101,7 +101,7 @@ def _arg_hashes(args: list[str]) -> dict[str, str]:
     return out
 
 
-def _key_text(doc: dict) -> str:
+def key_text(doc: dict) -> str:
     """The stamp key's text: compact JSON with sorted keys (the form of ``pipeline.artifacts`` keys; the
     document holds only strings, lists and dicts of them)."""
     return json.dumps(doc, sort_keys=True, separators=(",", ":"))
@@ -118,8 +118,8 @@ def _jobs(sweep: Sweep, out: Path) -> list[Job]:
             text = (f"# derived by loomlight evaluate --sweep {sweep.path.name}: scene {sweep.scene_path.name}, "
                     f"configuration {c.name}, method {m.name}\n" + dumps_toml(raw))
             args = expand_args(sweep, out, m.args)
-            key = hashlib.sha256(_key_text({"scene": text, "method": m.method, "args": args, "version": __version__,
-                                            "files": {**_referenced_files(raw), **_arg_hashes(args)}}).encode()).hexdigest()
+            key = hashlib.sha256(key_text({"scene": text, "method": m.method, "args": args, "version": __version__,
+                                            "files": {**referenced_files(raw), **arg_hashes(args)}}).encode()).hexdigest()
             d = out / "renders" / c.name
             jobs.append(Job(c, m, d / f"{m.name}.scene.toml", d / f"{m.name}.exr", d / f"{m.name}.stamp.json", key, text,
                             args))

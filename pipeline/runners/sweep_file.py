@@ -113,7 +113,7 @@ def _grid_configurations(path: Path, grid: dict) -> list[Configuration]:
     return out
 
 
-def _absolute_paths(raw: dict, scene_path: Path) -> dict:
+def absolute_paths(raw: dict, scene_path: Path) -> dict:
     """Scene file paths made absolute, so the derived scene can live in another folder."""
     raw = copy.deepcopy(raw)
     base = scene_path.parent
@@ -156,7 +156,7 @@ def load_sweep(path: str | Path) -> Sweep:
     for i, n in enumerate(cnames):
         if cnames.index(n) != i:
             raise LoomError(path, "configurations", f"configuration name {n!r} occurs twice")
-    return Sweep(path, sw.get("name", path.stem), scene_path, _absolute_paths(scene_raw, scene_path), sw["reference"],
+    return Sweep(path, sw.get("name", path.stem), scene_path, absolute_paths(scene_raw, scene_path), sw["reference"],
                  dict(sw.get("render", {})), dict(sw.get("camera", {})), methods, configs)
 
 

@@ -277,8 +277,8 @@ def test_render_key_follows_artifacts_named_in_set_options(tmp_path):
     art = tmp_path / "svf.bin"
     art.write_bytes(b"one")
     args = ["--set", f"svf={art}", "--set", "terms=single", str(art)]
-    before = sw._arg_hashes(args)
+    before = sw.arg_hashes(args)
     assert set(before) == {str(art)}
     art.write_bytes(b"two")
-    assert sw._arg_hashes(args) != before
-    assert sw._arg_hashes(["--set", "svf=no/such/file", "--set", "sg=mc"]) == {}
+    assert sw.arg_hashes(args) != before
+    assert sw.arg_hashes(["--set", "svf=no/such/file", "--set", "sg=mc"]) == {}
