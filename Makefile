@@ -200,6 +200,11 @@ $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/vol
 	$(LL) evaluate --ref $(OUT)/eval/volpath-realized.exr --test $(OUT)/eval/volpath-procedural.exr \
 	    --test $(OUT)/eval/fiberpath.exr --test $(OUT)/eval/bysdf.exr -o $(OUT)/eval/report
 
+# make demo's equal-error comparison, last and alone (its render times are measured on an idle machine): the demo
+# swatch at 64x48, fiberpath and bysdf at three budgets each against a 2,048-spp reference (data/compare/demo_quick.toml)
+$(OUT)/compare/report.md: $(OUT)/fibers.zarr/zarr.json $(OUT)/bysdf_fit.toml data/compare/demo_quick.toml
+	$(LL) evaluate --convergence data/compare/demo_quick.toml -o $(OUT)/compare
+
 # the longest chains first: with DEMO_JOBS stages at a time, numba compilation (one core) overlaps
 # another stage's two-thread work
 DEMO_OUTPUTS = $(OUT)/eval/report/report.md $(OUT)/damask_prt.exr $(OUT)/eval/damask/report.md $(OUT)/eval/knit/report.md \
@@ -218,7 +223,9 @@ demo: $(VENV)/.installed
 	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json \
 	    $(OUT)/knit_fibers.zarr/zarr.json
 	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target demo-outputs
+	@$(MAKE) --no-print-directory $(OUT)/compare/report.md
 	@echo "demo outputs:"
+	@echo "  which method, at equal error: $(OUT)/compare/report.html ($(OUT)/compare/convergence.png)"
 	@echo "  yarn curves          : $(OUT)/yarns.zarr ($(OUT)/yarns.png)"
 	@echo "  procedural tables    : $(OUT)/tables.zarr (cross-section $(OUT)/cross_section.png)"
 	@echo "  realized fibres      : $(OUT)/fibers.zarr ($(OUT)/fibers.png)"

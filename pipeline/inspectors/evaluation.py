@@ -8,7 +8,10 @@
   time, speed-up);
 - ``sweep``: every method's mean intensity (mean of R, G, B) and render time per configuration, and the
   per-method summary table;
-- ``table1``: the data-size and render-time table (seed 000 Table 1 form) and the render times.
+- ``table1``: the data-size and render-time table (seed 000 Table 1 form) and the render times;
+- ``convergence`` (``loomlight evaluate --convergence``): every method's relative error against render
+  time (log-log, the artifact's ``error`` and ``time_s``, floors dashed) and the table of bias floors,
+  noise constants and speed-ups at equal error.
 """
 from __future__ import annotations
 
@@ -231,6 +234,46 @@ def _table1_mode(art, plt, size):
     return fig
 
 
+def _convergence_mode(art, plt, size):
+    from ..report import fmt_bytes
+
+    s = art.summary
+    methods = s.get("convergence", {})
+    names = list(art.params.get("methods") or methods)
+    err, tim = np.asarray(art["error"], float), np.asarray(art["time_s"], float)
+    table_h = 0.35 * (len(names) + 3)
+    fig = plt.figure(figsize=(size[0] / DPI, min(size[1] / DPI, 5.0 + table_h)), layout="constrained")
+    gs = fig.add_gridspec(2, 1, height_ratios=[4.4, table_h])
+    ax = fig.add_subplot(gs[0, 0])
+    for i, nm in enumerate(names):
+        ok = np.isfinite(err[i]) & np.isfinite(tim[i]) & (err[i] > 0)
+        line, = ax.plot(tim[i][ok], err[i][ok], marker="o", lw=1.2, label=nm)
+        floor = (methods.get(nm) or {}).get("floor")
+        if floor:
+            ax.axhline(floor, color=line.get_color(), ls="--", lw=1)
+    for lv in s.get("levels", []):
+        ax.axhline(lv, color="0.6", ls=":", lw=0.8)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("render time (s, kernels only)")
+    ax.set_ylabel("relative RMSE (cloth, reference noise subtracted)")
+    ax.set_title(f"error against time (reference: {s.get('reference', {}).get('method', '?')}, "
+                 f"{s.get('reference', {}).get('spp', '?')} spp)")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(title="method")
+    rows = []
+    for nm in names:
+        e = methods.get(nm, {})
+        sp = e.get("speedup_at_equal_error") or {}
+        rows.append([nm, f"{e.get('floor', float('nan')):.3f}", f"{e.get('noise_constant', float('nan')):.3g}",
+                     f"{sp.get('bound', '')}{sp['value']:.3g}x at {sp['level']:.0%}" if sp.get("value") else "-",
+                     fmt_bytes(e.get("geometry_bytes")), fmt_bytes(e.get("peak_memory_bytes"))])
+    _table(fig.add_subplot(gs[1, 0]), ["method", "bias floor", "noise constant (s)", "speed-up at equal error",
+                                       "geometry memory", "peak memory"], rows, "methods at equal error")
+    fig.suptitle(f"evaluation (convergence '{s.get('comparison', '?')}'): {len(names)} methods")
+    return fig
+
+
 def _other_mode(art, plt, size):
     fig, ax = plt.subplots(figsize=(size[0] / DPI, size[1] / DPI))
     rows = [[k, str(v)[:90]] for k, v in sorted(art.summary.items())]
@@ -238,7 +281,7 @@ def _other_mode(art, plt, size):
     return fig
 
 
-MODES = {"images": _images_mode, "sweep": _sweep_mode, "table1": _table1_mode}
+MODES = {"images": _images_mode, "sweep": _sweep_mode, "table1": _table1_mode, "convergence": _convergence_mode}
 
 
 def inspect(art, png, show=False, size=(1200, 900), **_):

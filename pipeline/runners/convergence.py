@@ -501,7 +501,7 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
     strip = {}
     with progress(f"convergence {cmp.name}: equal-time strip", len(cmp.methods)) as advance:
         for m in cmp.methods:
-            n = equal_time_spp(T, methods[m.name]["seconds_per_spp"])
+            n = cmp.equal_time_spp if m.name == cmp.reference else equal_time_spp(T, methods[m.name]["seconds_per_spp"])
             em = CompareMethod(m.name, m.method, {**m.render, "max_spp": 0}, m.args, "spp", (n,))
             exr = out / "equal_time" / f"{m.name}.exr"
             rendered += render_once(cmp, em, out, exr, derived_scene(cmp, em, n, EQUAL_TIME_SEED), f"method {m.name}, "

@@ -260,6 +260,11 @@ def test_comparison_end_to_end(compare_file, tmp_path, standin):
 
     art = Artifact(out / "evaluation.zarr", kind="evaluation")
     assert art.summary["mode"] == "convergence" and art["error"].shape == (2, 8)
+    from pipeline.inspectors import inspector_for
+
+    png = tmp_path / "inspect.png"
+    inspector_for("evaluation").inspect(art, png)          # loomlight inspect draws it
+    assert png.stat().st_size > 10_000
 
     # a second run reuses the reference and every render
     n = len(calls)
