@@ -41,6 +41,8 @@ from typing import List, Optional
 
 import typer
 
+from .scheduling import SCHEDULER
+
 
 def register(app: typer.Typer) -> None:
     @app.command("evaluate")
@@ -59,6 +61,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "-o", "--out", help="Output directory for metrics, pictures and the report."),
         force: bool = typer.Option(False, "--force", help="Recompute even when the inputs are unchanged."),
         no_render: bool = typer.Option(False, "--no-render", help="--sweep: do not render; evaluate the renders that exist."),
+        scheduler: str = SCHEDULER,
     ):
         """Compare renders against a reference: metrics, error maps, report (and sweeps, Table 1)."""
         from ..errors import LoomError
@@ -71,14 +74,15 @@ def register(app: typer.Typer) -> None:
             raise LoomError(None, " and ".join(modes) if modes else "--ref/--test",
                             "give exactly one of --ref/--test, --sweep, --table1 or --convergence"
                             + (f" (got {len(modes)})" if modes else " (got none)"))
-        if reference_only and modes[0] != "--convergence":
-            raise LoomError(None, "--reference-only", "goes with --convergence")
+        for flag, on in (("--reference-only", reference_only), ("--no-memory", no_memory), ("--scheduler", scheduler)):
+            if on and modes[0] != "--convergence":
+                raise LoomError(None, flag, "goes with --convergence")
         check_output(out, "-o", DIRECTORY)
         if modes[0] == "--convergence":
             from ..runners.convergence import run_convergence
 
             res = run_convergence(convergence, out, ref_path=ref, reference_only=reference_only, force=force,
-                                  memory=not no_memory, echo=typer.echo)
+                                  memory=not no_memory, echo=typer.echo, scheduler=scheduler)
             if reference_only:
                 typer.echo(f"reference: {res.reference['path']}")
                 return

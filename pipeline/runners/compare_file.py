@@ -40,9 +40,8 @@ from pathlib import Path
 
 from ..errors import LoomError, unknown
 from ..schemas import validate
-from ..scene import load_scene
 from ..toml_file import read_toml
-from .sweep_file import absolute_paths
+from .sweep_file import absolute_paths, base_scene, check_method_names
 
 BUDGET_KINDS = ("spp", "max_spp")
 DEFAULT_LEVELS = (0.3, 0.2, 0.1)
@@ -112,19 +111,9 @@ def load_comparison(path: str | Path) -> Comparison:
     raw = read_toml(path, what="comparison file")
     validate(raw, "compare", path)
     cp = raw["compare"]
-    scene_path = Path(cp["scene"])
-    if not scene_path.is_absolute():
-        scene_path = (path.parent / scene_path).resolve()
-    if not scene_path.is_file():
-        raise LoomError(path, "compare.scene", f"scene file {scene_path} not found")
-    load_scene(scene_path)  # the scene's own errors name the scene file
+    scene_path = base_scene(path, cp["scene"], "compare.scene")
     methods = tuple(_method(path, i, m) for i, m in enumerate(raw["methods"]))
-    names = [m.name for m in methods]
-    for j, n in enumerate(names):
-        if names.index(n) != j:
-            raise LoomError(path, f"methods[{j}].name", f"method name {n!r} is used twice")
-    if cp["reference"] not in names:
-        raise LoomError(path, "compare.reference", unknown("method", cp["reference"], names))
+    check_method_names(path, [m.name for m in methods], cp["reference"], "compare.reference")
     r = raw["reference"]
     settings = ReferenceSettings(int(r["spp"]), int(r.get("batches", 16)), int(r.get("max_batches", 256)),
                                  float(r.get("pixel_error", 0.05)), float(r.get("mean_error", 0.002)))

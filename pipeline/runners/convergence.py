@@ -130,8 +130,9 @@ class Run:
 
 
 def render_once(cmp: Comparison, m: CompareMethod, out: Path, exr: Path, raw: dict, what: str,
-                renderer: Renderer, force: bool = False) -> bool:
-    """Render ``raw`` to ``exr`` unless its stamp says the same render is there; True when rendered."""
+                renderer: Renderer, force: bool = False, where: tuple = ()) -> bool:
+    """Render ``raw`` to ``exr`` unless its stamp says the same render is there; True when rendered.
+    ``where``: ``--scheduler`` arguments, not part of the stamp (a render's bytes do not depend on them)."""
     from .. import __version__
     from ..report import write_text
 
@@ -150,7 +151,7 @@ def render_once(cmp: Comparison, m: CompareMethod, out: Path, exr: Path, raw: di
     scene_file = exr.with_suffix(".scene.toml")
     write_text(scene_file, text)
     stamp.unlink(missing_ok=True)
-    renderer(scene_file, m.method, exr, list(args))
+    renderer(scene_file, m.method, exr, list(args) + list(where))
     write_text(stamp, json.dumps({"key": key, "method": m.method, "args": args}, indent=2) + "\n")
     return True
 
@@ -204,7 +205,7 @@ def load_reference(path: Path, key: dict | None) -> Reference:
 
 
 def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Renderer, rebuild: bool,
-                    echo: Callable[[str], None]) -> Reference:
+                    echo: Callable[[str], None], where: tuple = ()) -> Reference:
     """Reuse the reference at ``ref_path`` when its key matches; else (``rebuild``, or none there)
     render batches until the noise targets hold, and publish it (module doc, 1)."""
     from stages.evaluate.convergence import batch_mean, reference_noise
@@ -236,7 +237,7 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
                 raw = derived_scene(cmp, m, s.spp, REFERENCE_SEED + k)
                 raw["render"]["max_spp"] = 0
                 exr = bdir / f"batch_{k:04d}.exr"
-                render_once(cmp, m, out, exr, raw, f"reference batch {k}", renderer)
+                render_once(cmp, m, out, exr, raw, f"reference batch {k}", renderer, where=where)
                 rgb, ch = read_exr(exr)
                 images.append(np.asarray(rgb, np.float64))
                 alphas.append(np.asarray(ch.get("A", np.ones(rgb.shape[:2])), np.float64))
@@ -447,7 +448,10 @@ class ConvergenceResult:
 
 def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path | None = None,
                     reference_only: bool = False, force: bool = False, memory: bool = True,
-                    renderer: Renderer | None = None, echo: Callable[[str], None] = print) -> ConvergenceResult:
+                    renderer: Renderer | None = None, echo: Callable[[str], None] = print,
+                    scheduler: str | None = None) -> ConvergenceResult:
+    """The comparison of ``path`` into ``out_dir`` (module doc). ``scheduler``: where every render's tile
+    tasks run (``--scheduler`` of ``loomlight render``: a Dask cluster spreads the reference's batches)."""
     t_start = time.perf_counter()
     from stages.evaluate.convergence import equal_time_spp
 
@@ -458,6 +462,7 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
     if out.exists() and not out.is_dir():
         raise LoomError(out, None, "output path exists and is not a directory")
     do_render = renderer or cli_render
+    where = ("--scheduler", scheduler) if scheduler else ()
     explicit = ref_path is not None
     rpath = Path(ref_path) if explicit else default_reference_path(out)
     if rpath.suffix != ".zarr":
@@ -467,7 +472,7 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
             raise LoomError(rpath, "--ref", "no reference artifact here (make one with --reference-only)")
         ref = load_reference(rpath, reference_key(cmp, out))
     else:
-        ref = build_reference(cmp, out, rpath, do_render, rebuild=reference_only, echo=echo)
+        ref = build_reference(cmp, out, rpath, do_render, rebuild=reference_only, echo=echo, where=where)
     rs = ref.summary["reference"]
     ref_info = {"path": str(rpath), "spp": int(ref.summary["spp"]), "batches": ref.batches,
                 "render_time_s": float(rs["render_time_s"]), "pixel_error_p50": rs["pixel_error_p50"],
@@ -490,7 +495,7 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
             for j, b in enumerate(m.budgets):
                 exr = out / "renders" / m.name / f"{run_label(m, b)}.exr"
                 rendered += render_once(cmp, m, out, exr, derived_scene(cmp, m, b, 1 + j), f"method {m.name}, budget {b}",
-                                        do_render, force)
+                                        do_render, force, where)
                 runs[m.name].append(measure(Run(m.name, b, exr), ref))
                 advance()
     # 3. the fit, times to each level, speed-ups
@@ -505,7 +510,7 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
             em = CompareMethod(m.name, m.method, {**m.render, "max_spp": 0}, m.args, "spp", (n,))
             exr = out / "equal_time" / f"{m.name}.exr"
             rendered += render_once(cmp, em, out, exr, derived_scene(cmp, em, n, EQUAL_TIME_SEED), f"method {m.name}, "
-                                    f"equal time", do_render, force)
+                                    f"equal time", do_render, force, where)
             r = measure(Run(m.name, n, exr), ref)
             strip[m.name] = {"spp": n, "asked_time_s": T, "time_s": r.time_s, "error": r.error.error, "exr": str(exr),
                              "ssim": r.ssim}

@@ -126,26 +126,36 @@ def absolute_paths(raw: dict, scene_path: Path) -> dict:
     return raw
 
 
+def base_scene(path: Path, name: str, place: str) -> Path:
+    """The scene file ``name`` that the file ``path`` names at ``place`` (relative to it), checked and read."""
+    scene_path = Path(name)
+    if not scene_path.is_absolute():
+        scene_path = (path.parent / scene_path).resolve()
+    if not scene_path.is_file():
+        raise LoomError(path, place, f"scene file {scene_path} not found")
+    load_scene(scene_path)  # the base scene's names checked now, not at each derived render
+    return scene_path
+
+
+def check_method_names(path: Path, names: list[str], reference: str, place: str) -> None:
+    """Each ``methods[].name`` once, and the reference (named at ``place``) one of them."""
+    for j, n in enumerate(names):
+        if names.index(n) != j:
+            raise LoomError(path, f"methods[{j}].name", f"method name {n!r} is used twice")
+    if reference not in names:
+        raise LoomError(path, place, f"{reference!r} is not one of the methods ({', '.join(names)})")
+
+
 def load_sweep(path: str | Path) -> Sweep:
     path = Path(path)
     raw = read_toml(path, what="sweep file")
     validate(raw, "sweep", path)
     sw = raw["sweep"]
-    scene_path = Path(sw["scene"])
-    if not scene_path.is_absolute():
-        scene_path = (path.parent / scene_path).resolve()
-    if not scene_path.exists():
-        raise LoomError(path, "sweep.scene", f"scene file {scene_path} not found")
-    load_scene(scene_path)  # the base scene's names checked now, not at each derived render
+    scene_path = base_scene(path, sw["scene"], "sweep.scene")
     scene_raw = read_toml(scene_path, what="scene file")
     methods = [Method(m["name"], m.get("method", m["name"]), dict(m.get("render", {})), list(m.get("args", [])))
                for m in raw["methods"]]
-    names = [m.name for m in methods]
-    for j, n in enumerate(names):
-        if names.index(n) != j:
-            raise LoomError(path, f"methods[{j}].name", f"method name {n!r} is used twice")
-    if sw["reference"] not in names:
-        raise LoomError(path, "sweep.reference", f"{sw['reference']!r} is not one of the methods ({', '.join(names)})")
+    check_method_names(path, [m.name for m in methods], sw["reference"], "sweep.reference")
     configs = _grid_configurations(path, raw["grid"]) if "grid" in raw else []
     for c in raw.get("configurations", []):
         configs.append(Configuration(c["name"], c.get("lights"), dict(c.get("camera", {})), dict(c.get("render", {})),

@@ -22,6 +22,7 @@ import zarr
 from pipeline.errors import LoomError
 from pipeline.images import write_render
 from stages.evaluate import convergence as cv
+from tests.evaluate.test_sweep import SCENE as SWEEP_SCENE
 
 # ------------------------------------------------------------------------------------------------
 # the fit
@@ -118,29 +119,7 @@ def test_equal_time_spp():
 # ------------------------------------------------------------------------------------------------
 # the whole comparison with a stand-in renderer
 
-SCENE = """
-[scene]
-name = "conv-test"
-seed = 3
-[fabric]
-source = "generator"
-[fabric.generator]
-kind = "woven"
-pattern = "plain"
-ends = 2
-picks = 2
-[camera]
-origin = [0.0, -1.0, 1.0]
-target = [0.0, 0.0, 0.0]
-width = 20
-height = 14
-[[lights]]
-type = "constant"
-radiance = 0.5
-[render]
-spp = 4
-source = "procedural"
-"""
+SCENE = SWEEP_SCENE   # a small woven scene under a constant light: the stand-in reads only its camera and [render]
 
 COMPARE = """
 [compare]
@@ -297,7 +276,7 @@ def test_reference_from_another_scene_or_code_is_refused(compare_file, tmp_path,
     (("target_speedup = 4.0", 'budget = "seconds"\ntarget_speedup = 4.0'), "methods[1].budget", "unknown budget"),
     (("[1, 2, 4, 8, 16, 32, 64, 128]", "[1, 2, 8, 4]"), "methods[1].budgets[3]", "must increase"),
     (("[1, 2, 4, 8, 16, 32, 64, 128]", "[0, 2]"), "methods[1].budgets[0]", "positive"),
-    (('reference = "exact"', 'reference = "fibres"'), "compare.reference", "unknown method"),
+    (('reference = "exact"', 'reference = "fibres"'), "compare.reference", "is not one of the methods"),
 ])
 def test_bad_comparison_files(compare_file, tmp_path, standin, cli, edit, place, words):
     compare_file.write_text(compare_file.read_text().replace(*edit, 1))
