@@ -11,7 +11,7 @@ gives the right picture fastest" for one scene (the comparison file: ``pipeline.
    per-channel variance of the mean is in ``channels/variance_r|g|b``, the batches' count, spp, time
    and noise in ``summary.reference``. It is keyed (``reference_key``) by the derived scene, the
    method and its arguments, the batch settings, the input artifacts' content and the *code version*
-   (``render_code_version``: the render kernels, the renderers' setup and the presets): an existing
+   (``render_code_version``: the kernels of every stage but evaluate, the renderers' setup and the presets): an existing
    reference with the same key is reused, never re-rendered; one with another key is refused (exit
    2, naming what differs) unless it is being rebuilt (``--reference-only``, ``make references``).
    Default place ``DIR/reference/reference.zarr``; ``--ref PATH`` names another.
@@ -63,6 +63,7 @@ EQUAL_TIME_SEED = 500_000       # the equal-time strip's renders
 MEMORY_SEED = 700_000           # the peak-memory render in a process of its own
 RENDER_CODE = ("stages", "pipeline/renderers", "pipeline/render_setup.py", "pipeline/fibre_cache.py",
                "pipeline/presets.py", "pipeline/scene.py", "pipeline/yarns.py", "data/yarns", "data/bcsdf")
+NOT_RENDER_CODE = ("stages/evaluate",)   # measures pictures, never makes them
 
 Renderer = Callable[[Path, str, Path, list], None]
 
@@ -70,14 +71,16 @@ Renderer = Callable[[Path, str, Path, list], None]
 # ------------------------------------------------------------------------------------------------
 # keys
 def render_code_version() -> str:
-    """sha256 (16 hex digits) of what decides a picture: the kernels (stages/), the renderers' setup
-    and the presets (``RENDER_CODE``); the report and evaluation code are not part of it."""
+    """sha256 (16 hex digits) of what decides a picture: the kernels (every stage but evaluate), the
+    renderers' setup and the presets (``RENDER_CODE``); the evaluation and report code are not part of it."""
     root = Path(__file__).resolve().parents[2]
     h = hashlib.sha256()
     for rel in RENDER_CODE:
         p = root / rel
         files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix in (".py", ".toml")) if p.is_dir() else [p]
         for f in files:
+            if any(f.is_relative_to(root / x) for x in NOT_RENDER_CODE):
+                continue
             h.update(str(f.relative_to(root)).encode())
             h.update(f.read_bytes())
     return h.hexdigest()[:16]

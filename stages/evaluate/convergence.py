@@ -223,6 +223,7 @@ def fit_bias_noise(times, e2, e2_se) -> NoiseFit:
     sigma = np.maximum(sigma, 1e-30)
     w = 1.0 / sigma ** 2
     p, cov = _weighted_lsq(x, y, w, {})
+    free_se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     if p[0] < 0 and p[1] < 0:
         p, cov = np.zeros(2), np.zeros((2, 2))
     elif p[0] < 0:
@@ -230,8 +231,9 @@ def fit_bias_noise(times, e2, e2_se) -> NoiseFit:
     elif p[1] < 0:
         p, cov = _weighted_lsq(x, y, w, {1: 0.0})
     p = np.maximum(p, 0.0)
-    return NoiseFit(float(p[0]), float(p[1]), float(math.sqrt(max(cov[0, 0], 0.0))),
-                    float(math.sqrt(max(cov[1, 1], 0.0))), int(t.size))
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    se = np.where(se > 0, se, free_se)   # a parameter held at 0: the free fit's uncertainty says how far from 0
+    return NoiseFit(float(p[0]), float(p[1]), float(se[0]), float(se[1]), int(t.size))
 
 
 @dataclass(frozen=True)

@@ -47,6 +47,7 @@ def test_fit_keeps_parameters_non_negative():
     assert fit.c == 0.0 and fit.b2 == pytest.approx(0.0395, rel=0.02)
     fit = cv.fit_bias_noise(t, 0.5 / t - 0.01, 0.01 * 0.5 / t)                # a negative floor: b^2 fixed at 0
     assert fit.b2 == 0.0 and fit.c == pytest.approx(0.5, rel=0.1)
+    assert fit.b2_se > 0.0          # held at 0, the floor still carries the free fit's uncertainty
 
 
 def test_time_to_error_uses_measured_points():
