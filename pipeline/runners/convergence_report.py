@@ -121,6 +121,43 @@ def floor_sentence(name: str, s: dict) -> str:
             f"mean; rescaling it to that mean removes {share:.0%} of its squared error at the largest budget.")
 
 
+def crossover(m: dict, r: dict) -> tuple[str, float | None]:
+    """Where a method's fitted error curve crosses the reference method's: with E(t)^2 = b^2 + c/t for
+    both, the times to an error E are equal where c_m (E^2 - b_r^2) = c_r (E^2 - b_m^2), i.e. at
+    E*^2 = (c_r b_m^2 - c_m b_r^2) / (c_r - c_m). Returns ("above", E*) when the method is the faster one
+    at errors above E* (it has less noise, more bias), ("below", E*) when below, ("always", None) or
+    ("never", None) when the curves do not cross where both are defined."""
+    bm2, cm, br2, cr = m["b2"], m["noise_constant"], r["b2"], r["noise_constant"]
+    lo = max(bm2, br2)
+    if cm == cr:
+        return ("always", None) if bm2 < br2 else ("never", None)
+    e2 = (cr * bm2 - cm * br2) / (cr - cm)
+    if cm < cr:   # less noise: faster at large errors, down to the crossing (or to its own floor)
+        return ("above", math.sqrt(e2)) if e2 > lo else (("always", None) if bm2 <= br2 else ("above", math.sqrt(bm2)))
+    return ("below", math.sqrt(e2)) if e2 > lo else ("never", None)
+
+
+def crossover_sentences(cmp, methods: dict) -> list[str]:
+    """One sentence per method on the errors at which it beats the reference method (the fits' crossing)."""
+    ref = methods[cmp.reference]
+    out = []
+    for name, s in methods.items():
+        if name == cmp.reference:
+            continue
+        how, e = crossover(s, ref)
+        if how == "always":
+            out.append(f"{name} is faster than {cmp.reference} at every error it reaches (fits).")
+        elif how == "never":
+            out.append(f"{name} is slower than {cmp.reference} at every error (fits).")
+        elif how == "above":
+            out.append(f"{name} is faster than {cmp.reference} above {e:.0%} error and cannot go below its floor "
+                       f"{s['floor']:.0%}; {cmp.reference} wins below {e:.0%} (fits)." if e <= s["floor"] * 1.0001 else
+                       f"{name} is faster than {cmp.reference} above {e:.0%} error, {cmp.reference} below it (fits).")
+        else:
+            out.append(f"{name} is faster than {cmp.reference} below {e:.0%} error, slower above it (fits).")
+    return out
+
+
 def winner_sentences(cmp, methods: dict) -> list[str]:
     out = []
     for lv in (f"{v:g}" for v in cmp.levels):
@@ -166,7 +203,7 @@ def write_outputs(cmp, out: Path, ref, ref_info: dict, methods: dict, strip: dic
     rep = rp.Report(f"Equal-error comparison: {cmp.name}")
     if cmp.description:
         rep.paragraph(cmp.description)
-    rep.paragraph(" ".join(winner_sentences(cmp, methods)))
+    rep.paragraph(" ".join(winner_sentences(cmp, methods) + crossover_sentences(cmp, methods)))
     rep.image("convergence.png", "Relative error against render time, log-log: points measured, lines the fit "
               "E² = b² + c/t, bias floors dashed, error levels dotted")
     rep.heading("Reference")

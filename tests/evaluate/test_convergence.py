@@ -286,3 +286,17 @@ def test_bad_comparison_files(compare_file, tmp_path, standin, cli, edit, place,
     line = err.strip().splitlines()[-1]
     assert str(compare_file) in line and place in line and words in line, line
     assert "Traceback" not in err and not (tmp_path / "out" / "reference").exists()
+
+
+def test_crossover_is_where_the_times_are_equal():
+    """The closed form of convergence_report.crossover against the two fits' times at that error."""
+    from pipeline.runners.convergence_report import crossover
+
+    ref = {"b2": 0.0, "noise_constant": 0.6}
+    biased = {"b2": 0.3 ** 2, "noise_constant": 0.1}          # less noise, more bias: faster at large errors
+    how, e = crossover(biased, ref)
+    t = lambda s, e: s["noise_constant"] / (e * e - s["b2"])  # noqa: E731
+    assert how == "above" and t(biased, e) == pytest.approx(t(ref, e))
+    assert t(biased, 1.2 * e) < t(ref, 1.2 * e) and t(biased, 0.95 * e) > t(ref, 0.95 * e)
+    assert crossover({"b2": 0.0, "noise_constant": 0.1}, ref) == ("always", None)
+    assert crossover({"b2": 0.01, "noise_constant": 0.9}, ref) == ("never", None)
