@@ -347,7 +347,7 @@ def brightness_part(img: np.ndarray, ref: Reference, e2: float) -> float:
     return max(e2 - rescaled, 0.0)
 
 
-def method_summary(cmp: Comparison, m: CompareMethod, runs: list[Run], ref: Reference, ref_times: dict) -> dict:
+def method_summary(cmp: Comparison, m: CompareMethod, runs: list[Run], ref: Reference) -> dict:
     from stages.evaluate.convergence import fit_bias_noise, time_to_error
 
     from .evaluate import load_image
@@ -502,7 +502,7 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
                 runs[m.name].append(measure(Run(m.name, b, exr), ref))
                 advance()
     # 3. the fit, times to each level, speed-ups
-    methods = {m.name: method_summary(cmp, m, runs[m.name], ref, {}) for m in cmp.methods}
+    methods = {m.name: method_summary(cmp, m, runs[m.name], ref) for m in cmp.methods}
     add_speedups(cmp, methods)
     # 4. the equal-time strip
     T = equal_time_target(cmp, methods[cmp.reference])
