@@ -23,6 +23,7 @@ from pipeline.errors import LoomError
 from pipeline.images import write_render
 from stages.evaluate import convergence as cv
 from tests.evaluate.test_sweep import SCENE as SWEEP_SCENE
+from tests.helpers import DATA
 
 # ------------------------------------------------------------------------------------------------
 # the fit
@@ -300,3 +301,13 @@ def test_crossover_is_where_the_times_are_equal():
     assert t(biased, 1.2 * e) < t(ref, 1.2 * e) and t(biased, 0.95 * e) > t(ref, 0.95 * e)
     assert crossover({"b2": 0.0, "noise_constant": 0.1}, ref) == ("always", None)
     assert crossover({"b2": 0.01, "noise_constant": 0.9}, ref) == ("never", None)
+
+
+@pytest.mark.parametrize("path", sorted((DATA / "compare").glob("*.toml")), ids=lambda p: p.stem)
+def test_shipped_comparison_files_load(path):
+    """Every data/compare/*.toml is a valid comparison: its scene, methods, budgets and reference."""
+    from pipeline.runners.compare_file import load_comparison
+
+    cmp = load_comparison(path)
+    assert cmp.reference in {m.name for m in cmp.methods}
+    assert all(len(m.budgets) >= 3 for m in cmp.methods)
