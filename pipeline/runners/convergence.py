@@ -221,8 +221,10 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
     if (ref_path / "zarr.json").exists():
         try:
             r = load_reference(ref_path, key)
-            r.reused = True
-            return r
+            short = not r.summary["reference"]["targets_met"] and r.batches < cmp.settings.max_batches
+            if not (rebuild and short):   # a rebuild goes on where a reference stopped short of its targets
+                r.reused = True
+                return r
         except LoomError:
             if not rebuild:
                 raise

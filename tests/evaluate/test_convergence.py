@@ -311,3 +311,22 @@ def test_shipped_comparison_files_load(path):
     cmp = load_comparison(path)
     assert cmp.reference in {m.name for m in cmp.methods}
     assert all(len(m.budgets) >= 3 for m in cmp.methods)
+
+
+def test_reference_short_of_its_targets_is_extended(compare_file, tmp_path, standin):
+    """A reference stopped by max_batches before its targets is reused as it is by a comparison, and
+    extended (its batches kept, more rendered) by --reference-only once max_batches allows more."""
+    from pipeline.runners import convergence as rc
+
+    render, calls = standin
+    out = tmp_path / "out"
+    compare_file.write_text(compare_file.read_text().replace("max_batches = 64", "max_batches = 8")
+                            .replace("spp = 64\nbatches", "spp = 8\nbatches"))    # 64 spp in all: ~7 % per pixel
+    first = rc.run_convergence(compare_file, out, reference_only=True, renderer=render, echo=lambda s: None)
+    assert first.reference["batches"] == 8 and not first.reference["targets_met"]
+    compare_file.write_text(compare_file.read_text().replace("max_batches = 8", "max_batches = 64"))
+    n = len(calls)
+    again = rc.run_convergence(compare_file, out, reference_only=True, renderer=render, echo=lambda s: None)
+    new_seeds = {s for _, _, s in calls[n:]}
+    assert again.reference["targets_met"] and again.reference["batches"] > 8
+    assert min(new_seeds) == 1_000_000 + 8             # the first eight batches were reused, not re-rendered
