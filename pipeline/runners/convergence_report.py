@@ -233,6 +233,12 @@ def write_outputs(cmp, out: Path, ref, ref_info: dict, methods: dict, strip: dic
               "already; >: not reached by the last). Speed-up: the reference method's time over the method's at the "
               "lowest level both reach. Geometry memory: the method's setup's own count, else the arrays of the "
               "artifacts it loads. Peak memory: one render in a process of its own.")
+    own = methods[cmp.reference]
+    if own["floor"] > 3.0 * own["floor_se"] and own["floor"] > 0.05:
+        rep.paragraph(f"**Caution**: {cmp.reference}'s own floor against its own reference is {own['floor']:.3f} ± "
+                      f"{own['floor_se']:.3f}, not consistent with zero. Its budgets end before its error falls as 1/t "
+                      "(heavy-tailed noise: rare bright paths that small budgets miss), so the fitted floors and noise "
+                      "constants on this scene overstate the bias; render larger budgets.")
     floors = [floor_sentence(name, s) for name, s in methods.items()
               if any(d["floor_blocks"] for d in s["levels"].values())]
     if floors:
