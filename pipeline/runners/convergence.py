@@ -285,8 +285,8 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
                             companions=(exr_path, ref_path.with_suffix(".png"), err_png), started=t_start)
     with writer as w:
         write_render(exr_path, rgb, {"A": alpha.astype(np.float32), "variance": var_mean}, into=w.companion)
-        _error_png(w.companion(err_png), rel_se, alpha, f"reference {cmp.name}: relative standard error per pixel "
-                   f"({k} batches x {s.spp} spp)")
+        _error_png(w.companion(err_png), rel_se, alpha, f"reference {cmp.name}: relative standard error per pixel\n"
+                   f"{k} batches x {s.spp} spp, median {noise.pixel_median:.3f} over the cloth")
         w.write("image", rgb, chunks=(min(H, 128), min(W, 128), 3), dimension_names=("y", "x", "c"))
         chans = {"A": alpha, "variance": var_mean, "rel_stderr": rel_se,
                  **{f"variance_{c}": stats.variance[..., i] for i, c in enumerate("rgb")}}
@@ -301,7 +301,7 @@ def _error_png(path: Path, rel_se: np.ndarray, alpha: np.ndarray, title: str) ->
     from ..report import pyplot, save_figure
 
     plt = pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4.6))
+    fig, ax = plt.subplots(figsize=(6, 4.6), layout="constrained")
     im = ax.imshow(np.where(alpha > 0.5, rel_se, np.nan), cmap="magma", vmin=0.0, vmax=0.2)
     fig.colorbar(im, ax=ax, label="relative standard error (cloth pixels)")
     ax.set_title(title, fontsize=9)
