@@ -210,7 +210,13 @@ def test_preset_option_and_recorded_preset():
 
 def test_evaluate_modes_name_the_options(cli, tmp_path):
     code, _, err = cli("evaluate", "-o", tmp_path / "e")
-    assert (code, err) == (2, "error: --ref/--test: give exactly one of --ref/--test, --sweep or --table1 (got none)\n")
+    assert (code, err) == (2, "error: --ref/--test: give exactly one of --ref/--test, --sweep, --table1 or --convergence "
+                              "(got none)\n")
+    code, _, err = cli("evaluate", "--sweep", "s.toml", "--convergence", "c.toml", "-o", tmp_path / "e")
+    assert (code, err) == (2, "error: --sweep and --convergence: give exactly one of --ref/--test, --sweep, --table1 or "
+                              "--convergence (got 2)\n")
+    code, _, err = cli("evaluate", "--sweep", "s.toml", "--reference-only", "-o", tmp_path / "e")
+    assert (code, err) == (2, "error: --reference-only: goes with --convergence\n")
 
 
 # ------------------------------------------------------------------------------------------------ no placeholder
