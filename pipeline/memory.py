@@ -31,30 +31,32 @@ class Budget(NamedTuple):
     how: str          # where it comes from, for the refusal message
 
 
+def _proc_kib(path: str, key: str) -> int | None:
+    """The ``key:`` line of a /proc file given in kB, in bytes; None where it cannot be read."""
+    try:
+        for line in Path(path).read_text().splitlines():
+            if line.startswith(key + ":"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
 def peak_rss_bytes() -> int:
     """This process's peak resident memory: ``VmHWM`` of /proc/self/status, the high-water mark of this
     program's own address space. ``getrusage``'s ``ru_maxrss`` (the fallback where /proc is missing) is
     not that on Linux: a child forked from a large process and exec'd keeps the parent's peak as its
     own, so a render started by another loomlight process would report its parent's memory."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
+    hwm = _proc_kib("/proc/self/status", "VmHWM")
+    if hwm is not None:
+        return hwm
     import resource
 
     return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
 
 
 def _meminfo_available() -> int | None:
-    try:
-        for line in Path("/proc/meminfo").read_text().splitlines():
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+    return _proc_kib("/proc/meminfo", "MemAvailable")
 
 
 def _cgroup_room() -> int | None:

@@ -39,6 +39,7 @@ method, points measured with their uncertainty, floor dashed), ``DIR/equal_time.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -70,9 +71,11 @@ Renderer = Callable[[Path, str, Path, list], None]
 
 # ------------------------------------------------------------------------------------------------
 # keys
+@functools.lru_cache(maxsize=None)
 def render_code_version() -> str:
     """sha256 (16 hex digits) of what decides a picture: the kernels (every stage but evaluate), the
-    renderers' setup and the presets (``RENDER_CODE``); the evaluation and report code are not part of it."""
+    renderers' setup and the presets (``RENDER_CODE``); the evaluation and report code are not part of it.
+    Hashed once per process: every render's stamp and the reference's key ask for it."""
     root = Path(__file__).resolve().parents[2]
     h = hashlib.sha256()
     for rel in RENDER_CODE:
@@ -211,7 +214,7 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
                     echo: Callable[[str], None], where: tuple = ()) -> Reference:
     """Reuse the reference at ``ref_path`` when its key matches; else (``rebuild``, or none there)
     render batches until the noise targets hold, and publish it (module doc, 1)."""
-    from stages.evaluate.convergence import batch_mean, reference_noise
+    from stages.evaluate.convergence import LUMA, batch_mean, reference_noise
 
     from ..artifacts import ArtifactWriter, FILE
     from ..images import read_exr, write_render
@@ -265,7 +268,7 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
     rgb = stats.mean.astype(np.float32)
     var_mean = stats.variance.mean(axis=2).astype(np.float32)
     render_s = float(sum(times))
-    rel_se = np.sqrt(stats.variance.mean(axis=2)) / np.maximum(stats.mean @ np.array([0.2126, 0.7152, 0.0722]), 1e-12)
+    rel_se = np.sqrt(stats.variance.mean(axis=2)) / np.maximum(stats.mean @ LUMA, 1e-12)
     summary = {
         "kind": "render", "method": m.method, "width": int(W), "height": int(H), "spp": int(s.spp * k),
         "seed": REFERENCE_SEED, "wall_time_s": time.perf_counter() - t_start, "render_time_s": render_s,
