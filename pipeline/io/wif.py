@@ -15,7 +15,10 @@ line, and sections may be missing. What loomlight uses:
   ``[WARP COLORS]`` / ``[WEFT COLORS]`` thread = colour index, falling back to ``[WARP]`` /
   ``[WEFT]`` Color (an index, or r,g,b in the palette range), else no colour (the yarn type's).
   WIF colours are display (sRGB-encoded) values: they are mapped to [0, 1] by the range and
-  decoded with the sRGB transfer function to linear RGB.
+  decoded with the sRGB transfer function to linear RGB. ``[COLOR PALETTE]`` Form, when given, must
+  be RGB; a component outside the range, an entry that is not three numbers, a thread naming a
+  colour the table lacks: LoomError naming the section, line and key (exit 2). Where the colours go
+  from here: ``pipeline.thread_colors`` and docs/wif-colours.md.
 
 Defaults for threads without entries: an end missing from the threading is on no shaft (never
 lifted: under every pick in a rising shed); a pick missing from the treadling / lift plan lifts
@@ -135,8 +138,84 @@ class _Reader:
         return out
 
 
-def _srgb_to_linear(c: np.ndarray) -> np.ndarray:
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+def _thread_colors(r: _Reader, ends: int, picks: int):
+    """(warp colours, weft colours): per end / pick a linear RGB tuple, or None (no colour in the draft).
+
+    ``[COLOR PALETTE]`` Range = lo,hi maps a component v to (v - lo) / (hi - lo); the result is an
+    sRGB-encoded display value, decoded to linear (``pipeline.thread_colors.srgb_to_linear``). Form,
+    when given, must be RGB. A component outside the range, a table entry that is not three numbers, a
+    thread naming an index the table lacks: LoomError naming the section, line and key."""
+    from ..thread_colors import srgb_to_linear
+
+    lo, hi = 0.0, 255.0
+    v, ln = r.get("color palette", "range")
+    if v:
+        parts = [t for t in re.split(r"[,\s]+", v.strip()) if t]
+        try:
+            if len(parts) != 2:
+                raise ValueError
+            lo, hi = float(parts[0]), float(parts[1])
+        except ValueError:
+            raise r.err("color palette", ln, f"Range = {v!r}: expected lo,hi") from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+            raise r.err("color palette", ln, f"Range = {v!r}: expected finite lo,hi with hi > lo")
+    v, ln = r.get("color palette", "form")
+    if v and _norm(v) != "rgb":
+        raise r.err("color palette", ln, f"Form = {v!r}: only RGB palettes are read")
+
+    def rgb(sec, key, value, ln):
+        """Linear RGB of an ``r,g,b`` value in the palette range."""
+        parts = [t for t in re.split(r"[,\s]+", value.strip()) if t]
+        try:
+            nums = [float(t) for t in parts]
+        except ValueError:
+            nums = None
+        if nums is None or len(nums) != 3:
+            raise r.err(sec, ln, f"{key} = {value!r}: expected a colour r,g,b (three numbers)")
+        for x in nums:
+            if not (np.isfinite(x) and lo <= x <= hi):
+                raise r.err(sec, ln, f"{key} = {value!r}: component {x:g} is outside the palette range "
+                                     f"{lo:g}..{hi:g} ([COLOR PALETTE] Range)")
+        a = (np.asarray(nums) - lo) / (hi - lo)
+        return tuple(float(x) for x in srgb_to_linear(a))
+
+    ctable = {}
+    for key, (value, ln) in r.s.get("color table", {}).items():
+        if key == "__line__":
+            continue
+        try:
+            k = int(key)
+        except ValueError:
+            raise r.err("color table", ln, f"key {key!r} is not a colour index") from None
+        ctable[k] = rgb("color table", key, value, ln)
+
+    def thread_colors(sec_colors, sec_thread, n):
+        dflt = None
+        v, ln = r.get(sec_thread, "color")
+        if v:
+            parts = [t for t in re.split(r"[,\s]+", v.strip()) if t]
+            if len(parts) == 1:
+                try:
+                    k = int(parts[0])
+                except ValueError:
+                    raise r.err(sec_thread, ln, f"Color = {v!r}: expected a [COLOR TABLE] index or r,g,b") from None
+                if k not in ctable:
+                    raise r.err(sec_thread, ln, f"Color = {v!r}: colour {k} has no entry in [COLOR TABLE]")
+                dflt = ctable[k]
+            else:
+                dflt = rgb(sec_thread, "Color", v, ln)
+        out = [dflt] * n
+        for k, (vals, ln) in r.table(sec_colors).items():
+            if k > n:
+                raise r.err(sec_colors, ln, f"thread {k} is beyond the {n} declared")
+            if len(vals) != 1:
+                raise r.err(sec_colors, ln, f"{k} = {','.join(map(str, vals))}: expected one [COLOR TABLE] index")
+            if vals[0] not in ctable:
+                raise r.err(sec_colors, ln, f"{k} = {vals[0]}: colour {vals[0]} has no entry in [COLOR TABLE]")
+            out[k - 1] = ctable[vals[0]]
+        return out
+
+    return thread_colors("warp colors", "warp", ends), thread_colors("weft colors", "weft", picks)
 
 
 def parse(path, scale: float = 1.0) -> WifDraft:
@@ -209,59 +288,7 @@ def parse(path, scale: float = 1.0) -> WifDraft:
         tr = matrix(treadling, picks, treadles, "treadling", "treadle")
         over = interlacement_from_draft(th, tieup=tu, treadling=tr, rising=rising)
 
-    # colours
-    lo, hi = 0.0, 255.0
-    v, ln = r.get("color palette", "range")
-    if v:
-        parts = [t for t in re.split(r"[,\s]+", v) if t]
-        try:
-            lo, hi = float(parts[0]), float(parts[1])
-        except (ValueError, IndexError):
-            raise r.err("color palette", ln, f"Range = {v!r}: expected lo,hi") from None
-        if not hi > lo:
-            raise r.err("color palette", ln, f"Range = {v!r}: hi must exceed lo")
-
-    def rgb(vals, sec, ln):
-        a = (np.asarray(vals, dtype=float) - lo) / (hi - lo)
-        if len(vals) != 3:
-            raise r.err(sec, ln, f"colour needs 3 components, got {len(vals)}")
-        return tuple(float(x) for x in _srgb_to_linear(np.clip(a, 0.0, 1.0)))
-
-    ctable = {}
-    for key, (value, ln) in s.get("color table", {}).items():
-        if key == "__line__":
-            continue
-        try:
-            ctable[int(key)] = rgb([float(t) for t in re.split(r"[,\s]+", value.strip()) if t], "color table", ln)
-        except ValueError:
-            raise r.err("color table", ln, f"{key} = {value!r}: expected r,g,b") from None
-
-    def thread_colors(sec_colors, sec_thread, n):
-        dflt = None
-        v, ln = r.get(sec_thread, "color")
-        if v:
-            vals = [t for t in re.split(r"[,\s]+", v) if t]
-            try:
-                nums = [float(t) for t in vals]
-            except ValueError:
-                raise r.err(sec_thread, ln, f"Color = {v!r}: expected a palette index or r,g,b") from None
-            if len(nums) == 1:
-                if int(nums[0]) not in ctable:
-                    raise r.err(sec_thread, ln, f"Color = {v!r}: no such entry in [COLOR TABLE]")
-                dflt = ctable[int(nums[0])]
-            else:
-                dflt = rgb(nums, sec_thread, ln)
-        out = [dflt] * n
-        for k, (vals, ln) in r.table(sec_colors).items():
-            if k > n:
-                raise r.err(sec_colors, ln, f"thread {k} is beyond the {n} declared")
-            if len(vals) != 1 or vals[0] not in ctable:
-                raise r.err(sec_colors, ln, f"colour index {vals} has no entry in [COLOR TABLE]")
-            out[k - 1] = ctable[vals[0]]
-        return out
-
-    warp_colors = thread_colors("warp colors", "warp", ends)
-    weft_colors = thread_colors("weft colors", "weft", picks)
+    warp_colors, weft_colors = _thread_colors(r, ends, picks)
 
     def sizes(sec):
         v, ln = r.get(sec, "units", "centimeters")

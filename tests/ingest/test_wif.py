@@ -15,6 +15,12 @@ from pipeline.io import read_curves, wif
 from stages.ingest import weave
 
 
+def _real(name):
+    """A real draft: bundled in data/drafts/ (2229.wif, 54235plain.wif), else from ../shared/data/."""
+    p = DATA / "drafts" / name
+    return p if p.exists() else shared_file(f"data/{name}")
+
+
 def _brute(sections, rising=True):
     """Literal reading of the rule in formats.md from the raw sections (independent of parse())."""
     def table(name):
@@ -39,7 +45,7 @@ def _brute(sections, rising=True):
 
 
 def test_plain_draft_is_checkerboard():
-    path = shared_file("data/54235plain.wif")
+    path = _real("54235plain.wif")
     d = wif.parse(path)
     assert d.over.shape == (2, 2)
     assert d.over[0, 0] != d.over[0, 1] and d.over[0, 0] != d.over[1, 0] and d.over[0, 0] == d.over[1, 1]
@@ -50,7 +56,7 @@ def test_plain_draft_is_checkerboard():
 @pytest.mark.parametrize("name,ends,picks,shafts", [("54235plain.wif", 2, 2, 2), ("3parallelwarps.wif", 3, 3, 3),
                                                     ("2229.wif", 24, 24, 3)])
 def test_real_drafts_match_brute_force(name, ends, picks, shafts):
-    path = shared_file(f"data/{name}")
+    path = _real(name)
     d = wif.parse(path)
     assert d.over.shape == (ends, picks) and d.shafts == shafts
     assert np.array_equal(d.over, _brute(wif.parse_sections(path)))
@@ -61,7 +67,7 @@ def test_real_drafts_match_brute_force(name, ends, picks, shafts):
 
 
 def test_2229_counts_and_colours():
-    path = shared_file("data/2229.wif")
+    path = _real("2229.wif")
     d = wif.parse(path)
     assert d.treadles == 4
     # colour table 1 = (0,101,0) for all warp ends, 2 = white for all picks; sRGB decoded
@@ -71,7 +77,7 @@ def test_2229_counts_and_colours():
 
 
 def test_3parallelwarps_missing_colour_entries_default():
-    d = wif.parse(shared_file("data/3parallelwarps.wif"))
+    d = wif.parse(_real("3parallelwarps.wif"))
     # WARP COLORS lists ends 1-2 only and [WARP] has no Color: end 3 gets no colour (yarn type's)
     assert d.warp_colors[2] is None and d.warp_colors[0] is not None
     # all ends on shaft 1; treadles 1,2,1 lift shafts 1,2,1: over, under, over for every end
