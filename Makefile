@@ -1,4 +1,6 @@
-# loomlight — make targets for full runs. `make demo` and `make test` work from a fresh clone.
+# loomlight -- make targets. `make demo` and `make test` work from a fresh clone; `make help` lists every target
+# (from the `## ...` comment on each target's line). The experiments (sweeps, studies, agreement, Table 1) are in
+# make/experiments.mk, included at the end.
 SHELL := /bin/bash
 PY ?= python3
 VENV := .venv
@@ -10,23 +12,9 @@ export MPLBACKEND := Agg
 export PYTHONHASHSEED := 0
 OUT ?= out/demo
 SCENE ?= data/scenes/demo.toml
-LARGE_SCENE ?= data/scenes/woven_large.toml
-# make table1's scale row: the 1,000-yarn fabric rendered from its close-up camera, procedural only
-# (its full realization, ~74 GB, is counted, never built); about 7 minutes and 10 GB on 2 cores
-LARGE_CLOSE_SCENE ?= data/scenes/woven_large_close.toml
-LARGE_ARGS ?= --width 320 --height 240 --spp 4
-LARGE_OUT ?= out/large
-# make table1's 10x row: woven_huge (3,200 yarns, 160 cm square, ~750 GB if realized), procedural only,
-# from its close-up camera: about 40 minutes and 20 GB on 2 cores (README, "Scale"). Its tables build
-# and render estimate 19-20 GiB, over the default budget (75 % of the available memory): the row allows
-# HUGE_BUDGET MiB, 95 % of the memory available when make starts (a smaller machine still refuses)
-HUGE_SCENE ?= data/scenes/woven_huge.toml
-HUGE_ARGS ?= --width 320 --height 240 --spp 4 --cache 1024
-HUGE_OUT ?= out/huge
-HUGE_BUDGET ?= $(shell awk '/MemAvailable/ {print int($$2 / 1024 * 0.95)}' /proc/meminfo 2>/dev/null)
 TILING ?= data/tilings/damask.toml
 DAMASK_SCENE ?= data/scenes/draped_damask.toml
-# make demo stays under 10 minutes on an idle 2-core machine from a fresh clone (README: Status), so
+# make demo stays short on an idle 2-core machine from a fresh clone (README: Status; docs/measurements.md), so
 # its pictures are 240x180 (the scenes' cameras say 320x240: DEMO_SIZE= renders those) and its
 # precomputes are reduced (below). Main pictures adaptive (a second pass gives a pixel up to MAX_SPP more
 # samples, as many as its neighbours' relative error asks for to reach render.target_error); the
@@ -57,25 +45,109 @@ BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8
 KNIT_SCENE ?= data/scenes/knit.toml
 FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 4
 
-# make agreement: both swatches, fiberpath against realized volpath, converged (README: One look)
-AGREE ?= out/agreement
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
-AGREE_ARGS ?= --width 128 --height 96 --spp 64
+# what the experiments (make/experiments.mk) and the comparisons share: the seed 001 flat patches and damask
+# precomputed at the paper's settings (out/prt) and the seed 002 textures of the flat patches (out/btf)
+PRT := out/prt
+BTF_DIR := out/btf
 
-.PHONY: setup demo demo-quick test test-all bench table1 sweep agreement clean help references compare
+# --- which method gives the right picture fastest: every method against a converged reference, error against
+# time (loomlight evaluate --convergence; data/compare/*.toml; README: Choosing a method). make references
+# renders each comparison's reference until its noise is within the file's targets (kept under
+# $(COMPARE)/<name>/reference, reused while scene, settings and code are unchanged; never by make test);
+# make compare renders every method at its budgets and writes $(COMPARE)/<name>/report.html and the summary
+COMPARE := out/compare
+COMPARE_FILES ?= $(filter-out data/compare/demo_quick.toml,$(wildcard data/compare/*.toml))
+COMPARE_ARGS ?=
+COMPARE_IN := $(COMPARE)/inputs
+COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(OUT)/bysdf_fit.toml \
+	$(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json $(OUT)/damask_btf_fit.zarr/zarr.json \
+	$(OUT)/knit_fibers.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml \
+	$(COMPARE_IN)/twill_fibers.zarr/zarr.json $(COMPARE_IN)/knit_btf.zarr/zarr.json \
+	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
 
-help:
-	@echo "make demo    - set up .venv if needed, run the demo scene end to end, print output paths"
-	@echo "make demo-quick - the same at small sizes and reduced precomputes, a first look in a few minutes (out/quick)"
-	@echo "make test    - set up .venv if needed, run the test suite (make test-all: with the slow tests)"
-	@echo "make bench   - benchmarks -> bench/results/*.json and bench/results/summary.md"
-	@echo "make table1  - seed 000 Table 1 (data sizes, procedural vs realized volpath time, the 1,000- and 3,200-yarn close-ups; ~50 min, 20 GB) -> out/table1/report.md"
-	@echo "make sweep   - seed 001 Fig. 13 / Table 2 style sweep over light directions and SG sharpness"
-	@echo "make agreement - fiberpath vs volpath on the demo and twill swatches, demo light and sweep lights"
-	@echo "make btf-sweep - seed 002 fitted textures of the damask's two satins against fiberpath (out/btf)"
-	@echo "make references - render each comparison's converged reference (data/compare/*.toml; kept and reused)"
-	@echo "make compare - every method against the converged references, error against time, speed-up at equal error (out/compare)"
-	@echo "make setup   - create .venv and install loomlight with its test and Dask dependencies"
+.DEFAULT_GOAL := help
+.PHONY: help setup demo demo-quick test test-all bench references compare docs clean
+
+##@ Main targets
+
+help: ## list every target with what it does (this list)
+	@echo "usage: make TARGET [VARIABLE=value ...]  (variables: the top of Makefile and make/experiments.mk)"
+	@awk 'BEGIN { FS = ":[^#]*## " } \
+	    /^##@ / { printf "\n%s\n", substr($$0, 5); next } \
+	    /^[a-zA-Z0-9][a-zA-Z0-9_.-]*:[^=]*## / { printf "  make %-14s %s\n", $$1, $$2 }' $(MAKEFILE_LIST)
+
+setup: $(VENV)/.installed ## create .venv and install loomlight with its test and Dask dependencies
+
+# two stages at a time, each one's output printed whole when it ends (no live progress bars then);
+# the tables and fibres first, so the longest chain (procedural volpath, the longest compilation on a
+# cold cache) starts at once beside the rest
+demo: $(VENV)/.installed ## set up .venv if needed, run the demo scene end to end, print the output paths
+	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json \
+	    $(OUT)/knit_fibers.zarr/zarr.json
+	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target demo-outputs
+	@$(MAKE) --no-print-directory $(OUT)/compare/report.md
+	@echo "demo outputs:"
+	@echo "  which method, at equal error: $(OUT)/compare/report.html ($(OUT)/compare/convergence.png)"
+	@echo "  yarn curves          : $(OUT)/yarns.zarr ($(OUT)/yarns.png)"
+	@echo "  procedural tables    : $(OUT)/tables.zarr (cross-section $(OUT)/cross_section.png)"
+	@echo "  realized fibres      : $(OUT)/fibers.zarr ($(OUT)/fibers.png)"
+	@echo "  volpath render       : $(OUT)/volpath.exr ($(OUT)/volpath.png)"
+	@echo "  fiberpath render     : $(OUT)/fiberpath.exr ($(OUT)/fiberpath.png)"
+	@echo "  damask tiling        : $(OUT)/damask_tiling.zarr ($(OUT)/damask_tiling.png)"
+	@echo "  draped damask render : $(OUT)/damask.exr ($(OUT)/damask.png)"
+	@echo "  damask SVF (seed 001): $(OUT)/damask_svf.zarr ($(OUT)/damask_svf.png)"
+	@echo "  damask IIRTF         : $(OUT)/damask_iirtf.zarr ($(OUT)/damask_iirtf.png)"
+	@echo "  damask, prt (seed 001): $(OUT)/damask_prt.exr ($(OUT)/damask_prt.png)"
+	@echo "  damask texture (seed 002): $(OUT)/damask_btf_fit.zarr ($(OUT)/damask_btf_fit.png)"
+	@echo "  damask, btf (seed 002): $(OUT)/damask_btf.exr ($(OUT)/damask_btf.png)"
+	@echo "  prt, btf vs fiberpath: $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
+	@echo "  bysdf fitted to fiberpath (seed 004): $(OUT)/bysdf_fit.toml, $(OUT)/knit_bysdf_fit.toml (.json reports)"
+	@echo "  knit, bysdf (seed 004): $(OUT)/knit_bysdf.exr ($(OUT)/knit_bysdf.png)"
+	@echo "  knit, fiberpath      : $(OUT)/knit_fiberpath.exr ($(OUT)/knit_fiberpath.png)"
+	@echo "  knit, bysdf vs fiberpath: $(OUT)/eval/knit/report.md ($(OUT)/eval/knit/report.html)"
+	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
+
+# the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
+demo-quick: ## the demo at small sizes and reduced precomputes, a first look (out/quick)
+	@$(MAKE) --no-print-directory demo OUT=out/quick DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
+	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
+	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
+	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4" \
+	    FIT_ARGS="--width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3"
+
+# make test: everything but the tests marked slow; make test-all: all of them
+test: $(VENV)/.installed ## set up .venv if needed, run the test suite but the slow tests
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m "not slow"
+
+test-all: $(VENV)/.installed ## the whole test suite, the slow tests too
+	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+
+# the benchmarks' exit status is make bench's, after docs/measurements.md is rewritten from what they wrote
+bench: $(VENV)/.installed ## benchmarks -> bench/results/*.json, bench/results/summary.md, docs/measurements.md
+	@mkdir -p bench/results
+	@# the optional peer renderer for bench_mitsuba (skipped with a message when it cannot be installed)
+	@$(PIP) install -q -e '.[test,dask,bench]' > $(VENV)/pip-bench.log 2>&1 || echo "note: Mitsuba 3 not installed (see $(VENV)/pip-bench.log); bench_mitsuba will be skipped"
+	$(BIN)/python bench/run.py --out bench/results; status=$$?; \
+	    $(LL) docs --only measurements --bench-results bench/results --compare-dir $(COMPARE) && exit $$status
+
+references: $(COMPARE_INPUTS) ## render each comparison's converged reference (data/compare/*.toml; kept and reused)
+	@for f in $(COMPARE_FILES); do \
+	    $(LL) evaluate --convergence $$f -o $(COMPARE)/$$(basename $$f .toml) --reference-only || exit 1; \
+	done
+
+compare: references ## every method against the converged references, error against time (out/compare, docs/measurements.md)
+	@for f in $(COMPARE_FILES); do \
+	    $(LL) evaluate --convergence $$f -o $(COMPARE)/$$(basename $$f .toml) $(COMPARE_ARGS) || exit 1; \
+	done
+	@for f in $(COMPARE_FILES); do echo "report: $(COMPARE)/$$(basename $$f .toml)/report.html"; done
+	$(LL) docs --only measurements --bench-results bench/results --compare-dir $(COMPARE)
+
+docs: $(VENV)/.installed ## regenerate docs/scenes.md, the method pages' generated blocks and docs/measurements.md
+	$(LL) docs
+
+clean: ## remove out/, the numba cache and pytest's cache
+	rm -rf out .numba_cache .pytest_cache
 
 # pip's output goes to .venv/pip.log and is shown only when the install fails
 PIP := $(BIN)/python -m pip --disable-pip-version-check --no-input
@@ -85,8 +157,6 @@ $(VENV)/.installed: pyproject.toml
 	@{ $(PIP) install -q --upgrade pip && $(PIP) install -q -e '.[test,dask]'; } > $(VENV)/pip.log 2>&1 \
 	    || { cat $(VENV)/pip.log; echo "error: pip install failed (log above, also in $(VENV)/pip.log)"; exit 1; }
 	@touch $@
-
-setup: $(VENV)/.installed
 
 # --- one rule per stage artifact; the CLI itself skips a stage whose inputs and code are unchanged ---
 $(OUT)/yarns.zarr/zarr.json: $(SCENE) $(VENV)/.installed
@@ -216,183 +286,7 @@ DEMO_JOBS ?= 2
 .PHONY: demo-outputs
 demo-outputs: $(DEMO_OUTPUTS)
 
-# two stages at a time, each one's output printed whole when it ends (no live progress bars then);
-# the tables and fibres first, so the longest chain (procedural volpath, ~3.5 min of compilation on a
-# cold cache) starts at once beside the rest
-demo: $(VENV)/.installed
-	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json \
-	    $(OUT)/knit_fibers.zarr/zarr.json
-	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target demo-outputs
-	@$(MAKE) --no-print-directory $(OUT)/compare/report.md
-	@echo "demo outputs:"
-	@echo "  which method, at equal error: $(OUT)/compare/report.html ($(OUT)/compare/convergence.png)"
-	@echo "  yarn curves          : $(OUT)/yarns.zarr ($(OUT)/yarns.png)"
-	@echo "  procedural tables    : $(OUT)/tables.zarr (cross-section $(OUT)/cross_section.png)"
-	@echo "  realized fibres      : $(OUT)/fibers.zarr ($(OUT)/fibers.png)"
-	@echo "  volpath render       : $(OUT)/volpath.exr ($(OUT)/volpath.png)"
-	@echo "  fiberpath render     : $(OUT)/fiberpath.exr ($(OUT)/fiberpath.png)"
-	@echo "  damask tiling        : $(OUT)/damask_tiling.zarr ($(OUT)/damask_tiling.png)"
-	@echo "  draped damask render : $(OUT)/damask.exr ($(OUT)/damask.png)"
-	@echo "  damask SVF (seed 001): $(OUT)/damask_svf.zarr ($(OUT)/damask_svf.png)"
-	@echo "  damask IIRTF         : $(OUT)/damask_iirtf.zarr ($(OUT)/damask_iirtf.png)"
-	@echo "  damask, prt (seed 001): $(OUT)/damask_prt.exr ($(OUT)/damask_prt.png)"
-	@echo "  damask texture (seed 002): $(OUT)/damask_btf_fit.zarr ($(OUT)/damask_btf_fit.png)"
-	@echo "  damask, btf (seed 002): $(OUT)/damask_btf.exr ($(OUT)/damask_btf.png)"
-	@echo "  prt, btf vs fiberpath: $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
-	@echo "  bysdf fitted to fiberpath (seed 004): $(OUT)/bysdf_fit.toml, $(OUT)/knit_bysdf_fit.toml (.json reports)"
-	@echo "  knit, bysdf (seed 004): $(OUT)/knit_bysdf.exr ($(OUT)/knit_bysdf.png)"
-	@echo "  knit, fiberpath      : $(OUT)/knit_fiberpath.exr ($(OUT)/knit_fiberpath.png)"
-	@echo "  knit, bysdf vs fiberpath: $(OUT)/eval/knit/report.md ($(OUT)/eval/knit/report.html)"
-	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
-
-# the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
-demo-quick:
-	@$(MAKE) --no-print-directory demo OUT=out/quick DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
-	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
-	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
-	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4" \
-	    FIT_ARGS="--width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3"
-
-# make test: everything but the tests marked slow (under 10 minutes on 2 cores from a fresh clone);
-# make test-all: all of them
-test: $(VENV)/.installed
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile -m "not slow"
-
-test-all: $(VENV)/.installed
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
-
-bench: $(VENV)/.installed
-	@mkdir -p bench/results
-	@# the optional peer renderer for bench_mitsuba (skipped with a message when it cannot be installed)
-	@$(PIP) install -q -e '.[test,dask,bench]' > $(VENV)/pip-bench.log 2>&1 || echo "note: Mitsuba 3 not installed (see $(VENV)/pip-bench.log); bench_mitsuba will be skipped"
-	$(BIN)/python bench/run.py --out bench/results
-
-# woven_large keeps one stored rotation-minimising-frame sample per spline segment (ingest's default is 4):
-# those samples are breakpoints of the frame that the lookups' frame samples must keep, so this halves the
-# frame samples (8.0 M -> 4.0 M rows) and saves ~0.8 GB when its tables load. The woven generator's yarns are
-# planar curves, whose rotation-minimising frame one double reflection per segment gives as four do (normals
-# within 2.3e-16 over 9 yarns x 20,000 points, positions identical): the same fabric
-LARGE_INGEST_ARGS ?= --frame-samples 1
-$(LARGE_OUT)/yarns.zarr/zarr.json: $(LARGE_SCENE) $(VENV)/.installed
-	$(LL) ingest $(LARGE_SCENE) -o $(LARGE_OUT)/yarns.zarr $(LARGE_INGEST_ARGS)
-
-$(LARGE_OUT)/tables.zarr/zarr.json: $(LARGE_OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
-	$(LL) tables $(LARGE_OUT)/yarns.zarr -o $(LARGE_OUT)/tables.zarr
-
-$(LARGE_OUT)/close.exr: $(LARGE_OUT)/tables.zarr/zarr.json $(LARGE_CLOSE_SCENE)
-	$(LL) render $(LARGE_CLOSE_SCENE) --method volpath --source procedural --tables $(LARGE_OUT)/tables.zarr \
-	    $(LARGE_ARGS) -o $@
-
-$(HUGE_OUT)/yarns.zarr/zarr.json: $(HUGE_SCENE) $(VENV)/.installed
-	$(LL) ingest $(HUGE_SCENE) -o $(HUGE_OUT)/yarns.zarr $(LARGE_INGEST_ARGS)
-
-$(HUGE_OUT)/tables.zarr/zarr.json: $(HUGE_OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
-	$(LL) tables $(HUGE_OUT)/yarns.zarr -o $(HUGE_OUT)/tables.zarr $(if $(HUGE_BUDGET),--budget $(HUGE_BUDGET))
-
-$(HUGE_OUT)/close.exr: $(HUGE_OUT)/tables.zarr/zarr.json $(HUGE_SCENE)
-	$(if $(HUGE_BUDGET),LOOMLIGHT_MEMORY_BUDGET=$(HUGE_BUDGET)) $(LL) render $(HUGE_SCENE) --method volpath \
-	    --source procedural --tables $(HUGE_OUT)/tables.zarr $(HUGE_ARGS) -o $@
-
-# HUGE_SCENE= leaves the 10x row out
-table1: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(LARGE_OUT)/close.exr \
-	    $(if $(HUGE_SCENE),$(HUGE_OUT)/close.exr)
-	$(LL) evaluate --table1 --scene $(SCENE) --scene $(LARGE_SCENE) $(if $(HUGE_SCENE),--scene $(HUGE_SCENE)) \
-	    --procedural $(OUT)/eval/volpath-procedural.exr --realized $(OUT)/eval/volpath-realized.exr \
-	    --unrealized $(LARGE_OUT)/close.exr $(if $(HUGE_SCENE),--unrealized $(HUGE_OUT)/close.exr) -o out/table1
-	@echo "report: out/table1/report.md"
-
-sweep: $(OUT)/fibers.zarr/zarr.json
-	$(LL) evaluate --sweep data/sweeps/demo.toml -o $(OUT)/sweep
-	@echo "report: $(OUT)/sweep/report.md"
-
-$(AGREE)/twill/yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed
-	$(LL) ingest $(TWILL_SCENE) -o $(AGREE)/twill/yarns.zarr
-
-$(AGREE)/twill/fibers.zarr/zarr.json: $(AGREE)/twill/yarns.zarr/zarr.json
-	$(LL) realize $(AGREE)/twill/yarns.zarr -o $(AGREE)/twill/fibers.zarr
-
-$(AGREE)/demo/%.exr: $(OUT)/fibers.zarr/zarr.json $(SCENE)
-	$(LL) render $(SCENE) --method $(firstword $(subst -, ,$*)) --source realized --fibers $(OUT)/fibers.zarr $(AGREE_ARGS) -o $@
-
-$(AGREE)/twill/%.exr: $(AGREE)/twill/fibers.zarr/zarr.json $(TWILL_SCENE)
-	$(LL) render $(TWILL_SCENE) --method $(firstword $(subst -, ,$*)) --source realized --fibers $(AGREE)/twill/fibers.zarr $(AGREE_ARGS) -o $@
-
-$(AGREE)/%/report/report.md: $(AGREE)/%/fiberpath.exr $(AGREE)/%/volpath.exr
-	$(LL) evaluate --ref $(AGREE)/$*/fiberpath.exr --test $(AGREE)/$*/volpath.exr -o $(AGREE)/$*/report
-
-.PRECIOUS: $(AGREE)/demo/%.exr $(AGREE)/twill/%.exr
-
-agreement: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(AGREE)/twill/fibers.zarr/zarr.json sweep
-	$(LL) evaluate --sweep data/sweeps/twill.toml -o $(AGREE)/twill/sweep
-	@echo "reports: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(OUT)/sweep/report.md $(AGREE)/twill/sweep/report.md"
-
-# --- seed 001: precomputed light transport against path tracing, and its parameter studies ---
-# make prt-sweep: the damask's two exemplars each alone on a flat patch (data/tilings/flat_satin41.toml,
-# flat_satin14.toml; the exemplar only) and the draped damask, precomputed with PRT_SVF_ARGS / PRT_IIRTF_ARGS; each swept over the demo sweep's 12 lights, prt against
-# fiberpath at 16 spp (data/sweeps/prt_*.toml), then split into single and multiple scattering
-# (loomlight study prt-terms). make prt-study: seed 001 §6.1's cell-size and SH-order strips on one cheap
-# exemplar (data/studies/prt_params.toml). The sweep files name these paths (out/prt).
-PRT := out/prt
-PRT_SWEEPS := flat41 flat14 damask
-PRT_SVF_ARGS ?= --resolution 128 --components 48
-PRT_IIRTF_ARGS ?= --order 4 --cell-factor 1.5 --paths 200 --light-sampling mis
-PRT_EXEMPLAR_41 := 0
-PRT_EXEMPLAR_14 := 1
-
-$(PRT)/flat%_tiling.zarr/zarr.json: data/tilings/flat_satin%.toml data/scenes/flat_satin.toml $(VENV)/.installed
-	$(LL) tile data/tilings/flat_satin$*.toml -o $(PRT)/flat$*_tiling.zarr
-
-$(PRT)/flat%_svf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
-	$(LL) precompute svf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_svf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(PRT_SVF_ARGS)
-
-$(PRT)/flat%_iirtf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py)
-	$(LL) precompute iirtf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_iirtf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(PRT_IIRTF_ARGS)
-
-$(PRT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed
-	$(LL) tile $(TILING) -o $(PRT)/damask_tiling.zarr
-
-$(PRT)/damask_svf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
-	$(LL) precompute svf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_svf.zarr $(PRT_SVF_ARGS)
-
-$(PRT)/damask_iirtf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py)
-	$(LL) precompute iirtf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_iirtf.zarr $(PRT_IIRTF_ARGS)
-
-.PRECIOUS: $(PRT)/damask_%.zarr/zarr.json $(PRT)/flat%_tiling.zarr/zarr.json $(PRT)/flat%_svf.zarr/zarr.json $(PRT)/flat%_iirtf.zarr/zarr.json
-.PHONY: prt-sweep prt-study
-
-prt-sweep: $(foreach s,41 14,$(PRT)/flat$(s)_svf.zarr/zarr.json $(PRT)/flat$(s)_iirtf.zarr/zarr.json) \
-		$(PRT)/damask_svf.zarr/zarr.json $(PRT)/damask_iirtf.zarr/zarr.json
-	@for s in $(PRT_SWEEPS); do \
-	    $(LL) evaluate --sweep data/sweeps/prt_$$s.toml -o $(PRT)/$$s && \
-	    $(LL) study prt-terms data/sweeps/prt_$$s.toml --sweep-dir $(PRT)/$$s -o $(PRT)/$$s/terms || exit 1; \
-	done
-	@for s in $(PRT_SWEEPS); do echo "reports: $(PRT)/$$s/report.md $(PRT)/$$s/terms/attribution.md"; done
-
-# make btf-sweep: seed 002's fitted texture of each damask exemplar alone on its flat patch (the prt sweep's
-# tilings, out/prt/flat41_tiling.zarr and flat14), fitted at the defaults of precompute btf (BTF_SWEEP_ARGS)
-# into out/btf/, against fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
-BTF_DIR := out/btf
-BTF_SWEEP_ARGS ?=
-
-$(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py)
-	$(LL) precompute btf $(PRT)/flat$*_tiling.zarr -o $(BTF_DIR)/flat$*_btf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(BTF_SWEEP_ARGS)
-
-.PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json
-.PHONY: btf-sweep
-
-btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json)
-	@for s in 41 14; do $(LL) evaluate --sweep data/sweeps/btf_flat$$s.toml -o $(BTF_DIR)/flat$$s || exit 1; done
-	@for s in 41 14; do echo "report: $(BTF_DIR)/flat$$s/report.md"; done
-
-# --- which method gives the right picture fastest: every method against a converged reference, error against
-# time (loomlight evaluate --convergence; data/compare/*.toml; README: Choosing a method). make references
-# renders each comparison's reference until its noise is within the file's targets (kept under
-# $(COMPARE)/<name>/reference, reused while scene, settings and code are unchanged; never by make test);
-# make compare renders every method at its budgets and writes $(COMPARE)/<name>/report.html and the summary
-COMPARE := out/compare
-COMPARE_FILES ?= $(filter-out data/compare/demo_quick.toml,$(wildcard data/compare/*.toml))
-COMPARE_ARGS ?=
-COMPARE_IN := $(COMPARE)/inputs
+# --- the comparisons' own inputs (make references, make compare; the flat patches come from make/experiments.mk) ---
 $(COMPARE_IN)/twill_yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed
 	$(LL) ingest $(TWILL_SCENE) -o $(COMPARE_IN)/twill_yarns.zarr
 
@@ -406,27 +300,5 @@ $(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json 
 	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf.zarr
 
 .PRECIOUS: $(COMPARE_IN)/%.zarr/zarr.json
-COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(OUT)/bysdf_fit.toml \
-	$(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json $(OUT)/damask_btf_fit.zarr/zarr.json \
-	$(OUT)/knit_fibers.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml \
-	$(COMPARE_IN)/twill_fibers.zarr/zarr.json $(COMPARE_IN)/knit_btf.zarr/zarr.json \
-	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
-.PHONY: references compare
 
-references: $(COMPARE_INPUTS)
-	@for f in $(COMPARE_FILES); do \
-	    $(LL) evaluate --convergence $$f -o $(COMPARE)/$$(basename $$f .toml) --reference-only || exit 1; \
-	done
-
-compare: references
-	@for f in $(COMPARE_FILES); do \
-	    $(LL) evaluate --convergence $$f -o $(COMPARE)/$$(basename $$f .toml) $(COMPARE_ARGS) || exit 1; \
-	done
-	@for f in $(COMPARE_FILES); do echo "report: $(COMPARE)/$$(basename $$f .toml)/report.html"; done
-
-prt-study: $(VENV)/.installed
-	$(LL) study prt-params data/studies/prt_params.toml -o $(PRT)/study
-	@echo "report: $(PRT)/study/report.md (strips $(PRT)/study/cell_size.png, $(PRT)/study/sh_order.png)"
-
-clean:
-	rm -rf out .numba_cache .pytest_cache
+include make/experiments.mk
