@@ -17,9 +17,11 @@ after that is finished by the next writer of the artifact, so the set on disk is
 one or the new one.
 
 Artifacts are what they claim: at write every array gets a sha256 and a crc32c of its bytes, and
-the content hash covers the kind, the summary and those checksums. ``Artifact`` refuses one whose
-content hash does not match its summary and checksums (an edited summary or hash), whose arrays
-differ from the recorded ones, or that has no checksums (written before they were recorded:
+the content hash covers the kind, the summary, the parameters and those checksums. ``Artifact``
+refuses one whose content hash does not match its summary, parameters and checksums (an edited
+summary or hash), whose arrays differ from the recorded ones, whose summary's counts, shapes or
+orders disagree with its arrays' shapes (a forged summary with a recomputed hash:
+``pipeline.artifact_checks``), or that has no checksums (written before they were recorded:
 rebuild it), and checks an array's crc32c whenever it reads it, so a deleted or truncated chunk is
 an error, never zeros.
 
@@ -47,6 +49,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Mapping
 
 from . import __version__
+from .artifact_checks import check_summary
 from .errors import IncompleteArtifact, LoomError
 from .memory import peak_rss_bytes
 from .schemas import validate
@@ -127,9 +130,12 @@ def build_key(kind: str, stage: str, params: Mapping, input_hashes: Mapping[str,
     return hashlib.sha256(_canonical(doc).encode()).hexdigest()
 
 
-def content_digest(kind: str, summary: Mapping, checksums: Mapping) -> str:
-    """The content hash: sha256 over the kind, the summary and every array's recorded checksums."""
+def content_digest(kind: str, summary: Mapping, checksums: Mapping, params: Mapping | None) -> str:
+    """The content hash: sha256 over the kind, the summary, every array's recorded checksums and the
+    parameters (``None``: the hash of artifacts written before the parameters joined it)."""
     doc = {"kind": kind, "summary": summary, "arrays": checksums}
+    if params is not None:
+        doc["params"] = params
     return hashlib.sha256(_canonical(doc).encode()).hexdigest()
 
 
@@ -274,14 +280,17 @@ def read_meta(path: str | Path) -> dict:
 
 
 def verify_meta(path: Path, meta: dict, summary: dict) -> dict:
-    """The recorded checksums, once the content hash matches them and the summary."""
+    """The recorded checksums, once the content hash matches them, the summary and the parameters."""
     checksums = meta.get("arrays")
     if not isinstance(checksums, dict):
         raise LoomError(path, None, "artifact has no checksums (written by a loomlight before they were recorded); "
                         "rebuild it with its stage")
-    if content_digest(meta.get("kind"), summary, checksums) != meta.get("content_hash"):
-        raise LoomError(path, None, "the summary or checksums do not match the content hash (edited?); "
-                        "rebuild it with its stage")
+    if content_digest(meta.get("kind"), summary, checksums, meta.get("params", {})) != meta.get("content_hash"):
+        if content_digest(meta.get("kind"), summary, checksums, None) == meta.get("content_hash"):
+            raise LoomError(path, None, "written by a loomlight whose content hash did not cover the parameters; "
+                            "rebuild it with its stage")
+        raise LoomError(path, None, "the summary or checksums do not match the content hash (edited? it covers "
+                        "the parameters too); rebuild it with its stage")
     return checksums
 
 
@@ -305,6 +314,7 @@ class Artifact:
         self._arrays = arrays
         validate(self.meta, "artifact-meta", self.path, prefix="loomlight.")
         validate(manifest, self.meta["kind"], self.path)
+        check_summary(self.path, self.meta["kind"], self.summary, arrays)
 
     @property
     def group(self):
@@ -667,7 +677,7 @@ class ArtifactWriter:
             "peak_memory_bytes": peak_rss_bytes(),
             "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
             "arrays": checksums,
-            "content_hash": content_digest(self.kind, summary, checksums),
+            "content_hash": content_digest(self.kind, summary, checksums, self.params),
             "complete": True,
         }
         if companions:

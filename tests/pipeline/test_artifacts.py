@@ -18,10 +18,14 @@ from tests.helpers import ROOT
 
 
 def _yarn_like(w, n=4):
-    """The arrays a yarns artifact must hold (schemas/yarns.schema.json), filled trivially."""
+    """The arrays a yarns artifact must hold (schemas/yarns.schema.json), filled trivially: one curve of n
+    points (the counts agree with the summary, ``pipeline.artifact_checks``)."""
     for name in ("points", "tangents", "frame_normal", "color"):
         w.write(name, np.zeros((n, 3), np.float32))
-    for name in ("curve_offsets", "closed", "radius", "group", "yarn_type", "seg_length", "seg_arclen",
+    w.write("curve_offsets", np.array([0, n]))
+    for name in ("closed", "group", "yarn_type"):
+        w.write(name, np.zeros(1))
+    for name in ("radius", "seg_length", "seg_arclen",
                  "curve_length", "delta", "frame_s", "frame_offsets", "grid_cell_start", "grid_items",
                  "seg_curve", "frame_twist", "grid_lo", "grid_cell", "grid_dims", "grid_pad"):
         w.write(name, np.zeros(n))
