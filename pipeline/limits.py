@@ -5,6 +5,10 @@
   beyond, float32 positions have lost their digits and the segment grids, frames and tables overflow.
 - Lengths (radii, spacings, scales) are finite, positive and at most ``MAX_LENGTH``.
 - Light values (irradiance, radiance, power) are at most ``MAX_LIGHT``.
+- Counts a stage works through (paths per cell, SG counts) are bounded by time where their memory does
+  not grow with them: ``WorkEstimate`` refuses a run whose least time exceeds the time limit
+  (``LOOMLIGHT_TIME_LIMIT`` hours, default 24), with the estimate in the message, as
+  ``pipeline.memory.Estimate`` refuses one past the memory budget.
 
 The schemas (``schemas/*.schema.json``) state the same limits; input beyond them is refused with
 the limit in the message, never published.
@@ -12,6 +16,7 @@ the limit in the message, never published.
 from __future__ import annotations
 
 import math
+import os
 
 from .errors import LoomError
 
@@ -45,3 +50,60 @@ def first_bad_row(points) -> int:
     pts = np.asarray(points, dtype=np.float64)
     bad = ~(np.abs(pts) <= MAX_COORD).all(axis=1)
     return int(np.argmax(bad)) if bad.any() else -1
+
+
+# ------------------------------------------------------------------------------------------------ time
+TIME_LIMIT_ENV = "LOOMLIGHT_TIME_LIMIT"   # hours
+DEFAULT_TIME_LIMIT_H = 24.0
+
+
+def time_limit() -> tuple[float, str]:
+    """(seconds, where it comes from): $LOOMLIGHT_TIME_LIMIT hours, else ``DEFAULT_TIME_LIMIT_H``."""
+    env = os.environ.get(TIME_LIMIT_ENV)
+    if env:
+        try:
+            h = float(env)
+        except ValueError:
+            h = float("nan")
+        if not (math.isfinite(h) and h > 0):
+            raise LoomError(None, TIME_LIMIT_ENV, f"must be a positive number of hours, got {env!r}")
+        return 3600.0 * h, f"{TIME_LIMIT_ENV}"
+    return 3600.0 * DEFAULT_TIME_LIMIT_H, f"the default; {TIME_LIMIT_ENV} sets it, in hours"
+
+
+def fmt_seconds(s: float) -> str:
+    for unit, f in (("years", 365.25 * 86400), ("days", 86400), ("h", 3600), ("min", 60)):
+        if s >= f:
+            return f"{s / f:.3g} {unit}"
+    return f"{s:.3g} s"
+
+
+class WorkEstimate:
+    """The least wall time a stage can take, as named parts: ``add(label, count, per_thread_s, detail)``
+    (``count`` units of work at ``per_thread_s`` units per second on one thread), spread over ``threads``.
+
+    The bound from time for a count option whose memory does not grow with it (paths per cell, SG
+    counts): the rates are faster than any measured, so a refused run could not have finished within
+    the limit either. ``check`` raises the one-line refusal, with the estimate, before any work starts."""
+
+    def __init__(self, what: str, threads: int):
+        self.what = what
+        self.threads = max(1, int(threads))
+        self.parts: list[tuple[str, float, str]] = []
+
+    def add(self, label: str, count: float, per_thread_s: float, detail: str = "") -> "WorkEstimate":
+        self.parts.append((label, float(count) / (float(per_thread_s) * self.threads), detail))
+        return self
+
+    @property
+    def seconds(self) -> float:
+        return float(sum(s for _, s, _ in self.parts))
+
+    def check(self, file=None, place: str | None = None, remedy: str = "lower it") -> None:
+        limit, how = time_limit()
+        if self.seconds > limit:
+            parts = sorted(self.parts, key=lambda p: -p[1])[:2]
+            text = "; ".join(f"{label} {fmt_seconds(s)}" + (f" ({d})" if d else "") for label, s, d in parts)
+            raise LoomError(file, place, f"{self.what} would take at least an estimated {fmt_seconds(self.seconds)} "
+                            f"on {self.threads} thread(s) ({text}), over the time limit of {limit / 3600:g} h "
+                            f"({how}); nothing was started: {remedy}")

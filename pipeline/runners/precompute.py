@@ -30,10 +30,18 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
-from ..memory import Estimate, budget as memory_budget
+from ..memory import Estimate, budget as memory_budget, fmt_bytes
 
 MAX_ORDER = 8
 MIN_RESOLUTION = 8
+# Bounds from time (``pipeline.limits.WorkEstimate``): rates no thread reaches, so a refused run could
+# not have finished within the time limit either. A transfer path costs at least one periodic ray and
+# an SH projection (measured: 2.7e4 paths/s a thread on the damask, README); the SG fit tests every
+# visible pixel of every segment against every SG axis.
+PATHS_PER_THREAD_S = 1e6
+SG_TESTS_PER_THREAD_S = 1e11
+CELL_BYTES = 40   # a cell's bookkeeping in ``build_cells`` and the writer (offsets, counts, cell_row)
+MAX_CELLS = 10 ** 15   # past any memory (40 PB of cell grids); within it the memory budget decides
 
 
 # ------------------------------------------------------------------------------------------------ parameters
@@ -61,6 +69,10 @@ class SvfParams:
             raise LoomError(None, "--components", f"must be at least 1, got {self.components}")
         if not self.sg_count >= 1:
             raise LoomError(None, "--sg-count", f"must be at least 1, got {self.sg_count}")
+        if self.sg_count > self.resolution ** 2:
+            raise LoomError(None, "--sg-count", f"{self.sg_count} SGs exceed the {self.resolution}x{self.resolution} = "
+                            f"{self.resolution ** 2} visibility pixels: an SG's weight is the solid angle of the "
+                            "pixels nearest its axis, so SGs past the pixel count get none; lower --sg-count")
         if not (math.isfinite(self.sg_sharpness) and self.sg_sharpness > 0):
             raise LoomError(None, "--sg-sharpness", f"must be a positive number, got {self.sg_sharpness}")
         if not self.chunk >= 1:
@@ -179,6 +191,38 @@ def svf_estimate(S_max: int, S_all: int, p: SvfParams, hold: bool) -> Estimate:
     return est
 
 
+def svf_render_estimate(S_all: int, K: int, p: SvfParams) -> Estimate:
+    """What ``render --method prt`` holds of this SVF (``pipeline.renderers.prt.load_prt``): every
+    segment's PCA coefficients and SG weights, every exemplar's mean and basis."""
+    D = p.resolution * p.resolution
+    est = Estimate("loomlight render --method prt on this SVF", kernels=False)
+    est.add("SG weights", 4.0 * S_all * p.sg_count, f"{S_all:,} segments x {p.sg_count:,} SGs (--sg-count)")
+    est.add("PCA coefficients", 4.0 * S_all * p.components, f"{S_all:,} segments x {p.components} (--components)")
+    est.add("PCA bases", 4.0 * K * (p.components + 1) * D, f"{K} exemplar(s) x {p.components} x {D:,} pixels")
+    return est
+
+
+def svf_work(S: int, p: SvfParams, threads: int):
+    """The least time of the visibility images and the SG fit of S segments (``WorkEstimate``)."""
+    from ..limits import WorkEstimate
+
+    D = p.resolution * p.resolution
+    est = WorkEstimate("loomlight precompute svf", threads)
+    est.add("SG fit", float(S) * D * p.sg_count, SG_TESTS_PER_THREAD_S,
+            f"{S:,} segments x {D:,} pixels x {p.sg_count:,} SGs (--sg-count)")
+    est.add("visibility images", float(S) * D, 1e8, f"{S:,} segments x {D:,} rays (--resolution)")
+    return est
+
+
+def _largest_option(est, default: str) -> str:
+    """The option named in the detail of an estimate's largest part (``(--sg-count)``), else ``default``."""
+    import re
+
+    parts = sorted(est.parts, key=lambda t: -t[1])
+    m = re.search(r"\((--[a-z-]+)\)", parts[0][2]) if parts else None
+    return m.group(1) if m else default
+
+
 def _svf_visibility_task(tiling, tiling_hash, store, k, a, b, p: dict):
     """Chunk task: visibility images and sums of SGs of exemplar k's segments a..b-1."""
     from stages.precompute.periodic import periodic_scene
@@ -264,6 +308,13 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     S_max = max(len(s.ids) for s in segs.values())
     S_all = int(art.summary["segments"])
     limit = budget or memory_budget()
+    S_ks = sum(len(s.ids) for s in segs.values())
+    import numba
+
+    work = svf_work(S_ks, p, numba.get_num_threads())
+    work.check(None, _largest_option(work, "--resolution"), "lower --sg-count or --resolution")
+    rest = svf_render_estimate(S_ks, len(ks), p)
+    rest.check(limit, None, _largest_option(rest, "--sg-count"))
     hold = svf_estimate(S_max, S_all, p, True).total <= 0.5 * limit.nbytes
     svf_estimate(S_max, S_all, p, hold).check(limit, tiling)
     tiling_hash = art.meta["content_hash"]
@@ -392,10 +443,48 @@ def _nonempty(cells, k):
     return np.flatnonzero(np.diff(cells.cell_offsets[base:base + n + 1]) > 0)
 
 
-def iirtf_estimate(S_all: int, C_max: int, p: IirtfParams, n_mats: int) -> Estimate:
+def iirtf_work(p: IirtfParams, n_exemplars: int, stored_cells: int, threads: int):
+    """The least time of the mean free paths and the transfer matrices (``WorkEstimate``); before the
+    cells are known, ``stored_cells`` = the exemplars (each stores at least one cell)."""
+    from ..limits import WorkEstimate
+
+    est = WorkEstimate("loomlight precompute iirtf", threads)
+    est.add("transfer matrices", float(p.paths) * stored_cells, PATHS_PER_THREAD_S,
+            f"{p.paths:,} paths per cell x {stored_cells:,} cells holding segments (--paths)")
+    est.add("mean free paths", float(p.mfp_paths) * n_exemplars, PATHS_PER_THREAD_S,
+            f"{p.mfp_paths:,} paths x {n_exemplars} exemplar(s) (--mfp-paths)")
+    return est
+
+
+def cell_counts(art, targets, ks) -> dict[int, int]:
+    """Cells of each exemplar k in ``ks`` at target length ``targets[k]`` (``build_cells``' grids), counted
+    in Python integers before any cell is allocated."""
+    from stages.precompute.iirtf import cells_per_side, exemplar_slabs
+
+    slabs = exemplar_slabs(art["ex_points"], art["ex_radius"], art["ex_offsets"], art["ex_fibers"])
+    bs, nb = art["block_size"], art["ex_nblocks"]
+    out = {}
+    for k in ks:
+        try:
+            n = [cells_per_side(float(side), float(targets[k])) for side in (bs[0], bs[1], slabs[k, 1] - slabs[k, 0])]
+        except (ValueError, OverflowError):
+            n = None
+        cells = None if n is None else int(nb[k, 0]) * n[0] * int(nb[k, 1]) * n[1] * n[2]
+        if cells is None or cells > MAX_CELLS:
+            raise LoomError(None, "--cell-factor", f"cells of {float(targets[k]):.3g} (the factor times exemplar {k}'s "
+                            f"mean free path) make {'too many' if cells is None else f'{cells:.3g}'} cells, over "
+                            f"{MAX_CELLS:.0e} ({fmt_bytes(CELL_BYTES * MAX_CELLS)} of cell grids); nothing was started: "
+                            "raise --cell-factor")
+        out[k] = cells
+    return out
+
+
+def iirtf_estimate(S_all: int, C_max: int, p: IirtfParams, n_mats: int, cells: int = 0) -> Estimate:
     J = (p.order + 1) ** 2
     est = Estimate("loomlight precompute iirtf")
     est.add("tiling scene and cells", 520.0 * S_all, f"{S_all:,} segments")
+    if cells:
+        est.add("cell grids", float(CELL_BYTES) * cells, f"{cells:,} cells (--cell-factor)")
     est.add("transfer chunk", 2 * 8 * 3 * J * J * min(p.chunk, C_max) + 4 * 3 * J * J * 2 * C_max,
             f"{C_max:,} cells x 3 x {J}x{J}")
     est.add("C_S tables", 8.0 * n_mats * p.theta_samples * J * 3 * 2, f"{n_mats} materials x {p.theta_samples} theta_o")
@@ -417,6 +506,10 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     tiling = Path(tiling)
     art = tiling_input(tiling)
     ks = pick_exemplars(art, exemplars, tiling)
+    import numba
+
+    work = iirtf_work(p, len(ks), len(ks), numba.get_num_threads())
+    work.check(None, _largest_option(work, "--paths"), "lower --paths or --mfp-paths")
     scene_path, sc_obj = materials_scene(tiling, art, scene)
     mof, mats = tiling_materials(sc_obj, art, p.material)
     # first_ray: how the paths leave a segment's midpoint (stages.precompute.periodic, "Rays from a segment")
@@ -448,12 +541,18 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     mfp_s = time.perf_counter() - t0
     bs = art["block_size"]
     targets = np.array([p.cell_factor * mfp[k][0] if k in mfp else max(bs[0], bs[1]) for k in range(len(periods))])
+    # every exemplar's cells are built (``_cells``), not only those of ks
+    counted = cell_counts(art, targets, range(len(periods)))
+    iirtf_estimate(S_all, 1, p, len(mats), sum(counted.values())).check(budget or memory_budget(), None,
+                                                                          "--cell-factor")
     cells = _cells(art, (str(tiling), tiling_hash), targets)
     C = {k: int(cells.ex_cells[k + 1] - cells.ex_cells[k]) for k in ks}
     rows = {k: _nonempty(cells, k) for k in ks}
     N = {k: len(rows[k]) for k in ks}
-    est = iirtf_estimate(S_all, max(N.values()), p, len(mats))
+    est = iirtf_estimate(S_all, max(N.values()), p, len(mats), sum(counted.values()))
     est.check(budget or memory_budget(), tiling)
+    work = iirtf_work(p, len(ks), sum(N.values()), numba.get_num_threads())
+    work.check(None, _largest_option(work, "--paths"), "lower --paths or raise --cell-factor")
     J = (p.order + 1) ** 2
     info = []
     t_start = time.perf_counter()
