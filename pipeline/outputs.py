@@ -1,5 +1,5 @@
 """Output paths: the one check every command makes on its ``-o`` (and ``--png``, ``--write``,
-``--export-npy``) before it does any work.
+``--export-npy``) before it does any work, given the command's inputs.
 
 ``check_output(path, option, kind, suffixes=())`` refuses, as one ``LoomError`` naming the path and
 the option (exit code 2):
@@ -12,7 +12,11 @@ the option (exit code 2):
 - an output of the wrong kind that already exists: ``ARTIFACT`` replaces only a directory holding a
   ``zarr.json`` (an artifact is swapped in whole, so anything else would be deleted), ``FILE`` only
   a file, ``DIRECTORY`` only a directory;
-- a suffix not in ``suffixes`` (``ARTIFACT`` paths end in ``.zarr``).
+- a suffix not in ``suffixes`` (``ARTIFACT`` paths end in ``.zarr``);
+- an output that is one of the command's ``inputs``, lies inside one (a file written into an input
+  artifact's directory) or, for an artifact (published by replacing the whole directory), holds one,
+  whatever the path's form: relative, through symbolic links (both are resolved) or a hard link to
+  the input (the same file).
 
 Nothing is created or changed here: a refused command leaves the previous output untouched.
 """
@@ -34,13 +38,42 @@ def _nearest_existing(path: Path) -> Path:
     return p
 
 
-def check_output(path, option: str = "-o", kind: str = FILE, suffixes: tuple[str, ...] = ()) -> Path:
-    """``path`` as a Path once it can be written as an output of ``kind`` (module doc), else LoomError."""
+def _same_file(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist
+        return False
+
+
+def check_not_input(path, option: str, inputs, kind: str = FILE) -> None:
+    """Refuse an output ``path`` that is one of ``inputs``, lies inside one or (``ARTIFACT``, published by
+    replacing its whole directory) holds one; paths are resolved (relative paths, symbolic links) and
+    existing files compared by identity (hard links)."""
+    out = Path(os.path.realpath(path))
+    for inp in inputs:
+        if inp is None:
+            continue
+        real = Path(os.path.realpath(inp))
+        if out == real or _same_file(path, inp):
+            raise LoomError(path, option, f"is the input {inp}; writing it would destroy the input: choose "
+                            "another path")
+        if real in out.parents:
+            raise LoomError(path, option, f"lies inside the input {inp}; writing it would change the input: "
+                            "choose a path outside it")
+        if kind == ARTIFACT and out in real.parents:
+            raise LoomError(path, option, f"holds the input {inp}; publishing it would delete the input: "
+                            "choose another path")
+
+
+def check_output(path, option: str = "-o", kind: str = FILE, suffixes: tuple[str, ...] = (), inputs=()) -> Path:
+    """``path`` as a Path once it can be written as an output of ``kind`` (module doc) and is none of
+    ``inputs`` (nor inside one), else LoomError."""
     path = Path(path)
     if kind == ARTIFACT:
         suffixes = suffixes or (".zarr",)
     if suffixes and path.suffix.lower() not in suffixes:
         raise LoomError(path, option, f"the output must end in {' or '.join(suffixes)}")
+    check_not_input(path, option, inputs, kind)
     real = Path(os.path.realpath(path))
     for fs in KERNEL_FILE_SYSTEMS:
         if real == Path(fs) or Path(fs) in real.parents:

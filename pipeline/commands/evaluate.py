@@ -77,7 +77,8 @@ def register(app: typer.Typer) -> None:
         for flag, on in (("--reference-only", reference_only), ("--no-memory", no_memory), ("--scheduler", scheduler)):
             if on and modes[0] != "--convergence":
                 raise LoomError(None, flag, "goes with --convergence")
-        check_output(out, "-o", DIRECTORY)
+        check_output(out, "-o", DIRECTORY, inputs=[ref, *(test or ()), sweep, convergence, *(scene or ()),
+                                                   *(procedural or ()), *(realized or ()), *(unrealized or ())])
         if modes[0] == "--convergence":
             from ..runners.convergence import run_convergence
 

@@ -21,6 +21,6 @@ def register(app: typer.Typer) -> None:
         from ..memory import budget as memory_budget
         from ..runners.export import run_export
 
-        check_output(out, "-o", suffixes=(".txt", ".bcc"))
+        check_output(out, "-o", suffixes=(".txt", ".bcc"), inputs=[fibers])
         res = run_export(fibers, out, budget=memory_budget(budget))
         typer.echo(f"wrote {out} ({res['curves']} curves)")

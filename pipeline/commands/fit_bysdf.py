@@ -25,7 +25,7 @@ def register(app: typer.Typer) -> None:
         from ..outputs import check_output
         from ..runners.fit_bysdf import SETUPS, run_fit
 
-        check_output(out, "-o", suffixes=(".toml",))
+        check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (ref_spp, "--ref-spp"),
                         (iterations, "--iterations")):
             if v <= 0:

@@ -34,9 +34,9 @@ def register(app: typer.Typer) -> None:
         from ..memory import budget as memory_budget
         from ..runners.ingest import run_ingest
 
-        check_output(out, "-o", ARTIFACT)
+        check_output(out, "-o", ARTIFACT, inputs=[input])
         if write is not None:
-            check_output(write, "--write", suffixes=(".bcc", ".obj", ".txt"))
+            check_output(write, "--write", suffixes=(".bcc", ".obj", ".txt"), inputs=[input])
         check_positive(radius, "--radius")
         check_positive(scale, "--scale")
         try:

@@ -28,7 +28,7 @@ def register(app: typer.Typer) -> None:
         if png is None and not show:
             raise LoomError(artifact, "--png", "give --png FILE or --show")
         if png is not None:
-            check_output(png, "--png")
+            check_output(png, "--png", inputs=[artifact])
         art = Artifact(artifact)
         mod = inspector_for(art.kind)
         if png is not None:

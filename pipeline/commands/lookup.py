@@ -24,6 +24,6 @@ def register(app: typer.Typer) -> None:
         from ..memory import budget as memory_budget
         from ..runners.lookup import run_lookup
 
-        check_output(out, "-o", suffixes=(".npz",))
+        check_output(out, "-o", suffixes=(".npz",), inputs=[tables, points])
         res = run_lookup(tables, points, out, budget=memory_budget(budget))
         typer.echo(f"wrote {out} ({res['inside']} of {res['points']} points inside a fibre)")

@@ -64,7 +64,7 @@ def svf(
     from ..chunks import resolve_scheduler
     from ..runners.precompute import SvfParams, run_svf
 
-    check_output(out, "-o", ARTIFACT)
+    check_output(out, "-o", ARTIFACT, inputs=[tiling])
     p = SvfParams(resolution=resolution, components=components, sg_count=sg_count, sg_sharpness=sg_sharpness,
                   chunk=chunk, seed=seed)
     res = run_svf(tiling, out, p, exemplars=exemplar or None, force=force, budget=memory_budget(budget),
@@ -117,7 +117,7 @@ def iirtf(
     from ..chunks import resolve_scheduler
     from ..runners.precompute import IirtfParams, parse_material_options, run_iirtf
 
-    check_output(out, "-o", ARTIFACT)
+    check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
     p = IirtfParams(order=order, cell_factor=cell_factor, paths=paths, mfp_paths=mfp_paths, max_depth=max_depth,
                     rr_depth=rr_depth, light_sampling=light_sampling, theta_samples=theta_samples, chunk=chunk, seed=seed,
                     material=parse_material_options(set_ or [], bcsdf))
@@ -175,7 +175,7 @@ def btf(
     from ..runners.precompute import parse_material_options
     from ..runners.precompute_btf import BtfParams, parse_grid, run_btf
 
-    check_output(out, "-o", ARTIFACT)
+    check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
     p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=parse_grid(lights, "--lights"),
                   spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, directions=directions,
                   max_depth=max_depth,

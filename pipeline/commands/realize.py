@@ -33,7 +33,7 @@ def register(app: typer.Typer) -> None:
         from ..outputs import ARTIFACT, check_output
         from ..runners.realize import run_realize
 
-        check_output(out, "-o", ARTIFACT)
+        check_output(out, "-o", ARTIFACT, inputs=[yarns])
         sched = resolve_scheduler(scheduler, None, workers, threads_per_worker)
         res = run_realize(yarns, out, preset=preset, radius=radius, seed=seed, spacing=spacing,
                           budget=memory_budget(budget), force=force, scheduler=sched)

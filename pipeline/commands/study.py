@@ -42,7 +42,7 @@ def prt_params(
     from ..outputs import DIRECTORY, check_output
     from ..runners.prt_study import run_params
 
-    check_output(out, "-o", DIRECTORY)
+    check_output(out, "-o", DIRECTORY, inputs=[study])
     res = run_params(study, out, force=force)
     for what, rows in (("cell size", res.cell_size), ("SH order", res.sh_order)):
         for e in rows:
@@ -65,7 +65,7 @@ def prt_terms(
     from ..outputs import DIRECTORY, check_output
     from ..runners.prt_study import run_terms
 
-    check_output(out, "-o", DIRECTORY)
+    check_output(out, "-o", DIRECTORY, inputs=[sweep, sweep_dir])
     res = run_terms(sweep, sweep_dir, out, reference=reference, prt=prt, force=force)
     s = res.summary
     typer.echo(f"  relative RMSE of mean intensity: all {s['relative_rmse']:.1%}, single {s['relative_rmse_single']:.1%}, "

@@ -30,7 +30,7 @@ def register(app: typer.Typer) -> None:
         from ..memory import budget as memory_budget
         from ..runners.tables import run_tables
 
-        check_output(out, "-o", ARTIFACT)
+        check_output(out, "-o", ARTIFACT, inputs=[yarns])
         res = run_tables(yarns, out, preset=preset, radius=radius, seed=seed, nbins=bins, hair_mode=hair_mode,
                          force=force, budget=memory_budget(budget))
         if res["skipped"]:

@@ -26,7 +26,7 @@ def register(app: typer.Typer) -> None:
         from ..memory import budget as memory_budget
         from ..runners.tile import run_tile
 
-        check_output(out, "-o", ARTIFACT)
+        check_output(out, "-o", ARTIFACT, inputs=[config])
         res = run_tile(config, out, force=force, budget=memory_budget(budget))
         if res["skipped"]:
             typer.echo(f"{out} is up to date")

@@ -33,8 +33,8 @@ def register(app: typer.Typer) -> None:
         from ..memory import budget as memory_budget
         from ..runners.voxelize import run_voxelize
 
-        check_output(out, "-o", ARTIFACT)
+        check_output(out, "-o", ARTIFACT, inputs=[tables])
         if export_npy is not None:
-            check_output(export_npy, "--export-npy", DIRECTORY)
+            check_output(export_npy, "--export-npy", DIRECTORY, inputs=[tables, out])
         sched = resolve_scheduler(scheduler, None, workers, threads_per_worker)
         typer.echo(run_voxelize(tables, out, res, supersample, export_npy, force, memory_budget(budget), sched))

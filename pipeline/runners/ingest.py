@@ -254,7 +254,9 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
     cs = validate_curves(cs, src_file, merge_duplicates)
     if write is not None:
         from ..io import write_curves
+        from ..outputs import check_not_input
 
+        check_not_input(write, "--write", extra_inputs.values())  # a scene's curve file (fabric.path)
         write_curves(write, cs)
         info(f"wrote {write}")
 
