@@ -23,7 +23,8 @@ scene's ``render.scheduler``; the ``LOOMLIGHT_SCHEDULER`` environment variable; 
 connected, and the Dask dashboard's address is printed); ``run_tasks`` maps the tasks onto it,
 draws the progress bar from task completions and returns the results in task order. A worker that
 dies has its tasks rerun elsewhere (Dask's own retries): the artifact is the same bytes. A scheduler
-that cannot be reached or is lost mid-run is a ``LoomError`` naming the address (exit 2); the
+that cannot be reached or is lost mid-run is a ``LoomError`` naming the address (exit 2): a refused
+connection at once, silence after ``LOOMLIGHT_CONNECT_TIMEOUT`` seconds (default 10); the
 artifact under construction is discarded by its writer, and the previous one stays.
 
 ``worker_cache(key, build)`` keeps what a task needs and its process already built (a BVH, the
@@ -166,6 +167,17 @@ def _worker_env(spec: Scheduler) -> dict:
     return env
 
 
+def probe_address(address: str, timeout: float) -> None:
+    """Open and close a TCP connection to ``tcp://HOST:PORT``: a refused connection, an unknown host or
+    an unreachable network raises its OSError at once (Dask's client retries those until its timeout);
+    only silence waits out ``timeout`` seconds (``TimeoutError``)."""
+    import socket
+
+    host, _, port = address[len("tcp://"):].rpartition(":")
+    with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout):
+        pass
+
+
 @contextmanager
 def session(spec: Scheduler | None):
     """Run the block's ``run_tasks`` on ``spec`` (module doc). Local: nothing is started."""
@@ -198,6 +210,7 @@ def session(spec: Scheduler | None):
         else:
             try:
                 timeout = float(os.environ.get(CONNECT_TIMEOUT_ENV) or 10)
+                probe_address(spec.address, timeout)
                 client = Client(spec.address, timeout=timeout, set_as_default=False)
             except (OSError, TimeoutError) as e:
                 raise LoomError(None, "--scheduler", f"cannot reach the Dask scheduler at {spec.address} "
