@@ -199,7 +199,7 @@ def _describe_fabric(f: dict) -> str:
 
 
 def check_scene_matches(scene, path, option: str) -> None:
-    """Refuse a scene whose fabric or yarn types are not those the ``fibers`` or ``tables`` artifact at
+    """Refuse a scene whose fabric or yarn types are not those the ``fibers``, ``tables`` or ``yarns`` artifact at
     ``path`` was made of (``--fibers``/``--tables`` of another scene, file or preset), naming both.
 
     The rule: ingest records ``pipeline.scene.ingest_identity`` of its scene (or of its bare curve
@@ -216,12 +216,12 @@ def check_scene_matches(scene, path, option: str) -> None:
 
     art = Artifact(path)
     rec = art.summary.get("ingest_identity")
-    if not isinstance(rec, dict) or art.kind not in ("fibers", "tables"):
+    if not isinstance(rec, dict) or art.kind not in ("fibers", "tables", "yarns"):
         return
     mine = jsonable(ingest_identity(scene))
     made = f"{Path(path).name} (--{option}, made from {rec.get('scene') or rec['fabric'].get('file')})"
-    fix = "render the scene it was made from, or re-run ingest and " + ("realize" if art.kind == "fibers" else "tables") \
-        + " on this scene"
+    fix = "render the scene it was made from, or re-run ingest" + {"fibers": " and realize", "tables": " and tables"}.get(
+        art.kind, "") + " on this scene"
     strip = lambda f: {k: v for k, v in f.items() if k != "file"}  # noqa: E731  (a renamed copy is the same file)
     if strip(mine["fabric"]) != strip(rec["fabric"]):
         raise LoomError(scene.path, "fabric", f"the scene's fabric ({_describe_fabric(mine['fabric'])}) is not the one "

@@ -13,6 +13,7 @@ checked (not an input, not a file or directory in the way) before anything is re
 """
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -165,11 +166,32 @@ def check_inputs(scene, m, options) -> None:
             raise LoomError(None, f"--{inp.option}" if inp.option in CLI_INPUTS else f"--set {inp.option}",
                             f"{via} needs {inp.what}: pass {how}")
     check_bcsdf_names(scene, options)
+    check_set_artifacts(options)
     from ..render_setup import check_scene_matches
 
-    for key in ("fibers", "tables"):
+    for key in ("fibers", "tables", "yarns"):
         if options.get(key):
-            check_scene_matches(scene, options[key], key)
+            check_scene_matches(scene, options[key], key if key != "yarns" else "set yarns")
+
+
+def check_set_artifacts(options) -> None:
+    """Every ``--set KEY=PATH.zarr`` names an artifact of the kind KEY reads (``INPUT_KINDS``), and none is
+    passed over: ``--set tiling=`` names the tiling ``--fibers`` names, if both are given."""
+    from ..artifacts import read_meta
+
+    extra = options.get("extra") or {}
+    for key, value in sorted(extra.items()):
+        want = {**INPUT_KINDS, "tiling": "tiling"}.get(key)
+        if want is None or not str(value).endswith(".zarr"):
+            continue   # not an artifact setting (a tiling config .toml is built from by --build)
+        want = (want,) if isinstance(want, str) else want
+        found = read_meta(value).get("kind")
+        if found not in want:
+            raise LoomError(value, f"--set {key}", f"expected a {' or '.join(repr(k) for k in want)} artifact, found a "
+                            f"{found!r} artifact")
+    tiling, fibers = extra.get("tiling"), options.get("fibers")
+    if tiling and fibers and os.path.realpath(tiling) != os.path.realpath(fibers):
+        raise LoomError(None, "--set tiling", f"names {tiling} while --fibers names {fibers}; give the tiling once")
 
 
 def check_bcsdf_names(scene, options) -> None:
