@@ -365,6 +365,24 @@ class Artifact:
     def __contains__(self, name: str) -> bool:
         return name in self._checksums
 
+    def verify(self) -> int:
+        """Read every array, in blocks, and compare its sha256 and crc32c with the ones recorded at write (a
+        deleted, truncated or garbled chunk is a LoomError naming the array); returns the bytes read."""
+        total = 0
+        for name, rec in sorted(self._checksums.items()):
+            place = f"array {name}"
+            try:
+                a = self.group[name]
+                got = array_checksums(a)
+            except Exception as e:  # zarr / codec errors: a truncated or garbled chunk, a missing array directory
+                raise LoomError(self.path, place, f"cannot be read, chunk missing or corrupt ({_short(e)}); "
+                                "rebuild it with its stage (--force if it says up to date)") from None
+            if got["sha256"] != rec.get("sha256") or got["crc32c"] != rec.get("crc32c"):
+                raise LoomError(self.path, place, "content does not match its checksum (chunk missing or corrupt); "
+                                "rebuild it with its stage (--force if it says up to date)")
+            total += int(a.nbytes)
+        return total
+
     def arrays(self) -> dict[str, Any]:
         return dict(_walk_arrays(self.group))
 

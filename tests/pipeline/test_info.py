@@ -147,7 +147,7 @@ def test_info_json_is_the_recorded_metadata_whole(tmp_path, cli):
                 "params": {"k": 1, "name": "x"}, "inputs": meta["inputs"], "wall_time_s": meta["wall_time_s"],
                 "peak_memory_bytes": meta["peak_memory_bytes"], "created": meta["created"],
                 "loomlight_version": meta["loomlight_version"], "build_key": meta["build_key"],
-                "content_hash": meta["content_hash"], "arrays": meta["arrays"]}
+                "content_hash": meta["content_hash"], "arrays": meta["arrays"], "arrays_verified": False}
     assert doc == expected
     assert list(doc) == list(expected)
     assert doc["inputs"]["source"]["sha256"] == hashlib.sha256(src.read_bytes()).hexdigest()
