@@ -125,6 +125,11 @@ def load_scene(path: str | Path) -> Scene:
         raise LoomError(path, "fabric.generator", "source = 'generator' needs a [fabric.generator] table")
     if "path" in fabric:
         fabric["path"] = str((path.parent / fabric["path"]).resolve()) if not Path(fabric["path"]).is_absolute() else fabric["path"]
+        what = "WIF draft" if src == "wif" else "curve file"
+        if Path(fabric["path"]).is_dir():
+            raise LoomError(path, "fabric.path", f"{fabric['path']} is a directory, not a {what}")
+        if not Path(fabric["path"]).is_file():
+            raise LoomError(path, "fabric.path", f"{what} {fabric['path']} not found")
     scene_tbl = raw.get("scene", {})
     camera = None
     if "camera" in raw:

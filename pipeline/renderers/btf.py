@@ -179,8 +179,13 @@ def load_obj(path, repeat: float) -> DressedMesh:
     from ..io.obj_mesh import read_obj_mesh
 
     p = Path(path)
+    if p.is_dir():
+        raise LoomError(p, "--set mesh", "is a directory; give a Wavefront OBJ triangle mesh file (.obj)")
     if not p.is_file():
-        raise LoomError(p, None, "mesh file not found (--set mesh)")
+        raise LoomError(p, "--set mesh", "mesh file not found")
+    if p.suffix.lower() != ".obj":
+        raise LoomError(p, "--set mesh", f"is not a Wavefront OBJ mesh (suffix {p.suffix or 'none'}); the btf method "
+                        "renders an .obj triangle mesh with texture coordinates")
     for ln, line in enumerate(p.read_text(errors="replace").splitlines(), 1):
         parts = line.split()
         if parts and parts[0] == "f" and any(len(c.split("/")) < 2 or c.split("/")[1] == "" for c in parts[1:]):

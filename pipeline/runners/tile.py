@@ -136,9 +136,12 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
         inputs["block_map"] = cfg["tiling"]["block_map"]
     if "path" in s:
         inputs["surface"] = s["path"]
+    places = {"scene": "scene", "block_map": "tiling.block_map", "surface": "surface.path",
+              **{f"exemplar{k}": f"exemplars[{k}].path" for k in range(len(cfg["exemplars"]))}}
     for name, p in inputs.items():
-        if not Path(p).exists():
-            raise LoomError(config, name if name != "config" else None, f"file not found: {p}")
+        if not Path(p).is_file():
+            what = "is a directory, not a file" if Path(p).is_dir() else "file not found"
+            raise LoomError(config, places.get(name), f"{what}: {p}")
     w = ArtifactWriter(out, kind="tiling", stage="tile", params={"config": cfg},
                        inputs={name: (p, FILE) for name, p in inputs.items()}, started=t_start)
     if not force and w.up_to_date():
