@@ -4,7 +4,9 @@ Writes the linear float32 EXR (RGB plus the method's extra channels: alpha ``A``
 ``variance``), an sRGB PNG preview beside it, and a ``render`` artifact ``<out stem>.zarr`` beside
 them holding the image (chunked) and the statistics (``pipeline.runners.render``). Size, spp and seed
 default to the scene's camera and [render] table. The methods, their sources and settings come from
-the renderer registry (``pipeline.renderers``).
+the renderer registry (``pipeline.renderers``). The artifacts a method reads that no option gives
+(``--fibers``, ``--tables``, ``--set KEY=PATH``) are built into a cache beside the output and reused
+(``pipeline.autobuild``; ``--cache-dir``, ``--no-build``); one line says what was built or reused.
 """
 from __future__ import annotations
 
@@ -38,6 +40,12 @@ def register(app: typer.Typer) -> None:
                threads: int = typer.Option(None, "--threads", help="numba threads (default: all cores); the image does not depend on it."),
                exposure: float = typer.Option(0.0, "--exposure", help="PNG preview exposure in stops (finite, within +-64)."),
                set_: list[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help=settings_help()),
+               cache_dir: Path = typer.Option(None, "--cache-dir", help="Where the artifacts no option gives are built "
+                                              "and reused (default: .loomlight-cache beside -o; docs/one-command-render.md)."),
+               no_build: bool = typer.Option(False, "--no-build", help="Refuse a render whose method reads an "
+                                             "artifact no option gives, instead of building it (by default ingest, "
+                                             "tables or realize, tile and precompute build it at their defaults into "
+                                             "--cache-dir, and it is reused while the scene and code are unchanged)."),
                scheduler: str = SCHEDULER, workers: int = WORKERS, threads_per_worker: int = THREADS_PER_WORKER):
         """Render a scene to a linear EXR, an sRGB PNG preview and a render artifact with statistics."""
         from ..errors import LoomError, check_name
@@ -60,6 +68,7 @@ def register(app: typer.Typer) -> None:
         result = run_render(scene, method=method, out=out, width=width, height=height, spp=spp, seed=seed,
                             source=source, fibers=fibers, tables=tables, grid=grid, bcsdf=bcsdf, material=material, max_depth=max_depth,
                             threads=threads, exposure=exposure, settings=set_ or [], max_spp=max_spp,
-                            scheduler=scheduler, workers=workers, threads_per_worker=threads_per_worker, cache=cache)
+                            scheduler=scheduler, workers=workers, threads_per_worker=threads_per_worker, cache=cache,
+                            build=not no_build, cache_dir=cache_dir, say=typer.echo)
         for line in result:
             typer.echo(line)

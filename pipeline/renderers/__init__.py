@@ -294,6 +294,11 @@ def render_schema() -> dict:
                                        "to reach target_error (0: off)"},
             "target_error": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
                              "description": "adaptive sampling: relative standard error of a pixel's mean aimed at"},
+            "tiling": {"type": "string", "minLength": 1,
+                       "description": "a tiling configuration (.toml, relative to the scene) for methods on a tiling "
+                                      "(prt, btf, fiberpath_shell; fiberpath then renders the tiling too): render builds "
+                                      "the tiling and its precomputes from it when no option gives them "
+                                      "(--set tiling=CONFIG.toml does the same)"},
             "cache": {"type": "number", "minimum": 0,
                       "description": "volpath --source procedural: the render-time fibre cache budget in MiB "
                                      "(0: every lookup procedural; default 2048); --cache overrides it"},

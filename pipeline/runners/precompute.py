@@ -280,9 +280,12 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.precompute.svf import packed_bytes, pca_error_report, ssdf_pca
 
+    from .. import compilation
     from ..artifacts import ArtifactWriter
     from ..chunks import ChunkTask, open_for_chunk, run_tasks, session
+    from ..progress import status
 
+    compilation.watch()
     p.check()
     _threads(threads)
     tiling = Path(tiling)
@@ -344,7 +347,8 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
             g = f"exemplar_{k}/"
             t0 = time.perf_counter()
             packed = open_for_chunk(store, g + "visibility")[...]
-            pca = ssdf_pca(packed, R, R, p.components, p.seed, chunk=p.chunk, hold=hold)
+            with status(f"svf: PCA of the SSDFs, exemplar {k} ({S:,} segments)"):
+                pca = ssdf_pca(packed, R, R, p.components, p.seed, chunk=p.chunk, hold=hold)
             del packed
             w.write(g + "ssdf_mean", pca.mean)
             w.write(g + "ssdf_basis", pca.basis, chunks=(min(8, p.components), D))
@@ -498,9 +502,12 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     from stages.core.shading.material import MAT_BCSDF
     from stages.precompute.iirtf import exemplar_slabs, mean_free_path
 
+    from .. import compilation
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session
+    from ..progress import progress, status
 
+    compilation.watch()
     p.check()
     _threads(threads)
     tiling = Path(tiling)
@@ -531,13 +538,15 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     compile_s = time.perf_counter() - t0
     mfp = {}
     t0 = time.perf_counter()
-    for k in ks:
-        ell, se, n = mean_free_path(sc, k, slabs[k, 0], slabs[k, 1], periods[k], mof, mats, n_paths=p.mfp_paths,
-                                    seed=p.seed, max_depth=p.max_depth)
-        if not (n > 0 and math.isfinite(ell) and ell > 0):
-            raise LoomError(tiling, f"exemplar {k}", "no path scattered twice inside the fabric, so it has no mean "
-                            f"free path (are its fibres black, or is it empty?); measured {n} free paths")
-        mfp[k] = (ell, se, n)
+    with progress(f"iirtf: mean free path ({p.mfp_paths:,} paths per exemplar)", len(ks)) as advance:
+        for k in ks:
+            ell, se, n = mean_free_path(sc, k, slabs[k, 0], slabs[k, 1], periods[k], mof, mats, n_paths=p.mfp_paths,
+                                        seed=p.seed, max_depth=p.max_depth)
+            if not (n > 0 and math.isfinite(ell) and ell > 0):
+                raise LoomError(tiling, f"exemplar {k}", "no path scattered twice inside the fabric, so it has no mean "
+                                f"free path (are its fibres black, or is it empty?); measured {n} free paths")
+            mfp[k] = (ell, se, n)
+            advance()
     mfp_s = time.perf_counter() - t0
     bs = art["block_size"]
     targets = np.array([p.cell_factor * mfp[k][0] if k in mfp else max(bs[0], bs[1]) for k in range(len(periods))])
@@ -575,9 +584,10 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
         w.write("materials", mats)
         tabs = np.zeros((len(mats), p.theta_samples, J, 3))
         t0 = time.perf_counter()
-        for m, row in enumerate(mats):
-            if int(row[0]) == MAT_BCSDF:
-                tabs[m] = bcsdf_sh_table(row[1:11], p.order, p.theta_samples)
+        with status(f"iirtf: BCSDF SH tables C_S of {len(mats)} material(s)"):
+            for m, row in enumerate(mats):
+                if int(row[0]) == MAT_BCSDF:
+                    tabs[m] = bcsdf_sh_table(row[1:11], p.order, p.theta_samples)
         cs_s = time.perf_counter() - t0
         w.write("bcsdf_sh", tabs)
         pdict = {k: v for k, v in asdict(p).items() if k != "material"}

@@ -139,8 +139,11 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
 
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session
+    from .. import compilation
+    from ..progress import status
     from .precompute import materials_scene, periodic_scenes, pick_exemplars, tiling_input, tiling_materials
 
+    compilation.watch()
     p.check()
     if threads:
         import numba
@@ -189,8 +192,9 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
         samples = w.group["samples"][...].astype(np.float32)
         alpha = w.group["alpha"][...]
         t0 = time.perf_counter()
-        levels = fit_levels(samples, alpha, frames, view_dirs, light_dirs, p.lobes, p.threshold,
-                            max_rounds=p.max_rounds)
+        with status(f"btf: fitting {res}x{res} texels and their mip levels"):
+            levels = fit_levels(samples, alpha, frames, view_dirs, light_dirs, p.lobes, p.threshold,
+                                max_rounds=p.max_rounds)
         fit_s = time.perf_counter() - t0
         del samples
         fit_bytes = 0

@@ -144,8 +144,10 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.procedural.realize import realize_plan
 
+    from .. import compilation
     from ..chunks import ChunkTask, run_tasks, session, worker_cache
 
+    compilation.watch()
     check_options(preset, radius, spacing=spacing)
     params = {"preset": preset, "radius": radius, "seed": int(seed), "spacing": float(spacing)}
     w = ArtifactWriter(out, kind="fibers", stage="realize", params=params, inputs={"yarns": (yarns_path, "yarns")},

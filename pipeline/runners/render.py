@@ -153,10 +153,16 @@ def _cache_budget(cli, rs):
     return None
 
 
+def render_source(scene, m, options):
+    """The method's source: ``--source``, else the scene's ``render.source`` where the method has it, else
+    the method's default."""
+    scene_source = scene.render.get("source")
+    return m.source(options["source"] or (scene_source if scene_source in m.source_names else None))
+
+
 def check_inputs(scene, m, options) -> None:
     """The method's source exists and every artifact it reads was given."""
-    scene_source = scene.render.get("source")
-    src = m.source(options["source"] or (scene_source if scene_source in m.source_names else None))
+    src = render_source(scene, m, options)
     for inp in src.inputs:
         if not options.get(inp.option):
             via = f"{m.name} --source {src.name}" if len(m.sources) > 1 else m.name
@@ -219,8 +225,10 @@ def check_bcsdf_names(scene, options) -> None:
 def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
                fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None,
                exposure=0.0, settings=(), max_spp=None, budget=None, scheduler=None, workers=None,
-               threads_per_worker=None, cache=None):
-    """Render and publish; returns the lines to print (output paths and statistics). ``budget``
+               threads_per_worker=None, cache=None, build=False, cache_dir=None, say=print):
+    """Render and publish; returns the lines to print (output paths and statistics). ``build``: build
+    the inputs no option gave into the cache (``pipeline.autobuild``; ``cache_dir``, else beside ``out``),
+    saying what was built or reused through ``say``; otherwise they are refused. ``budget``
     (``pipeline.memory.budget``, default a fraction of the available memory): refuse before rendering
     when the estimated peak memory exceeds it. ``scheduler``: where the tile tasks run (``--scheduler``;
     ``pipeline.chunks``), with ``workers`` and ``threads_per_worker`` for a LocalCluster."""
@@ -251,6 +259,14 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     extra = parse_settings(settings, m)
     options = resolve_options(scene, m, width, height, spp, seed, source, fibers, tables, grid, bcsdf, material,
                               max_depth, threads, extra, max_spp, cache)
+    from .. import compilation
+
+    compilation.watch()
+    if build:
+        from ..autobuild import build_missing
+
+        check_bcsdf_names(scene, options)   # bad names first: nothing is built for a render that would be refused
+        build_missing(scene, m, render_source(scene, m, options), options, out, cache_dir, budget, sched, say)
     check_inputs(scene, m, options)
     if threads:
         import numba
@@ -268,7 +284,9 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     render_estimate(options, inputs).check(budget or memory_budget(), scene.path)
     options["out"] = str(out)  # where a distributed render puts its scratch film (not a parameter)
     t0 = time.perf_counter()
-    with session(sched) as dask:
+    from ..progress import status
+
+    with session(sched) as dask, compilation.group(f"{method} render"), status(f"{method}: setup and render"):
         result: RenderResult = m.run(scene, options)
         workers = dask.workers() if dask is not None else 0
     wall = time.perf_counter() - t0

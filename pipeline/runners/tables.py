@@ -219,6 +219,10 @@ def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.core.yarn.tables import STORED_FIELDS, table_bytes
 
+    from .. import compilation
+
+    compilation.watch()
+
     check_options(preset, radius, nbins)
     if hair_mode not in ("hybrid", "free"):
         raise LoomError(None, "--hair-mode", f"must be 'hybrid' or 'free', got {hair_mode!r}")
@@ -229,7 +233,11 @@ def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair
         return {"skipped": True}
     prep = prepare(yarns_path, preset, radius)
     tables_estimate(prep, nbins, hair_mode).check(budget or memory_budget(), prep.yarns.path)
-    cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode, derive=False, prepared=prep)
+    from ..progress import status
+
+    with status(f"tables: {len(prep.curve_length):,} yarns"):
+        cv, tab, info, dicts, yarns = build(yarns_path, preset, radius, seed, nbins, hair_mode, derive=False,
+                                            prepared=prep)
     parts = table_bytes(tab)
     with w:
         for name in STORED_FIELDS:

@@ -180,8 +180,8 @@ def test_render_method_and_source_options(cli, tmp_path):
     code, _, err = cli("render", demo, "--source", "realised", "-o", out)
     assert (code, err) == (2, ("error: --source: unknown render source 'realised' "
                                f"(known: {_known(all_sources())}); did you mean 'realized'?\n"))
-    # procedural without tables: the option the render command has (it said `--set tables=`)
-    code, _, err = cli("render", demo, "-o", out)
+    # procedural without tables and --no-build: the option the render command has (it said `--set tables=`)
+    code, _, err = cli("render", demo, "--no-build", "-o", out)
     assert (code, err) == (2, ("error: --tables: volpath --source procedural needs the procedural tables "
                                "(loomlight tables): pass --tables PATH.zarr\n"))
     assert list(tmp_path.iterdir()) == []

@@ -363,7 +363,7 @@ def test_cli_usage_errors(cli, tmp_path):
     for opt in ("--spp", "--width", "--height"):
         code, _, err = cli("render", scene, "--method", "fiberpath", "-o", tmp_path / "o.exr", opt, "0")
         assert code == 2 and opt in err
-    code, _, err = cli("render", scene, "--method", "fiberpath", "-o", tmp_path / "o.exr")
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--no-build", "-o", tmp_path / "o.exr")
     assert code == 2 and "--fibers" in err
     assert not (tmp_path / "o.exr").exists()
 

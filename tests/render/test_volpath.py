@@ -467,7 +467,7 @@ def test_render_bad_input(small, tmp_path):
     for opt in ("--width", "--height", "--spp"):
         code, _, err = _cli(*base, opt, 0)
         assert code == 2 and opt in err
-    code, _, err = _cli(*base, "--source", "procedural")
+    code, _, err = _cli(*base, "--source", "procedural", "--no-build")   # (else render builds the tables)
     assert code == 2 and "tables" in err
     code, _, err = _cli(*base, "--source", "procedural", "--set", f"tables={tmp_path / 'missing.zarr'}")
     assert code == 2 and "not found" in err
