@@ -36,6 +36,8 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import fcntl
+import glob
 import hashlib
 import json
 import math
@@ -63,6 +65,7 @@ if TYPE_CHECKING:
 SCHEMA_VERSION = 1
 FILE = "file"                      # the kind of an input that is a plain file, not an artifact
 PAUSE_ENV = "LOOMLIGHT_PAUSE_AT"   # tests: "<point>[,<point>...]" sleeps there (see pause_point)
+PUBLISH_WAIT_ENV = "LOOMLIGHT_PUBLISH_WAIT"   # seconds a reader waits for a publication in progress (30)
 _HEX64 = re.compile(r"^[0-9a-f]{64}$")
 
 
@@ -265,8 +268,10 @@ def stat_fingerprint(path: str | Path, kind=None) -> str:
 # ------------------------------------------------------------------------------------------------
 # reading
 def read_meta(path: str | Path) -> dict:
-    """The ``loomlight`` attribute block of an artifact, refusing incomplete ones."""
+    """The ``loomlight`` attribute block of an artifact, refusing incomplete ones (a publication of it
+    left half done is settled first: ``settle``)."""
     path = Path(path)
+    settle(path)
     if not path.exists():
         raise LoomError(path, None, "artifact not found")
     if not (path / "zarr.json").exists():
@@ -764,18 +769,62 @@ def _publish_set(moves: list[tuple[Path, Path]], path: Path) -> None:
 
 
 def _roll_forward(journal: Path) -> None:
-    """Finish the moves a killed publication listed (those whose temporary is still the new one)."""
+    """Finish the moves a killed publication listed (those whose temporary is still the new one). Under
+    a lock on the journal: two processes that find it (a writer, readers: ``settle``) finish it once."""
     try:
-        entries = json.loads(journal.read_text())
-    except (OSError, ValueError):
-        entries = []
-    for t, d, digest in entries:
-        t, d = Path(t), Path(d)
-        if t.is_dir() and (not (t / "zarr.json").is_file() or _sha256_file(t / "zarr.json") != digest):
-            continue  # the previous artifact, exchanged out: clean_stale removes it
-        if t.exists():
-            _move(t, d)
-    journal.unlink(missing_ok=True)
+        fh = open(journal, "rb")
+    except OSError:
+        return  # finished by another process
+    with fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        if not journal.exists():
+            return  # another process finished it while this one waited for the lock
+        try:
+            entries = json.loads(fh.read())
+        except (OSError, ValueError):
+            entries = []
+        for t, d, digest in entries:
+            t, d = Path(t), Path(d)
+            if t.is_dir() and (not (t / "zarr.json").is_file() or _sha256_file(t / "zarr.json") != digest):
+                continue  # the previous artifact, exchanged out: clean_stale removes it
+            if t.exists():
+                _move(t, d)
+        journal.unlink(missing_ok=True)
+
+
+def settle(path: str | Path) -> None:
+    """Before a reader reads the artifact at ``path``, or a file published with it (a render's EXR: pass
+    its ``.zarr``): a publication of that set which a killed process left half done (its journal still
+    there, ``_publish_set``) is finished here, as its next writer would, and one in progress is waited
+    for (``LOOMLIGHT_PUBLISH_WAIT`` seconds, default 30, then refused), so that a reader sees the old set
+    or the new one, never the new EXR beside the old PNG and artifact. Without a journal beside ``path``
+    (the common case) this is one directory listing."""
+    path = Path(path)
+    pattern = str(path.parent / (glob.escape(f".{path.name}") + ".publish-*.json"))
+    deadline = None
+    while True:
+        journals = [Path(j) for j in glob.glob(pattern) if _OWNED.search(Path(j).name)]
+        if not journals:
+            return
+        live = []
+        for j in journals:
+            if _owner_dead(j):
+                try:
+                    _roll_forward(j)
+                except OSError as e:  # a reader without write access to the directory
+                    raise LoomError(path, None, f"a publication of it was interrupted and cannot be finished "
+                                    f"here ({_short(e)}); run its stage again") from None
+            else:
+                live.append(j)
+        if not live:
+            continue
+        wait = float(os.environ.get(PUBLISH_WAIT_ENV) or 30)
+        deadline = deadline if deadline is not None else time.monotonic() + wait
+        if time.monotonic() >= deadline:
+            pid = _OWNED.search(live[0].name).group(2)
+            raise LoomError(path, None, f"is being published by process {pid} (its files are changing); read it "
+                            "when that has finished")
+        time.sleep(0.05)
 
 
 def _fill(dtype: np.dtype):

@@ -49,10 +49,15 @@ def write_exr(path: str | Path, rgb: np.ndarray, extra: dict[str, np.ndarray] | 
 
 
 def read_exr(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """(RGB float32 (H, W, 3), other channels by name). Bad files raise a one-line LoomError."""
+    """(RGB float32 (H, W, 3), other channels by name). Bad files raise a one-line LoomError. A render's
+    EXR is published with its PNG and artifact as one set: an interrupted publication of that set is
+    settled first (``pipeline.artifacts.settle``), so the EXR read is the one the artifact describes."""
     import OpenEXR
 
+    from .artifacts import settle
+
     path = Path(path)
+    settle(path.with_suffix(".zarr"))
     if not path.exists():
         raise LoomError(path, None, "file not found")
     try:
