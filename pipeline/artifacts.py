@@ -13,8 +13,9 @@ moment leaves no partial artifact at the output path and the previous artifact u
 writer of that path (even one that finds the artifact up to date) removes what killed runs left.
 Files published together with an artifact (a render's EXR and PNG: ``companions``) go through a
 journal: all of them are complete before it is written, and a publication a kill interrupted
-after that is finished by the next writer of the artifact, so the set on disk is either the old
-one or the new one.
+after that is finished by the next writer of the artifact or by the next reader of it or of its files
+(``settle``, in ``read_meta`` and ``images.read_exr``; a publication in progress is waited for), so a
+reader sees either the old set or the new one.
 
 Artifacts are what they claim: at write every array gets a sha256 and a crc32c of its bytes, and
 the content hash covers the kind, the summary, the parameters and those checksums. ``Artifact``
