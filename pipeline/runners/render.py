@@ -24,6 +24,32 @@ INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid
                "iirtf": "iirtf", "btf": "btf", "yarns": "yarns"}  # artifact kinds per option
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
+# the bound from time on --spp / --max-spp (``pipeline.limits.WorkEstimate``): camera paths a thread traces
+# in a second, a rate no method reaches (measured: 2-6e4 fiberpath and volpath paths a thread-second, README)
+PATHS_PER_THREAD_S = 1e7
+
+
+def render_work(options: dict, sched, method: str):
+    """The least time of a render's camera paths (``WorkEstimate``: every pixel's spp, at most max_spp more
+    each), on this process's threads or a LocalCluster's; None on a running scheduler (its workers are not
+    known before connecting)."""
+    from ..limits import WorkEstimate
+
+    if sched is not None and sched.kind == "address":
+        return None
+    if sched is not None and sched.kind == "processes":
+        threads = sched.workers * sched.threads_per_worker
+    else:
+        import numba
+
+        threads = numba.get_num_threads()
+    W, H, spp, more = options["width"], options["height"], options["spp"], options.get("max_spp") or 0
+    est = WorkEstimate(f"loomlight render --method {method}", threads)
+    est.add("camera paths", float(W) * H * spp, PATHS_PER_THREAD_S, f"{W} x {H} pixels x {spp:,} spp (--spp)")
+    if more:
+        est.add("adaptive paths (at most)", float(W) * H * more, PATHS_PER_THREAD_S,
+                f"{W} x {H} pixels x {more:,} more (--max-spp)")
+    return est
 
 
 def render_estimate(options: dict, inputs: dict) -> Estimate:
@@ -282,6 +308,10 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     writer = ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs,
                             companions=(out, out.with_suffix(".png")), started=t_start)
     render_estimate(options, inputs).check(budget or memory_budget(), scene.path)
+    work = render_work(options, sched, method)
+    if work is not None:
+        top = max(work.parts, key=lambda part: part[1])[2]
+        work.check(None, "--max-spp" if "--max-spp" in top else "--spp", "lower --spp or --max-spp")
     options["out"] = str(out)  # where a distributed render puts its scratch film (not a parameter)
     t0 = time.perf_counter()
     from ..progress import status

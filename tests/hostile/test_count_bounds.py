@@ -74,3 +74,14 @@ def test_time_limit_setting_checked(cli, ws, monkeypatch):
     monkeypatch.setenv("LOOMLIGHT_TIME_LIMIT", "soon")
     assert_refused(cli, ws, ["precompute", "iirtf", ws / "tiling.zarr", "-o", ws / "iirtf.zarr", *IIRTF_ARGS,
                              "--scene", ws / "scene.toml"], "LOOMLIGHT_TIME_LIMIT", "hours")
+
+
+def test_render_spp_bounded_by_time(cli, ws):
+    """``render --spp`` (and ``--max-spp``, the adaptive pass's most) had no bound: the camera paths' least
+    time (at 1e7 paths a thread-second, ~200x the measured rate) is refused past the time limit."""
+    base = ["render", ws / "scene.toml", "--method", "fiberpath", "--fibers", ws / "tiling.zarr", "--threads", "2",
+            "-o", ws / "render.exr"]
+    line = assert_refused(cli, ws, [*base, "--spp", "100000000000000"], "--spp", "camera paths",
+                          "8 x 6 pixels x 100,000,000,000,000 spp", "would take at least an estimated")
+    assert "years" in line
+    assert_refused(cli, ws, [*base, "--spp", "1", "--max-spp", "100000000000000"], "--max-spp", "adaptive paths")
