@@ -2,8 +2,9 @@
 
 ``run_ingest`` reads the input (``curves_from_input``: curve files through ``pipeline.io``, WIF drafts
 and scene generators through ``pipeline.generators``), checks the curves (``validate_curves``), gives
-every curve a yarn type, radius and colour, splines them (``stages.ingest.spline_process``) and
-publishes the ``yarns`` artifact.
+every curve a yarn type, radius and colour (``curve_colors``: the scene's group colour, else the
+draft's thread colour, else the yarn type's), splines them (``stages.ingest.spline_process``) and
+publishes the ``yarns`` artifact (its summary's ``thread_colors`` lists the colours per group).
 """
 from __future__ import annotations
 
@@ -20,7 +21,10 @@ from ..memory import Estimate, budget as memory_budget
 from ..limits import MAX_COORD, MAX_LENGTH, coordinate_problem, first_bad_row
 from ..progress import info, warn
 from ..scene import load_scene
+from ..thread_colors import FROM_DRAFT, FROM_SCENE, FROM_TYPE, describe as describe_colors
 
+# the colour the yarns inspector draws a yarn whose colour is its yarn type's (the preset albedo is
+# resolved later, by tables / realize); never rendered
 DEFAULT_COLORS = {"warp": (0.80, 0.78, 0.72), "weft": (0.25, 0.35, 0.60), "knit": (0.70, 0.25, 0.22),
                   "other": (0.6, 0.6, 0.6)}
 
@@ -115,6 +119,26 @@ def validate_curves(cs: CurveSet, file: Path, merge_duplicates: bool) -> CurveSe
     cs.points = pts_out
     cs.point_radius = None if cs.point_radius is None else rad_out
     return cs
+
+
+def curve_colors(cs: CurveSet, types: list, yarn_type: np.ndarray):
+    """(color (C, 3) float32 linear RGB, color_source (C,) int8) of every curve, by precedence: the
+    scene's colour of its yarn group (``yarns.<group>.color``, ``yarns.default`` merged in) wins over
+    the input file's thread colour (a WIF draft's), which wins over the yarn type's (its preset's
+    albedo, resolved by tables / realize: ``color`` then holds the group colour the inspector draws).
+    This is the one place the precedence is decided (``pipeline.thread_colors``)."""
+    n = len(cs.points)
+    color = np.empty((n, 3), dtype=np.float32)
+    source = np.empty(n, dtype=np.int8)
+    for c in range(n):
+        scene_col = types[yarn_type[c]].get("color")
+        if scene_col is not None:
+            color[c], source[c] = scene_col, FROM_SCENE
+        elif cs.color[c] is not None:
+            color[c], source[c] = cs.color[c], FROM_DRAFT
+        else:
+            color[c], source[c] = DEFAULT_COLORS[cs.group[c]], FROM_TYPE
+    return color, source
 
 
 def _estimate_radius(cs: CurveSet) -> float:
@@ -289,10 +313,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         rad[np.isnan(rad)] = est
         warn(f"{input_path}: no yarn radius given (--radius, fabric.radius or yarns.<group>.radius); "
              f"using half the median control-point spacing, {est:.6g}")
-    color = np.empty((ncurve, 3), dtype=np.float32)
-    for c in range(ncurve):
-        col = cs.color[c] or types[yarn_type[c]].get("color") or DEFAULT_COLORS[cs.group[c]]
-        color[c] = col
+    color, color_source = curve_colors(cs, types, yarn_type)
 
     points = np.concatenate(cs.points).astype(np.float32)
     offsets = np.concatenate([[0], np.cumsum([len(p) for p in cs.points])]).astype(np.int64)
@@ -306,6 +327,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         w.write("radius", rad.astype(np.float64))
         w.write("group", group_idx)
         w.write("color", color)
+        w.write("color_source", color_source)
         w.write("yarn_type", yarn_type)
         for name in ("tangents", "seg_curve", "seg_length", "seg_arclen", "curve_length", "frame_s",
                      "frame_offsets", "frame_normal", "frame_twist", "delta", "grid_lo", "grid_cell",
@@ -320,6 +342,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
             "yarn_types": types, "total_length": float(proc["curve_length"].sum()),
             "source_format": cs.source_format, "curve_type": cs.curve_type,
             "radius_range": [float(rad.min()), float(rad.max())],
+            "thread_colors": describe_colors(GROUPS, group_idx, color, color_source),
             "delta_max": float(proc["delta"].max()),
             "grid": {"dims": proc["grid_dims"].tolist(), "cell": float(proc["grid_cell"][0]),
                      "items": int(len(proc["grid_items"]))},
