@@ -11,11 +11,13 @@ scene's ``render.source``, which selects volpath's density source, is ignored. T
 (default) gives every fibre the BCSDF preset of its yarn group -- scene key ``yarns.<group>.bcsdf``
 (falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).
-Each yarn's colour (the scene's ``yarns.<group>.color`` as realized into the fibers artifact) tints
+Each yarn's colour (the scene's ``yarns.<group>.color``, else a WIF draft's thread colour, else the
+preset's albedo, as realized into the fibers artifact) tints
 its BCSDF: both lobe colours, C_R inside the Fresnel-like weight and C_TT, are multiplied by it
 (``--set tint=yarn``, the default), so a dyed yarn keeps its colour under a preset fitted to white
 fibres; ``--set tint=none`` renders the presets as fitted. A preset given as a ``.toml`` path in the scene is resolved against the scene file.
-On a tiling, each yarn group's albedo is the scene's ``yarns.<group>.color``, else the yarn preset's.
+On a tiling, each yarn's albedo is the scene's ``yarns.<group>.color``, else its WIF exemplar's draft
+colour, else the yarn preset's (``tiling_fibers``; docs/wif-colours.md).
 Lights, camera and the optional ground plane come from the scene.
 """
 from __future__ import annotations
@@ -123,7 +125,13 @@ def fiber_materials(scene, fibers, options):
 
 
 def tiling_fibers(scene, art) -> Fibers:
-    """``Fibers``-like view of a tiling's exemplar fibres (per fibre: a global yarn index, its group and albedo)."""
+    """``Fibers``-like view of a tiling's exemplar fibres (per fibre: a global yarn index, its group and albedo).
+
+    A yarn's albedo: the scene's ``yarns.<group>.color``, else its WIF exemplar's draft colour
+    (``ex_yarn_color`` where ``ex_yarn_color_source`` is draft), else the yarn preset's albedo -- the
+    precedence ingest applies (``pipeline.runners.ingest.curve_colors``)."""
+    from ..thread_colors import FROM_DRAFT
+
     sizes = art.summary["exemplar_sizes"]
     ex_fibers = art["ex_fibers"]
     fy = art["ex_fiber_yarn"].astype(np.int64)
@@ -131,17 +139,24 @@ def tiling_fibers(scene, art) -> Fibers:
     for k in range(len(sizes)):
         fy[ex_fibers[k]:ex_fibers[k + 1]] += yarn_off[k]
     group = art["ex_yarn_group"].astype(np.int64)
+    # absent in tilings made before it: no draft colours
+    draft = (np.asarray(art["ex_yarn_color_source"]) == FROM_DRAFT) if "ex_yarn_color_source" in art \
+        else np.zeros(len(group), bool)
     albedo = np.empty((len(group), 3))
     for g in range(len(GROUP_NAMES)):  # every group present (was warp and weft only: other rows stayed unset)
         if not np.any(group == g):
             continue
         yt = scene.yarn_type(GROUP_NAMES[g])
         col = yt.get("color")
-        if col is None:
-            from ..presets import load_preset
+        if col is not None:   # the scene's colour wins over the draft's
+            albedo[group == g] = np.broadcast_to(np.asarray(col, float), 3)
+            continue
+        from ..presets import load_preset
 
-            col = load_preset(yt.get("preset") or (art.params["config"].get("yarn", {}).get("preset", "cotton1")))["albedo"]
+        col = load_preset(yt.get("preset") or (art.params["config"].get("yarn", {}).get("preset", "cotton1")))["albedo"]
         albedo[group == g] = np.broadcast_to(np.asarray(col, float), 3)
+        here = (group == g) & draft
+        albedo[here] = np.asarray(art["ex_yarn_color"], float)[here]
     return Fibers(art.path, art["ex_points"], art["ex_radius"], art["ex_offsets"], fy.astype(np.int32),
                   albedo, group)
 

@@ -14,7 +14,8 @@ Configuration (``schemas/tile-config.schema.json``; relative paths against the f
                    block_stitches = [bx, by] stitches per block (default [1, 1])
   [[exemplars]]    woven: pattern = plain | twill (n, m) | satin (n, step) | basket (n) | wif (path), ends,
                    picks (the exemplar size; default the draft's natural repeat), invert (swap warp and
-                   weft faces: 4/1 satin -> 1/4 satin), name;
+                   weft faces: 4/1 satin -> 1/4 satin), name; a WIF's thread colours are recorded per
+                   exemplar yarn (ex_yarn_color, ex_yarn_color_source; docs/wif-colours.md);
                    knitted: pattern = stockinette | garter | rib1x1, wales, courses (default the pattern's
                    repeat: 1 x 1, 1 x 2, 2 x 1), name. One tiling's exemplars are all woven or all knitted.
   [tiling]         repeat = [ru, rv] repeats of exemplar 0 over the cloth (default [2, 2]) -> the block
@@ -196,6 +197,8 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
         w.write("ex_fiber_yarn", cat([e["fiber_yarn"] for e in exs]))
         w.write("ex_fibers", ex_fibers)
         w.write("ex_yarn_group", cat([e["yarn_group"] for e in exs]))
+        w.write("ex_yarn_color", cat([c for c, _ in layout.colors]))
+        w.write("ex_yarn_color_source", cat([src for _, src in layout.colors]))
         w.write("ex_over", cat([e["over"].ravel() for e in exs]).astype(np.int8))
         w.write("seg_block", cat([e["seg_block"] for e in exs]))
         w.write("ex_nblocks", np.array([e["nblocks"] for e in exs], np.int64))

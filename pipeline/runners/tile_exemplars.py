@@ -48,6 +48,7 @@ class Layout(NamedTuple):
     block_cells: tuple      # (bx, by) weave cells or stitches per block
     sizes: list             # per exemplar (nx, ny) cells: (ends, picks) or (wales, courses)
     overs: list             # per exemplar: the interlacement (ends, picks), or the stitches (courses, wales)
+    colors: list            # per exemplar: (color (Y, 3) float32 linear RGB, color_source (Y,) int8) of its yarns
 
 
 class Exemplars(NamedTuple):
@@ -110,6 +111,29 @@ def exemplar_interlacement(ex, file, place):
     return over
 
 
+def exemplar_colors(ex, n_ends: int, n_picks: int):
+    """(color (E+P, 3) float32, color_source (E+P,) int8) of an exemplar's yarns (ends, then picks, as
+    ``stages.tile.exemplar`` numbers them): a WIF exemplar's thread colours (end e takes the draft's end
+    e, modulo the draft's ends; likewise picks; ``invert`` keeps each thread's colour), source draft, else
+    source yarn type (``pipeline.thread_colors``; the renderers give those the scene's group colour or the
+    preset's albedo, ``pipeline.renderers.fiberpath.tiling_fibers``)."""
+    from ..thread_colors import FROM_DRAFT, FROM_TYPE
+
+    Y = n_ends + n_picks
+    color = np.zeros((Y, 3), np.float32)
+    source = np.full(Y, FROM_TYPE, np.int8)
+    if ex.get("pattern") == "wif":
+        from ..io.wif import parse
+
+        d = parse(ex["path"])
+        per_yarn = [d.warp_colors[e % len(d.warp_colors)] for e in range(n_ends)] + \
+                   [d.weft_colors[p % len(d.weft_colors)] for p in range(n_picks)]
+        for y, c in enumerate(per_yarn):
+            if c is not None:
+                color[y], source[y] = c, FROM_DRAFT
+    return color, source
+
+
 def is_knit(ex) -> bool:
     from stages.core.curves.knit import PATTERNS
 
@@ -162,7 +186,8 @@ def knit_stitches(ex, file, place):
 
 
 def tiling_layout(cfg, file) -> Layout:
-    """The kind, cell spacing, cells per block and size of every exemplar, checked (before any fibre)."""
+    """The kind, cell spacing, cells per block, size and yarn colours of every exemplar, checked (before any
+    fibre)."""
     kind = fabric_kind(cfg, file)
     places = [f"exemplars[{k}]" for k in range(len(cfg["exemplars"]))]
     if kind == "knit":
@@ -172,18 +197,20 @@ def tiling_layout(cfg, file) -> Layout:
         cells = tuple(cfg.get("knit", {}).get("block_stitches", [1, 1]))
         sizes = [knit_stitches(ex, file, pl) for ex, pl in zip(cfg["exemplars"], places)]
         overs = [stitch_types(ex["pattern"], *sz) for ex, sz in zip(cfg["exemplars"], sizes)]
+        colors = [exemplar_colors(ex, 0, courses) for ex, (_, courses) in zip(cfg["exemplars"], sizes)]
         names, what, key = ("wales", "courses"), "stitches", "knit.block_stitches"
     else:
         spacing = tuple(cfg.get("weave", {}).get("spacing", [DEFAULT_SPACING, DEFAULT_SPACING]))
         cells = tuple(cfg.get("weave", {}).get("block_cells", [1, 1]))
         overs = [exemplar_interlacement(ex, file, pl) for ex, pl in zip(cfg["exemplars"], places)]
         sizes = [tuple(o.shape) for o in overs]
+        colors = [exemplar_colors(ex, *o.shape) for ex, o in zip(cfg["exemplars"], overs)]
         names, what, key = ("ends", "picks"), "cells", "weave.block_cells"
     for pl, (nx, ny) in zip(places, sizes):
         if nx % cells[0] or ny % cells[1]:
             raise LoomError(file, pl, f"exemplar of {nx} {names[0]} x {ny} {names[1]} cannot be cut into blocks of "
                                       f"{cells[0]} x {cells[1]} {what} ({key})")
-    return Layout(kind, (float(spacing[0]), float(spacing[1])), (int(cells[0]), int(cells[1])), sizes, overs)
+    return Layout(kind, (float(spacing[0]), float(spacing[1])), (int(cells[0]), int(cells[1])), sizes, overs, colors)
 
 
 def default_radius(cfg, file) -> float:
