@@ -85,8 +85,22 @@ def _plain_flags(cmd) -> None:
         _plain_flags(sub)
 
 
+NO_KERNELS = ("info", "docs")   # commands that never compile a kernel (no numba import for them)
+
+
+def _watch_compilation(argv) -> None:
+    """Announce numba compilations (``pipeline.compilation``) in a command that runs: not for ``--help``,
+    ``--version`` or a command without kernels, which need not import numba."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] not in NO_KERNELS and not {"--help", "-h", "--version"} & set(args):
+        from .compilation import watch
+
+        watch()
+
+
 def main(argv: list[str] | None = None) -> int:
     try:
+        _watch_compilation(argv)
         command()(args=argv, standalone_mode=False)
     except LoomError as e:
         typer.echo(f"error: {e.one_line()}", err=True)

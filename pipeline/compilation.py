@@ -15,8 +15,10 @@ compiles again, in about the same time); of a kernel never timed here it says th
 ``group(label)`` names what compiles inside it (``volpath render``, ``tables``); without one the notice
 names the kernel's module.
 
-``watch()`` is called by the runners that compile (render and every stage it builds, tables, realize,
-precompute svf / iirtf / btf); it imports numba, so ``loomlight --help`` stays fast.
+``watch()`` is called by the command line for every command that runs (``pipeline.cli.main``; not for
+``--help``, ``--version``, ``info`` or ``docs``: it imports numba, and those stay fast), and by the runners
+that compile (render and every stage it builds, tables, realize, precompute svf / iirtf / btf) for
+callers of the API.
 """
 from __future__ import annotations
 
