@@ -168,3 +168,29 @@ def test_keys_follow_what_each_step_reads(tmp_path):
         assert all(a != b for a, b in zip(keys[name], keys["same"])), name
     assert len(set(keys["same"])) == 3
     assert base.tables().path == tmp_path / ".loomlight-cache" / f"tables-{base.tables().key}.zarr"
+
+
+def test_a_second_render_waits_for_the_first_then_reuses(scene_dir, tmp_path):
+    """Two renders wanting one artifact: the second waits on the lock beside it while the first builds, then
+    reuses what the first published (it does not build it again)."""
+    import fcntl
+    import threading
+    import time
+
+    from pipeline.autobuild import ensure
+    from pipeline.runners.ingest import run_ingest
+
+    pl = _planner(scene_dir / "scenes" / "single_yarn.toml", "bysdf", tmp_path / "o.exr")
+    node = pl.yarns()
+    node.path.parent.mkdir(parents=True)
+    lines = []
+    with open(node.path.parent / f".{node.path.name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)                      # the first render, building
+        t = threading.Thread(target=ensure, args=(node, lines.append))
+        t.start()
+        time.sleep(0.5)
+        assert t.is_alive() and lines == []                   # the second waits
+        run_ingest(scene_dir / "scenes" / "single_yarn.toml", node.path)   # the first publishes
+    t.join(30)
+    assert not t.is_alive()
+    assert lines == [f"reused yarns {node.path}"]
