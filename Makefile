@@ -79,13 +79,14 @@ help: ## list every target with what it does (this list)
 
 setup: $(VENV)/.installed ## create .venv and install loomlight with its test and Dask dependencies
 
-# two stages at a time, each one's output printed whole when it ends (no live progress bars then);
+# two stages at a time, their lines interleaved as they come (progress and compile notices live, as plain
+# lines off a terminal);
 # the tables and fibres first, so the longest chain (procedural volpath, the longest compilation on a
 # cold cache) starts at once beside the rest
 demo: $(VENV)/.installed ## set up .venv if needed, run the demo scene end to end, print the output paths
-	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json \
+	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=line $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json \
 	    $(OUT)/knit_fibers.zarr/zarr.json
-	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=target demo-outputs
+	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=line demo-outputs
 	@$(MAKE) --no-print-directory $(OUT)/compare/report.md
 	@echo "demo outputs:"
 	@echo "  which method, at equal error: $(OUT)/compare/report.html ($(OUT)/compare/convergence.png)"
