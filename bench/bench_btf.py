@@ -1,4 +1,4 @@
-"""btf render speed (seed 002 §7: "about 1 frame per second for a resolution of 730 x 400"): frames per second.
+"""btf render speed (Daubert et al. 2001 §7: "about 1 frame per second for a resolution of 730 x 400"): frames per second.
 
 Geometry: the draped damask's base surface (``data/tilings/damask.toml``: a 4 x 4 cloth over a sphere of
 radius 1, 40 x 40 quads, 3200 triangles, ``stages.tile.base_surfaces.sphere_drape``) with 8 texture

@@ -1,4 +1,5 @@
-"""bysdf (seed 004) against fiberpath on realized fibres, and multiscale against near on a distant view.
+"""bysdf (A Multi-scale Yarn Appearance Model with Fiber Details) against fiberpath on realized fibres, and multiscale against near on a distant
+view.
 
 Scene: the demo swatch (``data/scenes/demo.toml``: 8 x 8 plain weave of cotton1, 3 plies x 75 fibres
 per yarn) under its own lights; ``loomlight ingest`` and ``realize`` write into

@@ -1,4 +1,4 @@
-"""Procedural lookups against realized references (seed 000 §6.1 "Performance"): lookups per second.
+"""Procedural lookups against realized references (Luan, Zhao, Bala 2017 §6.1 "Performance"): lookups per second.
 
 Scenes: the demo scene (data/scenes/demo.toml, 16 cotton1 yarns) and the exactness swatch
 (data/scenes/gentle_swatch.toml: 2 x 2 cotton2 plain weave with gentle crimp). Each is ingested,

@@ -55,14 +55,14 @@ $(HUGE_OUT)/close.exr: $(HUGE_OUT)/tables.zarr/zarr.json $(HUGE_SCENE)
 # HUGE_SCENE= leaves the 10x row out
 TABLE1_INPUTS = $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/volpath-realized.exr $(LARGE_OUT)/close.exr \
 	$(if $(HUGE_SCENE),$(HUGE_OUT)/close.exr)
-table1: $(TABLE1_INPUTS) ## seed 000 Table 1: data sizes, procedural vs realized volpath, the 1,000- and 3,200-yarn close-ups (about 20 GB) -> out/table1/report.md
+table1: $(TABLE1_INPUTS) ## Table 1 of Luan, Zhao, Bala 2017: data sizes, procedural vs realized volpath, the 1,000- and 3,200-yarn close-ups (about 20 GB) -> out/table1/report.md
 	$(LL) evaluate --table1 --scene $(SCENE) --scene $(LARGE_SCENE) $(if $(HUGE_SCENE),--scene $(HUGE_SCENE)) \
 	    --procedural $(OUT)/eval/volpath-procedural.exr --realized $(OUT)/eval/volpath-realized.exr \
 	    --unrealized $(LARGE_OUT)/close.exr $(if $(HUGE_SCENE),--unrealized $(HUGE_OUT)/close.exr) -o out/table1
 	@echo "report: out/table1/report.md"
 
 # --- light sweeps and fiberpath against volpath ---
-sweep: $(OUT)/fibers.zarr/zarr.json ## seed 001 Fig. 13 / Table 2 style sweep of the demo over light directions and SG sharpness
+sweep: $(OUT)/fibers.zarr/zarr.json ## Khungurn et al. 2017 Fig. 13 / Table 2 style sweep of the demo over light directions and SG sharpness
 	$(LL) evaluate --sweep data/sweeps/demo.toml -o $(OUT)/sweep
 	@echo "report: $(OUT)/sweep/report.md"
 
@@ -122,14 +122,14 @@ $(PRT)/damask_iirtf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(DAMASK
 
 PRT_SWEEP_INPUTS = $(foreach s,41 14,$(PRT)/flat$(s)_svf.zarr/zarr.json $(PRT)/flat$(s)_iirtf.zarr/zarr.json) \
 	$(PRT)/damask_svf.zarr/zarr.json $(PRT)/damask_iirtf.zarr/zarr.json
-prt-sweep: $(PRT_SWEEP_INPUTS) ## seed 001: prt against fiberpath on the damask's flat satins and the draped damask, 12 lights, split into terms (out/prt)
+prt-sweep: $(PRT_SWEEP_INPUTS) ## Khungurn et al. 2017: prt against fiberpath on the damask's flat satins and the draped damask, 12 lights, split into terms (out/prt)
 	@for s in $(PRT_SWEEPS); do \
 	    $(LL) evaluate --sweep data/sweeps/prt_$$s.toml -o $(PRT)/$$s && \
 	    $(LL) study prt-terms data/sweeps/prt_$$s.toml --sweep-dir $(PRT)/$$s -o $(PRT)/$$s/terms || exit 1; \
 	done
 	@for s in $(PRT_SWEEPS); do echo "reports: $(PRT)/$$s/report.md $(PRT)/$$s/terms/attribution.md"; done
 
-prt-study: $(VENV)/.installed ## seed 001 §6.1: the cell-size and SH-order strips on one exemplar (out/prt/study)
+prt-study: $(VENV)/.installed ## Khungurn et al. 2017 §6.1: the cell-size and SH-order strips on one exemplar (out/prt/study)
 	$(LL) study prt-params data/studies/prt_params.toml -o $(PRT)/study
 	@echo "report: $(PRT)/study/report.md (strips $(PRT)/study/cell_size.png, $(PRT)/study/sh_order.png)"
 
@@ -144,6 +144,6 @@ $(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/sce
 
 .PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json
 
-btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) ## seed 002: fitted textures of the damask's two satins against fiberpath, 12 lights (out/btf)
+btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) ## Daubert et al. 2001: fitted textures of the damask's two satins against fiberpath, 12 lights (out/btf)
 	@for s in 41 14; do $(LL) evaluate --sweep data/sweeps/btf_flat$$s.toml -o $(BTF_DIR)/flat$$s || exit 1; done
 	@for s in 41 14; do echo "report: $(BTF_DIR)/flat$$s/report.md"; done

@@ -346,7 +346,7 @@ def iirtf_size(tiling: Path, p) -> str:
     S, K = int(s.get("segments", 0)), int(s.get("exemplars", 0))
     return (f"precompute iirtf at its defaults (SH order {p.order}, cells of {p.cell_factor:g} mean free path, "
             f"{p.paths:,} paths per cell, {p.light_sampling} light sampling): {S:,} segments in {K} exemplar(s); "
-            "seed 001's full quality (its bar shows the time left once the cells are counted); pass --set iirtf=IIRTF.zarr from a cheaper precompute to skip it "
+            "the full quality of Khungurn et al. 2017 (its bar shows the time left once the cells are counted); pass --set iirtf=IIRTF.zarr from a cheaper precompute to skip it "
             "(make demo's: --cell-factor 3 --paths 200 --light-sampling mis)")
 
 

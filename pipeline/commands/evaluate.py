@@ -53,7 +53,7 @@ def register(app: typer.Typer) -> None:
         convergence: Optional[Path] = typer.Option(None, "--convergence", help="A comparison file (TOML, schemas/compare.schema.json, data/compare/): every method's error against time at equal error."),
         reference_only: bool = typer.Option(False, "--reference-only", help="--convergence: build (or check) the converged reference and stop."),
         no_memory: bool = typer.Option(False, "--no-memory", help="--convergence: skip the peak-memory render of each method in a process of its own."),
-        table1: bool = typer.Option(False, "--table1", help="Build the seed 000 Table 1 form (data sizes and render times)."),
+        table1: bool = typer.Option(False, "--table1", help="Build the Table 1 form of Luan, Zhao, Bala 2017 (data sizes and render times)."),
         scene: Optional[List[Path]] = typer.Option(None, "--scene", help="--table1: a scene file; repeat for several."),
         procedural: Optional[List[Path]] = typer.Option(None, "--procedural", help="--table1: procedural volpath render (EXR) of the matching --scene."),
         realized: Optional[List[Path]] = typer.Option(None, "--realized", help="--table1: realized volpath render (EXR) of the matching --scene."),

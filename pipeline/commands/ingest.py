@@ -26,8 +26,8 @@ def register(app: typer.Typer) -> None:
     ):
         """Read, validate and spline yarn curves and publish them as a yarns artifact.
 
-        Splines are C1 Catmull-Rom with arc length, rotation-minimising frames, seed 000's δ_i bound and a
-        segment grid. A scene's names (presets, BCSDFs, method, source, light types) are checked first."""
+        Splines are C1 Catmull-Rom with arc length, rotation-minimising frames, the δ_i bound of
+        Luan, Zhao, Bala 2017 and a segment grid. A scene's names (presets, BCSDFs, method, source, light types) are checked first."""
         from ..errors import LoomError
         from ..limits import check_positive
         from ..outputs import ARTIFACT, check_output

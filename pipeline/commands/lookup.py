@@ -16,7 +16,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "-o", "--out", help="Output .npz: inside, yarn, kind, direction, density, albedo."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
-        """Look up the procedural fibres at given points (seed 000 Algorithm 1).
+        """Look up the procedural fibres at given points (Luan, Zhao, Bala 2017 Algorithm 1).
 
         For every point: inside a fibre or not, yarn index (-1 outside), kind (0 none, 1 regular, 2 loop,
         3 hair), unit fibre direction (zero outside), density and albedo."""

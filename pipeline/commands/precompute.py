@@ -19,8 +19,8 @@ from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 app = typer.Typer(name="precompute", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
                   help="Precompute the light transport of a tiling's exemplars for render --method prt "
-                       "(seed 001 §4: svf, then iirtf), or fit one exemplar as a cloth texture for render "
-                       "--method btf (seed 002: btf).")
+                       "(Khungurn et al. 2017 §4: svf, then iirtf), or fit one exemplar as a cloth texture for render "
+                       "--method btf (Daubert et al. 2001: btf).")
 
 
 def register(root: typer.Typer) -> None:
@@ -54,7 +54,7 @@ def svf(
     workers: int = WORKERS,
     threads_per_worker: int = THREADS_PER_WORKER,
 ):
-    """Compute the segment visibility functions of every fibre segment (seed 001 §4.1).
+    """Compute the segment visibility functions of every fibre segment (Khungurn et al. 2017 §4.1).
 
     Per fibre segment: the binary visibility image of the sky from its
     midpoint in the exemplar repeated without end, its spherical signed distance function (SSDF) compressed
@@ -106,7 +106,7 @@ def iirtf(
     workers: int = WORKERS,
     threads_per_worker: int = THREADS_PER_WORKER,
 ):
-    """Compute the incoming indirect radiance transfer functions of every exemplar (seed 001 §4.2-4.3).
+    """Compute the incoming indirect radiance transfer functions of every exemplar (Khungurn et al. 2017 §4.2-4.3).
 
     The exemplar cut into cells of about a mean free
     path, and per cell the SH matrix A_C taking light to the indirect incoming radiance at the cell's
@@ -139,19 +139,20 @@ def btf(
     scene: Path = typer.Option(None, "--scene", help="Scene giving the yarn materials (default: the scene the "
                                                      "tiling names)."),
     resolution: int = typer.Option(32, "--resolution", help="Texels a side of the finest level (a power of two; "
-                                                            "seed 002: 32)."),
+                                                            "Daubert et al. 2001: 32)."),
     views: str = typer.Option("8x8", "--views", help="View grid THETAxPHI: rings of equal solid angle x azimuths "
                                                     "(8x8 = the paper's 64 table entries; 4x8 its 32)."),
     lights: str = typer.Option("8x8", "--lights", help="Light grid THETAxPHI, as --views."),
     spp: int = typer.Option(16, "--spp", help="Rays per texel and view (super-sampled alpha and radiance)."),
     lobes: int = typer.Option(2, "--lobes", help="Lafortune lobes per texel: 1 or 2."),
     threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "
-                                                             "mean change is below this (seed 002: 0.1)."),
+                                                             "mean change is below this (Daubert et al. 2001: 0.1)."),
     max_rounds: int = typer.Option(10, "--max-rounds", help="At most this many lobe/table alternations."),
     directions: str = typer.Option("cell", "--directions", metavar="<cell | grid>",
                                    help="cell: each sample's view and light uniform over its grid cell (the texture "
                                         "holds cell averages, so fibre glints between grid directions are not lost "
-                                        "or aliased); grid: the grid directions themselves (seed 002's point samples)."),
+                                        "or aliased); grid: the grid directions themselves (the point samples of "
+                                        "Daubert et al. 2001)."),
     max_depth: int = typer.Option(16, "--max-depth", help="Largest number of scattering events on a path."),
     rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
     bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset for yarn groups the scene names none for."),
@@ -164,7 +165,7 @@ def btf(
     workers: int = WORKERS,
     threads_per_worker: int = THREADS_PER_WORKER,
 ):
-    """Fit one exemplar of a tiling as a view-dependent cloth texture (seed 002 §4-§5).
+    """Fit one exemplar of a tiling as a view-dependent cloth texture (Daubert et al. 2001 §4-§5).
 
     Radiance samples of the repeat over view x light grids, path traced on its explicit fibres with
     its copies all around, alpha and average normals per texel; per texel diffuse + Lafortune lobes

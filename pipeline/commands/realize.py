@@ -24,7 +24,7 @@ def register(app: typer.Typer) -> None:
         workers: int = WORKERS,
         threads_per_worker: int = THREADS_PER_WORKER,
     ):
-        """Realize every fibre of the yarns explicitly, as a fibers artifact (seed 000 Eq. 1-4 and 7).
+        """Realize every fibre of the yarns explicitly, as a fibers artifact (Luan, Zhao, Bala 2017 Eq. 1-4 and 7).
 
         Regular, loop and hair fibres with radius, yarn, ply and kind, from the same random numbers as
         `loomlight tables`, so both describe one fabric."""

@@ -15,7 +15,7 @@ from pathlib import Path
 import typer
 
 app = typer.Typer(name="study", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
-                  help="Study the prt renderer against fiberpath (seed 001 §6): parameter strips and error "
+                  help="Study the prt renderer against fiberpath (Khungurn et al. 2017 §6): parameter strips and error "
                        "attribution.")
 
 
@@ -38,7 +38,7 @@ def prt_params(
     out: Path = _OUT,
     force: bool = _FORCE,
 ):
-    """Compare prt's IIRTF cell sizes and SH orders with fiberpath on one view (seed 001 §6.1)."""
+    """Compare prt's IIRTF cell sizes and SH orders with fiberpath on one view (Khungurn et al. 2017 §6.1)."""
     from ..outputs import DIRECTORY, check_output
     from ..runners.prt_study import run_params
 

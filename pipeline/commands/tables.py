@@ -16,13 +16,13 @@ def register(app: typer.Typer) -> None:
         preset: str = typer.Option(None, "--preset", metavar="<name>", help="Give every yarn this preset (data/yarns/NAME.toml)."),
         radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers."),
-        bins: int = typer.Option(32, "--bins", help="Azimuth bins of the regular-fibre tables (seed 000 Fig. 7)."),
+        bins: int = typer.Option(32, "--bins", help="Azimuth bins of the regular-fibre tables (Luan, Zhao, Bala 2017 Fig. 7)."),
         hair_mode: str = typer.Option("hybrid", "--hair-mode", metavar="<hybrid | free>",
                                       help="'hybrid' (stored hair z extents, z-bins) or 'free' (Algorithm 3)."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
-        """Build the procedural fibre tables of a yarns artifact (seed 000), all a renderer needs.
+        """Build the procedural fibre tables of a yarns artifact (Luan, Zhao, Bala 2017), all a renderer needs.
 
         Per yarn type and ply: fibre trajectories binned by azimuth; per yarn: hair tables (hybrid mode);
         loops from consistent random numbers; plus a copy of the yarn curves."""

@@ -220,7 +220,7 @@ def _table1_mode(art, plt, size):
     body = [[dict(TABLE1_COLUMNS)[k]] + [cell(k, r.get(k)) for r in rows] for k in keys if k != "scene"]
     fig = plt.figure(figsize=(size[0] / DPI, size[1] / DPI), layout="constrained")
     gs = fig.add_gridspec(1, 2, width_ratios=[1.6, 1])
-    _table(fig.add_subplot(gs[0, 0]), headers, body, "data size and render time (seed 000 Table 1 form)")
+    _table(fig.add_subplot(gs[0, 0]), headers, body, "data size and render time (Luan, Zhao, Bala 2017 Table 1 form)")
     ax = fig.add_subplot(gs[0, 1])
     t = np.asarray(art["render_time_s"], float)
     x = np.arange(len(rows))

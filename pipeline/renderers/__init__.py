@@ -124,7 +124,7 @@ _FIBERPATH_SOURCES = (
 
 METHODS = {m.name: m for m in (
     RenderMethod(
-        "volpath", "procedural fibres as an anisotropic micro-flake volume (seed 000)", "volpath",
+        "volpath", "procedural fibres as an anisotropic micro-flake volume (Luan, Zhao, Bala 2017)", "volpath",
         sources=(Source("procedural", (TABLES,), "lookups on the fly from procedural tables (--tables)"),
                  Source("realized", (FIBERS,), "the realized fibres in a BVH (--fibers)"),
                  Source("grid", (GRID,), "a voxelized medium (--grid)")),
@@ -132,7 +132,8 @@ METHODS = {m.name: m for m in (
         settings=(Setting("majorant_cell", "majorant grid cell size in scene units (default: a quarter of the "
                                            "mean yarn extent bound)"),
                   Setting("phase", "bcsdf (default): a collision scatters by the yarn's tinted fibre BCSDF, as "
-                                    "fiberpath's fibres do; microflake: seed 000's specular micro-flakes",
+                                    "fiberpath's fibres do; microflake: the specular micro-flakes of "
+                                    "Luan, Zhao, Bala 2017",
                           ("bcsdf", "microflake")),
                   Setting("albedo", "micro-flakes' single-scattering albedo -- bcsdf (default): each yarn's "
                                     "tinted BCSDF's mean albedo; color: the yarn's colour itself",
@@ -149,7 +150,7 @@ METHODS = {m.name: m for m in (
         default_source="realized", settings=_FIBERPATH_SETTINGS, materials=("bcsdf", "lambert")),
     RenderMethod(
         "prt", "precomputed light transport on a shell-mapped tiling: SVF single + IIRTF multiple scattering "
-               "(seed 001)", "prt",
+               "(Khungurn et al. 2017)", "prt",
         sources=(Source("precomputed", (TILING, SVF, IIRTF), "a tiling (--fibers) with its precomputed SVF and "
                                                               "IIRTF (--set svf=, --set iirtf=)"),),
         default_source="precomputed",
@@ -166,7 +167,8 @@ METHODS = {m.name: m for m in (
                   Setting("tint", "yarn (default) or none, as fiberpath (must match the IIRTF's materials)",
                           ("yarn", "none")))),
     RenderMethod(
-        "btf", "a fitted cloth texture (Lafortune lobes x view table, mip-mapped) on a triangle mesh (seed 002)",
+        "btf", "a fitted cloth texture (Lafortune lobes x view table, mip-mapped) on a triangle mesh "
+               "(Daubert et al. 2001)",
         "btf",
         sources=(Source("mesh", (BTF,), "an OBJ with texture coordinates (--set mesh=, --set repeat=) and the "
                                         "texture (--set btf=)"),
@@ -182,7 +184,8 @@ METHODS = {m.name: m for m in (
                   Setting("shadows", "off (default) or on: shadow rays towards directional lights through the "
                                      "mesh's alpha", ("off", "on")))),
     RenderMethod(
-        "bysdf", "yarn curves only, plies and fibres implicit, four-lobe yarn scattering (seed 004)", "bysdf",
+        "bysdf", "yarn curves only, plies and fibres implicit, four-lobe yarn scattering (A Multi-scale Yarn "
+                 "Appearance Model with Fiber Details)", "bysdf",
         sources=(Source("yarns", (YARNS,), "the yarn curves of a yarns artifact (--set yarns=)"),),
         default_source="yarns",
         settings=(Setting("yarns", "the yarns artifact (loomlight ingest)"),

@@ -66,7 +66,7 @@ class BtfParams:
         if self.directions not in DIRECTIONS:
             raise LoomError(None, "--directions", f"must be one of {', '.join(DIRECTIONS)}, got {self.directions!r}")
         if self.lobes not in (1, 2):
-            raise LoomError(None, "--lobes", f"must be 1 or 2 (seed 002 §7), got {self.lobes}")
+            raise LoomError(None, "--lobes", f"must be 1 or 2 (Daubert et al. 2001 §7), got {self.lobes}")
         if not (math.isfinite(self.threshold) and self.threshold > 0):
             raise LoomError(None, "--threshold", f"must be a positive number, got {self.threshold}")
 

@@ -458,7 +458,7 @@ def run_params(study_path: str | Path, out_dir: str | Path, force: bool = False)
                 e["ratio_to_finest"] = (np.asarray(e["mean_intensity"], float) / np.maximum(base, 1e-12)).tolist()
 
     lights = "; ".join(", ".join(f"{k} {v}" for k, v in l.items()) for l in study.lights)
-    rep = rp.Report(f"prt parameter study {study.name} (seed 001 §6.1)")
+    rep = rp.Report(f"prt parameter study {study.name} (Khungurn et al. 2017 §6.1)")
     ex0 = (cell_rows or order_rows)[0]
     rep.paragraph(f"Study file {study.path}; tiling {study.tiling_config} (one exemplar, mean free path "
                   f"ℓ = {ex0['mean_free_path']:.5f}); scene {scene_path}; light: {lights}. Reference: fiberpath on the "
@@ -482,7 +482,7 @@ def run_params(study_path: str | Path, out_dir: str | Path, force: bool = False)
                 f"{e['speedup']:.1f}x" if e["speedup"] else "-"]
 
     if cell_rows:
-        rep.heading("Cell size (seed 001 Fig. 8)")
+        rep.heading("Cell size (Khungurn et al. 2017 Fig. 8)")
         rep.table(heads, [row(e, f"{e['cell_factor']:g} ℓ") for e in cell_rows],
                   caption=f"SH order {study.cell_order}; IIRTF precompute times: "
                           + ", ".join(f"{e['cell_factor']:g} ℓ {e['iirtf_time_s']:.0f} s" for e in cell_rows
@@ -491,7 +491,7 @@ def run_params(study_path: str | Path, out_dir: str | Path, force: bool = False)
                   out / "cell_size.png", f"IIRTF cell size (SH order {study.cell_order}) against fiberpath")
         rep.image("cell_size.png", "fiberpath, then prt at each cell size; below: relative squared error")
     if order_rows:
-        rep.heading("SH order (seed 001 Fig. 9)")
+        rep.heading("SH order (Khungurn et al. 2017 Fig. 9)")
         rep.table(heads, [row(e, f"L = {e['sh_order']}") for e in order_rows],
                   caption=f"All cut from one IIRTF of order {study.max_order} with cells of "
                           f"{study.order_cell_factor:g} ℓ")

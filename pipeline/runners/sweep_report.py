@@ -71,7 +71,7 @@ def write_report(sweep: Sweep, out: Path, got: SweepImages, methods: dict) -> No
     rep = rp.Report(f"Sweep {sweep.name}: methods against {sweep.reference}")
     rep.paragraph(f"Scene {sweep.scene_path}; {len(configs)} configurations x {len(mnames)} methods; "
                   f"reference method: {sweep.reference}. Sweep file: {sweep.path}.")
-    rep.heading("RMSE of mean image intensity (seed 001 Fig. 13 form)")
+    rep.heading("RMSE of mean image intensity (Khungurn et al. 2017 Fig. 13 form)")
     rep.paragraph("For every configuration the mean of each colour channel of the image (3 values per image); "
                   "RMSE of these values against the reference method's over all configurations. "
                   "Relative: divided by the RMS of the reference values.")
@@ -96,7 +96,7 @@ def write_report(sweep: Sweep, out: Path, got: SweepImages, methods: dict) -> No
     rp.sweep_scatter_png({n: (means[ok[:, mi], ri], means[ok[:, mi], mi]) for mi, n in enumerate(mnames)
                           if mi != ri and ok[:, mi].any()}, out / "sweep_scatter.png", sweep.reference)
     rep.image("sweep_scatter.png", "Mean intensity of each method against the reference, per configuration and channel")
-    rep.heading("Time per image and speed-up (seed 001 Table 2 form)")
+    rep.heading("Time per image and speed-up (Khungurn et al. 2017 Table 2 form)")
     rep.table(["method", "time per image", "speed-up"],
               [[n, fmt_seconds(methods[n]["time_per_image_s"]),
                 f"{methods[n]['speedup']:.2f}x" if methods[n]["speedup"] is not None else "-"]
