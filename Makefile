@@ -4,6 +4,9 @@
 SHELL := /bin/bash
 PY ?= python3
 VENV := .venv
+# the artifact format: an artifact made before a change to it is refused by its readers, so the first
+# artifact of every chain depends on it and the chain is rebuilt
+ARTIFACT_FORMAT := pipeline/artifacts.py pipeline/artifact_checks.py
 BIN := $(VENV)/bin
 LL := $(BIN)/loomlight
 # numba cache root; stages/__init__.py keys it by a hash of the kernel sources
@@ -27,7 +30,7 @@ EVAL_W ?= 64
 EVAL_H ?= 48
 EVAL_SPP ?= 8
 
-# seed 001 precompute of the damask's two exemplars (README: Precomputed light transport): SVF images of
+# Khungurn et al. 2017 precompute of the damask's two exemplars (README: Precomputed light transport): SVF images of
 # 64x64 (the paper: 128x128), 48 PCA components; IIRTF at cells of 3 mean free paths (the paper: 1-2),
 # 200 paths per cell (the paper: 50,000) with the MIS estimator, SH order 4. make prt-sweep uses the
 # paper's SVF and cells of 1.5 mean free paths (PRT_SVF_ARGS, PRT_IIRTF_ARGS): 3.5 points less error
@@ -35,19 +38,19 @@ EVAL_SPP ?= 8
 SVF_ARGS ?= --resolution 64 --components 48
 IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis
 
-# seed 002 in the demo: the damask's ground exemplar fitted as a cloth texture, reduced (the defaults: 32 x 32
+# Daubert et al. 2001 in the demo: the damask's ground exemplar fitted as a cloth texture, reduced (the defaults: 32 x 32
 # texels, 8x8 views and lights, 16 rays) and dressed on the draped cloth
 BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8
 
-# seed 004 in the demo: the yarn-level model fitted to fiberpath (front / back / both lights, small renders) on
+# the multi-scale yarn model in the demo: the yarn-level model fitted to fiberpath (front / back / both lights, small renders) on
 # the demo swatch and on the knitted swatch (data/scenes/knit.toml: its own yarn colour and fleece BCSDF), the
 # knit rendered with bysdf beside fiberpath on its realized fibres, and the woven swatch in the evaluation set
 KNIT_SCENE ?= data/scenes/knit.toml
 FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 4
 
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
-# what the experiments (make/experiments.mk) and the comparisons share: the seed 001 flat patches and damask
-# precomputed at the paper's settings (out/prt) and the seed 002 textures of the flat patches (out/btf)
+# what the experiments (make/experiments.mk) and the comparisons share: the Khungurn et al. 2017 flat patches and damask
+# precomputed at the paper's settings (out/prt) and the Daubert et al. 2001 textures of the flat patches (out/btf)
 PRT := out/prt
 BTF_DIR := out/btf
 
@@ -160,7 +163,7 @@ $(VENV)/.installed: pyproject.toml
 	@touch $@
 
 # --- one rule per stage artifact; the CLI itself skips a stage whose inputs and code are unchanged ---
-$(OUT)/yarns.zarr/zarr.json: $(SCENE) $(VENV)/.installed
+$(OUT)/yarns.zarr/zarr.json: $(SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) ingest $(SCENE) -o $(OUT)/yarns.zarr
 
 $(OUT)/tables.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
@@ -169,7 +172,7 @@ $(OUT)/tables.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/proc
 $(OUT)/fibers.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/yarns.zarr -o $(OUT)/fibers.zarr
 
-$(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed
+$(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile $(TILING) -o $(OUT)/damask_tiling.zarr
 
 $(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
@@ -226,7 +229,7 @@ $(OUT)/damask_btf.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_SCENE)
 $(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(wildcard stages/render/*.py stages/core/shading/bysdf.py)
 	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FIT_ARGS)
 
-$(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed
+$(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) ingest $(KNIT_SCENE) -o $(OUT)/knit_yarns.zarr
 
 $(OUT)/knit_fibers.zarr/zarr.json: $(OUT)/knit_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
@@ -271,9 +274,11 @@ $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/vol
 	$(LL) evaluate --ref $(OUT)/eval/volpath-realized.exr --test $(OUT)/eval/volpath-procedural.exr \
 	    --test $(OUT)/eval/fiberpath.exr --test $(OUT)/eval/bysdf.exr -o $(OUT)/eval/report
 
-# make demo's equal-error comparison, last and alone (its render times are measured on an idle machine): the demo
+# make demo's equal-error comparison, last and alone (its render times are measured on an idle machine; a reference
+# made by other code is rebuilt first): the demo
 # swatch at 64x48, fiberpath and bysdf at three budgets each against a 2,048-spp reference (data/compare/demo_quick.toml)
 $(OUT)/compare/report.md: $(OUT)/fibers.zarr/zarr.json $(OUT)/bysdf_fit.toml data/compare/demo_quick.toml
+	$(LL) evaluate --convergence data/compare/demo_quick.toml -o $(OUT)/compare --reference-only
 	$(LL) evaluate --convergence data/compare/demo_quick.toml -o $(OUT)/compare
 
 # the longest chains first: with DEMO_JOBS stages at a time, numba compilation (one core) overlaps
@@ -288,13 +293,13 @@ DEMO_JOBS ?= 2
 demo-outputs: $(DEMO_OUTPUTS)
 
 # --- the comparisons' own inputs (make references, make compare; the flat patches come from make/experiments.mk) ---
-$(COMPARE_IN)/twill_yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed
+$(COMPARE_IN)/twill_yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) ingest $(TWILL_SCENE) -o $(COMPARE_IN)/twill_yarns.zarr
 
 $(COMPARE_IN)/twill_fibers.zarr/zarr.json: $(COMPARE_IN)/twill_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(COMPARE_IN)/twill_yarns.zarr -o $(COMPARE_IN)/twill_fibers.zarr
 
-$(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/scenes/knit_swatch.toml $(VENV)/.installed
+$(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/scenes/knit_swatch.toml $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile data/tilings/knit_swatch.toml -o $(COMPARE_IN)/knit_tiling.zarr
 
 $(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)

@@ -1,5 +1,5 @@
-# loomlight -- the experiments: seed 000 Table 1 at scale, the light sweeps, fiberpath against volpath, the seed 001
-# and seed 002 parameter sweeps and studies. Included by the Makefile (its variables: OUT, SCENE, LL, PRT, BTF_DIR,
+# loomlight -- the experiments: Luan et al. 2017 Table 1 at scale, the light sweeps, fiberpath against volpath, the Khungurn et al. 2017
+# and Daubert et al. 2001 parameter sweeps and studies. Included by the Makefile (its variables: OUT, SCENE, LL, PRT, BTF_DIR,
 # TWILL_SCENE, ...); every target has a `## ...` line that `make help` lists.
 
 ##@ Experiments (make/experiments.mk)
@@ -25,14 +25,14 @@ AGREE_ARGS ?= --width 128 --height 96 --spp 64
 
 .PHONY: table1 sweep agreement prt-sweep prt-study btf-sweep
 
-# --- seed 000 Table 1 ---
+# --- Luan et al. 2017, Table 1 ---
 # woven_large keeps one stored rotation-minimising-frame sample per spline segment (ingest's default is 4):
 # those samples are breakpoints of the frame that the lookups' frame samples must keep, so this halves the
 # frame samples (8.0 M -> 4.0 M rows) and saves ~0.8 GB when its tables load. The woven generator's yarns are
 # planar curves, whose rotation-minimising frame one double reflection per segment gives as four do (normals
 # within 2.3e-16 over 9 yarns x 20,000 points, positions identical): the same fabric
 LARGE_INGEST_ARGS ?= --frame-samples 1
-$(LARGE_OUT)/yarns.zarr/zarr.json: $(LARGE_SCENE) $(VENV)/.installed
+$(LARGE_OUT)/yarns.zarr/zarr.json: $(LARGE_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) ingest $(LARGE_SCENE) -o $(LARGE_OUT)/yarns.zarr $(LARGE_INGEST_ARGS)
 
 $(LARGE_OUT)/tables.zarr/zarr.json: $(LARGE_OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
@@ -42,7 +42,7 @@ $(LARGE_OUT)/close.exr: $(LARGE_OUT)/tables.zarr/zarr.json $(LARGE_CLOSE_SCENE)
 	$(LL) render $(LARGE_CLOSE_SCENE) --method volpath --source procedural --tables $(LARGE_OUT)/tables.zarr \
 	    $(LARGE_ARGS) -o $@
 
-$(HUGE_OUT)/yarns.zarr/zarr.json: $(HUGE_SCENE) $(VENV)/.installed
+$(HUGE_OUT)/yarns.zarr/zarr.json: $(HUGE_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) ingest $(HUGE_SCENE) -o $(HUGE_OUT)/yarns.zarr $(LARGE_INGEST_ARGS)
 
 $(HUGE_OUT)/tables.zarr/zarr.json: $(HUGE_OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
@@ -66,7 +66,7 @@ sweep: $(OUT)/fibers.zarr/zarr.json ## Khungurn et al. 2017 Fig. 13 / Table 2 st
 	$(LL) evaluate --sweep data/sweeps/demo.toml -o $(OUT)/sweep
 	@echo "report: $(OUT)/sweep/report.md"
 
-$(AGREE)/twill/yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed
+$(AGREE)/twill/yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) ingest $(TWILL_SCENE) -o $(AGREE)/twill/yarns.zarr
 
 $(AGREE)/twill/fibers.zarr/zarr.json: $(AGREE)/twill/yarns.zarr/zarr.json
@@ -88,11 +88,11 @@ agreement: $(AGREEMENT_INPUTS) ## fiberpath vs volpath on the demo and twill swa
 	$(LL) evaluate --sweep data/sweeps/twill.toml -o $(AGREE)/twill/sweep
 	@echo "reports: $(AGREE)/demo/report/report.md $(AGREE)/twill/report/report.md $(OUT)/sweep/report.md $(AGREE)/twill/sweep/report.md"
 
-# --- seed 001: precomputed light transport against path tracing, and its parameter studies ---
+# --- Khungurn et al. 2017: precomputed light transport against path tracing, and its parameter studies ---
 # make prt-sweep: the damask's two exemplars each alone on a flat patch (data/tilings/flat_satin41.toml,
 # flat_satin14.toml; the exemplar only) and the draped damask, precomputed with PRT_SVF_ARGS / PRT_IIRTF_ARGS; each swept over the demo sweep's 12 lights, prt against
 # fiberpath at 16 spp (data/sweeps/prt_*.toml), then split into single and multiple scattering
-# (loomlight study prt-terms). make prt-study: seed 001 §6.1's cell-size and SH-order strips on one cheap
+# (loomlight study prt-terms). make prt-study: Khungurn et al. 2017 §6.1's cell-size and SH-order strips on one cheap
 # exemplar (data/studies/prt_params.toml). The sweep files name these paths (out/prt).
 PRT_SWEEPS := flat41 flat14 damask
 PRT_SVF_ARGS ?= --resolution 128 --components 48
@@ -100,7 +100,7 @@ PRT_IIRTF_ARGS ?= --order 4 --cell-factor 1.5 --paths 200 --light-sampling mis
 PRT_EXEMPLAR_41 := 0
 PRT_EXEMPLAR_14 := 1
 
-$(PRT)/flat%_tiling.zarr/zarr.json: data/tilings/flat_satin%.toml data/scenes/flat_satin.toml $(VENV)/.installed
+$(PRT)/flat%_tiling.zarr/zarr.json: data/tilings/flat_satin%.toml data/scenes/flat_satin.toml $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile data/tilings/flat_satin$*.toml -o $(PRT)/flat$*_tiling.zarr
 
 $(PRT)/flat%_svf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
@@ -109,7 +109,7 @@ $(PRT)/flat%_svf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json $(wildcard s
 $(PRT)/flat%_iirtf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py)
 	$(LL) precompute iirtf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_iirtf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(PRT_IIRTF_ARGS)
 
-$(PRT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed
+$(PRT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile $(TILING) -o $(PRT)/damask_tiling.zarr
 
 $(PRT)/damask_svf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
@@ -133,8 +133,8 @@ prt-study: $(VENV)/.installed ## Khungurn et al. 2017 §6.1: the cell-size and S
 	$(LL) study prt-params data/studies/prt_params.toml -o $(PRT)/study
 	@echo "report: $(PRT)/study/report.md (strips $(PRT)/study/cell_size.png, $(PRT)/study/sh_order.png)"
 
-# --- seed 002 ---
-# make btf-sweep: seed 002's fitted texture of each damask exemplar alone on its flat patch (the prt sweep's
+# --- Daubert et al. 2001 ---
+# make btf-sweep: Daubert et al. 2001 fitted texture of each damask exemplar alone on its flat patch (the prt sweep's
 # tilings, out/prt/flat41_tiling.zarr and flat14), fitted at the defaults of precompute btf (BTF_SWEEP_ARGS)
 # into out/btf/, against fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
 BTF_SWEEP_ARGS ?=

@@ -1,6 +1,6 @@
 """Procedural yarn presets (``data/yarns/<name>.toml``) and the yarn types of a fabric.
 
-Keys (seed 000 §3.2; names of the original fitting tool; lengths in centimetres):
+Keys (Luan et al. 2017 §3.2; names of the original fitting tool; lengths in centimetres):
   ply_num, fiber_num          plies per yarn, fibres per ply (>= 1)
   yarn_radius                 ply centres sit on a circle of radius yarn_radius / 2 (0 for one ply)
   yarn_alpha, alpha           pitch (length per turn) of the plies around the yarn axis / of the fibres
@@ -27,7 +27,7 @@ but no fibre radius; at the radii of real fibres (5-10 um) those counts fill 1.5
 an explicit-fibre render of such a yarn is see-through while its volume (at any density a volume
 renders solid) is not. loomlight therefore sizes fibres so the plies are packed as real staple
 yarns are (``PACKING_FRACTION`` = 0.5; ring-spun yarns measure about 0.4-0.6), and volpath's
-medium, which is non-zero only inside those fibres (seed 000 §4), stands for them as a cloud of
+medium, which is non-zero only inside those fibres (Luan et al. 2017 §4), stands for them as a cloud of
 opaque cylinders: a fibre of radius r intercepts every ray that crosses it, projecting 2 r per unit
 length, which a medium fibre does only in the limit of infinite density. Its density is set by the
 optical depth ``FIBRE_OPTICAL_DEPTH`` (kappa) across a fibre's diameter, den = kappa / (2 r): a ray
