@@ -14,7 +14,9 @@ scene's ``render.scheduler``; the ``LOOMLIGHT_SCHEDULER`` environment variable; 
 ``processes``
     a ``dask.distributed`` LocalCluster started and stopped by the command: ``--workers`` worker
     processes (default 2, ``LOOMLIGHT_WORKERS``) of ``--threads-per-worker`` numba threads each
-    (default 1, ``LOOMLIGHT_THREADS_PER_WORKER``).
+    (default 1, ``LOOMLIGHT_THREADS_PER_WORKER``). Bounded before any process starts
+    (``check_local_cluster``): the workers by the memory budget (``WORKER_BYTES`` each at least), a
+    worker's threads by this machine's CPUs.
 ``tcp://HOST:PORT``
     a running Dask scheduler (``dask scheduler``) and its workers (``dask worker tcp://HOST:PORT``),
     which must see loomlight's code, the inputs and the output's directory at the same paths.
@@ -50,6 +52,7 @@ SCHEDULER_HELP = ("Where chunk tasks run: local (this process, default), process
 WORKERS_HELP = f"--scheduler processes: worker processes (default ${WORKERS_ENV}, else 2)."
 THREADS_HELP = f"--scheduler processes: numba threads per worker (default ${THREADS_ENV}, else 1)."
 CONNECT_TIMEOUT_ENV = "LOOMLIGHT_CONNECT_TIMEOUT"   # seconds to reach a tcp:// scheduler (default 10)
+WORKER_BYTES = 100 << 20   # the least a LocalCluster worker takes: Python with Dask, numpy and numba (~113 MiB)
 
 
 @dataclass(frozen=True)
@@ -87,6 +90,22 @@ def _positive_int(value, place, file=None) -> int:
     return int(text)
 
 
+def check_local_cluster(workers: int, threads: int, workers_place: str, threads_place: str) -> None:
+    """Bounds of a LocalCluster on this machine, refused before a process starts: its worker processes by
+    memory (each one at least ``WORKER_BYTES``, against the memory budget: ``pipeline.memory.budget``), a
+    worker's numba threads by this machine's CPUs (more only wait for each other)."""
+    from .memory import Estimate, budget
+
+    Estimate("a Dask LocalCluster", kernels=False).add(
+        "worker processes", float(workers) * WORKER_BYTES,
+        f"{workers:,} workers x at least {WORKER_BYTES >> 20} MiB each (a Python process with Dask and numba)").check(
+        budget(), None, workers_place, "lower it")
+    cpus = os.cpu_count() or 1
+    if threads > cpus:
+        raise LoomError(None, threads_place, f"{threads:,} threads per worker is more than this machine's {cpus} "
+                        "CPUs (more only wait for each other); lower it")
+
+
 def parse_scheduler(value: str, place: str = "--scheduler", file=None, workers=None, threads=None) -> Scheduler:
     """A ``Scheduler`` from its name: ``local``, ``processes`` or ``tcp://HOST:PORT``."""
     v = str(value).strip()
@@ -94,6 +113,9 @@ def parse_scheduler(value: str, place: str = "--scheduler", file=None, workers=N
                       "--workers" if workers is not None else WORKERS_ENV)
     t = _positive_int(threads if threads is not None else os.environ.get(THREADS_ENV, 1),
                       "--threads-per-worker" if threads is not None else THREADS_ENV)
+    if v == "processes":
+        check_local_cluster(w, t, "--workers" if workers is not None else WORKERS_ENV,
+                            "--threads-per-worker" if threads is not None else THREADS_ENV)
     if v in ("local", "processes"):
         return Scheduler(v, None, w, t)
     if v.startswith("tcp://"):

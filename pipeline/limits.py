@@ -107,3 +107,13 @@ class WorkEstimate:
             raise LoomError(file, place, f"{self.what} would take at least an estimated {fmt_seconds(self.seconds)} "
                             f"on {self.threads} thread(s) ({text}), over the time limit of {limit / 3600:g} h "
                             f"({how}); nothing was started: {remedy}")
+
+
+def largest_option(est, default: str) -> str:
+    """The command-line option named in the detail of an estimate's largest part (``... (--sg-count)``), else
+    ``default``: the place of a refusal by a ``WorkEstimate`` or a ``pipeline.memory.Estimate``."""
+    import re
+
+    parts = sorted(est.parts, key=lambda t: -t[1])
+    m = re.search(r"\((--[a-z-]+)\)", parts[0][2]) if parts else None
+    return m.group(1) if m else default

@@ -141,9 +141,10 @@ class Estimate:
         text = [f"{label} {fmt_bytes(b)}" + (f" ({detail})" if detail else "") for label, b, detail in parts[:top]]
         return "; ".join(text)
 
-    def check(self, limit: Budget, file=None, place: str | None = None) -> None:
-        """Refuse (LoomError, exit code 2) when the estimate exceeds the budget."""
+    def check(self, limit: Budget, file=None, place: str | None = None,
+              remedy: str = "raise --budget or make the input smaller") -> None:
+        """Refuse (LoomError, exit code 2) when the estimate exceeds the budget; ``remedy`` ends the line."""
         if self.total > limit.nbytes:
             raise LoomError(file, place, f"{self.what} needs an estimated {fmt_bytes(self.total)} of memory "
                             f"({self.describe()}), over the budget of {fmt_bytes(limit.nbytes)} ({limit.how}); "
-                            "nothing was started: raise --budget or make the input smaller")
+                            f"nothing was started: {remedy}")

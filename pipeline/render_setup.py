@@ -5,6 +5,8 @@
 - ``load_bcsdf_preset(name)`` -> packed BCSDF (``stages.core.shading.bcsdf``) from ``data/bcsdf/<name>.toml``
   (or a path to a TOML file), checked against ``schemas/bcsdf-preset.schema.json``.
 - ``load_fibers(path)`` -> ``Fibers`` arrays of a ``fibers`` artifact, refusing empty or broken ones.
+- ``recorded_input(art, name, kind)`` -> the input an artifact records (its yarns), refused naming the
+  artifact and ``inputs.<name>`` when the recorded path is gone or unreadable.
 - ``ground_array(scene)`` -> (float64[4] height + albedo, enabled).
 """
 from __future__ import annotations
@@ -152,11 +154,47 @@ def fibers_from_arrays(points, point_radius, fiber_offsets, fiber_yarn=None, yar
     return Fibers(path, points, point_radius, off, fiber_yarn, yarn_albedo, yarn_group)
 
 
-def input_yarn_groups(art) -> np.ndarray | None:
-    """The yarn group of every yarn (0 warp, 1 weft, 2 knit, 3 other) from the yarns artifact an
-    artifact was built from, None when it names none that can be read."""
+# The command that builds each kind of artifact from its recorded inputs (what to run again).
+REBUILT_BY = {"fibers": "loomlight realize", "tables": "loomlight tables", "grid": "loomlight voxelize"}
+
+
+def recorded_input(art, name: str, kind: str | None = None):
+    """The artifact ``art`` records as its input ``name`` (``inputs.<name>`` of its metadata), opened as
+    an ``Artifact`` of ``kind``; None when it records no such input.
+
+    The recorded path is the one its stage was given, which the user of ``art`` never typed: a path
+    that is gone (moved or deleted) or no longer reads as that input is refused naming ``art`` and the
+    key, e.g. ``F.zarr: inputs.yarns: recorded input /old/y.zarr is gone (moved or deleted); re-run
+    loomlight realize on the yarns artifact where it is now``."""
     from .artifacts import Artifact
 
+    rec = (art.meta.get("inputs") or {}).get(name)
+    if not isinstance(rec, dict) or not rec.get("path"):
+        return None
+    p = Path(str(rec["path"]))
+    stage = art.meta.get("stage", "its stage")
+    where = "" if p.is_absolute() else f" (a relative path, from the directory {stage} ran in)"
+    again = REBUILT_BY.get(art.kind, f"its stage ({art.meta.get('stage')})")
+    if not p.exists():
+        raise LoomError(art.path, f"inputs.{name}", f"recorded input {p}{where} is gone (moved or deleted); re-run "
+                        f"{again} on the {name} artifact where it is now")
+    try:
+        return Artifact(p, kind=kind)
+    except LoomError as e:
+        raise LoomError(art.path, f"inputs.{name}", f"recorded input {p}{where} cannot be read: "
+                        f"{': '.join(x for x in (e.place, e.message) if x)}; re-run {again} on a good {name} "
+                        "artifact") from None
+
+
+def input_yarn_groups(art) -> np.ndarray | None:
+    """The yarn group of every yarn (0 warp, 1 weft, 2 knit, 3 other) from the yarns artifact an
+    artifact was built from (its ``inputs.yarns``: refused, naming ``art``, when that is gone or
+    unreadable, ``recorded_input``); None when it records none (arrays written by other means)."""
+    from .artifacts import Artifact
+
+    yarns = recorded_input(art, "yarns", "yarns")
+    if yarns is not None:
+        return np.asarray(yarns["group"], np.int64) if "group" in yarns else None
     for inp in art.meta.get("inputs", {}).values():
         try:
             src = Artifact(inp["path"])

@@ -27,9 +27,14 @@ largest thread number used.
 
 Lengths: Spacing and Thickness are converted to centimetres (loomlight's scene unit for
 drafts): Units = Centimeters (default when absent), Millimeters (/10), Inches (x 2.54),
-Decipoints (1/720 inch). ``scale`` multiplies the result. Spacing missing: Thickness, else
-0.05 cm. The yarn radius is Thickness / 2; without Thickness, spacing / 4 (a radius that keeps
-crimped crossings free of interpenetration, see woven.py).
+Decipoints (1/720 inch); each must then lie between 1 micrometre and 1 m (``MIN_THREAD_CM``,
+``MAX_THREAD_CM``), else LoomError naming the section, line and key. ``scale`` multiplies the result.
+Spacing missing: Thickness, else 0.05 cm. The yarn radius is Thickness / 2; without Thickness,
+spacing / 4 (a radius that keeps crimped crossings free of interpenetration, see woven.py).
+
+Not a draft: a file that is not text (a NUL byte, or more than 1 % control or undecodable bytes) or
+that has neither a ``[WIF]`` section nor any section of a draft is refused as "not a WIF draft"
+before any section is looked for.
 """
 from __future__ import annotations
 
@@ -43,6 +48,14 @@ from ..errors import LoomError
 
 _UNITS_CM = {"centimeters": 1.0, "centimetres": 1.0, "cm": 1.0, "millimeters": 0.1, "millimetres": 0.1,
              "mm": 0.1, "inches": 2.54, "inch": 2.54, "in": 2.54, "decipoints": 2.54 / 720.0}
+# Sections of a draft (WIF 1.1): a file with none of them, and no [WIF] section either, is no WIF draft.
+DRAFT_SECTIONS = frozenset({"contents", "weaving", "warp", "weft", "threading", "tieup", "treadling", "liftplan",
+                            "color palette", "color table", "warp colors", "weft colors", "warp spacing",
+                            "weft spacing", "warp thickness", "weft thickness", "text", "notes"})
+# A thread's spacing and thickness, in centimetres after Units (before the fabric's scale): more than a
+# micrometre (finer than any fibre) and less than a metre.
+MIN_THREAD_CM = 1e-4
+MAX_THREAD_CM = 100.0
 _YES = {"yes": True, "true": True, "1": True, "on": True, "y": True,
         "no": False, "false": False, "0": False, "off": False, "n": False}
 
@@ -66,13 +79,33 @@ def _norm(name: str) -> str:
     return " ".join(name.strip().lower().split())
 
 
+def _not_text(data: bytes) -> bool:
+    """True for bytes no WIF writer makes: a NUL, or more than 1 % control characters or undecodable bytes
+    (a WIF is INI text, UTF-8 or an 8-bit code page such as Windows-1252; those decode with a few
+    replacements at most)."""
+    if b"\x00" in data:
+        return True
+    text = data.decode("utf-8", errors="replace")
+    bad = sum(1 for ch in text if ch == "\ufffd" or (ch < " " and ch not in "\t\r\n\f"))
+    return bad > max(8, len(text) // 100)
+
+
 def parse_sections(path) -> dict:
-    """{section: {key: (value, line number)}} plus '__line__' (header line) per section."""
+    """{section: {key: (value, line number)}} plus '__line__' (header line) per section.
+
+    A file that is not text, or text with neither a ``[WIF]`` section nor any section a draft has
+    (``DRAFT_SECTIONS``), is refused as not a WIF draft (before any section is looked for)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        data = path.read_bytes()
+    except IsADirectoryError:
+        raise LoomError(path, None, "is a directory, not a WIF draft") from None
     except OSError as e:
         raise LoomError(path, None, f"cannot read: {e.strerror or e}") from None
+    if _not_text(data):
+        raise LoomError(path, None, "not a WIF draft: the file is not text (binary data); a WIF draft is an INI-like "
+                                    "text file opening with a [WIF] section")
+    text = data.decode("utf-8", errors="replace")
     sections: dict[str, dict] = {}
     cur = None
     for lineno, raw in enumerate(text.splitlines(), 1):
@@ -88,6 +121,12 @@ def parse_sections(path) -> dict:
             continue  # text outside sections or free-text lines (e.g. [NOTES]) carry no draft data
         key, value = line.split("=", 1)
         cur[_norm(key)] = (value.strip(), lineno)
+    if "wif" not in sections and not DRAFT_SECTIONS & set(sections):
+        found = ", ".join(f"[{n.upper()}]" for n in list(sections)[:3])
+        raise LoomError(path, None, "not a WIF draft: it has no [WIF] section and none of a draft's sections "
+                                    "([WEAVING], [WARP], [WEFT], [THREADING], ...)"
+                                    + (f"; its sections are {found}" + (", ..." if len(sections) > 3 else "")
+                                       if sections else "; it has no [SECTION] header at all"))
     return sections
 
 
@@ -298,8 +337,17 @@ def parse(path, scale: float = 1.0) -> WifDraft:
         spacing = r.number(sec, "spacing")
         thick = r.number(sec, "thickness")
         for name, x in (("Spacing", spacing), ("Thickness", thick)):
-            if x is not None and x <= 0:
-                raise r.err(sec, r.get(sec, name.lower())[1], f"{name} = {x} must be positive")
+            if x is None:
+                continue
+            text, ln = r.get(sec, name.lower())
+            if x <= 0:
+                raise r.err(sec, ln, f"{name} = {text} must be positive")
+            cm = x * unit
+            if not MIN_THREAD_CM < cm < MAX_THREAD_CM:
+                raise r.err(sec, ln, f"{name} = {text} ({_norm(v).title()}) is {cm:.4g} cm: a thread's "
+                                     f"{name.lower()} must lie between 1 micrometre and 1 m ({MIN_THREAD_CM:g} .. "
+                                     f"{MAX_THREAD_CM:g} cm; WIF lengths are read in [{sec.upper()}] Units, "
+                                     "Centimeters when absent)")
         spacing = spacing * unit if spacing is not None else (thick * unit if thick is not None else 0.05)
         radius = thick * unit / 2.0 if thick is not None else spacing / 4.0
         return spacing * scale, radius * scale

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..errors import LoomError, unknown
 from ..progress import progress, warn
-from ..render_setup import ground_array, input_yarn_groups, load_fibers, pack_lights
+from ..render_setup import ground_array, input_yarn_groups, load_fibers, pack_lights, recorded_input
 from ..scene import camera_array
 from . import RenderResult
 
@@ -102,6 +102,9 @@ def _procedural_source(tables_path, cell, optics, view, advance):
     from ..runners.tables import load_tables
 
     t0 = time.perf_counter()
+    # the yarn groups come from the tables' recorded yarns input: one that is gone is refused before the
+    # tables are loaded (loading derives the lookup structures, and compiles their kernels on a cold cache)
+    groups = None if optics is None else input_yarn_groups(_artifact(tables_path, "tables", "--tables"))
     cv, tab, art = load_tables(tables_path)
     advance()
     t1 = time.perf_counter()
@@ -109,7 +112,6 @@ def _procedural_source(tables_path, cell, optics, view, advance):
         mats = np.zeros((len(tab.yarn_type), MAT_SIZE))
         mats[:, 0] = -1.0  # micro-flakes
     else:
-        groups = input_yarn_groups(art)
         mats, has = optics.rows(tab.yarn_albedo, groups)
         tparams = tab.tparams.copy()
         for t in range(len(tparams)):  # fibre phase function: the extinction of thin cylinders (roughness 0)
@@ -169,17 +171,15 @@ def realized_source(fibers_path, cell, optics):
     from stages.render.realized_medium import RealizedMedium, fiber_capsules
     from stages.render.tracking import majorants_from_capsules, make_majorant_grid
 
-    from ..artifacts import Artifact
     from ..runners.yarn_types import yarn_types_of
 
     if not fibers_path:
         raise LoomError(None, "--fibers", "--source realized needs the realized fibres: pass --fibers PATH.zarr")
     fibers = load_fibers(fibers_path)
     fart = _artifact(fibers_path, "fibers", "--fibers")
-    yarns_in = fart.meta.get("inputs", {}).get("yarns")
-    if not yarns_in:
+    yarns = recorded_input(fart, "yarns", "yarns")
+    if yarns is None:
         raise LoomError(fibers_path, "inputs", "the fibers artifact does not name the yarns artifact it was realized from")
-    yarns = Artifact(yarns_in["path"], kind="yarns")
     _, tparams, ytype, _ = yarn_types_of(yarns, fart.params.get("preset"), fart.params.get("radius"))
     Y = len(ytype)
     if int(fibers.fiber_yarn.max()) >= Y:

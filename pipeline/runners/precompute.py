@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
+from ..limits import largest_option
 from ..memory import Estimate, budget as memory_budget, fmt_bytes
 
 MAX_ORDER = 8
@@ -214,15 +215,6 @@ def svf_work(S: int, p: SvfParams, threads: int):
     return est
 
 
-def _largest_option(est, default: str) -> str:
-    """The option named in the detail of an estimate's largest part (``(--sg-count)``), else ``default``."""
-    import re
-
-    parts = sorted(est.parts, key=lambda t: -t[1])
-    m = re.search(r"\((--[a-z-]+)\)", parts[0][2]) if parts else None
-    return m.group(1) if m else default
-
-
 def _svf_visibility_task(tiling, tiling_hash, store, k, a, b, p: dict):
     """Chunk task: visibility images and sums of SGs of exemplar k's segments a..b-1."""
     from stages.precompute.periodic import periodic_scene
@@ -315,9 +307,9 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     import numba
 
     work = svf_work(S_ks, p, numba.get_num_threads())
-    work.check(None, _largest_option(work, "--resolution"), "lower --sg-count or --resolution")
+    work.check(None, largest_option(work, "--resolution"), "lower --sg-count or --resolution")
     rest = svf_render_estimate(S_ks, len(ks), p)
-    rest.check(limit, None, _largest_option(rest, "--sg-count"))
+    rest.check(limit, None, largest_option(rest, "--sg-count"))
     hold = svf_estimate(S_max, S_all, p, True).total <= 0.5 * limit.nbytes
     svf_estimate(S_max, S_all, p, hold).check(limit, tiling)
     tiling_hash = art.meta["content_hash"]
@@ -516,7 +508,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     import numba
 
     work = iirtf_work(p, len(ks), len(ks), numba.get_num_threads())
-    work.check(None, _largest_option(work, "--paths"), "lower --paths or --mfp-paths")
+    work.check(None, largest_option(work, "--paths"), "lower --paths or --mfp-paths")
     scene_path, sc_obj = materials_scene(tiling, art, scene)
     mof, mats = tiling_materials(sc_obj, art, p.material)
     # first_ray: how the paths leave a segment's midpoint (stages.precompute.periodic, "Rays from a segment")
@@ -561,7 +553,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     est = iirtf_estimate(S_all, max(N.values()), p, len(mats), sum(counted.values()))
     est.check(budget or memory_budget(), tiling)
     work = iirtf_work(p, len(ks), sum(N.values()), numba.get_num_threads())
-    work.check(None, _largest_option(work, "--paths"), "lower --paths or raise --cell-factor")
+    work.check(None, largest_option(work, "--paths"), "lower --paths or raise --cell-factor")
     J = (p.order + 1) ** 2
     info = []
     t_start = time.perf_counter()

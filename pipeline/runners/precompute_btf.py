@@ -31,10 +31,23 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
+from ..limits import largest_option
 from ..memory import Estimate, budget as memory_budget
 
 
 DIRECTIONS = ("cell", "grid")
+# Bounds of the count options. Memory (``btf_estimate``: the samples grow with texels x views x lights) and
+# time (``btf_work``, ``pipeline.limits.WorkEstimate``, at rates no thread reaches: every sample casts a camera
+# ray, and with ``--directions cell`` draws a direction in each light's cell; measured on a small tiling: about
+# 4e3 samples and 7e4 light terms a thread-second) refuse a run, with the estimate, before any work starts.
+# --max-depth and --rr-depth cap a path and --max-rounds the fit's alternations (each stops earlier on its
+# own), so they have plain caps: past them a number is a typo, not a setting.
+SAMPLES_PER_THREAD_S = 1e7
+LIGHT_DIRECTIONS_PER_THREAD_S = 1e9
+MAX_RESOLUTION = 256
+MAX_GRID_DIRECTIONS = 4096
+MAX_DEPTH = 10_000
+MAX_ROUNDS = 1_000
 
 
 @dataclass
@@ -54,15 +67,24 @@ class BtfParams:
 
     def check(self) -> None:
         r = self.resolution
-        if r < 1 or r & (r - 1) or r > 256:
-            raise LoomError(None, "--resolution", f"must be a power of two from 1 to 256, got {r}")
+        if r < 1 or r & (r - 1) or r > MAX_RESOLUTION:
+            raise LoomError(None, "--resolution", f"must be a power of two from 1 to {MAX_RESOLUTION}, got {r}")
         for name, g in (("--views", self.views), ("--lights", self.lights)):
-            if len(g) != 2 or min(g) < 1 or g[0] * g[1] > 4096:
-                raise LoomError(None, name, f"must be THETAxPHI with positive counts, at most 4096 directions; got {g}")
+            if len(g) != 2 or min(g) < 1 or g[0] * g[1] > MAX_GRID_DIRECTIONS:
+                raise LoomError(None, name, f"must be THETAxPHI with positive counts, at most {MAX_GRID_DIRECTIONS} "
+                                            f"directions; got {g}")
         for name, v in (("--spp", self.spp), ("--max-depth", self.max_depth), ("--rr-depth", self.rr_depth),
                         ("--max-rounds", self.max_rounds)):
             if v < 1:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
+        caps = (("--max-depth", self.max_depth, MAX_DEPTH,
+                 "scattering events on a path (Russian roulette from --rr-depth ends paths long before)"),
+                ("--rr-depth", self.rr_depth, MAX_DEPTH, "scattering events before Russian roulette"),
+                ("--max-rounds", self.max_rounds, MAX_ROUNDS,
+                 "lobe/table alternations (the fit stops earlier, at --threshold)"))
+        for name, v, cap, what in caps:
+            if v > cap:
+                raise LoomError(None, name, f"{v:,} is past the cap of {cap:,} {what}; lower it")
         if self.directions not in DIRECTIONS:
             raise LoomError(None, "--directions", f"must be one of {', '.join(DIRECTIONS)}, got {self.directions!r}")
         if self.lobes not in (1, 2):
@@ -80,11 +102,34 @@ def parse_grid(text: str, option: str) -> tuple[int, int]:
 
 
 def btf_estimate(res, V, L, segments) -> Estimate:
+    """Peak memory of the acquisition and the fit: the samples (float16 stored, float32 read, float64 in
+    the fit) and the tables and lobes of every level; each part names the option it grows with."""
     est = Estimate("loomlight precompute btf")
     est.add("tiling scene", 520.0 * segments, f"{segments:,} segments")
-    est.add("samples", res * res * V * L * 3 * (2 + 4 + 8), f"{res}x{res} texels x {V} views x {L} lights (float16 "
-            "stored, float32 read, float64 fit)")
-    est.add("fit", res * res * V * 4 * 8 * 6, "tables and lobes of every level")
+    grows = "--resolution" if res * res >= V * L else _grid_option(V, L)
+    est.add("samples", float(res) * res * V * L * 3 * (2 + 4 + 8), f"{res}x{res} texels x {V:,} views x {L:,} lights "
+            f"(float16 stored, float32 read, float64 fit) ({grows})")
+    est.add("fit", float(res) * res * V * 4 * 8 * 6, "tables and lobes of every level (--resolution)")
+    return est
+
+
+def _grid_option(V, L) -> str:
+    return "--views" if V >= L else "--lights"
+
+
+def btf_work(res, V, L, p: "BtfParams", threads: int):
+    """The least time of the acquisition (``WorkEstimate``): every sample of every texel and view casts a
+    camera ray, and with cell averages (the default) draws one direction in each light's cell."""
+    from ..limits import WorkEstimate
+
+    samples = float(res) * res * V * p.spp
+    est = WorkEstimate("loomlight precompute btf", threads)
+    est.add("camera rays", samples, SAMPLES_PER_THREAD_S,
+            f"{res}x{res} texels x {V:,} views x {p.spp:,} samples (--spp)")
+    if p.directions == "cell":
+        est.add("light directions", samples * L, LIGHT_DIRECTIONS_PER_THREAD_S,
+                f"{res}x{res} texels x {V:,} views x {p.spp:,} samples x {L:,} lights "
+                f"({'--spp' if p.spp >= max(V, L) else _grid_option(V, L)})")
     return est
 
 
@@ -145,10 +190,13 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
 
     compilation.watch()
     p.check()
-    if threads:
-        import numba
+    import numba
 
+    if threads:
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+    V, L = p.views[0] * p.views[1], p.lights[0] * p.lights[1]
+    work = btf_work(p.resolution, V, L, p, numba.get_num_threads())
+    work.check(None, largest_option(work, "--spp"), "lower it (or --resolution, --views, --lights)")
     tiling = Path(tiling)
     art = tiling_input(tiling)
     k = pick_exemplars(art, [exemplar], tiling)[0]
@@ -163,7 +211,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
     light_dirs = hemisphere_grid(*p.lights)
     V, L = len(view_dirs), len(light_dirs)
     limit = budget or memory_budget()
-    btf_estimate(res, V, L, int(art.summary["segments"])).check(limit, tiling)
+    est = btf_estimate(res, V, L, int(art.summary["segments"]))
+    est.check(limit, None, largest_option(est, "--resolution"), "lower it, or raise --budget")
     tiling_hash = art.meta["content_hash"]
     tiling_abs = str(tiling.resolve())  # chunk tasks may run in another directory
     sc, _ = periodic_scenes(tiling_abs, tiling_hash)

@@ -9,7 +9,9 @@ same (Curves, Tables) in memory from a yarns artifact (the realize runner and Ta
 
 Memory: ``tables_estimate`` counts the build's peak from the yarns artifact and the packed yarn types
 alone (plies x fibres x bins, hairs and loops per unit length times the yarn lengths, per-ply
-bookkeeping), so ``run_tables`` (and ``run_realize``) refuse an oversized build before it starts;
+bookkeeping), so ``run_tables`` (and ``run_realize``) refuse an oversized build before it starts
+(and past the time limit, ``bins_work``; ``check_bins`` names ``--bins`` as the place when the bins
+are at fault);
 ``accel_estimate`` counts what loading a tables artifact derives (frame samples, chord grid) from its
 small per-yarn arrays, for the stages that load tables.
 """
@@ -30,6 +32,8 @@ from .yarn_types import YarnTypes, type_summary, yarn_types_of
 
 FOLD_CAP = 0.5             # build_tables' cap on kappa x extent: g_min >= 1 - FOLD_CAP
 SLOT_BYTES = 1200          # per (yarn, ply): the dozen small arrays and list entries the build keeps
+BIN_ENTRIES_PER_THREAD_S = 1e10   # (bin, fibre) entries of the regular tables a thread fills: none reaches it
+DEFAULT_BINS = 32          # azimuth bins of the regular-fibre tables (``loomlight tables --bins``)
 PY_ARRAY_BYTES = 150       # a small numpy array in a Python list (header, list slot, bin start)
 
 
@@ -66,7 +70,7 @@ def prepare(yarns_path, preset=None, radius=None) -> Prepared:
     return Prepared(yarns, types, np.asarray(yarns["curve_length"], np.float64))
 
 
-def build(yarns_path, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", derive=True,
+def build(yarns_path, preset=None, radius=None, seed=0, nbins=DEFAULT_BINS, hair_mode="hybrid", derive=True,
           prepared: Prepared | None = None) -> BuiltTables:
     """(cv, tab, info, type dicts, yarns artifact) for a yarns artifact; derive: also the lookups'
     load-time structures (tables.derive_lookup_accel)."""
@@ -200,6 +204,40 @@ def frame_sample_count(art: Artifact, step: np.ndarray) -> float:
     return float(counts.sum())
 
 
+def bins_work(prep: Prepared, nbins: int, threads: int):
+    """The least time of the regular-fibre tables (``pipeline.limits.WorkEstimate``): every ply of every
+    yarn type fills a (bins x fibres) table, at a rate no thread reaches (``BIN_ENTRIES_PER_THREAD_S``)."""
+    from stages.core.yarn import model as M
+
+    from ..limits import WorkEstimate
+
+    entries = sum(float(tp[M.PLY_NUM]) * float(tp[M.FIBER_NUM]) for tp in prep.types.tparams) * float(nbins)
+    return WorkEstimate("loomlight tables", threads).add(
+        "regular-fibre bins", entries, BIN_ENTRIES_PER_THREAD_S,
+        f"{len(prep.types.tparams)} yarn type(s), plies x fibres x {int(nbins):,} bins (--bins)")
+
+
+def check_bins(prep: Prepared, nbins: int, hair_mode: str, limit) -> None:
+    """Refuse a build past the time limit (``bins_work``) or the memory budget ``limit``
+    (``tables_estimate``), naming the yarns artifact, and ``--bins`` as the place when the bins are at
+    fault: more than ``DEFAULT_BINS``, which would have passed."""
+    import numba
+
+    from ..limits import time_limit
+
+    threads = numba.get_num_threads()
+    more = int(nbins) > DEFAULT_BINS
+    work = bins_work(prep, nbins, threads)
+    if work.seconds > time_limit()[0]:
+        place = "--bins" if more and bins_work(prep, DEFAULT_BINS, threads).seconds <= time_limit()[0] else None
+        work.check(prep.yarns.path, place, "lower --bins" if place else "make the input smaller")
+    est = tables_estimate(prep, nbins, hair_mode)
+    if est.total > limit.nbytes:
+        place = "--bins" if more and tables_estimate(prep, DEFAULT_BINS, hair_mode).total <= limit.nbytes else None
+        est.check(limit, prep.yarns.path, place, "lower --bins, or raise --budget" if place else
+                  "raise --budget or make the input smaller")
+
+
 def check_options(preset, radius, nbins=None, spacing=None, budget=None):
     from ..presets import load_preset
 
@@ -212,8 +250,8 @@ def check_options(preset, radius, nbins=None, spacing=None, budget=None):
     check_positive(budget, "--budget", upper=math.inf)
 
 
-def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair_mode="hybrid", force=False,
-               budget=None):
+def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=DEFAULT_BINS, hair_mode="hybrid",
+               force=False, budget=None):
     """Build (or skip when up to date) the tables artifact; ``budget`` (``pipeline.memory.budget``):
     refuse before building when the estimated peak memory exceeds it."""
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
@@ -232,7 +270,7 @@ def run_tables(yarns_path, out, preset=None, radius=None, seed=0, nbins=32, hair
     if w.up_to_date() and not force:
         return {"skipped": True}
     prep = prepare(yarns_path, preset, radius)
-    tables_estimate(prep, nbins, hair_mode).check(budget or memory_budget(), prep.yarns.path)
+    check_bins(prep, nbins, hair_mode, budget or memory_budget())
     from ..progress import status
 
     with status(f"tables: {len(prep.curve_length):,} yarns"):

@@ -1,6 +1,7 @@
 """Voxelize runner: a voxel grid of the procedural fibre medium of a tables artifact (``grid`` artifact).
 
-``run_voxelize`` checks the resolution (at most 512^3 voxels) and supersampling, averages
+``run_voxelize`` checks the resolution (at most 512^3 voxels) and supersampling (the lookups' least time
+within the time limit, ``LOOKUPS_PER_THREAD_S``), averages
 ``supersample``^3 procedural lookups per voxel (``stages.render.grid_medium.voxelize``) over the box of
 all yarn tubes, publishes density, roughness, direction and albedo, and with ``export_npy`` also
 writes the raw numpy volumes (the layout is described in ``pipeline.commands.voxelize``).
@@ -17,6 +18,10 @@ from pathlib import Path
 
 
 VOXEL_BYTES = 32           # density, roughness (float32), direction, albedo (3 x float32)
+# --supersample: each voxel averages supersample^3 procedural lookups; their least time
+# (``pipeline.limits.WorkEstimate``) at a rate no thread reaches (a lookup finds the yarns near a point,
+# projects onto each and tests its fibres: well under 1e7 a thread-second) bounds it.
+LOOKUPS_PER_THREAD_S = 1e8
 EXPORT_VOXEL_BYTES = 96    # --export-npy: the SGGX volume and its float64 temporaries
 SLAB = 16                  # z-slices per stored chunk and per chunk task
 
@@ -70,6 +75,15 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
     nx, ny, nz = res
     if nx * ny * nz > 512 ** 3:
         raise LoomError(None, "--res", f"{nx} x {ny} x {nz} voxels is more than 512^3")
+    import numba
+
+    from ..limits import WorkEstimate
+
+    s = int(supersample)
+    WorkEstimate("loomlight voxelize", scheduler.workers * scheduler.threads_per_worker
+                 if scheduler is not None and scheduler.kind == "processes" else numba.get_num_threads()).add(
+        "procedural lookups", float(nx) * ny * nz * float(s) ** 3, LOOKUPS_PER_THREAD_S,
+        f"{nx} x {ny} x {nz} voxels x {s:,}^3 lookups (--supersample)").check(None, "--supersample", "lower it")
     out = Path(out)
     params = {"res": res, "supersample": int(supersample)}
     w = ArtifactWriter(out, kind="grid", stage="voxelize", params=params, inputs={"tables": (tables, "tables")},
