@@ -101,7 +101,9 @@ def _watch_compilation(argv) -> None:
 def main(argv: list[str] | None = None) -> int:
     try:
         _watch_compilation(argv)
-        command()(args=argv, standalone_mode=False)
+        code = command()(args=argv, standalone_mode=False)
+        if isinstance(code, int) and not isinstance(code, bool) and code:
+            return code   # without standalone mode click returns a command's typer.Exit(code) instead of raising it
     except LoomError as e:
         typer.echo(f"error: {e.one_line()}", err=True)
         return 2

@@ -50,6 +50,14 @@ def test_committed_docs_are_current(cli):
     assert code == 0, out + err
 
 
+def test_check_exits_1_when_stale(cli, monkeypatch):
+    """`--check` on stale docs names them and exits with code 1 (make test and CI rely on the code; the CLI once
+    returned 0 here, because click hands a command's typer.Exit back instead of raising it)."""
+    monkeypatch.setattr(docs_gen, "check", lambda root=None: ["docs/scenes.md: 1 line(s) differ"])
+    code, out, err = cli("docs", "--check")
+    assert code == 1 and "docs/scenes.md" in out and "stale" in err, (code, out, err)
+
+
 @pytest.mark.parametrize("name,anchor", [(n, a) for n, a, _, _ in docs_gen.SCHEMA_DOCS])
 def test_every_schema_key_is_in_scenes_md(name, anchor):
     schema = json.loads((ROOT / "schemas" / f"{name}.schema.json").read_text())
