@@ -5,6 +5,8 @@
   beyond, float32 positions have lost their digits and the segment grids, frames and tables overflow.
 - Lengths (radii, spacings, scales) are finite, positive and at most ``MAX_LENGTH``.
 - Light values (irradiance, radiance, power) are at most ``MAX_LIGHT``.
+- Path depths (``max_depth``, ``rr_depth`` of every render and precompute) are at most ``MAX_PATH_DEPTH``:
+  they cap work that Russian roulette ends long before, so past it a number is a typo, not a setting.
 - Counts a stage works through (paths per cell, SG counts) are bounded by time where their memory does
   not grow with them: ``WorkEstimate`` refuses a run whose least time exceeds the time limit
   (``LOOMLIGHT_TIME_LIMIT`` hours, default 24), with the estimate in the message, as
@@ -23,6 +25,7 @@ from .errors import LoomError
 MAX_COORD = 1e6
 MAX_LENGTH = 1e6
 MAX_LIGHT = 1e9
+MAX_PATH_DEPTH = 10_000
 
 
 def check_positive(value, place: str, file=None, upper: float = MAX_LENGTH):
@@ -30,6 +33,13 @@ def check_positive(value, place: str, file=None, upper: float = MAX_LENGTH):
     if value is not None and not (math.isfinite(value) and 0 < value <= upper):
         limit = f"at most {upper:g}" if math.isfinite(upper) else "finite"
         raise LoomError(file, place, f"must be positive and {limit}, got {value}")
+    return value
+
+
+def check_depth(value: int, place: str, file=None) -> int:
+    """``value`` when it is an integer from 1 to ``MAX_PATH_DEPTH``, else a LoomError naming ``place``."""
+    if not 1 <= value <= MAX_PATH_DEPTH:
+        raise LoomError(file, place, f"must be from 1 to {MAX_PATH_DEPTH:,} scattering events, got {value:,}")
     return value
 
 

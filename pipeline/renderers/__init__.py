@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING
 
 
 from ..errors import LoomError, did_you_mean, unknown  # noqa: F401 (did_you_mean: for the render runner)
+from ..limits import MAX_PATH_DEPTH
 
 if TYPE_CHECKING:  # numpy stays out of `loomlight --help`
     import numpy as np
@@ -274,6 +275,7 @@ def material_help() -> str:
 def render_schema() -> dict:
     """The JSON Schema of a scene's [render] table (``schemas/scene.schema.json`` takes it from here)."""
     positive = {"type": "integer", "minimum": 1}
+    depth = {"type": "integer", "minimum": 1, "maximum": MAX_PATH_DEPTH}
     return {
         "type": "object",
         "additionalProperties": False,
@@ -284,8 +286,8 @@ def render_schema() -> dict:
                        + " (checked against the registry when the scene is read)"},
             "spp": positive,
             "seed": {"type": "integer", "minimum": 0},
-            "max_depth": positive,
-            "rr_depth": positive,
+            "max_depth": depth,
+            "rr_depth": depth,
             "source": {"enum": all_sources()},
             "tile_size": {"type": "integer", "minimum": 4},
             "scheduler": {"type": "string", "pattern": "^(local|processes|tcp://.+:[0-9]+)$",

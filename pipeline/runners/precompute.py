@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
-from ..limits import largest_option
+from ..limits import check_depth, largest_option
 from ..memory import Estimate, budget as memory_budget, fmt_bytes
 
 MAX_ORDER = 8
@@ -104,6 +104,8 @@ class IirtfParams:
                             ("--theta-samples", self.theta_samples, 2), ("--chunk", self.chunk, 1)):
             if not v >= lo:
                 raise LoomError(None, name, f"must be at least {lo}, got {v}")
+        check_depth(self.max_depth, "--max-depth")
+        check_depth(self.rr_depth, "--rr-depth")
         if self.light_sampling not in ("uniform", "mis"):
             raise LoomError(None, "--light-sampling", f"unknown estimator {self.light_sampling!r} (known: mis, uniform)")
 

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
-from ..limits import largest_option
+from ..limits import MAX_PATH_DEPTH, largest_option
 from ..memory import Estimate, budget as memory_budget
 
 
@@ -46,7 +46,6 @@ SAMPLES_PER_THREAD_S = 1e7
 LIGHT_DIRECTIONS_PER_THREAD_S = 1e9
 MAX_RESOLUTION = 256
 MAX_GRID_DIRECTIONS = 4096
-MAX_DEPTH = 10_000
 MAX_ROUNDS = 1_000
 
 
@@ -77,9 +76,9 @@ class BtfParams:
                         ("--max-rounds", self.max_rounds)):
             if v < 1:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
-        caps = (("--max-depth", self.max_depth, MAX_DEPTH,
+        caps = (("--max-depth", self.max_depth, MAX_PATH_DEPTH,
                  "scattering events on a path (Russian roulette from --rr-depth ends paths long before)"),
-                ("--rr-depth", self.rr_depth, MAX_DEPTH, "scattering events before Russian roulette"),
+                ("--rr-depth", self.rr_depth, MAX_PATH_DEPTH, "scattering events before Russian roulette"),
                 ("--max-rounds", self.max_rounds, MAX_ROUNDS,
                  "lobe/table alternations (the fit stops earlier, at --threshold)"))
         for name, v, cap, what in caps:

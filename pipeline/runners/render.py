@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from ..errors import LoomError
+from ..limits import check_depth
 from ..memory import Estimate, budget as memory_budget, peak_rss_bytes
 
 INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid", "svf": "svf",
@@ -271,6 +272,8 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (max_depth, "--max-depth"),
                     (threads, "--threads")):
         _positive(v, name)
+    if max_depth is not None:
+        check_depth(max_depth, "--max-depth")
     if seed is not None and seed < 0:
         raise LoomError(None, "--seed", f"must be >= 0, got {seed}")
     out = Path(out)

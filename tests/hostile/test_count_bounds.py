@@ -85,3 +85,26 @@ def test_render_spp_bounded_by_time(cli, ws):
                           "8 x 6 pixels x 100,000,000,000,000 spp", "would take at least an estimated")
     assert "years" in line
     assert_refused(cli, ws, [*base, "--spp", "1", "--max-spp", "100000000000000"], "--max-spp", "adaptive paths")
+
+
+@pytest.mark.parametrize("where", ["render", "iirtf", "scene"])
+def test_path_depth_capped(cli, ws, where):
+    """``max_depth`` / ``rr_depth`` cap work that Russian roulette ends long before
+    (``pipeline.limits.MAX_PATH_DEPTH``): past the cap a number is a typo; before, a render or an IIRTF
+    precompute took any depth, and one past int64 was a numba OverflowError (exit 1)."""
+    huge = "100000000000000000000000"
+    if where == "render":
+        assert_refused(cli, ws, ["render", ws / "scene.toml", "--method", "fiberpath", "--fibers", ws / "tiling.zarr",
+                                 "--max-depth", "20000", "-o", ws / "r.exr"], "--max-depth", "from 1 to 10,000")
+    elif where == "iirtf":
+        for opt in ("--max-depth", "--rr-depth"):
+            assert_refused(cli, ws, ["precompute", "iirtf", ws / "tiling.zarr", "-o", ws / "iirtf.zarr", *IIRTF_ARGS,
+                                     "--scene", ws / "scene.toml", opt, huge], opt, "from 1 to 10,000")
+    else:
+        scene = ws / "deep_scene.toml"
+        try:
+            scene.write_text((ws / "scene.toml").read_text() + "\n[render]\nmax_depth = 20000\n")
+            assert_refused(cli, ws, ["render", scene, "--method", "fiberpath", "--fibers", ws / "tiling.zarr",
+                                     "-o", ws / "r.exr"], "deep_scene.toml", "max_depth", "10000")
+        finally:
+            scene.unlink()
