@@ -754,8 +754,10 @@ def _move(tmp: Path, dst: Path) -> None:
 def _publish_set(moves: list[tuple[Path, Path]], path: Path) -> None:
     """Publish complete temporaries (files first, the artifact directory last) as one set: a journal
     listing the moves is written first (with the new directory's zarr.json digest, to tell it from the
-    previous artifact an exchange leaves in its place), so the next writer of ``path`` finishes a
-    publication a kill interrupted."""
+    previous artifact an exchange leaves in its place), so the next writer of ``path``, or a reader
+    (``settle``), finishes a publication a kill interrupted. Files are published with their modification
+    time held at the epoch until the whole set is there (``_release_files``): Make, which judges a target
+    (a render's EXR) by its time, sees a file of an unfinished set as out of date, never as done."""
     entries = [[str(t), str(d), _sha256_file(t / "zarr.json") if t.is_dir() else None] for t, d in moves]
     journal = temp_sibling(path, "publish").with_suffix(".json")
     tmp = temp_sibling(path).with_suffix(".json")
@@ -763,10 +765,20 @@ def _publish_set(moves: list[tuple[Path, Path]], path: Path) -> None:
     os.replace(tmp, journal)
     pause_point("journal")
     for i, (t, d) in enumerate(moves):
+        if not t.is_dir():
+            os.utime(t, ns=(0, 0))
         _move(t, d)
         if i == 0:
             pause_point("half-published")
+    _release_files(entries)
     journal.unlink()
+
+
+def _release_files(entries) -> None:
+    """The published files of a finished set get the time it finished (``_publish_set``)."""
+    for _, d, digest in entries:
+        if digest is None and os.path.isfile(d):
+            os.utime(d)
 
 
 def _roll_forward(journal: Path) -> None:
@@ -789,7 +801,10 @@ def _roll_forward(journal: Path) -> None:
             if t.is_dir() and (not (t / "zarr.json").is_file() or _sha256_file(t / "zarr.json") != digest):
                 continue  # the previous artifact, exchanged out: clean_stale removes it
             if t.exists():
+                if not t.is_dir():
+                    os.utime(t, ns=(0, 0))
                 _move(t, d)
+        _release_files(entries)
         journal.unlink(missing_ok=True)
 
 

@@ -4,7 +4,8 @@ and artifact as one set through a journal (``pipeline.artifacts._publish_set``);
 the new EXR beside the old PNG and artifact until the next *writer* of that path repaired it, and a
 reader in between saw a mixed set. Now every reader settles the set first (``pipeline.artifacts.settle``,
 called by ``read_meta`` and ``images.read_exr``): a publication whose process is dead is finished, one in
-progress is waited for, then refused as one line.
+progress is waited for, then refused as one line. Make, the reader that judges by file times, sees the
+unfinished set's EXR at the epoch (out of date) and the finished set's at the time it finished.
 
 Reference: the artifact's recorded sha256 of its EXR and PNG (``companions``) against the files' bytes,
 and the seeds: the killed render's set (all three files differ from the previous render's).
@@ -84,6 +85,7 @@ def test_reader_after_a_killed_publication_sees_the_new_set(cli, tmp_path, fiber
     _kill(_paused("half-published", _render(fibers, out) + ["--seed", "2"], tmp_path))
     with pytest.raises(AssertionError, match="a mixed set"):
         _set(out)   # the files as the kill left them: the new EXR beside the old PNG and artifact
+    assert out.stat().st_mtime == 0   # Make (which judges the EXR by its time) sees it out of date, not done
     if reader == "info":
         code, _, err = cli("info", out.with_suffix(".zarr"), "--json")
         assert code == 0, err
@@ -93,6 +95,7 @@ def test_reader_after_a_killed_publication_sees_the_new_set(cli, tmp_path, fiber
         read_exr(out)
     new = _set(out)
     assert all(new[k] != old[k] for k in new)
+    assert out.stat().st_mtime > fibers.stat().st_mtime   # the finished set's time: Make sees it done
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".") and "publish" in p.name) == []
 
 
