@@ -28,6 +28,7 @@ import numpy as np
 import pytest
 
 from tests.hostile.contract import assert_refused
+from tests.hostile.precomputed import SCENE as PRT_SCENE
 
 H = Path(__file__).resolve().parent
 DRAFTS = H.parents[1] / "data" / "drafts"
@@ -181,41 +182,15 @@ def test_unreadable_recorded_yarns(cli, moved):
 
 
 # ------------------------------------------------------------------------------------------------ 4. precompute btf
-BTF_SCENE = """
-[fabric]
-source = "generator"
-[fabric.generator]
-kind = "woven"
-pattern = "plain"
-ends = 2
-picks = 2
-spacing = 0.1
-yarn_radius = 0.045
-[yarns.default]
-preset = "cotton1"
-bcsdf = "cotton"
-[camera]
-origin = [0.1, 0.1, 0.75]
-target = [0.1, 0.1, 0.0]
-up = [0.0, 1.0, 0.0]
-width = 8
-height = 6
-[[lights]]
-type = "directional"
-direction = [-0.4, 0.5, -0.77]
-irradiance = 3.0
-"""
-
-
 @pytest.fixture(scope="module")
 def tiled(tmp_path_factory):
-    """The tiny tiling of the precompute tests, its scene, and a previous artifact at the -o path
-    (a copy of the tiling: any artifact stands for the previous output)."""
+    """The tiny tiling of the precompute tests, the hostile prt scene (its materials), and a previous
+    artifact at the -o path (a copy of the tiling: any artifact stands for the previous output)."""
     from tests.precompute.conftest import make_tiling
 
     W = tmp_path_factory.mktemp("btf_bounds")
     make_tiling(W)
-    (W / "scene.toml").write_text(BTF_SCENE)
+    (W / "scene.toml").write_text(PRT_SCENE)
     shutil.copytree(W / "tiling.zarr", W / "btf.zarr")
     return W
 
