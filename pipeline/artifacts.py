@@ -745,9 +745,11 @@ def _publish(tmp: Path, path: Path) -> None:
 
 
 def _move(tmp: Path, dst: Path) -> None:
+    """One move of a set (``_publish_set``): a file arrives with its time held at the epoch."""
     if tmp.is_dir():
         _publish(tmp, dst)
     else:
+        os.utime(tmp, ns=(0, 0))
         os.replace(tmp, dst)
 
 
@@ -765,8 +767,6 @@ def _publish_set(moves: list[tuple[Path, Path]], path: Path) -> None:
     os.replace(tmp, journal)
     pause_point("journal")
     for i, (t, d) in enumerate(moves):
-        if not t.is_dir():
-            os.utime(t, ns=(0, 0))
         _move(t, d)
         if i == 0:
             pause_point("half-published")
@@ -801,8 +801,6 @@ def _roll_forward(journal: Path) -> None:
             if t.is_dir() and (not (t / "zarr.json").is_file() or _sha256_file(t / "zarr.json") != digest):
                 continue  # the previous artifact, exchanged out: clean_stale removes it
             if t.exists():
-                if not t.is_dir():
-                    os.utime(t, ns=(0, 0))
                 _move(t, d)
         _release_files(entries)
         journal.unlink(missing_ok=True)
