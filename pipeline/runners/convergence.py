@@ -57,7 +57,7 @@ from ..errors import LoomError
 from ..memory import peak_rss_bytes
 from ..toml_file import dumps_toml
 from .compare_file import CompareMethod, Comparison, derived_scene, load_comparison
-from .sweep import arg_hashes, key_text, referenced_files, cli_render
+from .sweep import arg_hashes, cli_render, key_text, referenced_files, substitute
 
 REFERENCE_SEED = 1_000_000      # batch k renders with seed REFERENCE_SEED + k; runs use seeds 1, 2, ...
 EQUAL_TIME_SEED = 500_000       # the equal-time strip's renders
@@ -90,8 +90,7 @@ def render_code_version() -> str:
 
 
 def expand(cmp: Comparison, out: Path, args: list) -> list[str]:
-    return [a.replace("{compare_dir}", str(cmp.path.parent.resolve())).replace("{out}", str(out.resolve()))
-            for a in args]
+    return substitute(args, {"compare_dir": cmp.path.parent, "out": out})
 
 
 def scene_text(cmp: Comparison, raw: dict, what: str) -> str:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -81,8 +82,23 @@ class Job:
     args: list[str]
 
 
+def substitute(args: list[str], places: dict[str, Path]) -> list[str]:
+    """``args`` with each ``{name}`` of ``places`` replaced by that absolute directory; an argument that had
+    one is normalised lexically, so ``{out}/../fibers.zarr`` names the same file (and hashes the same in
+    a key) before and after ``{out}`` is created (``Path.exists`` of ``out/..`` is False while ``out`` is not
+    there)."""
+    dirs = {f"{{{k}}}": str(Path(v).resolve()) for k, v in places.items()}
+    out = []
+    for a in args:
+        b = a
+        for k, v in dirs.items():
+            b = b.replace(k, v)
+        out.append(os.path.normpath(b) if b != a else a)
+    return out
+
+
 def expand_args(sweep: Sweep, out: Path, args: list[str]) -> list[str]:
-    return [a.replace("{sweep_dir}", str(sweep.path.parent.resolve())).replace("{out}", str(out.resolve())) for a in args]
+    return substitute(args, {"sweep_dir": sweep.path.parent, "out": out})
 
 
 def arg_hashes(args: list[str]) -> dict[str, str]:

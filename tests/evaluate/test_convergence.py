@@ -330,3 +330,21 @@ def test_reference_short_of_its_targets_is_extended(compare_file, tmp_path, stan
     new_seeds = {s for _, _, s in calls[n:]}
     assert again.reference["targets_met"] and again.reference["batches"] > 8
     assert min(new_seeds) == 1_000_000 + 8             # the first eight batches were reused, not re-rendered
+
+
+def test_reference_made_before_its_folder_exists_is_reused(compare_file, tmp_path, standin):
+    """make demo's order: ``--reference-only`` into a folder not yet there, then the whole comparison. An
+    input named ``{out}/../x`` (make demo's artifacts beside the comparison's folder) names the same file
+    before and after the folder exists, so the reference's input key matches and it is reused (it was
+    refused: ``Path.exists`` of ``out/../x`` is False while ``out`` is missing, so the first run hashed no input)."""
+    from pipeline.runners import convergence as rc
+
+    render, calls = standin
+    (tmp_path / "inputs.txt").write_text("an input artifact")
+    compare_file.write_text(compare_file.read_text().replace(
+        'name = "exact"\nmethod = "standin"', 'name = "exact"\nmethod = "standin"\nargs = ["--fibers", "{out}/../inputs.txt"]'))
+    out = tmp_path / "compare"
+    assert not out.exists()
+    rc.run_convergence(compare_file, out, reference_only=True, renderer=render, echo=lambda s: None)
+    res = rc.run_convergence(compare_file, out, renderer=render, echo=lambda s: None)
+    assert res.reference["reused"]
