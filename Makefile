@@ -70,7 +70,7 @@ COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(OUT
 	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo demo-quick test test-all bench references compare docs clean
+.PHONY: help setup demo demo-quick test test-all bench compile-report references compare docs clean
 
 ##@ Main targets
 
@@ -85,10 +85,10 @@ setup: $(VENV)/.installed ## create .venv and install loomlight with its test an
 # two stages at a time, their lines interleaved as they come (progress and compile notices live, as plain
 # lines off a terminal);
 # the tables and fibres first, so the longest chain (procedural volpath, the longest compilation on a
-# cold cache) starts at once beside the rest
+# cold cache) starts at once beside the rest; the knit's fibres after the demo's (two realize commands at
+# once would both compile realize's kernels on a cold cache: make compile-report)
 demo: $(VENV)/.installed ## set up .venv if needed, run the demo scene end to end, print the output paths
-	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=line $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json \
-	    $(OUT)/knit_fibers.zarr/zarr.json
+	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=line $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json
 	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=line demo-outputs
 	@$(MAKE) --no-print-directory $(OUT)/compare/report.md
 	@echo "demo outputs:"
@@ -113,8 +113,9 @@ demo: $(VENV)/.installed ## set up .venv if needed, run the demo scene end to en
 	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
 # the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
+QUICK_OUT ?= out/quick
 demo-quick: ## the demo at small sizes and reduced precomputes, a first look (out/quick)
-	@$(MAKE) --no-print-directory demo OUT=out/quick DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
+	@$(MAKE) --no-print-directory demo OUT=$(QUICK_OUT) DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
 	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
 	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
 	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4" \
@@ -126,6 +127,12 @@ test: $(VENV)/.installed ## set up .venv if needed, run the test suite but the s
 
 test-all: $(VENV)/.installed ## the whole test suite, the slow tests too
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+
+# on empty numba caches of its own (the checkout's cache and out/ untouched); COMPILE_REPORT_ARGS="--demo quick"
+# measures the quick demo's commands instead, "--tests all" make test's whole suite
+compile-report: $(VENV)/.installed ## what numba compiles on a cold cache for the demo and the heaviest tests -> bench/results/compile.json
+	$(BIN)/python bench/compile_report.py $(COMPILE_REPORT_ARGS)
+	$(LL) docs --only measurements --bench-results bench/results --compare-dir $(COMPARE)
 
 # the benchmarks' exit status is make bench's, after docs/measurements.md is rewritten from what they wrote
 bench: $(VENV)/.installed ## benchmarks -> bench/results/*.json, bench/results/summary.md, docs/measurements.md

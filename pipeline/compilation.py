@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import threading
 import time
 from contextlib import contextmanager
@@ -54,7 +55,8 @@ def _read_times() -> dict:
         return {}
 
 
-def _record(key: str, seconds: float) -> None:
+def record(key: str, seconds: float) -> None:
+    """Keep ``seconds`` as the time of ``key`` for the next estimate (``estimate_s``)."""
     f = times_file()
     if f is None:
         return
@@ -135,23 +137,100 @@ class _Compiling:
                 self.work.printed = True
                 progress.end(self.work)
         if took >= RECORD_MIN_S:
-            _record(self.key, took)
+            record(self.key, took)
 
 
 def _on_start(event) -> None:
     depth = getattr(_state, "depth", 0)
     _state.depth = depth + 1
+    data = event.data or {}
+    key, module, name = kernel_key(data.get("dispatcher"), data.get("args") or ())
     if depth == 0:
-        data = event.data or {}
-        key, module, name = kernel_key(data.get("dispatcher"), data.get("args") or ())
         _state.current = _Compiling(key, describe(module, name))
+    if _log_path is not None:
+        _log_start(key, data.get("args") or ())
 
 
 def _on_end(event) -> None:
     _state.depth = max(0, getattr(_state, "depth", 1) - 1)
+    if _log_path is not None:
+        _log_end()
     if _state.depth == 0 and getattr(_state, "current", None) is not None:
         current, _state.current = _state.current, None
         current.finish()
+
+
+# ---- the compile log of ``make compile-report`` (bench/compile_report.py) ------------------------------
+# With ``LOOMLIGHT_COMPILE_LOG`` set to a file, every compilation appends one JSON line to it: the kernel,
+# the signature it was typed with, its seconds in all and without the kernels it compiled inside it
+# (``self_s``), and who asked: the kernel it was compiled for (``parent``), else the first frame of
+# loomlight's code outside numba (``caller``), and the command or test file running (``context``).
+
+LOG_ENV = "LOOMLIGHT_COMPILE_LOG"
+_log_path = os.environ.get(LOG_ENV) or None
+
+
+def _command_context(argv: list[str]) -> str:
+    """``loomlight render --method volpath`` of a command line: the program, its subcommand words and the
+    method, without paths and settings."""
+    if not argv:
+        return "python"
+    words = [Path(argv[0]).name]
+    for a in argv[1:]:
+        if a.startswith("-") or "/" in a or "." in a:
+            break
+        words.append(a)
+    if "--method" in argv[:-1]:
+        words += ["--method", argv[argv.index("--method") + 1]]
+    return " ".join(words)
+
+
+context = os.environ.get("LOOMLIGHT_COMPILE_CONTEXT") or _command_context(list(sys.argv))
+_OWN_DIRS = ("pipeline", "tests", "bench", "stages")
+
+
+def _caller() -> str:
+    """The innermost frame of loomlight's Python code (not a numba kernel being typed) that asked."""
+    f = sys._getframe(3)
+    root = str(Path(__file__).resolve().parent.parent)
+    while f is not None:
+        fn = f.f_code.co_filename
+        if fn.startswith(root) and "/numba/" not in fn and Path(fn).name != "compilation.py":
+            rel = Path(fn).resolve().relative_to(root)
+            if rel.parts and rel.parts[0] in _OWN_DIRS:
+                return f"{rel}:{f.f_lineno} ({f.f_code.co_name})"
+        f = f.f_back
+    return "?"
+
+
+def _log_start(key: str, args) -> None:
+    stack = getattr(_state, "log_stack", None)
+    if stack is None:
+        stack = _state.log_stack = []
+    sig = ", ".join(str(a) for a in args)
+    asked = stack[-1]["kernel"] if stack else None
+    stack.append({"kernel": key, "signature": sig, "parent": asked,
+                  "caller": None if asked else _caller(), "t0": time.perf_counter(), "children_s": 0.0})
+
+
+def _log_end() -> None:
+    stack = getattr(_state, "log_stack", None)
+    if not stack:
+        return
+    rec = stack.pop()
+    total = time.perf_counter() - rec.pop("t0")
+    children = rec.pop("children_s")
+    if stack:
+        stack[-1]["children_s"] += total
+    rec.update(total_s=round(total, 4), self_s=round(max(0.0, total - children), 4),
+               context=context, pid=os.getpid())
+    line = json.dumps(rec) + "\n"
+    with _lock:
+        try:
+            with open(_log_path, "a") as fh:   # one write of one line: whole lines from every process
+                fh.write(line)
+        except OSError:
+            pass
 
 
 def watch() -> None:

@@ -708,6 +708,33 @@ def _bench_section(name: str, res, date, summary: str) -> list[str]:
     return out + [""]
 
 
+COMPILE_REPORT = "compile"   # bench/results/compile.json, written by make compile-report
+COMPILE_ROWS = 25            # kernels listed on the page (the json has them all)
+
+
+def _compile_section(res, date) -> list[str]:
+    """make compile-report's numbers: the cold-cache compile time per part and the kernels that cost most."""
+    out = ['<a id="compile"></a>', "", "## Compilation on a cold cache", "",
+           "`make compile-report` (`bench/compile_report.py`): numba's compile events while the demo's commands "
+           "and the heaviest test files run on empty caches; core-seconds are summed over processes.", ""]
+    if not isinstance(res, dict) or not isinstance(res.get("totals"), dict):
+        return out + ["Not measured in this run (`make compile-report` writes `bench/results/compile.json`).", ""]
+    m = res.get("machine", {})
+    out += [f"Measured {date} (demo: {m.get('demo', '?')}; tests: {' '.join(m.get('tests') or []) or '?'}).", ""]
+    out += _table(("part", "compile, core-minutes", "wall", "processes", "kernels", "compilations"),
+                  [(name, f"{t['compile_core_s'] / 60:.2f}", _seconds(t["wall_s"]), t["processes"], t["kernels"],
+                    t["compilations"]) for name, t in res["totals"].items()])
+    rows = []
+    for k in (res.get("kernels") or [])[:COMPILE_ROWS]:
+        top = (k.get("by_signature") or [{}])[0]
+        asked = "; ".join((top.get("asked_by") or [])[:2])
+        rows.append((f"`{k['kernel']}`", f"{k['self_s']:.1f}", k["signatures"], k["recompiled"], _cell(asked)))
+    out += ["", "Kernels typed more than one way first, then kernels compiled by more than one process with the "
+                "same signature, then by seconds (without the kernels compiled inside them):", ""]
+    out += _table(("kernel", "seconds", "signatures", "compiled again", "asked by (first signature)"), rows)
+    return out + [""]
+
+
 def method_summary(page: Page, data: Measurements, link: str) -> list[str]:
     """The measured numbers of one method page: its comparisons' rows and its benchmarks' headline numbers;
     ``link`` is the path of measurements.md from where the text goes."""
@@ -760,7 +787,9 @@ def measurements_md(data: Measurements) -> str:
     out += ["## Benchmarks", "", "`make bench` (`bench/run.py`): each `bench/bench_<name>.py` writes "
                                  "`bench/results/<name>.json`.", ""]
     for name, (res, date, summary) in sorted(data.bench.items()):
-        out += _bench_section(name, res, date, summary)
+        if name != COMPILE_REPORT:
+            out += _bench_section(name, res, date, summary)
+    out += _compile_section(*data.bench.get(COMPILE_REPORT, (None, None, ""))[:2])
     out += ["## Comparisons", "", "`make compare` (`loomlight evaluate --convergence`): every method against a "
                                   "converged reference, error against time; the reports are "
                                   "`out/compare/<name>/report.html`.", ""]

@@ -160,6 +160,16 @@ def advance(w, n: int = 1) -> None:
             _live.advance(w.rich_id, n)
 
 
+def relabel(w, description: str) -> None:
+    """Change what a bar or spinner says (a run of named steps: ``warmup``)."""
+    if w is None:
+        return
+    with _lock:
+        w.description = description
+        if w.rich_id is not None and _live is not None:
+            _live.update(w.rich_id, description=description)
+
+
 def end(w, keep: bool = True) -> None:
     """Finish a bar or spinner; ``keep`` a finished bar on a terminal (spinners never stay)."""
     global _live

@@ -13,6 +13,16 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("LOOMLIGHT_PROGRESS", "0")  # no bars or compilation notices in captured output
 
 
+if os.environ.get("LOOMLIGHT_COMPILE_LOG"):   # make compile-report: every compilation, by test file
+    from pipeline import compilation
+
+    compilation.watch()
+
+    @pytest.hookimpl(tryfirst=True)
+    def pytest_runtest_setup(item):
+        compilation.context = item.nodeid.split("::")[0]
+
+
 @pytest.fixture
 def cli(tmp_path):
     """Run the loomlight CLI in-process: returns (exit code, stdout, stderr)."""

@@ -19,9 +19,10 @@ same floats, so its segments are a subset of the full realization's.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
+from stages.core.threads import for_chunks
 
 from stages.core.yarn.model import (FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, S_MIG, ALPHA, USE_MIGRATION, TWO_PI, YARN_ALPHA, cycle_of, hair_params, hair_point, loop_unit_radius, migration_phase, regular_xy)
 
@@ -157,20 +158,24 @@ def yarn_counts(tab, c, L, spacing):
 
 
 def realize_fill(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, offsets, points, radius):
-    """Vertices of every planned piece (prange over pieces), fabric space via Eq. 7. (A Python
-    function: numba's cache cannot hold a compiled caller of a parallel kernel.)"""
+    """Vertices of every planned piece (pieces on threads), fabric space via Eq. 7."""
     offsets = np.asarray(offsets, np.int64)
     realize_fill_window(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, np.zeros(len(yarn), np.int64),
                         np.ascontiguousarray(offsets[1:] - offsets[:-1]), offsets, points, radius)
 
 
-@njit(cache=True, parallel=True)
 def realize_fill_window(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, nfull, offsets, points, radius):
     """Vertices first[q] .. first[q] + (offsets[q + 1] - offsets[q]) - 1 of planned piece q, a piece of
-    nfull[q] vertices (prange over pieces): the same floats as the whole piece's vertices there, so a
-    window of a piece is a run of the full realization's segments (``window_pieces``)."""
-    F = yarn.shape[0]
-    for q in prange(F):
+    nfull[q] vertices (pieces on threads: ``stages.core.threads``): the same floats as the whole piece's
+    vertices there, so a window of a piece is a run of the full realization's segments (``window_pieces``)."""
+    for_chunks(_fill_pieces, yarn.shape[0], cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, nfull, offsets,
+               points, radius)
+
+
+@njit(cache=True, nogil=True)
+def _fill_pieces(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, nfull, offsets, points, radius, q0, q1):
+    """``realize_fill_window`` for pieces q0 .. q1 - 1."""
+    for q in range(q0, q1):
         c = yarn[q]
         t = tab.yarn_type[c]
         tp = tab.tparams[t]

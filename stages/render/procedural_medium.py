@@ -22,7 +22,7 @@ In the realization-free hair mode (nothing stored per hair) the yarn's full exte
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 from numba.extending import overload
 
 import math
@@ -35,6 +35,7 @@ from stages.core.yarn.tables import loop_fibre
 from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point, hair_speed_bound, regular_xy, transverse_speed_bound)
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.threads import for_chunks
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 from stages.render.tracking import cell_half_diagonal, raster_capsule
 
@@ -150,32 +151,30 @@ def _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, mode, box,
                     px, py, pz = qx, qy, qz
 
 
-@njit(cache=True, parallel=True)
 def capsule_box(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
     """(lo (3,), hi (3,)): the box of every fibre-holding capsule (module doc), grown by the largest
-    capsule radius. Walks the capsules without storing them (yarns in parallel)."""
+    capsule radius. Walks the capsules without storing them (yarns on threads: ``stages.core.threads``)."""
     Y = cv.curve_length.shape[0]
     boxes = np.empty((Y, BOX_SIZE))
+    boxes[:, :3] = np.inf
+    boxes[:, 3:] = -np.inf
+    for_chunks(_box_yarns, Y, cv, tab, float(step_frac), int(hair_samples), float(loop_step_fibers), boxes)
+    rmax = boxes[:, 6].max()
+    return boxes[:, :3].min(axis=0) - rmax, boxes[:, 3:6].max(axis=0) + rmax
+
+
+@njit(cache=True, nogil=True)
+def _box_yarns(cv, tab, step_frac, hair_samples, loop_step_fibers, boxes, c0, c1):
+    """``capsule_box``'s per-yarn boxes of yarns c0 .. c1 - 1."""
     dummy_mu = np.zeros((1, 1, 1))
     dummy3 = np.zeros(3)
     dummy_res = np.ones(3, np.int64)
-    for c in prange(Y):
-        box = boxes[c]
-        box[:3] = np.inf
-        box[3:] = -np.inf
-        # c and mode typed as capsule_majorants passes them, so _walk_yarn compiles once
-        _walk_yarn(cv, tab, np.int64(c), step_frac, hair_samples, loop_step_fibers, np.int64(BOX), box, dummy_mu,
+    for c in range(c0, c1):
+        # c and mode typed as _raster_workers passes them, so _walk_yarn compiles once
+        _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, np.int64(BOX), boxes[c], dummy_mu,
                    dummy3, dummy3, 0.0, dummy_res)
-    rmax = boxes[:, 6].max()
-    lo = np.empty(3)
-    hi = np.empty(3)
-    for ax in range(3):
-        lo[ax] = boxes[:, ax].min() - rmax
-        hi[ax] = boxes[:, 3 + ax].max() + rmax
-    return lo, hi
 
 
-@njit(cache=True, parallel=True)
 def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16, loop_step_fibers=2.0):
     """Majorant densities (nz, ny, nx) over the box lo-hi at resolution res: a cell takes the largest
     density of the fibre-holding capsules that may reach it (tracking.raster_capsule). The capsules
@@ -183,23 +182,28 @@ def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16,
     fabric's size. Workers take yarns round robin and their grids meet by maximum, so the result does
     not depend on their number."""
     Y = cv.curve_length.shape[0]
-    T = min(max(workers, 1), max(Y, 1))
-    mu = np.zeros((res[2], res[1], res[0]))  # worker 0's grid, and the result
-    extra = np.zeros((T - 1, res[2], res[1], res[0]))
+    T = min(max(int(workers), 1), max(Y, 1))
+    lo = np.asarray(lo, np.float64)
+    hi = np.asarray(hi, np.float64)
+    res = np.asarray(res, np.int64)
+    grids = np.zeros((T, res[2], res[1], res[0]))
     cs = (hi - lo) / res
     half_diag = cell_half_diagonal(cs)
+    for_chunks(_raster_workers, T, cv, tab, float(step_frac), int(hair_samples), float(loop_step_fibers), lo, cs,
+               half_diag, res, grids, threads=T)
+    return grids.max(axis=0) if T > 1 else grids[0]
+
+
+@njit(cache=True, nogil=True)
+def _raster_workers(cv, tab, step_frac, hair_samples, loop_step_fibers, lo, cs, half_diag, res, grids, w0, w1):
+    """``capsule_majorants``' workers w0 .. w1 - 1: worker w rasters yarns w, w + T, ... into grids[w]."""
+    Y = cv.curve_length.shape[0]
+    T = grids.shape[0]
     box = np.empty(BOX_SIZE)
-    for w in prange(T):
-        grid = mu if w == 0 else extra[w - 1]
+    for w in range(w0, w1):
         for c in range(w, Y, T):
-            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, np.int64(RASTER), box, grid, lo, cs,
+            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, np.int64(RASTER), box, grids[w], lo, cs,
                        half_diag, res)
-    for w in range(T - 1):
-        for iz in prange(res[2]):
-            for iy in range(res[1]):
-                for ix in range(res[0]):
-                    mu[iz, iy, ix] = max(mu[iz, iy, ix], extra[w, iz, iy, ix])
-    return mu
 
 
 @njit(cache=True)

@@ -12,9 +12,10 @@ deterministic function of the curves and the stored tables.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from stages.core.geometry.bvh import round_down32, round_up32
+from stages.core.threads import for_chunks
 
 from .fibre_tests import stored_hair
 from .frame_samples import chord_grid, coarse_knots, sample_all
@@ -100,7 +101,6 @@ def _mark_ball(bits, base, nb, h, rw, x, y, z, r, w0):
                 bits[base + zb, w0 + (idx >> 6)] |= np.uint64(1) << np.uint64(idx & 63)
 
 
-@njit(cache=True, parallel=True)
 def fringe_occupancy(tab, fo_off, fo_geom):
     """Fringe occupancy bits of every yarn, one set for loops and one for hairs: cell (z-bin, shell,
     sector) of yarn c is set when a loop (its fibre's trajectory over the loop's cycle grown by the
@@ -109,9 +109,16 @@ def fringe_occupancy(tab, fo_off, fo_geom):
     arc (its speed bound), and every sample marks the cells within fringe_reach plus half a step.
     A lookup point in no set loop cell needs no loop scan, one in no set hair cell no hair test;
     one in neither, farther than type_rcore from the axis, is covered by no fibre of the yarn.
-    Yarns in parallel (each writes only its own rows)."""
+    Yarns on threads (each writes only its own rows; ``stages.core.threads``)."""
     bits = np.zeros((fo_off[-1], 2 * FO_WORDS), np.uint64)
-    for c in prange(tab.yarn_type.shape[0]):
+    for_chunks(_fringe_yarns, len(tab.yarn_type), tab, fo_off, fo_geom, bits)
+    return bits
+
+
+@njit(cache=True, nogil=True)
+def _fringe_yarns(tab, fo_off, fo_geom, bits, c0, c1):
+    """``fringe_occupancy`` of yarns c0 .. c1 - 1."""
+    for c in range(c0, c1):
         t = tab.yarn_type[c]
         tp = tab.tparams[t]
         base = fo_off[c]
@@ -147,7 +154,6 @@ def fringe_occupancy(tab, fo_off, fo_geom):
                 for q in range(n + 1):
                     x, y, z = hair_point(tp, k, hs.r0, hs.r1, hs.th1, hs.pe, hs.z1, hs.ze, q / n)
                     _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * speed / n, FO_WORDS)
-    return bits
 
 
 def fringe_tables(tab: Tables):

@@ -38,10 +38,11 @@ Kernels:
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
 from stages.core.curves.spline import coeffs_s, locate, segment_t_at
+from stages.core.threads import for_chunks
 
 # fs_frame columns: position 0-2, unit tangent 3-5, normal 6-8, binormal 9-11; then, on the row of
 # the step's first sample, N . T' and B . T' at its start (12, 13) and at its end (14, 15), and the
@@ -83,16 +84,20 @@ def breakpoints_of(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_le
     return out[:n]
 
 
-@njit(cache=True, parallel=True)
 def sample_counts(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, deltas):
     """The number of frame samples sample_all makes per yarn at steps ``deltas``, from the curve arrays
-    alone (a memory estimate reads them without loading the curves)."""
-    Y = deltas.shape[0]
-    counts = np.zeros(Y, np.int64)
-    for c in prange(Y):
+    alone (a memory estimate reads them without loading the curves). Yarns on threads."""
+    counts = np.zeros(deltas.shape[0], np.int64)
+    for_chunks(_count_from_arrays, deltas.shape[0], offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length,
+               deltas, counts)
+    return counts
+
+
+@njit(cache=True, nogil=True)
+def _count_from_arrays(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, deltas, counts, c0, c1):
+    for c in range(c0, c1):
         counts[c] = _n_samples(breakpoints_of(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, c),
                                deltas[c])
-    return counts
 
 
 @njit(cache=True)
@@ -266,24 +271,32 @@ def sample_error(cv, c, s_arr, fr, rho, lo, hi):
     return worst
 
 
-@njit(cache=True, parallel=True)
 def sample_all(cv, deltas, rho):
-    """Frame samples of every yarn (prange over yarns): (offsets (Y+1,), s (M,), frames (M, 12),
-    measured errors (Y,))."""
+    """Frame samples of every yarn (yarns on threads: ``stages.core.threads``): (offsets (Y+1,), s (M,),
+    frames (M, 12), measured errors (Y,))."""
     Y = deltas.shape[0]
     counts = np.zeros(Y, np.int64)
-    for c in prange(Y):
-        counts[c] = _n_samples(_breakpoints(cv, c), deltas[c])
+    for_chunks(_count_samples, Y, cv, deltas, counts)
     off = np.zeros(Y + 1, np.int64)
-    for c in range(Y):
-        off[c + 1] = off[c] + counts[c]
+    off[1:] = np.cumsum(counts)
     s_all = np.empty(off[Y])
     fr_all = np.empty((off[Y], FRAME_COLS))
     err = np.zeros(Y)
-    for c in prange(Y):
+    for_chunks(_sample_yarns, Y, cv, deltas, np.asarray(rho, np.float64), off, s_all, fr_all, err)
+    return off, s_all, fr_all, err
+
+
+@njit(cache=True, nogil=True)
+def _count_samples(cv, deltas, counts, c0, c1):
+    for c in range(c0, c1):
+        counts[c] = _n_samples(_breakpoints(cv, c), deltas[c])
+
+
+@njit(cache=True, nogil=True)
+def _sample_yarns(cv, deltas, rho, off, s_all, fr_all, err, c0, c1):
+    for c in range(c0, c1):
         sample_yarn(cv, c, deltas[c], s_all[off[c]:off[c + 1]], fr_all[off[c]:off[c + 1]])
         err[c] = sample_error(cv, c, s_all, fr_all, rho[c], off[c], off[c + 1])
-    return off, s_all, fr_all, err
 
 
 # ------------------------------------------------------------------------------------------------

@@ -7,7 +7,7 @@ covering fibre (zero outside); density the yarn type's density (0 outside); ``OU
 fibre covers p; fibre a number that tells the covering fibres apart (-1 outside).
 ``lookup_point(..., skip)`` answers for every fibre but the one numbered ``skip`` (volpath's rays
 leaving a fibre that scattered them).
-``lookup_points(cv, tab, pts)`` does it for (N, 3) points in parallel and returns
+``lookup_points(cv, tab, pts)`` does it for (N, 3) points on threads and returns
 the same fields as arrays (``FibreLookups``: inside, yarn, kind, direction (N, 3), density,
 albedo (N, 3)).
 ``tab`` must carry its derived fields (``tables.derive_lookup_accel``; ``load_tables`` does it).
@@ -52,8 +52,9 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
+from stages.core.threads import for_chunks
 from stages.core.yarn import hair_free
 from stages.core.yarn.fibre_tests import (TWO_PI, HairShape, RegularFibre, YarnVisit, exact_hair, exact_regular,
                                           fibre_xy, hair_closest_s, hair_prefilter, hair_quick_reject,
@@ -439,10 +440,9 @@ def _near_seam(tab, c, bound, rf, eps, px, py, pz):
     return dx * dx + dy * dy + dz * dz < r * r
 
 
-@njit(cache=True, parallel=True)
 def lookup_points(cv, tab, pts):
-    """Vectorised lookup_point over (N, 3) points: ``FibreLookups`` (inside, yarn, kind, direction
-    (N, 3), density, albedo (N, 3))."""
+    """Vectorised lookup_point over (N, 3) points, on threads (``stages.core.threads``): ``FibreLookups``
+    (inside, yarn, kind, direction (N, 3), density, albedo (N, 3))."""
     N = pts.shape[0]
     inside = np.zeros(N, np.bool_)
     yarn = np.full(N, -1, np.int32)
@@ -450,7 +450,14 @@ def lookup_points(cv, tab, pts):
     direction = np.zeros((N, 3))
     density = np.zeros(N)
     albedo = np.zeros((N, 3))
-    for i in prange(N):
+    for_chunks(_lookup_range, N, cv, tab, pts, inside, yarn, kind, direction, density, albedo)
+    return FibreLookups(inside, yarn, kind, direction, density, albedo)
+
+
+@njit(cache=True, nogil=True)
+def _lookup_range(cv, tab, pts, inside, yarn, kind, direction, density, albedo, i0, i1):
+    """``lookup_points`` of points i0 .. i1 - 1."""
+    for i in range(i0, i1):
         # skip typed as volpath passes it (not a literal): lookup_point compiles once for both
         r = lookup_point(cv, tab, pts[i, 0], pts[i, 1], pts[i, 2], np.int64(-1))
         inside[i] = r.inside
@@ -463,4 +470,3 @@ def lookup_points(cv, tab, pts):
         albedo[i, 0] = r.albedo_r
         albedo[i, 1] = r.albedo_g
         albedo[i, 2] = r.albedo_b
-    return FibreLookups(inside, yarn, kind, direction, density, albedo)
