@@ -73,10 +73,10 @@ METHOD_STEPS: dict[str, tuple[Step, ...]] = {
     ),
     "btf": (
         _TILE,
-        Step("BTF acquisition and fit", ("precompute", "btf", "{d}/tiling.zarr", "-o", "{d}/btf.zarr", "--exemplar",
+        Step("BTF acquisition and fit", ("precompute", "btf", "{d}/tiling.zarr", "-o", "{d}/btf_fit.zarr", "--exemplar",
                                          "0", "--resolution", "2", "--views", "2x2", "--lights", "2x2", "--spp", "1")),
         Step("btf", ("render", DAMASK, "--method", "btf", "--source", "tiling", "--fibers", "{d}/tiling.zarr",
-                     "--set", "btf={d}/btf.zarr", *TINY, "-o", "{d}/btf.exr")),
+                     "--set", "btf={d}/btf_fit.zarr", *TINY, "-o", "{d}/btf.exr")),
     ),
     "bysdf": (
         _INGEST, _REALIZE,
