@@ -59,6 +59,8 @@ def _run_part(name: str, cmd: list[str], work: Path, extra_env: dict | None = No
     env = dict(os.environ, LOOMLIGHT_NUMBA_CACHE_ROOT=str(cache), LOOMLIGHT_COMPILE_LOG=str(log),
                LOOMLIGHT_PROGRESS="0", **(extra_env or {}))
     env.pop("NUMBA_CACHE_DIR", None)
+    if Path(cmd[0]).name == "make":   # the Makefile sets the cache root; a command-line variable overrides it
+        cmd = [*cmd, f"LOOMLIGHT_NUMBA_CACHE_ROOT={cache}"]
     print(f"compile report: {name}: {' '.join(cmd)}", flush=True)
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
