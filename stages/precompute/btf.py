@@ -49,17 +49,19 @@ result is the same whatever the thread count or the split of texels into chunks.
 import math
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from stages.core.btf import cell_direction
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
+from stages.core.threads import chunk_kernel, for_chunks
 from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_vertex
 
 DIMS_PER_VERTEX = 4      # lobe, two for the direction, Russian roulette
 FIRST_DIMS = 2           # the point's jitter (then, for cell averages, the view's and every light's cell jitter)
+JOB_CHUNKS_PER_THREAD = 64  # (texel, view) jobs cost from a few rays (nothing hit) to spp full paths: small runs balance threads
 
 
 @njit(cache=True)
@@ -174,14 +176,13 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
     return hits, rays
 
 
-@njit(cache=True, parallel=True)
 def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_dirs, light_dirs, spp, seed,
                    max_depth, rr_depth, max_dist, eps, view_grid, light_grid):
     """Texels t0..t1-1 (row-major ids of the res x res grid): (radiance (T, V, L, 3) float32 mean over the
     hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc. ``view_grid`` and
     ``light_grid`` (n_theta, n_phi) of the grids that ``view_dirs`` and ``light_dirs`` are: cell averages
     (module doc); (0, 0): the directions themselves. Both are always passed (no defaults), so every caller
-    shares one compiled specialisation of this parallel kernel."""
+    shares one compiled specialisation of the kernel. (texel, view) jobs on threads (``stages.core.threads``)."""
     T = t1 - t0
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
@@ -189,12 +190,30 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
     alpha = np.zeros((T, V), np.float32)
     normal = np.zeros((T, V, 3))
     rays = np.zeros((T, V), np.int64)
-    for job in prange(T * V):
+    for_chunks(_texel_view_jobs, T * V, sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, view_dirs, light_dirs,
+               spp, seed, max_depth, rr_depth, max_dist, eps, view_grid, light_grid, radiance, alpha, normal, rays,
+               chunks_per_thread=JOB_CHUNKS_PER_THREAD)
+    return (radiance, alpha) + _view_sums(normal, rays)
+
+
+@njit(cache=True)
+def _view_sums(normal, rays):
+    return normal.sum(axis=1), rays.sum(axis=1)
+
+
+@chunk_kernel
+def _texel_view_jobs(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, view_dirs, light_dirs, spp, seed,
+                     max_depth, rr_depth, max_dist, eps, view_grid, light_grid, radiance, alpha, normal, rays,
+                     j0, j1):
+    """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v)."""
+    V = view_dirs.shape[0]
+    L = light_dirs.shape[0]
+    acc = np.empty((L, 3))   # per chunk (as numba's parallel loop hoisted them); texel_view_samples fills them
+    now = np.empty((L, 3))
+    for job in range(j0, j1):
         i = job // V
         v = job - i * V
         texel = t0 + i
-        acc = np.empty((L, 3))
-        now = np.empty((L, 3))
         key0 = (texel * V + v) * spp
         hits, r = texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, view_dirs[v, 0],
                                      view_dirs[v, 1], view_dirs[v, 2], light_dirs, spp, seed, key0, max_depth,
@@ -205,7 +224,6 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
             for k in range(L):
                 for c in range(3):
                     radiance[i, v, k, c] = acc[k, c] / hits
-    return radiance, alpha, normal.sum(axis=1), rays.sum(axis=1)
 
 
 def texel_frames(normal_sums):

@@ -124,7 +124,7 @@ lobes=2, threshold=0.1, max_rounds=10, max_iter=50) -> BtfFit``:
 - ``predict_samples(rho, lobes, table, frames, view_dirs, light_dirs)`` gives the model's radiance in
   the samples' layout (residual pictures, tests).
 
-The texels run in parallel (numba ``prange``). Each texel's arithmetic is sequential and independent
+The texels run on threads (``stages.core.threads``). Each texel's arithmetic is sequential and independent
 of the others, so the bytes are the same at any thread count.
 
 Cost
@@ -144,9 +144,10 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from stages.core.btf import LOBE_PARAMS, to_texel_frame
+from stages.core.threads import chunk_kernel, for_chunks
 
 N_START = 4.0          # initial lobe exponent: a moderate highlight (§5)
 ANISO = 1.22           # C_x = 1.22 C_y (lobe 1), C_y = 1.22 C_x (lobe 2) at the start (§5)
@@ -660,10 +661,11 @@ def _fit_texel(smp, alpha, frame, view_dirs, light_dirs, K, threshold, max_round
     return rounds, converged, iters
 
 
-@njit(cache=True, parallel=True)
+@chunk_kernel
 def _fit_all(samples, alpha, frames, view_dirs, light_dirs, K, threshold, max_rounds, max_iter,
-             rho, lobes, table, rmse, rmse_nt, rounds, converged, iterations):
-    for t in prange(samples.shape[0]):
+             rho, lobes, table, rmse, rmse_nt, rounds, converged, iterations, t0, t1):
+    """Texels t0 .. t1 - 1 (``for_chunks``)."""
+    for t in range(t0, t1):
         r, ok, n = _fit_texel(samples[t], alpha[t], frames[t], view_dirs, light_dirs, K, threshold, max_rounds,
                            max_iter, rho[t], lobes[t], table[t], rmse[t], rmse_nt[t])
         rounds[t] = r
@@ -712,8 +714,8 @@ def fit_btf(samples, alpha, view_dirs, light_dirs, frames, lobes=2, threshold=0.
     rounds = np.zeros(T, np.int32)
     converged = np.zeros(T, np.bool_)
     iterations = np.zeros(T, np.int32)
-    _fit_all(samples, alpha, frames, view_dirs, light_dirs, K, float(threshold), int(max_rounds), int(max_iter),
-             rho, lob, table, rmse, rmse_nt, rounds, converged, iterations)
+    for_chunks(_fit_all, samples.shape[0], samples, alpha, frames, view_dirs, light_dirs, K, float(threshold),
+               int(max_rounds), int(max_iter), rho, lob, table, rmse, rmse_nt, rounds, converged, iterations)
     return BtfFit(rho, lob, table, rmse, rmse_nt, rounds, converged, iterations, frames.copy(),
                   _summary(samples, alpha, rmse, rmse_nt, rounds, converged))
 
@@ -732,9 +734,9 @@ def _summary(samples, alpha, rmse, rmse_nt, rounds, converged) -> FitSummary:
 
 # ------------------------------------------------------------------------------------------------
 # predictions (residual pictures, tests)
-@njit(cache=True, parallel=True)
-def _predict(rho, lobes, table, frames, view_dirs, light_dirs, out):
-    for t in prange(rho.shape[0]):
+@chunk_kernel
+def _predict(rho, lobes, table, frames, view_dirs, light_dirs, out, t0, t1):
+    for t in range(t0, t1):
         for v in range(view_dirs.shape[0]):
             vx, vy, vz = view_dirs[v, 0], view_dirs[v, 1], view_dirs[v, 2]
             bx, by, bz = to_texel_frame(frames[t], vx, vy, vz)
@@ -764,7 +766,7 @@ def predict_samples(rho, lobes, table, frames, view_dirs, light_dirs) -> np.ndar
     view_dirs = np.ascontiguousarray(view_dirs, dtype=np.float64)
     light_dirs = np.ascontiguousarray(light_dirs, dtype=np.float64)
     out = np.empty((rho.shape[0], view_dirs.shape[0], light_dirs.shape[0], 3))
-    _predict(rho, lobes, table, frames, view_dirs, light_dirs, out)
+    for_chunks(_predict, rho.shape[0], rho, lobes, table, frames, view_dirs, light_dirs, out)
     return out
 
 

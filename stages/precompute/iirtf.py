@@ -102,20 +102,21 @@ independent, may run in other processes, and concatenate to the whole)
 from collections import namedtuple
 import math
 
-import numba
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from stages.core.rng import uniform
 from stages.core.sh import sh_eval
 from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_prepare,
                                           material_sample)
+from stages.core.threads import chunk_kernel, for_chunks
 from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_scene, periodic_vertex
 
 MAX_ORDER = 8
 TWO_PI = 2.0 * math.pi
 FOUR_PI = 4.0 * math.pi
 MFP_STREAM = 1 << 62
+CELL_CHUNKS_PER_THREAD = 64   # cells cost from nothing to a full cell's paths: small runs balance the threads
 MAX_DIST_PERIODS = 32.0  # default max_dist = 32 max(W, H), as the SVF's (stages.precompute.svf)
 
 Cells = namedtuple("Cells", [
@@ -333,23 +334,27 @@ def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ig
     return rays
 
 
-@njit(cache=True, parallel=True)
+@chunk_kernel
 def _iirtf_cells(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, cell_offsets, cell_segments, seg_mid, seg_fibre,
-                 c0, c1, order, mis, n_paths, seed, max_depth, rr_depth, max_dist, eps, a_out, se_out, rays_out):
+                 c0, c1, order, mis, n_paths, seed, max_depth, rr_depth, max_dist, eps, a_out, se_out, rays_out,
+                 i0, i1):
+    """Cells c0 + i0 .. c0 + i1 - 1 into rows i0 .. i1 - 1 of the outputs (``for_chunks``)."""
     J = (order + 1) * (order + 1)
-    for ci in prange(c1 - c0):
+    S = np.empty((3, J, J))   # per chunk, zeroed per cell (as numba's parallel loop hoisted them)
+    Q = np.empty((3, J, J))
+    Y = np.empty(J)
+    Y1 = np.empty(J)
+    u = np.empty((3, J))
+    w0 = np.empty(3)
+    w1 = np.empty(3)
+    for ci in range(i0, i1):
         c = c0 + ci
         s_beg = cell_offsets[c]
         ns = cell_offsets[c + 1] - s_beg
         if ns == 0:
             continue
-        S = np.zeros((3, J, J))
-        Q = np.zeros((3, J, J))
-        Y = np.empty(J)
-        Y1 = np.empty(J)
-        u = np.empty((3, J))
-        w0 = np.empty(3)
-        w1 = np.empty(3)
+        S[:] = 0.0
+        Q[:] = 0.0
         rays = 0
         for p in range(n_paths):
             key = (c << 32) + p
@@ -404,12 +409,12 @@ def _max_dist(max_dist, period):
 def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order: int = 4, n_paths: int = 50_000,
                 seed: int = 0, max_depth: int = 32, rr_depth: int = 5, light_sampling: str = "uniform",
                 max_dist=None) -> IIRTFChunk:
-    """a_C and its standard error for global cells c0 <= c < c1 (module doc), prange over cells.
+    """a_C and its standard error for global cells c0 <= c < c1 (module doc), cells on threads.
     ``sc`` the tiling's ShellScene, ``mat_of_fiber`` (F,) int32 material row per global fibre id, ``mats``
     (NM, MAT_SIZE); ``order`` L in 0..8 (J = (L+1)^2); ``max_dist`` caps every ray (default 32 periods:
     a flat section 64 periods across); ``light_sampling`` "uniform" (the paper's estimator) or "mis"
     (module doc "Estimator"). Any split of [0, C) into chunks gives the same bytes; threads
-    take cells one at a time (cells cost from nothing to a full cell's paths)."""
+    take runs of cells (``CELL_CHUNKS_PER_THREAD`` per thread: cells cost from nothing to a full cell's paths)."""
     order = int(order)
     if not 0 <= order <= MAX_ORDER:
         raise ValueError(f"iirtf_chunk: SH order {order} outside 0..{MAX_ORDER}")
@@ -433,21 +438,20 @@ def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order
         W, H = (float(v) for v in cells.ex_period[k])
         z_lo, z_hi = (float(v) for v in cells.ex_slab[k])
         sl = slice(lo - c0, hi - c0)
-        with numba.parallel_chunksize(1):
-            _iirtf_cells(periodic_scene(sc, k), z_lo, z_hi, W, H, mof, mats, cells.cell_offsets,
-                         cells.cell_segments, cells.seg_mid, cells.seg_fibre, lo, hi, order,
-                         light_sampling == "mis", int(n_paths),
-                         int(seed), int(max_depth), int(rr_depth), _max_dist(max_dist, (W, H)), 1e-7 * max(W, H),
-                         a[sl], se[sl], rays[sl])
+        for_chunks(_iirtf_cells, hi - lo, periodic_scene(sc, k), z_lo, z_hi, W, H, mof, mats, cells.cell_offsets,
+                   cells.cell_segments, cells.seg_mid, cells.seg_fibre, lo, hi, order, light_sampling == "mis",
+                   int(n_paths), int(seed), int(max_depth), int(rr_depth), _max_dist(max_dist, (W, H)),
+                   1e-7 * max(W, H), a[sl], se[sl], rays[sl], chunks_per_thread=CELL_CHUNKS_PER_THREAD)
     return IIRTFChunk(a, se, rays)
 
 
 # ------------------------------------------------------------------------------------------------
 # mean free path
 
-@njit(cache=True, parallel=True)
-def _free_paths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, n_paths, seed, max_depth, max_dist, eps, S, Nseg):
-    for p in prange(n_paths):
+@chunk_kernel
+def _free_paths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, seed, max_depth, max_dist, eps, S, Nseg, p0, p1):
+    """Free paths p0 .. p1 - 1 (``for_chunks``)."""
+    for p in range(p0, p1):
         key = MFP_STREAM + p
         t_tan = np.empty(3)
         n = np.empty(3)
@@ -495,9 +499,9 @@ def mean_free_path(sc, k: int, z_lo: float, z_hi: float, period, mat_of_fiber, m
     W, H = (float(v) for v in period)
     S = np.zeros(n_paths)
     Nseg = np.zeros(n_paths, np.int64)
-    _free_paths(periodic_scene(sc, k), float(z_lo), float(z_hi), W, H, np.ascontiguousarray(mat_of_fiber, np.int32),
-                np.ascontiguousarray(mats, np.float64), int(n_paths), int(seed), int(max_depth),
-                _max_dist(max_dist, (W, H)), 1e-7 * max(W, H), S, Nseg)
+    for_chunks(_free_paths, n_paths, periodic_scene(sc, k), float(z_lo), float(z_hi), W, H,
+               np.ascontiguousarray(mat_of_fiber, np.int32), np.ascontiguousarray(mats, np.float64), int(seed),
+               int(max_depth), _max_dist(max_dist, (W, H)), 1e-7 * max(W, H), S, Nseg)
     total = int(Nseg.sum())
     if total == 0:
         return math.nan, math.nan, 0

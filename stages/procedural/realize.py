@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
-from stages.core.threads import for_chunks
+from stages.core.threads import chunk_kernel, for_chunks
 
 from stages.core.yarn.model import (FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, S_MIG, ALPHA, USE_MIGRATION, TWO_PI, YARN_ALPHA, cycle_of, hair_params, hair_point, loop_unit_radius, migration_phase, regular_xy)
 
@@ -172,7 +172,7 @@ def realize_fill_window(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, 
                points, radius)
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _fill_pieces(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, nfull, offsets, points, radius, q0, q1):
     """``realize_fill_window`` for pieces q0 .. q1 - 1."""
     for q in range(q0, q1):

@@ -35,7 +35,7 @@ from stages.core.yarn.tables import loop_fibre
 from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point, hair_speed_bound, regular_xy, transverse_speed_bound)
 
 from stages.core.dispatch import is_tuple_class
-from stages.core.threads import for_chunks
+from stages.core.threads import chunk_kernel, for_chunks
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 from stages.render.tracking import cell_half_diagonal, raster_capsule
 
@@ -163,7 +163,7 @@ def capsule_box(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
     return boxes[:, :3].min(axis=0) - rmax, boxes[:, 3:6].max(axis=0) + rmax
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _box_yarns(cv, tab, step_frac, hair_samples, loop_step_fibers, boxes, c0, c1):
     """``capsule_box``'s per-yarn boxes of yarns c0 .. c1 - 1."""
     dummy_mu = np.zeros((1, 1, 1))
@@ -194,7 +194,7 @@ def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16,
     return grids.max(axis=0) if T > 1 else grids[0]
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _raster_workers(cv, tab, step_frac, hair_samples, loop_step_fibers, lo, cs, half_diag, res, grids, w0, w1):
     """``capsule_majorants``' workers w0 .. w1 - 1: worker w rasters yarns w, w + T, ... into grids[w]."""
     Y = cv.curve_length.shape[0]

@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.bvh import round_down32, round_up32
-from stages.core.threads import for_chunks
+from stages.core.threads import chunk_kernel, for_chunks
 
 from .fibre_tests import stored_hair
 from .frame_samples import chord_grid, coarse_knots, sample_all
@@ -115,7 +115,7 @@ def fringe_occupancy(tab, fo_off, fo_geom):
     return bits
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _fringe_yarns(tab, fo_off, fo_geom, bits, c0, c1):
     """``fringe_occupancy`` of yarns c0 .. c1 - 1."""
     for c in range(c0, c1):

@@ -42,7 +42,7 @@ from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
 from stages.core.curves.spline import coeffs_s, locate, segment_t_at
-from stages.core.threads import for_chunks
+from stages.core.threads import chunk_kernel, for_chunks
 
 # fs_frame columns: position 0-2, unit tangent 3-5, normal 6-8, binormal 9-11; then, on the row of
 # the step's first sample, N . T' and B . T' at its start (12, 13) and at its end (14, 15), and the
@@ -93,7 +93,7 @@ def sample_counts(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_len
     return counts
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _count_from_arrays(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, deltas, counts, c0, c1):
     for c in range(c0, c1):
         counts[c] = _n_samples(breakpoints_of(offsets, closed, seg_arclen, frame_offsets, frame_s, curve_length, c),
@@ -286,13 +286,13 @@ def sample_all(cv, deltas, rho):
     return off, s_all, fr_all, err
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _count_samples(cv, deltas, counts, c0, c1):
     for c in range(c0, c1):
         counts[c] = _n_samples(_breakpoints(cv, c), deltas[c])
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _sample_yarns(cv, deltas, rho, off, s_all, fr_all, err, c0, c1):
     for c in range(c0, c1):
         sample_yarn(cv, c, deltas[c], s_all[off[c]:off[c + 1]], fr_all[off[c]:off[c + 1]])

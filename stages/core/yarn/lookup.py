@@ -54,7 +54,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from stages.core.threads import for_chunks
+from stages.core.threads import chunk_kernel, for_chunks
 from stages.core.yarn import hair_free
 from stages.core.yarn.fibre_tests import (TWO_PI, HairShape, RegularFibre, YarnVisit, exact_hair, exact_regular,
                                           fibre_xy, hair_closest_s, hair_prefilter, hair_quick_reject,
@@ -454,7 +454,7 @@ def lookup_points(cv, tab, pts):
     return FibreLookups(inside, yarn, kind, direction, density, albedo)
 
 
-@njit(cache=True, nogil=True)
+@chunk_kernel
 def _lookup_range(cv, tab, pts, inside, yarn, kind, direction, density, albedo, i0, i1):
     """``lookup_points`` of points i0 .. i1 - 1."""
     for i in range(i0, i1):
