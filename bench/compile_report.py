@@ -14,8 +14,8 @@ cache or ``out/`` is touched.
 Writes ``bench/results/compile.json`` (``loomlight docs --only measurements`` puts it on the measurements
 page): per part (demo, tests) the compile time summed over processes (core-seconds: every process
 compiles on one core) and the part's wall time; per kernel its self seconds (without the kernels it
-compiled), its signatures with the seconds of each, how many times each was compiled (more than once: two
-processes compiled it, each paying), and who asked. Kernels typed more than one way come first, then
+compiled), its signatures with the seconds of each, how many times each was compiled per part (more than
+once: two processes of the part compiled it, each paying), and who asked. Kernels typed more than one way come first, then
 kernels compiled more than once with the same signature, then the rest by seconds.
 Timings are the machine's: run it alone (it uses both cores for the demo's ``-j2``).
 """
@@ -86,23 +86,23 @@ def summarize(parts: dict[str, dict]) -> dict:
             "kernels": len({r["kernel"] for r in recs}),
         }
     by_kernel: dict[str, dict] = defaultdict(lambda: {"self_s": 0.0, "signatures": defaultdict(
-        lambda: {"self_s": 0.0, "compiled": 0, "asked_by": set()})})
+        lambda: {"self_s": 0.0, "compiled": defaultdict(int), "asked_by": set()})})
     for name, part in parts.items():
         for r in part["records"]:
             k = by_kernel[r["kernel"]]
             k["self_s"] += r["self_s"]
             s = k["signatures"][r["signature"]]
             s["self_s"] += r["self_s"]
-            s["compiled"] += 1
+            s["compiled"][name] += 1   # per part: each part has a cache of its own, so one compile per part is due
             who = f"kernel {r['parent']}" if r.get("parent") else r.get("caller") or "?"
             s["asked_by"].add(f"{name}: {r['context']}: {who}")
     kernels = []
     for key, k in by_kernel.items():
-        sigs = [{"signature": sig, "self_s": round(s["self_s"], 2), "compiled": s["compiled"],
+        sigs = [{"signature": sig, "self_s": round(s["self_s"], 2), "compiled": dict(s["compiled"]),
                  "asked_by": sorted(s["asked_by"])} for sig, s in k["signatures"].items()]
         sigs.sort(key=lambda s: -s["self_s"])
         kernels.append({"kernel": key, "self_s": round(k["self_s"], 2), "signatures": len(sigs),
-                        "recompiled": sum(s["compiled"] - 1 for s in sigs), "by_signature": sigs})
+                        "recompiled": sum(n - 1 for s in sigs for n in s["compiled"].values()), "by_signature": sigs})
     # typed two ways first, then compiled twice with one signature, then by time
     kernels.sort(key=lambda k: (k["signatures"] < 2, k["recompiled"] < 1, -k["self_s"]))
     return {"totals": totals, "kernels": kernels}

@@ -71,8 +71,12 @@ def test_report_lists_duplicate_signatures_first():
     t = report["totals"]["demo"]
     assert t["compile_core_s"] == 44.5 and t["processes"] == 2 and t["kernels"] == 4 and t["compilations"] == 6
     again = report["kernels"][1]
-    assert again["signatures"] == 1 and again["recompiled"] == 1 and again["by_signature"][0]["compiled"] == 2
+    assert again["signatures"] == 1 and again["recompiled"] == 1 and again["by_signature"][0]["compiled"] == {"demo": 2}
     assert report["kernels"][3]["by_signature"][0]["asked_by"] == ["demo: loomlight render: kernel big"]
+    # a part has a cache of its own: the same signature compiled once in each of two parts is no repeat
+    two = summarize({"demo": {"records": [rec("k", "int64", 1.0, 1)], "wall_s": 1.0},
+                     "tests": {"records": [rec("k", "int64", 1.0, 7)], "wall_s": 1.0}})
+    assert two["kernels"][0]["recompiled"] == 0 and two["kernels"][0]["by_signature"][0]["compiled"] == {"demo": 1, "tests": 1}
 
 
 def test_warmup_plan_runs_each_step_once_and_parses(cli, monkeypatch):
