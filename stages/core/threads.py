@@ -16,6 +16,8 @@ a ``prange`` body (a division by zero gives inf or nan rather than raising; with
 dispatch of about a microsecond per argument per chunk; loops whose items range from nothing to a whole
 cell's paths (the IIRTF's cells, the BTF's texels) ask for more (``chunks_per_thread``).
 """
+import threading
+
 import numpy as np
 from numba import njit
 
@@ -43,7 +45,21 @@ def for_chunks(kernel, n: int, *args, threads: int | None = None, chunks_per_thr
     if t == 1 or len(b) == 2:
         kernel(*args, b[0], b[-1])
         return
-    from concurrent.futures import ThreadPoolExecutor
+    list(_pool(t).map(lambda i: kernel(*args, b[i], b[i + 1]), range(len(b) - 1)))
 
-    with ThreadPoolExecutor(max_workers=t) as ex:
-        list(ex.map(lambda i: kernel(*args, b[i], b[i + 1]), range(len(b) - 1)))
+
+_pools: dict = {}
+_pools_lock = threading.Lock()
+
+
+def _pool(t: int):
+    """A thread pool of ``t`` workers kept for the process (starting one per call cost ~1 ms, which the
+    procedural lookups' many small calls paid). Chunk kernels never call ``for_chunks`` themselves, so
+    a task never waits on the pool it runs in."""
+    with _pools_lock:
+        ex = _pools.get(t)
+        if ex is None:
+            from concurrent.futures import ThreadPoolExecutor
+
+            ex = _pools[t] = ThreadPoolExecutor(max_workers=t, thread_name_prefix="loomlight-chunks")
+        return ex
