@@ -53,13 +53,13 @@ TWO_PI = 2.0 * math.pi
 CLAMP = 3.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def clamped_normal(seed, index, dim):
     v = normal(seed, index, dim)
     return min(CLAMP, max(-CLAMP, v))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def key3(a, b, c):
     return hash_u64(a, b, c)
 
@@ -97,13 +97,13 @@ def sample_regular_fibers(tp, type_key):
     return R, th, th0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def ply_angle(tp, k, z):
     P = tp[PLY_NUM]
     return TWO_PI * k / P + tp[YARN_SGN] * TWO_PI * z / tp[YARN_ALPHA]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def ply_frame(tp, k, z):
     """(cx, cy, drx, dry): ply centre and the unit radial direction d_r (d_t = (-dry, drx))."""
     a = ply_angle(tp, k, z)
@@ -113,22 +113,22 @@ def ply_frame(tp, k, z):
     return rp * ca, rp * sa, ca, sa
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def fiber_twist(tp, z):
     return tp[FIBER_SGN] * TWO_PI * z / tp[ALPHA]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def migration_phase(tp, theta0, z):
     return tp[S_MIG] * TWO_PI * z / tp[ALPHA] + theta0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def cycle_of(phase):
     return int(math.floor((phase + math.pi) / TWO_PI))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def loop_unit_radius(tp, yarn_seed, k, j, Rj, th, th0, c):
     """U_loop of migration cycle c of fibre (k, j) in a yarn, or -1 where the cycle is not mutated."""
     if tp[USE_FLYAWAYS] == 0.0 or tp[P_LOOP] <= 0.0 or tp[USE_MIGRATION] == 0.0:
@@ -148,7 +148,7 @@ def loop_unit_radius(tp, yarn_seed, k, j, Rj, th, th0, c):
     return Rm * r1 / dist
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def fiber_unit_radius(tp, yarn_seed, k, j, Rj, th, th0, z):
     """(R(z) on the unit disc, kind): kind 1 regular, 2 inside a mutated (loop) cycle."""
     if tp[USE_MIGRATION] == 0.0:
@@ -163,14 +163,14 @@ def fiber_unit_radius(tp, yarn_seed, k, j, Rj, th, th0, z):
     return lo + (tp[RHO_MAX] - tp[RHO_MIN]) * Rj * w, 1
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def ply_to_yarn(tp, k, z, a, b):
     """Yarn-space (x, y) of the ply-frame offset (a along d_r, b along d_t) of ply k at z."""
     cx, cy, drx, dry = ply_frame(tp, k, z)
     return cx + a * drx - b * dry, cy + a * dry + b * drx
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def regular_xy(tp, yarn_seed, k, j, Rj, th, th0, z):
     """Yarn-space (x, y, kind) of regular fibre (k, j) at z (loops included)."""
     U, kind = fiber_unit_radius(tp, yarn_seed, k, j, Rj, th, th0, z)
@@ -181,7 +181,7 @@ def regular_xy(tp, yarn_seed, k, j, Rj, th, th0, z):
     return x, y, kind
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def hair_params(tp, yarn_seed, k, h):
     """(r0, r1, theta1, pe) of hair h of ply k: start and end radius, start azimuth, azimuth extent."""
     idx = key3(yarn_seed, k, h)
@@ -192,7 +192,7 @@ def hair_params(tp, yarn_seed, k, h):
     return max(r0, 0.0), max(r0 + re, 0.0), th1, pe
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def hair_point(tp, k, r0, r1, th1, pe, z1, ze, t):
     """Yarn-space (x, y, z) of a hair at t in [0, 1] (Eq. 4 in the ply frame)."""
     z = z1 + ze * t
@@ -219,7 +219,7 @@ def hair_radius_bound(tp) -> float:
     return float(max(r0, r0 + re, 0.0))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def transverse_speed(tp, u_hi, u_lo):
     """Upper bound of |d(x, y)/dz| in yarn space of a fibre whose unit-disc radius stays in
     [u_lo, u_hi]: the ply centre's turn, the offset's turn (ply and fibre twist) and migration."""
@@ -230,7 +230,7 @@ def transverse_speed(tp, u_hi, u_lo):
     return w_y * tp[PLY_RADIUS] + (w_y + w_f) * u_hi * e + mig
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def reach_factor(v, gmin):
     """K: a fibre point within fabric distance D of p lies within K D of p in the cross-section at
     p's foot point s. Eq. 7 with rotation-minimising frames has the yarn-space metric
@@ -248,7 +248,7 @@ def transverse_speed_bound(tp):
     return transverse_speed(tp, tp[U_MAX], 0.0)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def hair_speed_bound(tp, r0, r1, pe, ze):
     """Upper bound of the yarn-space speed |d(x, y, z)/dt| of a hair (Eq. 4 in the rotating ply frame)."""
     rm = max(r0, r1) + tp[PLY_RADIUS]
