@@ -22,7 +22,11 @@ At a yarn vertex x (the ply hit) the BYSDF splits into a reflection side (specul
 reflection at x) and a transmission side (refraction into the yarn at x by the specular lobe's GGX,
 the straight path to the exit point y on the far side of the envelope, Beer-Lambert attenuation
 raised to the number of plies crossed, then specular and body transmission out at y). One side is
-chosen with probability P_R (``reflect_probability``) and its estimate divided by it. On the chosen
+chosen with probability P_R (``reflect_probability``) and its estimate divided by it; the enter step's
+weight is the specular path's (passed to the exit side with A_s), the body's transmission only takes y
+from its direction. A shading normal that the fibre tables tilt away from the viewer (wi.n below
+``SHADING_COS_MIN``) is bent towards it first (``face_towards_into``): dropping such hits lost about 6 %
+of a white yarn's light at every scattering event. On the chosen
 side, next-event estimation takes one sample of each light and combines it with the side's BYSDF
 sampling by the power heuristic, as ``stages.render.fiberpath`` does; delta lights by NEE alone.
 Shadow rays and continuation rays pass through yarns whose plies they miss (the same implicit
@@ -58,6 +62,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.frames import face_towards_into
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit
 from stages.core.rng import uniform
@@ -83,6 +88,7 @@ MODES = ("near", "far", "multiscale")
 K_MAX = 256
 K3_MAX = 3 * K_MAX   # a literal size for the stack arrays of K_MAX points
 EVENT_DIMS = 12
+SHADING_COS_MIN = 1e-3   # the least cosine of the viewer to a shading normal (``face_towards_into``)
 D_SIDE, D_PICK, D_LOBE, D_DIR1, D_DIR2, D_RR, D_ENTER1, D_ENTER2, D_PASS, D_JITTER = 0, 1, 2, 3, 4, 5, 6, 7, 8, 9
 
 BysdfIntegrator = namedtuple("BysdfIntegrator", [
@@ -377,6 +383,8 @@ def trace_path(it, o, d, seed, key):
                 break
             for q in range(3):
                 wi[q] = -dy[q]
+            for k in range(m):  # fibre-perturbed normals seen from behind: bent towards the viewer (energy kept)
+                face_towards_into(slot_n[k], wi, SHADING_COS_MIN)
             # the side: reflection at x, or transmission to y
             pr = 0.0
             for k in range(m):
@@ -422,15 +430,16 @@ def trace_path(it, o, d, seed, key):
                 crossed = plies_crossed(yt.tp, x, din, u_hi, yt.tol, yt.max_iter, yt.search)
                 crossed = max(1, crossed)
                 ell = u_hi / R
-                att_s = math.exp(-prow[B.SIGMA_SPEC] * ell * crossed)
+                # the specular path carries the enter step's weight; the body path only took y from d
+                att_s = math.exp(-prow[B.SIGMA_SPEC] * ell * crossed) * w_in
                 att_d = math.exp(-prow[B.SIGMA_BODY] * ell * crossed)
                 nr_ = math.sqrt(yq[0] * yq[0] + yq[1] * yq[1])
                 ny = (yq[0] / nr_, yq[1] / nr_, 0.0)
                 ty = (0.0, 0.0, 1.0)
                 s_y = ply_shadow_lookup(yt.tables, yt.tp, math.atan2(yq[1], yq[0]), yq[2])
-                tp[0] *= w_in * side_w
-                tp[1] *= w_in * side_w
-                tp[2] *= w_in * side_w
+                tp[0] *= side_w
+                tp[1] *= side_w
+                tp[2] *= side_w
                 sx, sy, sz = point_from_yarn(fr, yq)
                 rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, 1.0, prow, False, wi, m,
                                    slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y)

@@ -216,9 +216,10 @@ def test_white_furnace(tmp_path):
     """Non-absorbing BYSDF (specular colours 1, body colours 1 with the diffusion term alone -- the
     Lommel-Seeliger term is single scattering and loses the rest by design --, no attenuation, shadowing
     off) on a ball of yarns in a uniform environment of radiance 1, 64 bounces: every pixel's mean
-    radiance is at most 1 (within 4 standard errors); the loss (microfacet single scattering, the exit
-    lobe's total internal reflection, paths cut at 64 bounces) is stated by the mean over the ball:
-    0.367 measured, a 63 % loss."""
+    radiance is at most 1 (within 4 standard errors) and the mean over the ball at least 0.95 (issue 53:
+    the rough interfaces carry their multiple scattering, the exit keeps what total internal reflection
+    holds inside, fibre-perturbed normals seen from behind are bent towards the viewer). Measured: 1.0005
+    (0.9995 at 64 spp; before those three changes, 0.367)."""
     scene, yarns = _make(tmp_path, "ball", _ball(), origin=(0.0, 0.0, 1.2), fov=24.0, w=12, h=12,
                          lights='[[lights]]\ntype = "constant"\nradiance = 1.0\n', bysdf=WHITE)
     r = _render(scene, yarns, spp=256, max_depth=64, fibre_threshold=1, ply_threshold=1)
@@ -230,10 +231,7 @@ def test_white_furnace(tmp_path):
     assert np.all(lum <= 1.0 + 4.0 * np.sqrt(var[cov]) + 1e-9), lum.max()
     mean = float(lum.mean())
     print(f"white furnace: mean radiance over the ball {mean:.4f} (loss {100 * (1 - mean):.1f} %)")
-    # measured: 0.367 (loss 63 %): per scattering event the model keeps about 0.72 of the energy (the exit
-    # lobe's total internal reflection is dropped, GGX at alpha 0.9 loses to single scattering), and a
-    # ball's paths scatter a few times before they escape. A lost lobe or side would fall below this:
-    assert mean > 0.3
+    assert mean >= 0.95
 
 
 def test_bad_input_exits_2(cli, weave):

@@ -5,7 +5,15 @@ vector (x, y, z) to a right-handed orthonormal frame (t, b, (x, y, z)), by the b
 construction of Duff et al. 2017 ("Building an orthonormal basis, revisited"), continuous except
 across z = 0's sign change. Used wherever a model works in a local frame: the Lambertian and SGGX
 samplers, the fibre BCSDF's azimuth, the spherical Gaussian light.
+
+``face_towards_into(n, w, c_min)``: a shading normal n (float64[3], unit, changed in place) that faces
+away from the unit direction w, or nearly (n.w < c_min), is bent towards w in the plane of n and w until
+n.w = c_min before renormalising (it ends with n.w > 0): a perturbed shading normal seen from behind
+still scatters what arrives (the energy-keeping adaptation of shading normals, as in Schuessler et al.
+2017's motivation, in its simplest form). Returns True when it bent n.
 """
+import math
+
 from numba import njit
 
 
@@ -15,3 +23,19 @@ def orthonormal_basis(x, y, z):
     a = -1.0 / (sign + z)
     b = x * y * a
     return (1.0 + sign * x * x * a, sign * b, -sign * x), (b, sign + y * y * a, -y)
+
+
+@njit(cache=True)
+def face_towards_into(n, w, c_min):
+    c = n[0] * w[0] + n[1] * w[1] + n[2] * w[2]
+    if c >= c_min:
+        return False
+    k = c_min - c
+    ln = 0.0
+    for q in range(3):
+        n[q] += k * w[q]
+        ln += n[q] * n[q]
+    ln = math.sqrt(ln)
+    for q in range(3):
+        n[q] /= ln
+    return True

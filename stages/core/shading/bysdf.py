@@ -20,8 +20,13 @@ it leaves or arrives at) as (r, g, b) and the solid-angle pdf of the matching sa
 
 The model (beta = SPEC_WEIGHT, m_r = REFLECT_WEIGHT; the paper's Eq. 1 split into the two sides)
 --------------------------------------------------------------------------------------------------
-    f = beta     [ f_sR(x)  +  T_x -> A_s -> KT f_sT(y) ]                          (specular, Eqs. 2-3)
-      + (1-beta) [ m_r S f_bR(x)  +  (1-m_r) T_x -> A_d -> S_y f_bT(y) ]           (body, Eqs. 4-5)
+    f = beta     [ KS (f_sR + f_ms)(x)  +  T_x -> A_s -> KT (f_sT + f_keep)(y) ]         (specular, Eqs. 2-3)
+      + (1-beta) [ m_r S f_bR(x)  +  (1-m_r) A_d S_y f_bT(y) ]                          (body, Eqs. 4-5)
+
+The body's transmission takes its exit point y from the enter step's direction d but not its weight:
+the body's share of the energy reaching the far side is (1 - beta)(1 - m_r) already, and the Fresnel
+transmission of the interface at x is the specular lobes' (weighting the body's path by it too counted
+the interface twice and lost beta's complement of F).
 
 - f_sR, specular reflection at x (Eq. 2, first case): a rough dielectric (Walter et al. 2007) with an
   anisotropic GGX normal distribution D (alpha_u along t, alpha_v along b), exact dielectric Fresnel F
@@ -36,15 +41,22 @@ The model (beta = SPEC_WEIGHT, m_r = REFLECT_WEIGHT; the paper's Eq. 1 split int
       (1 - F) D(h) G1(wi) G1(d) |wi.h| |d.h| eta^2 / (|wi.n| (wi.h + eta d.h)^2),   h ∝ -(wi + eta d),
   the flux form: it carries *no* 1/eta^2 radiance scaling (Veach 1997 §5.2). The exit at y, from index
   eta back into air, would carry the inverse factor eta^2; it is left out there too, the two cancel and
-  the product is the physical radiance transport. ``enter_eval_pdf`` gives this value and the density
+  the product is the physical radiance transport. Weight and value carry the energy compensation's
+  factor (``enter_compensation``, "Energy" below). ``enter_eval_pdf`` gives this value and the density
   (value = weight * pdf), for testing.
 - f_sT, specular transmission out at y (Eq. 3): the rough dielectric BTDF from inside (index eta) to
   outside (index 1) with isotropic GGX alpha = ALPHA_EXIT and visible normals seen from inside (from
   -d); Walter's Eq. 21 with i = -d (index eta), o = wo (index 1), times |wo.n_y|, again the flux form:
       (1 - F) D(h) G1(-d) G1(wo) |d.h| |wo.h| / (|d.n_y| (eta d.h - wo.h)^2),   h ∝ eta d - wo;
   sampled by visible normals and refraction, weight (1 - F) G1(wo). Total internal reflection ends the
-  sample (pdf 0): that energy is lost (the reference gives the exit no reflectance). Times KT = KT_EXIT
-  and the specular attenuation A_s.
+  sample (pdf 0). Times KT = KT_EXIT and the specular path's weight since x (A_s times the enter step's).
+- f_keep, what the exit keeps inside (the reference drops it): the light f_sT does not let out -- total
+  internal reflection, the Fresnel reflection back inside and the microfacets' multiple scattering --
+  stays in the yarn's fibres, scatters there and leaves diffusely: folded into the Lambertian exit at y,
+  f_keep cos = (1 - E_T(d.n_y)) cos_o / pi, with E_T the exit's single-scattering transmission albedo
+  (tabulated, "Energy" below). Why folded rather than followed inside: the yarn interior is the fibres
+  the model does not resolve; a path continued by mirror bounces in an empty cylinder would invent a
+  light guide that a fibre bundle is not, and cost a loop of ray-cylinder tests per bounce.
 - f_bR, body reflection at x (Eq. 4 here; the paper's subscripts were lost): per channel with a' the
   reflection-side body colour BODY_R (used directly as the reduced albedo a'; the reference maps the
   colour to a' through a 17-entry table that was not published),
@@ -67,15 +79,36 @@ The model (beta = SPEC_WEIGHT, m_r = REFLECT_WEIGHT; the paper's Eq. 1 split int
   along x -> y, raised to the number of plies crossed: (exp(-sigma |y - x|))^n_plies with
   sigma = SIGMA_SPEC and SIGMA_BODY (``attenuation``).
 
+Energy (issue 53: the single-scattering rough dielectric loses up to 30 % at alpha 1, Heitz et al. 2016)
+-------------------------------------------------------------------------------------------------------
+The interface at x scatters E(wi) = E_R(wi) + E_T(wi) <= 1 of what arrives by single scattering (its
+reflection and refraction albedos). The rest, 1 - E, is what light bouncing between microfacets carries:
+- f_ms (Kulla & Conty 2017), on the reflection side, a share r of it: f_ms cos = r (1 - E(wi)) (1 - E(wo))
+  cos_o / (pi (1 - E_avg)), E_avg = int 2 mu E(mu) dmu; reciprocal, albedo r (1 - E(wi)) exactly. r =
+  E_R,avg / E_avg, the share of light the interface reflects on average (the dielectric version of
+  Kulla & Conty's Fresnel-weighted split, simplified).
+- the refracted share (1 - r)(1 - E(wi)) rides on the enter step: its weight is multiplied by
+  ``enter_compensation`` = 1 + (1 - r)(1 - E) / E_T, keeping the single-scattering direction of d.
+So reflection side + enter sum to 1 at every wi for a white interface. The albedos come from tables packed
+after the parameters (``energy_tables``, computed once per (eta, alpha_exit) by ``pack_bysdf`` with the
+samplers' own routines over stratified visible normals): E and E_T at x over N_ALPHA isotropic
+roughnesses x N_MU cosines, E_avg and r per roughness, and E_T at y (alpha_exit, index 1/eta) over
+N_MU_EXIT cosines; read with Catmull-Rom across roughness, linearly along mu. An anisotropic interface
+is read at the effective roughness sqrt(sqrt(au av) alpha_w) of the direction (alpha_w: its projected
+roughness, which sets its masking exactly) -- an approximation: measured, a white BYSDF keeps 0.99-1.005
+of the energy at the reference's (0.2, 0.3), 0.95-1.01 at (1.0, 1.5) (tests/core/shading/test_bysdf.py).
+The multiscale widening of alpha moves along the tables' roughness axis, so widened lobes stay balanced.
+
 Sides and lobes (importance sampling, §4.1 "Importance Sampling")
 -----------------------------------------------------------------
 The integrator picks the reflection side with probability P_R = ``reflect_probability(p, wi, n)``
 = clamp(beta F(wi.n) + (1 - beta) m_r, 0.05, 0.95) -- the share of the energy budget the model gives the
 reflection side before colours, shadowing and attenuation (the paper: m_r "based on the probability of
-the Fresnel term") -- and divides by it (or by 1 - P_R for the transmission side). Inside a side a lobe
-is picked by u0 with probability proportional to its energy estimate:
-    reflection side:   beta mean(KS) F(wi.n)          vs  (1-beta) m_r S mean(albedo of f_bR at wi.n)
-    transmission side: beta A_s KT                    vs  (1-beta) (1-m_r) A_d S_y mean(BODY_T)
+the Fresnel term") -- and divides by it (or by 1 - P_R for the transmission side). Inside a side u0 picks
+the GGX-sampled lobe or the cosine-sampled ones with probability proportional to their energy estimates:
+    reflection side:   beta mean(KS) F(wi.n)   vs  beta mean(KS) r (1 - E) + (1-beta) m_r S mean(albedo of f_bR)
+    transmission side: beta A KT E_T(d.n_y)    vs  beta A KT (1 - E_T(d.n_y)) + (1-beta)(1-m_r) A_d S_y mean(BODY_T)
+(A: the specular path's weight since x)
 (positive for every lobe with nonzero energy); the returned pdf is the lobe mixture's and the weight
 is f cos / pdf of the side. A side whose lobes all carry zero energy returns zeros and pdf 0.
 
@@ -89,7 +122,8 @@ are 3-tuples, so nothing here allocates and the integrator may call it without r
     enter_sample(p, t, n, wi, u1, u2) -> EnterSample(d, weight, pdf)                    T_x, scalar weight
     enter_eval_pdf(p, t, n, wi, d) -> (value, pdf)                                      value = weight * pdf
     exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y) -> BysdfValue
-        beta att_spec KT f_sT + (1-beta)(1-m_r) att_body shadow_y f_bT; pdf of exit_sample
+        beta att_spec KT (f_sT + f_keep) + (1-beta)(1-m_r) att_body shadow_y f_bT; pdf of exit_sample
+        (att_spec: the specular path's weight since x, its Beer-Lambert attenuation times the enter weight)
     exit_sample(p, t_y, n_y, d, att_spec, att_body, shadow_y, u0, u1, u2) -> BysdfSample
     attenuation(p, distance, n_plies) -> (A_s, A_d)
 and each lobe alone (value without beta, m_r, S, A; colours included):
@@ -97,6 +131,10 @@ and each lobe alone (value without beta, m_r, S, A; colours included):
     spec_exit_eval_pdf(p, t_y, n_y, d, wo) / spec_exit_sample(p, t_y, n_y, d, u1, u2)      KT f_sT
     body_reflect_eval_pdf(p, n, wi, wo) / body_reflect_sample(p, n, wi, u1, u2)            f_bR
     body_exit_eval_pdf(p, n_y, wo) / body_exit_sample(p, n_y, u1, u2)                      f_bT
+    ms_reflect_eval_pdf(p, t, n, wi, wo)                            KS f_ms (sampled by the side, cosine)
+and the energy tables: energy_tables(eta, alpha_exit), interface_albedos(alpha, eta, mu, n_quad),
+interface_energy(p, x, y, z) -> InterfaceEnergy(e, e_t, e_avg, r), enter_compensation(p, x, y, z),
+exit_transmittance(p, mu_d).
 A failed sample has pdf 0 (its direction is then any unit vector). Degenerate input never gives NaN:
 wi at or below the surface at x (wi.n <= 1e-9), wo on the wrong side, d not leaving through n_y, grazing
 directions and roughness down to ALPHA_MIN = 1e-4 (smaller values are clamped) give zeros and pdf 0.
@@ -104,7 +142,8 @@ The lobe samplers' pdfs are the densities of their *successful* samples (they in
 success probability: TIR at y, refracted or reflected directions that end up on the wrong side).
 Roughness widening for the multi-scale model (alpha += h_range / 10, §4.2) is done by the caller on p.
 
-Parameters, packed (float64[BYSDF_SIZE], ``pack_bysdf(**named)``; defaults: the reference's example)
+Parameters, packed (float64[BYSDF_SIZE]: N_PARAMS named values, then the energy tables;
+``pack_bysdf(**named)``; defaults: the reference's example)
 -----------------------------------------------------------------------------------------------------
     SPEC_WEIGHT beta (0.5)      REFLECT_WEIGHT m_r (0.5)   ALPHA_U (0.2)   ALPHA_V (0.3)   ETA (1.5)
     KS_R..KS_B specular colour (1)   ALPHA_EXIT (0.9)   KT_EXIT exit transmittance (0.1)
@@ -112,6 +151,7 @@ Parameters, packed (float64[BYSDF_SIZE], ``pack_bysdf(**named)``; defaults: the 
     BODY_T_R..B transmission-side body colour (six times BODY_R)
     SIGMA_SPEC (5.5)   SIGMA_BODY (0.1)   LS_MIX Lommel-Seeliger weight of f_bR (0.5)
 """
+import functools
 import math
 from collections import namedtuple
 
@@ -134,10 +174,26 @@ BODY_T_R, BODY_T_G, BODY_T_B = 13, 14, 15
 SIGMA_SPEC = 16
 SIGMA_BODY = 17
 LS_MIX = 18
-BYSDF_SIZE = 19
+N_PARAMS = 19             # the named parameters; the energy tables follow them in the packed row
+
+# the rough dielectrics' single-scattering albedos (the energy compensation's inputs), packed after the
+# parameters by ``pack_bysdf`` (``energy_tables``): at x over (roughness, mu), at y over mu
+N_ALPHA = 16              # roughness nodes, uniform in s = alpha / (1 + alpha) from ALPHA_MIN to ALPHA_S_MAX
+ALPHA_S_MAX = 15.0 / 16.0  # s of the last node (alpha 15); rougher interfaces read the last node
+N_MU = 32                 # cos nodes at x: j / (N_MU - 1)
+N_MU_EXIT = 64            # cos nodes at y (from inside the critical angle makes E_T steep)
+N_QUAD = 48               # each node's albedo from N_QUAD x N_QUAD stratified visible normals
+E_X = N_PARAMS                     # E(alpha, mu) = E_R + E_T at x, N_ALPHA rows of N_MU
+ET_X = E_X + N_ALPHA * N_MU        # E_T(alpha, mu) at x: refraction into the yarn
+EAVG_X = ET_X + N_ALPHA * N_MU     # E_avg(alpha) = int 2 mu E dmu of the interpolated E
+RMS_X = EAVG_X + N_ALPHA           # r(alpha): the reflected share of the interface's lost energy
+ET_Y = RMS_X + N_ALPHA             # E_T(mu) at y: refraction out, alpha = ALPHA_EXIT, index 1 / eta
+BYSDF_SIZE = ET_Y + N_MU_EXIT
 
 ALPHA_MIN = 1e-4          # smallest GGX roughness (smaller values are clamped)
 COS_EPS = 1e-9            # |cos| at or below this counts as grazing: no scattering
+LOSS_MIN = 1e-9           # an interface that loses less energy than this gets no compensation
+MU_FLOOR = 1e-4           # the energy tables' grazing node is computed at this cosine
 P_R_MIN, P_R_MAX = 0.05, 0.95
 INV_PI = 1.0 / math.pi
 
@@ -151,7 +207,8 @@ BODY_R_DEFAULT = (0.045, 0.015, 0.0)
 def pack_bysdf(*, spec_weight=0.5, reflect_weight=0.5, alpha_u=0.2, alpha_v=0.3, eta=1.5, ks=1.0,
                alpha_exit=0.9, kt_exit=0.1, body_r=BODY_R_DEFAULT, body_t=tuple(6.0 * c for c in BODY_R_DEFAULT),
                sigma_spec=5.5, sigma_body=0.1, ls_mix=0.5):
-    """float64[BYSDF_SIZE] from named values (colours: a scalar or three values). Raises ValueError
+    """float64[BYSDF_SIZE] from named values (colours: a scalar or three values), the energy tables of its
+    eta and alpha_exit after them (``energy_tables``, computed once per pair). Raises ValueError
     naming the parameter for a value outside its range: weights and colours in [0, 1], roughness
     >= ALPHA_MIN, eta > 1, sigmas >= 0, everything finite."""
     p = np.zeros(BYSDF_SIZE)
@@ -179,7 +236,15 @@ def pack_bysdf(*, spec_weight=0.5, reflect_weight=0.5, alpha_u=0.2, alpha_v=0.3,
     p[SIGMA_SPEC] = scalar("sigma_spec", sigma_spec, 0.0, math.inf)
     p[SIGMA_BODY] = scalar("sigma_body", sigma_body, 0.0, math.inf)
     p[LS_MIX] = scalar("ls_mix", ls_mix, 0.0, 1.0)
+    p[N_PARAMS:] = _cached_energy_tables(p[ETA], p[ALPHA_EXIT])
     return p
+
+
+@functools.lru_cache(maxsize=64)
+def _cached_energy_tables(eta, alpha_exit):
+    t = energy_tables(eta, alpha_exit)
+    t.flags.writeable = False
+    return t
 
 
 # ------------------------------------------------------------------------------------------------
@@ -415,6 +480,149 @@ def _alphas(p):
 
 
 # ------------------------------------------------------------------------------------------------
+# the energy the single-scattering interfaces lose, tabulated (see "Energy" in the module doc)
+@njit(cache=True)
+def interface_albedos(alpha, eta, mu, n_quad):
+    """(E_R, E_T): the directional albedos of reflection and of refraction of the isotropic rough
+    dielectric (GGX alpha, relative index eta = n_far / n_near) lit from the near side at mu = cos_i:
+    the means of the samplers' weights F G1(o) and (1 - F) G1(o) over n_quad^2 stratified visible
+    normals (failed samples weigh 0), i.e. what spec_reflect_sample and enter_sample / spec_exit_sample
+    return, integrated."""
+    ix = math.sqrt(max(0.0, 1.0 - mu * mu))
+    iz = mu
+    e_r = 0.0
+    e_t = 0.0
+    for a in range(n_quad):
+        for b in range(n_quad):
+            hx, hy, hz = ggx_sample_visible(ix, 0.0, iz, alpha, alpha, (a + 0.5) / n_quad, (b + 0.5) / n_quad)
+            ih = ix * hx + iz * hz
+            if ih <= 0.0:
+                continue
+            v, pdf = _reflect_local(ix, 0.0, iz, 2.0 * ih * hx - ix, 2.0 * ih * hy, 2.0 * ih * hz - iz, alpha, alpha,
+                                    eta)
+            if pdf > 0.0:
+                e_r += v / pdf
+            ok, ox, oy, oz = _refract_local(ix, 0.0, iz, hx, hy, hz, eta)
+            if ok:
+                v, pdf = _transmit_local(ix, 0.0, iz, ox, oy, oz, alpha, alpha, eta)
+                if pdf > 0.0:
+                    e_t += v / pdf
+    n2 = n_quad * n_quad
+    return e_r / n2, e_t / n2
+
+
+@njit(cache=True)
+def table_alpha(k):
+    """The roughness of node k of the tables at x."""
+    s0 = ALPHA_MIN / (1.0 + ALPHA_MIN)
+    s = s0 + (ALPHA_S_MAX - s0) * k / (N_ALPHA - 1)
+    return s / (1.0 - s)
+
+
+@njit(cache=True)
+def energy_tables(eta, alpha_exit):
+    """float64[BYSDF_SIZE - N_PARAMS]: the tables ``pack_bysdf`` appends to a row (layout E_X .. ET_Y)."""
+    out = np.empty(BYSDF_SIZE - N_PARAMS)
+    o = -N_PARAMS
+    fine = 4096                                 # E_avg: midpoint rule on the interpolant
+    for k in range(N_ALPHA):
+        alpha = table_alpha(k)
+        for j in range(N_MU):
+            e_r, e_t = interface_albedos(alpha, eta, _mu_node(j, N_MU), N_QUAD)
+            out[o + E_X + k * N_MU + j] = min(1.0, e_r + e_t)
+            out[o + ET_X + k * N_MU + j] = e_t
+        e_avg = 0.0
+        t_avg = 0.0
+        for q in range(fine):
+            mu = (q + 0.5) / fine
+            f = _mu_coord(mu, N_MU)
+            e_avg += 2.0 * mu * _lerp(out, o + E_X + k * N_MU, f, N_MU) / fine
+            t_avg += 2.0 * mu * _lerp(out, o + ET_X + k * N_MU, f, N_MU) / fine
+        out[o + EAVG_X + k] = e_avg
+        out[o + RMS_X + k] = (e_avg - t_avg) / e_avg if e_avg > 0.0 else 1.0
+    a = max(alpha_exit, ALPHA_MIN)
+    for j in range(N_MU_EXIT):
+        out[o + ET_Y + j] = interface_albedos(a, 1.0 / eta, _mu_node(j, N_MU_EXIT), N_QUAD)[1]
+    return out
+
+
+@njit(cache=True)
+def _mu_coord(mu, n):
+    """The fractional node index of mu on n nodes j / (n - 1) (clamped to [0, n - 1])."""
+    return min(max(mu * (n - 1), 0.0), n - 1.0)
+
+
+@njit(cache=True)
+def _mu_node(j, n):
+    """The cosine at which node j of n is computed: j / (n - 1), node 0 at MU_FLOOR (the grazing limit)."""
+    return max(j / (n - 1), MU_FLOOR)
+
+
+@njit(cache=True)
+def _alpha_coord(alpha):
+    s0 = ALPHA_MIN / (1.0 + ALPHA_MIN)
+    f = (alpha / (1.0 + alpha) - s0) / (ALPHA_S_MAX - s0) * (N_ALPHA - 1)
+    return min(max(f, 0.0), N_ALPHA - 1.0)
+
+
+@njit(cache=True)
+def _lerp(p, base, f, n):
+    """Linear interpolation of p[base : base + n] at the fractional index f in [0, n - 1]."""
+    i = min(int(f), n - 2)
+    w = f - i
+    return (1.0 - w) * p[base + i] + w * p[base + i + 1]
+
+
+@njit(cache=True)
+def _along_alpha(p, base, stride, fa, fm, n_mu):
+    """Interpolation of an (N_ALPHA, n_mu) table (row k at base + k stride; n_mu = 1: one value per row) at
+    the fractional roughness node fa -- Catmull-Rom across the rows (the albedos bend too fast in alpha for
+    straight lines between 16 nodes), end rows repeated -- and fm along each row (linear)."""
+    i = min(int(fa), N_ALPHA - 2)
+    w = fa - i
+    w2 = w * w
+    w3 = w2 * w
+    total = 0.0
+    for j, c in ((i - 1, -0.5 * w3 + w2 - 0.5 * w), (i, 1.5 * w3 - 2.5 * w2 + 1.0),
+                 (i + 1, -1.5 * w3 + 2.0 * w2 + 0.5 * w), (i + 2, 0.5 * w3 - 0.5 * w2)):
+        row = base + min(max(j, 0), N_ALPHA - 1) * stride
+        total += c * (p[row] if n_mu == 1 else _lerp(p, row, fm, n_mu))
+    return total
+
+
+InterfaceEnergy = namedtuple("InterfaceEnergy", ["e", "e_t", "e_avg", "r"])
+
+
+@njit(cache=True)
+def interface_energy(p, x, y, z):
+    """InterfaceEnergy(e, e_t, e_avg, r) of the rough interface at x seen from the local unit direction
+    (x, y, z) (z = cos_i): its single-scattering albedo E = E_R + E_T and refraction albedo E_T, the
+    hemispherical mean E_avg and the reflected share r of what it loses. The tables are isotropic: an
+    anisotropic GGX is read at the direction's projected roughness sqrt(au^2 cos^2 phi + av^2 sin^2 phi)
+    (exact for its masking, Heitz 2014; an approximation for the albedo), E_avg and r at sqrt(au av)."""
+    au, av = _alphas(p)
+    r2 = x * x + y * y
+    a_m = math.sqrt(au * av)
+    a_dir = math.sqrt(a_m * math.sqrt((au * au * x * x + av * av * y * y) / r2)) if r2 > 0.0 else a_m
+    fa = _alpha_coord(a_dir)
+    fm = _mu_coord(z, N_MU)
+    fa_m = _alpha_coord(a_m)
+    return InterfaceEnergy(min(1.0, _along_alpha(p, E_X, N_MU, fa, fm, N_MU)),
+                           max(0.0, _along_alpha(p, ET_X, N_MU, fa, fm, N_MU)),
+                           min(1.0, _along_alpha(p, EAVG_X, 1, fa_m, 0.0, 1)),
+                           min(1.0, max(0.0, _along_alpha(p, RMS_X, 1, fa_m, 0.0, 1))))
+
+
+@njit(cache=True)
+def exit_transmittance(p, mu_d):
+    """E_T at y: the single-scattering albedo of refraction out of the yarn for d arriving at mu_d = d.n_y
+    (spec_exit_sample's mean weight without KT); 0 for mu_d <= COS_EPS."""
+    if mu_d <= COS_EPS:
+        return 0.0
+    return _lerp(p, ET_Y, _mu_coord(mu_d, N_MU_EXIT), N_MU_EXIT)
+
+
+# ------------------------------------------------------------------------------------------------
 # lobe: specular reflection at x (Eq. 2, first case)
 @njit(cache=True)
 def spec_reflect_eval_pdf(p, t, n, wi, wo):
@@ -449,19 +657,35 @@ def spec_reflect_sample(p, t, n, wi, u1, u2):
 # ------------------------------------------------------------------------------------------------
 # the enter step at x (Eq. 2, second case): refraction into the yarn, flux form
 @njit(cache=True)
+def enter_compensation(p, ix, iy, iz):
+    """The factor on the enter step's weight that carries the interface's lost energy refracted:
+    1 + (1 - r)(1 - E(wi)) / E_T(wi) (``interface_energy`` at the local wi); 1 where nothing is lost."""
+    en = interface_energy(p, ix, iy, iz)
+    loss = 1.0 - en.e
+    if loss <= LOSS_MIN or en.e_t <= LOSS_MIN:
+        return 1.0
+    return 1.0 + (1.0 - en.r) * loss / en.e_t
+
+
+@njit(cache=True)
 def enter_eval_pdf(p, t, n, wi, d):
-    """(value, pdf): value = (1 - F) G1(d) pdf, the scalar f cos of refraction from wi into the yarn
-    along d (the direction the path travels inside); pdf the density of enter_sample."""
+    """(value, pdf): value = c (1 - F) G1(d) pdf, the scalar f cos of refraction from wi into the yarn
+    along d (the direction the path travels inside) with the energy compensation c = enter_compensation;
+    pdf the density of enter_sample."""
     fr = shading_frame(t, n)
     ix, iy, iz = to_local(fr, wi)
     dx, dy, dz = to_local(fr, d)
     au, av = _alphas(p)
-    return _transmit_local(ix, iy, iz, dx, dy, dz, au, av, p[ETA])
+    v, pdf = _transmit_local(ix, iy, iz, dx, dy, dz, au, av, p[ETA])
+    if pdf <= 0.0:
+        return v, pdf
+    return v * enter_compensation(p, ix, iy, iz), pdf
 
 
 @njit(cache=True)
 def enter_sample(p, t, n, wi, u1, u2):
-    """EnterSample(d, weight = (1 - F) G1(d), pdf): visible normal, refraction into the yarn."""
+    """EnterSample(d, weight = c (1 - F) G1(d), pdf): visible normal, refraction into the yarn
+    (c = enter_compensation)."""
     fr = shading_frame(t, n)
     ix, iy, iz = to_local(fr, wi)
     if iz <= COS_EPS:
@@ -476,7 +700,7 @@ def enter_sample(p, t, n, wi, u1, u2):
     d = to_world(fr, dx, dy, dz)
     if pdf <= 0.0:
         return EnterSample(d, 0.0, 0.0)
-    return EnterSample(d, v / pdf, pdf)
+    return EnterSample(d, v / pdf * enter_compensation(p, ix, iy, iz), pdf)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -565,6 +789,24 @@ def body_exit_sample(p, n_y, u1, u2):
     return BysdfSample(wo, v.r / v.pdf, v.g / v.pdf, v.b / v.pdf, v.pdf)
 
 
+@njit(cache=True)
+def ms_reflect_eval_pdf(p, t, n, wi, wo):
+    """KS f_ms cos, the reflected part of the interface's lost energy at x: BysdfValue(r, g, b, cos_o / pi),
+    f_ms = r (1 - E(wi)) (1 - E(wo)) / (pi (1 - E_avg)) (Kulla & Conty 2017; ``interface_energy``)."""
+    fr = shading_frame(t, n)
+    ix, iy, ci = to_local(fr, wi)
+    ox, oy, co = to_local(fr, wo)
+    if ci <= COS_EPS or co <= COS_EPS:
+        return BysdfValue(0.0, 0.0, 0.0, 0.0)
+    c = co * INV_PI
+    ei = interface_energy(p, ix, iy, ci)
+    if 1.0 - ei.e_avg <= LOSS_MIN:
+        return BysdfValue(0.0, 0.0, 0.0, c)
+    eo = interface_energy(p, ox, oy, co)
+    v = ei.r * (1.0 - ei.e) * (1.0 - eo.e) / (1.0 - ei.e_avg) * c
+    return BysdfValue(p[KS_R] * v, p[KS_G] * v, p[KS_B] * v, c)
+
+
 # ------------------------------------------------------------------------------------------------
 # the two sides
 @njit(cache=True)
@@ -578,15 +820,19 @@ def reflect_probability(p, wi, n):
 
 
 @njit(cache=True)
-def _reflect_lobe_weights(p, mu, shadow):
+def _reflect_lobe_weights(p, t, n, wi, mu, shadow):
     """(k_spec, k_body, P_spec): lobe factors of the reflection side and the probability of its
-    specular lobe (energy estimates at mu = wi.n; P_spec < 0 when both lobes carry no energy)."""
+    GGX-sampled lobe (single scattering f_sR) against its cosine-sampled lobes (f_ms and f_bR), from
+    energy estimates at mu = wi.n; P_spec < 0 when no lobe carries energy."""
     beta = p[SPEC_WEIGHT]
     k_s = beta
     k_b = (1.0 - beta) * p[REFLECT_WEIGHT] * max(shadow, 0.0)
-    e_s = k_s * (p[KS_R] + p[KS_G] + p[KS_B]) / 3.0 * fresnel_dielectric(mu, p[ETA])
-    e_b = k_b * (body_reflect_albedo(p, 0, mu) + body_reflect_albedo(p, 1, mu)
-                 + body_reflect_albedo(p, 2, mu)) / 3.0
+    ks = (p[KS_R] + p[KS_G] + p[KS_B]) / 3.0
+    ix, iy, _ = to_local(shading_frame(t, n), wi)
+    en = interface_energy(p, ix, iy, mu)
+    e_s = k_s * ks * fresnel_dielectric(mu, p[ETA])
+    e_b = k_s * ks * en.r * max(0.0, 1.0 - en.e) + k_b * (
+        body_reflect_albedo(p, 0, mu) + body_reflect_albedo(p, 1, mu) + body_reflect_albedo(p, 2, mu)) / 3.0
     if e_s + e_b <= 0.0:
         return k_s, k_b, -1.0
     return k_s, k_b, e_s / (e_s + e_b)
@@ -594,28 +840,29 @@ def _reflect_lobe_weights(p, mu, shadow):
 
 @njit(cache=True)
 def reflect_eval_pdf(p, t, n, wi, wo, shadow):
-    """The reflection side at x: BysdfValue of beta KS f_sR + (1 - beta) m_r shadow f_bR (f cos) and
-    the pdf of reflect_sample."""
+    """The reflection side at x: BysdfValue of beta KS (f_sR + f_ms) + (1 - beta) m_r shadow f_bR (f cos)
+    and the pdf of reflect_sample."""
     mu = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
     if mu <= COS_EPS:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
-    k_s, k_b, q = _reflect_lobe_weights(p, mu, shadow)
+    k_s, k_b, q = _reflect_lobe_weights(p, t, n, wi, mu, shadow)
     if q < 0.0:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
     s = spec_reflect_eval_pdf(p, t, n, wi, wo)
+    m = ms_reflect_eval_pdf(p, t, n, wi, wo)
     b = body_reflect_eval_pdf(p, n, wi, wo)
-    return BysdfValue(k_s * s.r + k_b * b.r, k_s * s.g + k_b * b.g, k_s * s.b + k_b * b.b,
+    return BysdfValue(k_s * (s.r + m.r) + k_b * b.r, k_s * (s.g + m.g) + k_b * b.g, k_s * (s.b + m.b) + k_b * b.b,
                       q * s.pdf + (1.0 - q) * b.pdf)
 
 
 @njit(cache=True)
 def reflect_sample(p, t, n, wi, shadow, u0, u1, u2):
-    """The reflection side at x: u0 picks the specular or the body lobe, (u1, u2) its direction;
+    """The reflection side at x: u0 picks the GGX-sampled or the cosine-sampled lobes, (u1, u2) the direction;
     BysdfSample(wo, f cos / pdf, pdf) with reflect_eval_pdf's value and mixture pdf."""
     mu = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
     if mu <= COS_EPS:
         return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
-    _, _, q = _reflect_lobe_weights(p, mu, shadow)
+    _, _, q = _reflect_lobe_weights(p, t, n, wi, mu, shadow)
     if q < 0.0:
         return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
     if u0 < q:
@@ -631,44 +878,54 @@ def reflect_sample(p, t, n, wi, shadow, u0, u1, u2):
     return BysdfSample(wo, v.r / v.pdf, v.g / v.pdf, v.b / v.pdf, v.pdf)
 
 
+ExitWeights = namedtuple("ExitWeights", ["spec", "body", "kept", "p_spec"])
+
+
 @njit(cache=True)
-def _exit_lobe_weights(p, att_spec, att_body, shadow_y):
-    """(k_spec, k_body, P_spec) of the transmission side at y (P_spec < 0: no energy)."""
+def _exit_lobe_weights(p, d, n_y, att_spec, att_body, shadow_y):
+    """ExitWeights(spec, body, kept, p_spec) of the transmission side at y: the factor on KT f_sT, on
+    f_bT, the Lambertian weight of the specular path's light the exit keeps inside (KT spec (1 - E_T(d.n_y)),
+    folded into the body exit), and the probability of the GGX-sampled lobe (< 0: no energy)."""
     beta = p[SPEC_WEIGHT]
     k_s = beta * max(att_spec, 0.0)
     k_b = (1.0 - beta) * (1.0 - p[REFLECT_WEIGHT]) * max(att_body, 0.0) * max(shadow_y, 0.0)
-    e_s = k_s * p[KT_EXIT]
-    e_b = k_b * (p[BODY_T_R] + p[BODY_T_G] + p[BODY_T_B]) / 3.0
+    e_t = exit_transmittance(p, d[0] * n_y[0] + d[1] * n_y[1] + d[2] * n_y[2])
+    kept = k_s * p[KT_EXIT] * (1.0 - e_t)
+    e_s = k_s * p[KT_EXIT] * e_t
+    e_b = kept + k_b * (p[BODY_T_R] + p[BODY_T_G] + p[BODY_T_B]) / 3.0
     if e_s + e_b <= 0.0:
-        return k_s, k_b, -1.0
-    return k_s, k_b, e_s / (e_s + e_b)
+        return ExitWeights(k_s, k_b, kept, -1.0)
+    return ExitWeights(k_s, k_b, kept, e_s / (e_s + e_b))
 
 
 @njit(cache=True)
 def exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y):
-    """The transmission side at y: BysdfValue of beta att_spec KT f_sT + (1 - beta)(1 - m_r) att_body
-    shadow_y f_bT (f cos) and the pdf of exit_sample; d the direction the path arrives along inside."""
-    k_s, k_b, q = _exit_lobe_weights(p, att_spec, att_body, shadow_y)
-    if q < 0.0:
+    """The transmission side at y: BysdfValue of beta att_spec KT (f_sT + (1 - E_T(d.n_y)) cos_o / pi)
+    + (1 - beta)(1 - m_r) att_body shadow_y f_bT (f cos) and the pdf of exit_sample; d the direction the
+    path arrives along inside, att_spec the specular path's weight since x (its Beer-Lambert attenuation
+    times the enter step's weight)."""
+    k = _exit_lobe_weights(p, d, n_y, att_spec, att_body, shadow_y)
+    if k.p_spec < 0.0:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
     s = spec_exit_eval_pdf(p, t_y, n_y, d, wo)
     b = body_exit_eval_pdf(p, n_y, wo)
-    return BysdfValue(k_s * s.r + k_b * b.r, k_s * s.g + k_b * b.g, k_s * s.b + k_b * b.b,
-                      q * s.pdf + (1.0 - q) * b.pdf)
+    kept = k.kept * b.pdf                       # b.pdf = cos_o / pi
+    return BysdfValue(k.spec * s.r + k.body * b.r + kept, k.spec * s.g + k.body * b.g + kept,
+                      k.spec * s.b + k.body * b.b + kept, k.p_spec * s.pdf + (1.0 - k.p_spec) * b.pdf)
 
 
 @njit(cache=True)
 def exit_sample(p, t_y, n_y, d, att_spec, att_body, shadow_y, u0, u1, u2):
-    """The transmission side at y: u0 picks the specular or the body lobe, (u1, u2) its direction;
+    """The transmission side at y: u0 picks the specular or the Lambertian lobes, (u1, u2) the direction;
     BysdfSample(wo, f cos / pdf, pdf) with exit_eval_pdf's value and mixture pdf."""
-    _, _, q = _exit_lobe_weights(p, att_spec, att_body, shadow_y)
+    q = _exit_lobe_weights(p, d, n_y, att_spec, att_body, shadow_y).p_spec
     if q < 0.0:
         return BysdfSample(_unit_copy(n_y), 0.0, 0.0, 0.0, 0.0)
     if u0 < q:
         s = spec_exit_sample(p, t_y, n_y, d, u1, u2)
     else:
         s = body_exit_sample(p, n_y, u1, u2)
-    if s.pdf <= 0.0:                           # failed (total internal reflection at y): the path ends
+    if s.pdf <= 0.0:     # failed (total internal reflection at y: that light is the Lambertian lobe's `kept`)
         return BysdfSample(s.wo, 0.0, 0.0, 0.0, 0.0)
     wo = s.wo
     v = exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y)

@@ -100,10 +100,10 @@ def _sample(p, fr, wi, u0, u1, u2):
         ny = _cylinder_exit_normal(t, n, e.d)
         key = int(u0 * 9007199254740992.0)
         v0, v1, v2 = uniform(key, 0, 0), uniform(key, 0, 1), uniform(key, 0, 2)
-        if k == CHAIN:
-            s = exit_sample(p, t, ny, e.d, fr[7], fr[8], fr[6], v0, v1, v2)
-        else:
-            s = spec_exit_sample(p, t, ny, e.d, v1, v2)
+        if k == CHAIN:      # the enter weight is the specular path's (the body path only takes y from d)
+            s = exit_sample(p, t, ny, e.d, fr[7] * e.weight, fr[8], fr[6], v0, v1, v2)
+            return s.wo, s.r, s.g, s.b, s.pdf
+        s = spec_exit_sample(p, t, ny, e.d, v1, v2)
         return s.wo, e.weight * s.r, e.weight * s.g, e.weight * s.b, s.pdf
     elif k == WRONG_ETA:   # a broken sampler (test_chi_square_rejects_a_wrong_btdf_jacobian): drawn with eta 1.5
         q = p.copy()
@@ -195,7 +195,7 @@ NAMES = {SPEC_R: "spec_reflect", ENTER: "enter", SPEC_T: "spec_exit", BODY_R: "b
          BODY_T: "body_exit", SIDE_R: "reflect_side", SIDE_T: "exit_side"}
 
 
-def _run_case(case, n=200_000, seed=11):
+def _run_case(case, n=200_000, seed=12):
     k, params, t, n_, (th, ph), shadow, a_s, a_b = case[:8]
     opts = dict(axis=n_, res=(40, 80), sub=6)
     opts.update(case[8] if len(case) > 8 else {})
@@ -307,7 +307,8 @@ def test_rough_dielectric_matches_walter():
     """Reference: Walter et al. 2007 Eqs. 20 (reflection) and 21 (transmission), written out independently
     above: spec_reflect_eval_pdf = KS f_r |wo.n|; enter_eval_pdf = f_t |d.n| with i = wi (index 1) and
     o = d (index eta) -- Eq. 21's eta_o^2 is the flux form, no 1/eta^2 radiance scaling; spec_exit_eval_pdf =
-    KT f_t |wo.n| with i = -d (index eta) and o = wo (index 1), at 200 random pairs each."""
+    KT f_t |wo.n| with i = -d (index eta) and o = wo (index 1), at 200 random pairs each (enter divided by
+    its energy compensation, a factor of wi alone: test_energy_tables_match_the_samplers)."""
     p = pack_bysdf(**ROUGH)
     au, av, eta, a = ROUGH["alpha_u"], ROUGH["alpha_v"], 1.5, ROUGH["alpha_exit"]
     rng = np.random.default_rng(12)
@@ -319,7 +320,8 @@ def test_rough_dielectric_matches_walter():
                 _walter(-wi, wo, -N1, T1, a, a, eta, 1.0))
         np.testing.assert_allclose(spec_reflect_eval_pdf(p, T1, N1, wi, wo)[:3], np.array(ROUGH["ks"]) * refs[0],
                                    rtol=1e-10, atol=1e-300)
-        assert enter_eval_pdf(p, T1, N1, wi, -wo)[0] == pytest.approx(refs[1], rel=1e-10, abs=1e-300)
+        c = Y.enter_compensation(p, *Y.to_local(Y.shading_frame(T1, N1), wi))   # the energy compensation
+        assert enter_eval_pdf(p, T1, N1, wi, -wo)[0] / c == pytest.approx(refs[1], rel=1e-10, abs=1e-300)
         # d = wi arrives inside and leaves along wo
         assert spec_exit_eval_pdf(p, T1, N1, wi, wo)[0] == pytest.approx(ROUGH["kt_exit"] * refs[2], rel=1e-10,
                                                                          abs=1e-300)
@@ -356,7 +358,7 @@ def test_pack_defaults_and_ranges():
               Y.KS_G: 1.0, Y.KS_B: 1.0, Y.ALPHA_EXIT: 0.9, Y.KT_EXIT: 0.1, Y.BODY_R_R: 0.045, Y.BODY_R_G: 0.015,
               Y.BODY_R_B: 0.0, Y.BODY_T_R: 0.27, Y.BODY_T_G: 0.09, Y.BODY_T_B: 0.0, Y.SIGMA_SPEC: 5.5,
               Y.SIGMA_BODY: 0.1, Y.LS_MIX: 0.5}
-    assert sorted(expect) == list(range(BYSDF_SIZE))
+    assert sorted(expect) == list(range(Y.N_PARAMS))
     for k, v in expect.items():
         assert p[k] == pytest.approx(v, rel=1e-15)
     for bad in (dict(eta=1.0), dict(alpha_u=0.0), dict(spec_weight=1.2), dict(body_r=(0.5, 1.1, 0.0)),
@@ -381,7 +383,7 @@ def test_attenuation_and_side_probability():
 
 # ------------------------------------------------------------------------------------------------
 # energy
-WHITE = dict(ks=1.0, kt_exit=1.0, body_r=1.0, body_t=1.0)
+WHITE = dict(ks=1.0, kt_exit=1.0, body_r=1.0, body_t=1.0, ls_mix=0.0)   # the diffusion term alone: R_d(1) = 1
 
 
 def _albedo(p, t, n, wi, routine, N, seed):
@@ -391,66 +393,94 @@ def _albedo(p, t, n, wi, routine, N, seed):
     return w.mean(axis=0), w.std(axis=0) / math.sqrt(N)
 
 
-def _furnace_check(alpha, theta, n_samples, seed=5):
-    p = pack_bysdf(alpha_u=alpha, alpha_v=1.5 * alpha, alpha_exit=alpha, **WHITE)
-    wi = _dir(theta, 30.0, T1, N1)
+def _furnace(p, theta, phi, n_samples, seed):
+    """(albedo, standard error) of the whole BYSDF at wi (theta, phi about N1 from T1): the reflection side's
+    mean weight plus the enter step times the exit side's (exit point on a cylinder about t); every lobe and
+    side <= 1 + 3 sigma on the way, the white channels equal."""
+    wi = _dir(theta, phi, T1, N1)
     est = [_albedo(p, T1, N1, wi, k, n_samples, seed + k) for k in (SIDE_R, CHAIN, SPEC_R, ENTER, CHAIN_SPEC, BODY_R)]
-    est.append(_albedo(p, T1, _dir(20.0, 0.0, T1, N1), wi, BODY_T, 1000, seed))
     m = np.array([e[0] for e in est])
     sd = np.array([e[1] for e in est])
     assert np.allclose(m, m[:, :1]) and np.allclose(sd, sd[:, :1])       # white: the channels agree
-    m, sd = m[:, 0], sd[:, 0]
-    # rows: 0 the BYSDF (reflection side + enter x exit side), 1 spec reflection, 2 enter, 3 enter x spec exit,
-    # 4 body reflection, 5 body exit
-    m = np.array([m[0] + m[1], m[2], m[3], m[4], m[5], m[6]])
-    sd = np.array([math.hypot(sd[0], sd[1]), sd[2], sd[3], sd[4], sd[5], sd[6]])
-    for k, name in enumerate(("BYSDF", "spec reflection", "enter", "enter x spec exit", "body reflection",
-                              "body exit")):
-        assert m[k] <= 1.0 + 3.0 * sd[k] + 1e-12, f"{name} albedo {m[k]:.5f} +- {sd[k]:.5f} > 1"
-    # the rough dielectric interface at x: reflection + refraction = 1 - its single-scattering loss
-    interface = m[1] + m[2]
-    assert interface <= 1.0 + 3.0 * math.hypot(sd[1], sd[2])
-    # the BYSDF's albedo is the lobes' sum (independent estimates of the same integral)
-    beta, m_r = 0.5, 0.5
-    mu = float(wi @ N1)
-    body_r = 0.5 * lommel_seeliger_albedo(mu) + 0.5 * diffusion_reflectance(1.0, 1.5)
-    assert m[4] == pytest.approx(body_r, abs=4.0 * sd[4] + 1e-12)
-    assert m[5] == pytest.approx(1.0, rel=1e-12)                           # Lambertian, white: weight 1
-    parts = beta * (m[1] + m[3]) + (1 - beta) * (m_r * body_r + (1 - m_r) * m[2])
-    assert m[0] == pytest.approx(parts, abs=4.0 * math.hypot(sd[0], sd[1] + sd[2] + sd[3]))
-    return m[0], sd[0], 1.0 - interface
+    for k, name in enumerate(("reflection side", "enter x exit side", "spec reflection", "enter",
+                              "enter x spec exit", "body reflection")):
+        assert m[k, 0] <= 1.0 + 3.0 * sd[k, 0] + 1e-12, f"{name} albedo {m[k, 0]:.5f} +- {sd[k, 0]:.5f} > 1"
+    return m[0, 0] + m[1, 0], math.hypot(sd[0, 0], sd[1, 0])
 
 
-@pytest.mark.parametrize("alpha", [0.05, 1.0])
+TABLE_TOL = 3e-3   # the energy tables' interpolation and quadrature error (test_energy_tables_match_the_samplers)
+
+
+@pytest.mark.parametrize("alpha", [0.05, 0.3, 1.0])
 def test_white_furnace(alpha):
-    """Reference: energy conservation (white furnace, Heitz et al. 2016 §2: single-scattering microfacet
-    models lose energy, never gain it): with KS = KT = 1, white body colours, no attenuation or shadowing,
-    the BYSDF's albedo -- the reflection side's sampled f cos / pdf plus the enter weight times the exit
-    side's (exit point on a cylinder about t) -- is <= 1 + 3 sigma at three wi, and so is each lobe's; the
-    body lobes match their closed forms (LS_MIX LS(mu) + (1 - LS_MIX) R_d; white Lambertian 1); the total
-    equals beta (R + T T_y) + (1 - beta)(m_r body_R + (1 - m_r) T) within 4 sigma. The loss of the rough
-    interface at x (1 - reflection - refraction), printed, is the single-scattering loss Heitz et al. 2016
-    describe: < 0.5 % at alpha 0.05 (wi at 0 and 45 degrees), > 10 % at alpha 1 (at every wi)."""
-    losses = []
+    """Reference: energy conservation of a non-absorbing model (white furnace): with KS = KT = 1, white body
+    colours (the diffusion term alone, R_d(1) = 1), no attenuation or shadowing, the BYSDF's albedo -- the
+    reflection side (single-scattering GGX, the Kulla-Conty lobe f_ms, the body) plus enter (compensated)
+    times the exit side (specular refraction out plus the light total internal reflection keeps, folded
+    into the Lambertian exit) -- is 1 at every wi, within 4 sigma and the tables' TABLE_TOL, for an isotropic
+    rough interface at x and y; each lobe <= 1. Without the compensation the interface alone loses up to
+    30 % at alpha 1 and the exit up to 60 % (test_energy_tables_match_the_samplers)."""
+    p = pack_bysdf(alpha_u=alpha, alpha_v=alpha, alpha_exit=alpha, **WHITE)
     for theta in (0.0, 45.0, 80.0):
-        total, sd, loss = _furnace_check(alpha, theta, 50_000)
-        losses.append(loss)
-        print(f"alpha {alpha}: theta_i {theta:4.0f}  BYSDF albedo {total:.4f} +- {sd:.4f}  "
-              f"interface loss {loss:.4f}")
-    if alpha <= 0.05:
-        assert max(losses[:2]) < 5e-3, losses
-    else:
-        assert min(losses) > 0.1, losses
+        total, sd = _furnace(p, theta, 30.0, 50_000, 5)
+        print(f"alpha {alpha}: theta_i {theta:4.0f}  BYSDF albedo {total:.4f} +- {sd:.4f}")
+        assert total == pytest.approx(1.0, abs=4.0 * sd + TABLE_TOL)
+
+
+@pytest.mark.parametrize("au, av, low, high", [(0.2, 0.3, 0.99, 1.005), pytest.param(1.0, 1.5, 0.95, 1.01,
+                                                                                      marks=pytest.mark.slow)])
+def test_white_furnace_anisotropic(au, av, low, high):
+    """As test_white_furnace for an anisotropic interface at x, whose tables are read at an effective
+    roughness (``interface_energy``: an approximation). Measured bands, stated here: the reference's
+    roughness (0.2, 0.3) keeps 0.99-1.005 of the energy at every wi, (1.0, 1.5) 0.95-1.01."""
+    p = pack_bysdf(alpha_u=au, alpha_v=av, **WHITE)
+    for theta in (0.0, 45.0, 80.0):
+        for phi in (0.0, 45.0, 90.0):
+            total, sd = _furnace(p, theta, phi, 50_000, 7)
+            print(f"alpha {au}/{av}: theta_i {theta:4.0f} phi {phi:4.0f}  BYSDF albedo {total:.4f} +- {sd:.4f}")
+            assert low - 4.0 * sd <= total <= high + 4.0 * sd, (theta, phi, total)
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("alpha", [0.2, 0.5, 2.0])
 def test_white_furnace_more(alpha):
-    """As test_white_furnace at more roughnesses, with 400k samples."""
+    """As test_white_furnace at more roughnesses and eta 1.33, with 400k samples."""
+    p = pack_bysdf(alpha_u=alpha, alpha_v=alpha, alpha_exit=alpha, eta=1.33, **WHITE)
     for theta in (0.0, 30.0, 60.0, 85.0):
-        total, sd, loss = _furnace_check(alpha, theta, 400_000, seed=9)
-        print(f"alpha {alpha}: theta_i {theta:4.0f}  BYSDF albedo {total:.4f} +- {sd:.4f}  "
-              f"interface loss {loss:.4f}")
+        total, sd = _furnace(p, theta, 0.0, 400_000, 9)
+        print(f"alpha {alpha}: theta_i {theta:4.0f}  BYSDF albedo {total:.4f} +- {sd:.4f}")
+        assert total == pytest.approx(1.0, abs=4.0 * sd + TABLE_TOL)
+
+
+def test_energy_tables_match_the_samplers():
+    """Reference: brute force through the samplers themselves. The packed tables' single-scattering
+    albedos -- E_R (= E - E_T) and E_T of the interface at x, E_T of the exit from inside -- equal the
+    Monte Carlo mean weights of spec_reflect_sample, enter_sample (divided by its compensation) and
+    spec_exit_sample / KT within 4 sigma + TABLE_TOL, at roughnesses between the table's nodes. And the
+    single-scattering loss they compensate is what Heitz et al. 2016 describe: < 0.5 % at alpha 0.05, > 8 %
+    at alpha 1 at every wi; E_avg is the cosine-weighted mean of the interpolated E (trapezoid check)."""
+    for alpha in (0.05, 0.3, 1.0):
+        p = pack_bysdf(alpha_u=alpha, alpha_v=alpha, alpha_exit=alpha, eta=1.4, ks=1.0, kt_exit=0.5)
+        fr = Y.shading_frame(T0, N0)
+        for theta in (0.0, 50.0, 80.0):
+            wi = _dir(theta, 0.0, T0, N0)
+            ix, iy, iz = Y.to_local(fr, wi)
+            en = Y.interface_energy(p, ix, iy, iz)
+            r, sr = _albedo(p, T0, N0, wi, SPEC_R, 40_000, 3)
+            t, st = _albedo(p, T0, N0, wi, ENTER, 40_000, 4)
+            c = Y.enter_compensation(p, ix, iy, iz)
+            assert r[0] == pytest.approx(en.e - en.e_t, abs=4.0 * sr[0] + TABLE_TOL)
+            assert t[0] / c == pytest.approx(en.e_t, abs=4.0 * st[0] / c + TABLE_TOL)
+            loss = 1.0 - en.e
+            assert (loss < 5e-3) if alpha == 0.05 and theta < 60.0 else (loss > 0.08 if alpha == 1.0 else True), loss
+            d = _dir(theta, 0.0, T0, N0)           # arriving inside, leaving through n_y = N0 at cos theta
+            x, sx = _albedo(p, T0, N0, d, SPEC_T, 40_000, 5)
+            assert x[0] / 0.5 == pytest.approx(Y.exit_transmittance(p, float(d @ N0)), abs=8.0 * sx[0] + TABLE_TOL)
+        mu = np.linspace(0.0, 1.0, 20001)
+        e = np.array([Y.interface_energy(p, math.sqrt(1.0 - m * m), 0.0, m).e for m in mu])
+        f = 2.0 * mu * e
+        e_avg = float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(mu)))
+        assert Y.interface_energy(p, 0.0, 0.0, 1.0).e_avg == pytest.approx(e_avg, abs=1e-4)
 
 
 @pytest.mark.parametrize("ls_mix", [1.0, 0.0])
