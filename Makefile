@@ -46,7 +46,7 @@ BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8
 # the demo swatch and on the knitted swatch (data/scenes/knit.toml: its own yarn colour and fleece BCSDF), the
 # knit rendered with bysdf beside fiberpath on its realized fibres, and the woven swatch in the evaluation set
 KNIT_SCENE ?= data/scenes/knit.toml
-FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 4
+FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 6
 
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
 # what the experiments (make/experiments.mk) and the comparisons share: the Khungurn et al. 2017 flat patches and damask

@@ -18,22 +18,28 @@ def register(app: typer.Typer) -> None:
         height: int = typer.Option(72, "--height", help="Height of the fitting renders."),
         spp: int = typer.Option(16, "--spp", help="Samples per pixel of the bysdf renders."),
         ref_spp: int = typer.Option(32, "--ref-spp", help="Samples per pixel of the fiberpath references."),
-        iterations: int = typer.Option(4, "--iterations", help="Fitting rounds (each renders front and back)."),
+        iterations: int = typer.Option(6, "--iterations", help="Fitting rounds (each renders front and back)."),
+        scene_lights: bool = typer.Option(True, "--scene-lights/--no-scene-lights",
+                                          help="Also compare under the scene's own lights (reported, not fitted)."),
     ):
-        """Fit the BYSDF's energy split so bysdf matches fiberpath under front, back and front+back light."""
+        """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and
+        back light; report front+back and the scene's own lights as predictions."""
         from ..errors import LoomError
         from ..outputs import check_output
-        from ..runners.fit_bysdf import SETUPS, run_fit
+        from ..runners.fit_bysdf import run_fit
 
         check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (ref_spp, "--ref-spp"),
                         (iterations, "--iterations")):
             if v <= 0:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
-        rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations, progress=typer.echo)
-        typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}"
+        rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations,
+                      scene_lights=None if scene_lights else False, progress=typer.echo)
+        typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}, "
+                   "body colour factors " + " ".join(f"{v:.3g}" for v in rep["body_r_scale"]) + " (reflection), "
+                   + " ".join(f"{v:.3g}" for v in rep["body_t_scale"]) + " (transmission)"
                    + (" (capped: the fibres are brighter than the yarn colours allow)" if rep["energy_capped"] else ""))
-        for n in SETUPS:
-            r = rep["setups"][n]
-            typer.echo(f"  {n:10s} mean luminance error {100 * r['rel_error_luminance']:+.1f} %  (rgb "
-                       + " ".join(f"{100 * e:+.1f}" for e in r["rel_error_rgb"]) + " %)")
+        for n, r in rep["setups"].items():
+            typer.echo(f"  {n:10s} mean error {100 * r['rel_error_luminance']:+.1f} % luminance, rgb "
+                       + " ".join(f"{100 * e:+.1f}" for e in r["rel_error_rgb"]) + f" %, SSIM {r['ssim']:.3f}"
+                       + ("" if r["fitted"] else " (not fitted)"))

@@ -101,28 +101,51 @@ def read_params_file(path) -> dict:
     return d
 
 
-def bysdf_rows(scene, groups, albedo, options) -> np.ndarray:
+COLOUR_SCALES = ("body_r_scale", "body_t_scale")   # per-channel factors on the yarn colour (fit-bysdf)
+
+
+def _colour_scale(v, where, key) -> np.ndarray:
+    try:
+        c = np.broadcast_to(np.asarray(v, dtype=np.float64), (3,)).copy()
+    except (TypeError, ValueError):
+        raise LoomError(where, key, f"expected a number or three numbers, got {v!r}") from None
+    if not np.all(np.isfinite(c)) or np.any(c < 0.0):
+        raise LoomError(where, key, f"expected non-negative finite numbers, got {v!r}")
+    return c
+
+
+def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
     """(Y, BYSDF_SIZE) packed BYSDF of every yarn: defaults, body colours from the yarn's colour, the
-    scene's ``[yarns.<group>.bysdf]``, then ``--set params=``."""
+    scene's ``[yarns.<group>.bysdf]``, then ``--set params=`` (or ``fitted``, the same {group: {name:
+    value}} as that file). ``body_r_scale`` / ``body_t_scale`` (three factors, or one) multiply the yarn's
+    colour per channel before it becomes the body colours (clipped to 1; the reflection side's through
+    ``reduced_albedo``): the per-channel freedom ``fit-bysdf`` fits. A ``body_r`` / ``body_t`` given
+    explicitly replaces the colour-derived one."""
     from stages.core.shading.bysdf import pack_bysdf
 
     extra = options.get("extra") or {}
-    fitted = read_params_file(extra["params"]) if extra.get("params") else {}
+    if fitted is None:
+        fitted = read_params_file(extra["params"]) if extra.get("params") else {}
+    where = extra.get("params") or scene.path
     rows = []
     cache = {}
     for y in range(len(groups)):
         g = GROUPS[int(groups[y])]
         key = (g, tuple(np.round(albedo[y], 12)))
         if key not in cache:
-            kw = {"body_r": tuple(reduced_albedo(albedo[y])), "body_t": tuple(albedo[y]), **SCALE_DEFAULTS}
             place = f"yarns.{g}.bysdf"
-            kw.update(scene.yarn_type(g).get("bysdf") or {})
+            kw = dict(scene.yarn_type(g).get("bysdf") or {})
             for tab_name in ("default", g):
                 kw.update(fitted.get(tab_name, {}))
+            scale = {k: _colour_scale(kw.pop(k), where, f"{place}.{k}") if k in kw else np.ones(3)
+                     for k in COLOUR_SCALES}
+            colour_r = np.clip(np.asarray(albedo[y], float) * scale["body_r_scale"], 0.0, 1.0)
+            colour_t = np.clip(np.asarray(albedo[y], float) * scale["body_t_scale"], 0.0, 1.0)
+            kw = {"body_r": tuple(reduced_albedo(colour_r)), "body_t": tuple(colour_t), **SCALE_DEFAULTS, **kw}
             try:
                 cache[key] = pack_bysdf(**kw)
             except (TypeError, ValueError) as e:
-                raise LoomError(extra.get("params") or scene.path, place, str(e)) from None
+                raise LoomError(where, place, str(e)) from None
         rows.append(cache[key])
     return np.ascontiguousarray(np.stack(rows))
 

@@ -8,19 +8,29 @@ scene's camera under
 - ``front``: one directional light travelling along the camera's view direction (lit from the viewer's side),
 - ``back``: one travelling against it (lit from behind the cloth, seen through it),
 - ``front+back``: both (not fitted: it checks that the fitted reflection and transmission add up),
+- ``scene`` (``scene_lights=True``, the default when the scene has lights): the scene's own lights, not
+  fitted either, compared over the pixels both methods cover (its environment lights the background),
 
-each of irradiance ``IRRADIANCE``, no environment (the background stays black, so the image mean
-is the cloth's). Fitted: the BYSDF's energy split (``stages.core.shading.bysdf``), as the body energy
-reflected at the entry point, x = (1 - spec_weight) reflect_weight, and the body energy transmitted to
-the exit point, y = (1 - spec_weight) (1 - reflect_weight); the specular lobes take the rest,
-spec_weight = 1 - x - y. The front setup's light is mostly x's, the back setup's mostly y's, so
-``iterations`` rounds of the multiplicative update x <- x mean_ref / mean_bysdf (front) and
-y <- y mean_ref / mean_bysdf (back) on the image's mean luminance converge in a few rounds (each
-round renders both setups); x + y is capped at 1 (energy: no negative specular share), and a cap that
-binds is reported (the fibres are then brighter than the yarn colours allow). Output: a TOML of
-parameters (``[default]`` table: ``spec_weight``, ``reflect_weight``) for ``--set params=`` and a JSON
-report with the reference and fitted means and the residual relative error of each setup per channel
-and in luminance.
+each directional light of irradiance ``IRRADIANCE``, no environment in the first three (the background
+stays black, so the image mean is the cloth's). Fitted, eight numbers with six constraints' worth of
+freedom (front and back, per channel):
+
+- the energy split (``stages.core.shading.bysdf``), as the body energy reflected at the entry point,
+  x = (1 - spec_weight) reflect_weight, and the body energy transmitted to the exit point,
+  y = (1 - spec_weight) (1 - reflect_weight); the specular lobes take the rest, spec_weight = 1 - x - y,
+  fitted on the mean luminance: x <- x L_ref / L_bysdf (front), y <- y L_ref / L_bysdf (back), x + y
+  capped at 1 (no negative specular share; a binding cap is reported);
+- per-channel factors on the yarn colour that becomes the body colours (``body_r_scale`` for the
+  reflection side, ``body_t_scale`` for the transmission side; ``pipeline.renderers.bysdf.bysdf_rows``),
+  fitted on the chromaticity of the same setups: s_c <- s_c (ref_c / bysdf_c) / (L_ref / L_bysdf), then
+  normalised to luminance weight 1 (x and y carry the brightness).
+
+Both are fixed-point updates: a setup's light is mostly its side's, so each round (two renders) moves
+each number towards its target; where the uncoloured specular lobes make most of a setup's light, the
+colour factors converge slowly and clip (colours at most 1): the report names the setups left off.
+Output: a TOML of parameters (``[default]``: ``spec_weight``, ``reflect_weight``, ``body_r_scale``,
+``body_t_scale``) for ``--set params=`` and a JSON report with, per setup, the reference and fitted means
+per channel, their relative errors and the SSIM of the two pictures (``stages.evaluate.metrics``).
 """
 from __future__ import annotations
 
@@ -67,8 +77,8 @@ class _Renderer:
                                     extra=dict(extra))
         self.setup = importlib.import_module(f"pipeline.renderers.{m.module}").film_setup(sc, self.opts)
 
-    def mean(self, lights, **fields) -> np.ndarray:
-        """The image mean under ``lights``, with any other integrator ``fields`` replaced too."""
+    def image(self, lights, **fields) -> tuple[np.ndarray, np.ndarray]:
+        """(rgb (H, W, 3), coverage (H, W)) under ``lights``, with any other integrator ``fields`` replaced too."""
         from ..render_setup import pack_lights
         from ..renderers.film import render_film, sampling_of
 
@@ -76,12 +86,88 @@ class _Renderer:
         integ = s.integ._replace(lights=pack_lights(lights, self.scene.path).table(), **fields)
         run = render_film(s.label, integ, s.cam, o["width"], o["height"], sampling_of(o), o["seed"], o["tile_size"],
                           s.variance, o.get("threads"), None)
-        return np.asarray(run.rgb, np.float64).reshape(-1, 3).mean(axis=0)
+        return np.asarray(run.rgb, np.float64), np.asarray(run.extra["A"], np.float64).reshape(run.rgb.shape[:2])
+
+    def mean(self, lights, **fields) -> np.ndarray:
+        """The image mean under ``lights`` (see ``image``)."""
+        return self.image(lights, **fields)[0].reshape(-1, 3).mean(axis=0)
 
 
-def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, ref_spp=32, iterations=4,
-            max_depth=None, threads=None, progress=print) -> dict:
+SCALE_MIN, SCALE_MAX = 1e-3, 10.0   # the colour factors' range (a channel the fit cannot move stops there)
+
+
+@dataclasses.dataclass
+class FitState:
+    """The fitted numbers: body energies x (reflected) and y (transmitted), per-channel colour factors."""
+    x: float
+    y: float
+    scale_r: np.ndarray = dataclasses.field(default_factory=lambda: np.ones(3))
+    scale_t: np.ndarray = dataclasses.field(default_factory=lambda: np.ones(3))
+    capped: bool = False
+
+    def table(self) -> dict:
+        """The ``[default]`` table of the parameters file, as written (6 significant digits)."""
+        six = lambda v: float(f"{v:.6g}")   # noqa: E731
+        return {**{k: six(v) for k, v in split(self.x, self.y).items()},
+                "body_r_scale": [six(v) for v in self.scale_r], "body_t_scale": [six(v) for v in self.scale_t]}
+
+
+def _ratio(ref, got):
+    return np.asarray(ref, float) / np.maximum(np.asarray(got, float), 1e-12)
+
+
+def fit_step(st: FitState, ref: dict, got: dict) -> FitState:
+    """One round of the fixed-point updates (module doc) from the front and back means."""
+    lum_f = float(LUMA @ ref["front"]) / max(float(LUMA @ got["front"]), 1e-12)
+    lum_b = float(LUMA @ ref["back"]) / max(float(LUMA @ got["back"]), 1e-12)
+    x = float(np.clip(st.x * lum_f, 1e-4, 1.0))
+    y = float(np.clip(st.y * lum_b, 1e-4, 1.0))
+    capped = x + y > 1.0
+    if capped:
+        x, y = x / (x + y), y / (x + y)
+    scale_r = np.clip(st.scale_r * _ratio(ref["front"], got["front"]) / lum_f, SCALE_MIN, SCALE_MAX)
+    scale_t = np.clip(st.scale_t * _ratio(ref["back"], got["back"]) / lum_b, SCALE_MIN, SCALE_MAX)
+    return FitState(x, y, scale_r, scale_t, capped)
+
+
+def fit_rounds(render_means, ref: dict, st: FitState, iterations: int, progress=print):
+    """(FitState, history): ``iterations`` rounds of ``fit_step``; ``render_means(state, setups)`` gives
+    {setup: mean rgb} of bysdf with the state's parameters (as written to the file)."""
+    history = []
+    for it in range(iterations):
+        got = render_means(st, ("front", "back"))
+        err = {n: _ratio(got[n], ref[n]) - 1.0 for n in got}
+        history.append({"iteration": it, "reflect_energy": st.x, "transmit_energy": st.y,
+                        "body_r_scale": st.scale_r.tolist(), "body_t_scale": st.scale_t.tolist(),
+                        **{f"{n}_rel_error": float(LUMA @ got[n] / max(LUMA @ ref[n], 1e-12) - 1.0) for n in got},
+                        **{f"{n}_rel_error_rgb": err[n].tolist() for n in got}})
+        progress(f"round {it + 1}/{iterations}: body energy reflected {st.x:.4f}, transmitted {st.y:.4f}: "
+                 + ", ".join(f"{n} " + " ".join(f"{100 * e:+.1f}" for e in err[n]) + " %" for n in got))
+        st = fit_step(st, ref, got)
+    return st, history
+
+
+def bysdf_means(by: _Renderer, yarns, lights: dict):
+    """(rows(state), render_means(state, setups)) of a bysdf ``_Renderer``: the packed BYSDF of every yarn
+    with a FitState's parameters as written to the file, and {setup: mean rgb} rendered with them."""
+    from ..renderers.bysdf import bysdf_rows, yarn_setup
+
+    _, _, ytypes, groups = yarn_setup(str(yarns))
+
+    def rows(state):
+        return bysdf_rows(by.scene, groups, ytypes.albedo, by.opts, {"default": state.table()})
+
+    def render_means(state, names):
+        params = rows(state)
+        return {n: by.mean(lights[n], params=params) for n in names}
+
+    return rows, render_means
+
+
+def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, ref_spp=32, iterations=6,
+            max_depth=None, threads=None, scene_lights=None, progress=print) -> dict:
     from stages.core.shading import bysdf as B
+    from stages.evaluate import metrics as mt
 
     from ..artifacts import Artifact
     from ..scene import load_scene
@@ -92,52 +178,48 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     Artifact(fibers, kind="fibers")
     Artifact(yarns, kind="yarns")
     lights = setup_lights(scene)
+    if scene_lights is None:
+        scene_lights = bool(scene.lights)
+    if scene_lights:
+        if not scene.lights:
+            raise LoomError(scene.path, "lights", "the scene has no lights to check the fit under")
+        lights["scene"] = list(scene.lights)
+    setups = tuple(lights)
     t0 = time.perf_counter()
-    progress("fiberpath reference: front, back and front+back light")
+    progress("fiberpath reference: " + ", ".join(setups))
     fp = _Renderer(scene, "fiberpath", {"width": width, "height": height, "spp": ref_spp, "seed": scene.seed,
                                         "fibers": str(fibers), "max_depth": max_depth, "threads": threads}, {})
-    ref = {name: fp.mean(lights[name]) for name in SETUPS}
+    ref_img = {name: fp.image(lights[name]) for name in setups}
     del fp
+    ref = {name: img.reshape(-1, 3).mean(axis=0) for name, (img, _) in ref_img.items()}
     ref_s = time.perf_counter() - t0
     p0 = B.pack_bysdf()
-    x = (1.0 - p0[B.SPEC_WEIGHT]) * p0[B.REFLECT_WEIGHT]
-    y = (1.0 - p0[B.SPEC_WEIGHT]) * (1.0 - p0[B.REFLECT_WEIGHT])
-    capped = False
-    history = []
+    st = FitState((1.0 - p0[B.SPEC_WEIGHT]) * p0[B.REFLECT_WEIGHT], (1.0 - p0[B.SPEC_WEIGHT]) * (1.0 - p0[B.REFLECT_WEIGHT]))
     base = {"width": width, "height": height, "spp": spp, "seed": scene.seed, "max_depth": max_depth,
             "threads": threads}
     by = _Renderer(scene, "bysdf", base, {"yarns": str(yarns)})   # tubes, BVH and tables built once
-
-    def bysdf_means(setups):
-        # the rows --set params= would give: the split's two weights (as written, 6 digits) over the rest
-        params = by.setup.integ.params.copy()
-        sp = {k: float(f"{v:.6g}") for k, v in split(x, y).items()}
-        params[:, B.SPEC_WEIGHT] = sp["spec_weight"]
-        params[:, B.REFLECT_WEIGHT] = sp["reflect_weight"]
-        return {n: by.mean(lights[n], params=params) for n in setups}
-
+    rows, render_means = bysdf_means(by, yarns, lights)
     t1 = time.perf_counter()
-    for it in range(iterations):
-        got = bysdf_means(("front", "back"))
-        history.append({"iteration": it, "reflect_energy": x, "transmit_energy": y,
-                        **{f"{n}_rel_error": float(LUMA @ got[n] / max(LUMA @ ref[n], 1e-12) - 1.0) for n in got}})
-        progress(f"round {it + 1}/{iterations}: body energy reflected {x:.4f}, transmitted {y:.4f}: "
-                 f"front {history[-1]['front_rel_error']:+.3f}, back {history[-1]['back_rel_error']:+.3f}")
-        x = float(np.clip(x * (LUMA @ ref["front"]) / max(LUMA @ got["front"], 1e-12), 1e-4, 1.0))
-        y = float(np.clip(y * (LUMA @ ref["back"]) / max(LUMA @ got["back"], 1e-12), 1e-4, 1.0))
-        capped = x + y > 1.0
-        if capped:
-            x, y = x / (x + y), y / (x + y)
-    final = bysdf_means(SETUPS)
+    st, history = fit_rounds(render_means, ref, st, iterations, progress)
+    params = rows(st)
+    final = {n: by.image(lights[n], params=params) for n in setups}
     fit_s = time.perf_counter() - t1
-    residual = {n: {"reference_rgb": ref[n].tolist(), "bysdf_rgb": final[n].tolist(),
-                    "rel_error_rgb": (final[n] / np.maximum(ref[n], 1e-12) - 1.0).tolist(),
-                    "rel_error_luminance": float(LUMA @ final[n] / max(LUMA @ ref[n], 1e-12) - 1.0)}
-                for n in SETUPS}
-    write_params(out, x, y, residual)
+    residual = {}
+    for n in setups:
+        (img_r, a_r), (img_b, a_b) = ref_img[n], final[n]
+        if n == "scene":       # the environment lights the background: compare the cloth both cover
+            both = (a_r > 0.5) & (a_b > 0.5)
+            m_r, m_b = img_r[both].mean(axis=0), img_b[both].mean(axis=0)
+        else:
+            m_r, m_b = ref[n], img_b.reshape(-1, 3).mean(axis=0)
+        residual[n] = {"reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
+                       "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
+                       "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0),
+                       "ssim": mt.ssim(mt.ssim_input(img_b), mt.ssim_input(img_r)), "fitted": n in ("front", "back")}
+    write_params(out, st, residual)
     report = {"scene": str(scene.path), "yarns": str(yarns), "fibers": str(fibers), "width": width, "height": height,
-              "spp": spp, "reference_spp": ref_spp, "iterations": iterations, **split(x, y),
-              "energy_capped": capped, "setups": residual, "history": history, "reference_s": ref_s, "fit_s": fit_s}
+              "spp": spp, "reference_spp": ref_spp, "iterations": iterations, **st.table(),
+              "energy_capped": st.capped, "setups": residual, "history": history, "reference_s": ref_s, "fit_s": fit_s}
     Path(out).with_suffix(".json").write_text(json.dumps(report, indent=2))
     return report
 
@@ -147,12 +229,16 @@ def split(x, y) -> dict:
     return {"spec_weight": max(0.0, 1.0 - x - y), "reflect_weight": x / (x + y)}
 
 
-def write_params(path, x, y, residual=None):
+def write_params(path, st: FitState, residual=None):
     lines = ["# BYSDF parameters fitted by loomlight fit-bysdf (render with --set params=THIS.toml)"]
     for n, r in (residual or {}).items():
-        lines.append(f"# {n}: mean-luminance error {100 * r['rel_error_luminance']:+.1f} % against fiberpath")
-    sp = split(x, y)
-    lines += ["[default]", f"spec_weight = {sp['spec_weight']:.6g}", f"reflect_weight = {sp['reflect_weight']:.6g}", ""]
+        lines.append(f"# {n}: mean error {100 * r['rel_error_luminance']:+.1f} % luminance, rgb "
+                     + " ".join(f"{100 * e:+.1f}" for e in r["rel_error_rgb"])
+                     + f" % against fiberpath, SSIM {r['ssim']:.3f}" + ("" if r["fitted"] else " (not fitted)"))
+    t = st.table()
+    vec = lambda v: "[" + ", ".join(f"{c:.6g}" for c in v) + "]"   # noqa: E731
+    lines += ["[default]", f"spec_weight = {t['spec_weight']:.6g}", f"reflect_weight = {t['reflect_weight']:.6g}",
+              f"body_r_scale = {vec(t['body_r_scale'])}", f"body_t_scale = {vec(t['body_t_scale'])}", ""]
     tmp = Path(str(path) + ".tmp")
     tmp.write_text("\n".join(lines))
     tmp.replace(path)

@@ -261,3 +261,18 @@ def test_negative_roughness_in_scene_exits_2(cli, tmp_path):
                          str(d / "x.exr"))
     assert code == 2, (out, err)
     assert "alpha_u" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_bad_colour_scale_in_params_exits_2(cli, weave, tmp_path):
+    """A parameters file (``--set params=``, as fit-bysdf writes) with a negative or non-numeric colour factor
+    is refused: exit 2, one line naming the file and the key, no image."""
+    scene, yarns = weave
+    for bad in ("[1.0, -0.5, 1.0]", '"red"'):
+        params = tmp_path / "params.toml"
+        params.write_text(f"[default]\nbody_r_scale = {bad}\n")
+        out = tmp_path / "x.exr"
+        code, _, err = cli("render", str(scene.path), "--method", "bysdf", "--set", f"yarns={yarns}", "--set",
+                           f"params={params}", "-o", str(out))
+        assert code == 2, err
+        assert len(err.strip().splitlines()) == 1 and "body_r_scale" in err and "params.toml" in err, err
+        assert not out.exists()
