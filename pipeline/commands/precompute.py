@@ -96,7 +96,8 @@ def iirtf(
     theta_samples: int = typer.Option(512, "--theta-samples", help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
     bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset for yarn groups the scene names none for."),
     chunk: int = typer.Option(16, "--chunk", help="Cells per chunk task."),
-    seed: int = typer.Option(0, "--seed", help="Seed of the Monte Carlo estimates."),
+    seed: int = typer.Option(0, "--seed", help="Seed of the transfer matrices' Monte Carlo (the mean free path, "
+                                                 "hence the cell grid, uses a fixed one)."),
     set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help="Material option KEY=VALUE (tint=yarn|none, as render)."),
     exemplar: List[int] = _EXEMPLAR,
     force: bool = _FORCE,

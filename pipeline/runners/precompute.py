@@ -80,6 +80,12 @@ class SvfParams:
             raise LoomError(None, "--chunk", f"must be at least 1, got {self.chunk}")
 
 
+# ell is the exemplar's, not the transfer matrices' Monte Carlo: traced with one fixed seed whatever --seed
+# is, so the cell grid (cell_factor * ell) is the same for every seed (issue 53 item 3: with the seed, one
+# patch got 24,000 or 25,600 cells); its precision is the reported standard error (--mfp-paths)
+MFP_SEED = 0
+
+
 @dataclass(frozen=True)
 class IirtfParams:
     order: int = 4
@@ -527,7 +533,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     iirtf_estimate(S_all, 1, p, len(mats)).check(budget or memory_budget(), tiling)
     # mean free path per exemplar (§4.2; the first call compiles the kernels: timed apart)
     t0 = time.perf_counter()
-    mean_free_path(sc, ks[0], slabs[ks[0], 0], slabs[ks[0], 1], periods[ks[0]], mof, mats, n_paths=2, seed=p.seed,
+    mean_free_path(sc, ks[0], slabs[ks[0], 0], slabs[ks[0], 1], periods[ks[0]], mof, mats, n_paths=2, seed=MFP_SEED,
                    max_depth=2)
     compile_s = time.perf_counter() - t0
     mfp = {}
@@ -535,7 +541,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     with progress(f"iirtf: mean free path ({p.mfp_paths:,} paths per exemplar)", len(ks)) as advance:
         for k in ks:
             ell, se, n = mean_free_path(sc, k, slabs[k, 0], slabs[k, 1], periods[k], mof, mats, n_paths=p.mfp_paths,
-                                        seed=p.seed, max_depth=p.max_depth)
+                                        seed=MFP_SEED, max_depth=p.max_depth)
             if not (n > 0 and math.isfinite(ell) and ell > 0):
                 raise LoomError(tiling, f"exemplar {k}", "no path scattered twice inside the fabric, so it has no mean "
                                 f"free path (are its fibres black, or is it empty?); measured {n} free paths")
