@@ -19,11 +19,14 @@ def register(app: typer.Typer) -> None:
         spp: int = typer.Option(16, "--spp", help="Samples per pixel of the bysdf renders."),
         ref_spp: int = typer.Option(32, "--ref-spp", help="Samples per pixel of the fiberpath references."),
         iterations: int = typer.Option(6, "--iterations", help="Fitting rounds (each renders front and back)."),
-        scene_lights: bool = typer.Option(True, "--scene-lights/--no-scene-lights",
-                                          help="Also compare under the scene's own lights (reported, not fitted)."),
+        no_scene_lights: bool = typer.Option(False, "--no-scene-lights",
+                                             help="Skip the comparison under the scene's own lights (a prediction "
+                                                  "unless --fit-reflection scene)."),
+        fit_reflection: str = typer.Option("front", "--fit-reflection", metavar="<front | scene>",
+                                           help="The setup the reflection side is fitted to: the front light (the "
+                                                "paper's protocol) or the scene's own lights."),
     ):
-        """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and
-        back light; report front+back and the scene's own lights as predictions."""
+        """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and back light."""
         from ..errors import LoomError
         from ..outputs import check_output
         from ..runners.fit_bysdf import run_fit
@@ -34,7 +37,8 @@ def register(app: typer.Typer) -> None:
             if v <= 0:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
         rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations,
-                      scene_lights=None if scene_lights else False, progress=typer.echo)
+                      scene_lights=False if no_scene_lights else None, reflect=fit_reflection,
+                      progress=typer.echo)
         typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}, "
                    "body colour factors " + " ".join(f"{v:.3g}" for v in rep["body_r_scale"]) + " (reflection), "
                    + " ".join(f"{v:.3g}" for v in rep["body_t_scale"]) + " (transmission)"

@@ -25,6 +25,11 @@ freedom (front and back, per channel):
   fitted on the chromaticity of the same setups: s_c <- s_c (ref_c / bysdf_c) / (L_ref / L_bysdf), then
   normalised to luminance weight 1 (x and y carry the brightness).
 
+``reflect="scene"`` (``--fit-reflection scene``) fits the reflection side's numbers to the scene's own
+lights instead of the front light (which becomes a prediction): the model's reflection does not follow
+the fibres' as the light moves away from the view (docs/methods/bysdf.md, Limits), so a fit under the
+lights a picture is rendered with is what keeps that picture's colour.
+
 Both are fixed-point updates: a setup's light is mostly its side's, so each round (two renders) moves
 each number towards its target; where the uncoloured specular lobes make most of a setup's light, the
 colour factors converge slowly and clip (colours at most 1): the report names the setups left off.
@@ -93,6 +98,7 @@ class _Renderer:
         return self.image(lights, **fields)[0].reshape(-1, 3).mean(axis=0)
 
 
+REFLECT_SETUPS = ("front", "scene")   # the setups the reflection side may be fitted to
 SCALE_MIN, SCALE_MAX = 1e-3, 10.0   # the colour factors' range (a channel the fit cannot move stops there)
 
 
@@ -116,26 +122,27 @@ def _ratio(ref, got):
     return np.asarray(ref, float) / np.maximum(np.asarray(got, float), 1e-12)
 
 
-def fit_step(st: FitState, ref: dict, got: dict) -> FitState:
-    """One round of the fixed-point updates (module doc) from the front and back means."""
-    lum_f = float(LUMA @ ref["front"]) / max(float(LUMA @ got["front"]), 1e-12)
+def fit_step(st: FitState, ref: dict, got: dict, reflect: str = "front") -> FitState:
+    """One round of the fixed-point updates (module doc) from the means of the ``reflect`` setup (front, or
+    the scene's own lights) and of the back setup."""
+    lum_f = float(LUMA @ ref[reflect]) / max(float(LUMA @ got[reflect]), 1e-12)
     lum_b = float(LUMA @ ref["back"]) / max(float(LUMA @ got["back"]), 1e-12)
     x = float(np.clip(st.x * lum_f, 1e-4, 1.0))
     y = float(np.clip(st.y * lum_b, 1e-4, 1.0))
     capped = x + y > 1.0
     if capped:
         x, y = x / (x + y), y / (x + y)
-    scale_r = np.clip(st.scale_r * _ratio(ref["front"], got["front"]) / lum_f, SCALE_MIN, SCALE_MAX)
+    scale_r = np.clip(st.scale_r * _ratio(ref[reflect], got[reflect]) / lum_f, SCALE_MIN, SCALE_MAX)
     scale_t = np.clip(st.scale_t * _ratio(ref["back"], got["back"]) / lum_b, SCALE_MIN, SCALE_MAX)
     return FitState(x, y, scale_r, scale_t, capped)
 
 
-def fit_rounds(render_means, ref: dict, st: FitState, iterations: int, progress=print):
+def fit_rounds(render_means, ref: dict, st: FitState, iterations: int, progress=print, reflect: str = "front"):
     """(FitState, history): ``iterations`` rounds of ``fit_step``; ``render_means(state, setups)`` gives
     {setup: mean rgb} of bysdf with the state's parameters (as written to the file)."""
     history = []
     for it in range(iterations):
-        got = render_means(st, ("front", "back"))
+        got = render_means(st, (reflect, "back"))
         err = {n: _ratio(got[n], ref[n]) - 1.0 for n in got}
         history.append({"iteration": it, "reflect_energy": st.x, "transmit_energy": st.y,
                         "body_r_scale": st.scale_r.tolist(), "body_t_scale": st.scale_t.tolist(),
@@ -143,13 +150,14 @@ def fit_rounds(render_means, ref: dict, st: FitState, iterations: int, progress=
                         **{f"{n}_rel_error_rgb": err[n].tolist() for n in got}})
         progress(f"round {it + 1}/{iterations}: body energy reflected {st.x:.4f}, transmitted {st.y:.4f}: "
                  + ", ".join(f"{n} " + " ".join(f"{100 * e:+.1f}" for e in err[n]) + " %" for n in got))
-        st = fit_step(st, ref, got)
+        st = fit_step(st, ref, got, reflect)
     return st, history
 
 
-def bysdf_means(by: _Renderer, yarns, lights: dict):
+def bysdf_means(by: _Renderer, yarns, lights: dict, masks=None):
     """(rows(state), render_means(state, setups)) of a bysdf ``_Renderer``: the packed BYSDF of every yarn
-    with a FitState's parameters as written to the file, and {setup: mean rgb} rendered with them."""
+    with a FitState's parameters as written to the file, and {setup: mean rgb} rendered with them (over
+    ``masks[setup]``'s pixels where given, else the whole image)."""
     from ..renderers.bysdf import bysdf_rows, yarn_setup
 
     _, _, ytypes, groups = yarn_setup(str(yarns))
@@ -159,13 +167,17 @@ def bysdf_means(by: _Renderer, yarns, lights: dict):
 
     def render_means(state, names):
         params = rows(state)
-        return {n: by.mean(lights[n], params=params) for n in names}
+        out = {}
+        for n in names:
+            img = by.image(lights[n], params=params)[0]
+            out[n] = img[masks[n]].mean(axis=0) if masks and n in masks else img.reshape(-1, 3).mean(axis=0)
+        return out
 
     return rows, render_means
 
 
 def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, ref_spp=32, iterations=6,
-            max_depth=None, threads=None, scene_lights=None, progress=print) -> dict:
+            max_depth=None, threads=None, scene_lights=None, reflect="front", progress=print) -> dict:
     from stages.core.shading import bysdf as B
     from stages.evaluate import metrics as mt
 
@@ -178,8 +190,12 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     Artifact(fibers, kind="fibers")
     Artifact(yarns, kind="yarns")
     lights = setup_lights(scene)
+    if reflect not in REFLECT_SETUPS:
+        raise LoomError(None, "--fit-reflection", f"unknown setup {reflect!r} (known: {', '.join(REFLECT_SETUPS)})")
     if scene_lights is None:
-        scene_lights = bool(scene.lights)
+        scene_lights = bool(scene.lights) or reflect == "scene"
+    if reflect == "scene" and not scene_lights:
+        raise LoomError(None, "--fit-reflection", "fitting to the scene's lights needs them (drop --no-scene-lights)")
     if scene_lights:
         if not scene.lights:
             raise LoomError(scene.path, "lights", "the scene has no lights to check the fit under")
@@ -191,34 +207,36 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
                                         "fibers": str(fibers), "max_depth": max_depth, "threads": threads}, {})
     ref_img = {name: fp.image(lights[name]) for name in setups}
     del fp
-    ref = {name: img.reshape(-1, 3).mean(axis=0) for name, (img, _) in ref_img.items()}
     ref_s = time.perf_counter() - t0
     p0 = B.pack_bysdf()
     st = FitState((1.0 - p0[B.SPEC_WEIGHT]) * p0[B.REFLECT_WEIGHT], (1.0 - p0[B.SPEC_WEIGHT]) * (1.0 - p0[B.REFLECT_WEIGHT]))
     base = {"width": width, "height": height, "spp": spp, "seed": scene.seed, "max_depth": max_depth,
             "threads": threads}
     by = _Renderer(scene, "bysdf", base, {"yarns": str(yarns)})   # tubes, BVH and tables built once
-    rows, render_means = bysdf_means(by, yarns, lights)
+    # the scene's environment lights the background: its means are over the cloth both methods cover
+    # (coverage is geometry's, the same for every parameter)
+    masks = {"scene": (ref_img["scene"][1] > 0.5) & (by.image(lights["scene"])[1] > 0.5)} if "scene" in lights else {}
+    ref = {n: img[masks[n]].mean(axis=0) if n in masks else img.reshape(-1, 3).mean(axis=0)
+           for n, (img, _) in ref_img.items()}
+    rows, render_means = bysdf_means(by, yarns, lights, masks)
     t1 = time.perf_counter()
-    st, history = fit_rounds(render_means, ref, st, iterations, progress)
+    st, history = fit_rounds(render_means, ref, st, iterations, progress, reflect)
     params = rows(st)
     final = {n: by.image(lights[n], params=params) for n in setups}
     fit_s = time.perf_counter() - t1
     residual = {}
     for n in setups:
-        (img_r, a_r), (img_b, a_b) = ref_img[n], final[n]
-        if n == "scene":       # the environment lights the background: compare the cloth both cover
-            both = (a_r > 0.5) & (a_b > 0.5)
-            m_r, m_b = img_r[both].mean(axis=0), img_b[both].mean(axis=0)
-        else:
-            m_r, m_b = ref[n], img_b.reshape(-1, 3).mean(axis=0)
+        (img_r, _), (img_b, _) = ref_img[n], final[n]
+        m_r = ref[n]
+        m_b = img_b[masks[n]].mean(axis=0) if n in masks else img_b.reshape(-1, 3).mean(axis=0)
         residual[n] = {"reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
                        "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
                        "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0),
-                       "ssim": mt.ssim(mt.ssim_input(img_b), mt.ssim_input(img_r)), "fitted": n in ("front", "back")}
+                       "ssim": mt.ssim(mt.ssim_input(img_b), mt.ssim_input(img_r)), "fitted": n in (reflect, "back")}
     write_params(out, st, residual)
     report = {"scene": str(scene.path), "yarns": str(yarns), "fibers": str(fibers), "width": width, "height": height,
-              "spp": spp, "reference_spp": ref_spp, "iterations": iterations, **st.table(),
+              "spp": spp, "reference_spp": ref_spp, "iterations": iterations, "reflection_setup": reflect,
+              **st.table(),
               "energy_capped": st.capped, "setups": residual, "history": history, "reference_s": ref_s, "fit_s": fit_s}
     Path(out).with_suffix(".json").write_text(json.dumps(report, indent=2))
     return report
