@@ -165,6 +165,8 @@ METHODS = {m.name: m for m in (
                                 "analytic: §5.2.2's Gamma with sum-of-SGs / erf-SSDF visibility", ("mc", "analytic")),
                   Setting("sigma_glo", "std. dev. of the Gaussian filtering multiple scattering's global "
                                        "visibility, flat-fabric units (default: the exemplar thickness)"),
+                  Setting("sh_window", "none (default), hann or lanczos: a window on the IIRTF's SH bands "
+                                       "against ringing", ("none", "hann", "lanczos")),
                   Setting("tint", "yarn (default) or none, as fiberpath (must match the IIRTF's materials)",
                           ("yarn", "none")))),
     RenderMethod(

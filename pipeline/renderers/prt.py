@@ -12,7 +12,11 @@ walk to their first fibre hit and no more, which times the walk every prt sample
 directions, the paper's CPU version) | analytic (§5.2.2's Gamma, sum of SGs and erf-smoothed SSDF);
 ``sigma_glo`` the standard deviation of the Gaussian that filters the global visibility of multiple
 scattering, in flat-fabric units (default: the tiling's exemplar thickness, the depth over which light
-spreads sideways inside the cloth). Integrator: ``stages.render.prt``.
+spreads sideways inside the cloth); ``sh_window`` none (default) | hann | lanczos: multiplies band l of
+both SH sides of every transfer matrix (the light's and the BCSDF's) by w_l, Hann 0.5 (1 + cos(pi l /
+(L + 1))) or Lanczos sinc(pi l / (L + 1)) (L the IIRTF's order), the classic cure for the ringing of a
+truncated SH expansion (Sloan 2008, "Stupid Spherical Harmonics Tricks" §8), traded against blur of
+multiple scattering's angular detail. Integrator: ``stages.render.prt``.
 """
 from __future__ import annotations
 
@@ -21,10 +25,24 @@ import time
 
 import numpy as np
 
-from ..errors import LoomError
+from ..errors import LoomError, unknown
 from . import RenderResult
 
 TERMS = {"all": 3, "single": 1, "multi": 2, "hits": 0}
+SH_WINDOWS = ("none", "hann", "lanczos")
+
+
+def sh_window(kind: str, order: int) -> np.ndarray:
+    """w_l per SH coefficient j (band l = floor(sqrt(j))) of an expansion of ``order``: 1 for "none"."""
+    if kind not in SH_WINDOWS:
+        raise LoomError(None, "--set sh_window", unknown("SH window", kind, SH_WINDOWS))
+    band = np.floor(np.sqrt(np.arange((order + 1) ** 2))).astype(float)
+    x = np.pi * band / (order + 1)
+    if kind == "hann":
+        return 0.5 * (1.0 + np.cos(x))
+    if kind == "lanczos":
+        return np.sinc(x / np.pi)
+    return np.ones_like(x)
 SG_MODES = {"mc": 0, "analytic": 1}
 
 
@@ -167,6 +185,10 @@ def film_setup(scene, options: dict):
     load_s = time.perf_counter() - t0
     terms = TERMS[extra.get("terms", "all")]
     sg_mode = SG_MODES[extra.get("sg", "mc")]
+    window = extra.get("sh_window", "none")
+    w = sh_window(window, arr["order"])
+    if window != "none":
+        arr["transfer"] = np.ascontiguousarray(arr["transfer"] * (w[:, None] * w[None, :]).astype(arr["transfer"].dtype))
     sigma = _float_setting(extra, "sigma_glo", float(art.summary.get("exemplar_thickness", art.summary["thickness"])))
     ground, has_ground = ground_array(scene.render)
     cam = camera_array(scene.camera, options["width"], options["height"])
@@ -177,7 +199,7 @@ def film_setup(scene, options: dict):
                           arr["seg_row"], arr["transfer"], arr["order"], quarter_turn_x(arr["order"]),
                           arr["cs_table"], arr["mat_cs"],
                           flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]))
-    stats = {"load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"),
+    stats = {"load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"), "sh_window": window,
              "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"])}
     return FilmSetup("prt", integ, cam, VARIANCE_CHANNELS, stats)
 

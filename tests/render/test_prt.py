@@ -498,3 +498,24 @@ def test_precompute_made_by_an_older_rule_is_named(swatch, monkeypatch, constant
     monkeypatch.setattr(pipeline.runners.precompute, constant, "another rule")
     swatch.render(scene, *small)
     assert [m for m in said if str(getattr(swatch, artifact)) in m and command in m], said
+
+
+def test_sh_window(swatch):
+    """Reference: the window's closed forms (Hann 0.5 (1 + cos(pi l / (L + 1))), Lanczos sinc(pi l / (L + 1)),
+    per coefficient of band l, 1 at l = 0) and at render time: multiple scattering changes with it; an unknown
+    window exits 2 with one line naming the setting."""
+    from pipeline.renderers.prt import sh_window
+
+    L = 2
+    band = np.array([0, 1, 1, 1, 2, 2, 2, 2, 2])
+    np.testing.assert_allclose(sh_window("hann", L), 0.5 * (1.0 + np.cos(np.pi * band / 3)), rtol=1e-15)
+    np.testing.assert_allclose(sh_window("lanczos", L), np.where(band == 0, 1.0, np.sin(np.pi * band / 3)
+                                                                 / np.maximum(np.pi * band / 3, 1e-300)), rtol=1e-15)
+    assert np.all(sh_window("none", L) == 1.0)
+    scene = swatch.scene(DIRECTIONAL.format(d=LIGHT_1))
+    args = [*swatch.prt_args(), "--spp", "2", "--width", "24", "--height", "18", "--set", "terms=multi"]
+    plain, _ = swatch.render(scene, *args)
+    hann, _ = swatch.render(scene, *args, "--set", "sh_window=hann")
+    assert plain.max() > 0.0 and not np.array_equal(plain, hann)
+    code, _, err = _cli("render", scene, "-o", swatch.d / "w.exr", *args, "--set", "sh_window=gauss")
+    assert code == 2 and "sh_window" in err and len(err.strip().splitlines()) == 1, err
