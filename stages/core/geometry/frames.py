@@ -9,8 +9,7 @@ samplers, the fibre BCSDF's azimuth, the spherical Gaussian light.
 ``face_towards_into(n, w, c_min)``: a shading normal n (float64[3], unit, changed in place) that faces
 away from the unit direction w, or nearly (n.w < c_min), is bent towards w in the plane of n and w until
 n.w = c_min before renormalising (it ends with n.w > 0): a perturbed shading normal seen from behind
-still scatters what arrives (the energy-keeping adaptation of shading normals, as in Schuessler et al.
-2017's motivation, in its simplest form). Returns True when it bent n.
+still scatters what arrives instead of ending the path. Returns True when it bent n.
 """
 import math
 
