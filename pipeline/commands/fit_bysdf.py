@@ -27,10 +27,12 @@ def register(app: typer.Typer) -> None:
                                                 "paper's protocol) or the scene's own lights."),
     ):
         """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and back light."""
-        from ..errors import LoomError
+        from ..errors import LoomError, unknown
         from ..outputs import check_output
-        from ..runners.fit_bysdf import run_fit
+        from ..runners.fit_bysdf import REFLECT_SETUPS, run_fit
 
+        if fit_reflection not in REFLECT_SETUPS:
+            raise LoomError(None, "--fit-reflection", unknown("setup", fit_reflection, REFLECT_SETUPS))
         check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (ref_spp, "--ref-spp"),
                         (iterations, "--iterations")):

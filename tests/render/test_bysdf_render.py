@@ -276,3 +276,14 @@ def test_bad_colour_scale_in_params_exits_2(cli, weave, tmp_path):
         assert code == 2, err
         assert len(err.strip().splitlines()) == 1 and "body_r_scale" in err and "params.toml" in err, err
         assert not out.exists()
+
+
+def test_fit_bysdf_unknown_reflection_setup_exits_2(cli, weave, tmp_path):
+    """``fit-bysdf --fit-reflection`` names front or scene: anything else exits 2 with one line naming the
+    option, before any input is read, and writes nothing."""
+    scene, yarns = weave
+    out = tmp_path / "fit.toml"
+    code, _, err = cli("fit-bysdf", str(scene.path), "--yarns", yarns, "--fibers", str(tmp_path / "none.zarr"),
+                       "-o", str(out), "--fit-reflection", "sky")
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "--fit-reflection" in err, err
+    assert not out.exists()
