@@ -93,10 +93,6 @@ class _Renderer:
                           s.variance, o.get("threads"), None)
         return np.asarray(run.rgb, np.float64), np.asarray(run.extra["A"], np.float64).reshape(run.rgb.shape[:2])
 
-    def mean(self, lights, **fields) -> np.ndarray:
-        """The image mean under ``lights`` (see ``image``)."""
-        return self.image(lights, **fields)[0].reshape(-1, 3).mean(axis=0)
-
 
 REFLECT_SETUPS = ("front", "scene")   # the setups the reflection side may be fitted to
 SCALE_MIN, SCALE_MAX = 1e-3, 10.0   # the colour factors' range (a channel the fit cannot move stops there)
@@ -116,6 +112,11 @@ class FitState:
         six = lambda v: float(f"{v:.6g}")   # noqa: E731
         return {**{k: six(v) for k, v in split(self.x, self.y).items()},
                 "body_r_scale": [six(v) for v in self.scale_r], "body_t_scale": [six(v) for v in self.scale_t]}
+
+
+def _mean(img, mask=None) -> np.ndarray:
+    """Mean rgb of an (H, W, 3) picture over ``mask``'s pixels, or all of them."""
+    return img[mask].mean(axis=0) if mask is not None else img.reshape(-1, 3).mean(axis=0)
 
 
 def _ratio(ref, got):
@@ -169,8 +170,7 @@ def bysdf_means(by: _Renderer, yarns, lights: dict, masks=None):
         params = rows(state)
         out = {}
         for n in names:
-            img = by.image(lights[n], params=params)[0]
-            out[n] = img[masks[n]].mean(axis=0) if masks and n in masks else img.reshape(-1, 3).mean(axis=0)
+            out[n] = _mean(by.image(lights[n], params=params)[0], (masks or {}).get(n))
         return out
 
     return rows, render_means
@@ -216,8 +216,7 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     # the scene's environment lights the background: its means are over the cloth both methods cover
     # (coverage is geometry's, the same for every parameter)
     masks = {"scene": (ref_img["scene"][1] > 0.5) & (by.image(lights["scene"])[1] > 0.5)} if "scene" in lights else {}
-    ref = {n: img[masks[n]].mean(axis=0) if n in masks else img.reshape(-1, 3).mean(axis=0)
-           for n, (img, _) in ref_img.items()}
+    ref = {n: _mean(img, masks.get(n)) for n, (img, _) in ref_img.items()}
     rows, render_means = bysdf_means(by, yarns, lights, masks)
     t1 = time.perf_counter()
     st, history = fit_rounds(render_means, ref, st, iterations, progress, reflect)
@@ -227,8 +226,7 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     residual = {}
     for n in setups:
         (img_r, _), (img_b, _) = ref_img[n], final[n]
-        m_r = ref[n]
-        m_b = img_b[masks[n]].mean(axis=0) if n in masks else img_b.reshape(-1, 3).mean(axis=0)
+        m_r, m_b = ref[n], _mean(img_b, masks.get(n))
         residual[n] = {"reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
                        "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
                        "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0),

@@ -790,6 +790,17 @@ def body_exit_sample(p, n_y, u1, u2):
 
 
 @njit(cache=True)
+def _ms_reflect_local(p, ei, ox, oy, co):
+    """KS f_ms cos towards the local wo (ox, oy, co), co > COS_EPS, given ``ei`` = interface_energy at wi."""
+    c = co * INV_PI
+    if 1.0 - ei.e_avg <= LOSS_MIN:
+        return BysdfValue(0.0, 0.0, 0.0, c)
+    eo = interface_energy(p, ox, oy, co)
+    v = ei.r * (1.0 - ei.e) * (1.0 - eo.e) / (1.0 - ei.e_avg) * c
+    return BysdfValue(p[KS_R] * v, p[KS_G] * v, p[KS_B] * v, c)
+
+
+@njit(cache=True)
 def ms_reflect_eval_pdf(p, t, n, wi, wo):
     """KS f_ms cos, the reflected part of the interface's lost energy at x: BysdfValue(r, g, b, cos_o / pi),
     f_ms = r (1 - E(wi)) (1 - E(wo)) / (pi (1 - E_avg)) (Kulla & Conty 2017; ``interface_energy``)."""
@@ -798,13 +809,7 @@ def ms_reflect_eval_pdf(p, t, n, wi, wo):
     ox, oy, co = to_local(fr, wo)
     if ci <= COS_EPS or co <= COS_EPS:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
-    c = co * INV_PI
-    ei = interface_energy(p, ix, iy, ci)
-    if 1.0 - ei.e_avg <= LOSS_MIN:
-        return BysdfValue(0.0, 0.0, 0.0, c)
-    eo = interface_energy(p, ox, oy, co)
-    v = ei.r * (1.0 - ei.e) * (1.0 - eo.e) / (1.0 - ei.e_avg) * c
-    return BysdfValue(p[KS_R] * v, p[KS_G] * v, p[KS_B] * v, c)
+    return _ms_reflect_local(p, interface_energy(p, ix, iy, ci), ox, oy, co)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -820,16 +825,14 @@ def reflect_probability(p, wi, n):
 
 
 @njit(cache=True)
-def _reflect_lobe_weights(p, t, n, wi, mu, shadow):
+def _reflect_lobe_weights(p, en, mu, shadow):
     """(k_spec, k_body, P_spec): lobe factors of the reflection side and the probability of its
     GGX-sampled lobe (single scattering f_sR) against its cosine-sampled lobes (f_ms and f_bR), from
-    energy estimates at mu = wi.n; P_spec < 0 when no lobe carries energy."""
+    energy estimates at mu = wi.n (``en``: interface_energy at wi); P_spec < 0 when no lobe carries energy."""
     beta = p[SPEC_WEIGHT]
     k_s = beta
     k_b = (1.0 - beta) * p[REFLECT_WEIGHT] * max(shadow, 0.0)
     ks = (p[KS_R] + p[KS_G] + p[KS_B]) / 3.0
-    ix, iy, _ = to_local(shading_frame(t, n), wi)
-    en = interface_energy(p, ix, iy, mu)
     e_s = k_s * ks * fresnel_dielectric(mu, p[ETA])
     e_b = k_s * ks * en.r * max(0.0, 1.0 - en.e) + k_b * (
         body_reflect_albedo(p, 0, mu) + body_reflect_albedo(p, 1, mu) + body_reflect_albedo(p, 2, mu)) / 3.0
@@ -842,14 +845,17 @@ def _reflect_lobe_weights(p, t, n, wi, mu, shadow):
 def reflect_eval_pdf(p, t, n, wi, wo, shadow):
     """The reflection side at x: BysdfValue of beta KS (f_sR + f_ms) + (1 - beta) m_r shadow f_bR (f cos)
     and the pdf of reflect_sample."""
-    mu = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    fr = shading_frame(t, n)
+    ix, iy, mu = to_local(fr, wi)
     if mu <= COS_EPS:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
-    k_s, k_b, q = _reflect_lobe_weights(p, t, n, wi, mu, shadow)
+    ei = interface_energy(p, ix, iy, mu)
+    k_s, k_b, q = _reflect_lobe_weights(p, ei, mu, shadow)
     if q < 0.0:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
     s = spec_reflect_eval_pdf(p, t, n, wi, wo)
-    m = ms_reflect_eval_pdf(p, t, n, wi, wo)
+    ox, oy, co = to_local(fr, wo)
+    m = _ms_reflect_local(p, ei, ox, oy, co) if co > COS_EPS else BysdfValue(0.0, 0.0, 0.0, 0.0)
     b = body_reflect_eval_pdf(p, n, wi, wo)
     return BysdfValue(k_s * (s.r + m.r) + k_b * b.r, k_s * (s.g + m.g) + k_b * b.g, k_s * (s.b + m.b) + k_b * b.b,
                       q * s.pdf + (1.0 - q) * b.pdf)
@@ -859,10 +865,10 @@ def reflect_eval_pdf(p, t, n, wi, wo, shadow):
 def reflect_sample(p, t, n, wi, shadow, u0, u1, u2):
     """The reflection side at x: u0 picks the GGX-sampled or the cosine-sampled lobes, (u1, u2) the direction;
     BysdfSample(wo, f cos / pdf, pdf) with reflect_eval_pdf's value and mixture pdf."""
-    mu = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
+    ix, iy, mu = to_local(shading_frame(t, n), wi)
     if mu <= COS_EPS:
         return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
-    _, _, q = _reflect_lobe_weights(p, t, n, wi, mu, shadow)
+    _, _, q = _reflect_lobe_weights(p, interface_energy(p, ix, iy, mu), mu, shadow)
     if q < 0.0:
         return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
     if u0 < q:
