@@ -70,7 +70,7 @@ COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(OUT
 	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo demo-quick test test-all bench compile-report references compare docs clean
+.PHONY: help setup demo demo-quick test test-all lint bench compile-report references compare docs clean
 
 ##@ Main targets
 
@@ -127,6 +127,10 @@ test: $(VENV)/.installed ## set up .venv if needed, run the test suite but the s
 
 test-all: $(VENV)/.installed ## the whole test suite, the slow tests too
 	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+
+# the rules and their exceptions: pyproject.toml [tool.ruff]; .ci/run runs it before make test
+lint: $(VENV)/.installed ## ruff over the code, tests and benchmarks (pyflakes, pycodestyle, isort, bugbear)
+	$(BIN)/ruff check .
 
 # on empty numba caches of its own (the checkout's cache and out/ untouched); COMPILE_REPORT_ARGS="--demo quick"
 # measures the quick demo's commands instead, "--tests all" make test's whole suite

@@ -1,4 +1,5 @@
-"""btf render speed (Daubert et al. 2001 §7: "about 1 frame per second for a resolution of 730 x 400"): frames per second.
+"""btf render speed (Daubert et al. 2001 §7: "about 1 frame per second for a resolution of 730 x 400"):
+frames per second.
 
 Geometry: the draped damask's base surface (``data/tilings/damask.toml``: a 4 x 4 cloth over a sphere of
 radius 1, 40 x 40 quads, 3200 triangles, ``stages.tile.base_surfaces.sphere_drape``) with 8 texture
@@ -59,7 +60,8 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
 
 
 def run(out_dir) -> dict:
-    import stages  # noqa: F401, I001  (before numba: importing stages points numba's cache at the project's)
+    import stages  # noqa: F401  (before numba: importing stages points numba's cache at the project's)
+    # isort: split
     import numba
 
     from pipeline.render_setup import pack_lights

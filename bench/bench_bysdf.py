@@ -1,5 +1,5 @@
-"""bysdf (A Multi-scale Yarn Appearance Model with Fiber Details) against fiberpath on realized fibres, and multiscale against near on a distant
-view.
+"""bysdf (A Multi-scale Yarn Appearance Model with Fiber Details) against fiberpath on realized fibres, and
+multiscale against near on a distant view.
 
 Scene: the demo swatch (``data/scenes/demo.toml``: 8 x 8 plain weave of cotton1, 3 plies x 75 fibres
 per yarn) under its own lights; ``loomlight ingest`` and ``realize`` write into
@@ -8,10 +8,10 @@ per yarn) under its own lights; ``loomlight ingest`` and ``realize`` write into
 1. Same view, resolution and spp (128 x 96 @ 16 spp, 2 threads), max depth 4 for both: render seconds
    (kernels only, compilation reported apart; the fastest of 3 interleaved runs) of ``fiberpath`` on the
    realized fibres and of ``bysdf`` ``near`` on the yarn curves (its default ply search, the certified
-   march, and the paper's iteration, ``ply_search=iteration``, recorded beside it); target bysdf >= 5x faster (seed 004 §5: about 6x against the fibre-based
-   model). Geometry memory: the arrays each traversal holds (fiberpath: fibre points, radii, offsets and
-   the capsule BVH; bysdf: the curves, tube pieces and their BVH, and the implicit tables); target
-   >= 100x smaller.
+   march, and the paper's iteration, ``ply_search=iteration``, recorded beside it); target bysdf >= 5x faster
+   (seed 004 §5: about 6x against the fibre-based model). Geometry memory: the arrays each traversal holds
+   (fiberpath: fibre points, radii, offsets and the capsule BVH; bysdf: the curves, tube pieces and their
+   BVH, and the implicit tables); target >= 100x smaller.
    The bound, as ``study prt-terms`` reports prt's: ``bysdf`` at max depth 0 renders only what every
    bysdf sample must do before it shades anything (the camera ray's walk over the tube BVH and the
    implicit ply search on the yarn's cross-section, passing on through yarns whose plies it misses;
@@ -41,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "out" / "bench_bysdf"
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
-import stages  # noqa: F401  (NUMBA_CACHE_DIR before numba loads: bench/run.py)
+import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads: bench/run.py)
 
 
 def _cli(*args):
@@ -155,7 +155,8 @@ def run(out_dir) -> dict:
         "near_render_s": n["render_s"], "multiscale_render_s": m["render_s"],
         "near_variance": n["variance"], "multiscale_variance": m["variance"],
         "near_mean": n["mean"], "multiscale_mean": m["mean"],
-        "multiscale_speedup_at_equal_error": (n["variance"] * n["render_s"]) / max(m["variance"] * m["render_s"], 1e-300),
+        "multiscale_speedup_at_equal_error": (n["variance"] * n["render_s"]) / max(m["variance"] * m["render_s"],
+                                                                                   1e-300),
         "multiscale_target": 1.2,
     })
     return res

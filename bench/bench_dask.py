@@ -118,7 +118,8 @@ def run(out_dir) -> dict:
         "iirtf exemplar 0 (paper: 1 mfp, 50,000 paths)": (i_tasks * 27, i_task_s * 250, i_bytes, i_serial, i_setup),
     }
     res["model"] = {name: {"tasks": n, "task_s": t, "bytes_per_task": b,
-                           "speedup_2": model_speedup(n, t, b, s, w, 2), "speedup_100": model_speedup(n, t, b, s, w, 100)}
+                           "speedup_2": model_speedup(n, t, b, s, w, 2),
+                           "speedup_100": model_speedup(n, t, b, s, w, 100)}
                     for name, (n, t, b, s, w) in jobs.items()}
     res["targets"] = {"same bytes": same_exr and same_iirtf}
     return res

@@ -62,7 +62,8 @@ def _primary(bvh, cam, W, H, spp):
 def run(out_dir) -> dict:
     import numba
 
-    from pipeline.render_setup import ground_array, load_bcsdf_preset, load_fibers, pack_lights
+    from pipeline.bcsdf_presets import load_bcsdf_preset
+    from pipeline.render_setup import ground_array, load_fibers, pack_lights
     from pipeline.scene import camera_array, load_scene
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert

@@ -34,9 +34,11 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 import stages  # noqa: E402,F401  (numba's cache folder, before any kernel)
-from stages.core.yarn.frame_samples import chord_lower_bound, foot_point  # noqa: E402
-from stages.core.yarn.lookup import FOOT_TOL  # noqa: E402
-from stages.core.yarn.model import FIBER_RADIUS  # noqa: E402
+
+# isort: split
+from stages.core.yarn.frame_samples import chord_lower_bound, foot_point  # noqa: E402  (after the sys.path set-up)
+from stages.core.yarn.lookup import FOOT_TOL  # noqa: E402  (after the sys.path set-up)
+from stages.core.yarn.model import FIBER_RADIUS  # noqa: E402  (after the sys.path set-up)
 
 SWATCH = ROOT / "data" / "scenes" / "gentle_swatch.toml"
 
@@ -78,7 +80,8 @@ def axis_projection(tab, pts):
             eps = tab.yarn_eps[c]
             rf = tab.tparams[tab.yarn_type[c], FIBER_RADIUS]
             gate = tab.kn_rgate[bq]
-            if best >= tab.yarn_extent[c] + 2.0 * eps or (best > 0.0 and best * best >= gate * gate + (rf + 2.0 * eps) ** 2):
+            if best >= tab.yarn_extent[c] + 2.0 * eps or (best > 0.0 and
+                                                          best * best >= gate * gate + (rf + 2.0 * eps) ** 2):
                 continue
             ia = tab.kn_idx[bq]
             fa = tab.kn_idx[max(bq - 1, tab.kn_off[c])]
@@ -135,8 +138,8 @@ def bench_scene(path: Path, n_points=100_000, spacing=0.002) -> dict:
             out[i] = covering_segment(b, pts[i, 0], pts[i, 1], pts[i, 2])
         return out
 
-    from stages.core.yarn.tables import accel_bytes, table_bytes
     from stages.core.yarn.accel import derive_lookup_accel
+    from stages.core.yarn.tables import accel_bytes, table_bytes
 
     t0 = time.perf_counter()
     derive_lookup_accel(cv, tab)
@@ -146,16 +149,18 @@ def bench_scene(path: Path, n_points=100_000, spacing=0.002) -> dict:
            "realized_bytes": int(fib.summary["bytes"]["total"]), "bvh_build_s": bvh_build,
            "tables_bytes": int(sum(table_bytes(tab).values())),
            "lookup_accel_bytes": accel_bytes(tab), "lookup_accel_build_s": accel_s,
-           "frame_samples": int(len(tab.fs_s)), "eps_over_fibre_radius": float(np.max(tab.yarn_eps / tab.tparams[tab.yarn_type, 27])),
+           "frame_samples": int(len(tab.fs_s)),
+           "eps_over_fibre_radius": float(np.max(tab.yarn_eps / tab.tparams[tab.yarn_type, 27])),
            "scene_setup_s": scene_s,
            "exact": bool(not info["folded"].any())}
     for name, Q in sets.items():
-        t_proc = _best(lambda: lookup_points(cv, tab, Q))
-        t_free = _best(lambda: lookup_points(cv, tab_free, Q), reps=1)
-        t_floor = _best(lambda: axis_projection(tab, Q))
+        t_proc = _best(lambda Q=Q: lookup_points(cv, tab, Q))
+        t_free = _best(lambda Q=Q: lookup_points(cv, tab_free, Q), reps=1)
+        t_floor = _best(lambda Q=Q: axis_projection(tab, Q))
         feet = axis_projection(tab, Q)
-        t_bvh = _best(lambda: bvh_points(bvh, Q))
-        t_grid = _best(lambda: query_realized(pts32, rad, sf, yarn, ply, kind, idx, glo, cell, dims, start, items, Q, 0.0))
+        t_bvh = _best(lambda Q=Q: bvh_points(bvh, Q))
+        t_grid = _best(lambda Q=Q: query_realized(pts32, rad, sf, yarn, ply, kind, idx, glo, cell, dims, start, items,
+                                                  Q, 0.0))
         a = lookup_points(cv, tab, Q).inside
         b = bvh_points(bvh, Q) >= 0
         res[name] = {"procedural_per_s": n_points / t_proc,

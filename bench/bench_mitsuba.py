@@ -21,7 +21,7 @@ fibres, which touch and overlap, its rays start past whatever lies that close to
 more of them escape.
 That alone made Mitsuba's image 0.3 % brighter (6-9 standard errors); with Mitsuba's offset
 fiberpath's mean is Mitsuba's within noise (0.52341 against 0.52346 on ``small``, Embree and BVH alike).
-So the bench gives fiberpath Mitsuba's offset (``mitsuba_offset``) for both its renders: the same
+So the bench gives fiberpath Mitsuba's offset (``embree_kernels.mitsuba_offset``) for both its renders: the same
 scene, the same rays, and means that must agree (``means_agree``) or the timing means nothing.
 
 Both renderers get the same fibres: realized by ``loomlight realize`` and written for Mitsuba by
@@ -34,14 +34,14 @@ use survival min(0.95, max throughput channel)). Timings are of warm runs (each 
 first: numba loads or JITs its kernels, Dr.Jit traces and compiles its megakernel), ``ROUNDS`` of them
 taken in turn (fiberpath on Embree, on the BVH, Mitsuba; again; five, since three-round medians swung
 by ±0.05 between runs): the machine's speed drifts by ±10 % from one minute to the next, Mitsuba's
-with it, so a ratio is only worth the median over rounds of renders made side by side (``speed_ratio``, its spread in ``speed_ratio_range``). Builds are timed
-separately (fiberpath's Embree scene, and its SAH build and 4-wide collapse, from arrays in memory;
-Mitsuba's ``load_dict``: reading the curve text, Embree's scene build and scene setup). Mitsuba's rays/s is
-estimated from fiberpath's ray count (a lower bound: Mitsuba also traces the shadow rays of light
-samples below the surface, which fiberpath skips). ``means_agree``: |difference| < 4 standard errors
-per channel (Mitsuba reports no variance; one image's error is taken equal to fiberpath's, and its
-mean is over the rounds' seeds). ``make bench`` also
-writes the README's table of the run (``comparison_table``) to ``bench/results/mitsuba_table.md``.
+with it, so a ratio is only worth the median over rounds of renders made side by side (``speed_ratio``, its
+spread in ``speed_ratio_range``). Builds are timed separately (fiberpath's Embree scene, and its SAH build and
+4-wide collapse, from arrays in memory; Mitsuba's ``load_dict``: reading the curve text, Embree's scene build
+and scene setup). Mitsuba's rays/s is estimated from fiberpath's ray count (a lower bound: Mitsuba also traces
+the shadow rays of light samples below the surface, which fiberpath skips). ``means_agree``: |difference| < 4
+standard errors per channel (Mitsuba reports no variance; one image's error is taken equal to fiberpath's, and
+its mean is over the rounds' seeds). ``make bench`` also writes the README's table of the run
+(``comparison_table``) to ``bench/results/mitsuba_table.md``.
 
 The kernels alone (``kernel_case``, ``bench/embree_kernels.py``): fiberpath's Embree 4.4 (``embreex``)
 and the Embree 3.13.4 inside Mitsuba's wheel trace the same curves and the same camera, bounce and
@@ -166,6 +166,7 @@ class FiberpathRenderer:
     def __init__(self, fibers: Path, camera: dict, W, H, spp, max_depth, rr_depth=4, radius_scale=1.0,
                  accel="embree", eps=None):
         import numba
+        from embree_kernels import mitsuba_offset
 
         from pipeline.render_setup import load_fibers, pack_lights
         from pipeline.scene import camera_array
@@ -224,12 +225,6 @@ class FiberpathRenderer:
         if self.keep is not None:
             self.keep.close()
             self.keep = None
-
-
-def mitsuba_offset(points) -> float:
-    """Mitsuba 3's ray offset at a surface point p, (1 + max |p_i|) x 1500 x 2^-24 (its RayEpsilon), taken at
-    the fibres' largest coordinate: what the bench gives fiberpath's ``eps`` so both spawn rays alike."""
-    return (1.0 + float(np.abs(points).max())) * 1500.0 * 2.0 ** -24
 
 
 class MitsubaRenderer:
@@ -342,6 +337,8 @@ def kernel_case(name, fibers: Path, camera: dict) -> dict:
     """The two ray-tracing kernels alone on one case's rays (``embree_kernels``: Embree 4.4 under
     fiberpath, Embree 3.13.4 under Mitsuba), or the reason they could not be compared."""
     import embree_kernels
+    from embree_kernels import mitsuba_offset
+
     from pipeline.render_setup import load_fibers
 
     W, H = CASES[name][:2]
@@ -387,7 +384,8 @@ def run(out_dir) -> dict:
     return res
 
 
-CASE_LABELS = {"small": "4×4 plain weave, 96×96 @ 256 spp", "thin": "same fibres, radii × 0.1 (control), 96×96 @ 128 spp",
+CASE_LABELS = {"small": "4×4 plain weave, 96×96 @ 256 spp",
+               "thin": "same fibres, radii × 0.1 (control), 96×96 @ 128 spp",
                "demo": "realized demo swatch, 96×72 @ 256 spp"}
 
 
@@ -395,13 +393,15 @@ def comparison_table(res: dict) -> str:
     """The README's table (Status, *Rendering*) of one run: per case, fiberpath on Embree and on
     loomlight's BVH against Mitsuba 3, builds and means."""
     lines = ["| case (Lambertian fibres, constant sky, max depth 16, 2 threads) | fiberpath (Embree) | "
-             "fiberpath (`accel=bvh`) | Mitsuba 3 | ratio (≥ 1: loomlight faster; median of the rounds, range) | build: Embree / BVH / Mitsuba load | "
+             "fiberpath (`accel=bvh`) | Mitsuba 3 | ratio (≥ 1: loomlight faster; median of the rounds, range) | "
+             "build: Embree / BVH / Mitsuba load | "
              "means: fiberpath / Mitsuba (SE) | Embree vs BVH (SE) |",
              "|---|---|---|---|---|---|---|---|"]
     for c, label in CASE_LABELS.items():
         if f"{c}_speed_ratio" not in res:
             continue
-        g = lambda k: res[f"{c}_{k}"]  # noqa: E731
+        def g(k, c=c):
+            return res[f"{c}_{k}"]
         lines.append(
             f"| {label}, {g('segments') / 1e6:.2f} M segments | {g('fiberpath_render_s'):.2f} s, "
             f"{g('fiberpath_rays_per_s') / 1e6:.2f} M rays/s | {g('fiberpath_bvh_render_s'):.2f} s | "
@@ -412,15 +412,19 @@ def comparison_table(res: dict) -> str:
             f"{g('embree_bvh_diff_in_standard_errors'):.2f} |")
     kernels = [(c, res[f"{c}_kernels"]) for c in CASE_LABELS if f"{c}_kernels" in res]
     if kernels:
-        lines += ["", "| the ray-tracing kernels alone, one thread (`bench/embree_kernels.py`) | rays: camera / bounce / shadow | "
+        lines += ["", "| the ray-tracing kernels alone, one thread (`bench/embree_kernels.py`) | "
+                  "rays: camera / bounce / shadow | "
                   "Embree 4.4 (fiberpath), ns per ray | Embree 3.13.4 (Mitsuba), ns per ray | "
-                  "Embree 3 / Embree 4 (< 1: Mitsuba's faster) | builds: Embree 4 / 3 | camera rays: same segment (other: its chain neighbour) | "
+                  "Embree 3 / Embree 4 (< 1: Mitsuba's faster) | builds: Embree 4 / 3 | "
+                  "camera rays: same segment (other: its chain neighbour) | "
                   "rays from inside a capsule meeting a surface: Embree 4 / 3 |",
                   "|---|---|---|---|---|---|---|---|"]
         for c, k in kernels:
-            ns = lambda e: " / ".join(f"{k[f'{x}_ns_per_ray'][e]:.0f}" for x in ("camera", "bounce", "shadow"))  # noqa: E731
+            def ns(e, k=k):
+                return " / ".join(f"{k[f'{x}_ns_per_ray'][e]:.0f}" for x in ("camera", "bounce", "shadow"))
             lines.append(
-                f"| {CASE_LABELS[c].split(',')[0]} | {' / '.join(str(v) for v in k['rays'].values())} | {ns('embree4')} | "
+                f"| {CASE_LABELS[c].split(',')[0]} | {' / '.join(str(v) for v in k['rays'].values())} | "
+                f"{ns('embree4')} | "
                 f"{ns('embree3')} | {k['camera_embree3_over_embree4']:.2f} / {k['bounce_embree3_over_embree4']:.2f} / "
                 f"{k['shadow_embree3_over_embree4']:.2f}; all rays **{k['all_rays_embree3_over_embree4']:.2f}** | "
                 f"{k['embree4_build_s']:.2f} / {k['embree3_build_s']:.2f} s | {100 * k['camera_same_segment']:.2f} % "

@@ -99,8 +99,6 @@ def _budget_point(tables: str, fibers: str, W: int, H: int, spp: int, cache: flo
 
 
 def _budget_child(tables, fibers, W, H, spp, cache) -> dict:
-    import pipeline.fibre_cache
-
     from pipeline.renderers import method
     from pipeline.runners.render import resolve_options
     from pipeline.scene import load_scene
@@ -261,7 +259,8 @@ def run(out_dir) -> dict:
     res["lookups_over_realized_render"] = res["lookups_render_s"] / res["realized_render_s"]
     res["target_render_ratio_max"] = 1.5
     res["target_end_to_end_ratio_max"] = 1.0
-    res["target_met"] = bool(res["cached_over_realized_render"] <= 1.5 and res["cached_over_realized_end_to_end"] <= 1.0)
+    res["target_met"] = bool(res["cached_over_realized_render"] <= 1.5
+                             and res["cached_over_realized_end_to_end"] <= 1.0)
     # the budget curve: fractions of the full cache's estimate, each in its own process
     full = res["cached_cache_estimate_bytes"] / 2**20
     points = [_budget_point(str(tables), str(fibers), W, H, spp, round(f * full, 1)) for f in BUDGET_FRACTIONS]

@@ -14,22 +14,22 @@ spatial splits (SBVH) and ray streams sorted by direction. Prints JSON. Not run 
    axis; a capsule goes to every side it reaches, with its box clipped to that side: the part of the
    segment within r of the side, grown by r, cut at the plane). Reported: how often the spatial split
    is cheaper, the median ratio, and the mean cost ratio the SBVH rule (take the cheaper) would give.
-3. **Ray order.** The camera's first fibre hits at 128 x 96 x 16 become bounce rays, 1e-4 off the
-   surface in cosine-distributed directions about the normal (a diffuse bounce); one thread walks them nearest-hit in the order a path
-   tracer makes them (pixel by pixel), in random order, by origin alone (Morton order), sorted by
-   direction octant then origin, and by 64 direction bins then origin. Sorting is what ray-stream tracers do to share node visits
-   between rays; loomlight's traversal takes one ray at a time.
+3. **Ray order.** The camera's first fibre hits at 128 x 96 x 16 become bounce rays, 1e-4 off the surface in
+   cosine-distributed directions about the normal (a diffuse bounce); one thread walks them nearest-hit in the
+   order a path tracer makes them (pixel by pixel), in random order, by origin alone (Morton order), sorted by
+   direction octant then origin, and by 64 direction bins then origin. Sorting is what ray-stream tracers do
+   to share node visits between rays; loomlight's traversal takes one ray at a time.
 4. **A library: Embree 4.** The ``embreex`` wheel on PyPI (now one of loomlight's dependencies: fiberpath's
    default tracer, ``stages.core.geometry.embree``, came out of this probe) carries a whole ``libembree4``,
-   though its Python API only builds triangle meshes. The same
-   fibres go in as Embree round linear curves (a vertex and radius per fibre point, a segment per capsule),
-   and a numba loop calls ``rtcIntersect1`` through ctypes one ray at a time, beside the same loop over
-   loomlight's ``surface_hit``, on the camera rays and the bounce rays above (no segments skipped; both
-   also compute the hit's normal, as a path tracer must). Reported: both build times, ns per ray, hit counts and the summed
-   hit distances. The hits differ only where Embree's float32 curve test differs from loomlight's float64
-   capsule test (near-ties at joints, grazing rays; the vertices here are shared at joints, where Embree
-   interpolates the points' radii, as ``stages.core.geometry.embree`` does not). (numba cannot cache a
-   kernel that calls a ctypes function: these two compile every run.) Skipped with the reason when ``embreex`` is missing.
+   though its Python API only builds triangle meshes. The same fibres go in as Embree round linear curves (a
+   vertex and radius per fibre point, a segment per capsule), and a numba loop calls ``rtcIntersect1`` through
+   ctypes one ray at a time, beside the same loop over loomlight's ``surface_hit``, on the camera rays and the
+   bounce rays above (no segments skipped; both also compute the hit's normal, as a path tracer must).
+   Reported: both build times, ns per ray, hit counts and the summed hit distances. The hits differ only where
+   Embree's float32 curve test differs from loomlight's float64 capsule test (near-ties at joints, grazing
+   rays; the vertices here are shared at joints, where Embree interpolates the points' radii, as
+   ``stages.core.geometry.embree`` does not). (numba cannot cache a kernel that calls a ctypes function: these
+   two compile every run.) Skipped with the reason when ``embreex`` is missing.
 5. **The same, end to end.** One Lambertian path tracer (unit sky, albedo 0.75, max depth 16, cosine
    sampling, 64 x 48 @ 16 spp, one thread) written twice, identical but for the traversal: loomlight's
    ``surface_hit`` (the normal from the capsule's axis) or ``rtcIntersect1`` (Embree's geometric normal).
@@ -63,14 +63,16 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads)
 
-import numpy as np  # noqa: E402
-from numba import njit, types  # noqa: E402
+# isort: split
 
-from stages.core.geometry.embree import embree_intersect  # noqa: E402
-from stages.core.geometry.surface import surface_hit  # noqa: E402
-from stages.core.rng import uniform  # noqa: E402
-from stages.render.camera import camera_ray  # noqa: E402
-from stages.render.realized_medium import covering_segment_arrays  # noqa: E402
+import numpy as np  # noqa: E402  (after sys.path and stages set-up)
+from numba import njit, types  # noqa: E402  (after sys.path and stages set-up)
+
+from stages.core.geometry.embree import embree_intersect  # noqa: E402  (after sys.path and stages set-up)
+from stages.core.geometry.surface import surface_hit  # noqa: E402  (after sys.path and stages set-up)
+from stages.core.rng import uniform  # noqa: E402  (after sys.path and stages set-up)
+from stages.render.camera import camera_ray  # noqa: E402  (after sys.path and stages set-up)
+from stages.render.realized_medium import covering_segment_arrays  # noqa: E402  (after sys.path and stages set-up)
 
 PLANES = 16   # spatial split bins per axis (15 planes)
 
@@ -270,8 +272,9 @@ def ray_order(scene_path, fibers, W=128, H=96, spp=16, repeats=3) -> dict:
     t0 = time.perf_counter()
     by_octant = np.lexsort((_morton(O), octant))
     sort_s = time.perf_counter() - t0
-    orders = {"pixel": np.arange(n), "random": np.random.default_rng(0).permutation(n), "origin": np.argsort(_morton(O)),
-              "octant_then_origin": by_octant, "direction64_then_origin": np.lexsort((_morton(O), zb * 8 + pb))}
+    orders = {"pixel": np.arange(n), "random": np.random.default_rng(0).permutation(n),
+              "origin": np.argsort(_morton(O)), "octant_then_origin": by_octant,
+              "direction64_then_origin": np.lexsort((_morton(O), zb * 8 + pb))}
     _walk(G, O, D, F, S, orders["pixel"][:16], it.eps, it.ign_window)   # compile (or load) apart
     best = {}
     for _ in range(repeats):

@@ -12,11 +12,11 @@ seconds with and without the kernels compiled inside it, and who asked). Nothing
 cache or ``out/`` is touched.
 
 Writes ``bench/results/compile.json`` (``loomlight docs --only measurements`` puts it on the measurements
-page): per part (demo, tests) the compile time summed over processes (core-seconds: every process
-compiles on one core) and the part's wall time; per kernel its self seconds (without the kernels it
-compiled), its signatures with the seconds of each, how many times each was compiled per part (more than
-once: two processes of the part compiled it, each paying), and who asked. Kernels typed more than one way come first, then
-kernels compiled more than once with the same signature, then the rest by seconds.
+page): per part (demo, tests) the compile time summed over processes (core-seconds: every process compiles on
+one core) and the part's wall time; per kernel its self seconds (without the kernels it compiled), its
+signatures with the seconds of each, how many times each was compiled per part (more than once: two processes
+of the part compiled it, each paying), and who asked. Kernels typed more than one way come first, then kernels
+compiled more than once with the same signature, then the rest by seconds.
 Timings are the machine's: run it alone (it uses both cores for the demo's ``-j2``).
 """
 from __future__ import annotations

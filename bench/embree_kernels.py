@@ -21,13 +21,13 @@ fiberpath's own code can do against Mitsuba. This bench measures that speed alon
   (interleaved against the machine's drift); the ratio is the median over rounds of Embree 3's time
   over Embree 4's (< 1: Mitsuba's kernel faster). Builds are timed too, one thread: ``EmbreeScene``
   from the fibres (its segment rows included) and Embree 3's commit of those rows.
-- *Answers*: the fraction of camera rays whose nearest segment is the same in both, and of the
-  rest those where one kernel reports the other's chain neighbour (a near-tie at a joint, in
-  float32). Embree 3 is built here with back-face culling for curves (its ``verbose`` features say
-  ``backfacecullingcurves``): a ray that starts inside a capsule does not meet its way out
-  (``inside_rays``: from segments' axis midpoints across the axis, as far as the capsule's radius;
-  Embree 4 meets a surface on all of them, Embree 3 only where another fibre begins that close), so bounce rays from inside overlapping fibres differ by more;
-  camera rays start outside every fibre.
+- *Answers*: the fraction of camera rays whose nearest segment is the same in both, and of the rest those
+  where one kernel reports the other's chain neighbour (a near-tie at a joint, in float32). Embree 3 is built
+  here with back-face culling for curves (its ``verbose`` features say ``backfacecullingcurves``): a ray that
+  starts inside a capsule does not meet its way out (``inside_rays``: from segments' axis midpoints across the
+  axis, as far as the capsule's radius; Embree 4 meets a surface on all of them, Embree 3 only where another
+  fibre begins that close), so bounce rays from inside overlapping fibres differ by more; camera rays start
+  outside every fibre.
 
 Runs inside ``bench_mitsuba`` (only when Mitsuba 3 is installed); never part of loomlight's renderer.
 """
@@ -48,13 +48,15 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads)
 
-import numpy as np  # noqa: E402
-from numba import njit, types  # noqa: E402
+# isort: split
+
+import numpy as np  # noqa: E402  (after sys.path and stages set-up)
+from numba import njit, types  # noqa: E402  (after sys.path and stages set-up)
 
 from stages.core.geometry.embree import embree_surface_hit, peek, poke, scratch_address, write_ray  # noqa: E402
-from stages.core.rng import uniform  # noqa: E402
-from stages.core.shading.lambert import cosine_direction  # noqa: E402
-from stages.render.camera import camera_ray  # noqa: E402
+from stages.core.rng import uniform  # noqa: E402  (after sys.path and stages set-up)
+from stages.core.shading.lambert import cosine_direction  # noqa: E402  (after sys.path and stages set-up)
+from stages.render.camera import camera_ray  # noqa: E402  (after sys.path and stages set-up)
 
 ROUNDS = 5
 SPP = 32          # camera samples per pixel recorded
@@ -106,7 +108,8 @@ class Embree3:
                                 ("rtcGetDeviceError", c_int, [vp]), ("rtcNewScene", vp, [vp]),
                                 ("rtcCommitScene", None, [vp]), ("rtcReleaseScene", None, [vp]),
                                 ("rtcNewGeometry", vp, [vp, c_int]),
-                                ("rtcSetSharedGeometryBuffer", None, [vp, c_int, c_uint, c_int, vp, c_size, c_size, c_size]),
+                                ("rtcSetSharedGeometryBuffer", None,
+                                 [vp, c_int, c_uint, c_int, vp, c_size, c_size, c_size]),
                                 ("rtcCommitGeometry", None, [vp]), ("rtcAttachGeometry", c_uint, [vp, vp]),
                                 ("rtcReleaseGeometry", None, [vp])):
             f = getattr(self.lib, self.names[name])
@@ -118,8 +121,14 @@ class Embree3:
     def curve_scene(self, rows_address, n_segments):
         """(device, scene, index buffer, build seconds): loomlight's segment rows (at ``rows_address``,
         ``EmbreeFibers.rows``) as round linear curves."""
-        from stages.core.geometry.embree import BUFFER_INDEX, BUFFER_VERTEX, FORMAT_FLOAT4, FORMAT_UINT, \
-            GEOMETRY_ROUND_LINEAR_CURVE, VERTEX_STRIDE
+        from stages.core.geometry.embree import (
+            BUFFER_INDEX,
+            BUFFER_VERTEX,
+            FORMAT_FLOAT4,
+            FORMAT_UINT,
+            GEOMETRY_ROUND_LINEAR_CURVE,
+            VERTEX_STRIDE,
+        )
 
         f = self.fn
         dev = f["rtcNewDevice"](b"threads=1")
@@ -165,25 +174,37 @@ def record_rays(fibers, cam, eps, spp, seed):
             ox, oy, oz, dx, dy, dz = o[0], o[1], o[2], d[0], d[1], d[2]
             tmin = 0.0
             for depth in range(3):
-                rays[n, 0] = ox; rays[n, 1] = oy; rays[n, 2] = oz
-                rays[n, 3] = dx; rays[n, 4] = dy; rays[n, 5] = dz
+                rays[n, 0] = ox
+                rays[n, 1] = oy
+                rays[n, 2] = oz
+                rays[n, 3] = dx
+                rays[n, 4] = dy
+                rays[n, 5] = dz
                 rays[n, 6] = tmin
                 kind[n] = CAMERA if depth == 0 else BOUNCE
                 n += 1
                 h = embree_surface_hit(fibers, ox, oy, oz, dx, dy, dz, tmin, np.inf, -1, -1, 0)
                 if h.prim < 0 or depth == 2:
                     break
-                nrm[0] = h.nx; nrm[1] = h.ny; nrm[2] = h.nz
+                nrm[0] = h.nx
+                nrm[1] = h.ny
+                nrm[2] = h.nz
                 if nrm[0] * dx + nrm[1] * dy + nrm[2] * dz > 0.0:
-                    nrm[0] = -nrm[0]; nrm[1] = -nrm[1]; nrm[2] = -nrm[2]
+                    nrm[0] = -nrm[0]
+                    nrm[1] = -nrm[1]
+                    nrm[2] = -nrm[2]
                 off = 1e-3 * h.radius + eps
                 ox = ox + h.t * dx + off * nrm[0]
                 oy = oy + h.t * dy + off * nrm[1]
                 oz = oz + h.t * dz + off * nrm[2]
                 tmin = eps
                 sx, sy, sz = cosine_direction(nrm, uniform(seed, key, 2 + 4 * depth), uniform(seed, key, 3 + 4 * depth))
-                rays[n, 0] = ox; rays[n, 1] = oy; rays[n, 2] = oz
-                rays[n, 3] = sx; rays[n, 4] = sy; rays[n, 5] = sz
+                rays[n, 0] = ox
+                rays[n, 1] = oy
+                rays[n, 2] = oz
+                rays[n, 3] = sx
+                rays[n, 4] = sy
+                rays[n, 5] = sz
                 rays[n, 6] = tmin
                 kind[n] = SHADOW
                 n += 1
@@ -313,13 +334,18 @@ def compare(f, camera: dict, W: int, H: int, eps: float, spp: int = SPP, rounds:
     return res
 
 
+def mitsuba_offset(points) -> float:
+    """Mitsuba 3's ray offset at a surface point p, (1 + max |p_i|) x 1500 x 2^-24 (its RayEpsilon), taken at
+    the fibres' largest coordinate: what the bench gives fiberpath's ``eps`` so both spawn rays alike."""
+    return (1.0 + float(np.abs(points).max())) * 1500.0 * 2.0 ** -24
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("fibers", help="a fibers.zarr (loomlight realize)")
     ap.add_argument("scene", help="the scene whose camera makes the rays")
     ap.add_argument("--size", type=int, nargs=2, default=(96, 72), metavar=("W", "H"))
     args = ap.parse_args(argv)
-    from bench_mitsuba import mitsuba_offset
     from pipeline.render_setup import load_fibers
     from pipeline.scene import load_scene
 

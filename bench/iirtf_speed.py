@@ -17,8 +17,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 
-import numba  # noqa: E402
-import numpy as np  # noqa: E402
+import numba  # noqa: E402  (after sys.path and cache env set-up)
+import numpy as np  # noqa: E402  (after sys.path and cache env set-up)
 
 
 def main(argv=None) -> dict:
@@ -34,7 +34,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--light-sampling", default="uniform,mis")
     a = ap.parse_args(argv)
 
-    from pipeline.render_setup import load_bcsdf_preset
+    from pipeline.bcsdf_presets import load_bcsdf_preset
     from pipeline.runners.tile import load_tiling
     from stages.core.shading.material import pack_material_bcsdf
     from stages.precompute.iirtf import build_cells, exemplar_slabs, iirtf_chunk, mean_free_path

@@ -34,13 +34,15 @@ sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 import stages  # noqa: E402,F401  (NUMBA_CACHE_DIR before numba loads)
 
-import numpy as np  # noqa: E402
-from numba import njit  # noqa: E402
+# isort: split
 
-from stages.core.geometry.stack import stack_vector3  # noqa: E402
-from stages.core.rng import uniform, van_der_corput  # noqa: E402
-from stages.render.camera import camera_ray_into  # noqa: E402
-from stages.render.integrator import radiance  # noqa: E402
+import numpy as np  # noqa: E402  (after sys.path and stages set-up)
+from numba import njit  # noqa: E402  (after sys.path and stages set-up)
+
+from stages.core.geometry.stack import stack_vector3  # noqa: E402  (after sys.path and stages set-up)
+from stages.core.rng import uniform, van_der_corput  # noqa: E402  (after sys.path and stages set-up)
+from stages.render.camera import camera_ray_into  # noqa: E402  (after sys.path and stages set-up)
+from stages.render.integrator import radiance  # noqa: E402  (after sys.path and stages set-up)
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 

@@ -27,7 +27,9 @@ os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 # before numba reads its configuration: stages sets NUMBA_CACHE_DIR to the directory keyed by the kernel
 # sources (a benchmark that imports numba first would use __pycache__ beside the sources, where machine
 # code compiled from older callees is not invalidated)
-import stages  # noqa: E402,F401
+import stages  # noqa: E402,F401  (before numba: NUMBA_CACHE_DIR, see above)
+
+# isort: split
 
 COMPARE = ("paths_per_s", "rays_per_s", "rays_per_s_per_core")
 

@@ -18,8 +18,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
 
-import numba  # noqa: E402
-import numpy as np  # noqa: E402
+import numba  # noqa: E402  (after sys.path and cache env set-up)
+import numpy as np  # noqa: E402  (after sys.path and cache env set-up)
 
 
 def _timed(f, *args, **kw):

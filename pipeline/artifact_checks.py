@@ -149,7 +149,8 @@ def _exemplar_entries(a: _Arrays) -> list[dict]:
     groups = sorted({n.split("/", 1)[0] for n in a.arrays if n.startswith("exemplar_") and "/" in n})
     extra = [g for g in groups if g not in {f"exemplar_{k}" for k in seen}]
     if extra:
-        raise LoomError(a.path, "summary.exemplars", f"does not list group {extra[0]}, which the artifact holds; {REBUILD}")
+        raise LoomError(a.path, "summary.exemplars",
+                        f"does not list group {extra[0]}, which the artifact holds; {REBUILD}")
     return entries
 
 

@@ -25,7 +25,8 @@ needs ``--res``) and a mesh are not built: the one-line error says what to pass.
 built is found before anything is built. The precomputes print their size before they start (at these
 defaults the IIRTF is seed 001's full quality: long).
 
-Cache: ``<output's directory>/.loomlight-cache/<artifact>-<key>.zarr`` (``--cache-dir DIR``: ``DIR/<artifact>-<key>.zarr``).
+Cache: ``<output's directory>/.loomlight-cache/<artifact>-<key>.zarr`` (``--cache-dir DIR``:
+``DIR/<artifact>-<key>.zarr``).
 The key (16 hex digits of a sha256) covers what the artifact is made of and nothing else: the step and its
 arguments, the key of what it is built from (or the content hash of a given artifact), the code
 (``artifacts.code_hash``: loomlight's sources and schemas; ``render_code_version``: also the yarn and BCSDF
@@ -346,7 +347,8 @@ def iirtf_size(tiling: Path, p) -> str:
     S, K = int(s.get("segments", 0)), int(s.get("exemplars", 0))
     return (f"precompute iirtf at its defaults (SH order {p.order}, cells of {p.cell_factor:g} mean free path, "
             f"{p.paths:,} paths per cell, {p.light_sampling} light sampling): {S:,} segments in {K} exemplar(s); "
-            "the full quality of Khungurn et al. 2017 (its bar shows the time left once the cells are counted); pass --set iirtf=IIRTF.zarr from a cheaper precompute to skip it "
+            "the full quality of Khungurn et al. 2017 (its bar shows the time left once the cells are counted); "
+            "pass --set iirtf=IIRTF.zarr from a cheaper precompute to skip it "
             "(make demo's: --cell-factor 3 --paths 200 --light-sampling mis)")
 
 

@@ -24,6 +24,7 @@ import typer
 from . import __version__
 from .errors import LoomError
 
+
 def _help() -> str:
     from .renderers import known_methods
 

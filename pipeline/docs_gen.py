@@ -293,7 +293,8 @@ def _rows(root: dict, node, prefix: str, tables: dict, defaults: dict, schema: s
             rows += _rows(root, items, f"{path}[].", tables, defaults, schema, table)
     for branch in node.get("allOf", ()):
         if "if" in branch and "then" in branch:
-            cond = " and ".join(f"{k} = {_value(v.get('const'))}" for k, v in branch["if"].get("properties", {}).items())
+            cond = " and ".join(f"{k} = {_value(v.get('const'))}"
+                                for k, v in branch["if"].get("properties", {}).items())
             then = {**branch["then"], "required": [r for r in branch["then"].get("required", ())]}
             rows += _rows(root, then, prefix, tables, defaults, schema, table, condition=f"*{cond}*: ")
     return rows
@@ -393,7 +394,8 @@ def _annotation_type(ann) -> str:
 def _param_type(p) -> str:
     if getattr(p, "is_flag", False):
         return "flag"
-    typ = f"`{p.metavar}`" if p.metavar else _annotation_type(getattr(getattr(p, "type_descriptor", None), "annotation", None))
+    typ = f"`{p.metavar}`" if p.metavar else _annotation_type(getattr(getattr(p, "type_descriptor", None),
+                                                                      "annotation", None))
     return typ + (" (repeatable)" if getattr(p, "multiple", False) else "")
 
 
@@ -567,7 +569,8 @@ def load_measurements(bench_results: Path, compare_dir: Path, bench_dir: Path | 
     bench_dir = bench_dir if bench_dir is not None else ROOT / "bench"
     if compare_files is None:
         compare_files = [p for p in sorted((ROOT / "data" / "compare").glob("*.toml")) if p.stem != "demo_quick"]
-    bench = {p.stem[len("bench_"):]: (None, None, _bench_summary(p)) for p in sorted(Path(bench_dir).glob("bench_*.py"))}
+    bench = {p.stem[len("bench_"):]: (None, None, _bench_summary(p))
+             for p in sorted(Path(bench_dir).glob("bench_*.py"))}
     for p in sorted(Path(bench_results).glob("*.json")) if Path(bench_results).is_dir() else ():
         try:
             res = json.loads(p.read_text())
@@ -691,8 +694,8 @@ def _compare_section(stem: str, doc, date) -> list[str]:
     targets = doc.get("targets") or []
     if targets:
         out += ["", "Targets: " + "; ".join(
-            f"{t['method']} ≥ {t['target']:g}× at equal error: " + ("met" if t.get("met") else
-                                                                       f"not met{': ' + t['why'] if t.get('why') else ''}")
+            f"{t['method']} ≥ {t['target']:g}× at equal error: "
+            + ("met" if t.get("met") else f"not met{': ' + t['why'] if t.get('why') else ''}")
             for t in targets) + "."]
     return out + [""]
 
@@ -751,7 +754,8 @@ def method_summary(page: Page, data: Measurements, link: str) -> list[str]:
                        "speed-up at equal error"), rows)
         out += [""]
     benches = [(b, data.bench.get(b, (None, None, ""))) for b in page.benchmarks]
-    brow = [(f"[{b}]({link}#bench-{b})", f"`{k}`", _fmt(v)) for b, (res, _, _) in benches if res for k, v in _headline(res)]
+    brow = [(f"[{b}]({link}#bench-{b})", f"`{k}`", _fmt(v))
+            for b, (res, _, _) in benches if res for k, v in _headline(res)]
     if brow:
         out += ["Benchmarks (`make bench`):", ""]
         out += _table(("benchmark", "quantity", "value"), brow)

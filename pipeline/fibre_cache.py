@@ -52,7 +52,8 @@ def cache_budget_mib(value, place: str = "--cache") -> float:
     except (TypeError, ValueError):
         raise LoomError(None, place, f"the fibre cache budget must be a number of MiB, got {value!r}") from None
     if not np.isfinite(mib) or mib < 0:
-        raise LoomError(None, place, f"the fibre cache budget must be a finite number of MiB >= 0 (0: no cache), got {value}")
+        raise LoomError(None, place,
+                        f"the fibre cache budget must be a finite number of MiB >= 0 (0: no cache), got {value}")
     free = available_bytes() / 2**20
     if mib > free:
         warn(f"{place} {mib:g} MiB is more than the available memory ({free:.0f} MiB): using {free:.0f} MiB")
@@ -67,7 +68,8 @@ def _medium(cv, tab, grid, cached, bvh, fibre_yarn, fibre_id):
 
     tp = tab.tparams[tab.yarn_type]
     return FibreCacheMedium(ProceduralMedium(cv, tab), grid.lo, np.full(3, 1.0 / grid.size), grid.res, cached, bvh,
-                            fibre_yarn, fibre_id, np.ascontiguousarray(tp[:, DENSITY]), np.ascontiguousarray(tab.yarn_albedo),
+                            fibre_yarn, fibre_id, np.ascontiguousarray(tp[:, DENSITY]),
+                            np.ascontiguousarray(tab.yarn_albedo),
                             np.ascontiguousarray(tp[:, ROUGHNESS]), bvh.wide_box, bvh.wide_child, bvh.prims,
                             bvh.seg_fiber, bvh.points, bvh.seg_a)
 
@@ -93,8 +95,18 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.procedural.realize import realize_fill_window, window_pieces, yarn_plan
     from stages.render.camera import camera_ray
-    from stages.render.fibre_cache import (PILOT_DEPTH, brick_grid, brick_order, brick_samples, choose_bricks, fibre_ids,
-                                           occupied_bricks, pilot_bricks, windows, yarn_samples)
+    from stages.render.fibre_cache import (
+        PILOT_DEPTH,
+        brick_grid,
+        brick_order,
+        brick_samples,
+        choose_bricks,
+        fibre_ids,
+        occupied_bricks,
+        pilot_bricks,
+        windows,
+        yarn_samples,
+    )
 
     t0 = time.perf_counter()
     Y = len(tab.yarn_type)

@@ -39,7 +39,8 @@ def woven_curveset(over, spacing_x, spacing_y, radius_warp, radius_weft, crimp=1
     warp, weft = woven_curves(over, spacing_x, spacing_y, radius_warp, radius_weft, crimp, samples_per_cell)
     E, P = over.shape
     points = [warp[e] for e in range(E)] + [weft[p] for p in range(P)]
-    radii = [np.full(warp.shape[1], radius_warp) for _ in range(E)] + [np.full(weft.shape[1], radius_weft) for _ in range(P)]
+    radii = ([np.full(warp.shape[1], radius_warp) for _ in range(E)]
+             + [np.full(weft.shape[1], radius_weft) for _ in range(P)])
     colors = list(warp_colors or [None] * E) + list(weft_colors or [None] * P)
     n = dict(notes or {})
     n.update(interlacement=np.asarray(over, dtype=bool), spacing=(float(spacing_x), float(spacing_y)),

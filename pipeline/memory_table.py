@@ -72,7 +72,8 @@ def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
         run_ingest(Path(scene), yarns)
         cv, tab, info, dicts, _ = build(yarns, seed=seed, hair_mode="hybrid", derive=False)
     _, nverts, nfib, verts, pieces = realized_size(tab, cv.curve_length, spacing)
-    full = {k: int(verts[i] * FIBER_VERTEX_BYTES + pieces[i] * FIBER_BYTES) for i, k in ((1, "regular"), (2, "loop"), (3, "hair"))}
+    full = {k: int(verts[i] * FIBER_VERTEX_BYTES + pieces[i] * FIBER_BYTES)
+            for i, k in ((1, "regular"), (2, "loop"), (3, "hair"))}
     parts = table_bytes(tab)
     ours_regular = parts["regular"] + parts["per_yarn"]
     ours_total = ours_regular + parts["hair"] + parts["loop"]
@@ -81,7 +82,8 @@ def scene_row(scene, spacing: float = DEFAULT_SPACING, seed: int = 0) -> dict:
     return {
         "scene": Path(scene).stem, "yarns": int(len(tab.yarn_type)),
         "fibers": int(nfib), "vertices": int(nverts),
-        "regular_fibers": int(len(tab.yarn_type) and sum(int(tab.tparams[t, 0] * tab.tparams[t, 1]) for t in tab.yarn_type)),
+        "regular_fibers": int(len(tab.yarn_type)
+                              and sum(int(tab.tparams[t, 0] * tab.tparams[t, 1]) for t in tab.yarn_type)),
         "hairs": int(pieces[3]), "loops": int(pieces[2]), "spacing": float(spacing),
         "full_total_bytes": int(full_total), "full_regular_bytes": full["regular"],
         "full_hair_bytes": full["hair"], "full_loop_bytes": full["loop"],
@@ -106,10 +108,12 @@ def _fmt(n: float) -> str:
 
 
 def format_table(rows) -> str:
-    head = "| Scene | yarns | Full total | regular | hair | loop | Ours total | (saving) | regular | hair | loop | curves |"
+    head = ("| Scene | yarns | Full total | regular | hair | loop | Ours total | (saving) | regular | hair | loop | "
+            "curves |")
     lines = [head, "|" + "---|" * 12]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['yarns']} | {_fmt(r['full_total_bytes'])} | {_fmt(r['full_regular_bytes'])} | "
+        lines.append(f"| {r['scene']} | {r['yarns']} | {_fmt(r['full_total_bytes'])} | "
+                     f"{_fmt(r['full_regular_bytes'])} | "
                      f"{_fmt(r['full_hair_bytes'])} | {_fmt(r['full_loop_bytes'])} | {_fmt(r['ours_total_bytes'])} | "
                      f"({r['saving']:.1f}x) | {_fmt(r['ours_regular_bytes'])} | {_fmt(r['ours_hair_bytes'])} | "
                      f"{_fmt(r['ours_loop_bytes'])} | {_fmt(r['curves_bytes'])} |")

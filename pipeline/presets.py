@@ -192,7 +192,8 @@ def pack(d: dict) -> np.ndarray:
     tp[M.S_MIG] = d["s_i"]
     tp[M.HAIR_DENSITY] = d["flyaway_hair_density"]
     tp[M.LOOP_DENSITY] = d["flyaway_loop_density"]
-    for (mu, sig), key, f in ((M.ZE_MU, M.ZE_SIG), "flyaway_hair_ze", 0.75), ((M.R0_MU, M.R0_SIG), "flyaway_hair_r0", 0.75), \
+    for (mu, sig), key, f in ((M.ZE_MU, M.ZE_SIG), "flyaway_hair_ze", 0.75), \
+            ((M.R0_MU, M.R0_SIG), "flyaway_hair_r0", 0.75), \
             ((M.RE_MU, M.RE_SIG), "flyaway_hair_re", 0.75), ((M.PE_MU, M.PE_SIG), "flyaway_hair_pe", 0.75), \
             ((M.R1_MU, M.R1_SIG), "flyaway_loop_r1", 0.5):
         tp[mu] = d[key][0]

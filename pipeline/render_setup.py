@@ -1,9 +1,8 @@
-"""Shared render plumbing: scene lights -> packed light arrays, BCSDF presets, fibres artifacts.
+"""Shared render plumbing: scene lights -> packed light arrays, fibres artifacts (BCSDF presets:
+``pipeline.bcsdf_presets``).
 
 - ``pack_lights(scene)`` -> ``LightSet(lights, env, marginal, conditional)`` in the layout of
   ``stages.render.lights`` (at most one envmap; its EXR is read here).
-- ``load_bcsdf_preset(name)`` -> packed BCSDF (``stages.core.shading.bcsdf``) from ``data/bcsdf/<name>.toml``
-  (or a path to a TOML file), checked against ``schemas/bcsdf-preset.schema.json``.
 - ``load_fibers(path)`` -> ``Fibers`` arrays of a ``fibers`` artifact, refusing empty or broken ones.
 - ``recorded_input(art, name, kind)`` -> the input an artifact records (its yarns), refused naming the
   artifact and ``inputs.<name>`` when the recorded path is gone or unreadable.
@@ -17,10 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import LoomError
-from .schemas import validate
-from .toml_file import read_toml
 
-BCSDF_DIR = Path(__file__).resolve().parents[1] / "data" / "bcsdf"
 GROUP_NAMES = ("warp", "weft", "knit", "other")
 
 
@@ -78,30 +74,6 @@ def pack_lights(lights: list[dict], scene_path: str | Path | None = None) -> Lig
     arr = np.asarray(rows, dtype=np.float64).reshape(-1, LIGHT_SIZE)
     env, marg, cond = envmap_tables(env_img)
     return LightSet(arr, env, marg, cond)
-
-
-# ------------------------------------------------------------------------------------------------
-def bcsdf_presets() -> list[str]:
-    return sorted(p.stem for p in BCSDF_DIR.glob("*.toml"))
-
-
-def read_bcsdf_preset(name: str) -> tuple[Path, dict]:
-    path = Path(name)
-    if path.suffix != ".toml" or not path.exists():
-        path = BCSDF_DIR / f"{name}.toml"
-    if not path.exists():
-        raise LoomError(None, "bcsdf", f"unknown BCSDF preset {name!r} (known: {', '.join(bcsdf_presets())})")
-    doc = read_toml(path, what="BCSDF preset")
-    validate(doc, "bcsdf-preset", path)
-    return path, doc
-
-
-def load_bcsdf_preset(name: str) -> np.ndarray:
-    """Packed BCSDF parameters of preset ``name`` (a name in data/bcsdf/ or a .toml path)."""
-    from stages.core.shading.bcsdf import pack_bcsdf
-
-    _, d = read_bcsdf_preset(name)
-    return pack_bcsdf(d["c_r"], d["c_tt"], d["beta_r"], d["beta_tt"], d["gamma_tt"])
 
 
 # ------------------------------------------------------------------------------------------------
@@ -258,8 +230,8 @@ def check_scene_matches(scene, path, option: str) -> None:
         return
     mine = jsonable(ingest_identity(scene))
     made = f"{Path(path).name} (--{option}, made from {rec.get('scene') or rec['fabric'].get('file')})"
-    fix = "render the scene it was made from, or re-run ingest" + {"fibers": " and realize", "tables": " and tables"}.get(
-        art.kind, "") + " on this scene"
+    rerun = {"fibers": " and realize", "tables": " and tables"}.get(art.kind, "")
+    fix = "render the scene it was made from, or re-run ingest" + rerun + " on this scene"
     strip = lambda f: {k: v for k, v in f.items() if k != "file"}  # noqa: E731  (a renamed copy is the same file)
     if strip(mine["fabric"]) != strip(rec["fabric"]):
         raise LoomError(scene.path, "fabric", f"the scene's fabric ({_describe_fabric(mine['fabric'])}) is not the one "

@@ -166,7 +166,8 @@ def sweep_rmse_png(rmse_by_method: dict[str, float], path: str | Path, reference
     ax.set_xticks(range(len(names)))
     ax.set_xticklabels(names, fontsize=8)
     ax.set_ylabel(f"RMSE of mean intensity vs {reference}", fontsize=8)
-    ax.set_title(title or "RMSE of mean image intensity over configurations (Khungurn et al. 2017 Fig. 13 form)", fontsize=9)
+    ax.set_title(title or "RMSE of mean image intensity over configurations (Khungurn et al. 2017 Fig. 13 form)",
+                 fontsize=9)
     return save_figure(fig, Path(path))
 
 
@@ -298,7 +299,8 @@ class Report:
                 _, headers, rows, caption = b
                 if caption:
                     out += [f"*{caption}*", ""]
-                esc = lambda s: str(s).replace("|", "\\|")  # noqa: E731
+                def esc(s):
+                    return str(s).replace("|", "\\|")
                 out.append("| " + " | ".join(esc(h) for h in headers) + " |")
                 out.append("|" + "|".join("---" for _ in headers) + "|")
                 for r in rows:

@@ -23,7 +23,8 @@ from .renderers import COMMON_DEFAULTS
 from .schemas import load_schema, validate
 from .toml_file import read_toml
 
-CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": COMMON_DEFAULTS["width"], "height": COMMON_DEFAULTS["height"]}
+CAMERA_DEFAULTS = {"up": [0.0, 0.0, 1.0], "fov": 40.0, "width": COMMON_DEFAULTS["width"],
+                   "height": COMMON_DEFAULTS["height"]}
 RENDER_DEFAULTS = {k: COMMON_DEFAULTS[k] for k in ("spp", "seed", "max_depth", "rr_depth", "tile_size")}
 YARN_GROUPS = ("warp", "weft", "knit", "other")
 RENDER_ONLY_YARN_KEYS = ("bcsdf",)  # yarn-type keys only the renderer reads (not baked into yarns, tables, fibres)
@@ -68,14 +69,15 @@ def _named(table, key: str, known, path: Path, place: str, what: str) -> str | N
 
 
 def _check_bcsdf(name: str, path: Path, place: str) -> None:
-    from .render_setup import bcsdf_presets, read_bcsdf_preset
+    from .bcsdf_presets import bcsdf_presets, read_bcsdf_preset
 
     if not name.endswith(".toml"):
         check_name(name, bcsdf_presets(), path, place, "BCSDF preset")
         return
     file = Path(name) if Path(name).is_absolute() else (path.parent / name).resolve()
     if not file.is_file():
-        raise LoomError(path, place, f"BCSDF preset file {file} not found (or name one of: {', '.join(bcsdf_presets())})")
+        raise LoomError(path, place,
+                        f"BCSDF preset file {file} not found (or name one of: {', '.join(bcsdf_presets())})")
     read_bcsdf_preset(str(file))  # its own errors name the preset file and its key
 
 
@@ -124,7 +126,8 @@ def load_scene(path: str | Path) -> Scene:
     if src == "generator" and "generator" not in fabric:
         raise LoomError(path, "fabric.generator", "source = 'generator' needs a [fabric.generator] table")
     if "path" in fabric:
-        fabric["path"] = str((path.parent / fabric["path"]).resolve()) if not Path(fabric["path"]).is_absolute() else fabric["path"]
+        if not Path(fabric["path"]).is_absolute():
+            fabric["path"] = str((path.parent / fabric["path"]).resolve())
         what = "WIF draft" if src == "wif" else "curve file"
         if Path(fabric["path"]).is_dir():
             raise LoomError(path, "fabric.path", f"{fabric['path']} is a directory, not a {what}")
@@ -153,7 +156,8 @@ def load_scene(path: str | Path) -> Scene:
                     raise LoomError(path, f"lights[{i}].{k}", "zero-length vector")
                 light[k] = (v / n).tolist()
         if light["type"] == "envmap":
-            light["path"] = str(Path(light["path"]) if Path(light["path"]).is_absolute() else (path.parent / light["path"]).resolve())
+            lp = Path(light["path"])
+            light["path"] = str(lp if lp.is_absolute() else (path.parent / lp).resolve())
             light.setdefault("scale", 1.0)
             if not Path(light["path"]).exists():
                 raise LoomError(path, f"lights[{i}].path", f"environment map {light['path']} not found")

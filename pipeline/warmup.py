@@ -123,5 +123,6 @@ def run(methods, on_step=None) -> float:
                 code = main(args)
             if code != 0:
                 tail = " | ".join(out.getvalue().strip().splitlines()[-3:])
-                raise RuntimeError(f"warmup step {step.name!r} failed (exit {code}): loomlight {' '.join(args)}: {tail}")
+                raise RuntimeError(f"warmup step {step.name!r} failed (exit {code}): "
+                                   f"loomlight {' '.join(args)}: {tail}")
     return time.perf_counter() - t0

@@ -15,7 +15,8 @@ CURVE_ARRAYS = ("points", "tangents", "curve_offsets", "closed", "seg_curve", "s
 
 def curves_from_group(get) -> Curves:
     """Build ``Curves`` from a getter name -> array (an artifact, a zarr group or a dict)."""
-    f64 = lambda n: np.ascontiguousarray(get(n), dtype=np.float64)
+    def f64(n):
+        return np.ascontiguousarray(get(n), dtype=np.float64)
     return Curves(
         f64("points"), f64("tangents"), np.ascontiguousarray(get("curve_offsets"), np.int64),
         np.ascontiguousarray(get("closed"), np.bool_), np.ascontiguousarray(get("seg_curve"), np.int32),

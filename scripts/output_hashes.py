@@ -5,10 +5,10 @@
     make demo OUT=/tmp/b && scripts/refactor_extras.sh /tmp/b      # after
     .venv/bin/python scripts/output_hashes.py /tmp/b | diff hashes.txt -   # no lines differ
 
-Images and arrays (.exr, .png, .npy, .txt) are hashed as files, .npz archives by their arrays. An artifact (a zarr directory) is hashed by its
-arrays (name, dtype, shape, bytes) and its summary without the fields that measure the run rather
-than the result (times, rates, peak memory, thread count, paths on disk, including the ``source``
-path a voxel grid records). Reports (.md, .html) are
+Images and arrays (.exr, .png, .npy, .txt) are hashed as files, .npz archives by their arrays. An
+artifact (a zarr directory) is hashed by its arrays (name, dtype, shape, bytes) and its summary
+without the fields that measure the run rather than the result (times, rates, peak memory, thread
+count, paths on disk, including the ``source`` path a voxel grid records). Reports (.md, .html) are
 skipped: they quote timings.
 """
 import hashlib

@@ -296,7 +296,9 @@ def check_shading_model(sample, pdf, eval, p, frame, wi, *, axis=None, angles="c
         return Chi2Result(False, 0.0, math.inf, 0, alpha, float("nan"), msg)
     xy, bounds = _direction_xy(wo[ok], axis, angles, bounds)
     u, v, w = frame_from_axis(axis)
-    pdf_xy = lambda x, y: shading_pdf_xy(pdf, p, frame, wi, x, y, u, v, w, angles == "theta")
+    def pdf_xy(x, y):
+        return shading_pdf_xy(pdf, p, frame, wi, x, y, u, v, w, angles == "theta")
+
     return chi2_test(xy, pdf_xy, bounds, res=res, sub=sub, alpha=alpha, n_tests=n_tests,
                      n_total=None if ok.all() else int(n))
 
@@ -370,7 +372,9 @@ def check_light(lights, k, env, marg, cond, *, angles="cos", axis=(0.0, 0.0, 1.0
         raise ValueError(f"angles = {angles!r}: 'cos' or 'latlong'")
     lights = np.ascontiguousarray(lights, np.float64)
     W, vals, delta = light_draw(lights, k, env, marg, cond, int(n), int(seed))
-    pdf_dirs = lambda D: light_pdf_many(lights, k, env, marg, cond, np.ascontiguousarray(D))
+    def pdf_dirs(D):
+        return light_pdf_many(lights, k, env, marg, cond, np.ascontiguousarray(D))
+
     if delta.any():
         return Chi2Result(False, 0.0, math.inf, 0, alpha, float("nan"), "a delta light has no density to test")
     ok = vals[:, 3] > 0.0

@@ -8,7 +8,8 @@ import pytest
 from tests.helpers import ROOT
 
 os.environ.setdefault("LOOMLIGHT_NUMBA_CACHE_ROOT", str(ROOT / ".numba_cache"))
-import stages  # noqa: E402,F401  (sets NUMBA_CACHE_DIR, keyed by the kernel sources, before numba loads)
+import stages  # noqa: F401  (sets NUMBA_CACHE_DIR, keyed by the kernel sources, before numba loads)
+
 os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("LOOMLIGHT_PROGRESS", "0")  # no bars or compilation notices in captured output
 

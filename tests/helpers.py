@@ -15,7 +15,8 @@ EXACTNESS_SWATCH = (DATA / "scenes" / "gentle_swatch.toml").read_text()
 def shared_file(rel: str) -> Path:
     p = SHARED / rel
     if not p.exists():
-        pytest.skip(f"reference file ../shared/{rel} is not present (../shared is reference material, absent on this machine)")
+        pytest.skip(f"reference file ../shared/{rel} is not present "
+                    "(../shared is reference material, absent on this machine)")
     return p
 
 

@@ -2,7 +2,7 @@
 
 Three floors: ``pipeline/`` -> ``stages/<stage>/`` -> ``stages/core/``. A stage package never imports
 another stage package nor ``pipeline``; ``stages/core`` imports no stage package; no module imports
-a private name (``_x``) from another module.
+a private name (``_x``) from another module; the import graph has no circle.
 """
 import ast
 from pathlib import Path
@@ -94,3 +94,72 @@ def test_shared_compile_groups_name_real_test_files():
     missing = [p for p in SHARED_COMPILE if not (ROOT / p).is_file()]
     assert not missing, f"SHARED_COMPILE names files that do not exist: {missing}"
     assert all(n >= 2 for n in Counter(SHARED_COMPILE.values()).values()), "a group of one file groups nothing"
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def import_graph(tops=("pipeline", "stages", "bench", "scripts")) -> dict:
+    """module -> the project modules its file imports, at its top or inside a function (a lazy import
+    still ties the two modules together). ``from pkg import name`` counts ``pkg.name`` when that is a
+    module; a script in ``bench/`` imports its neighbours by their bare names (``import embree_kernels``)."""
+    modules = {_module_name(p): p for top in tops for p in _sources(top)}
+    graph = {}
+    for name, path in modules.items():
+        top = name.split(".")[0]
+        targets = set()
+        for mod, names in _imports(path):
+            for m in (mod, f"{top}.{mod}" if top in ("bench", "scripts") else mod):
+                targets.add(m)
+                targets.update(f"{m}.{n}" for n in names)
+        graph[name] = sorted(t for t in targets if t in modules and t != name)
+    return graph
+
+
+def import_cycles(graph: dict) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index, low, stack, on_stack, cycles = {}, {}, [], set(), []
+
+    def visit(v):
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return cycles
+
+
+def test_import_graph_is_acyclic():
+    """No two modules import each other, directly or around a circle, counting imports inside functions:
+    a circle means neither module can be understood, tested or moved without the other."""
+    graph = import_graph()
+    assert len(graph) > 100 and graph["pipeline.runners.render"], "the graph must see the project's imports"
+    cycles = import_cycles(graph)
+    assert not cycles, "import circles:\n" + "\n".join(" <-> ".join(c) for c in cycles)
+
+
+def test_cycle_finder_finds_a_circle():
+    """The control: a circle of three and a self-contained pair are found, a chain is not."""
+    graph = {"a": ["b"], "b": ["c"], "c": ["a"], "d": ["e"], "e": ["d"], "f": ["a"], "g": []}
+    assert sorted(import_cycles(graph)) == [["a", "b", "c"], ["d", "e"]]
+    assert import_cycles({"a": ["b"], "b": ["c"], "c": []}) == []

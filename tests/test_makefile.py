@@ -28,7 +28,9 @@ def test_demo_quick_is_the_whole_demo_small_in_its_own_directory():
     quick = _dry_run("-B", "demo-quick")
     demo = _dry_run("-B", "demo")
     # every stage of the demo, no more and no fewer: the same loomlight subcommands in the same order
-    sub = lambda lines: [line.split("loomlight ", 1)[1].split()[0] for line in lines if "bin/loomlight " in line]
+    def sub(lines):
+        return [line.split("loomlight ", 1)[1].split()[0] for line in lines if "bin/loomlight " in line]
+
     assert sub(quick) == sub(demo)
     for line in quick:
         if "bin/loomlight " in line:

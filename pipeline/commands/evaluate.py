@@ -47,20 +47,38 @@ from .scheduling import SCHEDULER
 def register(app: typer.Typer) -> None:
     @app.command("evaluate")
     def evaluate(
-        ref: Optional[Path] = typer.Option(None, "--ref", help="Reference image (linear EXR); with --convergence the reference artifact (default DIR/reference/reference.zarr)."),
+        ref: Optional[Path] = typer.Option(None, "--ref",
+                                           help="Reference image (linear EXR); with --convergence the reference "
+                                                "artifact (default DIR/reference/reference.zarr)."),
         test: Optional[List[Path]] = typer.Option(None, "--test", help="Test image (EXR); repeat for several."),
         sweep: Optional[Path] = typer.Option(None, "--sweep", help="A sweep file (TOML, schemas/sweep.schema.json)."),
-        convergence: Optional[Path] = typer.Option(None, "--convergence", help="A comparison file (TOML, schemas/compare.schema.json, data/compare/): every method's error against time at equal error."),
-        reference_only: bool = typer.Option(False, "--reference-only", help="--convergence: build (or check) the converged reference and stop."),
-        no_memory: bool = typer.Option(False, "--no-memory", help="--convergence: skip the peak-memory render of each method in a process of its own."),
-        table1: bool = typer.Option(False, "--table1", help="Build the Table 1 form of Luan, Zhao, Bala 2017 (data sizes and render times)."),
+        convergence: Optional[Path] = typer.Option(None, "--convergence",
+                                                   help="A comparison file (TOML, schemas/compare.schema.json, "
+                                                        "data/compare/): every method's error against time at equal "
+                                                        "error."),
+        reference_only: bool = typer.Option(False, "--reference-only",
+                                            help="--convergence: build (or check) the converged reference and stop."),
+        no_memory: bool = typer.Option(False, "--no-memory",
+                                       help="--convergence: skip the peak-memory render of each method in a process of "
+                                            "its own."),
+        table1: bool = typer.Option(False, "--table1",
+                                    help="Build the Table 1 form of Luan, Zhao, Bala 2017 (data sizes and render "
+                                         "times)."),
         scene: Optional[List[Path]] = typer.Option(None, "--scene", help="--table1: a scene file; repeat for several."),
-        procedural: Optional[List[Path]] = typer.Option(None, "--procedural", help="--table1: procedural volpath render (EXR) of the matching --scene."),
-        realized: Optional[List[Path]] = typer.Option(None, "--realized", help="--table1: realized volpath render (EXR) of the matching --scene."),
-        unrealized: Optional[List[Path]] = typer.Option(None, "--unrealized", help="--table1: procedural volpath render (EXR) of a scene too large to realize; these follow the --procedural/--realized pairs' scenes."),
+        procedural: Optional[List[Path]] = typer.Option(None, "--procedural",
+                                                        help="--table1: procedural volpath render (EXR) of the "
+                                                             "matching --scene."),
+        realized: Optional[List[Path]] = typer.Option(None, "--realized",
+                                                      help="--table1: realized volpath render (EXR) of the matching "
+                                                           "--scene."),
+        unrealized: Optional[List[Path]] = typer.Option(None, "--unrealized",
+                                                        help="--table1: procedural volpath render (EXR) of a scene too "
+                                                             "large to realize; these follow the "
+                                                             "--procedural/--realized pairs' scenes."),
         out: Path = typer.Option(..., "-o", "--out", help="Output directory for metrics, pictures and the report."),
         force: bool = typer.Option(False, "--force", help="Recompute even when the inputs are unchanged."),
-        no_render: bool = typer.Option(False, "--no-render", help="--sweep: do not render; evaluate the renders that exist."),
+        no_render: bool = typer.Option(False, "--no-render",
+                                       help="--sweep: do not render; evaluate the renders that exist."),
         scheduler: str = SCHEDULER,
     ):
         """Compare renders against a reference: metrics, error maps, report (and sweeps, Table 1)."""
@@ -91,7 +109,8 @@ def register(app: typer.Typer) -> None:
                 se = s.get("speedup_at_equal_error")
                 typer.echo(f"  {name:22s} bias floor {s['floor']:.3f} +- {s['floor_se']:.3f}  noise constant "
                            f"{s['noise_constant']:.3g} s" + (f"  speed-up at {se['level']:.0%}: "
-                                                            f"{se['bound'].replace('~', '~ ')}{se['value']:.3g}x" if se else ""))
+                                                            f"{se['bound'].replace('~', '~ ')}{se['value']:.3g}x"
+                                                            if se else ""))
             for t in res.targets:
                 got = "-" if t["value"] is None else f"{t['bound']}{t['value']:.3g}x at {t['level']:.0%}"
                 typer.echo(f"  target {t['method']}: >= {t['target']:g}x at equal error: {got}: "
@@ -115,7 +134,8 @@ def register(app: typer.Typer) -> None:
         if modes[0] == "--table1":
             from ..runners.table1 import run_table1
 
-            md = run_table1(scene or [], procedural or [], realized or [], out, force=force, unrealized=unrealized or [])
+            md = run_table1(scene or [], procedural or [], realized or [], out, force=force,
+                            unrealized=unrealized or [])
             typer.echo(f"report: {md}")
             return
         if ref is None:

@@ -13,12 +13,13 @@ def register(app: typer.Typer) -> None:
     def export(
         fibers: Path = typer.Argument(..., help="A fibers artifact (loomlight realize)."),
         out: Path = typer.Option(..., "-o", "--out", help=".txt: Mitsuba 3 curve text ('x y z r' per line, blank "
-                                                        "line between curves); .bcc: polyline Binary Curve Collection."),
+                                                        "line between curves); .bcc: polyline Binary Curve "
+                                                        "Collection."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
     ):
         """Write realized fibres as Mitsuba 3 curve text or a polyline BCC file."""
-        from ..outputs import check_output
         from ..memory import budget as memory_budget
+        from ..outputs import check_output
         from ..runners.export import run_export
 
         check_output(out, "-o", suffixes=(".txt", ".bcc"), inputs=[fibers])

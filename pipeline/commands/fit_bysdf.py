@@ -26,7 +26,7 @@ def register(app: typer.Typer) -> None:
                                            help="The setup the reflection side is fitted to: the front light (the "
                                                 "paper's protocol) or the scene's own lights."),
     ):
-        """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and back light."""
+        """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and back light."""  # noqa: E501 (command help: --help shows its line breaks)
         from ..errors import LoomError, unknown
         from ..outputs import check_output
         from ..runners.fit_bysdf import REFLECT_SETUPS, run_fit

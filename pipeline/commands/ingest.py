@@ -12,13 +12,16 @@ def register(app: typer.Typer) -> None:
     @app.command("ingest")
     def ingest(
         input: Path = typer.Argument(..., help="A curve file (.bcc Binary Curve Collection, .obj polylines, "
-                                                ".txt 'x y z [r]' polylines), a WIF weaving draft (.wif), or a scene (.toml)."),
+                                                ".txt 'x y z [r]' polylines), a WIF weaving draft (.wif), or a scene "
+                                                "(.toml)."),
         out: Path = typer.Option(..., "-o", "--out", help="Output yarns artifact (directory ending in .zarr)."),
-        radius: float = typer.Option(None, "--radius", help="Yarn radius for inputs that carry none (positive, at most 1e6)."),
+        radius: float = typer.Option(None, "--radius",
+                                     help="Yarn radius for inputs that carry none (positive, at most 1e6)."),
         scale: float = typer.Option(None, "--scale", help="Multiply file coordinates by this factor (positive; scaled "
                                                           "coordinates must stay within +-1e6 scene units)."),
         refuse_duplicates: bool = typer.Option(False, "--refuse-duplicates",
-                                               help="Refuse repeated consecutive control points instead of merging them."),
+                                               help="Refuse repeated consecutive control points instead of merging "
+                                                    "them."),
         frame_samples: int = typer.Option(4, "--frame-samples", min=1, help="Stored RMF samples per spline segment."),
         write: Path = typer.Option(None, "--write", help="Also write the validated curves as .bcc, .obj or .txt."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
@@ -27,11 +30,11 @@ def register(app: typer.Typer) -> None:
         """Read, validate and spline yarn curves and publish them as a yarns artifact.
 
         Splines are C1 Catmull-Rom with arc length, rotation-minimising frames, the δ_i bound of
-        Luan, Zhao, Bala 2017 and a segment grid. A scene's names (presets, BCSDFs, method, source, light types) are checked first."""
+        Luan, Zhao, Bala 2017 and a segment grid. A scene's names (presets, BCSDFs, method, source, light types) are checked first."""  # noqa: E501 (command help: --help shows its line breaks)
         from ..errors import LoomError
         from ..limits import check_positive
-        from ..outputs import ARTIFACT, check_output
         from ..memory import budget as memory_budget
+        from ..outputs import ARTIFACT, check_output
         from ..runners.ingest import run_ingest
 
         check_output(out, "-o", ARTIFACT, inputs=[input])

@@ -59,9 +59,9 @@ def svf(
     Per fibre segment: the binary visibility image of the sky from its
     midpoint in the exemplar repeated without end, its spherical signed distance function (SSDF) compressed
     by PCA over the exemplar, and the sum-of-SGs representation."""
+    from ..chunks import resolve_scheduler
     from ..memory import budget as memory_budget
     from ..outputs import ARTIFACT, check_output
-    from ..chunks import resolve_scheduler
     from ..runners.precompute import SvfParams, run_svf
 
     check_output(out, "-o", ARTIFACT, inputs=[tiling])
@@ -93,12 +93,15 @@ def iirtf(
                                             "uniform on the hemisphere) or mis (the same integral, a path "
                                             "tracer lit by the SH sky with multiple importance sampling; "
                                             "much less variance for sharp BCSDFs)."),
-    theta_samples: int = typer.Option(512, "--theta-samples", help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
-    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset for yarn groups the scene names none for."),
+    theta_samples: int = typer.Option(512, "--theta-samples",
+                                      help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
+    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>",
+                              help="BCSDF preset for yarn groups the scene names none for."),
     chunk: int = typer.Option(16, "--chunk", help="Cells per chunk task."),
     seed: int = typer.Option(0, "--seed", help="Seed of the transfer matrices' Monte Carlo (the mean free path, "
                                                  "hence the cell grid, uses a fixed one)."),
-    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help="Material option KEY=VALUE (tint=yarn|none, as render)."),
+    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>",
+                                   help="Material option KEY=VALUE (tint=yarn|none, as render)."),
     exemplar: List[int] = _EXEMPLAR,
     force: bool = _FORCE,
     budget: float = _BUDGET,
@@ -113,15 +116,15 @@ def iirtf(
     path, and per cell the SH matrix A_C taking light to the indirect incoming radiance at the cell's
     segments, estimated by path tracing the fibre BCSDF, with its standard error; plus the BCSDF's SH table
     C_S (§4.3) of every material."""
+    from ..chunks import resolve_scheduler
     from ..memory import budget as memory_budget
     from ..outputs import ARTIFACT, check_output
-    from ..chunks import resolve_scheduler
     from ..runners.precompute import IirtfParams, parse_material_options, run_iirtf
 
     check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
     p = IirtfParams(order=order, cell_factor=cell_factor, paths=paths, mfp_paths=mfp_paths, max_depth=max_depth,
-                    rr_depth=rr_depth, light_sampling=light_sampling, theta_samples=theta_samples, chunk=chunk, seed=seed,
-                    material=parse_material_options(set_ or [], bcsdf))
+                    rr_depth=rr_depth, light_sampling=light_sampling, theta_samples=theta_samples, chunk=chunk,
+                    seed=seed, material=parse_material_options(set_ or [], bcsdf))
     res = run_iirtf(tiling, out, p, scene=scene, exemplars=exemplar or None, force=force,
                     budget=memory_budget(budget), threads=threads,
                     scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))
@@ -156,9 +159,11 @@ def btf(
                                         "Daubert et al. 2001)."),
     max_depth: int = typer.Option(16, "--max-depth", help="Largest number of scattering events on a path."),
     rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
-    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>", help="BCSDF preset for yarn groups the scene names none for."),
+    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>",
+                              help="BCSDF preset for yarn groups the scene names none for."),
     seed: int = typer.Option(0, "--seed", help="Seed of the Monte Carlo estimates."),
-    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>", help="Material option KEY=VALUE (tint=yarn|none, as render)."),
+    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>",
+                                   help="Material option KEY=VALUE (tint=yarn|none, as render)."),
     force: bool = _FORCE,
     budget: float = _BUDGET,
     threads: int = _THREADS,

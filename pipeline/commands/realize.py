@@ -14,10 +14,14 @@ def register(app: typer.Typer) -> None:
     def realize(
         yarns: Path = typer.Argument(..., help="A yarns artifact (loomlight ingest)."),
         out: Path = typer.Option(..., "-o", "--out", help="Output fibers artifact (directory ending in .zarr)."),
-        preset: str = typer.Option(None, "--preset", metavar="<name>", help="Give every yarn this preset (data/yarns/NAME.toml)."),
-        radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
+        preset: str = typer.Option(None, "--preset", metavar="<name>",
+                                   help="Give every yarn this preset (data/yarns/NAME.toml)."),
+        radius: float = typer.Option(None, "--radius",
+                                     help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers (as for tables)."),
-        spacing: float = typer.Option(0.002, "--spacing", help="Largest step between vertices along z (scene units; positive, at most 1e6)."),
+        spacing: float = typer.Option(0.002, "--spacing",
+                                      help="Largest step between vertices along z (scene units; positive, at most "
+                                           "1e6)."),
         budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
         scheduler: str = SCHEDULER,

@@ -28,7 +28,8 @@ _FORCE = typer.Option(False, "--force", help="Redo precomputes and renders even 
 _STUDY = typer.Argument(..., help="A study file (TOML; format in pipeline/runners/prt_study.py).")
 _SWEEP = typer.Argument(..., help="The prt sweep file (methods 'fiberpath' and 'prt').")
 _SWEEP_DIR = typer.Option(..., "--sweep-dir", help="Where loomlight evaluate --sweep wrote that sweep.")
-_REFERENCE = typer.Option("fiberpath", "--reference", metavar="<name>", help="The reference method's name in the sweep.")
+_REFERENCE = typer.Option("fiberpath", "--reference", metavar="<name>",
+                          help="The reference method's name in the sweep.")
 _PRT = typer.Option("prt", "--prt", metavar="<name>", help="The prt method's name in the sweep.")
 
 
@@ -68,6 +69,7 @@ def prt_terms(
     check_output(out, "-o", DIRECTORY, inputs=[sweep, sweep_dir])
     res = run_terms(sweep, sweep_dir, out, reference=reference, prt=prt, force=force)
     s = res.summary
-    typer.echo(f"  relative RMSE of mean intensity: all {s['relative_rmse']:.1%}, single {s['relative_rmse_single']:.1%}, "
-               f"multi {s['relative_rmse_multi']:.1%} (multiple scattering {s['multi_share_reference']:.0%} of the light)")
+    typer.echo(f"  relative RMSE of mean intensity: all {s['relative_rmse']:.1%}, single "
+               f"{s['relative_rmse_single']:.1%}, multi {s['relative_rmse_multi']:.1%} (multiple scattering "
+               f"{s['multi_share_reference']:.0%} of the light)")
     typer.echo(f"report: {res.report_md}")

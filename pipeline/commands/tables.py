@@ -13,10 +13,13 @@ def register(app: typer.Typer) -> None:
     def tables(
         yarns: Path = typer.Argument(..., help="A yarns artifact (loomlight ingest)."),
         out: Path = typer.Option(..., "-o", "--out", help="Output tables artifact (directory ending in .zarr)."),
-        preset: str = typer.Option(None, "--preset", metavar="<name>", help="Give every yarn this preset (data/yarns/NAME.toml)."),
-        radius: float = typer.Option(None, "--radius", help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
+        preset: str = typer.Option(None, "--preset", metavar="<name>",
+                                   help="Give every yarn this preset (data/yarns/NAME.toml)."),
+        radius: float = typer.Option(None, "--radius",
+                                     help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers."),
-        bins: int = typer.Option(32, "--bins", help="Azimuth bins of the regular-fibre tables (Luan, Zhao, Bala 2017 Fig. 7)."),
+        bins: int = typer.Option(32, "--bins",
+                                 help="Azimuth bins of the regular-fibre tables (Luan, Zhao, Bala 2017 Fig. 7)."),
         hair_mode: str = typer.Option("hybrid", "--hair-mode", metavar="<hybrid | free>",
                                       help="'hybrid' (stored hair z extents, z-bins) or 'free' (Algorithm 3)."),
         force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
@@ -26,8 +29,8 @@ def register(app: typer.Typer) -> None:
 
         Per yarn type and ply: fibre trajectories binned by azimuth; per yarn: hair tables (hybrid mode);
         loops from consistent random numbers; plus a copy of the yarn curves."""
-        from ..outputs import ARTIFACT, check_output
         from ..memory import budget as memory_budget
+        from ..outputs import ARTIFACT, check_output
         from ..runners.tables import run_tables
 
         check_output(out, "-o", ARTIFACT, inputs=[yarns])

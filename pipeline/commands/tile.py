@@ -22,8 +22,8 @@ def register(app: typer.Typer) -> None:
         Realizes periodic fibre exemplars from weave drafts, cuts them into blocks, lays the blocks over the
         cloth's (u, v) domain by the block map, and builds the shell (base surface offset along its smoothed
         normals, split into tetrahedra) that maps them onto the surface (Khungurn et al. 2017 §2)."""
-        from ..outputs import ARTIFACT, check_output
         from ..memory import budget as memory_budget
+        from ..outputs import ARTIFACT, check_output
         from ..runners.tile import run_tile
 
         check_output(out, "-o", ARTIFACT, inputs=[config])

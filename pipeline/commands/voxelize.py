@@ -20,17 +20,20 @@ from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 def register(app: typer.Typer) -> None:
     @app.command("voxelize")
     def voxelize_cmd(tables: Path = typer.Argument(..., help="A tables artifact (loomlight tables)."),
-                     out: Path = typer.Option(..., "-o", "--out", help="Output grid artifact (directory ending in .zarr)."),
+                     out: Path = typer.Option(..., "-o", "--out",
+                                              help="Output grid artifact (directory ending in .zarr)."),
                      res: tuple[int, int, int] = typer.Option(..., "--res", help="Voxels along x, y, z: NX NY NZ."),
                      supersample: int = typer.Option(2, "--supersample", help="Lookups per voxel along each axis."),
-                     export_npy: Path = typer.Option(None, "--export-npy", help="Also write raw numpy volumes to this directory."),
-                     force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+                     export_npy: Path = typer.Option(None, "--export-npy",
+                                                     help="Also write raw numpy volumes to this directory."),
+                     force: bool = typer.Option(False, "--force",
+                                                help="Rebuild even when inputs and parameters are unchanged."),
                      budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
                      scheduler: str = SCHEDULER, workers: int = WORKERS, threads_per_worker: int = THREADS_PER_WORKER):
         """Voxelize the procedural fibre medium: density and mean fibre direction per voxel."""
         from ..chunks import resolve_scheduler
-        from ..outputs import ARTIFACT, DIRECTORY, check_output
         from ..memory import budget as memory_budget
+        from ..outputs import ARTIFACT, DIRECTORY, check_output
         from ..runners.voxelize import run_voxelize
 
         check_output(out, "-o", ARTIFACT, inputs=[tables])

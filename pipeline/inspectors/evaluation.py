@@ -192,8 +192,10 @@ def _sweep_mode(art, plt, size):
         rows.append([nm, fmt_num(e.get("configurations")), fmt_seconds(e.get("time_per_image_s")),
                      f"{e['speedup']:.2f}x" if e.get("speedup") is not None else "-",
                      fmt_num(e.get("rmse_mean_intensity")), fmt_num(e.get("relative_rmse_mean_intensity")),
-                     f"{100 * e['brightness_within_10pct']:.0f}%" if e.get("brightness_within_10pct") is not None else "-",
-                     fmt_num(e.get("worst_brightness_ratio")), fmt_num(e.get("mean_ssim")), fmt_num(e.get("mean_relmse"))])
+                     f"{100 * e['brightness_within_10pct']:.0f}%" if e.get("brightness_within_10pct") is not None
+                     else "-",
+                     fmt_num(e.get("worst_brightness_ratio")), fmt_num(e.get("mean_ssim")),
+                     fmt_num(e.get("mean_relmse"))])
     _table(fig.add_subplot(gs[1, :]), headers, rows, "methods against the reference over all configurations")
     fig.suptitle(f"evaluation (sweep '{params.get('sweep', '?')}'): {C} configurations x {len(mnames)} methods")
     return fig

@@ -3,7 +3,6 @@ the optical depth per unit sigma_t), one density slice through the middle of z, 
 albedo seen from above, and the mean fibre direction's |x| vs |y| balance (warp vs weft) of the slice."""
 from __future__ import annotations
 
-
 import numpy as np
 
 from . import finish, pyplot
@@ -35,7 +34,8 @@ def _figure(plt, artifact, size, z):
     d = dirs[k]
     balance = np.where(den[k] > 0, np.abs(d[..., 0]) - np.abs(d[..., 1]), np.nan)
     panels = [("density, mean over z", den.mean(axis=0), "magma", "density (1/length)"),
-              (f"density, slice z = {lo[2] + (k + 0.5) * (hi[2] - lo[2]) / nz:.4g}", den[k], "magma", "density (1/length)"),
+              (f"density, slice z = {lo[2] + (k + 0.5) * (hi[2] - lo[2]) / nz:.4g}", den[k], "magma",
+               "density (1/length)"),
               ("albedo (density-weighted, top view, RGB)", np.clip(top, 0, 1), None, None),
               ("slice direction |x| - |y| (red: along x, blue: along y)", balance, "coolwarm", "|d_x| - |d_y|")]
     dpi = 100

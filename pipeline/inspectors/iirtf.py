@@ -104,7 +104,8 @@ def _figure(plt, art, size, exemplar):
         m = np.array([flu[iz][~empty[iz]][:, ch].mean() if np.any(~empty[iz]) else np.nan for iz in range(NZ)])
         e = np.array([np.sqrt((se0[iz][~empty[iz].ravel()][:, ch] ** 2).mean()) if np.any(~empty[iz]) else np.nan
                       for iz in range(NZ)])
-        ax.errorbar(zc, m, yerr=e, color=col, marker="o", ms=3, capsize=2, label=f"{col} (bars: RMS of the cells' Monte Carlo SE)")
+        ax.errorbar(zc, m, yerr=e, color=col, marker="o", ms=3, capsize=2,
+                    label=f"{col} (bars: RMS of the cells' Monte Carlo SE)")
     ax.set_xlabel("cell layer height z (exemplar space; the light comes from +z)")
     ax.set_ylabel("mean fluence of the indirect light, int T dw1")
     ax.legend(fontsize=9)

@@ -64,7 +64,7 @@ def inspect(artifact, png, show=False, size=(1200, 900), **_options):
         fig, axes = plt.subplots(nrow, ncol, figsize=(fw, fh), squeeze=False, layout="constrained")
         for ax in axes.ravel()[len(panels):]:
             ax.set_axis_off()
-        for ax, (title, img, cmap, label) in zip(axes.ravel(), panels):
+        for ax, (title, img, cmap, _label) in zip(axes.ravel(), panels):
             im = ax.imshow(img, cmap=cmap, interpolation="nearest")
             ax.set_title(title)
             ax.set_xticks([])

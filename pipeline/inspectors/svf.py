@@ -8,8 +8,8 @@ down, the fabric's normal at the top):
   (d) the sum-of-SGs visibility V^ssg, with the segment's SG axes as dots.
 
 ``--segment K`` picks the segment by its tiling segment id (default: the segment of ``--exemplar`` (default:
-the first in the artifact) that sees closest to half the upper hemisphere); the title gives the exemplar, segment and visible
-solid angle.
+the first in the artifact) that sees closest to half the upper hemisphere); the title gives the exemplar,
+segment and visible solid angle.
 """
 from __future__ import annotations
 
@@ -54,7 +54,8 @@ def _pick(art, segment, exemplar):
             a, b = i["segment_range"]
             if a <= segment < b:
                 return i, segment - a
-        ranges = ", ".join(f"exemplar {i['exemplar']}: {i['segment_range'][0]}..{i['segment_range'][1] - 1}" for i in infos)
+        ranges = ", ".join(f"exemplar {i['exemplar']}: {i['segment_range'][0]}..{i['segment_range'][1] - 1}"
+                           for i in infos)
         raise LoomError(art.path, "--segment", f"segment {segment} is not in this artifact ({ranges})")
     k = ks[0] if exemplar is None else exemplar
     if k not in ks:

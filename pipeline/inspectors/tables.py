@@ -24,7 +24,9 @@ def cross_section(tab, c, z):
         for j in range(N):
             f = fo + k * N + j
             x, y, kd = M.regular_xy(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], z)
-            out.append((x, y)); kinds.append(kd); plies.append(k)
+            out.append((x, y))
+            kinds.append(kd)
+            plies.append(k)
         g = int(tab.yarn_ply_off[c]) + k
         base = int(tab.hair_off[g])
         for h in range(int(tab.hair_count[g]) if len(tab.hair_z1) else 0):
@@ -33,7 +35,9 @@ def cross_section(tab, c, z):
                 continue
             r0, r1, th1, pe = M.hair_params(tp, yseed, k, h)
             x, y, _ = M.hair_point(tp, k, r0, r1, th1, pe, z1, ze, (z - z1) / ze)
-            out.append((x, y)); kinds.append(3); plies.append(k)
+            out.append((x, y))
+            kinds.append(3)
+            plies.append(k)
     return np.array(out).reshape(-1, 2), np.array(kinds), np.array(plies)
 
 

@@ -30,8 +30,8 @@ def group_legend(art, chosen):
 
 
 def inspect(art, png, show=False, frames=False, yarn=-1, size=(1200, 900), **_):
-    from stages.ingest.spline_process import sample_curve_points
     from stages.core.curves.frames import curve_frame_at
+    from stages.ingest.spline_process import sample_curve_points
 
     from ..errors import LoomError
     from ..yarns import load_curves
@@ -61,7 +61,10 @@ def inspect(art, png, show=False, frames=False, yarn=-1, size=(1200, 900), **_):
             o, tt, nn, bb = [], [], [], []
             for s in np.linspace(0, L, m):
                 pos, t, n, b = curve_frame_at(cv, c, s)
-                o.append(pos); tt.append(t); nn.append(n); bb.append(b)
+                o.append(pos)
+                tt.append(t)
+                nn.append(n)
+                bb.append(b)
             o = np.array(o)
             scale = 2.0 * float(cv.radius[c])
             for vecs, col in zip((tt, nn, bb), FRAME_COLORS.values()):

@@ -19,6 +19,7 @@ from ..curveset import CurveSet
 from ..errors import LoomError
 
 SUFFIXES = (".bcc", ".obj", ".txt", ".wif")
+WIF_OPTIONS = ("scale", "crimp", "max_threads", "repeat", "samples_per_cell")
 
 
 def _module(suffix: str):
@@ -26,10 +27,8 @@ def _module(suffix: str):
         from . import bcc as m
     elif suffix == ".obj":
         from . import obj as m
-    elif suffix == ".txt":
-        from . import polyline_txt as m
     else:
-        from . import wif as m
+        from . import polyline_txt as m
     return m
 
 
@@ -40,8 +39,10 @@ def read_curves(path, **opts) -> CurveSet:
         raise LoomError(path, None, f"unknown curve file type {path.suffix!r}: expected one of {', '.join(SUFFIXES)}")
     if not path.is_file():
         raise LoomError(path, None, "is a directory, not a curve file" if path.is_dir() else "no such file")
-    if suffix == ".wif":
-        return _module(suffix).read(path, **opts)
+    if suffix == ".wif":  # a draft, not curves: woven by the generator (the reader here only parses it)
+        from ..generators import from_wif
+
+        return from_wif(path, **{k: opts[k] for k in WIF_OPTIONS if k in opts})
     scale = float(opts.pop("scale", 1.0) or 1.0)
     if not scale > 0:
         raise LoomError(path, "scale", f"scale = {scale} must be positive")

@@ -51,14 +51,17 @@ def from_z_up(points: np.ndarray, up_axis: int) -> np.ndarray:
 
 def read_header(data: bytes, path) -> dict:
     if len(data) < HEADER_SIZE:
-        raise LoomError(path, f"byte {len(data)}", f"truncated file: the BCC header needs {HEADER_SIZE} bytes, the file has {len(data)}")
+        raise LoomError(path, f"byte {len(data)}",
+                        f"truncated file: the BCC header needs {HEADER_SIZE} bytes, the file has {len(data)}")
     sig, nbytes, ctype, dims, up, ncurves, npoints, text = _HEADER.unpack_from(data, 0)
     if sig != b"BCC":
         raise LoomError(path, "byte 0", f"wrong signature {sig!r}: not a BCC file (expected b'BCC')")
     if nbytes != 0x44:
-        raise LoomError(path, "byte 3", f"unsupported byte count 0x{nbytes:02x}: only 0x44 (int32 and float32) is supported")
+        raise LoomError(path, "byte 3",
+                        f"unsupported byte count 0x{nbytes:02x}: only 0x44 (int32 and float32) is supported")
     if ctype not in _CURVE_TYPES:
-        raise LoomError(path, "byte 4", f"unsupported curve type {ctype!r}: expected b'C0' (Catmull-Rom) or b'PL' (polyline)")
+        raise LoomError(path, "byte 4",
+                        f"unsupported curve type {ctype!r}: expected b'C0' (Catmull-Rom) or b'PL' (polyline)")
     if dims != 3:
         raise LoomError(path, "byte 6", f"unsupported dimension count {dims}: only 3 is supported")
     if up not in (0, 1, 2):
@@ -93,7 +96,8 @@ def read(path, group: str = "other", **_ignored) -> CurveSet:
         end = off + 4 + 12 * m
         if end > size:
             raise LoomError(path, f"byte {off}: curve {c}",
-                            f"point count {n} overruns the file ({12 * m} bytes of points needed, {size - off - 4} left)")
+                            f"point count {n} overruns the file ({12 * m} bytes of points needed, "
+                            f"{size - off - 4} left)")
         p = np.frombuffer(data, "<f4", 3 * m, off + 4).reshape(m, 3)
         k = first_bad_row(p)
         if k >= 0:
@@ -103,9 +107,11 @@ def read(path, group: str = "other", **_ignored) -> CurveSet:
         total += m
         off = end
     if off != size:
-        raise LoomError(path, f"byte {off}", f"{size - off} trailing bytes after the {ncurves} curves the header declares")
+        raise LoomError(path, f"byte {off}",
+                        f"{size - off} trailing bytes after the {ncurves} curves the header declares")
     if total != head["point_count"]:
-        raise LoomError(path, "byte 16", f"header declares {head['point_count']} control points, the curves hold {total}")
+        raise LoomError(path, "byte 16",
+                        f"header declares {head['point_count']} control points, the curves hold {total}")
     return CurveSet(points=points, closed=closed, group=[group] * ncurves, point_radius=None,
                     curve_type=head["curve_type"], source_format="bcc",
                     notes={"up_axis": head["up_axis"], "text": head["text"]})

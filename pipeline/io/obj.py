@@ -84,7 +84,8 @@ def read(path, **_ignored) -> CurveSet:
                 ok = False
             if not ok:
                 have = nv if i > 0 else seen
-                raise LoomError(path, f"line {lineno}", f"line element references missing vertex {i} ({have} vertices defined)")
+                raise LoomError(path, f"line {lineno}",
+                                f"line element references missing vertex {i} ({have} vertices defined)")
             res.append(j)
         is_closed = len(res) >= 2 and res[0] == res[-1]
         if is_closed:

@@ -57,10 +57,12 @@ def read(path, group: str = "other", **_ignored) -> CurveSet:
             raise LoomError(path, f"line {lineno}", f"non-finite value in {line!r}")
         if ncols_cur is not None and len(row) != ncols_cur:
             raise LoomError(path, f"line {lineno}",
-                            f"{len(row)} columns inside a curve whose earlier points have {ncols_cur} (mixed 3/4 columns)")
+                            f"{len(row)} columns inside a curve whose earlier points have {ncols_cur} "
+                            "(mixed 3/4 columns)")
         if ncols_file is not None and len(row) != ncols_file:
             raise LoomError(path, f"line {lineno}",
-                            f"{len(row)} columns, but earlier curves have {ncols_file}: radius column must be all or none")
+                            f"{len(row)} columns, but earlier curves have {ncols_file}: "
+                            "radius column must be all or none")
         if not cur:
             cur_start = lineno
         ncols_cur = ncols_file = len(row)

@@ -322,7 +322,8 @@ def parse(path, scale: float = 1.0) -> WifDraft:
         over = interlacement_from_draft(th, liftplan=matrix(lifts, picks, shafts, "liftplan", "shaft"), rising=rising)
         treadles = 0
     else:
-        treadles = count("weaving", "treadles", list(tieup) + [x for vals, _ in treadling.values() for x in vals], "treadle")
+        used = list(tieup) + [x for vals, _ in treadling.values() for x in vals]
+        treadles = count("weaving", "treadles", used, "treadle")
         tu = matrix(tieup, treadles, shafts, "tieup", "shaft")
         tr = matrix(treadling, picks, treadles, "treadling", "treadle")
         over = interlacement_from_draft(th, tieup=tu, treadling=tr, rising=rising)
@@ -359,11 +360,3 @@ def parse(path, scale: float = 1.0) -> WifDraft:
                     weft_colors=weft_colors, shafts=shafts, treadles=treadles,
                     notes={"lift": "liftplan" if use_lift else "tieup+treadling"})
 
-
-def read(path, scale: float = 1.0, crimp: float = 1.0, max_threads: int | None = None,
-         repeat=None, samples_per_cell: int = 6, **_ignored):
-    """Draft -> CurveSet of woven warp and weft yarns (see ``pipeline.generators.from_wif``)."""
-    from ..generators import from_wif
-
-    return from_wif(path, scale=scale, crimp=crimp, max_threads=max_threads, repeat=repeat,
-                    samples_per_cell=samples_per_cell)

@@ -29,7 +29,6 @@ import importlib
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-
 from ..errors import LoomError, did_you_mean, unknown  # noqa: F401 (did_you_mean: for the render runner)
 from ..limits import MAX_PATH_DEPTH
 
@@ -303,8 +302,8 @@ def render_schema() -> dict:
                              "description": "adaptive sampling: relative standard error of a pixel's mean aimed at"},
             "tiling": {"type": "string", "minLength": 1,
                        "description": "a tiling configuration (.toml, relative to the scene) for methods on a tiling "
-                                      "(prt, btf, fiberpath_shell; fiberpath then renders the tiling too): render builds "
-                                      "the tiling and its precomputes from it when no option gives them "
+                                      "(prt, btf, fiberpath_shell; fiberpath then renders the tiling too): render "
+                                      "builds the tiling and its precomputes from it when no option gives them "
                                       "(--set tiling=CONFIG.toml does the same)"},
             "cache": {"type": "number", "minimum": 0,
                       "description": "volpath --source procedural: the render-time fibre cache budget in MiB "

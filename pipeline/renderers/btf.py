@@ -20,10 +20,10 @@ texture over the mesh's texture coordinates. Two geometries (``--source``, else 
   The surface the ``tile`` stage shell-maps its exemplars onto (its vertices, normals and flat (u, v)):
   the pattern coordinate is the flat position divided by the texture's period, so one texture repeat
   covers one exemplar period, exactly where the tiling puts the exemplar; the surface is moved out along
-  its normals to the top of the exemplar's fibres (the texture's ``top``: where acquisition sampled it). The texture must have been
-  fitted from this tiling: its recorded source hash must be the tiling's content hash (a texture of
-  another tiling's repeat is refused, naming both). A tiling of several exemplars (a damask) is
-  rendered with the one exemplar the texture was fitted to, everywhere.
+  its normals to the top of the exemplar's fibres (the texture's ``top``: where acquisition sampled it).
+  The texture must have been fitted from this tiling: its recorded source hash must be the tiling's
+  content hash (a texture of another tiling's repeat is refused, naming both). A tiling of several
+  exemplars (a damask) is rendered with the one exemplar the texture was fitted to, everywhere.
 
 Settings (``--set KEY=VALUE``):
 
@@ -119,7 +119,8 @@ def load_btf(path) -> BtfTexture:
         levels_rows.append((n, r))
         n += r * r
     fit_bytes = sum(int(np.prod(have[k].shape)) * np.dtype(have[k].dtype).itemsize for k in names)
-    return BtfTexture(np.ascontiguousarray(np.concatenate(texels)), np.ascontiguousarray(np.concatenate(tables), np.float32),
+    return BtfTexture(np.ascontiguousarray(np.concatenate(texels)),
+                      np.ascontiguousarray(np.concatenate(tables), np.float32),
                       np.asarray(levels_rows, np.int64), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), tuple(float(v) for v in s["period"]),
                       fit_bytes, s)

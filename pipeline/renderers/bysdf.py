@@ -34,8 +34,8 @@ BYSDF parameters of a yarn group: the defaults of ``stages.core.shading.bysdf.pa
 reference implementation's example values) with the body colours set from the yarn's colour (the
 reflection side's ``body_r`` is the reduced albedo a' whose diffuse reflectance R_d(a') is the colour,
 ``reduced_albedo``; the transmission side's ``body_t`` the colour itself) and the attenuations per yarn
-radius (``SCALE_DEFAULTS``), then the scene's ``[yarns.<group>.bysdf]`` table, then ``--set params=``. The scene's ``render.max_depth``
-applies; this method's own default is 4, as the reference implementation's.
+radius (``SCALE_DEFAULTS``), then the scene's ``[yarns.<group>.bysdf]`` table, then ``--set params=``. The
+scene's ``render.max_depth`` applies; this method's own default is 4, as the reference implementation's.
 """
 from __future__ import annotations
 
@@ -65,7 +65,8 @@ def _number(extra, key, default, kind=float, lo=None, hi=None):
     try:
         x = kind(v)
     except ValueError:
-        raise LoomError(None, f"--set {key}", f"expected {'an integer' if kind is int else 'a number'}, got {v!r}") from None
+        raise LoomError(None, f"--set {key}",
+                        f"expected {'an integer' if kind is int else 'a number'}, got {v!r}") from None
     if not math.isfinite(x) or (lo is not None and x < lo) or (hi is not None and x > hi):
         raise LoomError(None, f"--set {key}", f"{x:g} is outside [{lo:g}, {hi:g}]")
     return x
@@ -188,8 +189,7 @@ def film_setup(scene, options: dict):
     """The ``FilmSetup`` of a bysdf render (``pipeline.renderers.film``)."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.procedural.tables import yarn_key
-    from stages.render.bysdf import MODES as KMODES
-    from stages.render.bysdf import BysdfIntegrator
+    from stages.render.bysdf import MODES as KMODES, BysdfIntegrator
     from stages.render.film import VARIANCE_CHANNELS
     from stages.render.yarn_tubes import tube_pieces
 
@@ -201,7 +201,8 @@ def film_setup(scene, options: dict):
     extra = options.get("extra") or {}
     path = options.get("yarns") or extra.get("yarns")
     if not path:
-        raise LoomError(None, "--set yarns", "bysdf needs the yarn curves: pass --set yarns=PATH.zarr (loomlight ingest)")
+        raise LoomError(None, "--set yarns",
+                        "bysdf needs the yarn curves: pass --set yarns=PATH.zarr (loomlight ingest)")
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
     mode = extra.get("mode", "near")
@@ -234,7 +235,8 @@ def film_setup(scene, options: dict):
     # pieces skipped around the one a ray leaves: a window wider than 4 envelope radii of yarn
     seg_len = np.linalg.norm(np.diff(pieces.points, axis=0), axis=1)
     seg_len = seg_len[seg_len > 0]
-    window = int(min(1 << 20, math.ceil(4.0 * radius.max() / max(float(seg_len.min()), 1e-30)) + 1)) if len(seg_len) else 1
+    window = (int(min(1 << 20, math.ceil(4.0 * radius.max() / max(float(seg_len.min()), 1e-30)) + 1))
+              if len(seg_len) else 1)
     params = bysdf_rows(scene, groups, ytypes.albedo, options)
     ground, has_ground = ground_array(scene.render)
     W, H = options["width"], options["height"]
@@ -252,7 +254,8 @@ def film_setup(scene, options: dict):
                          + sum(a.nbytes for a in cv if isinstance(a, np.ndarray)))
     stats = {"setup_s": time.perf_counter() - t0, "tables_s": tables_s, "yarns": len(groups),
              "yarn_types": len(types), "tube_pieces": len(bvh.seg_a), "geometry_bytes": geometry_bytes,
-             "mode": mode, "k": K, "ply_search": search, "max_depth": max_depth, "envelope_radius": [t.radius for t in types]}
+             "mode": mode, "k": K, "ply_search": search, "max_depth": max_depth,
+             "envelope_radius": [t.radius for t in types]}
     return FilmSetup(f"bysdf ({mode})", integ, cam, VARIANCE_CHANNELS, stats)
 
 

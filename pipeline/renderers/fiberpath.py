@@ -15,7 +15,8 @@ Each yarn's colour (the scene's ``yarns.<group>.color``, else a WIF draft's thre
 preset's albedo, as realized into the fibers artifact) tints
 its BCSDF: both lobe colours, C_R inside the Fresnel-like weight and C_TT, are multiplied by it
 (``--set tint=yarn``, the default), so a dyed yarn keeps its colour under a preset fitted to white
-fibres; ``--set tint=none`` renders the presets as fitted. A preset given as a ``.toml`` path in the scene is resolved against the scene file.
+fibres; ``--set tint=none`` renders the presets as fitted. A preset given as a ``.toml`` path in the scene
+is resolved against the scene file.
 On a tiling, each yarn's albedo is the scene's ``yarns.<group>.color``, else its WIF exemplar's draft
 colour, else the yarn preset's (``tiling_fibers``; docs/wif-colours.md).
 Lights, camera and the optional ground plane come from the scene.
@@ -26,8 +27,9 @@ import time
 
 import numpy as np
 
+from ..bcsdf_presets import load_bcsdf_preset
 from ..errors import LoomError, unknown
-from ..render_setup import GROUP_NAMES, Fibers, ground_array, load_bcsdf_preset, load_fibers, pack_lights
+from ..render_setup import GROUP_NAMES, Fibers, ground_array, load_fibers, pack_lights
 from ..scene import camera_array
 from . import RenderResult
 
@@ -223,7 +225,8 @@ def film_setup(scene, options: dict):
     path = options.get("fibers") or (options.get("extra") or {}).get("tiling")
     source = options.get("source")
     if source not in (None, "realized"):
-        raise LoomError(None, "--source", f"fiberpath renders realized fibres only (got {source!r}); pass --fibers PATH.zarr")
+        raise LoomError(None, "--source",
+                        f"fiberpath renders realized fibres only (got {source!r}); pass --fibers PATH.zarr")
     if not path:
         raise LoomError(None, "--fibers", "fiberpath needs the realized fibres: pass --fibers PATH.zarr")
     if scene.camera is None:

@@ -8,8 +8,9 @@ materials must be the ones the scene gives the tiling now (the yarn BCSDFs and c
 scattering shades with them and multiple scattering was precomputed with them.
 
 Settings (``--set``): ``terms`` all (default) | single | multi | hits (fibre hits left black: the eye rays
-walk to their first fibre hit and no more, which times the walk every prt sample pays); ``sg`` mc (default: SG lights sampled into
-directions, the paper's CPU version) | analytic (§5.2.2's Gamma, sum of SGs and erf-smoothed SSDF);
+walk to their first fibre hit and no more, which times the walk every prt sample pays); ``sg`` mc (default:
+SG lights sampled into directions, the paper's CPU version) | analytic (§5.2.2's Gamma, sum of SGs and
+erf-smoothed SSDF);
 ``sigma_glo`` the standard deviation of the Gaussian that filters the global visibility of multiple
 scattering, in flat-fabric units (default: the tiling's exemplar thickness, the depth over which light
 spreads sideways inside the cloth); ``sh_window`` none (default) | hann | lanczos: multiplies band l of
@@ -139,7 +140,7 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
         k = e["exemplar"]
         g = f"exemplar_{k}/"
         rows = ii[g + "seg_row"].astype(np.int64)
-        f0, f1 = int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])
+        f0, _f1 = int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])
         a = int(art["ex_offsets"][f0]) - f0
         seg_row[a:a + len(rows)] = np.where(rows >= 0, rows + off2, -1)
         tr = ii[g + "transfer"]
@@ -188,7 +189,8 @@ def film_setup(scene, options: dict):
     window = extra.get("sh_window", "none")
     w = sh_window(window, arr["order"])
     if window != "none":
-        arr["transfer"] = np.ascontiguousarray(arr["transfer"] * (w[:, None] * w[None, :]).astype(arr["transfer"].dtype))
+        arr["transfer"] = np.ascontiguousarray(arr["transfer"]
+                                               * (w[:, None] * w[None, :]).astype(arr["transfer"].dtype))
     sigma = _float_setting(extra, "sigma_glo", float(art.summary.get("exemplar_thickness", art.summary["thickness"])))
     ground, has_ground = ground_array(scene.render)
     cam = camera_array(scene.camera, options["width"], options["height"])

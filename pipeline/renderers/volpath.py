@@ -179,7 +179,8 @@ def realized_source(fibers_path, cell, optics):
     fart = _artifact(fibers_path, "fibers", "--fibers")
     yarns = recorded_input(fart, "yarns", "yarns")
     if yarns is None:
-        raise LoomError(fibers_path, "inputs", "the fibers artifact does not name the yarns artifact it was realized from")
+        raise LoomError(fibers_path, "inputs",
+                        "the fibers artifact does not name the yarns artifact it was realized from")
     _, tparams, ytype, _ = yarn_types_of(yarns, fart.params.get("preset"), fart.params.get("radius"))
     Y = len(ytype)
     if int(fibers.fiber_yarn.max()) >= Y:
@@ -219,7 +220,8 @@ def grid_source(grid_path, cell, optics):
     vox = (hi - lo) / np.array(den.shape[::-1])
     res = _majorant_res(lo, hi, cell or 4.0 * float(vox.max()))
     mu = majorants_from_voxels(den, lo, hi, res)
-    return med, make_majorant_grid(lo, hi, res, mu), {"voxels": list(den.shape[::-1])}, optics.rows(np.zeros((0, 3)), None)[0]
+    return (med, make_majorant_grid(lo, hi, res, mu), {"voxels": list(den.shape[::-1])},
+            optics.rows(np.zeros((0, 3)), None)[0])
 
 
 class FibreOptics:

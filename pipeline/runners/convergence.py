@@ -215,7 +215,7 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
     render batches until the noise targets hold, and publish it (module doc, 1)."""
     from stages.evaluate.convergence import LUMA, batch_mean, reference_noise
 
-    from ..artifacts import ArtifactWriter, FILE
+    from ..artifacts import FILE, ArtifactWriter
     from ..images import read_exr, write_render
     from ..progress import progress
 
@@ -272,7 +272,8 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
         "kind": "render", "method": m.method, "width": int(W), "height": int(H), "spp": int(s.spp * k),
         "seed": REFERENCE_SEED, "wall_time_s": time.perf_counter() - t_start, "render_time_s": render_s,
         "paths": int(paths), "rays": 0, "paths_per_s": paths / max(render_s, 1e-12), "rays_per_s": 0.0,
-        "peak_memory_bytes": peak_rss_bytes(), "threads": _threads(), "mean_rgb": [float(v) for v in rgb.reshape(-1, 3).mean(0)],
+        "peak_memory_bytes": peak_rss_bytes(), "threads": _threads(),
+        "mean_rgb": [float(v) for v in rgb.reshape(-1, 3).mean(0)],
         "exr": str(ref_path.with_suffix(".exr")), "png": str(ref_path.with_suffix(".png")),
         "reference": {"key": key, "comparison": str(cmp.path), "method_name": m.name, "batches": int(k),
                       "spp_per_batch": int(s.spp), "render_time_s": render_s,
@@ -367,12 +368,14 @@ def method_summary(cmp: Comparison, m: CompareMethod, runs: list[Run], ref: Refe
     bright = brightness_part(load_image(last.exr), ref, last.error.e2)
     return {
         "name": m.name, "method": m.method, "budget": m.budget,
-        "floor": fit.floor, "floor_se": fit.floor_se, "b2": fit.b2, "noise_constant": fit.c, "noise_constant_se": fit.c_se,
+        "floor": fit.floor, "floor_se": fit.floor_se, "b2": fit.b2, "noise_constant": fit.c,
+        "noise_constant_se": fit.c_se,
         "levels": levels, "seconds_per_spp": last.time_s / max(float(last.spp or 1), 1e-12),
         "floor_terms": {"brightness_e2": bright, "structure_e2": max(last.error.e2 - bright, 0.0),
                         "mean_ratio": list(last.error.mean_ratio)},
         "runs": [{"budget": r.budget, "exr": str(r.exr), "time_s": r.time_s, "spp": r.spp, "error": r.error.error,
-                  "e2": r.error.e2, "e2_se": r.error.e2_se, "raw_e2": r.error.raw_e2, "ref_noise_e2": r.error.ref_noise_e2,
+                  "e2": r.error.e2, "e2_se": r.error.e2_se, "raw_e2": r.error.raw_e2,
+                  "ref_noise_e2": r.error.ref_noise_e2,
                   "mean_ratio": list(r.error.mean_ratio), "ssim": r.ssim} for r in runs],
     }
 
@@ -486,7 +489,8 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
                 "pixel_error_p95": rs["pixel_error_p95"], "mean_error": rs["mean_error"],
                 "targets_met": rs["targets_met"], "reused": ref.reused, "method": cmp.reference,
                 "code": rs["key"]["code"]}
-    echo(f"reference {cmp.name}: {ref.batches} batches, {ref_info['spp']} spp, {ref_info['render_time_s']:.1f} s render "
+    echo(f"reference {cmp.name}: {ref.batches} batches, {ref_info['spp']} spp, "
+         f"{ref_info['render_time_s']:.1f} s render "
          f"({'reused' if ref.reused else 'rendered'}); pixel error p50 {ref_info['pixel_error_p50']:.4f}, "
          f"mean {ref_info['mean_error']:.5f}" + ("" if ref_info["targets_met"] else " (targets NOT met)"))
     if reference_only:
@@ -501,8 +505,8 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
             runs[m.name] = []
             for j, b in enumerate(m.budgets):
                 exr = out / "renders" / m.name / f"{run_label(m, b)}.exr"
-                rendered += render_once(cmp, m, out, exr, derived_scene(cmp, m, b, 1 + j), f"method {m.name}, budget {b}",
-                                        do_render, force, where)
+                rendered += render_once(cmp, m, out, exr, derived_scene(cmp, m, b, 1 + j),
+                                        f"method {m.name}, budget {b}", do_render, force, where)
                 runs[m.name].append(measure(Run(m.name, b, exr), ref))
                 advance()
     # 3. the fit, times to each level, speed-ups
@@ -567,6 +571,7 @@ def check_targets(cmp: Comparison, methods: dict) -> list[dict]:
                                              else "no error level reached by both it and the reference method")})
             continue
         v, bound = got["value"], got["bound"]
-        out.append({"method": m.name, "target": m.target_speedup, "met": bool(bound in ("", ">=") and v >= m.target_speedup),
+        out.append({"method": m.name, "target": m.target_speedup,
+                    "met": bool(bound in ("", ">=") and v >= m.target_speedup),
                     "value": v, "bound": bound, "level": got["level"], "why": ""})
     return out

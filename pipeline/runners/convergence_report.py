@@ -210,7 +210,8 @@ def write_outputs(cmp, out: Path, ref, ref_info: dict, methods: dict, strip: dic
     rep.paragraph(f"{cmp.reference} from {ref_info['batches']} independent batches, {ref_info['spp']} spp in all, "
                   f"{rp.fmt_seconds(ref_info['render_time_s'])} of rendering "
                   f"({'reused' if ref_info['reused'] else 'rendered in this run'}; code version {ref_info['code']}). "
-                  f"Relative standard error over cloth pixels: median {ref_info['pixel_error_p50']:.3f}, 95th percentile "
+                  f"Relative standard error over cloth pixels: median {ref_info['pixel_error_p50']:.3f}, "
+                  "95th percentile "
                   f"{ref_info['pixel_error_p95']:.3f}; of the cloth's mean {ref_info['mean_error']:.4f}"
                   + ("" if ref_info["targets_met"] else " (**its targets were not met within max_batches**)") + ". "
                   "Every error below has the reference's own noise subtracted (E² − σ²_ref, with its uncertainty).")
@@ -246,7 +247,8 @@ def write_outputs(cmp, out: Path, ref, ref_info: dict, methods: dict, strip: dic
     if targets:
         rep.heading("Targets")
         rep.table(["method", "target speed-up", "measured", "at error", "met"],
-                  [[t["method"], f"≥ {t['target']:g}×", _speedup_text({"value": t["value"], "bound": t.get("bound", "")}),
+                  [[t["method"], f"≥ {t['target']:g}×",
+                    _speedup_text({"value": t["value"], "bound": t.get("bound", "")}),
                     f"{t['level']:.0%}" if t["level"] is not None else "-",
                     "yes" if t["met"] else f"no{': ' + t['why'] if t.get('why') else ''}"] for t in targets])
     rep.heading("Equal time")
@@ -256,8 +258,8 @@ def write_outputs(cmp, out: Path, ref, ref_info: dict, methods: dict, strip: dic
               [[n, d["spp"], rp.fmt_seconds(d["asked_time_s"]), rp.fmt_seconds(d["time_s"]), f"{d['error']:.3f}",
                 f"{d['ssim']:.3f}"] for n, d in strip.items()])
     rep.heading("Runs")
-    rep.table(["method", "budget", "spp traced", "render time", "E", "E² ± se", "reference noise σ²", "mean ratio R, G, B",
-               "SSIM"],
+    rep.table(["method", "budget", "spp traced", "render time", "E", "E² ± se", "reference noise σ²",
+               "mean ratio R, G, B", "SSIM"],
               [[name, r["budget"], rp.fmt_num(r["spp"]), rp.fmt_seconds(r["time_s"]), f"{r['error']:.4f}",
                 f"{r['e2']:.3g} ± {r['e2_se']:.2g}", f"{r['ref_noise_e2']:.2g}",
                 ", ".join(f"{v:.3f}" for v in r["mean_ratio"]), f"{r['ssim']:.3f}"]

@@ -282,7 +282,8 @@ def evaluate_images(ref_path: str | Path, test_paths: Sequence[str | Path], out_
 
     # the evaluation artifact, last: it marks a finished evaluation
     with writer as w:
-        w.write("mean_intensity", np.array([ref_entry["mean_intensity"]] + [metrics[l]["mean_intensity"] for l in labels]),
+        w.write("mean_intensity",
+                np.array([ref_entry["mean_intensity"]] + [metrics[l]["mean_intensity"] for l in labels]),
                 dimension_names=("image", "channel"))
         w.write("relative_error", np.stack(rel_maps), dimension_names=("test", "y", "x"))
         w.summary.update(kind="evaluation", mode="images", reference=ref_entry, tests=metrics,
@@ -311,7 +312,8 @@ def image_row(label: str, e: dict, reference: bool = False) -> list[str]:
     res = e.get("resolution")
     spp = e.get("spp")
     traced = e.get("samples_per_pixel")
-    spp_s = "-" if spp is None else (f"{spp} ({traced:.1f})" if traced is not None and abs(traced - spp) > 1e-9 else f"{spp}")
+    spp_s = "-" if spp is None else (f"{spp} ({traced:.1f})" if traced is not None and abs(traced - spp) > 1e-9
+                                     else f"{spp}")
     mean = ", ".join(f"{v:.4f}" for v in e.get("mean_intensity", []))
     ratio = "1 (reference)" if reference else ", ".join(f"{v:.3f}" for v in e.get("brightness_ratio", []))
     if e.get("brightness_mismatch"):
@@ -343,7 +345,8 @@ def _images_report(rep, ref_path: Path, ref_entry: dict, metrics: dict, labels: 
               f"metrics (RMSE, relMSE, SSIM, ΔE) measure noise more than the methods. Render more samples."
               for l in labels if metrics[l].get("noise_dominated")]
     for f in flags or ["Every test agrees with the reference in mean intensity within "
-                       f"{BRIGHTNESS_TOLERANCE:.0%} per channel, and no test's per-pixel metrics are dominated by noise "
+                       f"{BRIGHTNESS_TOLERANCE:.0%} per channel, and no test's per-pixel metrics are dominated "
+                       "by noise "
                        "(where variance channels tell)."]:
         rep.paragraph(f)
     rep.paragraph(SSIM_NOTE)

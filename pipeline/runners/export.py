@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 VERTEX_BYTES = 360   # a vertex: read, as float64 rows, as Python floats and text lines (Mitsuba) or curves (BCC)
 FIBER_BYTES = 200    # a fibre: its curve array or end index, Python objects
 
@@ -19,11 +18,11 @@ def run_export(fibers, out: Path, budget=None) -> dict:
     import numpy as np
 
     from ..artifacts import Artifact, clean_stale, temp_sibling
-    from ..memory import Estimate, budget as memory_budget
     from ..curveset import CurveSet
     from ..errors import LoomError
     from ..io import bcc
     from ..io.mitsuba_txt import write_mitsuba_txt
+    from ..memory import Estimate, budget as memory_budget
 
     out = Path(out)
     art = Artifact(fibers, kind="fibers")

@@ -109,7 +109,8 @@ class FitState:
 
     def table(self) -> dict:
         """The ``[default]`` table of the parameters file, as written (6 significant digits)."""
-        six = lambda v: float(f"{v:.6g}")   # noqa: E731
+        def six(v):
+            return float(f"{v:.6g}")
         return {**{k: six(v) for k, v in split(self.x, self.y).items()},
                 "body_r_scale": [six(v) for v in self.scale_r], "body_t_scale": [six(v) for v in self.scale_t]}
 
@@ -209,7 +210,8 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     del fp
     ref_s = time.perf_counter() - t0
     p0 = B.pack_bysdf()
-    st = FitState((1.0 - p0[B.SPEC_WEIGHT]) * p0[B.REFLECT_WEIGHT], (1.0 - p0[B.SPEC_WEIGHT]) * (1.0 - p0[B.REFLECT_WEIGHT]))
+    st = FitState((1.0 - p0[B.SPEC_WEIGHT]) * p0[B.REFLECT_WEIGHT],
+                  (1.0 - p0[B.SPEC_WEIGHT]) * (1.0 - p0[B.REFLECT_WEIGHT]))
     base = {"width": width, "height": height, "spp": spp, "seed": scene.seed, "max_depth": max_depth,
             "threads": threads}
     by = _Renderer(scene, "bysdf", base, {"yarns": str(yarns)})   # tubes, BVH and tables built once
@@ -252,7 +254,8 @@ def write_params(path, st: FitState, residual=None):
                      + " ".join(f"{100 * e:+.1f}" for e in r["rel_error_rgb"])
                      + f" % against fiberpath, SSIM {r['ssim']:.3f}" + ("" if r["fitted"] else " (not fitted)"))
     t = st.table()
-    vec = lambda v: "[" + ", ".join(f"{c:.6g}" for c in v) + "]"   # noqa: E731
+    def vec(v):
+        return "[" + ", ".join(f"{c:.6g}" for c in v) + "]"
     lines += ["[default]", f"spec_weight = {t['spec_weight']:.6g}", f"reflect_weight = {t['reflect_weight']:.6g}",
               f"body_r_scale = {vec(t['body_r_scale'])}", f"body_t_scale = {vec(t['body_t_scale'])}", ""]
     tmp = Path(str(path) + ".tmp")

@@ -17,8 +17,8 @@ import numpy as np
 from ..artifacts import FILE, ArtifactWriter
 from ..curveset import GROUPS, CurveSet
 from ..errors import LoomError
-from ..memory import Estimate, budget as memory_budget
 from ..limits import MAX_COORD, MAX_LENGTH, coordinate_problem, first_bad_row
+from ..memory import Estimate, budget as memory_budget
 from ..progress import info, warn
 from ..scene import load_scene
 from ..thread_colors import FROM_DRAFT, FROM_SCENE, FROM_TYPE, describe as describe_colors
@@ -161,7 +161,8 @@ def curves_estimate(points: float, frame_samples: int, what: str = "loomlight in
 
 def woven_points(ends: float, picks: float, samples: int) -> float:
     """Control points of a woven fabric (stages.core.curves.woven: (K - 1) s + 2 (s // 2) + 1 per yarn)."""
-    per = lambda k: (k - 1) * samples + 2 * (samples // 2) + 1  # noqa: E731
+    def per(k):
+        return (k - 1) * samples + 2 * (samples // 2) + 1
     return ends * per(picks) + picks * per(ends)
 
 
@@ -233,7 +234,8 @@ def input_estimate(path: Path, frame_samples: int) -> Estimate:
     else:
         s = int(gen.get("samples_per_cell", 6))
         pts = woven_points(ends, picks, s)
-    est = Estimate("loomlight ingest").add("generated curves", 64 * pts, f"{gen.get('kind')} {int(ends):,} x {int(picks):,}")
+    est = Estimate("loomlight ingest").add("generated curves", 64 * pts,
+                                           f"{gen.get('kind')} {int(ends):,} x {int(picks):,}")
     return est.extend(curves_estimate(pts, frame_samples))
 
 
@@ -301,7 +303,8 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
             rad[c] = float(np.mean(cs.point_radius[c]))
         elif types[yarn_type[c]].get("radius"):
             rad[c] = types[yarn_type[c]]["radius"]
-        elif scene is not None and scene.fabric["source"] == "generator" and scene.fabric["generator"].get("yarn_radius"):
+        elif (scene is not None and scene.fabric["source"] == "generator"
+              and scene.fabric["generator"].get("yarn_radius")):
             rad[c] = scene.fabric["generator"]["yarn_radius"]
         elif fallback:
             rad[c] = fallback

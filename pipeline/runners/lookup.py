@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-
 POINT_BYTES = 200    # a point: read, as float64, its six results and their copies in the .npz
 
 
@@ -29,11 +28,12 @@ def run_lookup(tables, points: Path, out: Path, budget=None) -> dict:
     refuse before reading the points when they, their results and the loaded tables would exceed it."""
     import numpy as np
 
+    from stages.core.yarn.lookup import lookup_points
+
     from ..artifacts import Artifact, clean_stale, temp_sibling
     from ..errors import LoomError
     from ..memory import budget as memory_budget
     from .tables import accel_estimate, load_tables
-    from stages.core.yarn.lookup import lookup_points
 
     points, out = Path(points), Path(out)
     if not points.exists():

@@ -61,11 +61,14 @@ class SvfParams:
 
     def check(self) -> None:
         if not self.resolution >= MIN_RESOLUTION:
-            raise LoomError(None, "--resolution", f"visibility resolution must be at least {MIN_RESOLUTION}, got {self.resolution}")
+            raise LoomError(None, "--resolution",
+                            f"visibility resolution must be at least {MIN_RESOLUTION}, got {self.resolution}")
         if self.resolution % 8:
-            raise LoomError(None, "--resolution", f"visibility resolution must be a multiple of 8 (bit-packed rows), got {self.resolution}")
+            raise LoomError(None, "--resolution",
+                            f"visibility resolution must be a multiple of 8 (bit-packed rows), got {self.resolution}")
         if self.resolution > 1024:
-            raise LoomError(None, "--resolution", f"visibility resolution above 1024 is not supported, got {self.resolution}")
+            raise LoomError(None, "--resolution",
+                            f"visibility resolution above 1024 is not supported, got {self.resolution}")
         if not self.components >= 1:
             raise LoomError(None, "--components", f"must be at least 1, got {self.components}")
         if not self.sg_count >= 1:
@@ -113,7 +116,8 @@ class IirtfParams:
         check_depth(self.max_depth, "--max-depth")
         check_depth(self.rr_depth, "--rr-depth")
         if self.light_sampling not in ("uniform", "mis"):
-            raise LoomError(None, "--light-sampling", f"unknown estimator {self.light_sampling!r} (known: mis, uniform)")
+            raise LoomError(None, "--light-sampling",
+                            f"unknown estimator {self.light_sampling!r} (known: mis, uniform)")
 
 
 def parse_material_options(settings, bcsdf=None) -> dict:
@@ -371,7 +375,8 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
         w.summary.update(kind="svf", tiling=str(tiling), exemplars=info, resolution=[R, R], components=p.components,
                          sg_count=p.sg_count, sg_sharpness=p.sg_sharpness, seed=p.seed,
                          segments=int(sum(i["segments"] for i in info)), rays=int(rays),
-                         rays_per_s=rays / max(vis_s, 1e-9), segments_per_s=sum(i["segments"] for i in info) / max(total_s, 1e-9),
+                         rays_per_s=rays / max(vis_s, 1e-9),
+                         segments_per_s=sum(i["segments"] for i in info) / max(total_s, 1e-9),
                          time_s=total_s, compile_s=compile_s)
     return {"skipped": False, "exemplars": len(ks), "segments": int(sum(i["segments"] for i in info)),
             "rays_per_s": rays / max(vis_s, 1e-9), "pca_rel_error": max(i["pca_rel_error"] for i in info)}
@@ -392,9 +397,8 @@ def materials_scene(tiling: Path, art, scene):
 def tiling_materials(scene, art, material: dict):
     """(mat_of_fiber (F,) int32, materials (M, MAT_SIZE)): the fibre materials the fiberpath renderer gives
     the tiling under ``scene`` (``pipeline.renderers.fiberpath``), so the precompute and the reference agree."""
-    from ..render_setup import load_bcsdf_preset  # noqa: F401  (presets resolve through it)
+    from ..bcsdf_presets import check_bcsdf_names
     from ..renderers.fiberpath import fiber_materials, tiling_fibers
-    from .render import check_bcsdf_names
 
     options = {"material": "bcsdf", "bcsdf": material.get("bcsdf"), "extra": {"tint": material.get("tint", "yarn")}}
     check_bcsdf_names(scene, options)
@@ -477,8 +481,8 @@ def cell_counts(art, targets, ks) -> dict[int, int]:
         if cells is None or cells > MAX_CELLS:
             raise LoomError(None, "--cell-factor", f"cells of {float(targets[k]):.3g} (the factor times exemplar {k}'s "
                             f"mean free path) make {'too many' if cells is None else f'{cells:.3g}'} cells, over "
-                            f"{MAX_CELLS:.0e} ({fmt_bytes(CELL_BYTES * MAX_CELLS)} of cell grids); nothing was started: "
-                            "raise --cell-factor")
+                            f"{MAX_CELLS:.0e} ({fmt_bytes(CELL_BYTES * MAX_CELLS)} of cell grids); "
+                            "nothing was started: raise --cell-factor")
         out[k] = cells
     return out
 
@@ -575,7 +579,8 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
             base = int(cells.ex_cells[k])
             cell_row = np.full(C[k], -1, np.int32)
             cell_row[rows[k]] = np.arange(N[k], dtype=np.int32)
-            seg0, seg1 = (int(art["ex_offsets"][f]) - f for f in (int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])))
+            seg0, seg1 = (int(art["ex_offsets"][f]) - f
+                          for f in (int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])))
             w.write(g + "cell_row", cell_row)
             w.write(g + "row_cell", rows[k].astype(np.int32))
             w.write(g + "row_segments", np.diff(cells.cell_offsets[base:base + C[k] + 1])[rows[k]].astype(np.int32))
@@ -591,7 +596,8 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
         cs_s = time.perf_counter() - t0
         w.write("bcsdf_sh", tabs)
         pdict = {k: v for k, v in asdict(p).items() if k != "material"}
-        tasks = [ChunkTask(_iirtf_task, (str(tiling.resolve()), tiling_hash, str(store), k, a, b, targets, mof, mats, pdict))
+        tasks = [ChunkTask(_iirtf_task,
+                           (str(tiling.resolve()), tiling_hash, str(store), k, a, b, targets, mof, mats, pdict))
                  for k in ks for a, b in _chunks(N[k], p.chunk)]
         res = run_tasks(tasks, "iirtf: transfer matrices")
         task_s = sum(r["s"] for r in res)
@@ -603,14 +609,16 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
             info.append({"exemplar": k, "name": art.summary["exemplar_names"][k], "mean_free_path": mfp[k][0],
                          "mean_free_path_se": mfp[k][1], "free_paths": int(mfp[k][2]), "cells": C[k],
                          "stored_cells": N[k], "empty_cells": C[k] - N[k],
-                         "cell_grid": [int(v) for v in cells.ex_grid[k]], "cell_size": [float(v) for v in cells.cell_size[k]],
+                         "cell_grid": [int(v) for v in cells.ex_grid[k]],
+                         "cell_size": [float(v) for v in cells.cell_size[k]],
                          "cells_per_block": [int(v) for v in cells.block_cells[k]],
                          "segments": S_k, "slab": [float(v) for v in slabs[k]], "bytes": int(nbytes)})
         total_s = time.perf_counter() - t_start
         w.summary.update(kind="iirtf", tiling=str(tiling), scene=str(scene_path), exemplars=info, order=p.order,
                          sh_coefficients=J, cell_factor=p.cell_factor, paths=p.paths, materials=int(len(mats)),
-                         theta_samples=p.theta_samples, seed=p.seed, light_sampling=p.light_sampling, cells=int(sum(C.values())),
-                         stored_cells=int(sum(N.values())), paths_total=int(paths), paths_per_s=paths / max(task_s, 1e-9),
+                         theta_samples=p.theta_samples, seed=p.seed, light_sampling=p.light_sampling,
+                         cells=int(sum(C.values())), stored_cells=int(sum(N.values())), paths_total=int(paths),
+                         paths_per_s=paths / max(task_s, 1e-9),
                          cells_per_s=sum(N.values()) / max(task_s, 1e-9), mean_free_path_s=mfp_s,
                          bcsdf_sh_s=cs_s, time_s=total_s, compile_s=compile_s)
     return {"skipped": False, "exemplars": len(ks), "cells": int(sum(C.values())),

@@ -34,7 +34,6 @@ from ..errors import LoomError
 from ..limits import MAX_PATH_DEPTH, largest_option
 from ..memory import Estimate, budget as memory_budget
 
-
 DIRECTIONS = ("cell", "grid")
 # Bounds of the count options. Memory (``btf_estimate``: the samples grow with texels x views x lights) and
 # time (``btf_work``, ``pipeline.limits.WorkEstimate``, at rates no thread reaches: every sample casts a camera
@@ -181,9 +180,9 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
     from stages.precompute.iirtf import exemplar_slabs
     from stages.precompute.periodic import periodic_scene
 
+    from .. import compilation
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session
-    from .. import compilation
     from ..progress import status
     from .precompute import materials_scene, periodic_scenes, pick_exemplars, tiling_input, tiling_materials
 

@@ -138,7 +138,8 @@ def load_study(path: str | Path) -> Study:
     st = raw.get("study")
     if not isinstance(st, dict):
         raise LoomError(path, "study", "missing [study] table")
-    rel = lambda p: (path.parent / p).resolve() if not Path(p).is_absolute() else Path(p)
+    def rel(p):
+        return (path.parent / p).resolve() if not Path(p).is_absolute() else Path(p)
     tiling = rel(_need(path, st, "tiling", str, "study"))
     if not tiling.is_file():
         raise LoomError(path, "study.tiling", f"tiling configuration {tiling} not found")
@@ -278,7 +279,8 @@ def compare(test: np.ndarray, ref: np.ndarray) -> dict:
     e["reference_mean_intensity"] = mr.tolist()
     e["ratio"] = ratio.tolist()
     e["luminance_ratio"] = float(mt @ LUMINANCE / max(float(mr @ LUMINANCE), 1e-12))
-    e["mean_intensity_rel_error"] = float(np.sqrt(np.mean((mt - mr) ** 2)) / max(float(np.sqrt(np.mean(mr ** 2))), 1e-12))
+    e["mean_intensity_rel_error"] = float(np.sqrt(np.mean((mt - mr) ** 2))
+                                          / max(float(np.sqrt(np.mean(mr ** 2))), 1e-12))
     return e
 
 
@@ -430,7 +432,8 @@ def run_params(study_path: str | Path, out_dir: str | Path, force: bool = False)
         a = Artifact(ii, kind="iirtf")
         ex = a.summary["exemplars"][0]
         # speed-up at equal samples per pixel: time per sample of fiberpath over prt's
-        per = lambda x: x["time_s"] / x["spp"] if x.get("time_s") and x.get("spp") else None
+        def per(x):
+            return x["time_s"] / x["spp"] if x.get("time_s") and x.get("spp") else None
         e.update(extra, name=job.name, image=str(job.exr), time_s=st.get("time_s"), spp=st.get("spp"),
                  speedup=(per(ref_stats) / per(st)) if per(ref_stats) and per(st) else None,
                  iirtf=str(ii), sh_order=int(a.summary["order"]), mean_free_path=ex["mean_free_path"],
@@ -464,11 +467,13 @@ def run_params(study_path: str | Path, out_dir: str | Path, force: bool = False)
                   f"ℓ = {ex0['mean_free_path']:.5f}); scene {scene_path}; light: {lights}. Reference: fiberpath on the "
                   f"tiling's explicit fibres ({_render_text(study.reference)}); prt "
                   f"({_render_text(study.prt)}). SVF: {' '.join(study.svf_args) or 'defaults'}; IIRTF: "
-                  f"{' '.join(study.iirtf_args) or 'defaults'}. Ratios: the prt image's mean intensity over fiberpath's "
+                  f"{' '.join(study.iirtf_args) or 'defaults'}. Ratios: the prt image's mean intensity over "
+                  "fiberpath's "
                   f"(R, G, B); relative error: RMS over channels of the mean-intensity difference over the RMS of "
                   f"fiberpath's means; vs finest: the mean intensity over the smallest cells' (the highest order's) "
                   f"prt image, which shares its random numbers. Times: render kernels, compilation apart.")
-    rep.paragraph(f"fiberpath: {ref_stats.get('time_s', float('nan')):.2f} s at {ref_stats.get('spp')} spp, mean intensity "
+    rep.paragraph(f"fiberpath: {ref_stats.get('time_s', float('nan')):.2f} s at {ref_stats.get('spp')} spp, "
+                  "mean intensity "
                   + ", ".join(f"{v:.4f}" for v in ref_img.reshape(-1, 3).mean(axis=0)))
     heads = ["variant", "cells (grid)", "cell side (cm)", "stored cells", "IIRTF bytes", "R, G, B ratio",
              "rel. error of mean", "image RMSE", "SSIM", "R, G, B vs finest", "time", "speed-up at equal spp"]
@@ -519,10 +524,12 @@ def attribute(fp: np.ndarray, fp1: np.ndarray, prt: np.ndarray, ps: np.ndarray, 
     RMSEs are over configurations and channels; relative ones divide by the RMS of fp."""
     fp, fp1, prt, ps, pm = (np.asarray(a, float) for a in (fp, fp1, prt, ps, pm))
     rms = float(np.sqrt(np.mean(fp ** 2)))
-    r = lambda d: float(np.sqrt(np.mean(d ** 2)))
+    def r(d):
+        return float(np.sqrt(np.mean(d ** 2)))
     d_all, d_s = prt - fp, ps - fp1
     d_m = (prt - ps) - (fp - fp1)
-    rel = lambda x: x / rms if rms > 0 else None
+    def rel(x):
+        return x / rms if rms > 0 else None
     return {"rmse": r(d_all), "rmse_single": r(d_s), "rmse_multi": r(d_m),
             "relative_rmse": rel(r(d_all)), "relative_rmse_single": rel(r(d_s)), "relative_rmse_multi": rel(r(d_m)),
             "mean_error": float(np.mean(d_all)), "mean_error_single": float(np.mean(d_s)),
@@ -600,14 +607,16 @@ def run_terms(sweep_path: str | Path, sweep_dir: str | Path, out_dir: str | Path
                      "multi_ratio": ((p - ps) / np.maximum(fp - fp1, 1e-12)).tolist(),
                      "multi_share": float(np.sum(fp - fp1) / max(float(np.sum(fp)), 1e-300)),
                      "both_terms": (ps + pm - p).tolist(),
-                     "time_s": {reference: tf.get(reference), prt: tf.get(prt), f"{reference}_single": t.get(f"{reference}_single"),
+                     "time_s": {reference: tf.get(reference), prt: tf.get(prt),
+                                f"{reference}_single": t.get(f"{reference}_single"),
                                 f"{prt}_single": t.get(f"{prt}_single"), f"{prt}_multi": t.get(f"{prt}_multi"),
                                 f"{prt}_hits": t.get(f"{prt}_hits")}})
     if not rows:
         raise LoomError(sweep_dir, "sweep.json", "no configuration has all five renders")
     summary = attribute(*(np.array(arrs[k]) for k in ("fp", "fp1", "prt", "ps", "pm")))
     summary["configurations"] = len(rows)
-    mean_t = lambda k: float(np.mean([r["time_s"][k] for r in rows if r["time_s"].get(k) is not None] or [np.nan]))
+    def mean_t(k):
+        return float(np.mean([r["time_s"][k] for r in rows if r["time_s"].get(k) is not None] or [np.nan]))
     summary["time_per_image_s"] = tpi = {k: mean_t(k) for k in rows[0]["time_s"]}
     summary["speedup"] = full["methods"].get(prt, {}).get("speedup") or float("nan")   # the sweep's own
     summary["speedup_bound"] = tpi[reference] / tpi[f"{prt}_hits"]   # nan where a time is missing
@@ -625,7 +634,8 @@ def run_terms(sweep_path: str | Path, sweep_dir: str | Path, out_dir: str | Path
                 f"{r['multi_share']:.0%}"] for r in rows])
     s = summary
     rep.table(["", "all", "single", "multi"],
-              [["RMSE of mean intensity", rp.fmt_num(s["rmse"]), rp.fmt_num(s["rmse_single"]), rp.fmt_num(s["rmse_multi"])],
+              [["RMSE of mean intensity", rp.fmt_num(s["rmse"]), rp.fmt_num(s["rmse_single"]),
+                rp.fmt_num(s["rmse_multi"])],
                ["relative (to RMS of the reference)", f"{s['relative_rmse']:.1%}", f"{s['relative_rmse_single']:.1%}",
                 f"{s['relative_rmse_multi']:.1%}"],
                ["mean signed error", rp.fmt_num(s["mean_error"]), rp.fmt_num(s["mean_error_single"]),

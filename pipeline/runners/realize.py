@@ -34,7 +34,8 @@ DEFAULT_SPACING = 0.002       # cm between realized vertices along the yarn (z_s
 FIBER_VERTEX_BYTES = 16       # float32 xyz + float32 radius
 FIBER_BYTES = 8 + 4 + 2 + 1 + 4  # offset, yarn, ply, kind, index
 PLAN_BYTES = 47               # yarn_plan's columns per piece of capacity (ply, index, kind, a0, a1, hair z1/ze, nv)
-PIECE_BYTES = 2 * PLAN_BYTES + 4 + FIBER_BYTES  # the concatenated plan beside the per-yarn buffers, + the stored columns
+PIECE_BYTES = 2 * PLAN_BYTES + 4 + FIBER_BYTES  # the concatenated plan beside the per-yarn buffers,
+                                                # + the stored columns
 BLOCK_VERTICES = 1 << 19      # vertices realized (float64) and measured (chord_error) per block (estimates)
 VERTEX_CHUNK = 1 << 18        # vertices per stored chunk of points / point_radius, and per chunk task
 BLOCK_BYTES = BLOCK_VERTICES * (32 + 150)  # a block's float64 vertices and radii, chord_error's temporaries
@@ -94,13 +95,15 @@ def realization_estimate(prep, spacing: float) -> Estimate:
         if not len(L):
             continue
         P, N = float(tp[M.PLY_NUM]), float(tp[M.FIBER_NUM])
-        loops = tp[M.P_LOOP] * (L * tp[M.S_MIG] / tp[M.ALPHA] + 2) if tp[M.USE_FLYAWAYS] and tp[M.USE_MIGRATION] else 0 * L
+        loops = (tp[M.P_LOOP] * (L * tp[M.S_MIG] / tp[M.ALPHA] + 2) if tp[M.USE_FLYAWAYS] and tp[M.USE_MIGRATION]
+                 else 0 * L)
         fib_pieces = P * N * (1 + 2 * loops)
         verts += float(np.sum(P * N * L / spacing + fib_pieces))
         pieces += float(np.sum(fib_pieces))
         n = slot_hairs(tp, L)
         rm = tp[M.HAIR_RMAX] + tp[M.PLY_RADIUS]
-        rms = lambda mu, sig: float(np.hypot(tp[mu], tp[sig]))  # noqa: E731
+        def rms(mu, sig, tp=tp):
+            return float(np.hypot(tp[mu], tp[sig]))
         speed = (rms(M.ZE_MU, M.ZE_SIG) * (1 + rm * 2 * np.pi / tp[M.YARN_ALPHA]) + rms(M.RE_MU, M.RE_SIG)
                  + tp[M.HAIR_RMAX] * rms(M.PE_MU, M.PE_SIG))
         verts += float(np.sum(P * n * (speed / spacing + 2)))
@@ -164,7 +167,8 @@ def run_realize(yarns_path, out, preset=None, radius=None, seed=0, spacing=DEFAU
     hairs = np.add.reduceat(tab.hair_count, tab.yarn_ply_off[:-1]) if len(tab.yarn_type) else np.zeros(0)
     cap = sum(float(_plan_capacity(tab.tparams[t], cv.curve_length[c:c + 1], hairs[c])[0])
               for c, t in enumerate(tab.yarn_type))
-    exact = Estimate("loomlight realize").add("tables", sum(np.asarray(a).nbytes for a in tab) + sum(np.asarray(a).nbytes for a in cv))
+    exact = Estimate("loomlight realize").add("tables", sum(np.asarray(a).nbytes for a in tab)
+                                              + sum(np.asarray(a).nbytes for a in cv))
     _vertex_parts(exact, verts, nfib, cap).check(limit, yarns.path)
 
     yarn, ply, idx, kind, a0, a1, hz1, hze, nv = realize_plan(tab, cv.curve_length, spacing)

@@ -17,6 +17,7 @@ import os
 import time
 from pathlib import Path
 
+from ..bcsdf_presets import check_bcsdf_names
 from ..errors import LoomError
 from ..limits import check_depth
 from ..memory import Estimate, budget as memory_budget, peak_rss_bytes
@@ -227,28 +228,6 @@ def check_set_artifacts(options) -> None:
         raise LoomError(None, "--set tiling", f"names {tiling} while --fibers names {fibers}; give the tiling once")
 
 
-def check_bcsdf_names(scene, options) -> None:
-    """Every BCSDF preset the scene names (``yarns.<group>.bcsdf``, a ``.toml`` path resolved against the
-    scene) and ``--bcsdf`` exists and is valid, whether or not a yarn of the fabric uses it."""
-    from ..render_setup import read_bcsdf_preset
-
-    named = [(f"yarns.{g}.bcsdf", t["bcsdf"]) for g, t in sorted(scene.yarns.items()) if t.get("bcsdf")]
-    for place, name in named:
-        try:
-            read_bcsdf_preset(str(scene.resolve(name)) if name.endswith(".toml") else name)
-        except LoomError as e:
-            if e.file is not None:  # the preset file itself is broken: its own message names it
-                raise
-            raise LoomError(scene.path, place, e.message) from None
-    if options.get("bcsdf"):
-        try:
-            read_bcsdf_preset(options["bcsdf"])
-        except LoomError as e:
-            if e.file is not None:
-                raise
-            raise LoomError(None, "--bcsdf", e.message) from None
-
-
 def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
                fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None,
                exposure=0.0, settings=(), max_spp=None, budget=None, scheduler=None, workers=None,
@@ -265,8 +244,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import resolve_scheduler, session
     from ..images import write_render
-    from ..renderers import RenderResult
-    from ..renderers import method as registered
+    from ..renderers import RenderResult, method as registered
     from ..scene import load_scene
 
     for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (max_depth, "--max-depth"),

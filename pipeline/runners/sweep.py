@@ -41,7 +41,8 @@ def referenced_files(raw: dict) -> dict[str, str]:
     from ..artifacts import content_hash
 
     files = {}
-    paths = [raw.get("fabric", {}).get("path")] + [l.get("path") for l in raw.get("lights", []) if l.get("type") == "envmap"]
+    paths = [raw.get("fabric", {}).get("path")] + [l.get("path") for l in raw.get("lights", [])
+                                                   if l.get("type") == "envmap"]
     for p in paths:
         if p and Path(p).exists():
             files[p] = content_hash(p)
@@ -127,7 +128,7 @@ def _jobs(sweep: Sweep, out: Path) -> list[Job]:
     from .. import __version__
 
     jobs = []
-    for i, c in enumerate(sweep.configurations):
+    for _i, c in enumerate(sweep.configurations):
         for m in sweep.methods:
             raw = derived_scene(sweep, c, m)
             validate(raw, "scene", sweep.path, prefix=f"configuration {c.name!r}, method {m.name!r}: ")
@@ -135,10 +136,11 @@ def _jobs(sweep: Sweep, out: Path) -> list[Job]:
                     f"configuration {c.name}, method {m.name}\n" + dumps_toml(raw))
             args = expand_args(sweep, out, m.args)
             key = hashlib.sha256(key_text({"scene": text, "method": m.method, "args": args, "version": __version__,
-                                            "files": {**referenced_files(raw), **arg_hashes(args)}}).encode()).hexdigest()
+                                            "files": {**referenced_files(raw),
+                                                      **arg_hashes(args)}}).encode()).hexdigest()
             d = out / "renders" / c.name
-            jobs.append(Job(c, m, d / f"{m.name}.scene.toml", d / f"{m.name}.exr", d / f"{m.name}.stamp.json", key, text,
-                            args))
+            jobs.append(Job(c, m, d / f"{m.name}.scene.toml", d / f"{m.name}.exr", d / f"{m.name}.stamp.json", key,
+                            text, args))
     return jobs
 
 
@@ -207,15 +209,16 @@ def run_sweep(sweep_path: str | Path, out_dir: str | Path, force: bool = False, 
               "configurations": [c.name for c in configs]}
     from ..artifacts import ArtifactWriter
 
-    writer = ArtifactWriter(out / "evaluation.zarr", kind="evaluation", stage="evaluate", params=params, inputs=got.inputs,
-                            started=t_start)
+    writer = ArtifactWriter(out / "evaluation.zarr", kind="evaluation", stage="evaluate", params=params,
+                            inputs=got.inputs, started=t_start)
     md, ht = out / "report.md", out / "report.html"
     if not force and rendered == 0 and writer.up_to_date() and md.exists() and ht.exists():
         return SweepResult(out, C, methods, 0, reused, md, ht)
 
     doc = {"sweep": sweep.name, "scene": str(sweep.scene_path), "reference": sweep.reference,
            "configurations": [{"name": c.name, "description": c.label,
-                               "mean_intensity": {n: (means[ci, mi].tolist() if not np.isnan(means[ci, mi, 0]) else None)
+                               "mean_intensity": {n: (means[ci, mi].tolist() if not np.isnan(means[ci, mi, 0])
+                                                      else None)
                                                   for mi, n in enumerate(mnames)},
                                "time_s": {n: (float(times[ci, mi]) if not np.isnan(times[ci, mi]) else None)
                                           for mi, n in enumerate(mnames)}}

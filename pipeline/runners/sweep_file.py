@@ -47,8 +47,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
-from ..schemas import validate
 from ..scene import load_scene
+from ..schemas import validate
 from ..toml_file import read_toml
 
 
@@ -101,7 +101,8 @@ def _grid_configurations(path: Path, grid: dict) -> list[Configuration]:
         for i, axis in enumerate(axes):
             ax = _unit(axis)
             for lam in grid.get("sharpness", []):
-                out.append(Configuration(f"{prefix}a{i}_l{lam:g}", [{"type": "sg", "axis": ax, "sharpness": float(lam), "power": power}],
+                out.append(Configuration(f"{prefix}a{i}_l{lam:g}",
+                                         [{"type": "sg", "axis": ax, "sharpness": float(lam), "power": power}],
                                          cam, {}, f"SG axis {np.round(ax, 3).tolist()}, lambda {lam:g}"
                                          + (f", view {view['name']}" if view else "")))
             if grid.get("directional", False):

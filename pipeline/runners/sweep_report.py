@@ -80,7 +80,8 @@ def write_report(sweep: Sweep, out: Path, got: SweepImages, methods: dict) -> No
         if n not in methods:
             continue
         s = methods[n]
-        rows.append([n, s["configurations"], fmt_num(s["rmse_mean_intensity"]), fmt_num(s["relative_rmse_mean_intensity"]),
+        rows.append([n, s["configurations"], fmt_num(s["rmse_mean_intensity"]),
+                     fmt_num(s["relative_rmse_mean_intensity"]),
                      fmt_num(s["worst_brightness_ratio"]), f"{s['brightness_within_10pct']:.0%}",
                      fmt_num(s.get("mean_rmse")), fmt_num(s.get("mean_ssim")), fmt_num(s.get("mean_delta_e2000_mean"))])
     rep.table(["method", "configurations", "RMSE mean intensity", "relative", "worst ratio", "channels within 10 %",
@@ -106,7 +107,8 @@ def write_report(sweep: Sweep, out: Path, got: SweepImages, methods: dict) -> No
     others = [mi for mi in range(len(mnames)) if mi != ri]
     rep.table(["configuration", "lighting / view"] + [f"Y mean, {n}" for n in mnames]
               + [f"R, G, B ratio {mnames[mi]} / {sweep.reference}" for mi in others],
-              [[c.name, c.label] + [fmt_num(float(means[ci, mi] @ lum)) if ok[ci, mi] else "-" for mi in range(len(mnames))]
+              [[c.name, c.label] + [fmt_num(float(means[ci, mi] @ lum)) if ok[ci, mi] else "-"
+                                    for mi in range(len(mnames))]
                + [", ".join(f"{v:.3f}" for v in means[ci, mi] / np.maximum(means[ci, ri], 1e-12)) if ok[ci, mi] else "-"
                   for mi in others]
                for ci, c in enumerate(configs)])

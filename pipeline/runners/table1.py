@@ -6,8 +6,9 @@ realization against the procedural model from ``pipeline.memory_table.table1_row
 the i-th procedural and realized volpath renders for the i-th scene (``render_stats`` of the render
 artifact beside each image), with the image difference between the two (they render the same
 fibres); then, for the scenes after those, procedural renders alone (``unrealized``: fabrics too
-large to realize), with their wall time and their peak memory against the full realization. Writes ``table1.json``, ``report.md``/``.html`` and the ``evaluation`` artifact
-``evaluation.zarr``; unchanged inputs are not recomputed unless ``force``.
+large to realize), with their wall time and their peak memory against the full realization. Writes
+``table1.json``, ``report.md``/``.html`` and the ``evaluation`` artifact ``evaluation.zarr``; unchanged
+inputs are not recomputed unless ``force``.
 """
 from __future__ import annotations
 
@@ -95,7 +96,8 @@ def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], r
     if len(procedural) > len(scenes):
         raise LoomError(None, "--procedural", f"{len(procedural)} render pairs for {len(scenes)} scenes")
     if len(procedural) + len(unrealized) > len(scenes):
-        raise LoomError(None, "--unrealized", f"{len(procedural)} render pairs and {len(unrealized)} unrealized renders "
+        raise LoomError(None, "--unrealized",
+                        f"{len(procedural)} render pairs and {len(unrealized)} unrealized renders "
                         f"for {len(scenes)} scenes (the unrealized ones belong to the scenes after the pairs)")
     for p in [*scenes, *procedural, *realized, *unrealized]:
         if not p.exists():
@@ -161,7 +163,8 @@ def run_table1(scenes: Sequence[str | Path], procedural: Sequence[str | Path], r
     headers = [dict(TABLE1_COLUMNS)[k] for k in keys] + extra
     rep = rp.Report("Data size and render time (Luan, Zhao, Bala 2017 Table 1 form)")
     rep.paragraph("Data size of the fully realized fibre model (regular, hair and loop fibres) against the "
-                  "procedural model the renderer reads on the fly (Luan, Zhao, Bala 2017 Table 1), and the wall time of the "
+                  "procedural model the renderer reads on the fly (Luan, Zhao, Bala 2017 Table 1), and the wall time "
+                  "of the "
                   "volumetric path tracer on the procedural model against the same tracer on the fully realized "
                   "fibres. Luan, Zhao, Bala 2017 (§6) report that the two run at approximately the same speed.")
     rep.table(headers, [[_table1_cell(k, r.get(k)) for k in keys + extra] for r in rows])

@@ -74,9 +74,9 @@ def build(yarns_path, preset=None, radius=None, seed=0, nbins=DEFAULT_BINS, hair
           prepared: Prepared | None = None) -> BuiltTables:
     """(cv, tab, info, type dicts, yarns artifact) for a yarns artifact; derive: also the lookups'
     load-time structures (tables.derive_lookup_accel)."""
-    from stages.procedural.tables import build_tables
     from stages.core.yarn.accel import derive_lookup_accel
     from stages.core.yarn.model import extent_bound
+    from stages.procedural.tables import build_tables
 
     yarns, (dicts, tparams, ytype, albedo), _ = prepared or prepare(yarns_path, preset, radius)
     ext = np.array([extent_bound(tparams[t]) for t in ytype])
@@ -96,7 +96,8 @@ def slot_hairs(tp, length) -> np.ndarray:
     """Hairs per ply of yarns of these lengths (tables.hair_count's rule), as floats (no overflow)."""
     from stages.core.yarn import model as M
 
-    return np.round(tp[M.HAIR_DENSITY] * np.asarray(length, np.float64)) if tp[M.USE_FLYAWAYS] else np.zeros(len(length))
+    return (np.round(tp[M.HAIR_DENSITY] * np.asarray(length, np.float64)) if tp[M.USE_FLYAWAYS]
+            else np.zeros(len(length)))
 
 
 def _bin_fraction(tp, nbins: int) -> float:
@@ -197,7 +198,8 @@ def frame_sample_count(art: Artifact, step: np.ndarray) -> float:
     (``sample_counts``), from the artifact's curve arrays alone."""
     from stages.core.yarn.frame_samples import sample_counts
 
-    get = lambda name, dtype: np.ascontiguousarray(art[f"curves/{name}"], dtype)  # noqa: E731
+    def get(name, dtype):
+        return np.ascontiguousarray(art[f"curves/{name}"], dtype)
     counts = sample_counts(get("curve_offsets", np.int64), get("closed", np.bool_), get("seg_arclen", np.float64),
                            get("frame_offsets", np.int64), get("frame_s", np.float64),
                            get("curve_length", np.float64), np.ascontiguousarray(step, np.float64))
@@ -305,13 +307,14 @@ def _cv_field(name):
 
 def load_tables(path):
     """(Curves, Tables, Artifact) of a tables artifact (self-contained: curves from its copy)."""
-    from stages.core.yarn.tables import STORED_FIELDS, Tables, empty_accel
     from stages.core.yarn.accel import derive_lookup_accel
+    from stages.core.yarn.tables import STORED_FIELDS, Tables, empty_accel
 
     art = Artifact(path, kind="tables")
     missing = [f for f in STORED_FIELDS if f not in art]
     if missing:
-        raise LoomError(art.path, missing[0], "array missing from the tables artifact (rebuild it with loomlight tables)")
+        raise LoomError(art.path, missing[0],
+                        "array missing from the tables artifact (rebuild it with loomlight tables)")
     stored = {f: np.ascontiguousarray(art[f]) for f in STORED_FIELDS}
     tab = Tables(**stored, **dict(zip([f for f in Tables._fields if f not in stored],
                                       empty_accel(len(stored["yarn_type"])))))

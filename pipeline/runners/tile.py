@@ -73,7 +73,8 @@ def load_config(path) -> dict:
     cfg = read_toml(path, what="tiling configuration")
     check_names(cfg, path)
     validate(cfg, "tile-config", path)
-    res = lambda p: str(Path(p) if Path(p).is_absolute() else (path.parent / p).resolve())
+    def res(p):
+        return str(Path(p) if Path(p).is_absolute() else (path.parent / p).resolve())
     if "scene" in cfg:
         cfg["scene"] = res(cfg["scene"])
         if Path(cfg["scene"]).is_file():  # a missing scene: run_tile says "file not found" at key scene
@@ -153,7 +154,8 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
     K = len(exs_cfg)
     layout = tiling_layout(cfg, config)
     bcx, bcy = layout.block_cells
-    nbu, nbv = block_grid(cfg.get("tiling", {}).get("repeat", [2, 2]), (layout.sizes[0][0] // bcx, layout.sizes[0][1] // bcy))
+    nbu, nbv = block_grid(cfg.get("tiling", {}).get("repeat", [2, 2]),
+                          (layout.sizes[0][0] // bcx, layout.sizes[0][1] // bcy))
     tile_estimate(cfg, config, layout, nbu, nbv).check(budget or memory_budget(), config)
     bmap = block_map(cfg, config, K, nbu, nbv)
     sx, sy = layout.spacing
@@ -208,7 +210,8 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
         w.write("wrap_points", cat([e["wrap"]["points"] for e in exs]))
         w.write("wrap_radius", cat([e["wrap"]["radius"] for e in exs]))
         w.write("wrap_offsets", wrap_offsets)
-        w.write("wrap_fiber", cat([e["wrap"]["piece_fiber"] + ex_fibers[k] for k, e in enumerate(exs)]).astype(np.int64))
+        w.write("wrap_fiber",
+                cat([e["wrap"]["piece_fiber"] + ex_fibers[k] for k, e in enumerate(exs)]).astype(np.int64))
         w.write("wrap_seg0", cat([e["wrap"]["piece_seg0"] + seg_off[k] for k, e in enumerate(exs)]).astype(np.int64))
         w.write("wrap_exemplar_pieces", wrap_pieces_n)
         w.write("base_vertices", V)
@@ -230,7 +233,8 @@ def run_tile(config, out, force: bool = False, budget=None) -> dict:
             kind="tiling", exemplars=K, exemplar_names=[e["name"] for e in exs], blocks=int(nbu * nbv),
             block_grid=[int(nbu), int(nbv)], block_size=[bw, bh], tetrahedra=int(len(shell["tets"])),
             thickness=T, exemplar_thickness=T_ex, flat_size=list(flat_size), fibers=int(ex_fibers[-1]),
-            segments=int(seg_off[-1]), wrapped_segments=int(len(cat([e["wrap"]["points"] for e in exs])) - wrap_pieces_n[-1]),
+            segments=int(seg_off[-1]),
+            wrapped_segments=int(len(cat([e["wrap"]["points"] for e in exs])) - wrap_pieces_n[-1]),
             exemplar_sizes=[list(e["over"].shape) for e in exs], surface=s["kind"], scene=cfg.get("scene"),
             bounds=[X.min(0).tolist(), X.max(0).tolist()], exemplar_bounds=[lo.tolist(), hi.tolist()])
         if layout.kind == "knit":  # exemplar_sizes of a weft knit: 0 ends x courses picks (tile_exemplars doc)

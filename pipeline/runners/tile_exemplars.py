@@ -30,7 +30,8 @@ import numpy as np
 from ..errors import LoomError
 
 DEFAULT_SPACING = 0.1
-DEFAULT_COURSE_RATIO = 0.8   # course spacing / wale spacing: the ingest knit generator's default (pipeline/generators.py)
+DEFAULT_COURSE_RATIO = 0.8   # course spacing / wale spacing: the ingest knit generator's default
+                             # (pipeline/generators.py)
 WOVEN_KEYS = ("n", "m", "step", "invert", "path", "ends", "picks")
 KNIT_KEYS = ("wales", "courses")
 
@@ -148,7 +149,8 @@ def fabric_kind(cfg, file) -> str:
     for k, (ex, kk) in enumerate(zip(exs, kinds)):
         if kk != kind:
             raise LoomError(file, f"exemplars[{k}].pattern", f"{ex['pattern']!r} is a {kk} pattern but exemplars[0] "
-                            f"({exs[0]['pattern']!r}) is a {kind} pattern: a tiling's exemplars are all woven or all knitted "
+                            f"({exs[0]['pattern']!r}) is a {kind} pattern: a tiling's exemplars are all woven or all "
+                            "knitted "
                             f"(its blocks share one cell size); make two tilings")
         wrong = WOVEN_KEYS if kk == "knit" else KNIT_KEYS
         for key in wrong:

@@ -16,7 +16,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-
 VOXEL_BYTES = 32           # density, roughness (float32), direction, albedo (3 x float32)
 # --supersample: each voxel averages supersample^3 procedural lookups; their least time
 # (``pipeline.limits.WorkEstimate``) at a rate no thread reaches (a lookup finds the yarns near a point,
@@ -62,8 +61,8 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
 
     from ..artifacts import Artifact, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session, worker_cache
-    from ..memory import budget as memory_budget
     from ..errors import LoomError
+    from ..memory import budget as memory_budget
     from ..renderers.volpath import procedural_source
 
     res = [int(r) for r in res]

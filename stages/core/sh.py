@@ -182,7 +182,7 @@ def gauss_legendre(n):
     for i in range((n + 1) // 2):
         z = math.cos(math.pi * (i + 0.75) / (n + 0.5))
         dp = 1.0
-        for it in range(100):
+        for _it in range(100):
             p1 = 1.0
             p = z
             for k in range(2, n + 1):

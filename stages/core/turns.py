@@ -1,9 +1,10 @@
 """Sine and cosine of a fraction of a turn: ``sincos_turn(u)`` = (sin 2 pi u, cos 2 pi u).
 
 Every sampler that turns a uniform number into an azimuth (cosine-weighted hemispheres, the constant
-sky, spherical-Gaussian lobes, the envmap's pixel) wants sin and cos of 2 pi u for u in [0, 1). libm's ``sincos`` takes a
-general argument and reduces it modulo pi / 2 in extended precision; it was 4-5 % of a Lambertian
-fiberpath render in ``perf`` (a call per sampled direction, never inlined, never vectorised).
+sky, spherical-Gaussian lobes, the envmap's pixel) wants sin and cos of 2 pi u for u in [0, 1).
+libm's ``sincos`` takes a general argument and reduces it modulo pi / 2 in extended precision; it
+was 4-5 % of a Lambertian fiberpath render in ``perf`` (a call per sampled direction, never inlined,
+never vectorised).
 
 Here the reduction is exact and the rest is inline arithmetic:
 

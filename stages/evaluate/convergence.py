@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-CLOTH_ALPHA = 0.5           # a pixel is cloth where the reference's alpha (fraction of camera rays that hit) exceeds this
+CLOTH_ALPHA = 0.5           # a pixel is cloth where the reference's alpha (fraction of camera rays that hit)
+                            # exceeds this
 DENOMINATOR_FLOOR = 0.1     # d_i >= this x the cloth's mean luminance: near-black pixels do not dominate (2)
 FIT_REL_FLOOR = 0.05        # the fit's uncertainty of a point is at least this fraction of its E^2
 LUMA = np.array([0.2126, 0.7152, 0.0722])

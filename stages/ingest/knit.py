@@ -7,8 +7,17 @@ samples_per_stitch=16, tube=False) -> (curves (courses, N, 3), closed (courses,)
 """
 from __future__ import annotations
 
-from stages.core.curves.knit import (DEPTH_FACTOR, LEAN, LOOP_HALF_HEIGHT, PATTERNS, PLATEAU, SINKER_CLEARANCE,
-                                     default_radius, knit_curves, stitch_types)
+from stages.core.curves.knit import (
+                                     DEPTH_FACTOR,
+                                     LEAN,
+                                     LOOP_HALF_HEIGHT,
+                                     PATTERNS,
+                                     PLATEAU,
+                                     SINKER_CLEARANCE,
+                                     default_radius,
+                                     knit_curves,
+                                     stitch_types,
+)
 
 __all__ = ["DEPTH_FACTOR", "LEAN", "LOOP_HALF_HEIGHT", "PATTERNS", "PLATEAU", "SINKER_CLEARANCE", "default_radius",
            "knit_curves", "stitch_types"]

@@ -17,8 +17,16 @@ import math
 import numpy as np
 from numba import njit
 
-from stages.core.curves.spline import (Curves, arclen_coeffs, cross3, normalize3, curve_point_at, segment_coeffs, segment_deriv)
 from stages.core.curves.frames import double_reflection
+from stages.core.curves.spline import (
+    Curves,
+    arclen_coeffs,
+    cross3,
+    curve_point_at,
+    normalize3,
+    segment_coeffs,
+    segment_deriv,
+)
 
 
 @njit(cache=True)
@@ -272,7 +280,8 @@ def curves_from_arrays(points, offsets, closed, radius, processed):
         processed["frame_normal"], processed["frame_twist"], np.ascontiguousarray(radius, np.float64),
         processed["delta"], processed["grid_lo"], processed["grid_cell"],
         np.ascontiguousarray(processed["grid_dims"], np.int64), processed["grid_cell_start"],
-        np.ascontiguousarray(processed["grid_items"], np.int32), np.ascontiguousarray(processed["grid_pad"], np.float64),
+        np.ascontiguousarray(processed["grid_items"], np.int32),
+        np.ascontiguousarray(processed["grid_pad"], np.float64),
     )
 
 

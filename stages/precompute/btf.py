@@ -61,7 +61,8 @@ from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic
 
 DIMS_PER_VERTEX = 4      # lobe, two for the direction, Russian roulette
 FIRST_DIMS = 2           # the point's jitter (then, for cell averages, the view's and every light's cell jitter)
-JOB_CHUNKS_PER_THREAD = 64  # (texel, view) jobs cost from a few rays (nothing hit) to spp full paths: small runs balance threads
+JOB_CHUNKS_PER_THREAD = 64  # (texel, view) jobs cost from a few rays (nothing hit) to spp full paths: small runs
+                            # balance threads
 
 
 @njit(cache=True)

@@ -652,7 +652,8 @@ def _fit_texel(smp, alpha, frame, view_dirs, light_dirs, K, threshold, max_round
             _table_update(X[c], K, rs[c], views, lp, vp, lz, Tv[c], fbuf)
             _to_radiance(X[c], K, scale[c], rho_out, lobes_out, c)
             converged = False
-        e = _channel_error(X[c], K, rs[c], wv, Tv[c], views, lp, vp, lz, False, dummy_J, dummy_g, dummy_b, dummy_e, nexp)
+        e = _channel_error(X[c], K, rs[c], wv, Tv[c], views, lp, vp, lz, False, dummy_J, dummy_g, dummy_b, dummy_e,
+                           nexp)
         if not math.isfinite(e):
             e = energy[c]
         rmse_out[c] = scale[c] * math.sqrt(max(e, 0.0) / (L * wsum))
@@ -688,7 +689,8 @@ def fit_btf(samples, alpha, view_dirs, light_dirs, frames, lobes=2, threshold=0.
     if alpha.shape != (T, V):
         raise ValueError(f"alpha must be (T, V) = {(T, V)}, got {alpha.shape}")
     if view_dirs.shape != (V, 3) or light_dirs.shape != (L, 3):
-        raise ValueError(f"view_dirs must be ({V}, 3) and light_dirs ({L}, 3), got {view_dirs.shape}, {light_dirs.shape}")
+        raise ValueError(f"view_dirs must be ({V}, 3) and light_dirs ({L}, 3), "
+                         f"got {view_dirs.shape}, {light_dirs.shape}")
     if frames.shape != (T, 2, 3):
         raise ValueError(f"frames must be (T, 2, 3) = {(T, 2, 3)}, got {frames.shape}")
     if int(lobes) not in (1, 2):

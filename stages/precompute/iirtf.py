@@ -99,16 +99,15 @@ independent, may run in other processes, and concatenate to the whole)
     iirtf_reconstruct(a, w0, w1) -> (N, 3) float64
     transfer_projection(...)  the one-path estimator (njit), for kernels that need it
 """
-from collections import namedtuple
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
 
 from stages.core.rng import uniform
 from stages.core.sh import sh_eval
-from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_prepare,
-                                          material_sample)
+from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_scene, periodic_vertex
 

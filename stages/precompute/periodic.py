@@ -46,9 +46,8 @@ procedural fibres overlap (half a ply's cross-section is fibre, placed, not pack
   came out darker still (11.5 / 10.9 / 5.9 % -> 15.0 / 12.2 / 8.3 % in multiple scattering alone,
   measured with the pass-through rule).
 """
-from collections import namedtuple
-
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit

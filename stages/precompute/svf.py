@@ -176,7 +176,8 @@ def _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
     (``stages.precompute.periodic``: rays from a midpoint)."""
     a = seg_a[s]
     r = seg_r[s]
-    if point_segment_dist2(ox, oy, oz, P[a, 0], P[a, 1], P[a, 2], P[a + 1, 0], P[a + 1, 1], P[a + 1, 2]) < INSIDE * r * r:
+    if point_segment_dist2(ox, oy, oz, P[a, 0], P[a, 1], P[a, 2],
+                           P[a + 1, 0], P[a + 1, 1], P[a + 1, 2]) < INSIDE * r * r:
         return False
     t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[a, 0], P[a, 1], P[a, 2],
                           P[a + 1, 0], P[a + 1, 1], P[a + 1, 2], seg_r[s], tmin)

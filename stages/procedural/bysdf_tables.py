@@ -40,11 +40,23 @@ from numba import njit
 
 from stages.core.rng import hash_u64
 from stages.core.yarn.implicit_plies import ply_envelope_radius, ply_half_axes
-from stages.core.yarn.implicit_tables import FIBRE_FIELDS, FIBRE_NORMAL_ANGLE, FIBRE_PHASE, FIBRE_SHADOW, \
-    ImplicitTables
-from stages.core.yarn.model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, S_MIG,
-                                    TWO_PI, USE_FLYAWAYS, USE_MIGRATION, fiber_twist, fiber_unit_radius,
-                                    sample_regular_fibers)
+from stages.core.yarn.implicit_tables import FIBRE_FIELDS, FIBRE_NORMAL_ANGLE, FIBRE_PHASE, FIBRE_SHADOW, ImplicitTables
+from stages.core.yarn.model import (
+    ALPHA,
+    E_LONG,
+    E_SHORT,
+    FIBER_NUM,
+    FIBER_RADIUS,
+    PLY_NUM,
+    PLY_RADIUS,
+    S_MIG,
+    TWO_PI,
+    USE_FLYAWAYS,
+    USE_MIGRATION,
+    fiber_twist,
+    fiber_unit_radius,
+    sample_regular_fibers,
+)
 
 TABLE_STREAM = 0x7AB1E   # second hash key of a table's own fibre sample (no migration)
 NUDGE = 1e-9             # a hit moves this far (in fibre / ply radii) back along its line before shadow rays start

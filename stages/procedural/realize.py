@@ -23,8 +23,23 @@ from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
 from stages.core.threads import chunk_kernel, for_chunks
-
-from stages.core.yarn.model import (FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, S_MIG, ALPHA, USE_MIGRATION, TWO_PI, YARN_ALPHA, cycle_of, hair_params, hair_point, loop_unit_radius, migration_phase, regular_xy)
+from stages.core.yarn.model import (
+    ALPHA,
+    FIBER_NUM,
+    FIBER_RADIUS,
+    PLY_NUM,
+    PLY_RADIUS,
+    S_MIG,
+    TWO_PI,
+    USE_MIGRATION,
+    YARN_ALPHA,
+    cycle_of,
+    hair_params,
+    hair_point,
+    loop_unit_radius,
+    migration_phase,
+    regular_xy,
+)
 
 
 @njit(cache=True)
@@ -262,7 +277,8 @@ def realize_plan(tab, curve_length, spacing):
     """The pieces of all yarns (flat arrays, no geometry): yarn, ply, index, kind, a0, a1, hair z1/ze,
     vertex counts."""
     parts = [yarn_plan(tab, c, float(curve_length[c]), spacing) for c in range(len(tab.yarn_type))]
-    yarn = np.concatenate([np.full(len(p[0]), c, np.int32) for c, p in enumerate(parts)]) if parts else np.zeros(0, np.int32)
+    yarn = np.concatenate([np.full(len(p[0]), c, np.int32)
+                           for c, p in enumerate(parts)]) if parts else np.zeros(0, np.int32)
     cols = [np.concatenate([p[i] for p in parts]) for i in range(8)]
     return (yarn, *cols)
 

@@ -20,8 +20,8 @@ ReferenceLookup = namedtuple("ReferenceLookup", ["inside", "yarn", "kind", "dir_
                                                  "kind_tie"])
 ReferenceLookup.__doc__ = """query_one's answer at p (module doc); surface_gap 1e300 outside the grid."""
 ReferenceLookups = namedtuple("ReferenceLookups", ["inside", "yarn", "kind", "direction", "surface_gap", "kind_tie"])
-ReferenceLookups.__doc__ = """query_realized's answers: inside, yarn (int32), kind (int8), direction (N, 3), surface_gap,
-kind_tie."""
+ReferenceLookups.__doc__ = """query_realized's answers: inside, yarn (int32), kind (int8), direction (N, 3),
+surface_gap, kind_tie."""
 
 
 def build_segment_grid(points, offsets, radius, pad, target_per_cell=8.0):
@@ -38,7 +38,8 @@ def build_segment_grid(points, offsets, radius, pad, target_per_cell=8.0):
     hi = bhi.max(axis=0)
     ext = np.maximum(hi - lo, 1e-9)
     seglen = np.linalg.norm(b - a, axis=1)
-    cell = max(float(np.median(seglen) + 2 * g) * 2.0, float((np.prod(ext) * target_per_cell / max(len(sid), 1)) ** (1 / 3)))
+    cell = max(float(np.median(seglen) + 2 * g) * 2.0,
+               float((np.prod(ext) * target_per_cell / max(len(sid), 1)) ** (1 / 3)))
     dims = np.maximum(1, np.ceil(ext / cell).astype(np.int64))
     g0 = np.clip(((blo - lo) / cell).astype(np.int64), 0, dims - 1)
     g1 = np.clip(((bhi - lo) / cell).astype(np.int64), 0, dims - 1)

@@ -18,8 +18,9 @@ the bin: a lookup tests the loops of its z-bin whose fibre is in its azimuth bin
 
 Hairs (§4.4.2), per yarn and ply: hybrid mode stores (z1, ze) and the shape (r0, r1, theta1,
 pe) of every hair and cuts z at the ends min(z1, z2) - m_z, max(z1, z2) + m_z of every hair; each
-z-bin lists (ascending hair index) the hairs active across the whole bin. The realization-free mode stores nothing per hair
-(hair_free.active_hairs). Both come from the same quad-tree, so they hold the same hairs.
+z-bin lists (ascending hair index) the hairs active across the whole bin. The realization-free mode
+stores nothing per hair (hair_free.active_hairs). Both come from the same quad-tree, so they hold
+the same hairs.
 
 The layout (``Tables``, stored and derived fields) is ``stages.core.yarn.tables``; the derived
 fields are filled at load by ``stages.core.yarn.accel.derive_lookup_accel``.
@@ -32,10 +33,30 @@ from numba import njit
 from stages.core.curves.frames import curve_frame_at
 from stages.core.rng import hash_u64
 from stages.core.yarn import hair_free
-from stages.core.yarn.model import (ALPHA, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, HAIR_DENSITY, P_LOOP, PLY_NUM,
-                                    S_MIG, USE_FLYAWAYS, USE_MIGRATION, ZE_MU, ZE_SIG, RHO_MAX, RHO_MIN, cycle_of,
-                                    extent_bound, hair_params, loop_unit_radius, reach_factor, sample_regular_fibers,
-                                    transverse_speed_bound)
+from stages.core.yarn.model import (
+    ALPHA,
+    E_LONG,
+    E_SHORT,
+    FIBER_NUM,
+    FIBER_RADIUS,
+    HAIR_DENSITY,
+    P_LOOP,
+    PLY_NUM,
+    RHO_MAX,
+    RHO_MIN,
+    S_MIG,
+    USE_FLYAWAYS,
+    USE_MIGRATION,
+    ZE_MU,
+    ZE_SIG,
+    cycle_of,
+    extent_bound,
+    hair_params,
+    loop_unit_radius,
+    reach_factor,
+    sample_regular_fibers,
+    transverse_speed_bound,
+)
 from stages.core.yarn.tables import DERIVED_FIELDS, PAD_FRACTION, Tables, empty_accel, hair_node_seed_nb
 
 # A yarn whose curvature x fibre extent reaches FOLD_CAP has its axial stretch bound g_min capped at
@@ -310,7 +331,8 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
             hstarts.append(st[1:] + hitem_base)
             hitems.append(it)
             hitem_base += len(it)
-    cat = lambda xs, dt: np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(0), dtype=dt)
+    def cat(xs, dt):
+        return np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(0), dtype=dt)
     shape = np.ascontiguousarray(np.concatenate(hshape), np.float64)
     stored = dict(
         tparams=np.ascontiguousarray(tparams, np.float64), type_K=type_K, type_mz=type_mz, type_fib_off=type_fib_off,
@@ -326,8 +348,8 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         hb_zoff=hzoff, hb_z=cat(bps, np.float64), hb_start=cat(hstarts, np.int64), hb_items=cat(hitems, np.int32),
         hair_mode=np.array([hair_mode], np.int64), yarn_length=np.ascontiguousarray(cv.curve_length[:Y], np.float64),
         max_extent=np.array([ext.max() if Y else 0.0]), fib_mask=cat([f[7] for f in fib], np.uint64),
-        lp_off=lp_off, lp_fib=cat(lfib, np.int32), lp_U=cat(lU, np.float64), lp_cyc=cat(lcyc, np.int32), lz_off=lz_off, lz_h=lz_h,
-        lz_start=cat(lstarts, np.int64), lz_items=cat(litems, np.int32),
+        lp_off=lp_off, lp_fib=cat(lfib, np.int32), lp_U=cat(lU, np.float64), lp_cyc=cat(lcyc, np.int32),
+        lz_off=lz_off, lz_h=lz_h, lz_start=cat(lstarts, np.int64), lz_items=cat(litems, np.int32),
         type_pad=type_pad, yarn_kappa=np.ascontiguousarray(kap, np.float64))
     tab = Tables(**stored, **dict(zip(DERIVED_FIELDS, empty_accel(Y))))
     info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap}

@@ -182,7 +182,8 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
     wlk = stack_vector3()
     rays = 0
     for k in range(lights.shape[0]):
-        lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base + EVENT_DIMS + 2 * k),
+        lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
+                                                  uniform(seed, key, base + EVENT_DIMS + 2 * k),
                                                   uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
         if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
             continue
@@ -310,7 +311,9 @@ def trace_path(it, o, d, seed, key):
             tp[0] *= w0
             tp[1] *= w1
             tp[2] *= w2
-            o[0] = sx; o[1] = sy; o[2] = sz
+            o[0] = sx
+            o[1] = sy
+            o[2] = sz
             for k in range(3):
                 d[k] = wow[k]
             ign_y = -1
@@ -375,7 +378,9 @@ def trace_path(it, o, d, seed, key):
                 ex, ey, ez = point_from_yarn(fr, oy)
                 path_len -= t_hit  # the path length is measured to the next hit from the origin
                 path_len += math.sqrt((ex - o[0]) ** 2 + (ey - o[1]) ** 2 + (ez - o[2]) ** 2)
-                o[0] = ex; o[1] = ey; o[2] = ez
+                o[0] = ex
+                o[1] = ey
+                o[2] = ez
                 ign_y = c
                 ign_s = h.prim
                 continue
@@ -398,7 +403,8 @@ def trace_path(it, o, d, seed, key):
                 rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, side_w, prow, True, wi, m,
                                    slot_t, slot_n, slot_s, no_exit, no_exit, no_exit, 1.0, 1.0, 1.0)
                 wv, w0, w1, w2, pf = B.reflect_sample(prow, slot_t[pick], slot_n[pick], wi, slot_s[pick],
-                                                      uniform(seed, key, base + D_LOBE), uniform(seed, key, base + D_DIR1),
+                                                      uniform(seed, key, base + D_LOBE),
+                                                      uniform(seed, key, base + D_DIR1),
                                                       uniform(seed, key, base + D_DIR2))
                 if pf <= 0.0:
                     break
@@ -415,12 +421,15 @@ def trace_path(it, o, d, seed, key):
                 tp[1] *= w1 * side_w
                 tp[2] *= w2 * side_w
                 dir_from_yarn(fr, wv, wow)
-                o[0] = sx; o[1] = sy; o[2] = sz
+                o[0] = sx
+                o[1] = sy
+                o[2] = sz
             else:
                 side_w = 1.0 / (1.0 - pr)
                 x = slot_x[pick]
                 din, w_in, p_in = B.enter_sample(prow, slot_t[pick], slot_n[pick], wi,
-                                                 uniform(seed, key, base + D_ENTER1), uniform(seed, key, base + D_ENTER2))
+                                                 uniform(seed, key, base + D_ENTER1),
+                                                 uniform(seed, key, base + D_ENTER2))
                 if p_in <= 0.0 or w_in <= 0.0:
                     break
                 _, u_hi = cylinder_span(x, din, R)
@@ -452,7 +461,9 @@ def trace_path(it, o, d, seed, key):
                 tp[1] *= w1
                 tp[2] *= w2
                 dir_from_yarn(fr, wv, wow)
-                o[0] = sx; o[1] = sy; o[2] = sz
+                o[0] = sx
+                o[1] = sy
+                o[2] = sz
             for q in range(3):
                 d[q] = wow[q]
             ign_y = c

@@ -2,10 +2,10 @@
 
 Geometry: a surface scene (``stages.core.geometry.surface``): realized fibres as chains of capsules
 traced by Embree 4 (``EmbreeFibers``, the renderer's default) or in loomlight's SAH BVH (``FiberBVH``),
-or tiled exemplars under a shell map (``ShellScene``); the same estimator runs on all three. Optional ground plane (``stages.render.ground``). Materials: packed rows
-(``stages.core.shading.material``: the BCSDF of Khungurn et al. 2015 or a Lambertian surface), one
-per fibre through ``mat_of_fiber``, and a Lambertian row for the ground. Lights: ``stages.render.lights``
-(all distant).
+or tiled exemplars under a shell map (``ShellScene``); the same estimator runs on all three. Optional
+ground plane (``stages.render.ground``). Materials: packed rows (``stages.core.shading.material``: the
+BCSDF of Khungurn et al. 2015 or a Lambertian surface), one per fibre through ``mat_of_fiber``, and a
+Lambertian row for the ground. Lights: ``stages.render.lights`` (all distant).
 
 ``FiberpathIntegrator`` fields: ``scene`` (EmbreeFibers | FiberBVH | ShellScene), ``mat_of_fiber`` (F,) int32 row of
 each fibre, ``mats`` (NM, MAT_SIZE), ``ground_mat`` (MAT_SIZE,) the ground's Lambertian row,
@@ -52,8 +52,13 @@ from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit, surface_occluded
 from stages.core.rng import uniform
-from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_is_curve, material_prepare,
-                                          material_sample)
+from stages.core.shading.material import (
+    CTX_SIZE,
+    material_eval_pdf,
+    material_is_curve,
+    material_prepare,
+    material_sample,
+)
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import light_eval, light_pdf, light_sample_into
@@ -130,8 +135,12 @@ def _trace(it, o, d, seed, key):
         # the vertex: its material, shading frame and where continuation rays start
         if not on_ground:
             mat = it.mats[it.mat_of_fiber[h.fiber]]
-            t_tan[0] = h.tx; t_tan[1] = h.ty; t_tan[2] = h.tz
-            n[0] = h.nx; n[1] = h.ny; n[2] = h.nz
+            t_tan[0] = h.tx
+            t_tan[1] = h.ty
+            t_tan[2] = h.tz
+            n[0] = h.nx
+            n[1] = h.ny
+            n[2] = h.nz
             if material_is_curve(mat):
                 nf = h.fiber
                 ns = h.prim
@@ -146,7 +155,9 @@ def _trace(it, o, d, seed, key):
             next_cell = h.cell
         else:
             mat = it.ground_mat
-            n[0] = 0.0; n[1] = 0.0; n[2] = 1.0 if d[2] < 0.0 else -1.0
+            n[0] = 0.0
+            n[1] = 0.0
+            n[2] = 1.0 if d[2] < 0.0 else -1.0
             nf = -1
             ns = -1
             for k in range(3):

@@ -41,9 +41,8 @@ nothing per lookup (with reference counting, the atomic counts on them had been 
 ``medium_lookup`` returns the procedural source's
 ``MediumPoint``: the yarn type's density and roughness, the yarn's albedo, the segment's tangent.
 """
-from collections import namedtuple
-
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
@@ -138,7 +137,8 @@ def occupied_bricks(maj, lo, size, res):
                 a2 = (maj.lo[2] + iz * cs[2] - lo[2]) / size
                 for bz in range(max(0, int(math.floor(a2))), min(res[2], int(math.floor(a2 + cs[2] / size)) + 1)):
                     for by in range(max(0, int(math.floor(a1))), min(res[1], int(math.floor(a1 + cs[1] / size)) + 1)):
-                        for bx in range(max(0, int(math.floor(a0))), min(res[0], int(math.floor(a0 + cs[0] / size)) + 1)):
+                        for bx in range(max(0, int(math.floor(a0))),
+                                        min(res[0], int(math.floor(a0 + cs[0] / size)) + 1)):
                             occ[(bz * res[1] + by) * res[0] + bx] = 1
     return occ
 

@@ -73,7 +73,8 @@ def finalize(film, counts, variance=VARIANCE_CHANNELS) -> FilmImage:
         mean = film[..., F_Y] / n
         var = np.where(n > 1, np.maximum(film[..., F_YY] / n - mean * mean, 0.0) / np.maximum(n - 1, 1), 0.0)
     elif variance == VARIANCE_CHANNELS:
-        var = (np.maximum(film[..., F_RR:F_BB + 1] / n3 - rgb * rgb, 0.0) * (n3 / np.maximum(n3 - 1, 1)) / n3).mean(axis=2)
+        var = (np.maximum(film[..., F_RR:F_BB + 1] / n3 - rgb * rgb, 0.0) * (n3 / np.maximum(n3 - 1, 1))
+               / n3).mean(axis=2)
     else:
         raise ValueError(f"unknown variance estimator {variance!r}")
     depth = np.where(hits > 0, film[..., F_DEPTH] / np.maximum(hits, 1), 0.0)

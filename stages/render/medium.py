@@ -19,14 +19,15 @@ A *density source* is a namedtuple class whose numba implementation of
     (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness, yarn, fibre)
 
 (float64 but for the int64 yarn and fibre: the covering fibre's yarn and a number that tells the
-fibres apart, -1 where the source does not know them) with den = 0 outside every fibre (``NO_MEDIUM``; other fields then unused).
-``skip`` is such a fibre number (-1: none) whose fibre counts as empty: where it and others cover the
-point, the first of the others in the source's order answers. A ray leaving a fibre that scattered it
-as a whole meets every fibre but that one, so a fibre overlapping it stays solid (fiberpath's rays
-meet it too), and the fibres' overlaps, a third of the covered volume at packing 0.5, are no holes. The integrator
-(``stages.render.volpath``) is compiled once per source class. Sources: ``HomogeneousMedium``
-(below; a box of constant fibre material, for closed-form tests), ``stages.render.grid_medium``,
-``stages.render.procedural_medium``, ``stages.render.realized_medium``.
+fibres apart, -1 where the source does not know them) with den = 0 outside every fibre
+(``NO_MEDIUM``; other fields then unused). ``skip`` is such a fibre number (-1: none) whose fibre
+counts as empty: where it and others cover the point, the first of the others in the source's order
+answers. A ray leaving a fibre that scattered it as a whole meets every fibre but that one, so a
+fibre overlapping it stays solid (fiberpath's rays meet it too), and the fibres' overlaps, a third of
+the covered volume at packing 0.5, are no holes. The integrator (``stages.render.volpath``) is
+compiled once per source class. Sources: ``HomogeneousMedium`` (below; a box of constant fibre
+material, for closed-form tests), ``stages.render.grid_medium``, ``stages.render.procedural_medium``,
+``stages.render.realized_medium``.
 """
 from collections import namedtuple
 

@@ -10,32 +10,45 @@ ProceduralMedium fields: ``cv`` (``stages.core.curves.spline.Curves`` of the yar
 Majorants: ``capsule_box(cv, tab, step_frac)`` and ``capsule_majorants(cv, tab, step_frac, lo, hi,
 res)`` walk capsules that hold every fibre surface, each carrying its yarn's density, without
 storing them (a 1,000-yarn fabric has some 10^8), and give their box and the majorant grid (a cell
-takes the largest bound of the capsules that reach it; zero elsewhere): the *core* tube of the regular fibres (radius ply_radius + rho_max
-R_max max(e_short, e_long) + the fibre radius, far inside the hair extent) as capsules between axis
-points spaced step_frac x that radius apart (radius + half the spacing: any curve point between
-two samples lies within half the arc length of one), plus every loop cycle and every stored hair
-(hybrid mode) as a chain of capsules along its centre curve (Eq. 7 with the sampled frames;
-radius: fibre radius + half a sample step times the curve's fabric-space speed bound + 2 eps_c).
-In the realization-free hair mode (nothing stored per hair) the yarn's full extent tube
-(``yarn_extent``, hairs included) stands in for the core tube.
+takes the largest bound of the capsules that reach it; zero elsewhere): the *core* tube of the
+regular fibres (radius ply_radius + rho_max R_max max(e_short, e_long) + the fibre radius, far inside
+the hair extent) as capsules between axis points spaced step_frac x that radius apart (radius + half
+the spacing: any curve point between two samples lies within half the arc length of one), plus every
+loop cycle and every stored hair (hybrid mode) as a chain of capsules along its centre curve (Eq. 7
+with the sampled frames; radius: fibre radius + half a sample step times the curve's fabric-space
+speed bound + 2 eps_c). In the realization-free hair mode (nothing stored per hair) the yarn's full
+extent tube (``yarn_extent``, hairs included) stands in for the core tube.
 """
+import math
 from collections import namedtuple
 
 import numpy as np
 from numba import njit
 from numba.extending import overload
 
-import math
-
 from stages.core.curves.spline import curve_point_at
+from stages.core.dispatch import is_tuple_class
+from stages.core.threads import chunk_kernel, for_chunks
 from stages.core.yarn.fibre_tests import stored_hair
 from stages.core.yarn.frame_samples import eq7, frame_at
 from stages.core.yarn.lookup import lookup_point
+from stages.core.yarn.model import (
+    DENSITY,
+    E_LONG,
+    E_SHORT,
+    FIBER_RADIUS,
+    PLY_NUM,
+    PLY_RADIUS,
+    R_MAX,
+    RHO_MAX,
+    ROUGHNESS,
+    USE_MIGRATION,
+    hair_point,
+    hair_speed_bound,
+    regular_xy,
+    transverse_speed_bound,
+)
 from stages.core.yarn.tables import loop_fibre
-from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, R_MAX, RHO_MAX, ROUGHNESS, USE_MIGRATION, hair_point, hair_speed_bound, regular_xy, transverse_speed_bound)
-
-from stages.core.dispatch import is_tuple_class
-from stages.core.threads import chunk_kernel, for_chunks
 from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
 from stages.render.tracking import cell_half_diagonal, raster_capsule
 

@@ -60,7 +60,7 @@ from stages.core.shell.traversal import enter_shell, shell_intersect
 from stages.core.svf import ssdf_at
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import DIRECTIONAL, SG, light_eval, light_sample_into
+from stages.render.lights import SG, light_eval, light_sample_into
 
 PrtIntegrator = namedtuple("PrtIntegrator", [
     "scene", "top", "mat_of_fiber", "mats", "lights", "ground", "has_ground", "ground_mat",

@@ -8,9 +8,10 @@ pixel with ``uniform(seed, index, 0)`` and ``uniform(seed, index, 1)`` (a box fi
 ``stages.render.film``), traces the camera ray (``stages.render.camera``) with the integrator's
 ``radiance`` (``stages.render.integrator``) and stores the pixel's sums (a pixel with no samples
 is left as it is) in ``film[row - row_off, col]``: ``counts`` and ``film`` may be a band of the image's
-rows starting at ``row_off`` (a chunk task renders one band) or the whole image (``row_off`` 0). ``stride`` bounds every pixel's sample numbers, so indices never collide; a plain
-render has stride = first + counts = spp. It is compiled once per integrator class and releases
-the GIL; calling it on an empty tile compiles (or loads) it without rendering.
+rows starting at ``row_off`` (a chunk task renders one band) or the whole image (``row_off`` 0). ``stride``
+bounds every pixel's sample numbers, so indices never collide; a plain render has stride = first + counts = spp.
+It is compiled once per integrator class and releases the GIL; calling it on an empty tile compiles (or loads)
+it without rendering.
 
 ``render_tiles(integ, cam, seed, stride, first, counts, tiles, film, threads)`` renders rows of
 ``tile_grid`` on ``threads`` threads (default: numba's thread count), one GIL-free ``render_tile``

@@ -94,7 +94,8 @@ def fine_majorants_from_prims(prims, seg_fiber, fiber_yarn, yarn_density, lo, hi
     half_diag = cell_half_diagonal(cs)
     for j in range(prims.shape[0]):
         den = yarn_density[fiber_yarn[seg_fiber[int(prims[j, 7])]]]
-        ax, ay, az, bx, by, bz, r = prims[j, 0], prims[j, 1], prims[j, 2], prims[j, 3], prims[j, 4], prims[j, 5], prims[j, 6]
+        ax, ay, az, bx, by, bz, r = (prims[j, 0], prims[j, 1], prims[j, 2], prims[j, 3], prims[j, 4], prims[j, 5],
+                                     prims[j, 6])
         x0, x1, y0, y1, z0, z1 = _capsule_cells(lo, cs, fres, ax, ay, az, bx, by, bz, r)
         for iz in range(z0, z1 + 1):
             for iy in range(y0, y1 + 1):

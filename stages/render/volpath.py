@@ -48,8 +48,8 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class, runtime_value
-from stages.core.rng import uniform
 from stages.core.geometry.stack import stack_array, stack_vector3
+from stages.core.rng import uniform
 from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample

@@ -14,11 +14,12 @@ ray passes on through the yarn.
 ``offset_points(yt, key, o, d, h0, h_lo, h_hi, K, jitter, ...)``: K near points at offsets h_k
 stratified uniformly in h over [h_lo, h_hi], the stratum's position ``jitter`` in [0, 1) shared by all
 k. (Uniform in h, the measure a pixel covers a yarn with, so ``far`` is the mean of ``near`` over a
-pixel spanning the yarn; the reference implementation spaces them uniformly in asin(h).) ``far`` mode uses h over [-1, 1] and shades the mean
-of the K near BYSDFs (seed 004 Eq. 6); ``multiscale`` uses the pixel's footprint and aggregates the
-geometry (``aggregate``: seed 004 Eq. 8-9): the normal and tangent are the weighted means of the K
-fibre frames with weights exp(-falloff |x_k - x_0| / R) (x_0: the point of the ray's own offset),
-the shadowing their weighted mean, and the specular roughness is widened by (h_hi - h_lo) / 10.
+pixel spanning the yarn; the reference implementation spaces them uniformly in asin(h).) ``far`` mode
+uses h over [-1, 1] and shades the mean of the K near BYSDFs (seed 004 Eq. 6); ``multiscale`` uses the
+pixel's footprint and aggregates the geometry (``aggregate``: seed 004 Eq. 8-9): the normal and
+tangent are the weighted means of the K fibre frames with weights exp(-falloff |x_k - x_0| / R) (x_0:
+the point of the ray's own offset), the shadowing their weighted mean, and the specular roughness is
+widened by (h_hi - h_lo) / 10.
 
 Nothing here allocates: points and frames are 3-tuples (``ShadingPoint``'s x, t, n too), and
 ``offset_points`` fills the caller's arrays, so ``stages.render.bysdf`` calls these without reference

@@ -2,8 +2,8 @@
 
 The BYSDF renders cloth from the ``yarns`` artifact alone. Each yarn is a tube of radius
 ``R_env`` (the farthest reach of its plies, ``stages.core.yarn.implicit_plies.ply_reach_radius``,
-plus a margin; ``pipeline.renderers.bysdf``) around the ingest stage's C1 cubic Hermite spline. The tube is traced as a chain of capsules around
-a polyline that follows the spline closely enough:
+plus a margin; ``pipeline.renderers.bysdf``) around the ingest stage's C1 cubic Hermite spline. The
+tube is traced as a chain of capsules around a polyline that follows the spline closely enough:
 
     Subdivision bound. On a piece [t0, t0 + h] of a cubic segment P(t) = a t^3 + b t^2 + c t + d,
     the chord's distance from the curve is at most h^2 / 8 max |P''| (linear interpolation error),
@@ -131,8 +131,12 @@ def yarn_hit_frame(cv, pieces, j, px, py, pz):
     projection on the piece's chord, then three Newton steps on the spline segment), then the stored
     rotation-minimising frame there."""
     P = pieces.points
-    ax = P[j, 0]; ay = P[j, 1]; az = P[j, 2]
-    ex = P[j + 1, 0] - ax; ey = P[j + 1, 1] - ay; ez = P[j + 1, 2] - az
+    ax = P[j, 0]
+    ay = P[j, 1]
+    az = P[j, 2]
+    ex = P[j + 1, 0] - ax
+    ey = P[j + 1, 1] - ay
+    ez = P[j + 1, 2] - az
     L2 = ex * ex + ey * ey + ez * ez
     lam = 0.0
     if L2 > 0.0:
@@ -178,7 +182,9 @@ def to_yarn(fr, px, py, pz, dx, dy, dz):
 @njit(cache=True)
 def to_yarn_into(fr, px, py, pz, dx, dy, dz, o, d):
     """``to_yarn`` writing the yarn-space point into o and the direction into d."""
-    rx = px - fr.px; ry = py - fr.py; rz = pz - fr.pz
+    rx = px - fr.px
+    ry = py - fr.py
+    rz = pz - fr.pz
     o[0] = rx * fr.nx + ry * fr.ny + rz * fr.nz
     o[1] = rx * fr.bx + ry * fr.by + rz * fr.bz
     o[2] = fr.s + rx * fr.tx + ry * fr.ty + rz * fr.tz

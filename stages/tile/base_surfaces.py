@@ -94,7 +94,8 @@ def triangle_checks(V, UV, F, N, rel_eps=1e-10):
     e1 = UV[F[:, 1]] - UV[F[:, 0]]
     e2 = UV[F[:, 2]] - UV[F[:, 0]]
     uv_area = 0.5 * (e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
-    deg = (area <= rel_eps * max(area.mean(), 1e-300)) | (np.abs(uv_area) <= rel_eps * max(np.abs(uv_area).mean(), 1e-300))
+    deg = ((area <= rel_eps * max(area.mean(), 1e-300))
+           | (np.abs(uv_area) <= rel_eps * max(np.abs(uv_area).mean(), 1e-300)))
     major = 1.0 if (uv_area > 0).sum() >= (uv_area < 0).sum() else -1.0
     fn = face_normals(V, F)
     nsum = N[F[:, 0]] + N[F[:, 1]] + N[F[:, 2]]

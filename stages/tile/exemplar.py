@@ -46,8 +46,18 @@ import numpy as np
 from numba import njit
 
 from stages.core.curves.woven import woven_curves
-from stages.core.yarn.model import (ALPHA, FIBER_NUM, FIBER_RADIUS, PLY_NUM, S_MIG, USE_FLYAWAYS, YARN_ALPHA, regular_xy, sample_regular_fibers)
 from stages.core.rng import hash_u64
+from stages.core.yarn.model import (
+    ALPHA,
+    FIBER_NUM,
+    FIBER_RADIUS,
+    PLY_NUM,
+    S_MIG,
+    USE_FLYAWAYS,
+    YARN_ALPHA,
+    regular_xy,
+    sample_regular_fibers,
+)
 
 DENSE = 32  # centreline samples per weave cell
 

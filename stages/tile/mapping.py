@@ -11,7 +11,6 @@ Within tetrahedron ``tet`` the shell map is affine (barycentric, piecewise linea
 """
 import math
 
-import numpy as np
 from numba import njit
 
 

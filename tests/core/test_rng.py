@@ -35,7 +35,9 @@ def test_uniform_and_normal_pairs_chi2():
     """Reference: the constant density on the unit square for (u0, u1) and (Phi(z0), Phi(z2)); 200k pairs,
     40 x 40 bins, Šidák over 2."""
     u, z, c = _draw(200_000, 31)
-    ones = lambda x, y: np.ones_like(x)
+    def ones(x, y):
+        return np.ones_like(x)
+
     res = chi2_test(u, ones, UNIT, res=(40, 40), n_tests=2)
     assert res.passed, "uniform: " + res.message
     res = chi2_test(stats.norm.cdf(z), ones, UNIT, res=(40, 40), n_tests=2)

@@ -273,7 +273,8 @@ def test_reference_from_another_scene_or_code_is_refused(compare_file, tmp_path,
 
 @pytest.mark.parametrize("edit,place,words", [
     (("scene.toml", "nowhere.toml"), "compare.scene", "not found"),
-    (('method = "standin"\nrender = { source = "realized" }', 'method = "pathtracer"\nrender = { source = "realized" }'),
+    (('method = "standin"\nrender = { source = "realized" }',
+      'method = "pathtracer"\nrender = { source = "realized" }'),
      "methods[1].method", "unknown render method"),
     (("target_speedup = 4.0", 'budget = "seconds"\ntarget_speedup = 4.0'), "methods[1].budget", "unknown budget"),
     (("[1, 2, 4, 8, 16, 32, 64, 128]", "[1, 2, 8, 4]"), "methods[1].budgets[3]", "must increase"),
@@ -342,7 +343,8 @@ def test_reference_made_before_its_folder_exists_is_reused(compare_file, tmp_pat
     render, calls = standin
     (tmp_path / "inputs.txt").write_text("an input artifact")
     compare_file.write_text(compare_file.read_text().replace(
-        'name = "exact"\nmethod = "standin"', 'name = "exact"\nmethod = "standin"\nargs = ["--fibers", "{out}/../inputs.txt"]'))
+        'name = "exact"\nmethod = "standin"',
+        'name = "exact"\nmethod = "standin"\nargs = ["--fibers", "{out}/../inputs.txt"]'))
     out = tmp_path / "compare"
     assert not out.exists()
     rc.run_convergence(compare_file, out, reference_only=True, renderer=render, echo=lambda s: None)

@@ -28,7 +28,8 @@ def _fake_render_artifact(exr_path, wall_time_s, peak_memory_bytes, spp=16, path
     g.attrs["summary"] = {"kind": "render", "wall_time_s": wall_time_s, "peak_memory_bytes": peak_memory_bytes,
                           "spp": spp, "paths_per_s": paths_per_s}
     g.attrs["loomlight"] = {"kind": "render", "complete": True, "wall_time_s": wall_time_s + 1.0,
-                            "peak_memory_bytes": 1, "content_hash": hashlib.sha256(str(wall_time_s).encode()).hexdigest()}
+                            "peak_memory_bytes": 1,
+                            "content_hash": hashlib.sha256(str(wall_time_s).encode()).hexdigest()}
 
 
 @pytest.fixture
@@ -163,7 +164,8 @@ def test_table1_rows_times_and_agreement(cli, tmp_path, monkeypatch):
     _fake_render_artifact(tmp_path / "proc.exr", 5.0, 2_000_000)
     _fake_render_artifact(tmp_path / "real.exr", 6.0, 9_000_000)
     out = tmp_path / "t1"
-    code, stdout, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "--scene", tmp_path / "woven.toml",
+    code, stdout, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml",
+                            "--scene", tmp_path / "woven.toml",
                             "--procedural", tmp_path / "proc.exr", "--realized", tmp_path / "real.exr", "-o", out)
     assert code == 0, err
     got = json.loads((out / "table1.json").read_text())
@@ -201,7 +203,8 @@ def test_table1_unrealized_scale_row(cli, tmp_path, monkeypatch):
     assert got[1]["peak_over_full"] == pytest.approx(0.05)
     assert "1/20.0" in (out / "report.md").read_text()
     code, _, err = cli("evaluate", "--table1", "--scene", tmp_path / "demo.toml", "--procedural", tmp_path / "proc.exr",
-                       "--realized", tmp_path / "real.exr", "--unrealized", tmp_path / "large.exr", "-o", tmp_path / "o2")
+                       "--realized", tmp_path / "real.exr", "--unrealized", tmp_path / "large.exr",
+                       "-o", tmp_path / "o2")
     assert code == 2 and "--unrealized" in err
 
 

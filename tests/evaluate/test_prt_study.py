@@ -67,7 +67,9 @@ def test_attribution_splits_the_error_into_its_terms():
     prt = fp1 + e_s + rem + e_m
     ps_, pm = fp1 + e_s, rem + e_m + bg
     a = ps.attribute(fp, fp1, prt, ps_, pm)
-    r = lambda x: np.sqrt(np.mean(x ** 2))
+    def r(x):
+        return np.sqrt(np.mean(x ** 2))
+
     assert a["rmse"] == pytest.approx(r(e_s + e_m), rel=1e-12)
     assert a["rmse_single"] == pytest.approx(r(e_s), rel=1e-12)
     assert a["rmse_multi"] == pytest.approx(r(e_m), rel=1e-12)
@@ -84,7 +86,8 @@ def test_compare_gives_the_mean_intensity_ratios():
     np.testing.assert_allclose(e["ratio"], [1.1, 0.9, 1.0], rtol=1e-12)
     m = ref.reshape(-1, 3).mean(axis=0)
     d = m * np.array([0.1, -0.1, 0.0])
-    assert e["mean_intensity_rel_error"] == pytest.approx(np.sqrt(np.mean(d ** 2)) / np.sqrt(np.mean(m ** 2)), rel=1e-12)
+    assert e["mean_intensity_rel_error"] == pytest.approx(np.sqrt(np.mean(d ** 2)) / np.sqrt(np.mean(m ** 2)),
+                                                          rel=1e-12)
     assert ps.compare(ref, ref)["ssim"] == pytest.approx(1.0)
 
 

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import zarr
 
-from pipeline.runners import sweep as sw
 from pipeline.images import write_render
+from pipeline.runners import sweep as sw
 from pipeline.scene import load_scene
 
 SCENE = """
@@ -139,7 +139,8 @@ def _expected_lights(sweep_path):
         for lam in g["sharpness"]:
             out[f"top_a{i}_l{lam:g}"] = {"type": "sg", "axis": ax, "sharpness": lam, "power": g["power"]}
         if g.get("directional"):
-            out[f"top_a{i}_dir"] = {"type": "directional", "direction": (-np.asarray(ax)).tolist(), "irradiance": g["irradiance"]}
+            out[f"top_a{i}_dir"] = {"type": "directional", "direction": (-np.asarray(ax)).tolist(),
+                                    "irradiance": g["irradiance"]}
     d = np.array([-1.0, 0.0, -0.5])
     out["grazing"] = {"type": "directional", "direction": (d / np.linalg.norm(d)).tolist(), "irradiance": 1.0}
     return out
@@ -195,7 +196,8 @@ def test_derived_scenes_carry_overrides(sweep_file, tmp_path):
 
 
 def _small(text):
-    return text.replace("sharpness = [10, 100]", "sharpness = [10]").replace("directional = true", "directional = false")
+    return text.replace("sharpness = [10, 100]", "sharpness = [10]").replace("directional = true",
+                                                                             "directional = false")
 
 
 def test_renders_reused_when_up_to_date(sweep_file, tmp_path):
@@ -236,8 +238,8 @@ def test_sweep_bad_inputs_exit_2(cli, sweep_file, tmp_path):
         "reference": SWEEP.format(fast_source="realized").replace('reference = "exact"', 'reference = "nope"'),
         "sharpness": SWEEP.format(fast_source="realized").replace("sharpness = [10, 100]", "sharpness = [0, 100]"),
         "unknown key": SWEEP.format(fast_source="realized").replace("[grid]", "[grid]\ncolour = 1"),
-        "bad light": SWEEP.format(fast_source="realized").replace('type = "directional", direction = [-1.0, 0.0, -0.5],',
-                                                                 'type = "directional", direction = [-1.0, 0.0],'),
+        "bad light": SWEEP.format(fast_source="realized").replace(
+            'type = "directional", direction = [-1.0, 0.0, -0.5],', 'type = "directional", direction = [-1.0, 0.0],'),
     }
     for what, text in cases.items():
         sweep_file.write_text(text)
@@ -254,7 +256,8 @@ def test_sweep_bad_inputs_exit_2(cli, sweep_file, tmp_path):
 
 
 def test_toml_writer_round_trip():
-    doc = {"scene": {"name": "a \"q\" b", "seed": 3}, "fabric": {"source": "generator", "generator": {"kind": "woven", "n": 2}},
+    doc = {"scene": {"name": "a \"q\" b", "seed": 3},
+           "fabric": {"source": "generator", "generator": {"kind": "woven", "n": 2}},
            "lights": [{"type": "sg", "axis": [0.0, 0.6, 0.8], "sharpness": 1e-05, "power": [1, 2.5, 3]}],
            "render": {"ground": {"albedo": 0.5}, "flag": True}}
     assert tomllib.loads(sw.dumps_toml(doc)) == doc

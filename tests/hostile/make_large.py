@@ -40,5 +40,5 @@ def make(directory) -> dict[str, Path]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    for name, path in make(sys.argv[1] if len(sys.argv) > 1 else ".").items():
+    for _name, path in make(sys.argv[1] if len(sys.argv) > 1 else ".").items():
         print(path)

@@ -198,8 +198,8 @@ def tiled(tmp_path_factory):
 @pytest.mark.parametrize("opts, names", [
     (["--spp", "1000000000000"], ["--spp", "would take at least an estimated", "camera rays",
                                   "1,000,000,000,000 samples", "24 h"]),
-    (["--resolution", "256", "--views", "64x64", "--lights", "64x64"], ["--views", "needs an estimated",
-                                                                        "4,096 views x 4,096 lights", "over the budget"]),
+    (["--resolution", "256", "--views", "64x64", "--lights", "64x64"],
+     ["--views", "needs an estimated", "4,096 views x 4,096 lights", "over the budget"]),
     (["--resolution", "256", "--views", "64x64", "--lights", "1x1"], ["--resolution", "needs an estimated", "fit"]),
     (["--resolution", "512"], ["--resolution", "power of two from 1 to 256"]),
     (["--views", "100x100"], ["--views", "at most 4096 directions"]),

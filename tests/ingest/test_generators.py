@@ -13,8 +13,8 @@ from scipy.spatial import cKDTree
 
 from pipeline.errors import LoomError
 from pipeline.generators import generate
-from stages.ingest import knit, weave
 from stages.core.curves import woven
+from stages.ingest import knit, weave
 
 
 @pytest.mark.parametrize("n,m", [(1, 1), (2, 1), (2, 2), (3, 1), (1, 3)])

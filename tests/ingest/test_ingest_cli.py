@@ -70,7 +70,8 @@ def _bad_cases():
         "overrun.bcc": (bcc_bytes(GOOD)[:64] + struct.pack("<i", 900) + good[68:], "curve 0"),
         "nan.bcc": (bcc_bytes(nan), "curve 0, point 1"),
         "short.bcc": (bcc_bytes(short), "curve 0"),
-        "nothreading.wif": (b"[WIF]\nVersion=1.1\n[CONTENTS]\nWEAVING=yes\nWARP=yes\nWEFT=yes\nTIEUP=yes\nTREADLING=yes\n"
+        "nothreading.wif": (b"[WIF]\nVersion=1.1\n[CONTENTS]\nWEAVING=yes\nWARP=yes\nWEFT=yes\nTIEUP=yes\n"
+                            b"TREADLING=yes\n"
                             b"[WEAVING]\nShafts=2\nTreadles=2\nRising Shed=yes\n[WARP]\nThreads=2\n[WEFT]\nThreads=2\n"
                             b"[TIEUP]\n1=1\n2=2\n[TREADLING]\n1=1\n2=2\n", "THREADING"),
         "missing.obj": (b"v 0 0 0\nv 1 0 0\nl 1 2 5\n", "line 3"),
@@ -117,7 +118,6 @@ def test_forced_rebuild_is_byte_identical(existing, cli, tmp_path):
 
 
 def test_demo_scene_ingests_woven_swatch(tmp_path, cli):
-    from pathlib import Path
 
     scene = ROOT / "data" / "scenes" / "demo.toml"
     out = tmp_path / "demo.zarr"

@@ -9,10 +9,10 @@ import struct
 import numpy as np
 import pytest
 
-from tests.helpers import DATA, shared_file
 from pipeline.curveset import CurveSet
 from pipeline.errors import LoomError
 from pipeline.io import bcc, obj, polyline_txt, read_curves, write_curves
+from tests.helpers import DATA, shared_file
 
 
 def _random_curves(seed=3, with_radius=False):
@@ -237,7 +237,8 @@ def test_txt_bad_input(tmp_path, case):
 
 def test_txt_comments_and_blank_runs(tmp_path):
     f = tmp_path / "a.txt"
-    f.write_text("# header\n0 0 0\n# a comment inside a curve is not a break\n1 0 0  # trailing\n\n\n\n0 1 0\n1 1 0\n2 1 0\n0 1 0\n")
+    f.write_text("# header\n0 0 0\n# a comment inside a curve is not a break\n1 0 0  # trailing\n"
+                 "\n\n\n0 1 0\n1 1 0\n2 1 0\n0 1 0\n")
     cs = read_curves(f)
     assert [len(p) for p in cs.points] == [2, 3]
     assert cs.closed == [False, True]  # first == last point -> closed, repeat dropped

@@ -8,11 +8,11 @@ satin; units convert by their definitions; malformed drafts raise LoomError nami
 import numpy as np
 import pytest
 
-from tests.helpers import DATA, shared_file
 from pipeline.errors import LoomError
 from pipeline.generators import from_wif
 from pipeline.io import read_curves, wif
 from stages.ingest import weave
+from tests.helpers import DATA, shared_file
 
 
 def _real(name):
@@ -146,10 +146,12 @@ BASE = "[WEAVING]\nShafts=2\nTreadles=2\n[WARP]\nThreads=2\n[WEFT]\nThreads=2\n"
     (BASE + "[THREADING]\n1=1\n2=x\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n", "[THREADING] line 10", "expected integers"),
     (BASE + "[THREADING]\n1=1\n2=3\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n", "[WEAVING] line 2", "Shafts = 2, but shaft 3"),
     (BASE + "[THREADING]\n1=1\n5=1\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n", "[WARP] line 5", "Threads = 2, but end 5"),
-    (BASE.replace("[WARP]\n", "[WARP]\nUnits=furlongs\nSpacing=1\n") + "[THREADING]\n1=1\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n",
+    (BASE.replace("[WARP]\n", "[WARP]\nUnits=furlongs\nSpacing=1\n")
+     + "[THREADING]\n1=1\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n",
      "[WARP] line 5", "Units = 'furlongs'"),
     (BASE + "Spacing=abc\n[THREADING]\n1=1\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n", "[WEFT] line 8", "not a number"),
-    (BASE + "[THREADING]\n1=1\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n[WARP COLORS]\n1=4\n", "[WARP COLORS] line 15", "no entry"),
+    (BASE + "[THREADING]\n1=1\n[TIEUP]\n1=1\n[TREADLING]\n1=1\n[WARP COLORS]\n1=4\n", "[WARP COLORS] line 15",
+     "no entry"),
     ("[WEAVING]\nRising Shed=maybe\n[THREADING]\n1=1\n[LIFTPLAN]\n1=1\n", "[WEAVING] line 2", "expected yes or no"),
 ])
 def test_bad_drafts(tmp_path, text, place, words):

@@ -202,9 +202,10 @@ def test_scene_colour_wins_and_every_stage_carries_the_result(tmp_path, cli):
     """Precedence: a scene's yarns.warp.color beats the draft's warp colour; the weft keeps the draft's.
     The yarns artifact records it (source scene / draft); the per-yarn albedo of tables, of realize's
     fibres, of fiberpath's materials (tinted BCSDF) and of bysdf is exactly that."""
+    from pipeline.bcsdf_presets import load_bcsdf_preset
+    from pipeline.render_setup import load_fibers
     from pipeline.renderers.bysdf import yarn_setup
     from pipeline.renderers.fiberpath import fiber_materials
-    from pipeline.render_setup import load_bcsdf_preset, load_fibers
     from pipeline.scene import load_scene
     from stages.core.shading.bcsdf import tint_bcsdf
     from stages.core.shading.material import pack_material_bcsdf
@@ -244,7 +245,8 @@ def test_draft_colours_reach_fibres_of_the_24_thread_draft(tmp_path, cli):
     assert cli("ingest", sc, "-o", y)[0] == 0
     assert cli("realize", y, "--spacing", "0.01", "-o", f)[0] == 0
     warp, weft = raw_thread_colours(DRAFTS / "2229.wif")
-    np.testing.assert_array_equal(Artifact(f, kind="fibers")["yarn_albedo"], np.asarray(warp[:6] + weft[:6], np.float32))
+    np.testing.assert_array_equal(Artifact(f, kind="fibers")["yarn_albedo"],
+                                  np.asarray(warp[:6] + weft[:6], np.float32))
 
 
 TILE = """
@@ -272,13 +274,13 @@ def test_tiling_records_draft_colours_and_its_materials_use_them(tmp_path, cli):
     """A WIF exemplar's yarns get the draft's colours (source draft), the plain exemplar's none; the
     renderers' view of the tiling (fiberpath on the shell, and through ``tiling_materials`` prt, the IIRTF
     and the BTF) gives them those colours, the plain exemplar its preset's albedo, and a scene colour wins."""
+    from pipeline.bcsdf_presets import load_bcsdf_preset
     from pipeline.presets import load_preset
     from pipeline.renderers.fiberpath import tiling_fibers
     from pipeline.runners.precompute import tiling_materials
     from pipeline.scene import load_scene
     from stages.core.shading.bcsdf import tint_bcsdf
     from stages.core.shading.material import pack_material_bcsdf
-    from pipeline.render_setup import load_bcsdf_preset
 
     plain = scene_file(tmp_path, "plain", "54235plain.wif")
     cfg = tmp_path / "tile.toml"

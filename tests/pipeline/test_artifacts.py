@@ -151,7 +151,8 @@ def test_input_identity_is_recomputed_from_bytes(tmp_path):
     with ArtifactWriter(tmp_path / "other.zarr", kind="yarns", stage="test", params={}) as w:
         _yarn_like(w)
         w.group["points"][...] = np.full((4, 3), 7.0, np.float32)
-    other = sorted(p for p in (tmp_path / "other.zarr" / "points").rglob("*") if p.is_file() and p.name != "zarr.json")[0]
+    other = sorted(p for p in (tmp_path / "other.zarr" / "points").rglob("*")
+                   if p.is_file() and p.name != "zarr.json")[0]
     data = other.read_bytes()
     assert len(data) == st.st_size and data != chunk.read_bytes()
     chunk.write_bytes(data)

@@ -52,7 +52,8 @@ def test_fiberpath_builds_then_reuses(cli, scene_dir, tmp_path):
     assert [(s, k) for s, k, _ in steps] == [("built", "yarns"), ("built", "fibers")], out
     yarns, fibers = (Path(p) for _, _, p in steps)
     assert yarns.parent == cache and fibers.parent == cache
-    assert re.fullmatch(r"yarns-[0-9a-f]{16}\.zarr", yarns.name) and re.fullmatch(r"fibers-[0-9a-f]{16}\.zarr", fibers.name)
+    assert (re.fullmatch(r"yarns-[0-9a-f]{16}\.zarr", yarns.name)
+            and re.fullmatch(r"fibers-[0-9a-f]{16}\.zarr", fibers.name))
     # what ingest and realize make at their commands' defaults
     assert Artifact(yarns, kind="yarns").params["frame_samples"] == 4
     fp = Artifact(fibers, kind="fibers").params
@@ -114,7 +115,8 @@ def test_method_on_a_tiling_without_a_configuration_is_one_line(cli, tmp_path):
     assert code == 2 and len(err.strip().splitlines()) == 1 and "nope.toml" in err and "--set tiling" in err, err
     # --no-build: the refusal of before (what to pass)
     code, _, err = cli("render", FLAT, "--method", "prt", "--no-build", "-o", out)
-    assert (code, err) == (2, "error: --fibers: prt needs a tiling artifact (loomlight tile): pass --fibers PATH.zarr\n")
+    assert (code, err) == (2, "error: --fibers: prt needs a tiling artifact (loomlight tile): "
+                              "pass --fibers PATH.zarr\n")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -146,7 +148,8 @@ def test_keys_follow_what_each_step_reads(tmp_path):
     text = FLAT.read_text()
     variants = {
         "same": text,
-        "camera": text.replace("fov = 22.0", "fov = 30.0").replace("origin = [0.75, -0.95, 2.1]", "origin = [0, -1, 2]"),
+        "camera": text.replace("fov = 22.0", "fov = 30.0").replace("origin = [0.75, -0.95, 2.1]",
+                                                                   "origin = [0, -1, 2]"),
         "light": text.replace("irradiance = 3.0", "irradiance = 5.0"),
         "render": text.replace("spp = 16", "spp = 64\nmax_spp = 64"),
         "bcsdf": text.replace('bcsdf = "gabardine"', 'bcsdf = "cotton"'),

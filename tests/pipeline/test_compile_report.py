@@ -76,7 +76,8 @@ def test_report_lists_duplicate_signatures_first():
     # a part has a cache of its own: the same signature compiled once in each of two parts is no repeat
     two = summarize({"demo": {"records": [rec("k", "int64", 1.0, 1)], "wall_s": 1.0},
                      "tests": {"records": [rec("k", "int64", 1.0, 7)], "wall_s": 1.0}})
-    assert two["kernels"][0]["recompiled"] == 0 and two["kernels"][0]["by_signature"][0]["compiled"] == {"demo": 1, "tests": 1}
+    assert (two["kernels"][0]["recompiled"] == 0
+            and two["kernels"][0]["by_signature"][0]["compiled"] == {"demo": 1, "tests": 1})
 
 
 def test_warmup_plan_runs_each_step_once_and_parses(cli, monkeypatch):

@@ -84,7 +84,8 @@ def test_every_schema_key_has_a_description(name):
     def walk(node):
         if isinstance(node, dict):
             for key, value in node.get("properties", {}).items():
-                if isinstance(value, dict) and not value.get("description") and not (name == "scene" and key == "render"):
+                if (isinstance(value, dict) and not value.get("description")
+                        and not (name == "scene" and key == "render")):
                     bare.append(key)
             for key, value in node.items():
                 if key != "if":   # an if's properties are conditions, not keys
@@ -164,7 +165,9 @@ def _synthetic(tmp_path: Path):
     (results / "summary.md").write_text("# loomlight benchmarks\n\nMachine: python 3.11, cpus 2\n")
     compare = tmp_path / "compare"
     (compare / "flat").mkdir(parents=True)
-    lv = lambda t, b="": {"time_s": t, "bound": b, "floor_blocks": False}
+    def lv(t, b=""):
+        return {"time_s": t, "bound": b, "floor_blocks": False}
+
     doc = {"comparison": "flat", "description": "a flat patch", "scene": "x.toml",
            "reference": {"method": "fiberpath", "spp": 512, "batches": 8, "render_time_s": 42.0,
                          "mean_error": 0.0012, "targets_met": True},

@@ -10,9 +10,9 @@ import tomllib
 
 import pytest
 
+from pipeline.bcsdf_presets import bcsdf_presets
 from pipeline.errors import LoomError
 from pipeline.presets import list_presets
-from pipeline.render_setup import bcsdf_presets
 from pipeline.renderers import METHODS, all_sources, known_methods
 from pipeline.runners.tile import load_config
 from pipeline.scene import load_scene
@@ -175,8 +175,8 @@ def test_render_method_and_source_options(cli, tmp_path):
     assert (code, err) == (2, (f"error: --method: unknown render method 'volpth' (known: {_known(known_methods())}); "
                                "did you mean 'volpath'?\n"))
     code, _, err = cli("render", demo, "--method", "volpath", "--source", "procedral", "-o", out)
-    assert (code, err) == (2, ("error: --source: unknown volpath source 'procedral' (known: procedural, realized, grid); "
-                               "did you mean 'procedural'?\n"))
+    assert (code, err) == (2, ("error: --source: unknown volpath source 'procedral' "
+                               "(known: procedural, realized, grid); did you mean 'procedural'?\n"))
     code, _, err = cli("render", demo, "--source", "realised", "-o", out)
     assert (code, err) == (2, ("error: --source: unknown render source 'realised' "
                                f"(known: {_known(all_sources())}); did you mean 'realized'?\n"))
@@ -210,11 +210,11 @@ def test_preset_option_and_recorded_preset():
 
 def test_evaluate_modes_name_the_options(cli, tmp_path):
     code, _, err = cli("evaluate", "-o", tmp_path / "e")
-    assert (code, err) == (2, "error: --ref/--test: give exactly one of --ref/--test, --sweep, --table1 or --convergence "
-                              "(got none)\n")
+    assert (code, err) == (2, "error: --ref/--test: give exactly one of --ref/--test, --sweep, --table1 or "
+                              "--convergence (got none)\n")
     code, _, err = cli("evaluate", "--sweep", "s.toml", "--convergence", "c.toml", "-o", tmp_path / "e")
-    assert (code, err) == (2, "error: --sweep and --convergence: give exactly one of --ref/--test, --sweep, --table1 or "
-                              "--convergence (got 2)\n")
+    assert (code, err) == (2, "error: --sweep and --convergence: give exactly one of --ref/--test, --sweep, "
+                              "--table1 or --convergence (got 2)\n")
     code, _, err = cli("evaluate", "--sweep", "s.toml", "--reference-only", "-o", tmp_path / "e")
     assert (code, err) == (2, "error: --reference-only: goes with --convergence\n")
 

@@ -62,7 +62,8 @@ def _small_artifact(d, started=None):
                         inputs={"source": (src, FILE)}, started=started) as w:
         w.write("points", np.arange(12, dtype=np.float32).reshape(4, 3))
         w.write("curve_offsets", np.array([0, 4], dtype=np.int64))
-        w.summary.update(kind="evaluation", mode="table1", curves=1, control_points=4, closed_curves=0, curve_type="polyline",
+        w.summary.update(kind="evaluation", mode="table1", curves=1, control_points=4, closed_curves=0,
+                         curve_type="polyline",
                          bounds=[[0.0, 0.0, 0.0], [9.0, 10.0, 11.0]], bytes={"points": 48},
                          delta_max=0.25, groups=["warp"], grid={"cell": 0.5, "dims": [1, 1, 1], "items": 3})
     return d / "a.zarr", src

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 
 from tests.helpers import ROOT
-from tests.inspector_checks import (assert_legible_png, blank_runs, edge_run, longest_run, saved_figures,
-                                    small_texts)
+from tests.inspector_checks import assert_legible_png, blank_runs, edge_run, longest_run, saved_figures, small_texts
 
 
 def written_kinds():

@@ -67,7 +67,8 @@ def test_yarn_colour_of_another_scene_refused(cli, made):
     _refused(cli, made, [made / "red.toml", "--method", "fiberpath", "--fibers", made / "bare_fibers.zarr"],
              ["red.toml: yarns.other", "bare_fibers.zarr (--fibers, made from small.txt)"])
     _refused(cli, made, [plain, "--method", "volpath", "--tables", made / "red_tables.zarr"],
-             ["plain.toml: yarns.other.color", "red_tables.zarr (--tables, made from red.toml)", "re-run ingest and tables"])
+             ["plain.toml: yarns.other.color", "red_tables.zarr (--tables, made from red.toml)",
+              "re-run ingest and tables"])
 
 
 def test_another_preset_refused(cli, made):

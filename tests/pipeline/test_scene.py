@@ -2,7 +2,6 @@
 mistyped key, a bad value or broken TOML is a one-line error naming the file and the key; Mitsuba-style
 camera conventions (row 0 at the top, full horizontal fov, right = forward x up) hold."""
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -41,7 +40,8 @@ def test_bundled_scenes_load(path):
 @pytest.mark.parametrize("extra, place", [
     ("[camera2]\nfov = 3\n", "camera2"),
     ("[render]\nssp = 4\n", "render.ssp"),
-    ("[[lights]]\ntype = 'directional'\ndirection = [0, 0, -1]\nirradiance = 1\nirradience = 2\n", "lights[0].irradience"),
+    ("[[lights]]\ntype = 'directional'\ndirection = [0, 0, -1]\nirradiance = 1\nirradience = 2\n",
+     "lights[0].irradience"),
     ("[yarns.warp]\npreset = 'cotton1'\nradus = 0.1\n", "yarns.warp.radus"),
 ])
 def test_unknown_key_is_named(tmp_path, extra, place):

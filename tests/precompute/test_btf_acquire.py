@@ -113,8 +113,7 @@ def test_cell_direction_covers_its_grid_cell():
     """``cell_direction``: (0.5, 0.5) is the grid direction (``hemisphere_grid``); uniform (u0, u1) give unit
     directions inside the cell (ring's cos theta range, azimuth range) whose cos theta is uniform (equal
     solid angle): its mean is the ring's middle and its variance (width^2 / 12)."""
-    from stages.core.btf import hemisphere_grid
-    from stages.core.btf import cell_direction
+    from stages.core.btf import cell_direction, hemisphere_grid
 
     nt, nph = 4, 6
     grid = hemisphere_grid(nt, nph)
@@ -144,8 +143,7 @@ def test_cell_averages_are_the_mean_over_the_cell(acquired):
     than 30 % for some pairs (measured: up to 80 %)."""
     from pipeline.renderers.fiberpath import fiber_materials, tiling_fibers
     from pipeline.scene import load_scene
-    from stages.core.btf import hemisphere_grid
-    from stages.core.btf import cell_direction
+    from stages.core.btf import cell_direction, hemisphere_grid
     from tests.helpers import ROOT
 
     art, k, W, H, args = acquired

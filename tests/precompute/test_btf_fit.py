@@ -19,8 +19,19 @@ import numpy as np
 import pytest
 
 from stages.core.btf import hemisphere_grid, lafortune_lobe, texel_f1
-from stages.precompute.btf_fit import (ANISO, N_MAX, N_MIN, N_START, PEAK_MAX, BtfFit, fit_btf, fit_levels,
-                                       group_level, predict_samples, table_entry)
+from stages.precompute.btf_fit import (
+    ANISO,
+    N_MAX,
+    N_MIN,
+    N_START,
+    PEAK_MAX,
+    BtfFit,
+    fit_btf,
+    fit_levels,
+    group_level,
+    predict_samples,
+    table_entry,
+)
 
 VIEWS = hemisphere_grid(4, 6)
 LIGHTS = hemisphere_grid(4, 6)
@@ -187,7 +198,8 @@ def test_fitted_table_is_eq4_of_the_fitted_lobes():
     rng = np.random.default_rng(4)
     rho, lob, tab = _random_model(rng, 2, 2, table=True)
     fr = _frames(rng, 2)
-    smp = predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS) * (1 + 0.05 * rng.normal(size=(2, len(VIEWS), len(LIGHTS), 3)))
+    smp = (predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS)
+           * (1 + 0.05 * rng.normal(size=(2, len(VIEWS), len(LIGHTS), 3))))
     alpha = np.ones((2, len(VIEWS)))
     fit = fit_btf(smp, alpha, VIEWS, LIGHTS, fr, lobes=2)
     for t in range(2):
@@ -243,7 +255,8 @@ def test_mip_levels_of_a_uniform_texture_equal_level_0():
     rng = np.random.default_rng(6)
     rho, lob, tab = _random_model(rng, 1, 1, table=True)
     fr = _frames(rng, 1)
-    one = predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS)[0] * (1 + 0.03 * rng.normal(size=(len(VIEWS), len(LIGHTS), 3)))
+    one = (predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS)[0]
+           * (1 + 0.03 * rng.normal(size=(len(VIEWS), len(LIGHTS), 3))))
     res = 4
     smp = np.broadcast_to(one, (res, res) + one.shape).copy()
     alpha = np.ones((res, res, len(VIEWS)))
@@ -275,7 +288,8 @@ def test_same_bytes_at_one_and_two_threads_and_texel_by_texel():
     n = 6
     rho, lob, tab = _random_model(rng, n, 2, table=True)
     fr = _frames(rng, n)
-    smp = predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS) * (1 + 0.05 * rng.normal(size=(n, len(VIEWS), len(LIGHTS), 3)))
+    smp = (predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS)
+           * (1 + 0.05 * rng.normal(size=(n, len(VIEWS), len(LIGHTS), 3))))
     alpha = np.where(rng.uniform(size=(n, len(VIEWS))) < 0.2, 0.0, 1.0)
     n0 = numba.get_num_threads()
     try:
@@ -351,7 +365,8 @@ def test_non_convergence_is_flagged_and_keeps_the_best_iterate():
     n = 3
     rho, lob, tab = _random_model(rng, n, 2, table=True)
     fr = _frames(rng, n)
-    smp = predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS) * (1 + 0.05 * rng.normal(size=(n, len(VIEWS), len(LIGHTS), 3)))
+    smp = (predict_samples(rho, lob, tab, fr, VIEWS, LIGHTS)
+           * (1 + 0.05 * rng.normal(size=(n, len(VIEWS), len(LIGHTS), 3))))
     alpha = np.ones((n, len(VIEWS)))
     fit = fit_btf(smp, alpha, VIEWS, LIGHTS, fr, lobes=2, max_rounds=1, max_iter=1)
     assert not fit.converged.any() and np.all(fit.rounds == 1)

@@ -16,10 +16,23 @@ from scipy import stats
 from stages.core.geometry.capsule import capsule_intersect
 from stages.core.sh import sh_eval
 from stages.core.shading.bcsdf import pack_bcsdf
-from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_prepare, material_sample,
-                                          pack_material_bcsdf, pack_material_lambert)
-from stages.precompute.iirtf import (build_cells, cell_box, cells_per_side, exemplar_slabs, iirtf_chunk,
-                                     iirtf_reconstruct, mean_free_path)
+from stages.core.shading.material import (
+    CTX_SIZE,
+    material_eval_pdf,
+    material_prepare,
+    material_sample,
+    pack_material_bcsdf,
+    pack_material_lambert,
+)
+from stages.precompute.iirtf import (
+    build_cells,
+    cell_box,
+    cells_per_side,
+    exemplar_slabs,
+    iirtf_chunk,
+    iirtf_reconstruct,
+    mean_free_path,
+)
 from stages.precompute.periodic import periodic_hit, periodic_scene, slab_length
 
 MAX_DEPTH = 8  # kept short so the independent estimator (no roulette) stays cheap; both use the same

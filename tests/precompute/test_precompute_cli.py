@@ -9,8 +9,8 @@ import pytest
 from pipeline.artifacts import read_meta
 
 SVF_ARGS = ["--resolution", "16", "--components", "4", "--chunk", "200"]
-IIRTF_ARGS = ["--order", "2", "--paths", "40", "--light-sampling", "mis", "--mfp-paths", "400", "--cell-factor", "3", "--chunk", "64",
-              "--scene", "data/scenes/draped_damask.toml"]
+IIRTF_ARGS = ["--order", "2", "--paths", "40", "--light-sampling", "mis", "--mfp-paths", "400", "--cell-factor", "3",
+              "--chunk", "64", "--scene", "data/scenes/draped_damask.toml"]
 
 
 def _arrays(path):

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from numba import njit
 
+import stages.core.svf as core_svf
 from stages.core.sg import sg_mass, spherical_fibonacci_axes
 from stages.precompute import svf
-import stages.core.svf as core_svf
 from stages.precompute.periodic import periodic_hit_outside, periodic_scene
 
 RES = 32
@@ -151,7 +151,8 @@ def _random_images(rng, R, C, n):
         else:               # smooth blobs: a random low-order field thresholded
             th = (np.arange(R) + 0.5) * math.pi / R
             ph = (np.arange(C) + 0.5) * 2 * math.pi / C
-            f = sum(rng.normal() * np.cos(a * th[:, None] + rng.uniform(0, 6)) * np.cos(b * ph[None, :] + rng.uniform(0, 6))
+            f = sum(rng.normal() * np.cos(a * th[:, None] + rng.uniform(0, 6))
+                    * np.cos(b * ph[None, :] + rng.uniform(0, 6))
                     for a, b in rng.integers(0, 4, (5, 2)))
             img = f > rng.normal(0, 0.5)
         out.append(img.astype(np.uint8))
@@ -356,7 +357,8 @@ def test_reconstruction_lookups_agree(tiny_svf):
             assert core_svf.ssdf_visible(pca.mean, pca.basis, coeffs[s], RES, RES, d) == (v > 0)
         r, c = 3, 30
         d = np.array(core_svf.pixel_direction(r, c, RES, RES))
-        assert core_svf.ssdf_at(pca.mean, pca.basis, coeffs[s], RES, RES, d) == pytest.approx(out[r * RES + c], abs=1e-9)
+        assert core_svf.ssdf_at(pca.mean, pca.basis, coeffs[s], RES, RES, d) == pytest.approx(out[r * RES + c],
+                                                                                             abs=1e-9)
 
 
 # ------------------------------------------------------------------------------------------------ determinism

@@ -14,9 +14,7 @@ import pytest
 from numba import njit
 
 from pipeline.presets import load_preset, pack, scale_preset
-from stages.core.yarn import implicit_plies as IP
-from stages.core.yarn import implicit_tables as IT
-from stages.core.yarn import model as M
+from stages.core.yarn import implicit_plies as IP, implicit_tables as IT, model as M
 from stages.procedural import bysdf_tables as BT
 
 KEY = np.uint64(2024)

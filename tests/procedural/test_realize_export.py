@@ -128,7 +128,8 @@ def test_realization_is_deterministic(realized, cli):
 def test_fibers_inspector_png(realized, cli, tmp_path, offscreen_gl):
     """The realized fibres of a yarn stretch render to a non-blank PNG (skips without off-screen OpenGL)."""
     png = tmp_path / "fibers.png"
-    code, _, err = cli("inspect", realized / "fibers.zarr", "--png", png, "--yarn", "1", "--width", "400", "--height", "300")
+    code, _, err = cli("inspect", realized / "fibers.zarr", "--png", png, "--yarn", "1",
+                       "--width", "400", "--height", "300")
     assert code == 0, err
     from tests.inspector_checks import assert_legible_png
 

@@ -12,10 +12,9 @@ import pytest
 
 from pipeline import presets
 from pipeline.runners.tables import build, load_tables
-from stages.core.yarn import tables as layout
-from stages.procedural import tables as T
-from stages.core.yarn import model as M
+from stages.core.yarn import model as M, tables as layout
 from stages.core.yarn.lookup import lookup_points
+from stages.procedural import tables as T
 from tests.helpers import compiled_typings
 
 SCENE = """
@@ -100,7 +99,8 @@ def test_loop_lists_hold_every_mutated_cycle():
     R, th, th0, *_ = T.regular_tables(tp, 5, 2.0, 16)
     N = int(tp[M.FIBER_NUM])
     L, seed, k = 1.7, np.uint64(987654321), 1
-    fib, U, z0, z1, cyc = T.yarn_loops(tp, seed, k, R[k * N:(k + 1) * N], th[k * N:(k + 1) * N], th0[k * N:(k + 1) * N], L)
+    fib, U, z0, z1, cyc = T.yarn_loops(tp, seed, k, R[k * N:(k + 1) * N], th[k * N:(k + 1) * N],
+                                       th0[k * N:(k + 1) * N], L)
     w = tp[M.S_MIG] * 2 * math.pi / tp[M.ALPHA]
     ref = []
     for j in range(N):

@@ -112,7 +112,8 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
         w.write("light_dirs", hemisphere_grid(*LIGHT_GRID))
         for lv in range(levels):
             r = res >> lv
-            w.write(f"level_{lv}/rho", (rho(lv, r) if callable(rho) else np.broadcast_to(rho, (r, r, 3))).astype(np.float32))
+            w.write(f"level_{lv}/rho",
+                    (rho(lv, r) if callable(rho) else np.broadcast_to(rho, (r, r, 3))).astype(np.float32))
             lob = np.zeros((r, r, lobes, 3, 4), np.float32)
             lob[..., 3] = 1.0
             if lobe_params is not None:
@@ -320,8 +321,10 @@ def test_packed_texels_equal_the_core_model(tmp_path):
 
     art = Artifact(path)
     cat = np.concatenate
-    g = lambda a: cat([np.asarray(art[f"level_{lv}/{a}"], np.float64).reshape((-1,) + art[f"level_{lv}/{a}"].shape[2:])
-                       for lv in range(2)])
+    def g(a):
+        return cat([np.asarray(art[f"level_{lv}/{a}"], np.float64).reshape((-1,) + art[f"level_{lv}/{a}"].shape[2:])
+                    for lv in range(2)])
+
     L = rng.normal(size=(60, 3))
     L[:, 2] = np.abs(L[:, 2])
     Vd = rng.normal(size=(60, 3))
@@ -330,7 +333,8 @@ def test_packed_texels_equal_the_core_model(tmp_path):
     Vd /= np.linalg.norm(Vd, axis=1)[:, None]
     err = _packed_vs_core(tex.texels, tex.table, g("rho"), g("lobes"), g("frame"), g("table"), L, Vd, *VIEW_GRID)
     assert err < 1e-6
-    assert tex.fit_bytes == sum(a.nbytes for name, a in art.arrays().items() if name.startswith(("level_", "view_", "light_")))
+    assert tex.fit_bytes == sum(a.nbytes for name, a in art.arrays().items()
+                                if name.startswith(("level_", "view_", "light_")))
 
 
 # ------------------------------------------------------------------------------------------------ shading
@@ -443,9 +447,11 @@ def test_mip_of_a_uniform_texture_is_level_0(bench):
     off, _, _ = bench.render(scene, *args, "--set", "mip=off")
     assert (ch["A"] > 0).mean() > 0.3 and on.max() > 0
     assert np.allclose(on, off, rtol=1e-6, atol=1e-9)
-    levels = write_btf(bench.name("levels").with_suffix(".zarr"), res=16, levels=5, rho=lambda lv, r: np.full((r, r, 3), 0.05 * (lv + 1)))
+    levels = write_btf(bench.name("levels").with_suffix(".zarr"), res=16, levels=5,
+                       rho=lambda lv, r: np.full((r, r, 3), 0.05 * (lv + 1)))
     args = ("--set", f"btf={levels}", "--set", f"mesh={mesh}", "--set", "repeat=40")
-    assert not np.allclose(bench.render(scene, *args)[0], bench.render(scene, *args, "--set", "mip=off")[0])  # mip acts here
+    # mip acts here
+    assert not np.allclose(bench.render(scene, *args)[0], bench.render(scene, *args, "--set", "mip=off")[0])
 
 
 def test_mip_level_follows_the_footprint(bench):

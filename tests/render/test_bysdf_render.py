@@ -149,8 +149,7 @@ def test_multiscale_with_vanishing_footprint_is_near(weave):
     """With the camera's pixel angle -> 0 the multiscale offset range collapses onto the ray's own offset:
     the aggregated frame and shadowing are the near point's and the roughness is not widened."""
     scene, yarns = weave
-    from pipeline.renderers import bysdf as R
-    from pipeline.renderers import method
+    from pipeline.renderers import bysdf as R, method
     from pipeline.renderers.film import render_film, sampling_of
     from pipeline.runners.render import resolve_options
 

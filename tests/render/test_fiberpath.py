@@ -4,17 +4,16 @@ import math
 
 import numpy as np
 import pytest
+from numba import njit
 from scipy import integrate
 from scipy.special import erf
 
-from numba import njit
-
-from stages.core.shading import bcsdf as B
-from stages.core.shading.bcsdf import pack_bcsdf
 from stages.core.geometry.bvh import build_fiber_bvh
 from stages.core.geometry.embree import EmbreeScene
-from stages.render.camera import pack_camera
+from stages.core.shading import bcsdf as B
+from stages.core.shading.bcsdf import pack_bcsdf
 from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
+from stages.render.camera import pack_camera
 from stages.render.fiberpath import FiberpathIntegrator
 from stages.render.film import VARIANCE_CHANNELS, finalize, new_film, tile_grid
 from stages.render.lights import LightTable, envmap_tables, pack_light
@@ -109,7 +108,8 @@ def _S_reference(p, wi, wo, t):
     to = math.asin(np.clip(wo @ t, -1, 1))
 
     def G(mu, b):
-        return integrate.quad(lambda x: math.exp(-0.5 * ((x - mu) / b) ** 2) / (math.sqrt(2 * math.pi) * b) * math.cos(x) ** 2,
+        return integrate.quad(lambda x: (math.exp(-0.5 * ((x - mu) / b) ** 2) / (math.sqrt(2 * math.pi) * b)
+                                         * math.cos(x) ** 2),
                               -math.pi / 2, math.pi / 2, points=[mu], epsrel=1e-11)[0]
 
     def g(x, mu, b):
@@ -140,8 +140,8 @@ def test_single_fibre_directional_against_numerical_bcsdf():
     E = 2.0
     travel = np.array([0.35, 0.25, 0.9])  # from below: TT dominates on the camera side
     travel /= np.linalg.norm(travel)
-    img, var, alpha, _ = render_arrays(pts, offs, rad, [pack_material_bcsdf(p)], [0], [pack_light("directional", [E, E, E], travel)],
-                                       cam, spp=64, max_depth=1)
+    img, var, alpha, _ = render_arrays(pts, offs, rad, [pack_material_bcsdf(p)], [0],
+                                       [pack_light("directional", [E, E, E], travel)], cam, spp=64, max_depth=1)
     t = np.array([1.0, 0.0, 0.0])
     wl = -travel
     ref = np.zeros((H, W))
@@ -174,7 +174,7 @@ def test_single_fibre_directional_against_numerical_bcsdf():
 def test_single_fibre_constant_environment_closed_form():
     """Reference: a lone fibre (absorbing silk preset) in a uniform environment L reflects
     L (F_R(theta_i) + (1 - F_R(theta_i)) C_TT) per channel (the BCSDF's albedo), all bounces."""
-    from pipeline.render_setup import load_bcsdf_preset
+    from pipeline.bcsdf_presets import load_bcsdf_preset
     from stages.core.shading.bcsdf import bcsdf_albedo
     from stages.render.camera import camera_ray
 
@@ -183,8 +183,8 @@ def test_single_fibre_constant_environment_closed_form():
     W = H = 10
     cam = pack_camera(np.array([-1.0, -0.8, 3.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 20.0, W, H)
     L = 1.5
-    img, var, alpha, _ = render_arrays(pts, offs, rad, [pack_material_bcsdf(p)], [0], [pack_light("constant", [L, L, L])],
-                                       cam, spp=64)
+    img, var, alpha, _ = render_arrays(pts, offs, rad, [pack_material_bcsdf(p)], [0],
+                                       [pack_light("constant", [L, L, L])], cam, spp=64)
     inner = alpha == 1.0
     assert inner.sum() >= 10
     for i, j in zip(*np.nonzero(inner)):
@@ -226,8 +226,8 @@ def test_single_fibre_sg_light_against_quadrature():
     axis = np.array([0.5, -0.3, 0.8])
     axis /= np.linalg.norm(axis)
     lam, P = 15.0, 4.0
-    img, var, alpha, _ = render_arrays(pts, offs, rad, [pack_material_bcsdf(p)], [0], [pack_light("sg", [P, P, P], axis, lam)],
-                                       cam, spp=512)
+    img, var, alpha, _ = render_arrays(pts, offs, rad, [pack_material_bcsdf(p)], [0],
+                                       [pack_light("sg", [P, P, P], axis, lam)], cam, spp=512)
     inner = np.argwhere(alpha == 1.0)
     assert len(inner) >= 12
     t = np.array([1.0, 0.0, 0.0])
@@ -250,7 +250,8 @@ def test_same_bytes_whatever_the_thread_count(accel):
     pts, offs, rad = fibre_cloud(4, n_fibres=10)
     cam = pack_camera(np.array([1.2, -1.6, 1.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 50.0, 12, 10)
     args = (pts, offs, rad, [pack_material_bcsdf(pack_bcsdf([0.5] * 3, [0.8] * 3, 5, 10, 25))], np.zeros(10),
-            [pack_light("sg", [3.0, 2.0, 1.0], [0.2, 0.1, 1.0], 8.0), pack_light("directional", [1.0] * 3, [0, 0, -1])], cam)
+            [pack_light("sg", [3.0, 2.0, 1.0], [0.2, 0.1, 1.0], 8.0), pack_light("directional", [1.0] * 3, [0, 0, -1])],
+            cam)
     n0 = numba.get_num_threads()
     try:
         numba.set_num_threads(1)
@@ -289,8 +290,9 @@ def test_embree_and_bvh_render_the_same_image(material):
 # bad input (render_setup) and the command line
 def test_bad_presets_and_fibres(tmp_path):
     """Unknown preset, negative widths, colours outside [0, 1], empty fibres: one-line LoomErrors naming the value."""
+    from pipeline.bcsdf_presets import load_bcsdf_preset
     from pipeline.errors import LoomError
-    from pipeline.render_setup import fibers_from_arrays, load_bcsdf_preset
+    from pipeline.render_setup import fibers_from_arrays
 
     with pytest.raises(LoomError, match="velvet.*known: cotton, fleece, gabardine, polyester, silk"):
         load_bcsdf_preset("velvet")
@@ -425,16 +427,19 @@ def test_cli_renders_exr_png_artifact(cli, tmp_path):
     code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
     assert code == 2 and "velvet" in err and not (tmp_path / "x.exr").exists()
     # a preset file (resolved against the scene) with a negative lobe width, then one with a colour above 1
-    (tmp_path / "bad.toml").write_text('c_r = [0.1, 0.1, 0.1]\nc_tt = [0.5, 0.5, 0.5]\nbeta_r = -3.0\nbeta_tt = 10.0\ngamma_tt = 20.0\n')
+    (tmp_path / "bad.toml").write_text('c_r = [0.1, 0.1, 0.1]\nc_tt = [0.5, 0.5, 0.5]\nbeta_r = -3.0\n'
+                                       'beta_tt = 10.0\ngamma_tt = 20.0\n')
     scene.write_text(SCENE.format(bcsdf="bad.toml"))
     code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
     assert code == 2 and "beta_r" in err and "-3.0" in err and len(err.strip().splitlines()) == 1
-    (tmp_path / "bad.toml").write_text('c_r = [0.1, 0.1, 0.1]\nc_tt = [0.5, 2.5, 0.5]\nbeta_r = 3.0\nbeta_tt = 10.0\ngamma_tt = 20.0\n')
+    (tmp_path / "bad.toml").write_text('c_r = [0.1, 0.1, 0.1]\nc_tt = [0.5, 2.5, 0.5]\nbeta_r = 3.0\n'
+                                       'beta_tt = 10.0\ngamma_tt = 20.0\n')
     code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "x.exr")
     assert code == 2 and "c_tt[1]" in err and "2.5" in err and not (tmp_path / "x.exr").exists()
     # tinting by the yarn's colour (the default): both lobe colours times the colour (0.6 here) darken the image
     scene.write_text(SCENE.format(bcsdf="gabardine"))
-    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "g.exr", "--set", "tint=none")[0] == 0
+    assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "g.exr",
+               "--set", "tint=none")[0] == 0
     assert cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "gt.exr")[0] == 0
     g, gt = read_exr(tmp_path / "g.exr")[0], read_exr(tmp_path / "gt.exr")[0]
     assert gt.sum() < g.sum()

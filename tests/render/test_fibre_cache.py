@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 from numba import njit
 
-from tests.helpers import EXACTNESS_SWATCH, closed_ring_scene, seam_points
 from pipeline.artifacts import Artifact
 from pipeline.fibre_cache import build_fibre_cache
 from pipeline.renderers.volpath import procedural_majorant
@@ -23,6 +22,7 @@ from stages.render.fibre_cache import fibre_ids
 from stages.render.medium import medium_lookup
 from stages.render.procedural_medium import ProceduralMedium
 from stages.render.realized_medium import RealizedMedium
+from tests.helpers import EXACTNESS_SWATCH, closed_ring_scene, seam_points
 
 SPACING = 0.002
 CAMERA = {"origin": [0.35, -0.6, 0.5], "target": [0.0, 0.0, 0.0], "up": [0.0, 0.0, 1.0], "fov": 50.0}
@@ -87,7 +87,8 @@ def _clear(fib, Q):
     tol = 2.0 * fib.summary["max_chord_error"] + 4 * np.finfo(np.float32).eps * float(np.abs(pts32).max())
     lo, cell, dims, start, items = build_segment_grid(pts32, off, rad, tol)
     ref = query_realized(pts32, rad, segment_fiber(off), np.asarray(fib["fiber_yarn"]), np.asarray(fib["fiber_ply"]),
-                         np.asarray(fib["fiber_kind"]), np.asarray(fib["fiber_index"]), lo, cell, dims, start, items, Q, tol)
+                         np.asarray(fib["fiber_kind"]), np.asarray(fib["fiber_index"]), lo, cell, dims, start, items,
+                         Q, tol)
     return (ref.surface_gap > tol) & ~ref.kind_tie
 
 

@@ -7,8 +7,15 @@ import numpy as np
 import pytest
 
 from stages.render import lights as Lt
-from tests.chisquare import (check_light, chi2_test, directions_to_xy, light_draw, light_eval_many,
-                             light_pdf_many, xy_to_directions)
+from tests.chisquare import (
+    check_light,
+    chi2_test,
+    directions_to_xy,
+    light_draw,
+    light_eval_many,
+    light_pdf_many,
+    xy_to_directions,
+)
 
 _pdf = light_pdf_many   # the adapter's compiled loops, shared with the closed-form tests below
 _eval = light_eval_many

@@ -318,7 +318,7 @@ def test_sum_of_sgs_against_monte_carlo(swatch):
     angle (for lobes 10 degrees above the horizon, 13-17 times the true visible mass on such segments).
     """
     from pipeline.artifacts import Artifact
-    from pipeline.render_setup import load_bcsdf_preset
+    from pipeline.bcsdf_presets import load_bcsdf_preset
     from stages.precompute.svf import exemplar_segments, unpack_images
 
     art = Artifact(swatch.tiling, kind="tiling")

@@ -20,7 +20,7 @@ def _fibres(seed=0, F=40):
     """Random-walk polylines (4-9 points, steps ~0.15) in the unit box with radii 0.02-0.06: they overlap."""
     rng = np.random.default_rng(seed)
     pts, rad, off = [], [], [0]
-    for f in range(F):
+    for _f in range(F):
         n = int(rng.integers(4, 10))
         p = rng.uniform(0.1, 0.9, 3) + np.cumsum(rng.normal(0, 0.09, (n, 3)), axis=0)
         pts.append(p)

@@ -7,8 +7,8 @@ import numpy as np
 from pipeline.render_setup import pack_lights
 from pipeline.runners.tile import load_tiling, run_tile
 from stages.core.geometry.bvh import build_fiber_bvh
-from stages.render.camera import pack_camera
 from stages.core.shading.material import pack_material_lambert
+from stages.render.camera import pack_camera
 from stages.render.fiberpath import FiberpathIntegrator
 from stages.render.film import finalize, new_film, tile_grid
 from stages.render.tiles import render_tiles
@@ -54,10 +54,12 @@ def test_shell_render_equals_direct_render(tmp_path):
             rad.append(R)
             cnt.append(np.diff(O))
     bvh, _ = build_fiber_bvh(np.concatenate(pts), np.r_[0, np.cumsum(np.concatenate(cnt))], np.concatenate(rad))
-    lights = pack_lights([{"type": "directional", "direction": list(np.array([0.2, 0.1, -1.0]) / np.linalg.norm([0.2, 0.1, -1.0])),
+    lights = pack_lights([{"type": "directional",
+                           "direction": list(np.array([0.2, 0.1, -1.0]) / np.linalg.norm([0.2, 0.1, -1.0])),
                            "irradiance": [2.0, 2.0, 2.0]}, {"type": "constant", "radiance": [0.3, 0.3, 0.3]}])
     cx, cy = art.summary["flat_size"][0] / 2, art.summary["flat_size"][1] / 2
-    cam = pack_camera(np.array([cx + 0.3, cy - 0.4, 2.5]), np.array([cx, cy, 0.0]), np.array([0.0, 1.0, 0.0]), 10.0, 24, 24)
+    cam = pack_camera(np.array([cx + 0.3, cy - 0.4, 2.5]), np.array([cx, cy, 0.0]), np.array([0.0, 1.0, 0.0]),
+                      10.0, 24, 24)
     img_s, hits_s, rays_s = _render(sc, np.zeros(int(art["ex_fibers"][-1]), np.int32), cam, lights, 24, 24, 4)
     img_d, hits_d, rays_d = _render(bvh, np.zeros((len(O) - 1) * 121, np.int32), cam, lights, 24, 24, 4)
     assert 0.2 < (hits_d > 0).mean() and img_d.max() > 0.05

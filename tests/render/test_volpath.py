@@ -14,16 +14,15 @@ import pytest
 from numba import njit
 
 from stages.core.rng import uniform
+from stages.core.shading.material import MAT_SIZE
+from stages.core.shading.sggx import fiber_sggx, phase_eval, projected_area
 from stages.render.camera import camera_ray, pack_camera
 from stages.render.film import F_B, F_HIT, F_R, VARIANCE_LUMINANCE, finalize, new_film, tile_grid
 from stages.render.grid_medium import GridMedium, grid_lookup
-from stages.render.lights import envmap_tables, pack_light
+from stages.render.lights import LightTable, envmap_tables, pack_light
 from stages.render.medium import HomogeneousMedium, extinction
-from stages.core.shading.sggx import fiber_sggx, phase_eval, projected_area
-from stages.render.tracking import make_majorant_grid, majorants_from_voxels, track
-from stages.render.lights import LightTable
 from stages.render.tiles import render_tiles
-from stages.core.shading.material import MAT_SIZE
+from stages.render.tracking import majorants_from_voxels, make_majorant_grid, track
 from stages.render.volpath import VolpathIntegrator
 from tests.helpers import compiled_typings
 
@@ -182,7 +181,8 @@ def test_white_furnace(ground, split):
     L = np.array([0.7, 0.5, 1.2])
     if split:
         img = np.broadcast_to((0.6 * L).astype(np.float32), (8, 16, 3))
-        lt = LightTable(np.array([pack_light("constant", 0.4 * L), pack_light("envmap", [1.0, 1.0, 1.0])]), *envmap_tables(img))
+        lt = LightTable(np.array([pack_light("constant", 0.4 * L), pack_light("envmap", [1.0, 1.0, 1.0])]),
+                        *envmap_tables(img))
     else:
         lt = _lights(pack_light("constant", L))
     cam = pack_camera(np.array([0.3, -4.0, 1.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]), 40.0, 12, 12)
@@ -345,8 +345,8 @@ def test_procedural_and_realized_sources_agree(small):
     and no block deviates by more than the Sidak-corrected 0.001 two-sided normal quantile
     (tests/chisquare.py: z_score_test)."""
     from pipeline.renderers.volpath import render
-    from tests.chisquare import z_score_test
     from pipeline.scene import load_scene
+    from tests.chisquare import z_score_test
 
     scene = load_scene(small / "s.toml")
     base = {"width": 8, "height": 8, "spp": 16, "max_depth": 4, "rr_depth": 3, "tile_size": 4, "extra": {}}

@@ -111,7 +111,8 @@ def test_voxelize_box_overlap_fractions():
     def frac(n, a, b):
         e = np.linspace(0, 1, n + 1)
         return np.clip(np.minimum(e[1:], b) - np.maximum(e[:-1], a), 0, None) * n
-    expect = 4.0 * frac(nz, 0.125, 0.625)[:, None, None] * frac(ny, 0.0, 0.5)[None, :, None] * frac(nx, 0.25, 0.75)[None, None, :]
+    expect = (4.0 * frac(nz, 0.125, 0.625)[:, None, None] * frac(ny, 0.0, 0.5)[None, :, None]
+              * frac(nx, 0.25, 0.75)[None, None, :])
     np.testing.assert_allclose(den, expect, rtol=1e-6, atol=1e-6)
     occ = den > 0
     np.testing.assert_allclose(np.abs(dirs[occ] @ np.array([0.0, 0.6, 0.8])), 1.0, rtol=1e-6)
@@ -164,7 +165,8 @@ def test_voxelize_cli_grid_artifact_export_and_render(tmp_path, cli):
     assert code == 2 and "not found" in err
     assert not (tmp_path / "h.zarr").exists()
     # the grid source renders
-    code, out, err = cli("render", scene, "--method", "volpath", "--source", "grid", "--set", f"grid={tmp_path / 'g.zarr'}",
+    code, out, err = cli("render", scene, "--method", "volpath", "--source", "grid",
+                         "--set", f"grid={tmp_path / 'g.zarr'}",
                          "-o", tmp_path / "r.exr", "--width", 6, "--height", 6, "--spp", 2)
     assert code == 0, err
     assert Artifact(tmp_path / "r.zarr").summary["method_stats"]["medium_lookups"] > 0

@@ -10,8 +10,14 @@ import math
 import numpy as np
 import pytest
 
-from stages.tile.base_surfaces import (cylinder, face_normals, flat_rectangle, sphere_drape, triangle_checks,
-                                       vertex_normals)
+from stages.tile.base_surfaces import (
+    cylinder,
+    face_normals,
+    flat_rectangle,
+    sphere_drape,
+    triangle_checks,
+    vertex_normals,
+)
 
 
 def _uv_area(UV, F):

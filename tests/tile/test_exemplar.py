@@ -14,8 +14,15 @@ import pytest
 from pipeline.presets import load_preset, pack, scale_preset
 from stages.core.yarn import model as M
 from stages.ingest import weave
-from stages.tile.exemplar import (centreline_frames, check_periodic_draft, periodic_centreline, realize_exemplar,
-                                  segment_blocks, snap_periodic, wrap_pieces)
+from stages.tile.exemplar import (
+    centreline_frames,
+    check_periodic_draft,
+    periodic_centreline,
+    realize_exemplar,
+    segment_blocks,
+    snap_periodic,
+    wrap_pieces,
+)
 
 SX, SY, R = 0.1, 0.12, 0.045
 

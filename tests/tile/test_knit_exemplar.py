@@ -18,8 +18,7 @@ from pipeline.presets import load_preset, pack, scale_preset
 from stages.core.curves import knit as core_knit
 from stages.core.yarn import model as M
 from stages.tile.exemplar import centreline_frames, wrap_pieces
-from stages.tile.knit_exemplar import (DENSE_STITCH, KNIT_GROUP, knit_centreline, natural_repeat,
-                                       realize_knit_exemplar)
+from stages.tile.knit_exemplar import DENSE_STITCH, KNIT_GROUP, knit_centreline, natural_repeat, realize_knit_exemplar
 
 W_SP, H_SP = 0.25, 0.2
 R = core_knit.default_radius(W_SP, H_SP)

@@ -130,7 +130,6 @@ def test_bad_input_exit_2_and_previous_artifact_untouched(case, tmp_path, cli, e
 def test_wif_exemplar_and_its_period(tmp_path, cli):
     """A WIF draft (data/drafts/twill_2x2.wif, 8 x 8 threads) as an exemplar: 4 x 4 is its period
     (accepted, the exemplar is the draft's first 4 x 4 cells); 3 x 4 is not (exit 2)."""
-    from pathlib import Path
 
     from pipeline.artifacts import Artifact
     from pipeline.io.wif import parse

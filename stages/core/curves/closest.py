@@ -13,6 +13,7 @@ from numba import njit
 
 from .spline import segment_arclen_to, segment_coeffs
 
+
 # ------------------------------------------------------------------------------------------------
 # closest point: exact root isolation of the quintic derivative of the squared distance
 @njit(cache=True, inline="always")

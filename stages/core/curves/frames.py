@@ -20,6 +20,7 @@ from numba import njit
 
 from .spline import coeffs_s, locate, normalize3, segment_arclen_to, wrap_s
 
+
 @njit(cache=True)
 def double_reflection(x0, t0, r0, x1, t1):
     """One step of the double reflection method (Wang et al. 2008): carry the reference vector r0 at

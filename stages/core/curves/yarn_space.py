@@ -11,6 +11,7 @@ from numba import njit
 from .closest import closest_point_on_curve
 from .frames import curve_frame_at
 
+
 @njit(cache=True)
 def to_yarn_space(cv, c, p):
     """seed 000 Eq. 8-9: yarn-space (x, y, z = s) of fabric-space p for curve c, and distance^2."""

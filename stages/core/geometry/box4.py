@@ -71,7 +71,8 @@ def box4_enter(typingctx, box, w, sx, sy, sz, ox, oy, oz, ix, iy, iz, tmin, tmax
             t1 = plane(col(12 + 4 * axis, s, -1), o[axis], inv[axis])
             tn = builder.select(builder.fcmp_ordered(">", t0, tn), t0, tn)
             tf = builder.select(builder.fcmp_ordered("<", t1, tf), t1, tf)
-        hit = builder.and_(builder.and_(builder.fcmp_ordered(">=", tf, tn), builder.fcmp_ordered(">=", tf, splat(lo_t))),
+        hit = builder.and_(builder.and_(builder.fcmp_ordered(">=", tf, tn),
+                                        builder.fcmp_ordered(">=", tf, splat(lo_t))),
                            builder.fcmp_ordered("<=", tn, splat(hi_t)))
         res = builder.select(hit, tn, splat(ir.Constant(ir.DoubleType(), float("inf"))))
         return cgutils.pack_array(builder, [builder.extract_element(res, ir.Constant(ir.IntType(32), k))

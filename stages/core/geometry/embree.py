@@ -13,14 +13,14 @@ Use
 ---
 ``EmbreeScene(points, fiber_offsets, point_radius, threads)`` builds the Embree device and scene (one
 geometry of round linear curves: a curve segment per capsule, in segment order, so Embree's ``primID``
-is loomlight's segment index, each with two vertices of its own at the capsule's radius) and holds them until ``close()``
-(or the end of a ``with`` block); ``.fibers`` is the ``EmbreeFibers`` namedtuple the kernels take:
-``handle`` (the RTCScene), ``filter`` (the address of ``window_filter``), ``rows`` (the address of the
-segment rows below), ``exact32`` (whether every point is a float32 value), and the segment arrays of
-``stages.core.geometry.bvh`` (``points``, ``seg_a``, ``seg_r``, ``seg_fiber``, ``fiber_seg_offsets``).
-It answers the surface-scene queries ``surface_hit`` / ``surface_occluded``
-(``stages.core.geometry.surface``) and ``embree_intersect`` / ``embree_occluded``, which have the
-signatures and results of ``bvh.intersect`` / ``bvh.occluded``.
+is loomlight's segment index, each with two vertices of its own at the capsule's radius) and holds
+them until ``close()`` (or the end of a ``with`` block); ``.fibers`` is the ``EmbreeFibers``
+namedtuple the kernels take: ``handle`` (the RTCScene), ``filter`` (the address of ``window_filter``),
+``rows`` (the address of the segment rows below), ``exact32`` (whether every point is a float32
+value), and the segment arrays of ``stages.core.geometry.bvh`` (``points``, ``seg_a``, ``seg_r``,
+``seg_fiber``, ``fiber_seg_offsets``). It answers the surface-scene queries ``surface_hit`` /
+``surface_occluded`` (``stages.core.geometry.surface``) and ``embree_intersect`` /
+``embree_occluded``, which have the signatures and results of ``bvh.intersect`` / ``bvh.occluded``.
 
 *Segment rows* (``segment_rows``): Embree's vertex buffer is loomlight's, one 64-byte row (a cache
 line) per segment: the two float4 vertices Embree reads (stride 32) and, in the gaps, the capsule's
@@ -154,7 +154,8 @@ def load_embree():
                             ("rtcCommitScene", None, [vp]), ("rtcReleaseScene", None, [vp]),
                             ("rtcNewGeometry", vp, [vp, c_int]),
                             ("rtcSetNewGeometryBuffer", vp, [vp, c_int, c_uint, c_int, c_size, c_size]),
-                            ("rtcSetSharedGeometryBuffer", None, [vp, c_int, c_uint, c_int, vp, c_size, c_size, c_size]),
+                            ("rtcSetSharedGeometryBuffer", None,
+                             [vp, c_int, c_uint, c_int, vp, c_size, c_size, c_size]),
                             ("rtcSetGeometryEnableFilterFunctionFromArguments", None, [vp, c_bool]),
                             ("rtcCommitGeometry", None, [vp]), ("rtcAttachGeometry", c_uint, [vp, vp]),
                             ("rtcReleaseGeometry", None, [vp])):
@@ -198,7 +199,8 @@ class EmbreeScene:
                                                VERTEX_STRIDE, 2 * ns)
                 ib = lib.rtcSetNewGeometryBuffer(geom, BUFFER_INDEX, 0, FORMAT_UINT, 4, ns)
                 self._check("allocating the curve buffers")
-                np.ctypeslib.as_array((ctypes.c_uint32 * ns).from_address(ib))[:] = np.arange(0, 2 * ns, 2, dtype=np.uint32)
+                np.ctypeslib.as_array((ctypes.c_uint32 * ns).from_address(ib))[:] = np.arange(0, 2 * ns, 2,
+                                                                                               dtype=np.uint32)
                 lib.rtcSetGeometryEnableFilterFunctionFromArguments(geom, True)
                 lib.rtcCommitGeometry(geom)
                 lib.rtcAttachGeometry(self.scene, geom)

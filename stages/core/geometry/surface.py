@@ -64,9 +64,13 @@ def capsule_surface_hit(t, s, fiber, r, ax, ay, az, bx, by, bz, ox, oy, oz, dx, 
     """The ``SurfaceHit`` of a ray (o, d) meeting capsule s (a -> b, radius r, of fibre ``fiber``) at t."""
     tl = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
     if tl > 0.0:
-        tx = (bx - ax) / tl; ty = (by - ay) / tl; tz = (bz - az) / tl
+        tx = (bx - ax) / tl
+        ty = (by - ay) / tl
+        tz = (bz - az) / tl
     else:
-        tx = 1.0; ty = 0.0; tz = 0.0
+        tx = 1.0
+        ty = 0.0
+        tz = 0.0
     nx, ny, nz, _ = capsule_normal(ox + t * dx, oy + t * dy, oz + t * dz, ax, ay, az, bx, by, bz)
     return SurfaceHit(t, s, fiber, -1, tx, ty, tz, nx, ny, nz, r)
 

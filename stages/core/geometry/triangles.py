@@ -191,7 +191,8 @@ def mesh_intersect(mesh, ox, oy, oz, dx, dy, dz, tmin, tmax):
                         ox, oy, oz, ix, iy, iz, tmin, best_t)
     if t_root == np.inf:
         return TriangleHit(np.inf, -1, 0.0, 0.0)
-    stack, stack_t = traversal_stack()   # stack_t: entry distance of each pushed node, skipped if a nearer hit came since
+    stack, stack_t = traversal_stack()   # stack_t: entry distance of each pushed node, skipped if a nearer hit
+                                         # came since
     node = 0
     sp = 0
     while True:

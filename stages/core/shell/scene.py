@@ -59,7 +59,8 @@ def build_shell_scene(a) -> ShellScene:
         # 4-wide nodes: inner references shift by the wide nodes before, leaf ranges by the prims before
         ch = bvh.wide_child
         leaf = -1 - np.where(ch < 0, ch, -1)
-        wide_child.append(np.where(ch >= 0, ch + w_off, -1 - ((leaf // LEAF_CODE + s_off) * LEAF_CODE + leaf % LEAF_CODE)))
+        wide_child.append(np.where(ch >= 0, ch + w_off,
+                                   -1 - ((leaf // LEAF_CODE + s_off) * LEAF_CODE + leaf % LEAF_CODE)))
         wide_box.append(bvh.wide_box)
         wide_roots[k] = w_off
         p_off += len(bvh.points)

@@ -43,7 +43,6 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
-
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
@@ -419,5 +418,6 @@ def _shell_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_p
 def _shell_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
     if is_tuple_class(scene, ShellScene):
         def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return shell_trace(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window).t < np.inf
+            return shell_trace(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim,
+                               ign_window).t < np.inf
         return impl

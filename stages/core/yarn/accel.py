@@ -19,10 +19,33 @@ from stages.core.threads import chunk_kernel, for_chunks
 
 from .fibre_tests import stored_hair
 from .frame_samples import chord_grid, coarse_knots, sample_all
-from .model import (E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, RHO_MAX, RHO_MIN, USE_MIGRATION,
-                    hair_point, hair_speed_bound, regular_xy, transverse_speed, transverse_speed_bound)
-from .tables import (FO_SECTORS, FO_SHELLS, FO_WORDS, FO_ZBIN_EXTENTS, FRAME_TOLERANCE, Tables, fringe_reach,
-                     fringe_window, loop_fibre)
+from .model import (
+    E_LONG,
+    E_SHORT,
+    FIBER_NUM,
+    FIBER_RADIUS,
+    PLY_NUM,
+    PLY_RADIUS,
+    RHO_MAX,
+    RHO_MIN,
+    USE_MIGRATION,
+    hair_point,
+    hair_speed_bound,
+    regular_xy,
+    transverse_speed,
+    transverse_speed_bound,
+)
+from .tables import (
+    FO_SECTORS,
+    FO_SHELLS,
+    FO_WORDS,
+    FO_ZBIN_EXTENTS,
+    FRAME_TOLERANCE,
+    Tables,
+    fringe_reach,
+    fringe_window,
+    loop_fibre,
+)
 
 
 def scan_bounds(tab: Tables):
@@ -216,7 +239,8 @@ def _gates(tab, top):
         if tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0:
             continue
         es, el = tp[E_SHORT], tp[E_LONG]
-        rcore = tab.type_rcore[t] + tab.type_K[t] * (tp[FIBER_RADIUS] + 2.0 * tab.yarn_eps[c]) * max(es, el) / min(es, el)
+        rcore = (tab.type_rcore[t]
+                 + tab.type_K[t] * (tp[FIBER_RADIUS] + 2.0 * tab.yarn_eps[c]) * max(es, el) / min(es, el))
         k0, k1 = tab.kn_off[c], tab.kn_off[c + 1]
         base, nb = tab.fo_off[c], tab.fo_off[c + 1] - tab.fo_off[c]
         h = tab.fo_geom[c, 0]

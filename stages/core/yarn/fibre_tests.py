@@ -131,7 +131,7 @@ def regular_closest(lf, tp, yseed, fib, p, z0):
     zb = lf.zb
     h = 1e-3 * (zb - za)
     z = min(max(z0, za), zb)
-    for it in range(12):
+    for _it in range(12):
         zp = min(z + h, zb)
         zn = max(z - h, za)
         Fp = _reg_model(lf, tp, yseed, fib, zp)
@@ -185,7 +185,7 @@ def hair_closest(lf, tp, k, hs, p, t0):
         return 1e300, 0.0
     t = min(max(t0, ta), tb)
     h = max(1e-3 * (tb - ta), 1e-9)
-    for it in range(12):
+    for _it in range(12):
         tp_ = min(t + h, tb)
         tm = max(t - h, ta)
         if tp_ <= tm:
@@ -302,7 +302,7 @@ def regular_closest_s(vis, fib, z0, tol):
     Dx = Dy = Dz = 0.0
     fx = fy = fz = 0.0
     kind = 1
-    for it in range(16):
+    for _it in range(16):
         i, fx, fy, fz, kind = _reg_at(vis, fib, i, z)
         zh = z + h if z + h <= zb else z - h
         i, ax, ay, az, kd = _reg_at(vis, fib, i, zh)
@@ -358,7 +358,7 @@ def hair_closest_s(vis, k, hs, t0, tol):
     Dx = Dy = Dz = 0.0
     fx = fy = fz = 0.0
     i = vis.lo
-    for it in range(16):
+    for _it in range(16):
         i, fx, fy, fz = _hair_at(vis, k, hs, i, t)
         th_ = t + h if t + h <= 1.0 else t - h
         i, ax, ay, az = _hair_at(vis, k, hs, i, th_)

@@ -454,7 +454,7 @@ def foot_point(s_arr, fr, lo, hi, i, s0, sa, sb, px, py, pz, tol):
     a = sa
     b = sb
     rx = ry = rz = 0.0
-    for it in range(40):
+    for _it in range(40):
         i, f = frame_at(s_arr, fr, lo, hi, i, s)
         rx, ry, rz = f[0] - px, f[1] - py, f[2] - pz
         g = rx * f[3] + ry * f[4] + rz * f[5]

@@ -20,7 +20,6 @@ import numpy as np
 from numba import njit
 
 from stages.core.rng import hash_u64, uniform
-
 from stages.core.yarn.model import CLAMP, STREAM_TREE
 
 MAX_DEPTH = 24

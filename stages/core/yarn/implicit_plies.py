@@ -95,9 +95,10 @@ ellipse-plane steps plus 3-4 Newton steps before its (shorter) march; 0.78 again
 hit on one core, and the march alone marches the plies nearest first (by G at u_lo, which it reuses), so
 the first entry found cuts the others short (12.4 -> 8.9 membership evaluations per first hit): 0.66 us.
 bysdf renders the demo 1.2x faster with it in ``near`` mode, 1.7x in ``far``, 1.8x in ``multiscale``
-(0.5-0.7 % of the pixels differ from the iteration's images, the means by 1e-6). Both find the same entries (within 1e-15 on
-10,000 random rays); they can differ on a ray that starts on a ply's surface within rounding of G = 0
-(the own ply counted or not). ``bysdf`` uses the march unless ``--set ply_search=iteration``.
+(0.5-0.7 % of the pixels differ from the iteration's images, the means by 1e-6). Both find the same
+entries (within 1e-15 on 10,000 random rays); they can differ on a ray that starts on a ply's
+surface within rounding of G = 0 (the own ply counted or not). ``bysdf`` uses the march unless
+``--set ply_search=iteration``.
 
 ``PlyHit`` fields:
   hit            False: the ray passes through the yarn between the plies

@@ -59,8 +59,21 @@ from numba import njit
 
 from stages.core.rng import uniform
 
-from .model import (ALPHA, E_LONG, E_SHORT, FIBER_SGN, PLY_NUM, R_MAX, RHO_MAX, TWO_PI, YARN_ALPHA, YARN_SGN,
-                    fiber_twist, ply_angle, ply_frame)
+from .model import (
+    ALPHA,
+    E_LONG,
+    E_SHORT,
+    FIBER_SGN,
+    PLY_NUM,
+    R_MAX,
+    RHO_MAX,
+    TWO_PI,
+    YARN_ALPHA,
+    YARN_SGN,
+    fiber_twist,
+    ply_angle,
+    ply_frame,
+)
 
 ImplicitTables = namedtuple("ImplicitTables", [
     "fibre_table", "ply_shadow", "n_tables", "n_angles", "n_ply_angles", "switch_length", "blend_length",

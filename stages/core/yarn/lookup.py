@@ -56,12 +56,37 @@ from numba import njit
 
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.core.yarn import hair_free
-from stages.core.yarn.fibre_tests import (TWO_PI, HairShape, RegularFibre, YarnVisit, exact_hair, exact_regular,
-                                          fibre_xy, hair_closest_s, hair_prefilter, hair_quick_reject,
-                                          regular_closest_s, stored_hair)
+from stages.core.yarn.fibre_tests import (
+    TWO_PI,
+    HairShape,
+    RegularFibre,
+    YarnVisit,
+    exact_hair,
+    exact_regular,
+    fibre_xy,
+    hair_closest_s,
+    hair_prefilter,
+    hair_quick_reject,
+    regular_closest_s,
+    stored_hair,
+)
 from stages.core.yarn.frame_samples import chord_lower_bound, foot_point, frame_at
-from stages.core.yarn.model import (DENSITY, E_LONG, E_SHORT, FIBER_NUM, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, YARN_ALPHA,
-                                    ZE_MU, ZE_SIG, fiber_twist, hair_params, ply_frame, reach_factor)
+from stages.core.yarn.model import (
+    DENSITY,
+    E_LONG,
+    E_SHORT,
+    FIBER_NUM,
+    FIBER_RADIUS,
+    PLY_NUM,
+    PLY_RADIUS,
+    YARN_ALPHA,
+    ZE_MU,
+    ZE_SIG,
+    fiber_twist,
+    hair_params,
+    ply_frame,
+    reach_factor,
+)
 from stages.core.yarn.tables import fringe_bits, fringe_window, hair_node_seed_nb, yarn_space_limit, z_window
 
 FOOT_TOL = 1e-4  # foot-point Newton stops at steps below this x the fibre radius (w absorbs the rest)

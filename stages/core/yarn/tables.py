@@ -74,7 +74,8 @@ Tables = namedtuple("Tables", [
     "fg_yarn", "fg_a", "fg_b",       # runs: yarn, coarse chords [a, b) (int32 each)
     "ply_rr",           # (T, max plies, 2) float64 (min r_lo, max r_hi) over the ply's fibres (unit disc)
     "fib_v",            # (F,) float64 transverse speed bound of each fibre outside loop cycles
-    "hair_box",         # (H, 4) float32 hybrid: each hair's z range and radius range (zlo, zhi, Rlo, Rhi), rounded outward
+    "hair_box",         # (H, 4) float32 hybrid: each hair's z range and radius range (zlo, zhi, Rlo, Rhi),
+                        # rounded outward
     "lz_rr",            # (loop z-bins, 2) float64 (min r_lo, max U_loop) over each loop z-bin's loops
     "type_rcore",       # (T,) float64 yarn-space radius beyond which no regular (non-loop) fibre is in reach
     "fo_off",           # (Y+1,) int64: fringe z-bins of yarn c at fo_off[c]:fo_off[c+1]
@@ -123,8 +124,8 @@ def accel_bytes(tab: Tables) -> int:
 def empty_accel(Y):
     z, zi = np.zeros(0), np.zeros(0, np.int64)
     return (np.zeros(Y + 1, np.int64), z, np.zeros((0, FRAME_COLS)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
-            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int32), np.zeros(0, np.int32), np.zeros(0, np.int32),
-            np.zeros(0, np.int32),
+            np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int32), np.zeros(0, np.int32),
+            np.zeros(0, np.int32), np.zeros(0, np.int32),
             np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4), np.float32), np.zeros((0, 2)), np.zeros(0),
             np.zeros(Y + 1, np.int64), np.ones((Y, 2)), np.zeros((0, 2 * FO_WORDS), np.uint64), np.zeros(0))
 

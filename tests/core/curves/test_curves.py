@@ -9,7 +9,7 @@ import pytest
 
 from stages.core.curves.closest import closest_point_on_curve, yarns_near
 from stages.core.curves.frames import curve_frame_at
-from stages.core.curves.spline import curve_point_at, segment_deriv, segment_point
+from stages.core.curves.spline import curve_point_at, segment_point
 from stages.core.curves.yarn_space import from_yarn_space, to_yarn_space
 from stages.ingest.spline_process import curves_from_arrays, process_curves, sample_curve_points
 

@@ -85,14 +85,16 @@ def test_box4_contains_is_the_scalar_test(seed):
         p = rng.random(3) * 1.4 - 0.1
         if it % 2:                                       # in (or near) a chosen child's box
             q = it % 4
-            lo, hi = box[w, 4 * np.arange(3) + q].astype(np.float64), box[w, 12 + 4 * np.arange(3) + q].astype(np.float64)
+            lo, hi = (box[w, 4 * np.arange(3) + q].astype(np.float64),
+                      box[w, 12 + 4 * np.arange(3) + q].astype(np.float64))
             if np.all(np.isfinite(lo)):
                 p = lo + (hi - lo) * (rng.random(3) * 1.2 - 0.1)
         if it % 3 == 0:                                  # exactly on a bound: bounds are inside
             q, k = int(rng.integers(4)), int(rng.integers(3))
             p[k] = float(box[w, 4 * k + q] if it % 2 else box[w, 12 + 4 * k + q])
         want = sum(1 << q for q in range(4)
-                   if all(np.float64(box[w, 4 * k + q]) <= p[k] <= np.float64(box[w, 12 + 4 * k + q]) for k in range(3)))
+                   if all(np.float64(box[w, 4 * k + q]) <= p[k] <= np.float64(box[w, 12 + 4 * k + q])
+                          for k in range(3)))
         assert _contains(box, w, p) == want, it
         held += want != 0
     assert held > 500

@@ -30,10 +30,13 @@ def _queries(bvh, O, D, tmin, ign_f, ign_s, window):
     n = O.shape[0]
     out = np.empty((n, 5))
     for k in range(n):
-        t, s = intersect(bvh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], tmin, np.inf, ign_f[k], ign_s[k], window)
-        tb, sb = intersect_brute(bvh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], tmin, np.inf, ign_f[k], ign_s[k], window)
+        t, s = intersect(bvh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2],
+                         tmin, np.inf, ign_f[k], ign_s[k], window)
+        tb, sb = intersect_brute(bvh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2],
+                                 tmin, np.inf, ign_f[k], ign_s[k], window)
         tmax = 0.5 * tb if tb < np.inf else 10.0
-        occ_half = occluded(bvh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], tmin, tmax, ign_f[k], ign_s[k], window)
+        occ_half = occluded(bvh, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2],
+                            tmin, tmax, ign_f[k], ign_s[k], window)
         out[k, 0] = t
         out[k, 1] = s
         out[k, 2] = tb
@@ -154,7 +157,8 @@ def test_capsule_closed_forms():
     assert capsule_intersect(-3.0, 0.0, 0.0, 1.0, 0.0, 0.0, *a, *b, r, 0.0) == pytest.approx(3.0 - r, abs=1e-14)
     # parallel to the axis at offset h < r: sphere entry at x = -sqrt(r^2 - h^2)
     h = 0.06
-    assert capsule_intersect(-3.0, h, 0.0, 1.0, 0.0, 0.0, *a, *b, r, 0.0) == pytest.approx(3.0 - math.sqrt(r * r - h * h), abs=1e-13)
+    assert capsule_intersect(-3.0, h, 0.0, 1.0, 0.0, 0.0, *a, *b, r, 0.0) == pytest.approx(
+        3.0 - math.sqrt(r * r - h * h), abs=1e-13)
     # tangent-grazing miss just outside the body
     assert capsule_intersect(0.5, 0.0, 5.0, 0.0, 1.0, 0.0, *a, *b, r, 0.0) == math.inf
     # far origin 1e6 away: the hit is accurate to 1e-9 relative to the capsule size
@@ -186,7 +190,7 @@ def test_capsule_first_hit_is_the_entry():
         d = target - o
         d /= np.linalg.norm(d)
 
-        def dist(p):
+        def dist(p, a=a, b=b):
             ab = b - a
             s = min(max(np.dot(p - a, ab) / np.dot(ab, ab), 0.0), 1.0)
             return np.linalg.norm(p - (a + s * ab))

@@ -79,7 +79,8 @@ def test_embree_matches_brute_force(seed, exact32):
     with EmbreeScene(pts, offs, rad, threads=2) as es:
         assert es.fibers.exact32 == exact32
         for case, (O, D, ign_f, ign_s) in enumerate(((O1, D1, no_skip, no_skip), (O2, D2, fib, s_idx),
-                                                    (O4, D4, no_skip[solid], no_skip[solid]), (O3, D3, no_skip, no_skip))):
+                                                    (O4, D4, no_skip[solid], no_skip[solid]),
+                                                    (O3, D3, no_skip, no_skip))):
             out = _queries(bvh, es.fibers, O, D, 1e-9, ign_f, ign_s, WINDOW)
             tb, sb, te, se = out[:, 0], out[:, 1], out[:, 2], out[:, 3]
             same = (sb == se) & ((tb == te) | (sb < 0))

@@ -13,7 +13,7 @@ PRESETS = ["fleece", "gabardine", "silk", "cotton", "polyester"]
 
 
 def preset(name):
-    from pipeline.render_setup import load_bcsdf_preset
+    from pipeline.bcsdf_presets import load_bcsdf_preset
 
     return load_bcsdf_preset(name)
 
@@ -52,7 +52,8 @@ def test_N_tt_integrates_to_one(gamma_deg):
     assert v == pytest.approx(1.0, abs=1e-10)
     # the floor is the mass lost outside (-pi, pi], not a constant
     tail = 1.0 - B.gauss_mass(-math.pi, math.pi, 0.0, p[8])
-    assert B.azimuthal_N_tt(math.pi, p[8], p[9]) - B.gauss(math.pi, 0.0, p[8]) == pytest.approx(tail / (2 * math.pi), rel=1e-9)
+    assert B.azimuthal_N_tt(math.pi, p[8], p[9]) - B.gauss(math.pi, 0.0, p[8]) == pytest.approx(tail / (2 * math.pi),
+                                                                                                rel=1e-9)
 
 
 def _sphere_integral(p, theta_i, phi_i, n_theta=1200, n_phi=144):
@@ -111,8 +112,10 @@ def test_sample_weight_is_eval_over_pdf_world():
     p = preset("gabardine")
     rng = np.random.default_rng(3)
     for _ in range(50):
-        t = rng.normal(size=3); t /= np.linalg.norm(t)
-        wi = rng.normal(size=3); wi /= np.linalg.norm(wi)
+        t = rng.normal(size=3)
+        t /= np.linalg.norm(t)
+        wi = rng.normal(size=3)
+        wi /= np.linalg.norm(wi)
         wo, w0, w1, w2, pdf = B.bcsdf_sample(p, t, wi, *rng.random(3))
         assert pdf > 0
         f = B.bcsdf_eval(p, t, wi, wo)
@@ -126,7 +129,8 @@ def test_sample_weight_is_eval_over_pdf_world():
 
 def test_truncated_gauss_sampler_inverts_cdf():
     """Reference: the truncated normal CDF; the sampler must use the mean and deviation (no erf-for-erfinv)."""
-    for mu, beta, a, b in ((0.3, 0.1, -1.5, 1.5), (1.5, 0.02, -1.5708, 1.5708), (-1.4, 0.5, -1.5708, 1.5708), (0.0, 0.4, -3.14, 3.14)):
+    for mu, beta, a, b in ((0.3, 0.1, -1.5, 1.5), (1.5, 0.02, -1.5708, 1.5708), (-1.4, 0.5, -1.5708, 1.5708),
+                           (0.0, 0.4, -3.14, 3.14)):
         for u in (1e-6, 0.1, 0.5, 0.9, 1 - 1e-6):
             x = B.sample_truncated_gauss(u, mu, beta, a, b)
             cdf = B.gauss_mass(a, x, mu, beta) / B.gauss_mass(a, b, mu, beta)

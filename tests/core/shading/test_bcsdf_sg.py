@@ -12,12 +12,11 @@ from numba import njit
 from scipy import special
 
 from stages.core import sg
-from stages.core.shading import bcsdf as B
-from stages.core.shading import bcsdf_sg as S
+from stages.core.shading import bcsdf as B, bcsdf_sg as S
 
 
 def preset(name):
-    from pipeline.render_setup import load_bcsdf_preset
+    from pipeline.bcsdf_presets import load_bcsdf_preset
 
     return load_bcsdf_preset(name)
 

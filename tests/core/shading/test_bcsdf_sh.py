@@ -7,12 +7,11 @@ import pytest
 from numba import njit
 
 from stages.core import sh
-from stages.core.shading import bcsdf as B
-from stages.core.shading import bcsdf_sh as BS
+from stages.core.shading import bcsdf as B, bcsdf_sh as BS
 
 
 def preset(name):
-    from pipeline.render_setup import load_bcsdf_preset
+    from pipeline.bcsdf_presets import load_bcsdf_preset
 
     return load_bcsdf_preset(name)
 

@@ -18,11 +18,33 @@ from numba import njit
 from stages.core.rng import uniform
 from stages.core.shading import bysdf as Y
 from stages.core.shading.bysdf import (
-    ALPHA_MIN, BYSDF_SIZE, P_R_MAX, P_R_MIN, attenuation, body_exit_eval_pdf, body_exit_sample,
-    body_reflect_eval_pdf, body_reflect_sample, diffusion_reflectance, enter_eval_pdf, enter_sample,
-    exit_eval_pdf, exit_sample, fresnel_dielectric, fresnel_diffuse_reflectance, ggx_D, ggx_G1,
-    lommel_seeliger_albedo, pack_bysdf, reflect_eval_pdf, reflect_probability, reflect_sample,
-    spec_exit_eval_pdf, spec_exit_sample, spec_reflect_eval_pdf, spec_reflect_sample,
+    ALPHA_MIN,
+    BYSDF_SIZE,
+    P_R_MAX,
+    P_R_MIN,
+    attenuation,
+    body_exit_eval_pdf,
+    body_exit_sample,
+    body_reflect_eval_pdf,
+    body_reflect_sample,
+    diffusion_reflectance,
+    enter_eval_pdf,
+    enter_sample,
+    exit_eval_pdf,
+    exit_sample,
+    fresnel_dielectric,
+    fresnel_diffuse_reflectance,
+    ggx_D,
+    ggx_G1,
+    lommel_seeliger_albedo,
+    pack_bysdf,
+    reflect_eval_pdf,
+    reflect_probability,
+    reflect_sample,
+    spec_exit_eval_pdf,
+    spec_exit_sample,
+    spec_reflect_eval_pdf,
+    spec_reflect_sample,
 )
 from tests.chisquare import bin_integrals, check_shading_model, shading_draw
 

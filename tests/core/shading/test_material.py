@@ -11,8 +11,15 @@ from numba import njit
 
 from stages.core.shading import bcsdf as B
 from stages.core.shading.lambert import lambert_eval, lambert_pdf
-from stages.core.shading.material import (CTX_SIZE, material_eval_pdf, material_is_curve, material_prepare,
-                                          material_sample, pack_material_bcsdf, pack_material_lambert)
+from stages.core.shading.material import (
+    CTX_SIZE,
+    material_eval_pdf,
+    material_is_curve,
+    material_prepare,
+    material_sample,
+    pack_material_bcsdf,
+    pack_material_lambert,
+)
 from tests.chisquare import check_shading_model
 
 
@@ -47,7 +54,7 @@ WI = np.array([0.36, 0.48, -0.8])
 
 
 def _rows():
-    from pipeline.render_setup import load_bcsdf_preset
+    from pipeline.bcsdf_presets import load_bcsdf_preset
 
     return {"bcsdf-silk": pack_material_bcsdf(load_bcsdf_preset("silk")),
             "lambert": pack_material_lambert([0.2, 0.5, 0.9])}

@@ -1,7 +1,6 @@
 """Exemplar tiling and shell mapping (issue 6): periodic exemplars, the identity shell map on a flat
 rectangle against a direct render of the same fibres, no cracks on a curved shell against a brute-force
 ray march, and the world <-> flat <-> exemplar maps as exact inverses."""
-import math
 
 import numpy as np
 import pytest
@@ -9,7 +8,6 @@ from numba import njit
 
 from pipeline.runners.tile import load_tiling, run_tile
 from stages.core.geometry.bvh import build_fiber_bvh, intersect
-from stages.core.geometry.capsule import capsule_intersect
 from stages.core.shell.traversal import shell_intersect
 from stages.render.camera import camera_ray, pack_camera
 from stages.tile.mapping import flat_to_exemplar, flat_to_uvw, flat_to_world, world_to_flat
@@ -106,7 +104,8 @@ def test_flat_shell_is_identity_and_matches_direct_render(flat_same):
     although the tiled render walks tetrahedra, cuts rays at block borders, switches between the two
     (identical) exemplars by the damask map and wraps blocks periodically."""
     sc, art = flat_same
-    assert np.allclose(art["shell_vertices"], art["shell_uvw"] * np.r_[art.summary["flat_size"], art.summary["thickness"]])
+    assert np.allclose(art["shell_vertices"],
+                       art["shell_uvw"] * np.r_[art.summary["flat_size"], art.summary["thickness"]])
     bvh, S0 = _direct_bvh(art)
     cam = pack_camera(np.array([0.62, 0.31, 2.2]), np.array([0.5, 0.5, 0.0]), np.array([0.0, 1.0, 0.0]), 12.0, 40, 40)
     img = _render_both(sc, bvh, cam, 40, 40, S0, S0)
@@ -218,7 +217,8 @@ def test_curved_shell_has_no_cracks(tmp_path):
             if np.isfinite(t):
                 assert abs(np.linalg.norm(h.tangent) - 1) < 1e-9
     assert hits > 60
-    assert (holes, late, grazing_bad) == (0, 0, 0), f"{hits} marched hits: {holes} holes, {late} late, {grazing_bad} off-surface"
+    assert (holes, late, grazing_bad) == (0, 0, 0), (f"{hits} marched hits: {holes} holes, {late} late, "
+                                                     f"{grazing_bad} off-surface")
 
 
 def test_world_flat_exemplar_round_trip(flat_same, tmp_path):
@@ -247,4 +247,5 @@ def test_world_flat_exemplar_round_trip(flat_same, tmp_path):
         assert 0 <= x < W + 1e-12 and 0 <= y < H + 1e-12
         sx, sy = (q[r, 0] - x) / W, (q[r, 1] - y) / H
         assert abs(sx - round(sx)) < 1e-9 and abs(sy - round(sy)) < 1e-9
-        assert k == art["block_map"][int(q[r, 0] // bw) % sc.block_map.shape[0], int(q[r, 1] // bh) % sc.block_map.shape[1]]
+        assert k == art["block_map"][int(q[r, 0] // bw) % sc.block_map.shape[0],
+                                     int(q[r, 1] // bh) % sc.block_map.shape[1]]

@@ -16,10 +16,10 @@ import math
 import numpy as np
 import pytest
 
-from tests.helpers import EXACTNESS_SWATCH as SCENE
 from pipeline.runners.tables import build
 from stages.core.curves.frames import curve_frame_at
 from stages.core.yarn.frame_samples import eq7, foot_point, frame_at, sample_all
+from tests.helpers import EXACTNESS_SWATCH as SCENE
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +45,8 @@ def _within_eps(cv, tab):
         lo, hi = tab.fs_off[c], tab.fs_off[c + 1]
         L, ext, eps = tab.yarn_length[c], tab.yarn_extent[c], tab.yarn_eps[c]
         worst = 0.0
-        for s, r, a in zip(rng.uniform(0, L, 400), ext * np.sqrt(rng.uniform(0, 1, 400)), rng.uniform(0, 2 * np.pi, 400)):
+        for s, r, a in zip(rng.uniform(0, L, 400), ext * np.sqrt(rng.uniform(0, 1, 400)),
+                           rng.uniform(0, 2 * np.pi, 400)):
             x, y = r * math.cos(a), r * math.sin(a)
             _, f = frame_at(tab.fs_s, tab.fs_frame, lo, hi, lo, s)
             pos, t, n, b = curve_frame_at(cv, c, s)
@@ -72,7 +73,8 @@ def test_twisted_closed_ring_frames_stay_within_eps(tmp_path):
                                               point_radius=[np.full(len(ring), 0.03)], curve_type="catmull-rom",
                                               source_format="bcc", notes={}))
     (tmp_path / "s.toml").write_text('[scene]\nname = "ring"\n[fabric]\nsource = "file"\n'
-                                     f'path = "{tmp_path / "ring.bcc"}"\nradius = 0.03\n[yarns.default]\npreset = "cotton2"\n')
+                                     f'path = "{tmp_path / "ring.bcc"}"\nradius = 0.03\n'
+                                     '[yarns.default]\npreset = "cotton2"\n')
     assert main(["ingest", str(tmp_path / "s.toml"), "-o", str(tmp_path / "yarns.zarr")]) == 0
     cv, tab, _, _, _ = build(tmp_path / "yarns.zarr", seed=3)
     assert bool(cv.closed[0]) and abs(cv.frame_twist[0]) > 1.0
@@ -81,7 +83,8 @@ def test_twisted_closed_ring_frames_stay_within_eps(tmp_path):
     no_twist[:, 16] = 0.0
     ext = float(tab.yarn_extent[0])
     n = len(tab.fs_s)
-    assert sample_error(cv, 0, tab.fs_s, no_twist, ext, 0, n) > 3.0 * sample_error(cv, 0, tab.fs_s, tab.fs_frame, ext, 0, n)
+    assert sample_error(cv, 0, tab.fs_s, no_twist, ext, 0, n) > 3.0 * sample_error(cv, 0, tab.fs_s, tab.fs_frame,
+                                                                                    ext, 0, n)
 
 
 def test_interpolation_error_is_fourth_order(swatch):
@@ -102,7 +105,8 @@ def test_foot_point_matches_brute_force(swatch):
     L, ext = tab.yarn_length[c], tab.yarn_extent[c]
     grid = np.linspace(0.0, L, 20001)
     P = np.array([_axis(tab, c, s) for s in grid])
-    for s_true, r, a in zip(rng.uniform(0.1 * L, 0.9 * L, 60), ext * rng.uniform(0.1, 0.9, 60), rng.uniform(0, 6.3, 60)):
+    for s_true, r, a in zip(rng.uniform(0.1 * L, 0.9 * L, 60), ext * rng.uniform(0.1, 0.9, 60),
+                            rng.uniform(0, 6.3, 60)):
         _, f = frame_at(tab.fs_s, tab.fs_frame, lo, hi, lo, s_true)
         p = np.array(eq7(f, r * math.cos(a), r * math.sin(a)))
         k = int(np.argmin(((P - p) ** 2).sum(1)))

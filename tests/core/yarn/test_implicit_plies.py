@@ -16,8 +16,7 @@ import pytest
 from numba import njit
 
 from pipeline.presets import load_preset, pack, scale_preset
-from stages.core.yarn import implicit_plies as IP
-from stages.core.yarn import model as M
+from stages.core.yarn import implicit_plies as IP, model as M
 
 DELTA = 1e-5
 TOL = 1e-4

@@ -20,12 +20,12 @@ reported by the realization as ``max_turn_rad``).
 import numpy as np
 import pytest
 
-from tests.helpers import DATA, EXACTNESS_SWATCH as SCENE, closed_ring_scene, seam_points
 from pipeline.artifacts import Artifact
 from pipeline.runners.realize import run_realize
 from pipeline.runners.tables import build
 from stages.core.yarn.lookup import lookup_points
 from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
+from tests.helpers import DATA, EXACTNESS_SWATCH as SCENE, closed_ring_scene, seam_points
 
 
 @pytest.fixture(scope="module")

@@ -12,13 +12,11 @@ import numpy as np
 import pytest
 from scipy import integrate, stats
 
-from tests.chisquare import chi2_test
-from tests.helpers import shared_file
-
 from pipeline import presets
 from pipeline.errors import LoomError
-from stages.core.yarn import hair_free
-from stages.core.yarn import model as M
+from stages.core.yarn import hair_free, model as M
+from tests.chisquare import chi2_test
+from tests.helpers import shared_file
 
 NAMES = ["cotton1", "cotton2", "polyester1", "rayon1", "rayon2", "rayon3", "rayon4", "silk1", "silk2"]
 
@@ -73,7 +71,9 @@ def test_cross_section_sampling_follows_eq3():
     tp = _tp("polyester1", fiber_num=20000, ply_num=1)
     R, th, _ = M.sample_regular_fibers(tp, np.uint64(11))
     eps, beta = tp[M.EPSILON], tp[M.BETA]
-    p = lambda r: (1 - 2 * eps) * np.clip((math.e - np.exp(r)) / (math.e - 1), 0, None) ** beta + eps
+    def p(r):
+        return (1 - 2 * eps) * np.clip((math.e - np.exp(r)) / (math.e - 1), 0, None) ** beta + eps
+
     Z = integrate.quad(lambda r: r * p(r), 0, 1)[0] * 2 * math.pi
     res = chi2_test(np.stack([R[0], th[0]], axis=1), lambda x, y: x * p(x) / Z,
                     bounds=((0.0, 1.0), (0.0, 2 * math.pi)), res=(20, 8))
@@ -147,10 +147,14 @@ def test_hair_tree_draws_the_product_distribution():
     inside = (z1 + ze > 0) & (z1 + ze < L)  # clamping at the yarn ends changes ze only there
     z = 3.0
     norm = stats.norm.cdf(z) - stats.norm.cdf(-z)
-    pdf = lambda x, y: (1.0 / L) * stats.norm.pdf((y - mu) / sig) / (sig * norm)
+    def pdf(x, y):
+        return (1.0 / L) * stats.norm.pdf((y - mu) / sig) / (sig * norm)
+
     xy = np.stack([z1[inside], raw_ze[inside]], axis=1)
     # condition on the un-clamped region {0 < z1 + ze < L}: its mass under the product density
-    F = lambda v: (stats.norm.cdf(np.clip((v - mu) / sig, -z, z)) - stats.norm.cdf(-z)) / norm
+    def F(v):
+        return (stats.norm.cdf(np.clip((v - mu) / sig, -z, z)) - stats.norm.cdf(-z)) / norm
+
     p_in = integrate.quad(lambda x: (F(L - x) - F(-x)) / L, 0.0, L, limit=200)[0]
     res = chi2_test(xy, lambda x, y: pdf(x, y) * ((x + y > 0) & (x + y < L)) / p_in,
                     bounds=((0.0, L), (mu - z * sig, mu + z * sig)), res=(10, 12))
