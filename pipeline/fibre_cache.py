@@ -87,7 +87,8 @@ def _vertices_per_length(tab, curve_length, spacing) -> np.ndarray:
 def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFAULT_SPACING,
                       fine_cell=None) -> CacheBuild:
     """The ``FibreCacheMedium`` of the procedural source ``(cv, tab)`` seen by ``cam`` at width x height,
-    within ``budget_mib``; where nothing is cached (budget 0, or too small for one brick) the bare
+    within ``budget_mib``; where nothing is cached (budget 0, too small for one brick, or tables of the
+    realization-free hair mode, whose hairs are never stored: ``info["cache_skipped"]`` says so) the bare
     ``ProceduralMedium``, whose lookups skip the cache's indirection. A partial cache is kept however
     little of the view it holds: every brick it holds answers faster than the lookups, and an uncached
     lookup through it costs what a bare one does (``bench_volpath``'s budget curve). ``fine_cell``: refine
@@ -125,6 +126,10 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
 
     if budget <= 0 or Y == 0:
         return bare()
+    if int(tab.hair_mode[0]) != 0:
+        # realization-free hairs are drawn from the implicit quad-tree at each lookup; the tables store none,
+        # so the cache could not realize them (yarn_plan would read hair arrays that are empty)
+        return bare(cache_skipped="hair mode free: the tables store no hairs to realize")
 
     occ = occupied_bricks(maj, grid.lo, grid.size, grid.res)
     stride = max(1, max(int(width), int(height)) // 128)

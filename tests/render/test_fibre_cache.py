@@ -227,6 +227,18 @@ def test_zero_budget_caches_nothing(swatch):
     assert built.info["cache_bricks_cached"] == 0 and isinstance(built.medium, ProceduralMedium)
 
 
+def test_free_hair_mode_tables_are_never_cached(swatch):
+    """Tables of the realization-free hair mode store no hairs (their hair arrays are empty while every ply
+    counts its hairs): the cache would realize hairs from memory past those arrays, a different fabric in
+    every process. It caches nothing and says why; the bare lookups answer."""
+    fib, _cv, _tab = swatch
+    cv, tab, _info, _, _ = build(fib.path.parent / "yarns.zarr", seed=3, hair_mode="free")   # the swatch's yarns
+    assert tab.hair_mode[0] != 0 and tab.hair_count.sum() > 0 and len(tab.hair_ze) == 0
+    built = build_fibre_cache(cv, tab, procedural_majorant(cv, tab), camera_array(CAMERA, 32, 24), 32, 24, 2048.0)
+    assert isinstance(built.medium, ProceduralMedium) and built.info["cache_bricks_cached"] == 0
+    assert "hair mode free" in built.info["cache_skipped"]
+
+
 @pytest.mark.slow
 def test_closed_yarn_cache_is_exact_at_the_seam(tmp_path):
     """A closed ring (tests/core/yarn/test_lookup_exactness): the cached pieces at both ends of the
