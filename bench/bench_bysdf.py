@@ -51,10 +51,11 @@ def _cli(*args):
 
 def _render(scene, method, W, H, spp, extra, fibers=None, max_depth=4):
     from pipeline.renderers import method as get_method
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
 
     m = get_method(method)
-    opts = resolve_options(scene, m, width=W, height=H, spp=spp, fibers=fibers, max_depth=max_depth, extra=dict(extra))
+    request = RenderRequest(width=W, height=H, spp=spp, fibers=fibers, max_depth=max_depth, extra=dict(extra))
+    opts = resolve_options(scene, m, request)
     return m.run(scene, opts)
 
 

@@ -100,12 +100,12 @@ def _budget_point(tables: str, fibers: str, W: int, H: int, spp: int, cache: flo
 
 def _budget_child(tables, fibers, W, H, spp, cache) -> dict:
     from pipeline.renderers import method
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
     from pipeline.scene import load_scene
 
     scene = load_scene(SCENE)
-    base = resolve_options(scene, method("volpath"), width=int(W), height=int(H), spp=int(spp), seed=7, fibers=fibers,
-                           tables=tables)
+    request = RenderRequest(width=int(W), height=int(H), spp=int(spp), seed=7, fibers=fibers, tables=tables)
+    base = resolve_options(scene, method("volpath"), request)
     _one(scene, {**base, "width": 2, "height": 2, "spp": 1}, "procedural", float(cache))  # compile, not timed
     before = _reset_peak_rss()
     r = _one(scene, base, "procedural", float(cache))
@@ -232,7 +232,7 @@ def run(out_dir) -> dict:
     import numba
 
     from pipeline.renderers import method
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
     from pipeline.scene import load_scene
 
     out_dir = Path(out_dir)
@@ -240,8 +240,8 @@ def run(out_dir) -> dict:
     tables, fibers, where = _artifacts(out_dir)
     scene = load_scene(SCENE)
     # the options the CLI would pass (`render --width W --height H --spp N --seed 7`), as it resolves them
-    base = resolve_options(scene, method("volpath"), width=W, height=H, spp=spp, seed=7, fibers=fibers,
-                           tables=tables)
+    base = resolve_options(scene, method("volpath"),
+                           RenderRequest(width=W, height=H, spp=spp, seed=7, fibers=fibers, tables=tables))
     res = {"scene": str(SCENE.relative_to(ROOT)), "image": f"{W}x{H} @ {spp} spp", "artifacts": where,
            "threads": int(numba.get_num_threads())}
     small = {**base, "width": 2, "height": 2, "spp": 1}

@@ -251,12 +251,13 @@ def _morton(P, bits=10):
 def ray_order(scene_path, fibers, W=128, H=96, spp=16, repeats=3) -> dict:
     from pipeline.renderers import method
     from pipeline.renderers.fiberpath import film_setup
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
     from pipeline.scene import load_scene
 
     scene = load_scene(scene_path)
-    opts = resolve_options(scene, method("fiberpath"), width=W, height=H, spp=spp, fibers=str(fibers),
-                           extra={"accel": "bvh"})   # loomlight's own BVH: the walk measured here
+    # loomlight's own BVH: the walk measured here
+    opts = resolve_options(scene, method("fiberpath"),
+                           RenderRequest(width=W, height=H, spp=spp, fibers=str(fibers), extra={"accel": "bvh"}))
     setup = film_setup(scene, opts)
     G, it = setup.integ.scene, setup.integ
     N = W * H * spp

@@ -49,11 +49,11 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 def _render(scene, fibers, W, H, spp, depth):
     from pipeline.renderers import method
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
 
     m = method("fiberpath")
-    return m.run(scene, resolve_options(scene, m, width=W, height=H, spp=spp, max_depth=depth,
-                                        fibers=str(fibers), extra={}))
+    request = RenderRequest(width=W, height=H, spp=spp, max_depth=depth, fibers=str(fibers))
+    return m.run(scene, resolve_options(scene, m, request))
 
 
 def by_light_and_depth(scene, fibers, W, H, spp) -> dict:
@@ -117,10 +117,10 @@ def stratified_pixels(scene, fibers, W, H, spp, ref_spp, cloth, threads=2) -> di
 
     from pipeline.renderers import method
     from pipeline.renderers.fiberpath import film_setup
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
 
-    setup = film_setup(scene, resolve_options(scene, method("fiberpath"), width=W, height=H, spp=spp,
-                                              fibers=str(fibers), extra={}))
+    request = RenderRequest(width=W, height=H, spp=spp, fibers=str(fibers))
+    setup = film_setup(scene, resolve_options(scene, method("fiberpath"), request))
 
     def image(seed, n, stratified):
         out = np.zeros((H, W, 3))

@@ -13,8 +13,8 @@ $LL ingest data/curves/mitsuba_curves.txt -o $X/mts.zarr
 $LL ingest data/drafts/twill_2x2.wif -o $X/twill.zarr
 $LL ingest data/scenes/gentle_swatch.toml -o $X/gentle_yarns.zarr
 $LL tables $X/gentle_yarns.zarr -o $X/gentle_tables.zarr --hair-mode free
-# the gentle swatch has no camera: the same fabric seen from above
-{ cat data/scenes/gentle_swatch.toml; printf '\n[camera]\norigin = [0.0, -0.9, 1.2]\ntarget = [0.0, 0.0, 0.0]\n'; } > $X/gentle_camera.toml
+# the gentle swatch has no camera nor light: the same fabric seen from above under a white sky
+{ cat data/scenes/gentle_swatch.toml; printf '\n[camera]\norigin = [0.0, -0.9, 1.2]\ntarget = [0.0, 0.0, 0.0]\n\n[[lights]]\ntype = "constant"\nradiance = 1.0\n'; } > $X/gentle_camera.toml
 $LL voxelize $O/tables.zarr -o $X/grid.zarr --res 24 24 6 --export-npy $X/npy
 $LL render $S --method volpath --source grid --grid $X/grid.zarr --width 24 --height 18 --spp 2 -o $X/vol_grid.exr
 $LL render $X/gentle_camera.toml --method volpath --source procedural --tables $X/gentle_tables.zarr --width 16 --height 12 --spp 1 -o $X/vol_free.exr

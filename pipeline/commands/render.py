@@ -84,7 +84,7 @@ def register(app: typer.Typer) -> None:
         from ..errors import LoomError, check_name
         from ..outputs import ARTIFACT, check_output
         from ..renderers import all_sources, method as registered
-        from ..runners.render import run_render
+        from ..runners.render import RenderRequest, run_render
 
         if method is not None:  # the names first: before the outputs are checked or the scene is read
             m = registered(method)
@@ -97,11 +97,11 @@ def register(app: typer.Typer) -> None:
         check_output(out, "-o", suffixes=(".exr",))
         check_output(out.with_suffix(".png"), "-o")
         check_output(out.with_suffix(".zarr"), "-o", ARTIFACT)
-        result = run_render(scene, method=method, out=out, width=width, height=height, spp=spp, seed=seed,
-                            source=source, fibers=fibers, tables=tables, grid=grid, bcsdf=bcsdf, material=material,
-                            max_depth=max_depth, threads=threads, exposure=exposure, settings=set_ or [],
-                            max_spp=max_spp, scheduler=scheduler, workers=workers,
-                            threads_per_worker=threads_per_worker, cache=cache, build=not no_build, cache_dir=cache_dir,
-                            say=typer.echo)
+        request = RenderRequest(width=width, height=height, spp=spp, seed=seed, source=source, fibers=fibers,
+                                tables=tables, grid=grid, bcsdf=bcsdf, material=material, max_depth=max_depth,
+                                threads=threads, max_spp=max_spp, cache=cache)
+        result = run_render(scene, out, request, method=method, settings=set_ or [], exposure=exposure,
+                            scheduler=scheduler, workers=workers, threads_per_worker=threads_per_worker,
+                            build=not no_build, cache_dir=cache_dir, say=typer.echo)
         for line in result:
             typer.echo(line)

@@ -207,6 +207,18 @@ METHODS = {m.name: m for m in (
 )}
 
 
+def input_kinds() -> dict[str, tuple[str, ...]]:
+    """option -> every artifact kind a source of some method reads through it, in the order the registry
+    declares them (``fibers``: a fibers or a tiling artifact)."""
+    kinds: dict[str, tuple[str, ...]] = {}
+    for m in METHODS.values():
+        for src in m.sources:
+            for inp in src.inputs:
+                have = kinds.get(inp.option, ())
+                kinds[inp.option] = have + tuple(k for k in inp.kinds if k not in have)
+    return kinds
+
+
 def known_methods() -> list[str]:
     return sorted(METHODS)
 

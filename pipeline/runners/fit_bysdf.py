@@ -71,15 +71,15 @@ class _Renderer:
         import importlib
 
         from ..renderers import method
-        from ..runners.render import resolve_options
+        from ..runners.render import RenderRequest, resolve_options
 
         sc = dataclasses.replace(scene, lights=next(iter(setup_lights(scene).values())))
         m = method(method_name)
         self.scene = sc
-        self.opts = resolve_options(sc, m, width=options["width"], height=options["height"], spp=options["spp"],
-                                    seed=options["seed"], fibers=options.get("fibers"),
-                                    max_depth=options.get("max_depth"), threads=options.get("threads"),
-                                    extra=dict(extra))
+        self.opts = resolve_options(sc, m, RenderRequest(
+            width=options["width"], height=options["height"], spp=options["spp"], seed=options["seed"],
+            fibers=options.get("fibers"), max_depth=options.get("max_depth"), threads=options.get("threads"),
+            extra=dict(extra)))
         self.setup = importlib.import_module(f"pipeline.renderers.{m.module}").film_setup(sc, self.opts)
 
     def image(self, lights, **fields) -> tuple[np.ndarray, np.ndarray]:

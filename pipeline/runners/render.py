@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..bcsdf_presets import check_bcsdf_names
@@ -22,8 +23,6 @@ from ..errors import LoomError
 from ..limits import check_depth
 from ..memory import Estimate, budget as memory_budget, peak_rss_bytes
 
-INPUT_KINDS = {"fibers": ("fibers", "tiling"), "tables": "tables", "grid": "grid", "svf": "svf",
-               "iirtf": "iirtf", "btf": "btf", "yarns": "yarns"}  # artifact kinds per option
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
 # the bound from time on --spp / --max-spp (``pipeline.limits.WorkEstimate``): camera paths a thread traces
@@ -127,12 +126,40 @@ def parse_settings(settings, m) -> dict:
     return extra
 
 
-def resolve_options(scene, m, width=None, height=None, spp=None, seed=None, source=None, fibers=None, tables=None,
-                    grid=None, bcsdf=None, material=None, max_depth=None, threads=None, extra=None,
-                    max_spp=None, cache=None) -> dict:
+@dataclass(frozen=True)
+class RenderRequest:
+    """What a render is asked for on top of its scene, as ``loomlight render`` takes it: a field left None is
+    the scene's (``[camera]`` width and height, ``[render]`` spp, seed, max_depth, max_spp, cache), else the
+    method's default (``resolve_options``). ``fibers``, ``tables``, ``grid``: artifact paths; ``extra``:
+    the method's ``--set`` settings, parsed (``parse_settings``); ``threads``: numba threads (the image
+    does not depend on them); ``cache``: volpath's fibre cache budget in MiB."""
+    width: int | None = None
+    height: int | None = None
+    spp: int | None = None
+    seed: int | None = None
+    source: str | None = None
+    fibers: str | Path | None = None
+    tables: str | Path | None = None
+    grid: str | Path | None = None
+    bcsdf: str | None = None
+    material: str | None = None
+    max_depth: int | None = None
+    threads: int | None = None
+    max_spp: int | None = None
+    cache: float | None = None
+    extra: dict = field(default_factory=dict)
+
+
+def resolve_options(scene, m, request: RenderRequest = RenderRequest()) -> dict:
+    """The render's options: ``request``'s choices over the scene's over the method ``m``'s defaults, the
+    artifacts its sources read, checked (positive sizes, a material the method knows)."""
     from ..renderers import COMMON_DEFAULTS
 
-    extra = extra or {}
+    r = request
+    width, height, spp, seed, source = r.width, r.height, r.spp, r.seed, r.source
+    fibers, tables, grid, bcsdf, material = r.fibers, r.tables, r.grid, r.bcsdf, r.material
+    max_depth, threads, max_spp, cache = r.max_depth, r.threads, r.max_spp, r.cache
+    extra = r.extra or {}
     cam = scene.camera or {}
     rs = scene.render
 
@@ -209,16 +236,18 @@ def check_inputs(scene, m, options) -> None:
 
 
 def check_set_artifacts(options) -> None:
-    """Every ``--set KEY=PATH.zarr`` names an artifact of the kind KEY reads (``INPUT_KINDS``), and none is
-    passed over: ``--set tiling=`` names the tiling ``--fibers`` names, if both are given."""
+    """Every ``--set KEY=PATH.zarr`` names an artifact of a kind KEY reads (the registry's
+    ``input_kinds``), and none is passed over: ``--set tiling=`` names the tiling ``--fibers`` names, if
+    both are given."""
     from ..artifacts import read_meta
+    from ..renderers import TILING, input_kinds
 
+    kinds = {**input_kinds(), "tiling": TILING.kinds}   # --set tiling= is --fibers TILING.zarr's other name
     extra = options.get("extra") or {}
     for key, value in sorted(extra.items()):
-        want = {**INPUT_KINDS, "tiling": "tiling"}.get(key)
+        want = kinds.get(key)
         if want is None or not str(value).endswith(".zarr"):
             continue   # not an artifact setting (a tiling config .toml is built from by --build)
-        want = (want,) if isinstance(want, str) else want
         found = read_meta(value).get("kind")
         if found not in want:
             raise LoomError(value, f"--set {key}", f"expected a {' or '.join(repr(k) for k in want)} artifact, found a "
@@ -228,11 +257,12 @@ def check_set_artifacts(options) -> None:
         raise LoomError(None, "--set tiling", f"names {tiling} while --fibers names {fibers}; give the tiling once")
 
 
-def run_render(scene_path, method=None, out=None, width=None, height=None, spp=None, seed=None, source=None,
-               fibers=None, tables=None, grid=None, bcsdf=None, material=None, max_depth=None, threads=None,
-               exposure=0.0, settings=(), max_spp=None, budget=None, scheduler=None, workers=None,
-               threads_per_worker=None, cache=None, build=False, cache_dir=None, say=print):
-    """Render and publish; returns the lines to print (output paths and statistics). ``build``: build
+def run_render(scene_path, out, request: RenderRequest = RenderRequest(), method=None, settings=(), exposure=0.0,
+               budget=None, scheduler=None, workers=None, threads_per_worker=None, build=False, cache_dir=None,
+               say=print):
+    """Render ``scene_path`` as ``request`` asks (``settings``: the ``--set KEY=VALUE`` strings, parsed
+    against ``method``'s) into ``out`` and publish; returns the lines to print (output paths and
+    statistics). ``build``: build
     the inputs no option gave into the cache (``pipeline.autobuild``; ``cache_dir``, else beside ``out``),
     saying what was built or reused through ``say``; otherwise they are refused. ``budget``
     (``pipeline.memory.budget``, default a fraction of the available memory): refuse before rendering
@@ -244,16 +274,17 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import resolve_scheduler, session
     from ..images import write_render
-    from ..renderers import RenderResult, method as registered
+    from ..renderers import RenderResult, input_kinds, method as registered
     from ..scene import load_scene
 
-    for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (max_depth, "--max-depth"),
-                    (threads, "--threads")):
+    r = request
+    for v, name in ((r.width, "--width"), (r.height, "--height"), (r.spp, "--spp"), (r.max_depth, "--max-depth"),
+                    (r.threads, "--threads")):
         _positive(v, name)
-    if max_depth is not None:
-        check_depth(max_depth, "--max-depth")
-    if seed is not None and seed < 0:
-        raise LoomError(None, "--seed", f"must be >= 0, got {seed}")
+    if r.max_depth is not None:
+        check_depth(r.max_depth, "--max-depth")
+    if r.seed is not None and r.seed < 0:
+        raise LoomError(None, "--seed", f"must be >= 0, got {r.seed}")
     out = Path(out)
     if out.suffix.lower() != ".exr":
         raise LoomError(out, "-o", "the output image must end in .exr")
@@ -263,9 +294,7 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
     if not method:
         raise LoomError(scene.path, "render.method", "no render method: pass --method")
     m = registered(method)
-    extra = parse_settings(settings, m)
-    options = resolve_options(scene, m, width, height, spp, seed, source, fibers, tables, grid, bcsdf, material,
-                              max_depth, threads, extra, max_spp, cache)
+    options = resolve_options(scene, m, replace(request, extra=parse_settings(settings, m)))
     from .. import compilation
 
     compilation.watch()
@@ -275,14 +304,15 @@ def run_render(scene_path, method=None, out=None, width=None, height=None, spp=N
         check_bcsdf_names(scene, options)   # bad names first: nothing is built for a render that would be refused
         build_missing(scene, m, render_source(scene, m, options), options, out, cache_dir, budget, sched, say)
     check_inputs(scene, m, options)
-    if threads:
+    if r.threads:
         import numba
 
-        numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+        numba.set_num_threads(min(int(r.threads), numba.config.NUMBA_NUM_THREADS))
     inputs = {"scene": (scene.path, FILE)}
+    kinds = input_kinds()
     for key in sorted({inp.option for src in m.sources for inp in src.inputs}):
         if options[key]:
-            inputs[key] = (options[key], INPUT_KINDS.get(key))
+            inputs[key] = (options[key], kinds[key])
     params = {k: v for k, v in options.items() if k != "threads"}
     params["method"] = method
     art_path = out.with_suffix(".zarr")

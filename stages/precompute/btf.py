@@ -55,7 +55,8 @@ from stages.core.btf import cell_direction
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
-from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
+from stages.core.sampling import continue_path
+from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_vertex
 
@@ -152,20 +153,14 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
             if depth >= max_depth:
                 break
             base = first_dims + DIMS_PER_VERTEX * (depth - 1)
-            s0, s1, s2, pf = material_sample(mat, ctx, t_tan, n, wi, uniform(seed, key, base),
-                                             uniform(seed, key, base + 1), uniform(seed, key, base + 2), wo)
-            if pf <= 0.0:
+            u_dir = (uniform(seed, key, base), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
+            step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth >= rr_depth, uniform(seed, key, base + 3),
+                                 (tp0, tp1, tp2), wo)
+            if not step.alive:
                 break
-            tp0 *= s0
-            tp1 *= s1
-            tp2 *= s2
-            if depth >= rr_depth:
-                q = min(0.95, max(tp0, max(tp1, tp2)))
-                if uniform(seed, key, base + 3) >= q:
-                    break
-                tp0 /= q
-                tp1 /= q
-                tp2 /= q
+            tp0 = step.tp0
+            tp1 = step.tp1
+            tp2 = step.tp2
             rays += 1
             h = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, max_dist)
             if math.isinf(h.t):

@@ -106,6 +106,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.rng import uniform
+from stages.core.sampling import continue_path, power_heuristic
 from stages.core.sh import sh_eval
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.threads import chunk_kernel, for_chunks
@@ -281,6 +282,8 @@ def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ig
             rays += 1
             if not periodic_occluded(sc, z_lo, z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf, max_dist):
                 if mis:
+                    # the power heuristic over p_light, folded into one division:
+                    # power_heuristic(p_light, pf) / p_light
                     w = p_light / (p_light * p_light + pf * pf)
                     sh_eval(order, wl[0], wl[1], wl[2], Y)
                     for j in range(J):
@@ -294,25 +297,20 @@ def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ig
                     T2 += tp2 * f2
         if depth >= max_depth:
             break
-        s0, s1, s2, pf = material_sample(mat, ctx, t_tan, n, wi, uniform(seed, key, base),
-                                         uniform(seed, key, base + 1), uniform(seed, key, base + 2), wo)
-        if pf <= 0.0:
+        u_dir = (uniform(seed, key, base), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
+        step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth >= rr_depth, uniform(seed, key, base + 3),
+                             (tp0, tp1, tp2), wo)
+        if not step.alive:
             break
-        tp0 *= s0
-        tp1 *= s1
-        tp2 *= s2
-        if depth >= rr_depth:
-            q = min(0.95, max(tp0, max(tp1, tp2)))
-            if uniform(seed, key, base + 3) >= q:
-                break
-            tp0 /= q
-            tp1 /= q
-            tp2 /= q
+        tp0 = step.tp0
+        tp1 = step.tp1
+        tp2 = step.tp2
+        pf = step.pdf
         rays += 1
         h = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, max_dist)
         if math.isinf(h.t):
             if mis and wo[2] > 0.0:  # escaped towards the sky: the BCSDF-sampled light direction
-                w = pf * pf / (pf * pf + p_light * p_light)
+                w = power_heuristic(pf, p_light)
                 sh_eval(order, wo[0], wo[1], wo[2], Y)
                 for j in range(J):
                     y = w * Y[j]

@@ -16,9 +16,11 @@ from collections import namedtuple
 import numpy as np
 from numba import njit, prange
 
+from stages.core.sampling import NO_HIT
+
 ReferenceLookup = namedtuple("ReferenceLookup", ["inside", "yarn", "kind", "dir_x", "dir_y", "dir_z", "surface_gap",
                                                  "kind_tie"])
-ReferenceLookup.__doc__ = """query_one's answer at p (module doc); surface_gap 1e300 outside the grid."""
+ReferenceLookup.__doc__ = """query_one's answer at p (module doc); surface_gap NO_HIT outside the grid."""
 ReferenceLookups = namedtuple("ReferenceLookups", ["inside", "yarn", "kind", "direction", "surface_gap", "kind_tie"])
 ReferenceLookups.__doc__ = """query_realized's answers: inside, yarn (int32), kind (int8), direction (N, 3),
 surface_gap, kind_tie."""
@@ -85,17 +87,17 @@ def query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fibe
     for d in range(3):
         g = int(math.floor((p[d] - lo[d]) / cell))
         if g < 0 or g >= dims[d]:
-            return ReferenceLookup(False, -1, 0, 0.0, 0.0, 0.0, 1e300, False)
+            return ReferenceLookup(False, -1, 0, 0.0, 0.0, 0.0, NO_HIT, False)
         ijk[d] = g
     c = (ijk[0] * dims[1] + ijk[1]) * dims[2] + ijk[2]
-    gap = 1e300
+    gap = NO_HIT
     best_key0 = 1 << 62
     best_key1 = 1 << 62
     bk = -1
-    bd = 1e300
+    bd = NO_HIT
     bseg = -1
-    d_reg = 1e300
-    d_loop = 1e300
+    d_reg = NO_HIT
+    d_loop = NO_HIT
     for q in range(start[c], start[c + 1]):
         s = items[q]
         f = seg_fiber[s]
@@ -112,9 +114,9 @@ def query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fibe
         if k0 < best_key0 or (k0 == best_key0 and k1 < best_key1):
             best_key0 = k0
             best_key1 = k1
-            bd = 1e300
-            d_reg = 1e300
-            d_loop = 1e300
+            bd = NO_HIT
+            d_reg = NO_HIT
+            d_loop = NO_HIT
         if k0 == best_key0 and k1 == best_key1:
             if fiber_kind[f] == 1:
                 d_reg = min(d_reg, dist)

@@ -66,6 +66,7 @@ from stages.core.geometry.frames import face_towards_into
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit
 from stages.core.rng import uniform
+from stages.core.sampling import power_heuristic, roulette_survival
 from stages.core.shading import bysdf as B
 from stages.core.shading.bysdf import BYSDF_SIZE
 from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
@@ -73,7 +74,7 @@ from stages.core.yarn.implicit_plies import plies_crossed, ply_blocks
 from stages.core.yarn.implicit_tables import ply_shadow_lookup
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import light_eval, light_pdf, light_sample_into
+from stages.render.lights import add_escaped_radiance, light_sample_into
 from stages.render.yarn_point import aggregate, near_point, offset_of, offset_points
 from stages.render.yarn_tubes import (
     cylinder_span,
@@ -195,6 +196,8 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
         rays += nr
         if not vis:
             continue
+        # side_w x the power heuristic over pl, in this order of products (side_w * power_heuristic(pl, pf) / pl
+        # rounds differently)
         w = side_w if delta else side_w * pl * pl / (pl * pl + pf * pf) / pl
         L[0] += tp[0] * f0 * lr * w
         L[1] += tp[1] * f1 * lg * w
@@ -256,17 +259,8 @@ def trace_path(it, o, d, seed, key):
             t_hit = tg
             on_ground = True
         if h.prim < 0 and not on_ground:  # escaped: environment, MIS-weighted against the last NEE
-            for k in range(nl):
-                lr, lg, lb = light_eval(lights, k, env, marg, cond, d)
-                if lr == 0.0 and lg == 0.0 and lb == 0.0:
-                    continue
-                w = 1.0
-                if depth > 0:
-                    pl = light_pdf(lights, k, env, marg, cond, d)
-                    w = pdf_prev * pdf_prev / (pdf_prev * pdf_prev + pl * pl)
-                L[0] += tp[0] * lr * w
-                L[1] += tp[1] * lg * w
-                L[2] += tp[2] * lb * w
+            L[0], L[1], L[2] = add_escaped_radiance(it.lights, d, depth > 0, pdf_prev, tp[0], tp[1], tp[2],
+                                                    L[0], L[1], L[2])
             break
         if depth == 0 and first_t == 0.0:
             first_t = path_len + t_hit
@@ -300,7 +294,7 @@ def trace_path(it, o, d, seed, key):
                 rays += nr
                 if not vis:
                     continue
-                w = 1.0 if delta else pl * pl / (pl * pl + pf * pf) / pl
+                w = 1.0 if delta else power_heuristic(pl, pf) / pl
                 L[0] += tp[0] * f0 * lr * w
                 L[1] += tp[1] * f1 * lg * w
                 L[2] += tp[2] * f2 * lb * w
@@ -472,7 +466,7 @@ def trace_path(it, o, d, seed, key):
         depth += 1
         passes = 0
         if depth >= it.rr_depth:
-            qv = min(0.95, max(tp[0], max(tp[1], tp[2])))
+            qv = roulette_survival(tp[0], tp[1], tp[2])
             if uniform(seed, key, base + D_RR) >= qv:
                 break
             tp[0] /= qv

@@ -52,16 +52,16 @@ from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit, surface_occluded
 from stages.core.rng import uniform
+from stages.core.sampling import continue_path, power_heuristic
 from stages.core.shading.material import (
     CTX_SIZE,
     material_eval_pdf,
     material_is_curve,
     material_prepare,
-    material_sample,
 )
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import light_eval, light_pdf, light_sample_into
+from stages.render.lights import add_escaped_radiance, light_sample_into
 
 FiberpathIntegrator = namedtuple("FiberpathIntegrator", [
     "scene", "mat_of_fiber", "mats", "ground_mat", "lights", "ground", "has_ground",
@@ -113,17 +113,7 @@ def _trace(it, o, d, seed, key):
             t_hit = tg
             on_ground = True
         if h.prim < 0 and not on_ground:  # escaped: environment radiance, MIS-weighted against the previous NEE
-            for k in range(nl):
-                lr, lg, lb = light_eval(lights, k, env, marg, cond, d)
-                if lr == 0.0 and lg == 0.0 and lb == 0.0:
-                    continue
-                w = 1.0
-                if depth > 0:
-                    pl = light_pdf(lights, k, env, marg, cond, d)
-                    w = pdf_prev * pdf_prev / (pdf_prev * pdf_prev + pl * pl)
-                L0 += tp0 * lr * w
-                L1 += tp1 * lg * w
-                L2 += tp2 * lb * w
+            L0, L1, L2 = add_escaped_radiance(it.lights, d, depth > 0, pdf_prev, tp0, tp1, tp2, L0, L1, L2)
             break
         if depth == 0:
             first_t = t_hit
@@ -184,29 +174,21 @@ def _trace(it, o, d, seed, key):
             if delta:
                 w = 1.0
             else:
-                w = pl * pl / (pl * pl + pf * pf) / pl
+                w = power_heuristic(pl, pf) / pl
             L0 += tp0 * f0 * lr * w
             L1 += tp1 * f1 * lg * w
             L2 += tp2 * f2 * lb * w
-        # scatter
-        u0 = uniform(seed, key, base + 0)
-        u1 = uniform(seed, key, base + 1)
-        u2 = uniform(seed, key, base + 2)
-        w0, w1, w2, pf = material_sample(mat, ctx, t_tan, n, wi, u0, u1, u2, wo)
-        if pf <= 0.0:
+        # scatter: the next direction, the throughput, Russian roulette from event rr_depth on
+        u_dir = (uniform(seed, key, base + 0), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
+        step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth + 1 >= it.rr_depth, uniform(seed, key, base + 3),
+                             (tp0, tp1, tp2), wo)
+        if not step.alive:
             break
-        tp0 *= w0
-        tp1 *= w1
-        tp2 *= w2
+        tp0 = step.tp0
+        tp1 = step.tp1
+        tp2 = step.tp2
         depth += 1
-        if depth >= it.rr_depth:
-            q = min(0.95, max(tp0, max(tp1, tp2)))
-            if uniform(seed, key, base + 3) >= q:
-                break
-            tp0 /= q
-            tp1 /= q
-            tp2 /= q
-        pdf_prev = pf
+        pdf_prev = step.pdf
         for k in range(3):
             o[k] = so[k]
             d[k] = wo[k]

@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
+from stages.core.sampling import power_heuristic
 from stages.core.turns import sincos_turn
 
 LightTable = namedtuple("LightTable", ["lights", "env", "marginal", "conditional"])
@@ -237,6 +238,26 @@ def light_sample_into(lights, k, env, marg, cond, u1, u2, w):
         return 0.0, 0.0, 0.0, 0.0, False
     pdf = pm * pc * H * W / (2.0 * math.pi * math.pi * st)
     return lights[k, 1] * env[i, j, 0], lights[k, 2] * env[i, j, 1], lights[k, 3] * env[i, j, 2], pdf, False
+
+
+@njit(cache=True, inline="always")
+def add_escaped_radiance(table, d, mis, pdf_prev, tp0, tp1, tp2, L0, L1, L2):
+    """(L0, L1, L2) plus what a path of throughput (tp0, tp1, tp2) escaping along ``d`` receives from the
+    lights of ``table`` (a ``LightTable``): each light's radiance weighted, when ``mis`` (a vertex that
+    sampled the lights sent the ray), by the power heuristic of the direction's pdf ``pdf_prev`` against
+    the light's own (``stages.core.sampling``)."""
+    for k in range(table.lights.shape[0]):
+        lr, lg, lb = light_eval(table.lights, k, table.env, table.marginal, table.conditional, d)
+        if lr == 0.0 and lg == 0.0 and lb == 0.0:
+            continue
+        w = 1.0
+        if mis:
+            pl = light_pdf(table.lights, k, table.env, table.marginal, table.conditional, d)
+            w = power_heuristic(pdf_prev, pl)
+        L0 += tp0 * lr * w
+        L1 += tp1 * lg * w
+        L2 += tp2 * lb * w
+    return L0, L1, L2
 
 
 @njit(cache=True)

@@ -50,6 +50,7 @@ from numba.extending import overload
 from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
+from stages.core.sampling import power_heuristic, roulette_survival
 from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample
@@ -60,12 +61,6 @@ from stages.render.tracking import track
 
 VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
                                                      "max_depth", "rr_depth", "mats"])
-
-
-@njit(cache=True)
-def _power(a, b):
-    a2 = a * a
-    return a2 / (a2 + b * b) if a2 > 0.0 else 0.0
 
 
 @njit(cache=True, _nrt=False)
@@ -98,7 +93,7 @@ def _escaped(lt, n, prev_pdf, dx, dy, dz):
         lr, lg, lb = light_eval(lights, k, env, marg, cond, w)
         if lr == 0.0 and lg == 0.0 and lb == 0.0:
             continue
-        mis = _power(prev_pdf, light_pdf(lights, k, env, marg, cond, w) / nl)
+        mis = power_heuristic(prev_pdf, light_pdf(lights, k, env, marg, cond, w) / nl)
         r += lr * mis
         g += lg * mis
         b += lb * mis
@@ -216,7 +211,7 @@ def trace_path(it, o, d, seed, index):
                     lookups += lk
                     rays += 1
                     if tr > 0.0:
-                        c = tr * (1.0 if ldelta else _power(lpdf, pf)) / lpdf
+                        c = tr * (1.0 if ldelta else power_heuristic(lpdf, pf)) / lpdf
                         Lr += br * ler * f0 * c
                         Lg += bg * leg * f1 * c
                         Lb += bb * leb * f2 * c
@@ -250,7 +245,7 @@ def trace_path(it, o, d, seed, index):
                     lookups += lk
                     rays += 1
                     if tr > 0.0:
-                        c = f * tr * (1.0 if ldelta else _power(lpdf, f)) / lpdf
+                        c = f * tr * (1.0 if ldelta else power_heuristic(lpdf, f)) / lpdf
                         Lr += br * ler * c
                         Lg += bg * leg * c
                         Lb += bb * leb * c
@@ -277,7 +272,7 @@ def trace_path(it, o, d, seed, index):
                     lookups += lk
                     rays += 1
                     if tr > 0.0:
-                        c = tr * (1.0 if ldelta else _power(lpdf, lambert_pdf(alb, nrm, wi, lw))) / lpdf
+                        c = tr * (1.0 if ldelta else power_heuristic(lpdf, lambert_pdf(alb, nrm, wi, lw))) / lpdf
                         Lr += br * ler * fr * c
                         Lg += bg * leg * fg * c
                         Lb += bb * leb * fb * c
@@ -299,7 +294,7 @@ def trace_path(it, o, d, seed, index):
         dz = wz
         skip = next_skip
         if n >= rr_depth:
-            q = min(max(br, bg, bb), 0.95)
+            q = roulette_survival(br, bg, bb)
             u = uniform(seed, index, dim)
             dim += 1
             if u >= q:

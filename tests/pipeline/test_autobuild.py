@@ -131,12 +131,12 @@ def test_what_render_does_not_build_is_one_line(cli, tmp_path):
 def _planner(scene_path, method, out, **options):
     from pipeline.autobuild import Planner, cache_root
     from pipeline.renderers import method as registered
-    from pipeline.runners.render import render_source, resolve_options
+    from pipeline.runners.render import RenderRequest, render_source, resolve_options
     from pipeline.scene import load_scene
 
     scene = load_scene(scene_path)
     m = registered(method)
-    opts = resolve_options(scene, m, **options)
+    opts = resolve_options(scene, m, RenderRequest(**options))
     return Planner(scene, m, render_source(scene, m, opts), opts, cache_root(out, None))
 
 

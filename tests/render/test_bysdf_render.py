@@ -77,11 +77,11 @@ def _make(tmp_path, name, curves, radius=0.02, origin=(0.0, 0.0, 1.0), target=(0
 
 def _render(scene, yarns, spp=4, threads=None, max_depth=None, W=None, H=None, **extra):
     from pipeline.renderers import method
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
 
     m = method("bysdf")
-    opts = resolve_options(scene, m, width=W, height=H, spp=spp, threads=threads, max_depth=max_depth,
-                           extra={"yarns": yarns, **{k: str(v) for k, v in extra.items()}})
+    opts = resolve_options(scene, m, RenderRequest(width=W, height=H, spp=spp, threads=threads, max_depth=max_depth,
+                                                   extra={"yarns": yarns, **{k: str(v) for k, v in extra.items()}}))
     return m.run(scene, opts)
 
 
@@ -121,12 +121,13 @@ def test_reference_free_paths_release_everything(weave, mode):
 
     from pipeline.renderers import method
     from pipeline.renderers.bysdf import film_setup
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
     from stages.render.film import new_film
     from stages.render.tiles import render_tile_borrowed, render_tiles, tile_kernel
 
     scene, yarns = weave
-    opts = resolve_options(scene, method("bysdf"), width=16, height=12, spp=4, extra={"yarns": yarns, "mode": mode})
+    opts = resolve_options(scene, method("bysdf"),
+                           RenderRequest(width=16, height=12, spp=4, extra={"yarns": yarns, "mode": mode}))
     s = film_setup(scene, opts)
     assert tile_kernel(s.integ) is render_tile_borrowed
     tiles = [(0, 0, 12, 16)]
@@ -151,12 +152,12 @@ def test_multiscale_with_vanishing_footprint_is_near(weave):
     scene, yarns = weave
     from pipeline.renderers import bysdf as R, method
     from pipeline.renderers.film import render_film, sampling_of
-    from pipeline.runners.render import resolve_options
+    from pipeline.runners.render import RenderRequest, resolve_options
 
     m = method("bysdf")
     imgs = {}
     for mode in ("near", "multiscale"):
-        opts = resolve_options(scene, m, spp=4, extra={"yarns": yarns, "mode": mode})
+        opts = resolve_options(scene, m, RenderRequest(spp=4, extra={"yarns": yarns, "mode": mode}))
         s = R.film_setup(scene, opts)
         integ = s.integ._replace(pixel_angle=1e-12)
         run = render_film(s.label, integ, s.cam, opts["width"], opts["height"], sampling_of(opts), opts["seed"],

@@ -11,6 +11,8 @@ import math
 import numpy as np
 from numba import njit
 
+from stages.core.sampling import NO_HIT
+
 from .spline import segment_arclen_to, segment_coeffs
 
 
@@ -178,7 +180,7 @@ def closest_point_on_curve(cv, c, p):
     The grid's candidate segments in p's cell cover every point within the curve's pad (yarn radius
     + δ); when the best candidate is farther than that pad, all segments of the curve are searched
     (with box pruning), so the answer is exact everywhere."""
-    best = 1e300
+    best = NO_HIT
     best_i = -1
     best_t = 0.0
     start, end = nearest_segments_in_cell(cv, p)

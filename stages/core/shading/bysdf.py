@@ -160,6 +160,14 @@ from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
 from stages.core.shading.lambert import cosine_direction
+from stages.core.shading.microfacet import (
+    COS_EPS,
+    fresnel_dielectric,
+    ggx_sample_visible,
+    refract,
+    rough_reflect,
+    rough_transmit,
+)
 
 SPEC_WEIGHT = 0
 REFLECT_WEIGHT = 1
@@ -191,7 +199,6 @@ ET_Y = RMS_X + N_ALPHA             # E_T(mu) at y: refraction out, alpha = ALPHA
 BYSDF_SIZE = ET_Y + N_MU_EXIT
 
 ALPHA_MIN = 1e-4          # smallest GGX roughness (smaller values are clamped)
-COS_EPS = 1e-9            # |cos| at or below this counts as grazing: no scattering
 LOSS_MIN = 1e-9           # an interface that loses less energy than this gets no compensation
 MU_FLOOR = 1e-4           # the energy tables' grazing node is computed at this cosine
 P_R_MIN, P_R_MAX = 0.05, 0.95
@@ -248,86 +255,7 @@ def _cached_energy_tables(eta, alpha_exit):
 
 
 # ------------------------------------------------------------------------------------------------
-# scalar pieces: Fresnel, GGX, the body albedos
-@njit(cache=True)
-def fresnel_dielectric(cos_i, eta):
-    """Unpolarised Fresnel reflectance for light meeting the interface at cos_i (> 0, on the incident
-    side) with relative index eta = n_transmitted / n_incident; 1 under total internal reflection."""
-    c = min(1.0, abs(cos_i))
-    sin2_t = (1.0 - c * c) / (eta * eta)
-    if sin2_t >= 1.0:
-        return 1.0
-    cos_t = math.sqrt(1.0 - sin2_t)
-    rs = (c - eta * cos_t) / (c + eta * cos_t)
-    rp = (eta * c - cos_t) / (eta * c + cos_t)
-    return 0.5 * (rs * rs + rp * rp)
-
-
-@njit(cache=True)
-def ggx_D(x, y, z, au, av):
-    """Anisotropic GGX normal distribution of the unit micro-normal (x, y, z) in the local frame
-    (x along alpha_u, z the macro normal): 1 / (pi au av (x^2/au^2 + y^2/av^2 + z^2)^2), 0 for z <= 0."""
-    if z <= 0.0:
-        return 0.0
-    e = (x / au) ** 2 + (y / av) ** 2 + z * z
-    return 1.0 / (math.pi * au * av * e * e)
-
-
-@njit(cache=True)
-def ggx_lambda(x, y, z, au, av):
-    """Smith's Lambda of the unit direction (x, y, z) for anisotropic GGX (inf at z = 0)."""
-    z2 = z * z
-    if z2 <= 0.0:
-        return math.inf
-    a2 = (au * au * x * x + av * av * y * y) / z2
-    return 0.5 * (math.sqrt(1.0 + a2) - 1.0)
-
-
-@njit(cache=True)
-def ggx_G1(x, y, z, au, av):
-    """Smith masking 1 / (1 + Lambda) of direction (x, y, z) (the sidedness test is the caller's)."""
-    return 1.0 / (1.0 + ggx_lambda(x, y, z, au, av))
-
-
-@njit(cache=True)
-def ggx_sample_visible(vx, vy, vz, au, av, u1, u2):
-    """A micro-normal (hx, hy, hz) with density G1(v) max(0, v.h) D(h) / v_z: the distribution of
-    visible normals seen from the local unit direction v (v_z > 0), Heitz 2018 Listing 1."""
-    sx = au * vx
-    sy = av * vy
-    sz = vz
-    ln = math.sqrt(sx * sx + sy * sy + sz * sz)
-    sx /= ln
-    sy /= ln
-    sz /= ln
-    lensq = sx * sx + sy * sy
-    if lensq > 0.0:
-        il = 1.0 / math.sqrt(lensq)
-        t1x, t1y = -sy * il, sx * il
-    else:
-        t1x, t1y = 1.0, 0.0
-    t2x = -sz * t1y               # T2 = Vh x T1 (T1 has no z component)
-    t2y = sz * t1x
-    t2z = sx * t1y - sy * t1x
-    r = math.sqrt(u1)
-    ph = 2.0 * math.pi * u2
-    a = r * math.cos(ph)
-    b = r * math.sin(ph)
-    s = 0.5 * (1.0 + sz)
-    b = (1.0 - s) * math.sqrt(max(0.0, 1.0 - a * a)) + s * b
-    c = math.sqrt(max(0.0, 1.0 - a * a - b * b))
-    nx = a * t1x + b * t2x + c * sx
-    ny = a * t1y + b * t2y + c * sy
-    nz = b * t2z + c * sz
-    hx = au * nx
-    hy = av * ny
-    hz = max(0.0, nz)
-    ln = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if ln <= 0.0:
-        return 0.0, 0.0, 1.0
-    return hx / ln, hy / ln, hz / ln
-
-
+# scalar pieces: the body albedos (Fresnel and GGX: stages.core.shading.microfacet)
 @njit(cache=True)
 def lommel_seeliger_albedo(mu):
     """Directional albedo of the Lommel-Seeliger term cos_o / (4 pi (mu + cos_o)) per unit a':
@@ -409,71 +337,6 @@ def _unit_copy(v):
     return float(v[0]), float(v[1]), float(v[2])
 
 
-# ------------------------------------------------------------------------------------------------
-# the rough dielectric in local coordinates (Walter et al. 2007 with visible-normal densities)
-@njit(cache=True)
-def _reflect_local(ix, iy, iz, ox, oy, oz, au, av, eta):
-    """(F D G1(i) G1(o) / (4 i_z), pdf) of reflection i -> o, both with z > COS_EPS."""
-    if iz <= COS_EPS or oz <= COS_EPS:
-        return 0.0, 0.0
-    hx, hy, hz = ix + ox, iy + oy, iz + oz
-    ln = math.sqrt(hx * hx + hy * hy + hz * hz)
-    hx /= ln
-    hy /= ln
-    hz /= ln
-    ih = ix * hx + iy * hy + iz * hz
-    D = ggx_D(hx, hy, hz, au, av)
-    if ih <= 0.0 or D <= 0.0:
-        return 0.0, 0.0
-    g1i = ggx_G1(ix, iy, iz, au, av)
-    pdf = g1i * D / (4.0 * iz)                  # G1(i) (i.h) D / i_z  *  1 / (4 i.h)
-    return fresnel_dielectric(ih, eta) * ggx_G1(ox, oy, oz, au, av) * pdf, pdf
-
-
-@njit(cache=True)
-def _transmit_local(ix, iy, iz, ox, oy, oz, au, av, eta):
-    """(value, pdf) of refraction i -> o across the interface, i on the z > 0 side (index 1), o on the
-    other (relative index eta = n_o / n_i); flux form value = (1 - F) G1(o) pdf, pdf the density of
-    visible-normal sampling and refraction (Walter 2007 Eq. 17 Jacobian)."""
-    if iz <= COS_EPS or oz >= -COS_EPS:
-        return 0.0, 0.0
-    hx, hy, hz = ix + eta * ox, iy + eta * oy, iz + eta * oz
-    ln = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if ln <= 1e-12:
-        return 0.0, 0.0
-    if hz < 0.0:
-        ln = -ln
-    hx /= ln
-    hy /= ln
-    hz /= ln
-    ih = ix * hx + iy * hy + iz * hz
-    oh = ox * hx + oy * hy + oz * hz
-    if ih <= 0.0 or oh >= 0.0:
-        return 0.0, 0.0
-    D = ggx_D(hx, hy, hz, au, av)
-    if D <= 0.0:
-        return 0.0, 0.0
-    den = ih + eta * oh
-    if den == 0.0:
-        return 0.0, 0.0
-    jac = eta * eta * (-oh) / (den * den)       # d omega_h / d omega_o
-    pdf = ggx_G1(ix, iy, iz, au, av) * ih * D / iz * jac
-    F = fresnel_dielectric(ih, eta)
-    return (1.0 - F) * ggx_G1(ox, oy, oz, au, av) * pdf, pdf
-
-
-@njit(cache=True)
-def _refract_local(ix, iy, iz, hx, hy, hz, eta):
-    """(ok, ox, oy, oz): -i refracted through the micro-normal h (i.h > 0), relative index eta;
-    ok False under total internal reflection."""
-    c = ix * hx + iy * hy + iz * hz
-    sin2_t = (1.0 - c * c) / (eta * eta)
-    if sin2_t >= 1.0:
-        return False, 0.0, 0.0, 0.0
-    k = c / eta - math.sqrt(1.0 - sin2_t)
-    return True, -ix / eta + k * hx, -iy / eta + k * hy, -iz / eta + k * hz
-
-
 @njit(cache=True)
 def _alphas(p):
     return max(p[ALPHA_U], ALPHA_MIN), max(p[ALPHA_V], ALPHA_MIN)
@@ -498,13 +361,13 @@ def interface_albedos(alpha, eta, mu, n_quad):
             ih = ix * hx + iz * hz
             if ih <= 0.0:
                 continue
-            v, pdf = _reflect_local(ix, 0.0, iz, 2.0 * ih * hx - ix, 2.0 * ih * hy, 2.0 * ih * hz - iz, alpha, alpha,
+            v, pdf = rough_reflect(ix, 0.0, iz, 2.0 * ih * hx - ix, 2.0 * ih * hy, 2.0 * ih * hz - iz, alpha, alpha,
                                     eta)
             if pdf > 0.0:
                 e_r += v / pdf
-            ok, ox, oy, oz = _refract_local(ix, 0.0, iz, hx, hy, hz, eta)
+            ok, ox, oy, oz = refract(ix, 0.0, iz, hx, hy, hz, eta)
             if ok:
-                v, pdf = _transmit_local(ix, 0.0, iz, ox, oy, oz, alpha, alpha, eta)
+                v, pdf = rough_transmit(ix, 0.0, iz, ox, oy, oz, alpha, alpha, eta)
                 if pdf > 0.0:
                     e_t += v / pdf
     n2 = n_quad * n_quad
@@ -631,7 +494,7 @@ def spec_reflect_eval_pdf(p, t, n, wi, wo):
     ix, iy, iz = to_local(fr, wi)
     ox, oy, oz = to_local(fr, wo)
     au, av = _alphas(p)
-    v, pdf = _reflect_local(ix, iy, iz, ox, oy, oz, au, av, p[ETA])
+    v, pdf = rough_reflect(ix, iy, iz, ox, oy, oz, au, av, p[ETA])
     return BysdfValue(p[KS_R] * v, p[KS_G] * v, p[KS_B] * v, pdf)
 
 
@@ -646,7 +509,7 @@ def spec_reflect_sample(p, t, n, wi, u1, u2):
     hx, hy, hz = ggx_sample_visible(ix, iy, iz, au, av, u1, u2)
     ih = ix * hx + iy * hy + iz * hz
     ox, oy, oz = 2.0 * ih * hx - ix, 2.0 * ih * hy - iy, 2.0 * ih * hz - iz
-    v, pdf = _reflect_local(ix, iy, iz, ox, oy, oz, au, av, p[ETA])
+    v, pdf = rough_reflect(ix, iy, iz, ox, oy, oz, au, av, p[ETA])
     wo = to_world(fr, ox, oy, oz)
     if pdf <= 0.0:
         return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
@@ -676,7 +539,7 @@ def enter_eval_pdf(p, t, n, wi, d):
     ix, iy, iz = to_local(fr, wi)
     dx, dy, dz = to_local(fr, d)
     au, av = _alphas(p)
-    v, pdf = _transmit_local(ix, iy, iz, dx, dy, dz, au, av, p[ETA])
+    v, pdf = rough_transmit(ix, iy, iz, dx, dy, dz, au, av, p[ETA])
     if pdf <= 0.0:
         return v, pdf
     return v * enter_compensation(p, ix, iy, iz), pdf
@@ -693,10 +556,10 @@ def enter_sample(p, t, n, wi, u1, u2):
     au, av = _alphas(p)
     eta = p[ETA]
     hx, hy, hz = ggx_sample_visible(ix, iy, iz, au, av, u1, u2)
-    ok, dx, dy, dz = _refract_local(ix, iy, iz, hx, hy, hz, eta)
+    ok, dx, dy, dz = refract(ix, iy, iz, hx, hy, hz, eta)
     if not ok or ix * hx + iy * hy + iz * hz <= 0.0:
         return EnterSample(_unit_copy(n), 0.0, 0.0)
-    v, pdf = _transmit_local(ix, iy, iz, dx, dy, dz, au, av, eta)
+    v, pdf = rough_transmit(ix, iy, iz, dx, dy, dz, au, av, eta)
     d = to_world(fr, dx, dy, dz)
     if pdf <= 0.0:
         return EnterSample(d, 0.0, 0.0)
@@ -712,7 +575,7 @@ def spec_exit_eval_pdf(p, t_y, n_y, d, wo):
     dx, dy, dz = to_local(fr, d)
     ox, oy, oz = to_local(fr, wo)
     a = max(p[ALPHA_EXIT], ALPHA_MIN)
-    v, pdf = _transmit_local(-dx, -dy, -dz, ox, oy, oz, a, a, 1.0 / p[ETA])
+    v, pdf = rough_transmit(-dx, -dy, -dz, ox, oy, oz, a, a, 1.0 / p[ETA])
     v *= p[KT_EXIT]
     return BysdfValue(v, v, v, pdf)
 
@@ -729,10 +592,10 @@ def spec_exit_sample(p, t_y, n_y, d, u1, u2):
     a = max(p[ALPHA_EXIT], ALPHA_MIN)
     eta = 1.0 / p[ETA]
     hx, hy, hz = ggx_sample_visible(vx, vy, vz, a, a, u1, u2)
-    ok, ox, oy, oz = _refract_local(vx, vy, vz, hx, hy, hz, eta)
+    ok, ox, oy, oz = refract(vx, vy, vz, hx, hy, hz, eta)
     if not ok or vx * hx + vy * hy + vz * hz <= 0.0:
         return BysdfSample(_unit_copy(n_y), 0.0, 0.0, 0.0, 0.0)
-    v, pdf = _transmit_local(vx, vy, vz, ox, oy, oz, a, a, eta)
+    v, pdf = rough_transmit(vx, vy, vz, ox, oy, oz, a, a, eta)
     wo = to_world(fr, ox, oy, oz)
     if pdf <= 0.0:
         return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
@@ -790,7 +653,7 @@ def body_exit_sample(p, n_y, u1, u2):
 
 
 @njit(cache=True)
-def _ms_reflect_local(p, ei, ox, oy, co):
+def _msrough_reflect(p, ei, ox, oy, co):
     """KS f_ms cos towards the local wo (ox, oy, co), co > COS_EPS, given ``ei`` = interface_energy at wi."""
     c = co * INV_PI
     if 1.0 - ei.e_avg <= LOSS_MIN:
@@ -809,7 +672,7 @@ def ms_reflect_eval_pdf(p, t, n, wi, wo):
     ox, oy, co = to_local(fr, wo)
     if ci <= COS_EPS or co <= COS_EPS:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
-    return _ms_reflect_local(p, interface_energy(p, ix, iy, ci), ox, oy, co)
+    return _msrough_reflect(p, interface_energy(p, ix, iy, ci), ox, oy, co)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -855,7 +718,7 @@ def reflect_eval_pdf(p, t, n, wi, wo, shadow):
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
     s = spec_reflect_eval_pdf(p, t, n, wi, wo)
     ox, oy, co = to_local(fr, wo)
-    m = _ms_reflect_local(p, ei, ox, oy, co) if co > COS_EPS else BysdfValue(0.0, 0.0, 0.0, 0.0)
+    m = _msrough_reflect(p, ei, ox, oy, co) if co > COS_EPS else BysdfValue(0.0, 0.0, 0.0, 0.0)
     b = body_reflect_eval_pdf(p, n, wi, wo)
     return BysdfValue(k_s * (s.r + m.r) + k_b * b.r, k_s * (s.g + m.g) + k_b * b.g, k_s * (s.b + m.b) + k_b * b.b,
                       q * s.pdf + (1.0 - q) * b.pdf)

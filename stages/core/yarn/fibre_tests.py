@@ -34,6 +34,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
+from stages.core.sampling import NO_HIT
 from stages.core.yarn.frame_samples import eq7, frame_at
 from stages.core.yarn.model import PLY_RADIUS, YARN_ALPHA, hair_point, hair_speed_bound, regular_xy
 
@@ -166,7 +167,7 @@ def _hair_model(lf, tp, k, hs, t):
 @njit(cache=True)
 def hair_closest(lf, tp, k, hs, p, t0):
     """(model distance, t*) of hair ``hs`` of ply k to p: Gauss-Newton in t over the part of the
-    hair whose z lies in the model window [za, zb]; distance 1e300 where no part does."""
+    hair whose z lies in the model window [za, zb]; distance NO_HIT where no part does."""
     za = lf.za
     zb = lf.zb
     z1 = hs.z1
@@ -180,9 +181,9 @@ def hair_closest(lf, tp, k, hs, p, t0):
         ta = max(ta, (zb - z1) / ze)
         tb = min(tb, (za - z1) / ze)
     elif z1 < za or z1 > zb:
-        return 1e300, 0.0
+        return NO_HIT, 0.0
     if ta > tb:
-        return 1e300, 0.0
+        return NO_HIT, 0.0
     t = min(max(t0, ta), tb)
     h = max(1e-3 * (tb - ta), 1e-9)
     for _it in range(12):
@@ -256,9 +257,9 @@ def hair_prefilter(tp, k, hs, x, y, z, limit):
         ta = max(ta, min(t1, t2))
         tb = min(tb, max(t1, t2))
         if ta > tb:
-            return 1e300, 0.0
+            return NO_HIT, 0.0
     n = min(HAIR_SAMPLES, max(1, int(math.ceil((tb - ta) * HAIR_SAMPLES))))
-    best = 1e300
+    best = NO_HIT
     bt = ta
     for i in range(n + 1):
         t = ta + (tb - ta) * i / n
@@ -332,7 +333,7 @@ def _hair_at(vis, k, hs, i, t):
 def hair_closest_s(vis, k, hs, t0, tol):
     """(distance, t*, unit tangent (3 scalars)) of hair ``hs`` of ply k to the visit's point p under
     the sampled frames, over the part of the hair whose z lies in the visit's window [za, zb]
-    (distance 1e300 where no part does): Gauss-Newton in t with forward differences, until a step
+    (distance NO_HIT where no part does): Gauss-Newton in t with forward differences, until a step
     moves the hair point by less than tol."""
     za = vis.za
     zb = vis.zb
@@ -350,9 +351,9 @@ def hair_closest_s(vis, k, hs, t0, tol):
         ta = max(ta, (zb - z1) / ze)
         tb = min(tb, (za - z1) / ze)
     elif z1 < za or z1 > zb:
-        return 1e300, 0.0, 0.0, 0.0, 0.0
+        return NO_HIT, 0.0, 0.0, 0.0, 0.0
     if ta > tb:
-        return 1e300, 0.0, 0.0, 0.0, 0.0
+        return NO_HIT, 0.0, 0.0, 0.0, 0.0
     t = min(max(t0, ta), tb)
     h = max(1e-5 * (tb - ta), 1e-10)
     Dx = Dy = Dz = 0.0

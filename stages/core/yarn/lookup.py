@@ -54,6 +54,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from stages.core.sampling import NO_HIT
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.core.yarn import hair_free
 from stages.core.yarn.fibre_tests import (
@@ -365,7 +366,7 @@ def lookup_point(cv, tab, px, py, pz, skip=-1):
     fr = tab.fs_frame
     while q < qe:
         c = tab.fg_yarn[q]
-        best = 1e300
+        best = NO_HIT
         bq = np.int64(-1)  # not a literal: _seam_visits gets one typing
         bt = 0.0
         while q < qe and tab.fg_yarn[q] == c:  # every run of yarn c in the cell

@@ -32,10 +32,7 @@ from stages.core.shading.bysdf import (
     enter_sample,
     exit_eval_pdf,
     exit_sample,
-    fresnel_dielectric,
     fresnel_diffuse_reflectance,
-    ggx_D,
-    ggx_G1,
     lommel_seeliger_albedo,
     pack_bysdf,
     reflect_eval_pdf,
@@ -46,6 +43,7 @@ from stages.core.shading.bysdf import (
     spec_reflect_eval_pdf,
     spec_reflect_sample,
 )
+from stages.core.shading.microfacet import fresnel_dielectric, ggx_D, ggx_G1
 from tests.chisquare import bin_integrals, check_shading_model, shading_draw
 
 SPEC_R, ENTER, SPEC_T, BODY_R, BODY_T, SIDE_R, SIDE_T, WRONG_ETA, CHAIN, CHAIN_SPEC = range(10)
