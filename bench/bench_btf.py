@@ -68,8 +68,8 @@ def run(out_dir) -> dict:
     from pipeline.renderers.btf import DressedMesh, load_btf, pack_integrator
     from pipeline.scene import camera_array, load_scene
     from stages.core.geometry.triangles import area_weighted_normals
-    from stages.render import btf as _btf  # noqa: F401  (registers the integrator's radiance)
     from stages.render.film import F_HIT, new_film, tile_grid
+    from stages.render.integrators import btf as _btf  # noqa: F401  (registers the integrator's radiance)
     from stages.render.tiles import render_tiles, tile_kernel
     from stages.tile.base_surfaces import sphere_drape
 

@@ -67,8 +67,8 @@ def run(out_dir) -> dict:
     from pipeline.scene import camera_array, load_scene
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
-    from stages.render.fiberpath import FiberpathIntegrator
     from stages.render.film import F_HIT, finalize, new_film, tile_grid
+    from stages.render.integrators.fiberpath import FiberpathIntegrator
     from stages.render.tiles import render_tiles
 
     src = Path(os.environ.get("LOOMLIGHT_BENCH_FIBERS", ROOT / "out" / "demo" / "fibers.zarr"))

@@ -8,7 +8,7 @@ Methods, on the same points:
                hairs; frame samples and chord grid derived at load, ``tables.derive_lookup_accel``)
   procedural_free   the same with realization-free hairs (Algorithm 3)
   realized_bvh the renderers' realized reference: SAH BVH over the realized segments
-               (stages.core.geometry.bvh + stages.render.realized_medium.covering_segment)
+               (stages.core.geometry.bvh + stages.render.media.realized_medium.covering_segment)
   realized_grid a uniform grid over the realized segments (stages.procedural.realized_reference)
   procedural_floor  step 1 of Algorithm 1 alone (the part no procedural lookup can skip: p's
                candidate yarns from the chord grid, the chord gates, and p's foot point on every yarn
@@ -110,7 +110,7 @@ def bench_scene(path: Path, n_points=100_000, spacing=0.002) -> dict:
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.yarn.lookup import lookup_points
     from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
-    from stages.render.realized_medium import covering_segment
+    from stages.render.media.realized_medium import covering_segment
 
     with tempfile.TemporaryDirectory(prefix="loomlight-bench-") as tmp:
         t0 = time.perf_counter()

@@ -173,8 +173,8 @@ class FiberpathRenderer:
         from stages.core.geometry.bvh import build_fiber_bvh
         from stages.core.geometry.embree import EmbreeScene
         from stages.core.shading.material import pack_material_lambert
-        from stages.render.fiberpath import FiberpathIntegrator
         from stages.render.film import new_film, tile_grid
+        from stages.render.integrators.fiberpath import FiberpathIntegrator
         from stages.render.tiles import render_tiles
 
         numba.set_num_threads(THREADS)

@@ -72,7 +72,7 @@ from stages.core.geometry.embree import embree_intersect  # noqa: E402  (after s
 from stages.core.geometry.surface import surface_hit  # noqa: E402  (after sys.path and stages set-up)
 from stages.core.rng import uniform  # noqa: E402  (after sys.path and stages set-up)
 from stages.render.camera import camera_ray  # noqa: E402  (after sys.path and stages set-up)
-from stages.render.realized_medium import covering_segment_arrays  # noqa: E402  (after sys.path and stages set-up)
+from stages.render.media.realized_medium import covering_segment_arrays  # noqa: E402  (after sys.path and stages set-up)
 
 PLANES = 16   # spatial split bins per axis (15 planes)
 

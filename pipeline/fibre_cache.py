@@ -1,6 +1,6 @@
 """Build the render-time fibre cache of ``volpath --source procedural`` (``--cache MiB``).
 
-The design is in ``stages.render.fibre_cache`` (bricks, samples, pilot, ranking) and
+The design is in ``stages.render.media.fibre_cache`` (bricks, samples, pilot, ranking) and
 docs/architecture.md ("Fibre cache"). This module glues the stages: it ranks the bricks, picks the
 prefix that fits the budget, realizes the needed windows of the yarns with the realization's own
 kernels (``stages.procedural.realize``: the same pieces, random numbers and vertex floats as
@@ -30,7 +30,7 @@ MAX_FINE_BYTES = 64 * 2**20  # the refined cells' sub-cell majorants hold at mos
 
 
 class CacheBuild(NamedTuple):
-    medium: object            # stages.render.fibre_cache.FibreCacheMedium
+    medium: object            # stages.render.media.fibre_cache.FibreCacheMedium
     majorant: object          # its MajorantGrid: inside cached bricks from the cached capsules
     info: dict                # statistics for the render artifact
 
@@ -63,8 +63,8 @@ def cache_budget_mib(value, place: str = "--cache") -> float:
 
 def _medium(cv, tab, grid, cached, bvh, fibre_yarn, fibre_id):
     from stages.core.yarn.model import DENSITY, ROUGHNESS
-    from stages.render.fibre_cache import FibreCacheMedium
-    from stages.render.procedural_medium import ProceduralMedium
+    from stages.render.media.fibre_cache import FibreCacheMedium
+    from stages.render.media.procedural_medium import ProceduralMedium
 
     tp = tab.tparams[tab.yarn_type]
     return FibreCacheMedium(ProceduralMedium(cv, tab), grid.lo, np.full(3, 1.0 / grid.size), grid.res, cached, bvh,
@@ -96,7 +96,7 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.procedural.realize import realize_fill_window, window_pieces, yarn_plan
     from stages.render.camera import camera_ray
-    from stages.render.fibre_cache import (
+    from stages.render.media.fibre_cache import (
         PILOT_DEPTH,
         brick_grid,
         brick_order,
@@ -118,7 +118,7 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
 
     def bare(**why):
         """Nothing cached: the bare procedural medium (its lookups skip the cache's indirection)."""
-        from stages.render.procedural_medium import ProceduralMedium
+        from stages.render.media.procedural_medium import ProceduralMedium
 
         info.update({"cache_bricks_cached": 0, "cache_fibres": 0, "cache_segments": 0, "cache_bytes": 0,
                      "cache_estimate_bytes": 0, **why, "cache_build_s": time.perf_counter() - t0})
@@ -193,10 +193,10 @@ def cached_majorant(med, maj, fine_cell=None):
     """``maj`` with the cells inside cached bricks bounded by the cached capsules (tighter than the
     procedural tubes: as many null collisions as the realized source), and, where ``maj``'s cells are
     coarser than ``fine_cell`` (a large cloth's grid is capped at MAX_MAJORANT_CELLS), those cells
-    refined into k^3 sub-cells of about ``fine_cell`` (k <= MAX_FINE_K; ``stages.render.tracking``):
+    refined into k^3 sub-cells of about ``fine_cell`` (k <= MAX_FINE_K; ``stages.render.media.tracking``):
     (MajorantGrid, info)."""
-    from stages.render.fibre_cache import cells_in_cached_bricks
-    from stages.render.tracking import fine_majorants_from_prims, majorants_from_prims, make_majorant_grid
+    from stages.render.media.fibre_cache import cells_in_cached_bricks
+    from stages.render.media.tracking import fine_majorants_from_prims, majorants_from_prims, make_majorant_grid
 
     inner = cells_in_cached_bricks(maj, med.brick_lo, 1.0 / med.brick_inv[0], med.brick_res, med.cached)
     mu = majorants_from_prims(med.prims, med.seg_fiber, med.fibre_yarn, med.yarn_density, maj.lo, maj.hi, maj.res)

@@ -37,7 +37,7 @@ extinguishes 0.956 of the fibres' projected area per volume (kappa = 1.27, den =
 only match the projected area if the fibres were spread evenly, and gives P = 0.62). Delta tracking
 costs a lookup per 1 / den of path inside fibre-occupied majorant cells, so kappa is a compromise:
 kappa = 5 costs about what the former fixed density of 1000 per cm did. The volume's scattering is the
-fibres' BCSDF (``stages.render.volpath``, ``pipeline.renderers.volpath``).
+fibres' BCSDF (``stages.render.integrators.volpath``, ``pipeline.renderers.volpath``).
 
 Scaling to a yarn radius R (``scale_preset``) is a similarity transform with factor
 S = R / yarn_radius: every length is multiplied by S (yarn_radius, ellipse axes, both pitches,

@@ -1,6 +1,6 @@
 """``loomlight voxelize tables.zarr -o grid.zarr --res NX NY NZ``: a voxel grid of the fibre medium.
 
-Averages ``--supersample``^3 procedural lookups per voxel (``stages.render.grid_medium.voxelize``):
+Averages ``--supersample``^3 procedural lookups per voxel (``stages.render.media.grid_medium.voxelize``):
 mean density, principal fibre direction, density-weighted albedo and roughness, over the box of all
 yarn tubes. The grid renders with ``loomlight render --method volpath --source grid --grid GRID.zarr``.
 ``--export-npy DIR`` also writes raw numpy volumes for other renderers (Mitsuba 3 ``gridvolume``

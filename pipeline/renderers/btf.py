@@ -41,9 +41,9 @@ Alpha: where the texture's alpha (its coverage at the view) is below 1 -- a hole
 knit -- the ray goes on through the surface, and the pixel is alpha x the cloth + (1 - alpha) x what
 lies behind: the mesh's other side or other parts, the scene's ground (``render.ground``), or the
 lights seen directly. Lights: directional lights exactly, constant / SG / environment lights by a sum
-over the texture's light grid (``stages.render.btf``). Lights, camera and ground come from the scene;
+over the texture's light grid (``stages.render.integrators.btf``). Lights, camera and ground come from the scene;
 the scene's fabric and yarns are not read. Statistics: the texture's size (``fit_bytes``: the bytes of
-the arrays the renderer reads), levels, views, triangles. Integrator: ``stages.render.btf``.
+the arrays the renderer reads), levels, views, triangles. Integrator: ``stages.render.integrators.btf``.
 
 Speed: nothing is random, so 1 spp is a finished image (more samples only anti-alias the edges). A
 pixel costs well under a microsecond, so with several threads the shared tile loop's per-tile
@@ -64,7 +64,7 @@ from . import RenderResult
 
 # a surface to dress: vertices, triangles, unit vertex normals, vertex pattern coordinates (in repeats)
 DressedMesh = namedtuple("DressedMesh", ["vertices", "triangles", "normals", "pattern_uv", "what"])
-# the texture, every level flattened and packed (``stages.render.btf`` module doc: ``texels``, ``table``,
+# the texture, every level flattened and packed (``stages.render.integrators.btf`` module doc: ``texels``, ``table``,
 # ``levels``), with what else the renderer needs from the artifact
 BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "period",
                                        "fit_bytes", "summary"])
@@ -273,7 +273,7 @@ def geometry_source(scene, options) -> str:
 def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_ground, cam, mip: bool, shadows: bool):
     """The ``BtfIntegrator`` of a dressed mesh and a texture under a camera (``pack_camera`` layout)."""
     from stages.core.geometry.triangles import build_triangle_mesh, uv_derivatives
-    from stages.render.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator
+    from stages.render.integrators.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator
     from stages.render.lights import DIRECTIONAL
 
     from .fiberpath import ray_eps

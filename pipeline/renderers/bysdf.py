@@ -4,17 +4,17 @@
 
 Reads only the ``yarns`` artifact (``loomlight ingest``): no fibres are realized and no tables artifact
 is needed, so it renders the largest inputs. Each yarn is a tube around its spline (within 1 % of its
-radius, ``stages.render.yarn_tubes``) whose radius is the farthest reach of its plies plus 2 %; plies follow the
+radius, ``stages.core.yarn.tubes``) whose radius is the farthest reach of its plies plus 2 %; plies follow the
 yarn type's procedural model (ply count, ply radius and twist, the ply ellipse; ``pipeline.presets``)
 and fibres come from 1D tables around the ply built once per yarn type at setup from the same model
 (fibre count, fibre radius, fibre twist; ``stages.procedural.bysdf_tables``; the build time is in the
-render's statistics as ``tables_s``). The integrator is ``stages.render.bysdf``, the shading model
+render's statistics as ``tables_s``). The integrator is ``stages.render.integrators.bysdf``, the shading model
 ``stages.core.shading.bysdf``.
 
 Settings (``--set KEY=VALUE``):
 
 - ``yarns``: the yarns artifact (required).
-- ``mode`` = near (default) | far | multiscale: seed 004 §4.2 (``stages.render.bysdf`` module doc).
+- ``mode`` = near (default) | far | multiscale: seed 004 §4.2 (``stages.render.integrators.bysdf`` module doc).
 - ``k``: offsets per far / multiscale vertex (default 16; 1 to 256).
 - ``params``: a TOML file of BYSDF parameters per yarn group (``[warp]``, ``[weft]``, ``[knit]``,
   ``[other]``, ``[default]`` tables; ``loomlight fit-bysdf`` writes one), applied over the scene's.
@@ -168,9 +168,9 @@ def yarn_setup(yarns_path):
 def build_types(tparams, tol, max_iter, fibre_threshold=0.5, ply_threshold=0.6, search="march"):
     """Tuple of ``YarnType`` (one per type) with its implicit tables, and the build seconds."""
     from stages.core.yarn.implicit_plies import SEARCHES, ply_reach_radius
+    from stages.core.yarn.shading_points import YarnType
     from stages.procedural.bysdf_tables import build_implicit_tables
     from stages.procedural.tables import type_key
-    from stages.render.yarn_point import YarnType
 
     t0 = time.perf_counter()
     out = []
@@ -188,10 +188,10 @@ def build_types(tparams, tol, max_iter, fibre_threshold=0.5, ply_threshold=0.6, 
 def film_setup(scene, options: dict):
     """The ``FilmSetup`` of a bysdf render (``pipeline.renderers.film``)."""
     from stages.core.geometry.bvh import build_fiber_bvh
+    from stages.core.yarn.tubes import tube_pieces
     from stages.procedural.tables import yarn_key
-    from stages.render.bysdf import MODES as KMODES, BysdfIntegrator
     from stages.render.film import VARIANCE_CHANNELS
-    from stages.render.yarn_tubes import tube_pieces
+    from stages.render.integrators.bysdf import MODES as KMODES, BysdfIntegrator
 
     from ..render_setup import ground_array, pack_lights
     from ..scene import camera_array

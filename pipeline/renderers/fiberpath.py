@@ -7,7 +7,7 @@ Fibres come from ``--fibers PATH.zarr``: a ``fibers`` artifact (realized fibres,
 tetrahedra; ``--method fiberpath_shell`` and ``--set tiling=PATH`` are the same). ``--source
 realized`` is accepted and means the same; it is the only fibre source this method has, so the
 scene's ``render.source``, which selects volpath's density source, is ignored. The estimator is one
-(``stages.render.fiberpath``) for both geometries. Materials: ``--material bcsdf``
+(``stages.render.integrators.fiberpath``) for both geometries. Materials: ``--material bcsdf``
 (default) gives every fibre the BCSDF preset of its yarn group -- scene key ``yarns.<group>.bcsdf``
 (falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).
@@ -216,8 +216,8 @@ def _tiling_scene(scene, path):
 def film_setup(scene, options: dict):
     """The ``FilmSetup`` of a fiberpath render (``pipeline.renderers.film``): integrator, camera, label."""
     from stages.core.shading.material import pack_material_lambert
-    from stages.render.fiberpath import FiberpathIntegrator
     from stages.render.film import VARIANCE_CHANNELS
+    from stages.render.integrators.fiberpath import FiberpathIntegrator
 
     from ..artifacts import read_meta
     from .film import FilmSetup

@@ -17,7 +17,7 @@ spreads sideways inside the cloth); ``sh_window`` none (default) | hann | lanczo
 both SH sides of every transfer matrix (the light's and the BCSDF's) by w_l, Hann 0.5 (1 + cos(pi l /
 (L + 1))) or Lanczos sinc(pi l / (L + 1)) (L the IIRTF's order), the classic cure for the ringing of a
 truncated SH expansion (Sloan 2008, "Stupid Spherical Harmonics Tricks" §8), traded against blur of
-multiple scattering's angular detail. Integrator: ``stages.render.prt``.
+multiple scattering's angular detail. Integrator: ``stages.render.integrators.prt``.
 """
 from __future__ import annotations
 
@@ -97,7 +97,7 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
     if (ii.meta.get("params") or {}).get("first_ray") != IIRTF_FIRST_RAY:
         warn(f"{iirtf_path}: an IIRTF made before 2026-12-02, whose paths passed through the fibres containing "
              "a segment's midpoint (multiple scattering ~10-20 % darker); run loomlight precompute iirtf again")
-    from stages.render.prt import MAX_SH_ORDER
+    from stages.render.integrators.prt import MAX_SH_ORDER
 
     if not 0 <= int(ii.summary["order"]) <= MAX_SH_ORDER:
         raise LoomError(ii.path, "summary.order", f"SH order {ii.summary['order']} is outside 0..{MAX_SH_ORDER}")
@@ -163,7 +163,7 @@ def film_setup(scene, options: dict):
     from stages.core.sh import quarter_turn_x
     from stages.core.shading.material import pack_material_lambert
     from stages.render.film import VARIANCE_CHANNELS
-    from stages.render.prt import PrtIntegrator
+    from stages.render.integrators.prt import PrtIntegrator
 
     from ..render_setup import ground_array, pack_lights
     from ..scene import camera_array

@@ -12,7 +12,7 @@ Sources (``--source``, default the scene's ``render.source``, else procedural):
 Optics (``FibreOptics``): the volume stands for the fibres a fiberpath render shows. Its density is
 the fibres' projected area per volume (``pipeline.presets``); a collision with a fibre of a yarn
 whose group names a BCSDF (``yarns.<group>.bcsdf`` or ``--bcsdf``) scatters by that BCSDF tinted by
-the yarn's colour, exactly as fiberpath's fibres do (``stages.render.volpath``, "Fibre phase
+the yarn's colour, exactly as fiberpath's fibres do (``stages.render.integrators.volpath``, "Fibre phase
 function"); ``--set phase=microflake`` (and every voxel-grid collision) uses seed 000's specular
 micro-flakes instead, with the tinted BCSDF's mean albedo as single-scattering albedo
 (``--set albedo=color``: the yarn's colour itself).
@@ -97,7 +97,7 @@ def procedural_source(tables_path, cell=None, optics=None, view=None):
 def _procedural_source(tables_path, cell, optics, view, advance):
     from stages.core.shading.material import MAT_SIZE
     from stages.core.yarn.model import ROUGHNESS
-    from stages.render.procedural_medium import ProceduralMedium
+    from stages.render.media.procedural_medium import ProceduralMedium
 
     from ..runners.tables import load_tables
 
@@ -136,13 +136,13 @@ def _procedural_source(tables_path, cell, optics, view, advance):
 
 def procedural_majorant(cv, tab, cell=None):
     """The ``MajorantGrid`` of procedural tables: the largest density of the capsules that hold every
-    fibre surface (``stages.render.procedural_medium.capsule_majorants``, walked twice: their box,
+    fibre surface (``stages.render.media.procedural_medium.capsule_majorants``, walked twice: their box,
     then the grid; never listed) per cell of ``cell`` (default a quarter of the mean yarn extent
     bound, at most MAX_MAJORANT_CELLS cells)."""
     import numba
 
-    from stages.render.procedural_medium import capsule_box, capsule_majorants
-    from stages.render.tracking import make_majorant_grid
+    from stages.render.media.procedural_medium import capsule_box, capsule_majorants
+    from stages.render.media.tracking import make_majorant_grid
 
     lo, hi = capsule_box(cv, tab, MAJORANT_STEP)
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * float(np.mean(tab.yarn_extent)))
@@ -152,9 +152,9 @@ def procedural_majorant(cv, tab, cell=None):
 
 def _fibre_numbers(fart) -> np.ndarray:
     """The procedural lookup's fibre numbers of a realization's polylines (pieces of one fibre share
-    one: ``stages.render.realized_medium``), or empty where the artifact does not say (each polyline
+    one: ``stages.render.media.realized_medium``), or empty where the artifact does not say (each polyline
     its own fibre)."""
-    from stages.render.fibre_cache import fibre_ids
+    from stages.render.media.fibre_cache import fibre_ids
 
     keys = ("fiber_yarn", "fiber_ply", "fiber_kind", "fiber_index")
     if not all(k in fart for k in keys):
@@ -168,8 +168,8 @@ def realized_source(fibers_path, cell, optics):
     preset/radius), scattering as ``optics``."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.yarn.model import DENSITY, ROUGHNESS, extent_bound
-    from stages.render.realized_medium import RealizedMedium, fiber_capsules
-    from stages.render.tracking import majorants_from_capsules, make_majorant_grid
+    from stages.render.media.realized_medium import RealizedMedium, fiber_capsules
+    from stages.render.media.tracking import majorants_from_capsules, make_majorant_grid
 
     from ..runners.yarn_types import yarn_types_of
 
@@ -207,8 +207,8 @@ def realized_source(fibers_path, cell, optics):
 def grid_source(grid_path, cell, optics):
     """(GridMedium, MajorantGrid, info, mats) from a grid artifact (macrocells of 4 voxels by default):
     micro-flakes (voxels know no yarn), the voxels' colours made albedos by ``optics``."""
-    from stages.render.grid_medium import GridMedium
-    from stages.render.tracking import majorants_from_voxels, make_majorant_grid
+    from stages.render.media.grid_medium import GridMedium
+    from stages.render.media.tracking import majorants_from_voxels, make_majorant_grid
 
     art = _artifact(grid_path, "grid", "--set grid=PATH.zarr")
     lo, hi = (np.asarray(v, float) for v in art.summary["bounds"])
@@ -229,7 +229,7 @@ class FibreOptics:
 
     ``rows(colours, groups)`` -> (mats (Y, MAT_SIZE), has (Y,) bool): per yarn its group's BCSDF tinted
     by its colour (``stages.core.shading.bcsdf.tint_bcsdf``), the fibre phase function of
-    ``stages.render.volpath``; model -1 (micro-flakes) where the scene names no BCSDF for the group or
+    ``stages.render.integrators.volpath``; model -1 (micro-flakes) where the scene names no BCSDF for the group or
     with ``phase=microflake``. ``albedo(colours, groups)``: the micro-flake albedo, the tinted BCSDF's
     mean albedo (``bcsdf_mean_albedo``) unless ``albedo=color`` or no BCSDF (then the colour itself).
     ``groups`` None: the yarns are unknown (voxels): the scene's one BCSDF applies, if it names one."""
@@ -307,7 +307,7 @@ def open_source(source, options, optics, view=None):
 # ------------------------------------------------------------------------------------------------
 def _sees_fabric(maj, cam, W, H, n=24):
     from stages.render.camera import camera_ray
-    from stages.render.tracking import ray_meets_majorant
+    from stages.render.media.tracking import ray_meets_majorant
 
     for i in range(n):
         for j in range(n):
@@ -320,7 +320,7 @@ def _sees_fabric(maj, cam, W, H, n=24):
 def film_setup(scene, options: dict):
     """The ``FilmSetup`` of a volpath render (``pipeline.renderers.film``): integrator, camera, label."""
     from stages.render.film import VARIANCE_LUMINANCE
-    from stages.render.volpath import VolpathIntegrator
+    from stages.render.integrators.volpath import VolpathIntegrator
 
     from .film import FilmSetup
 

@@ -2,7 +2,7 @@
 
 ``run_voxelize`` checks the resolution (at most 512^3 voxels) and supersampling (the lookups' least time
 within the time limit, ``LOOKUPS_PER_THREAD_S``), averages
-``supersample``^3 procedural lookups per voxel (``stages.render.grid_medium.voxelize``) over the box of
+``supersample``^3 procedural lookups per voxel (``stages.render.media.grid_medium.voxelize``) over the box of
 all yarn tubes, publishes density, roughness, direction and albedo, and with ``export_npy`` also
 writes the raw numpy volumes (the layout is described in ``pipeline.commands.voxelize``).
 
@@ -36,7 +36,7 @@ def _voxelize_task(tables, tables_hash, store, lo, hi, res, supersample, z0, z1)
     """Chunk task: voxel slices z0..z1-1 of all four arrays."""
     import numpy as np
 
-    from stages.render.grid_medium import voxelize
+    from stages.render.media.grid_medium import voxelize
 
     from ..chunks import open_for_chunk
 
@@ -89,7 +89,7 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
                        started=t_start)
     if w.up_to_date() and not force and export_npy is None:
         return f"{out} is up to date"
-    from stages.render.grid_medium import sggx_volume
+    from stages.render.media.grid_medium import sggx_volume
 
     from .tables import accel_estimate
 

@@ -14,7 +14,7 @@
 - ``NO_HIT``: the distance a query answers when it found nothing (no surface, no fibre within the
   window); finite, so that comparisons and products with zero stay ordinary numbers.
 
-The integrators (``stages.render.fiberpath``, ``.bysdf``, ``.volpath``) and the precomputes
+The integrators (``stages.render.integrators.fiberpath``, ``.bysdf``, ``.volpath``) and the precomputes
 (``stages.precompute.iirtf``, ``.btf``) call these; each draws its own uniforms from its own dimensions
 (``stages.core.rng``), so every decision stays a pure function of the path's keys.
 """

@@ -8,15 +8,9 @@ The skeleton every method shares:
 ``lights``       distant lights: directional, constant, spherical Gaussian, lat-long envmap
 ``ground``       the optional Lambertian ground plane
 
-Integrators:
-``fiberpath``    explicit fibre surfaces (realized or shell-mapped), BCSDF or Lambert materials
-``volpath``      micro-flake media by delta / ratio tracking
-
-volpath's media:
-``medium``             the density-source interface (``medium_lookup``), a homogeneous box
-``tracking``           majorant grids, delta and ratio tracking
-``procedural_medium``  seed 000's lookups on the fly
-``realized_medium``    realized fibres in a BVH
-``grid_medium``        a voxel grid (and ``voxelize``, which makes one)
+``integrators/``  one integrator per method (fiberpath, volpath, prt, btf, bysdf; its own docstring lists them)
+``media/``        volpath's density sources and the tracking through them
+The yarn tubes and implicit plies the bysdf integrator walks live beside the yarn model
+(``stages.core.yarn.tubes``, ``.shading_points``, ``.implicit_plies``).
 Scattering models and geometry queries are in ``stages.core.shading`` and ``stages.core.geometry``.
 """

@@ -17,7 +17,7 @@ scene (fibres, medium or ground), else 0.0; ``depth`` the distance to that first
 none); ``lookups`` medium lookups made (0 for surface methods); ``rays`` rays or free-flight queries
 traced.
 
-Integrators: ``stages.render.fiberpath`` (explicit fibre surfaces), ``stages.render.volpath``
+Integrators: ``stages.render.integrators.fiberpath`` (explicit fibre surfaces), ``stages.render.integrators.volpath``
 (micro-flake media). A new render method is one such file (namedtuple + estimator + overload), its
 registry entry in ``pipeline.renderers`` and its tests.
 """

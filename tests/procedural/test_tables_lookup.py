@@ -336,7 +336,7 @@ def test_lookups_compile_once_for_every_caller(built):
     medium (with and without a fibre to skip) must call it with one typing, or every process compiles it
     again (a literal -1 for ``skip`` once did that)."""
     from stages.core.yarn.lookup import lookup_point
-    from stages.render.procedural_medium import ProceduralMedium, procedural_lookup
+    from stages.render.media.procedural_medium import ProceduralMedium, procedural_lookup
 
     cv, tab, _ = load_tables(built / "tables.zarr")
     pts = np.random.default_rng(8).uniform([-0.3, -0.2, -0.05], [0.3, 0.2, 0.05], (500, 3))

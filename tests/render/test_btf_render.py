@@ -1,11 +1,11 @@
-"""``loomlight render --method btf`` (stages/render/btf.py, pipeline/renderers/btf.py; seed 002 §6) on small
+"""``loomlight render --method btf`` (stages/render/integrators/btf.py, pipeline/renderers/btf.py; seed 002 §6) on small
 synthetic textures (btf artifacts written by hand: a Lambertian texture is rho = albedo / pi, no lobes,
 T = 1, alpha = 1) dressed on flat quads and on a flat tiling's base surface.
 
 What is compared with what (each test names its reference):
 - ray-triangle queries (``stages.core.geometry.triangles``) against brute force over every triangle;
   dP/du, dP/dv against the triangles' own edges (round trip);
-- the packed texel model (``stages.render.btf.texel_f1_rgb`` / ``view_lookup``) against
+- the packed texel model (``stages.render.integrators.btf.texel_f1_rgb`` / ``view_lookup``) against
   ``stages.core.btf.texel_f1`` / ``table_lookup`` on random texels;
 - a Lambertian quad under a directional light against the closed form E a / pi cos(theta) in every
   pixel, under a constant light against L a (the light grid's quadrature of cos is exact);
@@ -36,7 +36,7 @@ from stages.core.geometry.triangles import (
     mesh_occluded,
     uv_derivatives,
 )
-from stages.render.btf import texel_f1_rgb, view_lookup
+from stages.render.integrators.btf import texel_f1_rgb, view_lookup
 
 VIEW_GRID = (4, 8)
 LIGHT_GRID = (8, 8)

@@ -112,7 +112,7 @@ def test_same_bytes_at_one_and_two_threads(weave):
 
 @pytest.mark.parametrize("mode", ["near", "multiscale", "far"])
 def test_reference_free_paths_release_everything(weave, mode):
-    """The estimator runs without reference counting (``stages.render.bysdf``, "Speed"): the tile loop is
+    """The estimator runs without reference counting (``stages.render.integrators.bysdf``, "Speed"): the tile loop is
     the borrowed one, and numba's runtime statistics balance over a render (every allocation a kernel
     makes is freed). numba itself refuses, at compile time, code without reference counting that takes a
     new array (or a tuple holding one) from a call: tried with ``to_yarn`` and with a kernel returning

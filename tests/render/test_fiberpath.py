@@ -1,4 +1,4 @@
-"""The explicit-fibre path tracer (stages/render/fiberpath.py) against closed forms, an independent
+"""The explicit-fibre path tracer (stages/render/integrators/fiberpath.py) against closed forms, an independent
 numerical BCSDF and the white furnace; the `loomlight render --method fiberpath` contract."""
 import math
 
@@ -14,8 +14,8 @@ from stages.core.shading import bcsdf as B
 from stages.core.shading.bcsdf import pack_bcsdf
 from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
 from stages.render.camera import pack_camera
-from stages.render.fiberpath import FiberpathIntegrator
 from stages.render.film import VARIANCE_CHANNELS, finalize, new_film, tile_grid
+from stages.render.integrators.fiberpath import FiberpathIntegrator
 from stages.render.lights import LightTable, envmap_tables, pack_light
 from stages.render.tiles import render_tiles
 

@@ -1,4 +1,4 @@
-"""The procedural source's render-time fibre cache (``stages.render.fibre_cache``, ``pipeline.fibre_cache``).
+"""The procedural source's render-time fibre cache (``stages.render.media.fibre_cache``, ``pipeline.fibre_cache``).
 
 Contracts: in a cached brick the cache answers exactly as the realized fibres' BVH does (the cached
 segments are the full realization's, same floats), so both describe the procedural fabric; outside
@@ -18,10 +18,10 @@ from pipeline.runners.tables import build
 from pipeline.scene import camera_array
 from stages.core.geometry.bvh import build_fiber_bvh
 from stages.procedural.realized_reference import build_segment_grid, query_realized, segment_fiber
-from stages.render.fibre_cache import fibre_ids
-from stages.render.medium import medium_lookup
-from stages.render.procedural_medium import ProceduralMedium
-from stages.render.realized_medium import RealizedMedium
+from stages.render.media.fibre_cache import fibre_ids
+from stages.render.media.medium import medium_lookup
+from stages.render.media.procedural_medium import ProceduralMedium
+from stages.render.media.realized_medium import RealizedMedium
 from tests.helpers import EXACTNESS_SWATCH, closed_ring_scene, seam_points
 
 SPACING = 0.002
@@ -158,7 +158,7 @@ def test_small_budget_caches_the_nearest_bricks_and_stays_exact(swatch):
     assert info["cache_estimate_bytes"] <= budget * 2**20
     assert 0 < in_cache[inside].mean() < 1  # some fibre points from the cache, some from the lookups
     # the bricks are taken in the pilot's order
-    from stages.render.fibre_cache import PILOT_DEPTH, pilot_bricks
+    from stages.render.media.fibre_cache import PILOT_DEPTH, pilot_bricks
 
     med = built.medium
     maj = procedural_majorant(cv, tab)
@@ -188,7 +188,7 @@ def test_refined_majorant_cells_bound_the_cached_fibres(swatch):
     cached bricks stay unrefined, and every cached fibre point lies in a sub-cell whose majorant is at
     least its density."""
     from pipeline.fibre_cache import cached_majorant
-    from stages.render.tracking import majorants_from_prims
+    from stages.render.media.tracking import majorants_from_prims
 
     fib, cv, tab = swatch
     maj = procedural_majorant(cv, tab)

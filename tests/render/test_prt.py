@@ -1,4 +1,4 @@
-"""``loomlight render --method prt`` (stages/render/prt.py, pipeline/renderers/prt.py; seed 001 §5) on one
+"""``loomlight render --method prt`` (stages/render/integrators/prt.py, pipeline/renderers/prt.py; seed 001 §5) on one
 small flat tiling (plain and 4/1 satin exemplars, 4 fibres per ply, 8 x 8 blocks of 1 mm) with its SVF
 (32 x 32 pixels, 16 PCA components) and IIRTF (SH order 2, 200 paths per cell, mis), all built once
 for the module through the CLI, and a camera looking down on the middle of the patch (no ground).

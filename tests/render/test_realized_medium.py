@@ -1,4 +1,4 @@
-"""The realized-fibre density source (stages/render/realized_medium.py), called directly on random,
+"""The realized-fibre density source (stages/render/media/realized_medium.py), called directly on random,
 overlapping fibres.
 
 References: a brute-force scan of every capsule (segment a-b of a fibre, radius the mean of its two point
@@ -11,9 +11,9 @@ import pytest
 from numba import njit
 
 from stages.core.geometry.bvh import build_fiber_bvh
-from stages.render.medium import medium_lookup
-from stages.render.realized_medium import RealizedMedium, covering_segment, fiber_capsules
-from stages.render.tracking import majorants_from_capsules, majorants_from_prims
+from stages.render.media.medium import medium_lookup
+from stages.render.media.realized_medium import RealizedMedium, covering_segment, fiber_capsules
+from stages.render.media.tracking import majorants_from_capsules, majorants_from_prims
 
 
 def _fibres(seed=0, F=40):

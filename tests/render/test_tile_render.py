@@ -1,5 +1,5 @@
 """fiberpath on a shell-mapped tiling (issue 6 item 5): on a flat rectangle (identity shell map) the
-fiberpath integrator (stages.render.fiberpath) renders the same image through the shell traversal
+fiberpath integrator (stages.render.integrators.fiberpath) renders the same image through the shell traversal
 (a ShellScene, stages.core.shell) as on the fabric realized directly -- the exemplar's periodic copies
 in one flat BVH -- with the same seed: same camera samples, same hits, same shadow rays."""
 import numpy as np
@@ -9,8 +9,8 @@ from pipeline.runners.tile import load_tiling, run_tile
 from stages.core.geometry.bvh import build_fiber_bvh
 from stages.core.shading.material import pack_material_lambert
 from stages.render.camera import pack_camera
-from stages.render.fiberpath import FiberpathIntegrator
 from stages.render.film import finalize, new_film, tile_grid
+from stages.render.integrators.fiberpath import FiberpathIntegrator
 from stages.render.tiles import render_tiles
 
 CFG = """

@@ -1,4 +1,4 @@
-"""Free-flight sampling (stages/render/tracking.py: delta tracking) against the closed-form exponential.
+"""Free-flight sampling (stages/render/media/tracking.py: delta tracking) against the closed-form exponential.
 
 Reference: in a homogeneous box of density den, fibre tangent t and roughness sigma, the extinction along
 a unit direction d is den sqrt(1 + (sigma^2 - 1)(t . d)^2) (Jakob 2010 Eq. 8 with the fibre-like SGGX
@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from numba import njit
 
-from stages.render.medium import HomogeneousMedium
-from stages.render.tracking import make_majorant_grid, ray_box, track
+from stages.render.media.medium import HomogeneousMedium
+from stages.render.media.tracking import make_majorant_grid, ray_box, track
 from tests.chisquare import chi2_test_1d
 
 LO = np.array([-1.0, -1.0, -0.5])

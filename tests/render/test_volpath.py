@@ -18,12 +18,12 @@ from stages.core.shading.material import MAT_SIZE
 from stages.core.shading.sggx import fiber_sggx, phase_eval, projected_area
 from stages.render.camera import camera_ray, pack_camera
 from stages.render.film import F_B, F_HIT, F_R, VARIANCE_LUMINANCE, finalize, new_film, tile_grid
-from stages.render.grid_medium import GridMedium, grid_lookup
+from stages.render.integrators.volpath import VolpathIntegrator
 from stages.render.lights import LightTable, envmap_tables, pack_light
-from stages.render.medium import HomogeneousMedium, extinction
+from stages.render.media.grid_medium import GridMedium, grid_lookup
+from stages.render.media.medium import HomogeneousMedium, extinction
+from stages.render.media.tracking import majorants_from_voxels, make_majorant_grid, track
 from stages.render.tiles import render_tiles
-from stages.render.tracking import majorants_from_voxels, make_majorant_grid, track
-from stages.render.volpath import VolpathIntegrator
 from tests.helpers import compiled_typings
 
 Z = 5.0  # standard errors allowed
@@ -413,7 +413,7 @@ def test_procedural_majorant_does_not_depend_on_workers(small):
     1 or 3 workers give the grid procedural_source built, bit for bit. The box walk and the raster walk
     share one compiled walk (one typing of _walk_yarn)."""
     from pipeline.renderers.volpath import MAJORANT_STEP, procedural_source
-    from stages.render.procedural_medium import _walk_yarn, capsule_majorants
+    from stages.render.media.procedural_medium import _walk_yarn, capsule_majorants
 
     med, maj, _, _ = procedural_source(str(small / "t.zarr"))
     for workers in (1, 3):

@@ -7,9 +7,9 @@ majorant grid.
 import numpy as np
 import pytest
 
-from stages.render.grid_medium import GridMedium, grid_lookup, sggx_volume, voxelize
-from stages.render.medium import HomogeneousMedium
-from stages.render.tracking import majorants_from_capsules, majorants_from_voxels
+from stages.render.media.grid_medium import GridMedium, grid_lookup, sggx_volume, voxelize
+from stages.render.media.medium import HomogeneousMedium
+from stages.render.media.tracking import majorants_from_capsules, majorants_from_voxels
 
 
 def _grid(density, lo=(0.0, 0.0, 0.0), hi=(1.0, 1.0, 1.0), seed=0):
@@ -131,7 +131,7 @@ def test_voxelize_cli_grid_artifact_export_and_render(tmp_path, cli):
     when unchanged, exit 2 on bad input; the grid renders with --source grid."""
     from pipeline.artifacts import Artifact
     from pipeline.runners.tables import load_tables
-    from stages.render.procedural_medium import ProceduralMedium, procedural_lookup
+    from stages.render.media.procedural_medium import ProceduralMedium, procedural_lookup
 
     scene = tmp_path / "s.toml"
     scene.write_text(GRID_SCENE)

@@ -8,7 +8,7 @@ leaves before ``tmin`` or enters beyond ``tmax``: the slab test of Kay and Kajiy
 plane of each axis picked by the direction's sign (Williams et al. 2005), so no min / max per axis.
 
 ``box4_contains(box, w, x, y, z)`` is the point query's test: a 4-bit mask, bit q set when child q's
-box holds the point (bounds included), the point queries of ``stages.render.realized_medium``.
+box holds the point (bounds included), the point queries of ``stages.render.media.realized_medium``.
 
 numba compiles the same tests written per child to scalar code (a float32 load, a conversion, a
 subtraction and a multiplication per plane and child, one child after another); this is one LLVM

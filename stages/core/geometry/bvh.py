@@ -41,7 +41,7 @@ best hit found since it was pushed; the any-hit query visits nearest first too (
 meets an occluder sooner: 8 % faster fiberpath renders than visiting children in slot order).
 Traversal stacks live on the machine stack (``stages.core.geometry.stack``). The same wide nodes
 serve the shell's exemplar queries (``stages.core.shell.traversal``) and the realized volume's point
-queries (``stages.render.realized_medium``).
+queries (``stages.render.media.realized_medium``).
 
 Traversal
 ---------

@@ -1,6 +1,6 @@
 """Ray queries of an explicit-fibre scene, whatever holds the fibres.
 
-Integrators that shade fibre surfaces (``stages.render.fiberpath``, and the precomputes after it)
+Integrators that shade fibre surfaces (``stages.render.integrators.fiberpath``, and the precomputes after it)
 ask a *surface scene* two things, each a generic kernel answered per scene class (dispatch:
 ``stages.core.dispatch``):
 

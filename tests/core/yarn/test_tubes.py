@@ -1,4 +1,4 @@
-"""Yarn tubes of ``--method bysdf`` (stages/render/yarn_tubes.py).
+"""Yarn tubes of ``--method bysdf`` (stages/core/yarn/tubes.py).
 
 References: the spline itself, densely sampled (the polyline's distance from it, against the stated
 bound of rel_err x radius); the rotation-minimising frame of ``stages.core.curves.frames`` evaluated
@@ -12,14 +12,14 @@ import pytest
 from stages.core.curves.frames import curve_frame_at
 from stages.core.curves.spline import segment_point
 from stages.core.geometry.bvh import build_fiber_bvh, intersect
-from stages.ingest.spline_process import curves_from_arrays, process_curves
-from stages.render.yarn_tubes import (
+from stages.core.yarn.tubes import (
     cylinder_span,
     point_from_yarn,
     to_yarn,
     tube_pieces,
     yarn_hit_frame,
 )
+from stages.ingest.spline_process import curves_from_arrays, process_curves
 
 
 def _curves(points_list, closed):

@@ -1,8 +1,8 @@
 """Volumetric path tracer for fibre media (seed 000 §5.4).
 
 Unidirectional path tracing through an anisotropic medium given by a density source
-(``stages.render.medium``): free flights by delta tracking on a majorant grid
-(``stages.render.tracking``), scattering by the fibres' BCSDF (below) or the specular micro-flake
+(``stages.render.media.medium``): free flights by delta tracking on a majorant grid
+(``stages.render.media.tracking``), scattering by the fibres' BCSDF (below) or the specular micro-flake
 phase function sampled exactly (weight = albedo), next-event estimation toward the lights with ratio-tracked
 transmittance, multiple importance sampling (power heuristic) between light sampling and phase /
 BSDF sampling for lights that a ray can hit (environment: constant, SG, envmap), Russian roulette
@@ -26,7 +26,7 @@ than fiberpath under low lights). Collisions whose yarn is unknown (voxel grids,
 without a row (``mats`` empty: ``--set phase=microflake``) use the micro-flake phase function of
 seed 000 App. A.
 
-``VolpathIntegrator`` fields: ``medium`` (a density source, ``stages.render.medium``), ``majorant``
+``VolpathIntegrator`` fields: ``medium`` (a density source, ``stages.render.media.medium``), ``majorant``
 (its ``MajorantGrid``), ``lights`` (``LightTable``, ``stages.render.lights``), ``ground`` float64[4]
 and ``has_ground`` (``stages.render.ground``), ``max_depth``, ``rr_depth``, ``mats`` (Y, MAT_SIZE)
 material rows per yarn (0 rows: micro-flakes everywhere). Its ``radiance``
@@ -57,7 +57,7 @@ from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import environment_radiance, light_eval, light_pdf, light_sample_into
-from stages.render.tracking import track
+from stages.render.media.tracking import track
 
 VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
                                                      "max_depth", "rr_depth", "mats"])

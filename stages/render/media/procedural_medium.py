@@ -49,8 +49,8 @@ from stages.core.yarn.model import (
     transverse_speed_bound,
 )
 from stages.core.yarn.tables import loop_fibre
-from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
-from stages.render.tracking import cell_half_diagonal, raster_capsule
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.tracking import cell_half_diagonal, raster_capsule
 
 ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 

@@ -10,7 +10,7 @@ tube is traced as a chain of capsules around a polyline that follows the spline 
     and P''(t) = 6 a t + 2 b is linear, so max |P''| = max(|2 b|, |6 a + 2 b|). A segment is cut into
     n = ceil(sqrt(max|P''| / (8 eps))) equal pieces in t with eps = ``rel_err`` R_env (default 1 %),
     so every point of the polyline lies within eps of the spline and vice versa; the capsule tube and
-    the spline's tube differ by at most eps (``tests/render/test_yarn_tubes.py`` measures it).
+    the spline's tube differ by at most eps (``tests/core/yarn/test_tubes.py`` measures it).
 
 The capsules go into the SAH BVH of the explicit-fibre renderer (``stages.core.geometry.bvh``),
 one "fibre" per yarn, so the traversal is the one every fibre tracer uses. A hit on piece j at axis
@@ -27,7 +27,7 @@ over the few radii a ray spends inside it).
 Kernels: ``tube_pieces`` (subdivision), ``yarn_hit_frame``, ``to_yarn`` (``to_yarn_into`` writes into
 the caller's vectors), ``dir_from_yarn``, ``point_from_yarn``, ``cylinder_span`` (entry and exit of a
 ray through the straight envelope in yarn space). The per-ray kernels allocate nothing but ``to_yarn``'s
-result, and ``yarn_hit_frame`` is compiled without reference counting, for ``stages.render.bysdf``.
+result, and ``yarn_hit_frame`` is compiled without reference counting, for ``stages.render.integrators.bysdf``.
 """
 import math
 from collections import namedtuple

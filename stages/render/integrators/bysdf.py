@@ -1,8 +1,8 @@
 """Yarn-level path tracer with the BYSDF (``--method bysdf``, seed 004).
 
-Geometry: yarn tubes only (``stages.render.yarn_tubes``): the ingest stage's splines as capsule
+Geometry: yarn tubes only (``stages.core.yarn.tubes``): the ingest stage's splines as capsule
 chains in the fibre tracer's SAH BVH, one "fibre" per yarn. Plies and fibres are implicit
-(``stages.render.yarn_point``): a ray that enters a tube is followed on its elliptical cross-section to
+(``stages.core.yarn.shading_points``): a ray that enters a tube is followed on its elliptical cross-section to
 the first ply it meets; a ray that meets no ply passes on through the yarn. Shading: the four-lobe
 BYSDF (``stages.core.shading.bysdf``) with ply and fibre shadowing.
 
@@ -28,7 +28,7 @@ from its direction. A shading normal that the fibre tables tilt away from the vi
 ``SHADING_COS_MIN``) is bent towards it first (``face_towards_into``): dropping such hits lost about 6 %
 of a white yarn's light at every scattering event. On the chosen
 side, next-event estimation takes one sample of each light and combines it with the side's BYSDF
-sampling by the power heuristic, as ``stages.render.fiberpath`` does; delta lights by NEE alone.
+sampling by the power heuristic, as ``stages.render.integrators.fiberpath`` does; delta lights by NEE alone.
 Shadow rays and continuation rays pass through yarns whose plies they miss (the same implicit
 test), so NEE and BYSDF sampling see the same scene. ``max_depth`` counts scattering events (default
 4, as the reference implementation); Russian roulette from ``rr_depth`` on.
@@ -38,13 +38,13 @@ the near BYSDF over K offsets stratified over the whole yarn (h in [-1, 1]): the
 ray on with the fraction of offsets that meet no ply, and otherwise is the mixture of the offsets
 that do (evaluation: their mean; sampling: one of them, uniformly; pdf: the mean); ``multiscale``
 takes the offsets of the ray cone's footprint (width = path length x ``pixel_angle``), aggregates
-normal, tangent and shadowing (``yarn_point.aggregate``) and widens the specular roughness by the
+normal, tangent and shadowing (``stages.core.yarn.shading_points.aggregate``) and widens the specular roughness by the
 offset range / 10; a vanishing footprint gives back ``near``, and a footprint as wide as the yarn (an
 offset range of 2 or more) shades as ``far`` (seed 004: near when the range is small, far when the
 pixel spans the yarn).
 
 Speed: the estimator (``trace_path`` and everything it calls per ray) is compiled without numba's
-reference counting, as ``stages.render.fiberpath`` is: the path's vectors and the
+reference counting, as ``stages.render.integrators.fiberpath`` is: the path's vectors and the
 K offsets' scratch live on the machine stack, the shading model and the implicit ply and fibre kernels
 return 3-tuples, and the yarn frames are read without taking references on the curves' arrays. With
 reference counting, the atomic updates of every array of every namedtuple a kernel unpacks (a yarn
@@ -72,17 +72,17 @@ from stages.core.shading.bysdf import BYSDF_SIZE
 from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 from stages.core.yarn.implicit_plies import plies_crossed, ply_blocks
 from stages.core.yarn.implicit_tables import ply_shadow_lookup
-from stages.render.ground import ground_intersect
-from stages.render.integrator import PathSample, radiance
-from stages.render.lights import add_escaped_radiance, light_sample_into
-from stages.render.yarn_point import aggregate, near_point, offset_of, offset_points
-from stages.render.yarn_tubes import (
+from stages.core.yarn.shading_points import aggregate, near_point, offset_of, offset_points
+from stages.core.yarn.tubes import (
     cylinder_span,
     dir_from_yarn,
     point_from_yarn,
     to_yarn_into,
     yarn_hit_frame,
 )
+from stages.render.ground import ground_intersect
+from stages.render.integrator import PathSample, radiance
+from stages.render.lights import add_escaped_radiance, light_sample_into
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
 MODES = ("near", "far", "multiscale")

@@ -24,7 +24,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 GridMedium = namedtuple("GridMedium", ["lo", "hi", "density", "direction", "albedo", "roughness"])
 

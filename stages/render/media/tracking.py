@@ -36,7 +36,7 @@ from numba import njit
 
 from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.rng import uniform
-from stages.render.medium import NO_MEDIUM, extinction, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, extinction, medium_lookup
 
 MajorantGrid = namedtuple("MajorantGrid", ["lo", "hi", "res", "mu", "fine", "fine_mu"])
 Flight = namedtuple("Flight", ["collided", "t", "transmittance", "dim", "lookups", "point"])

@@ -24,10 +24,10 @@ fibres apart, -1 where the source does not know them) with den = 0 outside every
 counts as empty: where it and others cover the point, the first of the others in the source's order
 answers. A ray leaving a fibre that scattered it as a whole meets every fibre but that one, so a
 fibre overlapping it stays solid (fiberpath's rays meet it too), and the fibres' overlaps, a third of
-the covered volume at packing 0.5, are no holes. The integrator (``stages.render.volpath``) is
+the covered volume at packing 0.5, are no holes. The integrator (``stages.render.integrators.volpath``) is
 compiled once per source class. Sources: ``HomogeneousMedium`` (below; a box of constant fibre
-material, for closed-form tests), ``stages.render.grid_medium``, ``stages.render.procedural_medium``,
-``stages.render.realized_medium``.
+material, for closed-form tests), ``stages.render.media.grid_medium``, ``stages.render.media.procedural_medium``,
+``stages.render.media.realized_medium``.
 """
 from collections import namedtuple
 

@@ -36,7 +36,7 @@ procedural lookup's fibre number: yarn, ply, regular or hair, index; the pieces 
 it), per yarn ``yarn_density``, ``yarn_albedo`` (Y, 3), ``yarn_roughness`` (the tables' values), and
 the BVH arrays a lookup reads (``wide_box``, ``wide_child``, ``prims``, ``seg_fiber``, ``points``,
 ``seg_a``) again at the top level. The lookup is compiled without reference counting (as the whole
-volpath estimator is, ``stages.render.volpath``), so nesting the tables' ~80 arrays in the medium costs
+volpath estimator is, ``stages.render.integrators.volpath``), so nesting the tables' ~80 arrays in the medium costs
 nothing per lookup (with reference counting, the atomic counts on them had been 80 % of a render). Its
 ``medium_lookup`` returns the procedural source's
 ``MediumPoint``: the yarn type's density and roughness, the yarn's albedo, the segment's tangent.
@@ -52,10 +52,10 @@ from stages.core.curves.spline import curve_point_at
 from stages.core.dispatch import is_tuple_class
 from stages.core.yarn.lookup import FIBRE_ID_STRIDE, ORDER_STRIDE
 from stages.render.camera import camera_ray_into
-from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
-from stages.render.procedural_medium import procedural_lookup
-from stages.render.realized_medium import covering_segment_arrays, segment_tangent
-from stages.render.tracking import ray_box
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.procedural_medium import procedural_lookup
+from stages.render.media.realized_medium import covering_segment_arrays, segment_tangent
+from stages.render.media.tracking import ray_box
 
 MAX_BRICKS_PER_AXIS = 256
 PILOT_DEPTH = 8.0  # majorant optical depth a pilot ray marches into the fabric (e^-8: 3e-4 of the light gets further)

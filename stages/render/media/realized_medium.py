@@ -28,7 +28,7 @@ from stages.core.geometry.box4 import box4_contains
 from stages.core.geometry.bvh import leaf_range
 from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.geometry.stack import STACK_SIZE, stack_array
-from stages.render.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness",
                                                "fibre_id"])

@@ -1,6 +1,6 @@
 """Shading points on a yarn: implicit plies and fibres at one or several azimuthal offsets (seed 004 §3.3-3.4, §4.2).
 
-A ray that enters a yarn's envelope tube is described in yarn space (``stages.render.yarn_tubes``):
+A ray that enters a yarn's envelope tube is described in yarn space (``stages.core.yarn.tubes``):
 entry point ``o`` on the envelope of radius R, direction ``d``, ``u_max`` the length inside. Its
 *azimuthal offset* is h = (o . w) / R in [-1, 1], w = normalize(z x d) the direction across the
 yarn as the ray sees it: h = 0 meets the axis, |h| = 1 grazes the silhouette. The ray at another
@@ -22,7 +22,7 @@ the point of the ray's own offset), the shadowing their weighted mean, and the s
 widened by (h_hi - h_lo) / 10.
 
 Nothing here allocates: points and frames are 3-tuples (``ShadingPoint``'s x, t, n too), and
-``offset_points`` fills the caller's arrays, so ``stages.render.bysdf`` calls these without reference
+``offset_points`` fills the caller's arrays, so ``stages.render.integrators.bysdf`` calls these without reference
 counting.
 
 ``YarnType`` holds what the kernels need of one yarn type: ``tp`` (the packed procedural yarn model,
@@ -40,7 +40,7 @@ from stages.core.yarn.implicit_tables import (
     fibre_lookup,
     ply_shadow_lookup,
 )
-from stages.render.yarn_tubes import cylinder_span
+from stages.core.yarn.tubes import cylinder_span
 
 # one yarn type: tp (NPARAM,), tables (ImplicitTables), envelope radius, ply tolerance, ply iterations, ply search
 # (stages.core.yarn.implicit_plies.SEARCH_ITERATION or SEARCH_MARCH)
