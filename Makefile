@@ -186,10 +186,10 @@ $(OUT)/fibers.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/proc
 $(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile $(TILING) -o $(OUT)/damask_tiling.zarr
 
-$(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
+$(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
 	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_svf.zarr $(SVF_ARGS)
 
-$(OUT)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py)
+$(OUT)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
 	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_iirtf.zarr $(IIRTF_ARGS)
 
 # --- pictures of intermediate artifacts ---
@@ -227,7 +227,7 @@ $(OUT)/damask_prt.exr: $(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr
 	$(LL) render $(DAMASK_SCENE) --method prt --fibers $(OUT)/damask_tiling.zarr --set svf=$(OUT)/damask_svf.zarr \
 	    --set iirtf=$(OUT)/damask_iirtf.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
-$(OUT)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py)
+$(OUT)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
 	$(LL) precompute btf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_btf_fit.zarr --exemplar 0 $(BTF_ARGS)
 
 $(OUT)/damask_btf_fit.png: $(OUT)/damask_btf_fit.zarr/zarr.json
@@ -237,7 +237,7 @@ $(OUT)/damask_btf.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_SCENE)
 	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
 	    --set btf=$(OUT)/damask_btf_fit.zarr --spp $(SPP) $(DEMO_SIZE) -o $@
 
-$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(wildcard stages/render/*.py stages/core/shading/bysdf.py)
+$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
 	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
@@ -246,7 +246,7 @@ $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FO
 $(OUT)/knit_fibers.zarr/zarr.json: $(OUT)/knit_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/knit_yarns.zarr -o $(OUT)/knit_fibers.zarr
 
-$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) $(wildcard stages/render/*.py stages/core/shading/bysdf.py)
+$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
 	$(LL) fit-bysdf $(KNIT_SCENE) --yarns $(OUT)/knit_yarns.zarr --fibers $(OUT)/knit_fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_bysdf.exr: $(OUT)/knit_yarns.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml $(KNIT_SCENE)
@@ -313,7 +313,7 @@ $(COMPARE_IN)/twill_fibers.zarr/zarr.json: $(COMPARE_IN)/twill_yarns.zarr/zarr.j
 $(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/scenes/knit_swatch.toml $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile data/tilings/knit_swatch.toml -o $(COMPARE_IN)/knit_tiling.zarr
 
-$(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py)
+$(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
 	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf.zarr
 
 .PRECIOUS: $(COMPARE_IN)/%.zarr/zarr.json

@@ -127,52 +127,6 @@ def load_btf(path) -> BtfTexture:
 
 
 # ------------------------------------------------------------------------------------------------ geometry
-def _obj_normals(path: Path, V, UV):
-    """The OBJ's own normal at every vertex of ``read_obj_mesh`` (one per distinct (v, vt) corner, in the
-    order it numbers them, checked against its positions and uv; the mean of the normals its corners
-    name), or None when a face corner names no normal."""
-    v, vt, vn, keys = [], [], [], {}
-    for ln, line in enumerate(path.read_text(errors="replace").splitlines(), 1):
-        parts = line.split()
-        if not parts or parts[0] not in ("v", "vt", "vn", "f"):
-            continue
-        try:
-            if parts[0] == "v":
-                v.append([float(x) for x in parts[1:4]])
-            elif parts[0] == "vt":
-                vt.append([float(x) for x in parts[1:3]])
-            elif parts[0] == "vn":
-                vn.append([float(x) for x in parts[1:4]])
-                if len(vn[-1]) != 3 or not np.all(np.isfinite(vn[-1])):
-                    raise ValueError(line)
-            else:
-                corners = []
-                for c in parts[1:]:
-                    ids = c.split("/")
-                    if len(ids) < 3 or ids[2] == "":
-                        return None
-                    vi, ti, ni = (int(x) for x in ids[:3])
-                    corners.append((vi - 1 if vi > 0 else len(v) + vi, ti - 1 if ti > 0 else len(vt) + ti,
-                                    ni - 1 if ni > 0 else len(vn) + ni))
-                    if not 0 <= corners[-1][2] < len(vn):
-                        raise LoomError(path, f"line {ln}", "face normal index out of range")
-                for k in range(1, len(corners) - 1):
-                    for c in (corners[0], corners[k], corners[k + 1]):
-                        keys.setdefault(c[:2], []).append(c[2])
-        except ValueError:
-            raise LoomError(path, f"line {ln}", "unreadable normal (vn x y z) or face corner (v/vt/vn)") from None
-    order = list(keys)
-    if len(order) != len(V) or not np.array_equal(np.asarray(v)[[k[0] for k in order]], V) \
-            or not np.array_equal(np.asarray(vt)[[k[1] for k in order]], UV):
-        return None
-    vn = np.asarray(vn, np.float64)
-    N = np.stack([vn[ns].sum(axis=0) for ns in keys.values()])
-    length = np.linalg.norm(N, axis=1)
-    if np.any(length == 0):
-        return None
-    return N / length[:, None]
-
-
 def load_obj(path, repeat: float) -> DressedMesh:
     """The OBJ at ``path`` (``--set mesh``) dressed with ``repeat`` texture repeats across its uv."""
     from stages.core.geometry.triangles import area_weighted_normals
@@ -187,21 +141,9 @@ def load_obj(path, repeat: float) -> DressedMesh:
     if p.suffix.lower() != ".obj":
         raise LoomError(p, "--set mesh", f"is not a Wavefront OBJ mesh (suffix {p.suffix or 'none'}); the btf method "
                         "renders an .obj triangle mesh with texture coordinates")
-    for ln, line in enumerate(p.read_text(errors="replace").splitlines(), 1):
-        parts = line.split()
-        if parts and parts[0] == "f" and any(len(c.split("/")) < 2 or c.split("/")[1] == "" for c in parts[1:]):
-            raise LoomError(p, f"line {ln}", "face corner without a texture coordinate (v/vt): the btf method "
-                                             "places its texture by the mesh's uv")
-    try:
-        V, UV, F = read_obj_mesh(p, p)
-    except LoomError as e:
-        if "no texture coordinates" in e.message:
-            raise LoomError(p, None, "no texture coordinates (vt): the btf method places its texture by the "
-                                     "mesh's uv") from None
-        raise
+    V, UV, F, N = read_obj_mesh(p, p, normals=True, uv_for="the btf method places its texture by the mesh's uv")
     if not (np.all(np.isfinite(V)) and np.all(np.isfinite(UV))):
         raise LoomError(p, None, "vertex or texture coordinates hold nan or inf")
-    N = _obj_normals(p, V, UV)
     what = "its normals"
     if N is None:
         N = area_weighted_normals(V, F)

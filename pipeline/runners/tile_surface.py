@@ -81,6 +81,6 @@ def build_surface(cfg, file, flat_size):
     else:
         if "path" not in s:
             raise LoomError(file, "surface.path", "surface kind 'obj' needs a path")
-        V, UV, F = read_obj_mesh(s["path"], file)
+        V, UV, F, _ = read_obj_mesh(s["path"], file)
     V = V * s.get("scale", 1.0) + np.asarray(s.get("offset", [0.0, 0.0, 0.0]))
     return V, UV, F

@@ -13,7 +13,7 @@ from numba import njit
 import stages.core.svf as core_svf
 from stages.core.sg import sg_mass, spherical_fibonacci_axes
 from stages.precompute import svf
-from stages.precompute.periodic import periodic_hit_outside, periodic_scene
+from stages.precompute.periodic import periodic_hit_outside, periodic_scene, ray_start
 
 RES = 32
 
@@ -24,7 +24,7 @@ def _reference_images(psc, z_lo, z_hi, mids, capsules, fibres, R, C, max_dist, o
         for r in range(R):
             for c in range(C):
                 x, y, z = core_svf.pixel_direction(r, c, R, C)
-                ox, oy, oz, t = svf.ray_start(mids[s, 0], mids[s, 1], mids[s, 2], capsules[s], x, y, z)
+                ox, oy, oz, t = ray_start(mids[s, 0], mids[s, 1], mids[s, 2], capsules[s], x, y, z)
                 h = periodic_hit_outside(psc, z_lo, z_hi, ox, oy, oz, x, y, z, fibres[s], max_dist - t)
                 out[s, r, c] = 1 if h.t == np.inf else 0
 
@@ -68,7 +68,7 @@ def test_exemplar_segments_follow_the_global_numbering(tiny_tiling):
 @pytest.mark.parametrize("from_surface", [True, False])
 def test_visibility_images_match_periodic_hit_per_pixel(tiny_tiling, from_surface):
     """Reference: one ``periodic_hit_outside`` per pixel centre (visible iff it escapes) from where the ray
-    starts (the segment's surface, ``svf.ray_start``, or its midpoint), both exemplars, 32 x 24 pixels,
+    starts (the segment's surface, ``periodic.ray_start``, or its midpoint), both exemplars, 32 x 24 pixels,
     every fourth segment: identical bits. Starting on the surface sees more (the midpoint's rays also
     meet the fibres that pass through the segment's own capsule)."""
     _, sc, art = tiny_tiling

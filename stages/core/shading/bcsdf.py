@@ -60,6 +60,13 @@ from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
 
+# the packed row (pack_bcsdf), slot by slot
+C_R = 0           # R lobe colour, 3 slots
+C_TT = 3          # TT lobe colour, 3 slots
+BETA_R = 6        # R longitudinal width (radians)
+BETA_TT = 7       # TT longitudinal width (radians)
+GAMMA_TT = 8      # TT azimuthal width (radians)
+TT_NORM = 9       # I = erf(pi / (sqrt(2) gamma_TT)), N_TT's normaliser on (-pi, pi]
 BCSDF_SIZE = 10
 SQRT2 = math.sqrt(2.0)
 INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
@@ -73,12 +80,12 @@ _GL_X, _GL_W = np.polynomial.legendre.leggauss(24)
 def pack_bcsdf(c_r, c_tt, beta_r_deg, beta_tt_deg, gamma_tt_deg):
     """Pack one material: colours in [0, 1]^3, lobe widths in degrees (> 0)."""
     p = np.zeros(BCSDF_SIZE)
-    p[0:3] = c_r
-    p[3:6] = c_tt
-    p[6] = math.radians(beta_r_deg)
-    p[7] = math.radians(beta_tt_deg)
-    p[8] = math.radians(gamma_tt_deg)
-    p[9] = math.erf(math.pi / (SQRT2 * p[8]))
+    p[C_R:C_R + 3] = c_r
+    p[C_TT:C_TT + 3] = c_tt
+    p[BETA_R] = math.radians(beta_r_deg)
+    p[BETA_TT] = math.radians(beta_tt_deg)
+    p[GAMMA_TT] = math.radians(gamma_tt_deg)
+    p[TT_NORM] = math.erf(math.pi / (SQRT2 * p[GAMMA_TT]))
     return p
 
 
@@ -261,17 +268,17 @@ def from_angles(t, theta, phi):
 @njit(cache=True)
 def bcsdf_eval_angles(p, theta_i, phi_i, theta_o, phi_o):
     """S(wi, wo) per channel (r, g, b) from fibre-frame angles."""
-    m_r = longitudinal_M(theta_i, theta_o, p[6])
-    m_tt = longitudinal_M(theta_i, theta_o, p[7])
+    m_r = longitudinal_M(theta_i, theta_o, p[BETA_R])
+    m_tt = longitudinal_M(theta_i, theta_o, p[BETA_TT])
     phi_d = wrap_pi(phi_o - phi_i - math.pi)
-    n_tt = azimuthal_N_tt(phi_d, p[8], p[9])
+    n_tt = azimuthal_N_tt(phi_d, p[GAMMA_TT], p[TT_NORM])
     n_r = 1.0 / TWO_PI
-    f0 = fresnel_R(theta_i, p[0])
-    f1 = fresnel_R(theta_i, p[1])
-    f2 = fresnel_R(theta_i, p[2])
-    s0 = f0 * m_r * n_r + (1.0 - f0) * p[3] * m_tt * n_tt
-    s1 = f1 * m_r * n_r + (1.0 - f1) * p[4] * m_tt * n_tt
-    s2 = f2 * m_r * n_r + (1.0 - f2) * p[5] * m_tt * n_tt
+    f0 = fresnel_R(theta_i, p[C_R])
+    f1 = fresnel_R(theta_i, p[C_R + 1])
+    f2 = fresnel_R(theta_i, p[C_R + 2])
+    s0 = f0 * m_r * n_r + (1.0 - f0) * p[C_TT] * m_tt * n_tt
+    s1 = f1 * m_r * n_r + (1.0 - f1) * p[C_TT + 1] * m_tt * n_tt
+    s2 = f2 * m_r * n_r + (1.0 - f2) * p[C_TT + 2] * m_tt * n_tt
     return s0, s1, s2
 
 
@@ -281,9 +288,9 @@ def lobe_probability_R(p, theta_i):
     a_r = 0.0
     a_tt = 0.0
     for c in range(3):
-        f = fresnel_R(theta_i, p[c])
+        f = fresnel_R(theta_i, p[C_R + c])
         a_r += f
-        a_tt += (1.0 - f) * p[3 + c]
+        a_tt += (1.0 - f) * p[C_TT + c]
     if a_r + a_tt <= 0.0:
         return -1.0
     return a_r / (a_r + a_tt)
@@ -300,14 +307,15 @@ def bcsdf_pdf_angles(p, theta_i, phi_i, theta_o, phi_o):
         return 0.0
     pdf = 0.0
     if pr > 0.0:
-        z = gauss_mass(-HALF_PI, HALF_PI, -theta_i, p[6])
+        z = gauss_mass(-HALF_PI, HALF_PI, -theta_i, p[BETA_R])
         if z > 0.0:
-            pdf += pr * gauss(theta_o, -theta_i, p[6]) / z / TWO_PI
+            pdf += pr * gauss(theta_o, -theta_i, p[BETA_R]) / z / TWO_PI
     if pr < 1.0:
-        z = gauss_mass(-HALF_PI, HALF_PI, -theta_i, p[7])
+        z = gauss_mass(-HALF_PI, HALF_PI, -theta_i, p[BETA_TT])
         if z > 0.0:
             phi_d = wrap_pi(phi_o - phi_i - math.pi)
-            pdf += (1.0 - pr) * gauss(theta_o, -theta_i, p[7]) / z * azimuthal_N_tt(phi_d, p[8], p[9])
+            pdf += ((1.0 - pr) * gauss(theta_o, -theta_i, p[BETA_TT]) / z
+                    * azimuthal_N_tt(phi_d, p[GAMMA_TT], p[TT_NORM]))
     return pdf / co
 
 
@@ -318,13 +326,13 @@ def bcsdf_sample_angles(p, theta_i, phi_i, u0, u1, u2):
     if pr < 0.0:
         return 0.0, 0.0, False
     if u0 < pr:
-        theta_o = sample_truncated_gauss(u1, -theta_i, p[6], -HALF_PI, HALF_PI)
+        theta_o = sample_truncated_gauss(u1, -theta_i, p[BETA_R], -HALF_PI, HALF_PI)
         phi_o = wrap_pi(TWO_PI * u2)
     else:
-        theta_o = sample_truncated_gauss(u1, -theta_i, p[7], -HALF_PI, HALF_PI)
-        I = p[9]
+        theta_o = sample_truncated_gauss(u1, -theta_i, p[BETA_TT], -HALF_PI, HALF_PI)
+        I = p[TT_NORM]
         if u2 < I:
-            phi_d = sample_truncated_gauss(u2 / I, 0.0, p[8], -math.pi, math.pi)
+            phi_d = sample_truncated_gauss(u2 / I, 0.0, p[GAMMA_TT], -math.pi, math.pi)
         else:
             phi_d = TWO_PI * (u2 - I) / (1.0 - I) - math.pi
         phi_o = wrap_pi(phi_d + phi_i + math.pi)
@@ -368,7 +376,17 @@ def bcsdf_sample(p, t, wi, u0, u1, u2):
 
 # ------------------------------------------------------------------------------------------------
 # per-vertex context: everything that depends on wi only, computed once per scattering vertex
-CTX_SIZE = 16  # theta_i, phi_i, F_R (3), 1/G_R, 1/G_TT, 1/Z_R, 1/Z_TT, P_R, frame y (3), frame z (3)
+CTX_THETA_I = 0   # theta_i
+CTX_PHI_I = 1     # phi_i
+CTX_F_R = 2       # F_R per channel, 3 slots
+CTX_INV_G_R = 5   # 1 / G_R (the R lobe's longitudinal normaliser)
+CTX_INV_G_TT = 6  # 1 / G_TT
+CTX_INV_Z_R = 7   # 1 / Z_R (the R lobe's sampled-mass normaliser)
+CTX_INV_Z_TT = 8  # 1 / Z_TT
+CTX_P_R = 9       # P_R, the probability of sampling the R lobe
+CTX_Y = 10        # the fibre frame's y axis, 3 slots
+CTX_Z = 13        # its z axis, 3 slots
+CTX_SIZE = 16
 
 
 @njit(cache=True)
@@ -377,25 +395,25 @@ def bcsdf_context(p, t, wi, ctx):
     y0, y1, y2, z0, z1, z2 = fiber_frame(t)
     sx = min(1.0, max(-1.0, wi[0] * t[0] + wi[1] * t[1] + wi[2] * t[2]))
     ti = math.asin(sx)
-    ctx[0] = ti
-    ctx[1] = math.atan2(wi[0] * z0 + wi[1] * z1 + wi[2] * z2, wi[0] * y0 + wi[1] * y1 + wi[2] * y2)
+    ctx[CTX_THETA_I] = ti
+    ctx[CTX_PHI_I] = math.atan2(wi[0] * z0 + wi[1] * z1 + wi[2] * z2, wi[0] * y0 + wi[1] * y1 + wi[2] * y2)
     for c in range(3):
-        ctx[2 + c] = fresnel_R(ti, p[c])
-    g = G_norm(-ti, p[6])
-    ctx[5] = 1.0 / g if g > 0.0 else 0.0
-    g = G_norm(-ti, p[7])
-    ctx[6] = 1.0 / g if g > 0.0 else 0.0
-    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[6])
-    ctx[7] = 1.0 / z if z > 0.0 else 0.0
-    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[7])
-    ctx[8] = 1.0 / z if z > 0.0 else 0.0
-    ctx[9] = lobe_probability_R(p, ti)
-    ctx[10] = y0
-    ctx[11] = y1
-    ctx[12] = y2
-    ctx[13] = z0
-    ctx[14] = z1
-    ctx[15] = z2
+        ctx[CTX_F_R + c] = fresnel_R(ti, p[C_R + c])
+    g = G_norm(-ti, p[BETA_R])
+    ctx[CTX_INV_G_R] = 1.0 / g if g > 0.0 else 0.0
+    g = G_norm(-ti, p[BETA_TT])
+    ctx[CTX_INV_G_TT] = 1.0 / g if g > 0.0 else 0.0
+    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[BETA_R])
+    ctx[CTX_INV_Z_R] = 1.0 / z if z > 0.0 else 0.0
+    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[BETA_TT])
+    ctx[CTX_INV_Z_TT] = 1.0 / z if z > 0.0 else 0.0
+    ctx[CTX_P_R] = lobe_probability_R(p, ti)
+    ctx[CTX_Y] = y0
+    ctx[CTX_Y + 1] = y1
+    ctx[CTX_Y + 2] = y2
+    ctx[CTX_Z] = z0
+    ctx[CTX_Z + 1] = z1
+    ctx[CTX_Z + 2] = z2
 
 
 @njit(cache=True)
@@ -403,20 +421,20 @@ def _eval_pdf_ctx_angles(p, ctx, theta_o, phi_o):
     co = math.cos(theta_o)
     if co <= 0.0:
         return 0.0, 0.0, 0.0, 0.0
-    ti = ctx[0]
-    g_r = gauss(theta_o, -ti, p[6])
-    g_tt = gauss(theta_o, -ti, p[7])
-    m_r = g_r * ctx[5]
-    m_tt = g_tt * ctx[6]
-    n_tt = azimuthal_N_tt(wrap_pi(phi_o - ctx[1] - math.pi), p[8], p[9])
+    ti = ctx[CTX_THETA_I]
+    g_r = gauss(theta_o, -ti, p[BETA_R])
+    g_tt = gauss(theta_o, -ti, p[BETA_TT])
+    m_r = g_r * ctx[CTX_INV_G_R]
+    m_tt = g_tt * ctx[CTX_INV_G_TT]
+    n_tt = azimuthal_N_tt(wrap_pi(phi_o - ctx[CTX_PHI_I] - math.pi), p[GAMMA_TT], p[TT_NORM])
     n_r = 1.0 / TWO_PI
-    s0 = ctx[2] * m_r * n_r + (1.0 - ctx[2]) * p[3] * m_tt * n_tt
-    s1 = ctx[3] * m_r * n_r + (1.0 - ctx[3]) * p[4] * m_tt * n_tt
-    s2 = ctx[4] * m_r * n_r + (1.0 - ctx[4]) * p[5] * m_tt * n_tt
-    pr = ctx[9]
+    s0 = ctx[CTX_F_R] * m_r * n_r + (1.0 - ctx[CTX_F_R]) * p[C_TT] * m_tt * n_tt
+    s1 = ctx[CTX_F_R + 1] * m_r * n_r + (1.0 - ctx[CTX_F_R + 1]) * p[C_TT + 1] * m_tt * n_tt
+    s2 = ctx[CTX_F_R + 2] * m_r * n_r + (1.0 - ctx[CTX_F_R + 2]) * p[C_TT + 2] * m_tt * n_tt
+    pr = ctx[CTX_P_R]
     pdf = 0.0
     if pr >= 0.0:
-        pdf = (pr * g_r * ctx[7] * n_r + (1.0 - pr) * g_tt * ctx[8] * n_tt) / co
+        pdf = (pr * g_r * ctx[CTX_INV_Z_R] * n_r + (1.0 - pr) * g_tt * ctx[CTX_INV_Z_TT] * n_tt) / co
     return s0 * co, s1 * co, s2 * co, pdf
 
 
@@ -424,15 +442,15 @@ def _eval_pdf_ctx_angles(p, ctx, theta_o, phi_o):
 def bcsdf_eval_pdf_ctx(p, ctx, t, wo):
     """(S cos(theta_o) r, g, b, pdf) at light direction wo: ``bcsdf_eval`` and ``bcsdf_pdf`` in one."""
     sx = min(1.0, max(-1.0, wo[0] * t[0] + wo[1] * t[1] + wo[2] * t[2]))
-    wy = wo[0] * ctx[10] + wo[1] * ctx[11] + wo[2] * ctx[12]
-    wz = wo[0] * ctx[13] + wo[1] * ctx[14] + wo[2] * ctx[15]
+    wy = wo[0] * ctx[CTX_Y] + wo[1] * ctx[CTX_Y + 1] + wo[2] * ctx[CTX_Y + 2]
+    wz = wo[0] * ctx[CTX_Z] + wo[1] * ctx[CTX_Z + 1] + wo[2] * ctx[CTX_Z + 2]
     return _eval_pdf_ctx_angles(p, ctx, math.asin(sx), math.atan2(wz, wy))
 
 
 @njit(cache=True)
 def bcsdf_sample_ctx(p, ctx, t, u0, u1, u2, wo):
     """Sample into ``wo`` (float64[3]); returns (weight r, g, b = S cos / pdf, pdf), pdf 0 on failure."""
-    to, phi_o, ok = bcsdf_sample_angles(p, ctx[0], ctx[1], u0, u1, u2)
+    to, phi_o, ok = bcsdf_sample_angles(p, ctx[CTX_THETA_I], ctx[CTX_PHI_I], u0, u1, u2)
     if not ok:
         return 0.0, 0.0, 0.0, 0.0
     st = math.sin(to)
@@ -455,8 +473,8 @@ def bcsdf_albedo(p, theta_i):
     """Closed form of int S(wi, wo) cos(theta_o) d wo = F_R + (1 - F_R) C_TT per channel."""
     out = np.empty(3)
     for c in range(3):
-        f = fresnel_R(theta_i, p[c])
-        out[c] = f + (1.0 - f) * p[3 + c]
+        f = fresnel_R(theta_i, p[C_R + c])
+        out[c] = f + (1.0 - f) * p[C_TT + c]
     return out
 
 

@@ -177,6 +177,12 @@ from numba import njit
 
 from stages.core.sg import sg_mass
 from stages.core.shading.bcsdf import (
+    BETA_R,
+    BETA_TT,
+    C_R,
+    C_TT,
+    GAMMA_TT,
+    TT_NORM,
     G_norm,
     fiber_frame,
     fresnel_R,
@@ -406,11 +412,11 @@ def _view_setup(p, t, w_view):
     theta_v = math.asin(sv)
     phi_v = math.atan2(w_view[0] * z0 + w_view[1] * z1 + w_view[2] * z2,
                        w_view[0] * y0 + w_view[1] * y1 + w_view[2] * y2)
-    g = G_norm(-theta_v, p[6])
+    g = G_norm(-theta_v, p[BETA_R])
     inv_g_r = 1.0 / g if g > 0.0 else 0.0
-    g = G_norm(-theta_v, p[7])
+    g = G_norm(-theta_v, p[BETA_TT])
     inv_g_tt = 1.0 / g if g > 0.0 else 0.0
-    n_gamma = int(math.ceil(TT_SERIES_DEVIATIONS / p[8]))
+    n_gamma = int(math.ceil(TT_SERIES_DEVIATIONS / p[GAMMA_TT]))
     base = np.empty(n_gamma + 1)
     base[0] = -1.0   # filled on first use (_fourier_coefficients)
     return theta_v, phi_v, y0, y1, y2, z0, z1, z2, inv_g_r, inv_g_tt, n_gamma, base
@@ -449,23 +455,24 @@ def _gamma_setup(p, t, setup, coef, axis, lam, model):
         c = math.cos(0.5 * dphi)
         chs = c * c
         if inv_g_r > 0.0:
-            L_r = _lobe_paper(theta_v, theta_a, cos_a, lam, p[6], False, 0.0, 0.0, chs) * inv_g_r
+            L_r = _lobe_paper(theta_v, theta_a, cos_a, lam, p[BETA_R], False, 0.0, 0.0, chs) * inv_g_r
         if inv_g_tt > 0.0:
-            L_tt = _lobe_paper(theta_v, theta_a, cos_a, lam, p[7], True, 1.0 / (p[8] * p[8]), p[9], chs) * inv_g_tt
+            L_tt = _lobe_paper(theta_v, theta_a, cos_a, lam, p[BETA_TT], True, 1.0 / (p[GAMMA_TT] * p[GAMMA_TT]),
+                               p[TT_NORM], chs) * inv_g_tt
     else:
         if inv_g_r > 0.0:
-            L_r = _lobe_refined(theta_v, theta_a, cos_a, lam, p[6], False, base, coef, n_gamma, p[8], p[9],
-                                dphi) * inv_g_r
+            L_r = _lobe_refined(theta_v, theta_a, cos_a, lam, p[BETA_R], False, base, coef, n_gamma, p[GAMMA_TT],
+                                p[TT_NORM], dphi) * inv_g_r
         if inv_g_tt > 0.0:
             coef[0] = -1.0
-            L_tt = _lobe_refined(theta_v, theta_a, cos_a, lam, p[7], True, base, coef, n_gamma, p[8], p[9],
-                                 dphi) * inv_g_tt
-    f = fresnel_R(theta_v, p[0])
-    out0 = f * L_r + (1.0 - f) * p[3] * L_tt
-    f = fresnel_R(theta_v, p[1])
-    out1 = f * L_r + (1.0 - f) * p[4] * L_tt
-    f = fresnel_R(theta_v, p[2])
-    out2 = f * L_r + (1.0 - f) * p[5] * L_tt
+            L_tt = _lobe_refined(theta_v, theta_a, cos_a, lam, p[BETA_TT], True, base, coef, n_gamma, p[GAMMA_TT],
+                                 p[TT_NORM], dphi) * inv_g_tt
+    f = fresnel_R(theta_v, p[C_R])
+    out0 = f * L_r + (1.0 - f) * p[C_TT] * L_tt
+    f = fresnel_R(theta_v, p[C_R + 1])
+    out1 = f * L_r + (1.0 - f) * p[C_TT + 1] * L_tt
+    f = fresnel_R(theta_v, p[C_R + 2])
+    out2 = f * L_r + (1.0 - f) * p[C_TT + 2] * L_tt
     return out0, out1, out2
 
 

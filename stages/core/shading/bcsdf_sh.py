@@ -51,7 +51,7 @@ from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
 from stages.core.sh import SH_LMAX, gauss_legendre, sh_count, sh_eval
-from stages.core.shading.bcsdf import G_norm, fresnel_R, gauss
+from stages.core.shading.bcsdf import BETA_R, BETA_TT, C_R, C_TT, GAMMA_TT, TT_NORM, G_norm, fresnel_R, gauss
 
 HALF_PI = 0.5 * math.pi
 TWO_PI = 2.0 * math.pi
@@ -129,7 +129,7 @@ def _bcsdf_sh_rows(p, L, thetas):
     # phi weights: R lobe (N_R = 1/(2 pi), moments delta_k0), TT lobe (moments of N_TT(phi - pi))
     w_r = np.full(nphi, 1.0 / nphi)
     mom = np.empty(L + 1)
-    _tt_fourier_moments(p[8], p[9], L, mom)
+    _tt_fourier_moments(p[GAMMA_TT], p[TT_NORM], L, mom)
     w_tt = np.empty(nphi)
     for b in range(nphi):
         s = mom[0]
@@ -142,14 +142,14 @@ def _bcsdf_sh_rows(p, L, thetas):
     a_tt = np.empty(n)
     for i in range(thetas.shape[0]):
         tv = thetas[i]
-        _lobe_moments(tv, p[6], L, cphi, sphi, w_r, gl_x, gl_w, y, a_r)
-        _lobe_moments(tv, p[7], L, cphi, sphi, w_tt, gl_x, gl_w, y, a_tt)
-        g_r = G_norm(-tv, p[6])
-        g_tt = G_norm(-tv, p[7])
+        _lobe_moments(tv, p[BETA_R], L, cphi, sphi, w_r, gl_x, gl_w, y, a_r)
+        _lobe_moments(tv, p[BETA_TT], L, cphi, sphi, w_tt, gl_x, gl_w, y, a_tt)
+        g_r = G_norm(-tv, p[BETA_R])
+        g_tt = G_norm(-tv, p[BETA_TT])
         for c in range(3):
-            f = fresnel_R(tv, p[c])
+            f = fresnel_R(tv, p[C_R + c])
             k_r = f / g_r if g_r > 0.0 else 0.0
-            k_tt = (1.0 - f) * p[3 + c] / g_tt if g_tt > 0.0 else 0.0
+            k_tt = (1.0 - f) * p[C_TT + c] / g_tt if g_tt > 0.0 else 0.0
             for j in range(n):
                 out[i, j, c] = k_r * a_r[j] + k_tt * a_tt[j]
     return out

@@ -1,0 +1,251 @@
+"""1. Visibility images (the package doc): the segments of an exemplar and one binary image per segment,
+rays from the segment's capsule surface through the flat periodic fabric (any-hit walks with image
+coherence)."""
+
+import math
+from collections import namedtuple
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from stages.core.geometry.bvh import direction_signs, leaf_range, push_children_sorted
+from stages.core.geometry.capsule import INSIDE, capsule_intersect, point_segment_dist2
+from stages.core.geometry.slab import safe_inverse
+from stages.core.geometry.stack import stack_array
+from stages.core.svf import pixel_direction
+from stages.precompute.periodic import ray_start, slab_length
+from stages.precompute.svf.pixels import packed_bytes
+
+MAX_DIST_PERIODS = 32.0     # default max_dist = 32 max(W, H)
+STACK = 256
+
+ExemplarSegments = namedtuple("ExemplarSegments", ["ids", "fibre", "mids", "capsules", "z_lo", "z_hi", "period"])
+ExemplarSegments.__doc__ = """Segments of one exemplar: global ids (S,) int64, fibre (S,) int64 (global fibre id),
+midpoints (S, 3) float64, capsules (S, 7) float64 (end points a, b and radius: the mean of the two
+point radii, as the BVH's), the slab z_lo, z_hi and the period (W, H)."""
+
+
+def exemplar_segments(ex_points, ex_radius, ex_offsets, ex_fibers, ex_period, k: int) -> ExemplarSegments:
+    """Segments of exemplar k of a tiling (arrays as in the tiling artifact): fibre f's segment i has
+    global id ex_offsets[f] - f + i and joins points ex_offsets[f] + i, + i + 1."""
+    O = np.asarray(ex_offsets, np.int64)
+    P = np.asarray(ex_points, np.float64)
+    R = np.asarray(ex_radius, np.float64)
+    f0, f1 = int(ex_fibers[k]), int(ex_fibers[k + 1])
+    n = np.diff(O[f0:f1 + 1])
+    nseg = np.maximum(n - 1, 0)
+    fibre = np.repeat(np.arange(f0, f1, dtype=np.int64), nseg)
+    first = np.repeat(O[f0:f1] - np.arange(f0, f1), nseg)          # global id of each fibre's segment 0
+    ids = np.arange(int(O[f0]) - f0, int(O[f1]) - f1, dtype=np.int64)
+    a = ids - first + O[fibre]                                     # first point of each segment
+    mids = 0.5 * (P[a] + P[a + 1])
+    capsules = np.concatenate([P[a], P[a + 1], (0.5 * (R[a] + R[a + 1]))[:, None]], axis=1)
+    zs, rs = P[O[f0]:O[f1], 2], R[O[f0]:O[f1]]
+    W, H = (float(v) for v in ex_period[k])
+    return ExemplarSegments(ids, fibre, mids, capsules, float((zs - rs).min()), float((zs + rs).max()), (W, H))
+
+
+# The hot helpers take arrays, never the ShellScene: passing the namedtuple of ~30 arrays to a call
+# costs ~0.5 us (reference counts of every array), twenty times a capsule test.
+@njit(cache=True, inline="always")
+def _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """Does the ray from the midpoint (origin already shifted into the capsule's period) enter wrapped
+    capsule s beyond tmin before tmax? A capsule that contains the origin lets it through
+    (``stages.precompute.periodic``: rays from a midpoint)."""
+    a = seg_a[s]
+    r = seg_r[s]
+    if point_segment_dist2(ox, oy, oz, P[a, 0], P[a, 1], P[a, 2],
+                           P[a + 1, 0], P[a + 1, 1], P[a + 1, 2]) < INSIDE * r * r:
+        return False
+    t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[a, 0], P[a, 1], P[a, 2],
+                          P[a + 1, 0], P[a + 1, 1], P[a + 1, 2], seg_r[s], tmin)
+    return t < tmax
+
+
+@njit(cache=True, inline="always")
+def _any_hit_period(P, seg_a, seg_r, srcfib, box, child, prim, root,
+                    ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, tmax, ign_fiber, stack):
+    """Any wrapped capsule (not of ign_fiber) hit in (tmin, tmax) by the ray in one period: its index or -1.
+    Walks the exemplar's 4-wide nodes (``stages.core.geometry.bvh``), children nearer first."""
+    sx, sy, sz = direction_signs(ix, iy, iz)
+    stack_t = stack_array(STACK, np.float64)
+    stack[0] = root
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        ref = stack[sp]
+        if ref < 0:
+            j0, n = leaf_range(ref)
+            for j in range(j0, j0 + n):
+                s = prim[j]
+                if srcfib[s] == ign_fiber:
+                    continue
+                if _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
+                    return s
+            continue
+        sp = push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax, stack, stack_t, sp)
+    return -1
+
+
+@njit(cache=True, inline="always")
+def _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root,
+                      bw, bh, nx, ny, ox, oy, oz, dx, dy, dz, L, ign_fiber, stack):
+    ci = int(math.floor(ox / bw)) // nx
+    cj = int(math.floor(oy / bh)) // ny
+    if dx > 0.0:
+        stx, tmx, tdx = 1, ((ci + 1) * nx * bw - ox) / dx, nx * bw / dx
+    elif dx < 0.0:
+        stx, tmx, tdx = -1, (ci * nx * bw - ox) / dx, -nx * bw / dx
+    else:
+        stx, tmx, tdx = 0, np.inf, np.inf
+    if dy > 0.0:
+        sty, tmy, tdy = 1, ((cj + 1) * ny * bh - oy) / dy, ny * bh / dy
+    elif dy < 0.0:
+        sty, tmy, tdy = -1, (cj * ny * bh - oy) / dy, -ny * bh / dy
+    else:
+        sty, tmy, tdy = 0, np.inf, np.inf
+    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
+    s = 0.0
+    while s < L:
+        s1 = min(tmx, tmy, L)
+        if s1 > s:
+            shx = (ci * nx) * bw
+            shy = (cj * ny) * bh
+            p = _any_hit_period(P, seg_a, seg_r, srcfib, box, child, prim, root,
+                                ox - shx, oy - shy, oz, dx, dy, dz, ix, iy, iz, s, s1, ign_fiber, stack)
+            if p >= 0:
+                return p, ci, cj
+            s = s1
+        if tmx < tmy:
+            ci += stx
+            tmx += tdx
+        else:
+            cj += sty
+            tmy += tdy
+        if tmx == np.inf and tmy == np.inf:
+            break
+    return -1, 0, 0
+
+
+@njit(cache=True)
+def periodic_any_hit(sc, k, ox, oy, oz, dx, dy, dz, L, ign_fiber, stack):
+    """(piece, ci, cj): a wrapped capsule of exemplar k (not of fibre ign_fiber) that the ray o + t d,
+    0 < t < L, hits in the exemplar repeated without end, found in period (ci, cj) (shift
+    (ci nx bw, cj ny bh)); piece = -1 when none. Hit or not agrees with ``periodic_hit_outside`` (a walk over
+    whole periods instead of blocks: the same capsules, the same roots)."""
+    return _periodic_any_hit(sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber, sc.fw_box, sc.fw_child, sc.fprim,
+                             sc.ex_wide_root[k],
+                             sc.block_size[0], sc.block_size[1], sc.ex_nblocks[k, 0], sc.ex_nblocks[k, 1],
+                             ox, oy, oz, dx, dy, dz, L, ign_fiber, stack)
+
+
+@njit(cache=True)
+def direction_table(res_theta, res_phi):
+    dirs = np.empty((res_theta, res_phi, 3))
+    for r in range(res_theta):
+        for c in range(res_phi):
+            x, y, z = pixel_direction(r, c, res_theta, res_phi)
+            dirs[r, c, 0] = x
+            dirs[r, c, 1] = y
+            dirs[r, c, 2] = z
+    return dirs
+
+
+@njit(cache=True)
+def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist, out, stack, col_cache):
+    """Bit-packed visibility image of segment midpoint m (skipping fibre ``fibre``; rays start on the
+    surface of ``capsule``, see ``ray_start``) into ``out`` (bytes); ``dirs`` from direction_table;
+    scratch: ``stack`` (STACK,) int64, ``col_cache`` (res_phi, 3) int64."""
+    P, seg_a, seg_r, srcfib = sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber
+    box, child, prim = sc.fw_box, sc.fw_child, sc.fprim
+    root = sc.ex_wide_root[k]
+    bw = sc.block_size[0]
+    bh = sc.block_size[1]
+    nx = sc.ex_nblocks[k, 0]
+    ny = sc.ex_nblocks[k, 1]
+    R = dirs.shape[0]
+    C = dirs.shape[1]
+    out[:] = 0
+    col_cache[:, 0] = -1
+    pp, pi, pj = -1, 0, 0
+    for r in range(R):
+        for cc in range(C):
+            c = cc if r % 2 == 0 else C - 1 - cc
+            dx = dirs[r, c, 0]
+            dy = dirs[r, c, 1]
+            dz = dirs[r, c, 2]
+            ox, oy, oz, t_start = ray_start(mx, my, mz, capsule, dx, dy, dz)
+            L = slab_length(oz, dz, z_lo, z_hi, max_dist - t_start)
+            visible = True
+            if L > 0.0:
+                blocked = False
+                # the capsule that blocked the previous pixel, then the one that blocked the pixel above
+                if pp >= 0 and _piece_hit(P, seg_a, seg_r, pp, ox - (pi * nx) * bw, oy - (pj * ny) * bh, oz,
+                                          dx, dy, dz, 0.0, L):
+                    blocked = True
+                else:
+                    q = col_cache[c, 0]
+                    qi = col_cache[c, 1]
+                    qj = col_cache[c, 2]
+                    if q >= 0 and not (q == pp and qi == pi and qj == pj) and \
+                            _piece_hit(P, seg_a, seg_r, q, ox - (qi * nx) * bw, oy - (qj * ny) * bh, oz,
+                                       dx, dy, dz, 0.0, L):
+                        blocked = True
+                        pp, pi, pj = q, qi, qj
+                    else:
+                        q, qi, qj = _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root, bw, bh, nx,
+                                                      ny, ox, oy, oz, dx, dy, dz, L, fibre, stack)
+                        if q >= 0:
+                            blocked = True
+                            pp, pi, pj = q, qi, qj
+                if blocked:
+                    visible = False
+                    col_cache[c, 0] = pp
+                    col_cache[c, 1] = pi
+                    col_cache[c, 2] = pj
+            if visible:
+                i = r * C + c
+                out[i >> 3] |= np.uint8(1 << (7 - (i & 7)))
+
+
+@njit(cache=True, parallel=True)
+def _visibility_kernel(sc, k, z_lo, z_hi, mids, capsules, fibres, dirs, max_dist, out):
+    C = dirs.shape[1]
+    for s in prange(mids.shape[0]):
+        stack = np.empty(STACK, np.int64)
+        col_cache = np.empty((C, 3), np.int64)
+        segment_image(sc, k, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], capsules[s], fibres[s], dirs,
+                      max_dist, out[s], stack, col_cache)
+
+
+def default_max_dist(psc, k: int) -> float:
+    """32 max(W, H) of exemplar k."""
+    W = float(psc.ex_nblocks[k, 0] * psc.block_size[0])
+    H = float(psc.ex_nblocks[k, 1] * psc.block_size[1])
+    return MAX_DIST_PERIODS * max(W, H)
+
+
+def visibility_images(psc, k: int, z_lo: float, z_hi: float, mids, fibres, res_theta: int = 128,
+                      res_phi: int = 128, max_dist: float | None = None, capsules=None):
+    """Chunk level. Bit-packed visibility images (S, ceil(D/8)) uint8 of the points ``mids`` (S, 3)
+    (segment midpoints, exemplar space), each skipping its fibre ``fibres`` (S,) (global fibre ids; -1
+    skips nothing), in exemplar k repeated without end; ``psc`` is the tiling's ``ShellScene`` or its
+    ``periodic_scene(sc, k)`` (only exemplar k's fibres are read). With ``capsules`` (S, 7: the
+    segments' ``ExemplarSegments.capsules``) each ray starts where it leaves its segment's capsule
+    (module doc, 1.), without them at the point itself. ``max_dist`` counts from the point. S * D
+    rays; segments are taken one at a time by the threads."""
+    mids = np.ascontiguousarray(mids, np.float64).reshape(-1, 3)
+    fibres = np.ascontiguousarray(fibres, np.int64).reshape(-1)
+    if capsules is None:
+        capsules = np.zeros((mids.shape[0], 7))
+    capsules = np.ascontiguousarray(capsules, np.float64).reshape(-1, 7)
+    if max_dist is None:
+        max_dist = default_max_dist(psc, k)
+    out = np.zeros((mids.shape[0], packed_bytes(res_theta, res_phi)), np.uint8)
+    if mids.shape[0]:
+        dirs = direction_table(res_theta, res_phi)
+        with numba.parallel_chunksize(1):
+            _visibility_kernel(psc, int(k), float(z_lo), float(z_hi), mids, capsules, fibres, dirs, float(max_dist),
+                               out)
+    return out
