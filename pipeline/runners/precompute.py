@@ -165,13 +165,26 @@ def periodic_scenes(tiling_path, content_hash: str):
     return _SCENES[key]
 
 
-def _threads(threads):
+def start_precompute(p, threads) -> None:
+    """What every precompute does first: compilation notices on, its parameters checked (``p.check()``),
+    ``--threads`` applied (refused below 1; None: all cores)."""
+    from .. import compilation
+
+    compilation.watch()
+    p.check()
     if threads is not None:
         import numba
 
         if threads < 1:
             raise LoomError(None, "--threads", f"must be at least 1, got {threads}")
         numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
+
+
+def open_tiling(tiling, exemplars) -> tuple[Path, object, list[int]]:
+    """(path, the tiling ``Artifact``, the exemplars to precompute: ``exemplars`` checked, else all)."""
+    tiling = Path(tiling)
+    art = tiling_input(tiling)
+    return tiling, art, pick_exemplars(art, exemplars, tiling)
 
 
 def _segments(art, k):
@@ -284,17 +297,12 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.precompute.svf import packed_bytes, pca_error_report, ssdf_pca
 
-    from .. import compilation
     from ..artifacts import ArtifactWriter
     from ..chunks import ChunkTask, open_for_chunk, run_tasks, session
     from ..progress import status
 
-    compilation.watch()
-    p.check()
-    _threads(threads)
-    tiling = Path(tiling)
-    art = tiling_input(tiling)
-    ks = pick_exemplars(art, exemplars, tiling)
+    start_precompute(p, threads)
+    tiling, art, ks = open_tiling(tiling, exemplars)
     # ray_start: where a segment's visibility rays start (stages.precompute.periodic, "Rays from a segment");
     # artifacts without it were made from the midpoint, and the renderer says so
     w = ArtifactWriter(out, kind="svf", stage="precompute svf",
@@ -506,17 +514,12 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     from stages.core.shading.material import MAT_BCSDF
     from stages.precompute.iirtf import exemplar_slabs, mean_free_path
 
-    from .. import compilation
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session
     from ..progress import progress, status
 
-    compilation.watch()
-    p.check()
-    _threads(threads)
-    tiling = Path(tiling)
-    art = tiling_input(tiling)
-    ks = pick_exemplars(art, exemplars, tiling)
+    start_precompute(p, threads)
+    tiling, art, ks = open_tiling(tiling, exemplars)
     import numba
 
     work = iirtf_work(p, len(ks), len(ks), numba.get_num_threads())

@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -180,24 +179,18 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
     from stages.precompute.iirtf import exemplar_slabs
     from stages.precompute.periodic import periodic_scene
 
-    from .. import compilation
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session
     from ..progress import status
-    from .precompute import materials_scene, periodic_scenes, pick_exemplars, tiling_input, tiling_materials
+    from .precompute import materials_scene, open_tiling, periodic_scenes, start_precompute, tiling_materials
 
-    compilation.watch()
-    p.check()
+    start_precompute(p, threads)
     import numba
 
-    if threads:
-        numba.set_num_threads(min(int(threads), numba.config.NUMBA_NUM_THREADS))
     V, L = p.views[0] * p.views[1], p.lights[0] * p.lights[1]
     work = btf_work(p.resolution, V, L, p, numba.get_num_threads())
     work.check(None, largest_option(work, "--spp"), "lower it (or --resolution, --views, --lights)")
-    tiling = Path(tiling)
-    art = tiling_input(tiling)
-    k = pick_exemplars(art, [exemplar], tiling)[0]
+    tiling, art, (k,) = open_tiling(tiling, [exemplar])
     scene_path, sc_obj = materials_scene(tiling, art, scene)
     mof, mats = tiling_materials(sc_obj, art, p.material)
     w = ArtifactWriter(out, kind="btf", stage="precompute btf", params={**asdict(p), "exemplar": k},

@@ -84,6 +84,8 @@ BAD = [
     (("iirtf",), ["--cell-factor", "nan"], "--cell-factor"),
     (("iirtf",), ["--scene", "no/such/scene.toml"], "not found"),
     (("iirtf",), ["--light-sampling", "best"], "estimator"),
+    (("svf",), ["--threads", "0"], "--threads"),
+    (("iirtf",), ["--threads", "-2"], "--threads"),
 ]
 
 
@@ -115,10 +117,11 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
 
 
 @pytest.mark.parametrize("extra,needle", [(["--directions", "diagonal"], "--directions"),
-                                          (["--lobes", "3"], "--lobes")])
+                                          (["--lobes", "3"], "--lobes"),
+                                          (["--threads", "-2"], "--threads")])   # was an internal error
 def test_btf_bad_options_exit_2_nothing_written(built, cli, tmp_path, extra, needle):
-    """precompute btf: an unknown direction scheme or lobe count is refused before any work: exit 2, one
-    line naming the option, no artifact."""
+    """precompute btf: an unknown direction scheme or lobe count, or a thread count below 1, is refused before
+    any work: exit 2, one line naming the option, no artifact."""
     tiling, _ = built
     fresh = tmp_path / "fresh_btf.zarr"
     code, out, err = cli("precompute", "btf", tiling, "-o", fresh, "--resolution", "2", *extra)
