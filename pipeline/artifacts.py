@@ -81,7 +81,7 @@ def pause_point(name: str) -> None:
 
 # ------------------------------------------------------------------------------------------------
 # hashing
-def _sha256_file(path: Path) -> str:
+def sha256_file(path: Path) -> str:
     h = hashlib.sha256()
     with open(path, "rb") as f:
         for block in iter(lambda: f.read(1 << 20), b""):
@@ -233,7 +233,7 @@ def input_identity(path: str | Path, kind=None) -> str:
     content hash and summary and every chunk and array-metadata file (names, sizes, bytes)."""
     path = Path(path)
     if _input_kind(path, kind) == FILE:
-        return _sha256_file(path)
+        return sha256_file(path)
     attrs = _root_attrs(path)
     meta = attrs.get("loomlight", {})
     h = hashlib.sha256(_canonical({"kind": meta.get("kind"), "content_hash": meta.get("content_hash"),
@@ -686,7 +686,7 @@ class ArtifactWriter:
             tmp = self._staged.get(dst)
             if tmp is None or not tmp.is_file():
                 raise RuntimeError(f"companion {dst} of {self.path} was not written")
-            companions[dst.name] = {"path": str(dst), "sha256": _sha256_file(tmp)}
+            companions[dst.name] = {"path": str(dst), "sha256": sha256_file(tmp)}
         ids = self.input_identities()
         meta = {
             "kind": self.kind,
@@ -760,7 +760,7 @@ def _publish_set(moves: list[tuple[Path, Path]], path: Path) -> None:
     (``settle``), finishes a publication a kill interrupted. Files are published with their modification
     time held at the epoch until the whole set is there (``_release_files``): Make, which judges a target
     (a render's EXR) by its time, sees a file of an unfinished set as out of date, never as done."""
-    entries = [[str(t), str(d), _sha256_file(t / "zarr.json") if t.is_dir() else None] for t, d in moves]
+    entries = [[str(t), str(d), sha256_file(t / "zarr.json") if t.is_dir() else None] for t, d in moves]
     journal = temp_sibling(path, "publish").with_suffix(".json")
     tmp = temp_sibling(path).with_suffix(".json")
     tmp.write_text(json.dumps(entries))
@@ -798,7 +798,7 @@ def _roll_forward(journal: Path) -> None:
             entries = []
         for t, d, digest in entries:
             t, d = Path(t), Path(d)
-            if t.is_dir() and (not (t / "zarr.json").is_file() or _sha256_file(t / "zarr.json") != digest):
+            if t.is_dir() and (not (t / "zarr.json").is_file() or sha256_file(t / "zarr.json") != digest):
                 continue  # the previous artifact, exchanged out: clean_stale removes it
             if t.exists():
                 _move(t, d)

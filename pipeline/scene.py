@@ -170,16 +170,6 @@ def load_scene(path: str | Path) -> Scene:
                  fabric=fabric, yarns=copy.deepcopy(raw.get("yarns", {})), camera=camera, lights=lights, render=render)
 
 
-def _sha256(path: Path) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def ingest_identity(scene: Scene) -> dict:
     """What of a scene its ``yarns`` artifact (and the tables and fibres made from that) is made of:
     ``fabric`` -- the source, the source file by its sha256 (its name kept for messages) and the
@@ -187,13 +177,15 @@ def ingest_identity(scene: Scene) -> dict:
     (``yarns.default`` merged in) without the keys only the renderer reads (``bcsdf``). Recorded by
     ingest in the artifact's summary, carried by tables and realize, compared by render
     (``pipeline.render_setup.check_scene_matches``)."""
+    from .artifacts import sha256_file
+
     fab = scene.fabric
     fabric = {"source": fab["source"]}
     if fab["source"] == "generator":
         fabric["generator"] = copy.deepcopy(fab["generator"])
     else:
         p = Path(fab["path"])
-        fabric.update(file=p.name, sha256=_sha256(p) if p.is_file() else None)
+        fabric.update(file=p.name, sha256=sha256_file(p) if p.is_file() else None)
         fabric.update({k: fab[k] for k in FABRIC_SHAPE_KEYS if k in fab})
     yarns = {}
     for g in YARN_GROUPS:
@@ -205,8 +197,10 @@ def ingest_identity(scene: Scene) -> dict:
 
 def file_identity(path: str | Path, scale: float | None = None) -> dict:
     """``ingest_identity`` of a curve file or WIF draft ingested without a scene: the file, no yarn types."""
+    from .artifacts import sha256_file
+
     p = Path(path)
-    fabric = {"source": "wif" if p.suffix.lower() == ".wif" else "file", "file": p.name, "sha256": _sha256(p)}
+    fabric = {"source": "wif" if p.suffix.lower() == ".wif" else "file", "file": p.name, "sha256": sha256_file(p)}
     if scale:
         fabric["scale"] = scale
     return {"scene": None, "fabric": fabric, "yarns": {}}
