@@ -58,7 +58,7 @@ from stages.core.rng import uniform
 from stages.core.sampling import continue_path
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare
 from stages.core.threads import chunk_kernel, for_chunks
-from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_vertex
+from stages.precompute.periodic import PeriodicPaths, periodic_hit, periodic_occluded, periodic_vertex
 
 DIMS_PER_VERTEX = 4      # lobe, two for the direction, Russian roulette
 FIRST_DIMS = 2           # the point's jitter (then, for cell averages, the view's and every light's cell jitter)
@@ -79,9 +79,8 @@ def _first_normal(sc, h, out):
 
 
 @njit(cache=True, _nrt=False)
-def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx, vy, vz, light_dirs, spp, seed,
-                       key0, max_depth, rr_depth, max_dist, eps, radiance, normal, view_cell, view_grid, light_grid,
-                       lights_now):
+def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key0, radiance, normal, view_cell,
+                       view_grid, light_grid, lights_now):
     """Radiance sums (L, 3) of texel ``texel`` seen from v over ``spp`` samples into ``radiance`` (zeroed
     here) and the first-hit normals into ``normal`` (added); returns (hits, rays). With view_grid[0] > 0
     each sample's view is uniform in grid cell ``view_cell`` and each light's direction uniform in its
@@ -89,6 +88,7 @@ def texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, vx,
     ``light_dirs`` themselves. Compiled without reference counting (its vectors on the machine stack):
     the two workers of ``acquire_texels`` would otherwise count references on the same arrays for every
     ray."""
+    sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps = paths
     L = light_dirs.shape[0]
     for k in range(L):
         for c in range(3):
@@ -186,9 +186,9 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
     alpha = np.zeros((T, V), np.float32)
     normal = np.zeros((T, V, 3))
     rays = np.zeros((T, V), np.int64)
-    for_chunks(_texel_view_jobs, T * V, sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, view_dirs, light_dirs,
-               spp, seed, max_depth, rr_depth, max_dist, eps, view_grid, light_grid, radiance, alpha, normal, rays,
-               chunks_per_thread=JOB_CHUNKS_PER_THREAD)
+    paths = PeriodicPaths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps)
+    for_chunks(_texel_view_jobs, T * V, paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid,
+               radiance, alpha, normal, rays, chunks_per_thread=JOB_CHUNKS_PER_THREAD)
     return (radiance, alpha) + _view_sums(normal, rays)
 
 
@@ -198,9 +198,8 @@ def _view_sums(normal, rays):
 
 
 @chunk_kernel
-def _texel_view_jobs(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, view_dirs, light_dirs, spp, seed,
-                     max_depth, rr_depth, max_dist, eps, view_grid, light_grid, radiance, alpha, normal, rays,
-                     j0, j1):
+def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, radiance, alpha,
+                     normal, rays, j0, j1):
     """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v)."""
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
@@ -211,9 +210,8 @@ def _texel_view_jobs(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, view_dir
         v = job - i * V
         texel = t0 + i
         key0 = (texel * V + v) * spp
-        hits, r = texel_view_samples(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, texel, view_dirs[v, 0],
-                                     view_dirs[v, 1], view_dirs[v, 2], light_dirs, spp, seed, key0, max_depth,
-                                     rr_depth, max_dist, eps, acc, normal[i, v], v, view_grid, light_grid, now)
+        hits, r = texel_view_samples(paths, res, texel, view_dirs[v, 0], view_dirs[v, 1], view_dirs[v, 2],
+                                     light_dirs, spp, seed, key0, acc, normal[i, v], v, view_grid, light_grid, now)
         rays[i, v] = r
         alpha[i, v] = hits / spp
         if hits > 0:

@@ -110,7 +110,13 @@ from stages.core.sampling import continue_path, power_heuristic
 from stages.core.sh import sh_eval
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.threads import chunk_kernel, for_chunks
-from stages.precompute.periodic import periodic_hit, periodic_occluded, periodic_scene, periodic_vertex
+from stages.precompute.periodic import (
+    PeriodicPaths,
+    periodic_hit,
+    periodic_occluded,
+    periodic_scene,
+    periodic_vertex,
+)
 
 MAX_ORDER = 8
 TWO_PI = 2.0 * math.pi
@@ -231,13 +237,13 @@ def cell_box(cells: Cells, c: int):
 # the path tracer
 
 @njit(cache=True)
-def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ign0, w0, w1, order, mis, seed, key,
-                        dim0, max_depth, rr_depth, max_dist, eps, Y, u):
+def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, seed, key, dim0, Y, u):
     """One path's estimate u[ch, j0] of int_{H+} T(w0', w1, x) Y_j0(w0') dw0' at x = (ox, oy, oz), the ray
     from x along w1 skipping fibre ``ign0`` (module doc "Estimator"). ``mis`` False: the paper's, T(w0, w1, x)
     Y_j0(w0) 2 pi with NEE along the path's w0; True: light directions drawn per vertex and BCSDF-sampled
     escapes, power heuristic. ``Y`` (J,) scratch, ``u`` (3, J) output (zeroed here). Random numbers
     (seed, key, dim0 + 6 per vertex). Returns the number of rays cast."""
+    sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps = paths
     J = (order + 1) * (order + 1)
     for ch in range(3):
         for j in range(J):
@@ -332,9 +338,8 @@ def transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, ox, oy, oz, ig
 
 
 @chunk_kernel
-def _iirtf_cells(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, cell_offsets, cell_segments, seg_mid, seg_fibre,
-                 c0, c1, order, mis, n_paths, seed, max_depth, rr_depth, max_dist, eps, a_out, se_out, rays_out,
-                 i0, i1):
+def _iirtf_cells(paths, cell_offsets, cell_segments, seg_mid, seg_fibre, c0, c1, order, mis, n_paths, seed, a_out,
+                 se_out, rays_out, i0, i1):
     """Cells c0 + i0 .. c0 + i1 - 1 into rows i0 .. i1 - 1 of the outputs (``for_chunks``)."""
     J = (order + 1) * (order + 1)
     S = np.empty((3, J, J))   # per chunk, zeroed per cell (as numba's parallel loop hoisted them)
@@ -369,9 +374,8 @@ def _iirtf_cells(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, cell_offsets, cell_se
             w1[0] = r * math.cos(ph)
             w1[1] = r * math.sin(ph)
             w1[2] = z
-            rays += transfer_projection(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, seg_mid[s, 0], seg_mid[s, 1],
-                                        seg_mid[s, 2], seg_fibre[s], w0, w1, order, mis, seed, key, 5, max_depth,
-                                        rr_depth, max_dist, eps, Y, u)
+            rays += transfer_projection(paths, seg_mid[s, 0], seg_mid[s, 1], seg_mid[s, 2], seg_fibre[s], w0, w1,
+                                        order, mis, seed, key, 5, Y, u)
             nz = False
             for ch in range(3):
                 for j in range(J):
@@ -435,10 +439,11 @@ def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order
         W, H = (float(v) for v in cells.ex_period[k])
         z_lo, z_hi = (float(v) for v in cells.ex_slab[k])
         sl = slice(lo - c0, hi - c0)
-        for_chunks(_iirtf_cells, hi - lo, periodic_scene(sc, k), z_lo, z_hi, W, H, mof, mats, cells.cell_offsets,
-                   cells.cell_segments, cells.seg_mid, cells.seg_fibre, lo, hi, order, light_sampling == "mis",
-                   int(n_paths), int(seed), int(max_depth), int(rr_depth), _max_dist(max_dist, (W, H)),
-                   1e-7 * max(W, H), a[sl], se[sl], rays[sl], chunks_per_thread=CELL_CHUNKS_PER_THREAD)
+        paths = PeriodicPaths(periodic_scene(sc, k), z_lo, z_hi, W, H, mof, mats, int(max_depth), int(rr_depth),
+                              _max_dist(max_dist, (W, H)), 1e-7 * max(W, H))
+        for_chunks(_iirtf_cells, hi - lo, paths, cells.cell_offsets, cells.cell_segments, cells.seg_mid,
+                   cells.seg_fibre, lo, hi, order, light_sampling == "mis", int(n_paths), int(seed), a[sl], se[sl],
+                   rays[sl], chunks_per_thread=CELL_CHUNKS_PER_THREAD)
     return IIRTFChunk(a, se, rays)
 
 

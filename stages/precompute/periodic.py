@@ -60,6 +60,13 @@ PeriodicHit = namedtuple("PeriodicHit", ["t", "segment", "fibre", "wrapped", "x"
                                          "fx", "fy", "fz"])
 PeriodicHit.__doc__ = "periodic_hit's result (module doc); t = inf and ids -1 on escape."
 
+PeriodicPaths = namedtuple("PeriodicPaths", ["scene", "z_lo", "z_hi", "W", "H", "mat_of_fiber", "mats", "max_depth",
+                                             "rr_depth", "max_dist", "eps"])
+PeriodicPaths.__doc__ = """The periodic fabric a precompute's paths walk and how far they go: ``scene``
+(``periodic_scene``), its slab z_lo..z_hi and period W x H, the fibres' material rows (``mat_of_fiber``,
+``mats``), at most ``max_depth`` scattering events with Russian roulette from ``rr_depth``, rays at most
+``max_dist`` long offset by ``eps``. The IIRTF's and the BTF acquisition's path tracers take it whole."""
+
 
 def periodic_scene(sc, k: int):
     """``sc`` with a block map of exemplar ``k`` alone (one period of its blocks)."""

@@ -2,7 +2,7 @@
 
 ``slab_enter(lx, ly, lz, hx, hy, hz, ox, oy, oz, ix, iy, iz, tmin, tmax)`` -> the entry distance
 max over axes of the near plane distance, for the box [l, h], the ray origin o and the reciprocal
-direction i = 1 / d (``safe_inverse``: a zero component becomes 1e300, so the slab of a parallel
+direction i = 1 / d (``safe_inverse``: a zero component becomes ``INVERSE_OF_ZERO``, so the slab of a parallel
 axis is all or nothing); inf when the ray misses the box, leaves it before ``tmin`` or enters it
 beyond ``tmax``. The BVH traversals (``stages.core.geometry.bvh``, ``stages.core.shell.traversal``)
 call it for every node they visit.
@@ -10,11 +10,13 @@ call it for every node they visit.
 import numpy as np
 from numba import njit
 
+INVERSE_OF_ZERO = 1e300   # safe_inverse(0): finite, so 0 x it stays 0 where an axis' slab holds the origin
+
 
 @njit(cache=True)
 def safe_inverse(d):
     if d == 0.0:
-        return 1e300
+        return INVERSE_OF_ZERO
     return 1.0 / d
 
 

@@ -48,6 +48,7 @@ from stages.core.threads import chunk_kernel, for_chunks
 # the step's first sample, N . T' and B . T' at its start (12, 13) and at its end (14, 15), and the
 # twist rate w (16); the last sample of a yarn has no step (zeros)
 FRAME_COLS = 17
+EMPTY_BOUND = 1e300     # an empty box's lower corner (its upper one: minus it)
 
 
 @njit(cache=True)
@@ -363,8 +364,8 @@ def chord_grid(fr, koff, kidx, sag, radius, cell):
     cell_start (cells+1,), run_yarn, run_a, run_b) -- per cell the runs [run_a, run_b) of coarse
     chord indices (global knot numbering), ascending by yarn then chord."""
     Y = koff.shape[0] - 1
-    lo = np.full(3, 1e300)
-    hi = np.full(3, -1e300)
+    lo = np.full(3, EMPTY_BOUND)     # the empty box, grown by every chord
+    hi = np.full(3, -EMPTY_BOUND)
     for c in range(Y):
         for q in range(koff[c], koff[c + 1]):
             i = kidx[q]
