@@ -47,23 +47,76 @@ Random numbers: ``uniform(seed, key, dim)`` with key = (texel * V + view) * spp 
 result is the same whatever the thread count or the split of texels into chunks.
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
 from stages.core.btf import cell_direction
+from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
-from stages.core.sampling import continue_path
-from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare
+from stages.core.shading.material import CTX_SIZE, material_eval_pdf
 from stages.core.threads import chunk_kernel, for_chunks
-from stages.precompute.periodic import PeriodicPaths, periodic_hit, periodic_occluded, periodic_vertex
+from stages.precompute.periodic import (
+    DIRECTION_DIMS,
+    PathScratch,
+    PeriodicPaths,
+    light_vertex,
+    path_escaped,
+    periodic_hit,
+    periodic_occluded,
+    periodic_path,
+)
 
-DIMS_PER_VERTEX = 4      # lobe, two for the direction, Russian roulette
 FIRST_DIMS = 2           # the point's jitter (then, for cell averages, the view's and every light's cell jitter)
 JOB_CHUNKS_PER_THREAD = 64  # (texel, view) jobs cost from a few rays (nothing hit) to spp full paths: small runs
                             # balance threads
+
+
+BtfLights = namedtuple("BtfLights", ["radiance", "lights"])
+BtfLights.__doc__ = """What one acquisition path records (a tally of ``periodic.periodic_path``): for every light
+direction of ``lights`` (L, 3) (unit irradiance), the radiance it sends along the path into ``radiance`` (L, 3)."""
+
+
+@njit(cache=True)
+def _btf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
+    """``periodic.light_vertex`` for an acquisition path: next-event estimation towards every light."""
+    lights = tally.lights
+    radiance = tally.radiance
+    wl = v.wl
+    so = v.so
+    tp0, tp1, tp2 = tp
+    rays = 0
+    for k in range(lights.shape[0]):
+        wl[0] = lights[k, 0]
+        wl[1] = lights[k, 1]
+        wl[2] = lights[k, 2]
+        f0, f1, f2, _pf = material_eval_pdf(mat, v.ctx, v.t_tan, v.n, v.wi, wl)
+        if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
+            continue
+        rays += 1
+        if not periodic_occluded(paths.scene, paths.z_lo, paths.z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf,
+                                 paths.max_dist):
+            radiance[k, 0] += tp0 * f0
+            radiance[k, 1] += tp1 * f1
+            radiance[k, 2] += tp2 * f2
+    return rays
+
+
+@overload(light_vertex)
+def _light_vertex_btf(tally, paths, v, mat, nf, tp, seed, key, base):
+    if is_tuple_class(tally, BtfLights):
+        return lambda tally, paths, v, mat, nf, tp, seed, key, base: _btf_light_vertex(
+            tally, paths, v, mat, nf, tp, seed, key, base)
+
+
+@overload(path_escaped)
+def _path_escaped_btf(tally, wo, tp, pdf):
+    if is_tuple_class(tally, BtfLights):   # the lights are counted at the vertices: an escape adds nothing
+        return lambda tally, wo, tp, pdf: None
 
 
 @njit(cache=True)
@@ -88,7 +141,8 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
     ``light_dirs`` themselves. Compiled without reference counting (its vectors on the machine stack):
     the two workers of ``acquire_texels`` would otherwise count references on the same arrays for every
     ray."""
-    sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps = paths
+    W = paths.W
+    H = paths.H
     L = light_dirs.shape[0]
     for k in range(L):
         for c in range(3):
@@ -99,13 +153,9 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
     first_dims = FIRST_DIMS + (2 + 2 * L if jitter else 0)
     iy = texel // res
     ix = texel - iy * res
-    t_tan = stack_vector3()
-    n = stack_vector3()
-    so = stack_vector3()
-    wi = stack_vector3()
-    wo = stack_vector3()
-    wl = stack_vector3()
-    ctx = stack_array(CTX_SIZE, np.float64)
+    v = PathScratch(stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(),
+                    stack_vector3(), stack_array(CTX_SIZE, np.float64))
+    tally = BtfLights(radiance, lights_now)
     hits = 0
     rays = 0
     for s in range(spp):
@@ -122,53 +172,15 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
                 lights_now[k, 1] = ly
                 lights_now[k, 2] = lz
         rays += 1
-        h = periodic_hit(sc, z_lo, z_hi, px, py, z_hi, -vx, -vy, -vz, -1, max_dist)
+        h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, px, py, paths.z_hi, -vx, -vy, -vz, -1, paths.max_dist)
         if math.isinf(h.t):
             continue
         hits += 1
-        _first_normal(sc, h, normal)
-        wi[0] = vx
-        wi[1] = vy
-        wi[2] = vz
-        tp0 = 1.0
-        tp1 = 1.0
-        tp2 = 1.0
-        depth = 1
-        while True:
-            row, nf = periodic_vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
-            mat = mats[row]
-            material_prepare(mat, t_tan, n, wi, ctx)
-            for k in range(L):  # next-event estimation towards every light (unit irradiance)
-                wl[0] = lights_now[k, 0]
-                wl[1] = lights_now[k, 1]
-                wl[2] = lights_now[k, 2]
-                f0, f1, f2, _pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
-                if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
-                    continue
-                rays += 1
-                if not periodic_occluded(sc, z_lo, z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf, max_dist):
-                    radiance[k, 0] += tp0 * f0
-                    radiance[k, 1] += tp1 * f1
-                    radiance[k, 2] += tp2 * f2
-            if depth >= max_depth:
-                break
-            base = first_dims + DIMS_PER_VERTEX * (depth - 1)
-            u_dir = (uniform(seed, key, base), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
-            step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth >= rr_depth, uniform(seed, key, base + 3),
-                                 (tp0, tp1, tp2), wo)
-            if not step.alive:
-                break
-            tp0 = step.tp0
-            tp1 = step.tp1
-            tp2 = step.tp2
-            rays += 1
-            h = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, max_dist)
-            if math.isinf(h.t):
-                break
-            wi[0] = -wo[0]
-            wi[1] = -wo[1]
-            wi[2] = -wo[2]
-            depth += 1
+        _first_normal(paths.scene, h, normal)
+        v.wi[0] = vx
+        v.wi[1] = vy
+        v.wi[2] = vz
+        rays += periodic_path(paths, tally, v, h, seed, key, first_dims, DIRECTION_DIMS)
     return hits, rays
 
 

@@ -104,16 +104,23 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
+from stages.core.dispatch import is_tuple_class
 from stages.core.rng import uniform
-from stages.core.sampling import continue_path, power_heuristic
+from stages.core.sampling import power_heuristic
 from stages.core.sh import sh_eval
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.precompute.periodic import (
+    DIRECTION_DIMS,
+    PathScratch,
     PeriodicPaths,
+    light_vertex,
+    path_escaped,
     periodic_hit,
     periodic_occluded,
+    periodic_path,
     periodic_scene,
     periodic_vertex,
 )
@@ -236,104 +243,110 @@ def cell_box(cells: Cells, c: int):
 # ------------------------------------------------------------------------------------------------
 # the path tracer
 
+IirtfLight = namedtuple("IirtfLight", ["u", "Y", "T", "w0", "order", "mis"])
+IirtfLight.__doc__ = """What one IIRTF path records (``transfer_projection``; a tally of ``periodic_path``): the
+projection ``u`` (3, J) onto the SH basis of order ``order`` (``Y`` (J,) scratch for the basis), ``T`` (3,) the
+transfer towards the fixed light direction ``w0`` of the paper's estimator (``mis`` False), or, with ``mis``,
+a light direction drawn per vertex and the path's escapes, power heuristic."""
+
+P_LIGHT = 1.0 / TWO_PI   # the density of a light direction uniform on the upper hemisphere
+
+
+@njit(cache=True)
+def _add_projection(u, Y, order, w, dx, dy, dz, c0, c1, c2):
+    """u[ch, j] += c_ch w Y_j(d) for the SH basis of ``order`` (``Y`` scratch)."""
+    sh_eval(order, dx, dy, dz, Y)
+    for j in range((order + 1) * (order + 1)):
+        y = w * Y[j]
+        u[0, j] += c0 * y
+        u[1, j] += c1 * y
+        u[2, j] += c2 * y
+
+
+@njit(cache=True)
+def _iirtf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
+    """``periodic.light_vertex`` for an IIRTF path: one light direction, ``w0`` or (``mis``) drawn uniform
+    on the upper hemisphere from dimensions base + DIRECTION_DIMS, + 1 (unit irradiance from there)."""
+    wl = v.wl
+    if tally.mis:
+        z = uniform(seed, key, base + DIRECTION_DIMS)
+        r = math.sqrt(max(0.0, 1.0 - z * z))
+        ph = TWO_PI * uniform(seed, key, base + DIRECTION_DIMS + 1)
+        wl[0] = r * math.cos(ph)
+        wl[1] = r * math.sin(ph)
+        wl[2] = z
+    else:
+        for k in range(3):
+            wl[k] = tally.w0[k]
+    f0, f1, f2, pf = material_eval_pdf(mat, v.ctx, v.t_tan, v.n, v.wi, wl)
+    if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
+        return 0
+    so = v.so
+    if not periodic_occluded(paths.scene, paths.z_lo, paths.z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf,
+                             paths.max_dist):
+        tp0, tp1, tp2 = tp
+        if tally.mis:
+            # the power heuristic over P_LIGHT, folded into one division: power_heuristic(P_LIGHT, pf) / P_LIGHT
+            w = P_LIGHT / (P_LIGHT * P_LIGHT + pf * pf)
+            _add_projection(tally.u, tally.Y, tally.order, w, wl[0], wl[1], wl[2], tp0 * f0, tp1 * f1, tp2 * f2)
+        else:
+            T = tally.T
+            T[0] += tp0 * f0
+            T[1] += tp1 * f1
+            T[2] += tp2 * f2
+    return 1
+
+
+@njit(cache=True)
+def _iirtf_escaped(tally, wo, tp, pdf):
+    """``periodic.path_escaped`` for an IIRTF path: with ``mis``, the sky above is the BCSDF-sampled light."""
+    if tally.mis and wo[2] > 0.0:
+        tp0, tp1, tp2 = tp
+        _add_projection(tally.u, tally.Y, tally.order, power_heuristic(pdf, P_LIGHT), wo[0], wo[1], wo[2],
+                        tp0, tp1, tp2)
+
+
+@overload(light_vertex)
+def _light_vertex_iirtf(tally, paths, v, mat, nf, tp, seed, key, base):
+    if is_tuple_class(tally, IirtfLight):
+        return lambda tally, paths, v, mat, nf, tp, seed, key, base: _iirtf_light_vertex(
+            tally, paths, v, mat, nf, tp, seed, key, base)
+
+
+@overload(path_escaped)
+def _path_escaped_iirtf(tally, wo, tp, pdf):
+    if is_tuple_class(tally, IirtfLight):
+        return lambda tally, wo, tp, pdf: _iirtf_escaped(tally, wo, tp, pdf)
+
+
 @njit(cache=True)
 def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, seed, key, dim0, Y, u):
     """One path's estimate u[ch, j0] of int_{H+} T(w0', w1, x) Y_j0(w0') dw0' at x = (ox, oy, oz), the ray
     from x along w1 skipping fibre ``ign0`` (module doc "Estimator"). ``mis`` False: the paper's, T(w0, w1, x)
     Y_j0(w0) 2 pi with NEE along the path's w0; True: light directions drawn per vertex and BCSDF-sampled
-    escapes, power heuristic. ``Y`` (J,) scratch, ``u`` (3, J) output (zeroed here). Random numbers
-    (seed, key, dim0 + 6 per vertex). Returns the number of rays cast."""
-    sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps = paths
+    escapes, power heuristic (``IirtfLight``; the path itself is ``periodic_path``'s). ``Y`` (J,) scratch,
+    ``u`` (3, J) output (zeroed here). Random numbers (seed, key, dim0 + 6 per vertex). Returns the number
+    of rays cast."""
     J = (order + 1) * (order + 1)
     for ch in range(3):
         for j in range(J):
             u[ch, j] = 0.0
-    h = periodic_hit(sc, z_lo, z_hi, ox, oy, oz, w1[0], w1[1], w1[2], ign0, max_dist)
-    rays = 1
+    h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, ox, oy, oz, w1[0], w1[1], w1[2], ign0, paths.max_dist)
     if math.isinf(h.t):
-        return rays
-    t_tan = np.empty(3)
-    n = np.empty(3)
-    so = np.empty(3)
-    wi = np.empty(3)
-    wo = np.empty(3)
-    wl = np.empty(3)
-    ctx = np.empty(CTX_SIZE)
+        return 1
+    v = PathScratch(np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(CTX_SIZE))
     for k in range(3):
-        wi[k] = -w1[k]
-        wl[k] = w0[k]
-    p_light = 1.0 / TWO_PI
-    T0 = 0.0
-    T1 = 0.0
-    T2 = 0.0
-    tp0 = 1.0
-    tp1 = 1.0
-    tp2 = 1.0
-    depth = 1
-    while True:
-        row, nf = periodic_vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so)
-        mat = mats[row]
-        material_prepare(mat, t_tan, n, wi, ctx)
-        base = dim0 + 6 * (depth - 1)
-        if mis:  # a light direction of this vertex, uniform on the upper hemisphere
-            z = uniform(seed, key, base + 4)
-            r = math.sqrt(max(0.0, 1.0 - z * z))
-            ph = TWO_PI * uniform(seed, key, base + 5)
-            wl[0] = r * math.cos(ph)
-            wl[1] = r * math.sin(ph)
-            wl[2] = z
-        # next-event estimation towards wl (unit irradiance from there)
-        f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
-        if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
-            rays += 1
-            if not periodic_occluded(sc, z_lo, z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf, max_dist):
-                if mis:
-                    # the power heuristic over p_light, folded into one division:
-                    # power_heuristic(p_light, pf) / p_light
-                    w = p_light / (p_light * p_light + pf * pf)
-                    sh_eval(order, wl[0], wl[1], wl[2], Y)
-                    for j in range(J):
-                        y = w * Y[j]
-                        u[0, j] += tp0 * f0 * y
-                        u[1, j] += tp1 * f1 * y
-                        u[2, j] += tp2 * f2 * y
-                else:
-                    T0 += tp0 * f0
-                    T1 += tp1 * f1
-                    T2 += tp2 * f2
-        if depth >= max_depth:
-            break
-        u_dir = (uniform(seed, key, base), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
-        step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth >= rr_depth, uniform(seed, key, base + 3),
-                             (tp0, tp1, tp2), wo)
-        if not step.alive:
-            break
-        tp0 = step.tp0
-        tp1 = step.tp1
-        tp2 = step.tp2
-        pf = step.pdf
-        rays += 1
-        h = periodic_hit(sc, z_lo, z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, max_dist)
-        if math.isinf(h.t):
-            if mis and wo[2] > 0.0:  # escaped towards the sky: the BCSDF-sampled light direction
-                w = power_heuristic(pf, p_light)
-                sh_eval(order, wo[0], wo[1], wo[2], Y)
-                for j in range(J):
-                    y = w * Y[j]
-                    u[0, j] += tp0 * y
-                    u[1, j] += tp1 * y
-                    u[2, j] += tp2 * y
-            break
-        for k in range(3):
-            wi[k] = -wo[k]
-        depth += 1
-    if not mis and (T0 != 0.0 or T1 != 0.0 or T2 != 0.0):
+        v.wi[k] = -w1[k]
+    T = np.zeros(3)
+    rays = 1 + periodic_path(paths, IirtfLight(u, Y, T, w0, order, mis), v, h, seed, key, dim0,
+                             DIRECTION_DIMS + 2)
+    if not mis and (T[0] != 0.0 or T[1] != 0.0 or T[2] != 0.0):
         sh_eval(order, w0[0], w0[1], w0[2], Y)
         for j in range(J):
             y = TWO_PI * Y[j]
-            u[0, j] = T0 * y
-            u[1, j] = T1 * y
-            u[2, j] = T2 * y
+            u[0, j] = T[0] * y
+            u[1, j] = T[1] * y
+            u[2, j] = T[2] * y
     return rays
 
 

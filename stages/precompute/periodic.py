@@ -45,6 +45,14 @@ procedural fibres overlap (half a ply's cross-section is fibre, placed, not pack
   5.7 / 4.4 / 4.5 % now (``make prt-sweep``, 2026-12-02). Started on the segment's surface instead, it
   came out darker still (11.5 / 10.9 / 5.9 % -> 15.0 / 12.2 / 8.3 % in multiple scattering alone,
   measured with the pass-through rule).
+
+Paths through the periodic fabric (``periodic_path``): the IIRTF's transfer paths and the BTF
+acquisition's camera paths are one path tracer -- vertex set-up, next-event estimation, material
+sampling with Russian roulette (``stages.core.sampling.continue_path``), the next ray -- that differ
+only in which light directions a vertex is lit from and what an escape adds. Those two are a *tally*'s,
+a namedtuple each precompute defines (``IirtfLight``, ``BtfLights``) and answers ``light_vertex`` and
+``path_escaped`` for (``numba.extending.overload``, as ``stages.core.dispatch`` describes), so the loop is
+written once and compiled once per tally.
 """
 import math
 from collections import namedtuple
@@ -53,7 +61,9 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.capsule import INSIDE, capsule_intersect, capsule_normal, point_segment_dist2
-from stages.core.shading.material import material_is_curve
+from stages.core.rng import uniform
+from stages.core.sampling import continue_path
+from stages.core.shading.material import material_is_curve, material_prepare
 from stages.core.shell.traversal import flat_segment_hit, flat_segment_occluded
 
 PeriodicHit = namedtuple("PeriodicHit", ["t", "segment", "fibre", "wrapped", "x", "y", "z", "tx", "ty", "tz",
@@ -210,3 +220,91 @@ def periodic_vertex(sc, mats, mat_of_fiber, h, W, H, eps, t_tan, n, so):
     so[1] = y + off * ny
     so[2] = h.z + off * nz
     return row, -1
+
+
+# ------------------------------------------------------------------------------------------------
+# the path tracer the IIRTF and the BTF acquisition share
+
+PathScratch = namedtuple("PathScratch", ["t_tan", "n", "so", "wi", "wo", "wl", "ctx"])
+PathScratch.__doc__ = """The vectors a periodic path works in, allocated by its caller (on the heap or the machine
+stack): the vertex's tangent ``t_tan``, normal ``n`` and ray origin ``so`` (``periodic_vertex``), the direction
+towards where the path came from ``wi`` (the caller sets it for the first vertex), the sampled next direction
+``wo``, a light direction ``wl`` and the material context ``ctx`` (``CTX_SIZE``), all float64."""
+
+
+def light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
+    """Next-event estimation at a vertex of a periodic path (``periodic_path``): for each light direction
+    the tally takes, the vertex's f(wi, wl) times the throughput ``tp`` (r, g, b) where the shadow ray
+    from ``v.so`` (skipping fibre ``nf``) leaves the fabric, added to what the tally records; returns the
+    number of shadow rays cast. Random dimensions from ``base + DIRECTION_DIMS`` are the tally's. numba-only:
+    each tally class (``stages.precompute.iirtf``, ``stages.precompute.btf``) overloads it."""
+    raise TypeError("light_vertex is only callable from numba-compiled code")
+
+
+def path_escaped(tally, wo, tp, pdf):
+    """The path left the fabric along ``wo`` (sampled from the last vertex's material with density
+    ``pdf``) with throughput ``tp``: what the tally adds for the light it meets there. numba-only
+    (overloaded per tally class)."""
+    raise TypeError("path_escaped is only callable from numba-compiled code")
+
+
+DIRECTION_DIMS = 4   # per vertex: three uniforms for the sampled direction, one for Russian roulette
+
+
+@njit(cache=True, _nrt=False)
+def periodic_path(paths, tally, v, h, seed, key, dim0, dims_per_vertex):
+    """The path from its first hit ``h`` (coming from ``-v.wi``) through the periodic fabric of ``paths``
+    (a ``PeriodicPaths``), one vertex after another until it leaves the fabric, Russian roulette ends it
+    or it has ``max_depth`` vertices; returns the rays cast after the first. At each vertex, in order:
+
+    - the vertex: its material row, tangent, normal and where rays leave from (``periodic_vertex``);
+    - emitter sampling: ``light_vertex(tally, ...)``, next-event estimation for the tally's lights;
+    - material sampling and roulette: ``continue_path`` with the vertex's uniforms ``base`` .. ``base + 3``
+      (base = dim0 + dims_per_vertex (depth - 1); a tally that draws its own takes the dimensions after
+      those, dims_per_vertex > DIRECTION_DIMS);
+    - the next ray: a hit is the next vertex, an escape is ``path_escaped(tally, ...)`` and the end.
+
+    Compiled without reference counting: the BTF acquisition's threads walk the same arrays for every ray."""
+    sc = paths.scene
+    mats = paths.mats
+    t_tan = v.t_tan
+    n = v.n
+    so = v.so
+    wi = v.wi
+    wo = v.wo
+    ctx = v.ctx
+    tp0 = 1.0
+    tp1 = 1.0
+    tp2 = 1.0
+    rays = 0
+    depth = 1
+    while True:
+        # the vertex
+        row, nf = periodic_vertex(sc, mats, paths.mat_of_fiber, h, paths.W, paths.H, paths.eps, t_tan, n, so)
+        mat = mats[row]
+        material_prepare(mat, t_tan, n, wi, ctx)
+        base = dim0 + dims_per_vertex * (depth - 1)
+        # emitter sampling
+        rays += light_vertex(tally, paths, v, mat, nf, (tp0, tp1, tp2), seed, key, base)
+        if depth >= paths.max_depth:
+            break
+        # material sampling and Russian roulette
+        u_dir = (uniform(seed, key, base), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
+        step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth >= paths.rr_depth, uniform(seed, key, base + 3),
+                             (tp0, tp1, tp2), wo)
+        if not step.alive:
+            break
+        tp0 = step.tp0
+        tp1 = step.tp1
+        tp2 = step.tp2
+        # the next ray
+        rays += 1
+        h = periodic_hit(sc, paths.z_lo, paths.z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, paths.max_dist)
+        if math.isinf(h.t):
+            path_escaped(tally, wo, (tp0, tp1, tp2), step.pdf)
+            break
+        wi[0] = -wo[0]
+        wi[1] = -wo[1]
+        wi[2] = -wo[2]
+        depth += 1
+    return rays

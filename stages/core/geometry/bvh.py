@@ -39,9 +39,12 @@ so it takes no min / max per axis; the nearest-hit query sorts the entered child
 5-comparator network and visits them nearest first, skipping a popped node that starts beyond the
 best hit found since it was pushed; the any-hit query visits nearest first too (in dense cloth it
 meets an occluder sooner: 8 % faster fiberpath renders than visiting children in slot order).
-Traversal stacks live on the machine stack (``stages.core.geometry.stack``). The same wide nodes
-serve the shell's exemplar queries (``stages.core.shell.traversal``) and the realized volume's point
-queries (``stages.render.media.realized_medium``).
+Traversal stacks live on the machine stack (``stages.core.geometry.stack``). The walk itself is
+written once (``stages.core.geometry.wide_walk``: the nearest-hit and any-hit walks, the child sort,
+``LEAF_CODE``), with a leaf test per tree: this module's packed capsules (``PackedLeaves``), the shell's
+exemplar queries (``stages.core.shell.traversal``) and the SVF's periodic any-hit
+(``stages.precompute.svf.visibility``); the realized volume's point queries
+(``stages.render.media.realized_medium``) walk the same nodes.
 
 Traversal
 ---------
@@ -55,15 +58,14 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
-from stages.core.geometry.box4 import box4_enter
+from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.capsule import capsule_intersect
-from stages.core.geometry.slab import safe_inverse
-from stages.core.geometry.stack import STACK_SIZE, stack_array
+from stages.core.geometry.wide_walk import LEAF_CODE, Ray, leaf_test, wide_any, wide_nearest
 
 LEAF_MAX = 2
 N_BINS = 16
-LEAF_CODE = 32   # a leaf child reference is -1 - (first prim * LEAF_CODE + count), count < LEAF_CODE
 EMPTY = -1       # an unused slot of a wide node (an empty leaf behind an empty box)
 
 FiberBVH = namedtuple("FiberBVH", ["points", "seg_a", "seg_r", "seg_fiber",
@@ -491,137 +493,43 @@ def _prim_hit(prims, j, ox, oy, oz, dx, dy, dz, tmin):
                              prims[j, 3], prims[j, 4], prims[j, 5], prims[j, 6], tmin)
 
 
-@njit(cache=True, inline="always")
-def direction_signs(ix, iy, iz):
-    """The near-plane column offsets (0 or 12) of ``box4.box4_enter`` for a ray's reciprocal direction."""
-    return 0 if ix >= 0.0 else 12, 0 if iy >= 0.0 else 12, 0 if iz >= 0.0 else 12
+PackedLeaves = namedtuple("PackedLeaves", ["prims", "ilo", "ihi"])
+PackedLeaves.__doc__ = """A ``FiberBVH``'s leaf entries for ``wide_walk``: the packed capsules ``prims`` (8 columns:
+a, b, radius, segment id) and the segment range [ilo, ihi] the query skips (``ignore_range``)."""
 
 
-@njit(cache=True, inline="always")
-def push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax, stack, stack_t, sp):
-    """Push the children of wide node ``ref`` that the ray meets within [tmin, tmax], farthest first (so the
-    nearest is visited next), with their entry distances; returns the new stack size. The four entry
-    distances are sorted by a 5-comparator network (misses are inf and sort last)."""
-    ct0, ct1, ct2, ct3 = box4_enter(box, ref, sx, sy, sz, ox, oy, oz, ix, iy, iz, tmin, tmax)
-    cr0 = child[ref, 0]
-    cr1 = child[ref, 1]
-    cr2 = child[ref, 2]
-    cr3 = child[ref, 3]
-    if ct1 < ct0:
-        ct0, ct1 = ct1, ct0
-        cr0, cr1 = cr1, cr0
-    if ct3 < ct2:
-        ct2, ct3 = ct3, ct2
-        cr2, cr3 = cr3, cr2
-    if ct2 < ct0:
-        ct0, ct2 = ct2, ct0
-        cr0, cr2 = cr2, cr0
-    if ct3 < ct1:
-        ct1, ct3 = ct3, ct1
-        cr1, cr3 = cr3, cr1
-    if ct2 < ct1:
-        ct1, ct2 = ct2, ct1
-        cr1, cr2 = cr2, cr1
-    if ct3 != np.inf:
-        stack[sp] = cr3
-        stack_t[sp] = ct3
-        sp += 1
-    if ct2 != np.inf:
-        stack[sp] = cr2
-        stack_t[sp] = ct2
-        sp += 1
-    if ct1 != np.inf:
-        stack[sp] = cr1
-        stack_t[sp] = ct1
-        sp += 1
-    if ct0 != np.inf:
-        stack[sp] = cr0
-        stack_t[sp] = ct0
-        sp += 1
-    return sp
-
-
-@njit(cache=True, inline="always")
-def leaf_range(ref):
-    """(first prim, count) of a leaf child reference (< 0)."""
-    code = -1 - ref
-    return code // LEAF_CODE, code % LEAF_CODE
+@overload(leaf_test, inline="always")
+def _packed_leaf_test(leaves, j, ray, tmin):
+    if is_tuple_class(leaves, PackedLeaves):
+        def impl(leaves, j, ray, tmin):
+            s = int(leaves.prims[j, 7])
+            if s >= leaves.ilo and s <= leaves.ihi:
+                return s, np.inf
+            return s, _prim_hit(leaves.prims, j, ray.ox, ray.oy, ray.oz, ray.dx, ray.dy, ray.dz, tmin)
+        return impl
 
 
 @njit(cache=True, _nrt=False)
 def intersect(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Nearest hit (t, segment) with tmin < t < tmax; (inf, -1) when none."""
-    box = bvh.wide_box
-    child = bvh.wide_child
-    prims = bvh.prims
-    if prims.shape[0] == 0:
+    if bvh.prims.shape[0] == 0:
         return np.inf, -1
     ilo, ihi = ignore_range(bvh, ign_fiber, ign_seg, ign_window)
-    ix = safe_inverse(dx)
-    iy = safe_inverse(dy)
-    iz = safe_inverse(dz)
-    sx, sy, sz = direction_signs(ix, iy, iz)
-    # node stack and entry distances (a popped node that starts beyond the best hit is skipped), on the machine stack
-    stack = stack_array(STACK_SIZE, np.int64)
-    stack_t = stack_array(STACK_SIZE, np.float64)
-    best_t = tmax
-    best_s = -1
-    stack[0] = 0
-    stack_t[0] = -np.inf
-    sp = 1
-    while sp > 0:
-        sp -= 1
-        ref = stack[sp]
-        if stack_t[sp] > best_t:
-            continue
-        if ref < 0:
-            j0, n = leaf_range(ref)
-            for j in range(j0, j0 + n):
-                s = int(prims[j, 7])
-                if s >= ilo and s <= ihi:
-                    continue
-                t = _prim_hit(prims, j, ox, oy, oz, dx, dy, dz, tmin)
-                if t < best_t or (t == best_t and best_s >= 0 and s < best_s):
-                    best_t = t
-                    best_s = s
-            continue
-        sp = push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, 0.0, best_t, stack, stack_t, sp)
-    if best_s < 0:
+    t, s = wide_nearest(bvh.wide_box, bvh.wide_child, 0, PackedLeaves(bvh.prims, ilo, ihi), Ray(ox, oy, oz, dx, dy, dz),
+                        0.0, tmin, tmax)
+    if s < 0:
         return np.inf, -1
-    return best_t, best_s
+    return t, s
 
 
 @njit(cache=True, _nrt=False)
 def occluded(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """True when any segment is hit with tmin < t < tmax."""
-    box = bvh.wide_box
-    child = bvh.wide_child
-    prims = bvh.prims
-    if prims.shape[0] == 0:
+    if bvh.prims.shape[0] == 0:
         return False
     ilo, ihi = ignore_range(bvh, ign_fiber, ign_seg, ign_window)
-    ix = safe_inverse(dx)
-    iy = safe_inverse(dy)
-    iz = safe_inverse(dz)
-    sx, sy, sz = direction_signs(ix, iy, iz)
-    stack = stack_array(STACK_SIZE, np.int64)
-    stack_t = stack_array(STACK_SIZE, np.float64)
-    stack[0] = 0
-    sp = 1
-    while sp > 0:
-        sp -= 1
-        ref = stack[sp]
-        if ref < 0:
-            j0, n = leaf_range(ref)
-            for j in range(j0, j0 + n):
-                s = int(prims[j, 7])
-                if s >= ilo and s <= ihi:
-                    continue
-                if _prim_hit(prims, j, ox, oy, oz, dx, dy, dz, tmin) < tmax:
-                    return True
-            continue
-        sp = push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, 0.0, tmax, stack, stack_t, sp)
-    return False
+    return wide_any(bvh.wide_box, bvh.wide_child, 0, PackedLeaves(bvh.prims, ilo, ihi), Ray(ox, oy, oz, dx, dy, dz),
+                    0.0, tmin, tmax) >= 0
 
 
 @njit(cache=True)

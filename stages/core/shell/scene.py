@@ -9,7 +9,8 @@ Both BVH builds are deterministic, so a scene rebuilt from the same artifact tra
 """
 import numpy as np
 
-from stages.core.geometry.bvh import LEAF_CODE, build_bvh_nodes, build_fiber_bvh, cache_aligned
+from stages.core.geometry.bvh import build_bvh_nodes, build_fiber_bvh, cache_aligned
+from stages.core.geometry.wide_walk import LEAF_CODE
 from stages.core.shell.traversal import ShellScene
 
 

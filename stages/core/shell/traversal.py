@@ -46,11 +46,12 @@ from numba import njit, prange
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
-from stages.core.geometry.bvh import direction_signs, leaf_range, push_children_sorted, segment_hit
+from stages.core.geometry.bvh import segment_hit
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.slab import safe_inverse, slab_enter
 from stages.core.geometry.stack import STACK_SIZE, stack_array
 from stages.core.geometry.surface import SurfaceHit, surface_hit, surface_occluded
+from stages.core.geometry.wide_walk import Ray, leaf_test, wide_any, wide_nearest
 
 ShellScene = namedtuple("ShellScene", [
     "planes", "nbr", "w2f", "f2w",
@@ -157,68 +158,42 @@ def _skipped(sc, s, ign_fiber, ign_seg, ign_window):
     return ign_fiber >= 0 and sc.seg_srcfiber[s] == ign_fiber and abs(sc.seg_src[s] - ign_seg) <= ign_window
 
 
+ShellLeaves = namedtuple("ShellLeaves", ["scene", "ign_fiber", "ign_seg", "ign_window"])
+ShellLeaves.__doc__ = """A ``ShellScene``'s exemplar leaf entries for ``wide_walk`` (``fprim``: wrapped pieces) and the
+pieces the query skips: those of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar segment
+``ign_seg`` (-1: none)."""
+
+
+@overload(leaf_test, inline="always")
+def _shell_leaf_test(leaves, j, ray, tmin):
+    if is_tuple_class(leaves, ShellLeaves):
+        def impl(leaves, j, ray, tmin):
+            sc = leaves.scene
+            s = sc.fprim[j]
+            if _skipped(sc, s, leaves.ign_fiber, leaves.ign_seg, leaves.ign_window):
+                return s, np.inf
+            return s, segment_hit(sc, s, ray.ox, ray.oy, ray.oz, ray.dx, ray.dy, ray.dz, tmin)
+        return impl
+
+
 @njit(cache=True, _nrt=False)
 def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Nearest capsule hit (t, segment) with tmin < t < tmax in the wide BVH rooted at ``root`` (ties:
     lower index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar
     segment ``ign_seg`` (-1: test everything)."""
-    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
-    sx, sy, sz = direction_signs(ix, iy, iz)
-    stack = stack_array(STACK_SIZE, np.int64)
-    stack_t = stack_array(STACK_SIZE, np.float64)
-    stack[0] = root
-    stack_t[0] = -np.inf
-    sp = 1
-    best = tmax
-    bs = -1
-    while sp > 0:
-        sp -= 1
-        ref = stack[sp]
-        if stack_t[sp] > best:
-            continue
-        if ref < 0:
-            j0, n = leaf_range(ref)
-            for j in range(j0, j0 + n):
-                s = sc.fprim[j]
-                if _skipped(sc, s, ign_fiber, ign_seg, ign_window):
-                    continue
-                t = segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin)
-                if t < best or (t == best and bs >= 0 and s < bs):
-                    best = t
-                    bs = s
-            continue
-        sp = push_children_sorted(sc.fw_box, sc.fw_child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, best,
-                                  stack, stack_t, sp)
-    if bs < 0:
+    t, s = wide_nearest(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window),
+                        Ray(ox, oy, oz, dx, dy, dz), tmin, tmin, tmax)
+    if s < 0:
         return np.inf, -1
-    return best, bs
+    return t, s
 
 
 @njit(cache=True, _nrt=False)
 def fiber_any(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """Is there a capsule hit with tmin < t < tmax in the wide BVH rooted at ``root`` (skips as
     ``fiber_nearest``)? Stops at the first one found: shadow rays need no nearest hit."""
-    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
-    sx, sy, sz = direction_signs(ix, iy, iz)
-    stack = stack_array(STACK_SIZE, np.int64)
-    stack_t = stack_array(STACK_SIZE, np.float64)
-    stack[0] = root
-    sp = 1
-    while sp > 0:
-        sp -= 1
-        ref = stack[sp]
-        if ref < 0:
-            j0, n = leaf_range(ref)
-            for j in range(j0, j0 + n):
-                s = sc.fprim[j]
-                if _skipped(sc, s, ign_fiber, ign_seg, ign_window):
-                    continue
-                if segment_hit(sc, s, ox, oy, oz, dx, dy, dz, tmin) < tmax:
-                    return True
-            continue
-        sp = push_children_sorted(sc.fw_box, sc.fw_child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax,
-                                  stack, stack_t, sp)
-    return False
+    return wide_any(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window),
+                    Ray(ox, oy, oz, dx, dy, dz), tmin, tmin, tmax) >= 0
 
 
 @njit(cache=True)

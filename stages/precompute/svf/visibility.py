@@ -8,17 +8,16 @@ from collections import namedtuple
 import numba
 import numpy as np
 from numba import njit, prange
+from numba.extending import overload
 
-from stages.core.geometry.bvh import direction_signs, leaf_range, push_children_sorted
+from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.capsule import INSIDE, capsule_intersect, point_segment_dist2
-from stages.core.geometry.slab import safe_inverse
-from stages.core.geometry.stack import stack_array
+from stages.core.geometry.wide_walk import Ray, leaf_test, wide_any
 from stages.core.svf import pixel_direction
 from stages.precompute.periodic import ray_start, slab_length
 from stages.precompute.svf.pixels import packed_bytes
 
 MAX_DIST_PERIODS = 32.0     # default max_dist = 32 max(W, H)
-STACK = 256
 
 ExemplarSegments = namedtuple("ExemplarSegments", ["ids", "fibre", "mids", "capsules", "z_lo", "z_hi", "period"])
 ExemplarSegments.__doc__ = """Segments of one exemplar: global ids (S,) int64, fibre (S,) int64 (global fibre id),
@@ -53,44 +52,45 @@ def _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Does the ray from the midpoint (origin already shifted into the capsule's period) enter wrapped
     capsule s beyond tmin before tmax? A capsule that contains the origin lets it through
     (``stages.precompute.periodic``: rays from a midpoint)."""
+    return _piece_t(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin) < tmax
+
+
+@njit(cache=True, inline="always")
+def _piece_t(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin):
+    """Where the ray enters wrapped capsule s beyond tmin (inf: never, or the capsule contains the origin)."""
     a = seg_a[s]
     r = seg_r[s]
     if point_segment_dist2(ox, oy, oz, P[a, 0], P[a, 1], P[a, 2],
                            P[a + 1, 0], P[a + 1, 1], P[a + 1, 2]) < INSIDE * r * r:
-        return False
-    t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[a, 0], P[a, 1], P[a, 2],
-                          P[a + 1, 0], P[a + 1, 1], P[a + 1, 2], seg_r[s], tmin)
-    return t < tmax
+        return np.inf
+    return capsule_intersect(ox, oy, oz, dx, dy, dz, P[a, 0], P[a, 1], P[a, 2],
+                             P[a + 1, 0], P[a + 1, 1], P[a + 1, 2], seg_r[s], tmin)
+
+
+PeriodLeaves = namedtuple("PeriodLeaves", ["points", "seg_a", "seg_r", "seg_fibre", "prim", "ign_fiber"])
+PeriodLeaves.__doc__ = """An exemplar's wrapped pieces for ``wide_walk`` in one period of the flat fabric (arrays of the
+``ShellScene``: points, seg_a, seg_r, seg_srcfiber, fprim), the pieces of fibre ``ign_fiber`` skipped and a
+capsule that contains the ray's origin let through (``_piece_t``)."""
+
+
+@overload(leaf_test, inline="always")
+def _period_leaf_test(leaves, j, ray, tmin):
+    if is_tuple_class(leaves, PeriodLeaves):
+        def impl(leaves, j, ray, tmin):
+            s = leaves.prim[j]
+            if leaves.seg_fibre[s] == leaves.ign_fiber:
+                return s, np.inf
+            return s, _piece_t(leaves.points, leaves.seg_a, leaves.seg_r, s, ray.ox, ray.oy, ray.oz, ray.dx, ray.dy,
+                               ray.dz, tmin)
+        return impl
 
 
 @njit(cache=True, inline="always")
-def _any_hit_period(P, seg_a, seg_r, srcfib, box, child, prim, root,
-                    ox, oy, oz, dx, dy, dz, ix, iy, iz, tmin, tmax, ign_fiber, stack):
-    """Any wrapped capsule (not of ign_fiber) hit in (tmin, tmax) by the ray in one period: its index or -1.
-    Walks the exemplar's 4-wide nodes (``stages.core.geometry.bvh``), children nearer first."""
-    sx, sy, sz = direction_signs(ix, iy, iz)
-    stack_t = stack_array(STACK, np.float64)
-    stack[0] = root
-    sp = 1
-    while sp > 0:
-        sp -= 1
-        ref = stack[sp]
-        if ref < 0:
-            j0, n = leaf_range(ref)
-            for j in range(j0, j0 + n):
-                s = prim[j]
-                if srcfib[s] == ign_fiber:
-                    continue
-                if _piece_hit(P, seg_a, seg_r, s, ox, oy, oz, dx, dy, dz, tmin, tmax):
-                    return s
-            continue
-        sp = push_children_sorted(box, child, ref, ox, oy, oz, ix, iy, iz, sx, sy, sz, tmin, tmax, stack, stack_t, sp)
-    return -1
-
-
-@njit(cache=True, inline="always")
-def _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root,
-                      bw, bh, nx, ny, ox, oy, oz, dx, dy, dz, L, ign_fiber, stack):
+def _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny, ox, oy, oz, dx, dy, dz, L):
+    """``periodic_any_hit`` on the exemplar's wide nodes (``box``, ``child``, ``root``) and ``PeriodLeaves``: a DDA
+    over whole periods (bw nx by bh ny), each period's pieces walked by ``wide_walk.wide_any`` with the
+    origin shifted into it. 15 parameters: the ray and the period as scalars, as ``segment_image``'s pixel
+    loop holds them (it reuses ``_piece_hit`` on the pieces this returns)."""
     ci = int(math.floor(ox / bw)) // nx
     cj = int(math.floor(oy / bh)) // ny
     if dx > 0.0:
@@ -105,15 +105,13 @@ def _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root,
         sty, tmy, tdy = -1, (cj * ny * bh - oy) / dy, -ny * bh / dy
     else:
         sty, tmy, tdy = 0, np.inf, np.inf
-    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
     s = 0.0
     while s < L:
         s1 = min(tmx, tmy, L)
         if s1 > s:
             shx = (ci * nx) * bw
             shy = (cj * ny) * bh
-            p = _any_hit_period(P, seg_a, seg_r, srcfib, box, child, prim, root,
-                                ox - shx, oy - shy, oz, dx, dy, dz, ix, iy, iz, s, s1, ign_fiber, stack)
+            p = wide_any(box, child, root, leaves, Ray(ox - shx, oy - shy, oz, dx, dy, dz), s, s, s1)
             if p >= 0:
                 return p, ci, cj
             s = s1
@@ -129,15 +127,14 @@ def _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root,
 
 
 @njit(cache=True)
-def periodic_any_hit(sc, k, ox, oy, oz, dx, dy, dz, L, ign_fiber, stack):
+def periodic_any_hit(sc, k, ox, oy, oz, dx, dy, dz, L, ign_fiber):
     """(piece, ci, cj): a wrapped capsule of exemplar k (not of fibre ign_fiber) that the ray o + t d,
     0 < t < L, hits in the exemplar repeated without end, found in period (ci, cj) (shift
     (ci nx bw, cj ny bh)); piece = -1 when none. Hit or not agrees with ``periodic_hit_outside`` (a walk over
     whole periods instead of blocks: the same capsules, the same roots)."""
-    return _periodic_any_hit(sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber, sc.fw_box, sc.fw_child, sc.fprim,
-                             sc.ex_wide_root[k],
-                             sc.block_size[0], sc.block_size[1], sc.ex_nblocks[k, 0], sc.ex_nblocks[k, 1],
-                             ox, oy, oz, dx, dy, dz, L, ign_fiber, stack)
+    leaves = PeriodLeaves(sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber, sc.fprim, ign_fiber)
+    return _periodic_any_hit(sc.fw_box, sc.fw_child, sc.ex_wide_root[k], leaves, sc.block_size[0], sc.block_size[1],
+                             sc.ex_nblocks[k, 0], sc.ex_nblocks[k, 1], ox, oy, oz, dx, dy, dz, L)
 
 
 @njit(cache=True)
@@ -153,12 +150,13 @@ def direction_table(res_theta, res_phi):
 
 
 @njit(cache=True)
-def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist, out, stack, col_cache):
+def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist, out, col_cache):
     """Bit-packed visibility image of segment midpoint m (skipping fibre ``fibre``; rays start on the
     surface of ``capsule``, see ``ray_start``) into ``out`` (bytes); ``dirs`` from direction_table;
-    scratch: ``stack`` (STACK,) int64, ``col_cache`` (res_phi, 3) int64."""
-    P, seg_a, seg_r, srcfib = sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber
-    box, child, prim = sc.fw_box, sc.fw_child, sc.fprim
+    scratch: ``col_cache`` (res_phi, 3) int64."""
+    P, seg_a, seg_r = sc.points, sc.seg_a, sc.seg_r
+    box, child = sc.fw_box, sc.fw_child
+    leaves = PeriodLeaves(P, seg_a, seg_r, sc.seg_srcfiber, sc.fprim, fibre)
     root = sc.ex_wide_root[k]
     bw = sc.block_size[0]
     bh = sc.block_size[1]
@@ -194,8 +192,8 @@ def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist,
                         blocked = True
                         pp, pi, pj = q, qi, qj
                     else:
-                        q, qi, qj = _periodic_any_hit(P, seg_a, seg_r, srcfib, box, child, prim, root, bw, bh, nx,
-                                                      ny, ox, oy, oz, dx, dy, dz, L, fibre, stack)
+                        q, qi, qj = _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny, ox, oy, oz, dx, dy,
+                                                      dz, L)
                         if q >= 0:
                             blocked = True
                             pp, pi, pj = q, qi, qj
@@ -213,10 +211,9 @@ def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist,
 def _visibility_kernel(sc, k, z_lo, z_hi, mids, capsules, fibres, dirs, max_dist, out):
     C = dirs.shape[1]
     for s in prange(mids.shape[0]):
-        stack = np.empty(STACK, np.int64)
         col_cache = np.empty((C, 3), np.int64)
         segment_image(sc, k, z_lo, z_hi, mids[s, 0], mids[s, 1], mids[s, 2], capsules[s], fibres[s], dirs,
-                      max_dist, out[s], stack, col_cache)
+                      max_dist, out[s], col_cache)
 
 
 def default_max_dist(psc, k: int) -> float:

@@ -25,9 +25,9 @@ from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.box4 import box4_contains
-from stages.core.geometry.bvh import leaf_range
 from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.geometry.stack import STACK_SIZE, stack_array
+from stages.core.geometry.wide_walk import leaf_range
 from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
 
 RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness",

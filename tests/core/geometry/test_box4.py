@@ -11,8 +11,8 @@ import pytest
 from numba import njit
 
 from stages.core.geometry.box4 import box4_contains, box4_enter
-from stages.core.geometry.bvh import direction_signs
 from stages.core.geometry.slab import safe_inverse
+from stages.core.geometry.wide_walk import direction_signs
 
 
 def _boxes(rng, m=64):

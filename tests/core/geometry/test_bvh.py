@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 from numba import njit
 
-from stages.core.geometry.bvh import LEAF_CODE, build_fiber_bvh, intersect, intersect_brute, occluded
+from stages.core.geometry.bvh import build_fiber_bvh, intersect, intersect_brute, occluded
 from stages.core.geometry.capsule import capsule_intersect, capsule_normal
+from stages.core.geometry.wide_walk import LEAF_CODE
 
 
 def random_fibres(seed, n_fibres=40, n_points=16, box=1.0, radius=0.02):
