@@ -56,7 +56,7 @@ from numba import njit, types  # noqa: E402  (after sys.path and stages set-up)
 from stages.core.geometry.embree import embree_surface_hit, peek, poke, scratch_address, write_ray  # noqa: E402
 from stages.core.rng import uniform  # noqa: E402  (after sys.path and stages set-up)
 from stages.core.shading.lambert import cosine_direction  # noqa: E402  (after sys.path and stages set-up)
-from stages.render.camera import camera_ray  # noqa: E402  (after sys.path and stages set-up)
+from stages.render.camera import CAM_HEIGHT, CAM_WIDTH, camera_ray  # noqa: E402  (after sys.path and stages set-up)
 
 ROUNDS = 5
 SPP = 32          # camera samples per pixel recorded
@@ -157,8 +157,8 @@ class Embree3:
 def record_rays(fibers, cam, eps, spp, seed):
     """Rays (origin, direction, tmin, tmax; n x 8) and their class (CAMERA / BOUNCE / SHADOW), in path order
     (module doc): camera rays, and up to two Lambertian vertices' bounce and shadow rays each."""
-    W = int(cam[13])
-    H = int(cam[14])
+    W = int(cam[CAM_WIDTH])
+    H = int(cam[CAM_HEIGHT])
     n_max = W * H * spp * 5
     rays = np.empty((n_max, 8))
     rays[:, 7] = np.inf

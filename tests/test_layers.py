@@ -163,3 +163,44 @@ def test_cycle_finder_finds_a_circle():
     graph = {"a": ["b"], "b": ["c"], "c": ["a"], "d": ["e"], "e": ["d"], "f": ["a"], "g": []}
     assert sorted(import_cycles(graph)) == [["a", "b", "c"], ["d", "e"]]
     assert import_cycles({"a": ["b"], "b": ["c"], "c": []}) == []
+
+
+MAX_KERNEL_PARAMETERS = 12
+KERNEL_DECORATORS = ("njit", "jit", "chunk_kernel")
+
+
+def long_signatures(files) -> list[str]:
+    """'file:line name (N)' of every numba kernel (decorated ``@njit``, ``@jit`` or ``@chunk_kernel``) in
+    ``files`` that takes more than MAX_KERNEL_PARAMETERS parameters without saying why: its docstring must
+    say "N parameters:" with its own count N, so that the reason is looked at again when the count changes."""
+    found = []
+    for path in files:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            if not any(any(k in ast.unparse(d) for k in KERNEL_DECORATORS) for d in node.decorator_list):
+                continue
+            n = len(node.args.posonlyargs) + len(node.args.args) + len(node.args.kwonlyargs)
+            said = " ".join((ast.get_docstring(node) or "").split())   # line breaks as spaces
+            if n > MAX_KERNEL_PARAMETERS and f"{n} parameters:" not in said:
+                found.append(f"{path.name}:{node.lineno} {node.name} ({n})")
+    return found
+
+
+def test_long_kernel_signatures_say_why():
+    """Issue 56 item 2: values cross calls in named records (``PeriodicPaths``, ``Ray``, ``RenderRequest``, the
+    integrators' and media's namedtuples); a kernel over 12 parameters says in its docstring why it is not one."""
+    assert long_signatures(_sources("stages")) == []
+
+
+def test_long_signature_finder_finds_one(tmp_path):
+    """The control: 13 parameters without a reason are found, with one (or 12 parameters) they are not."""
+    args = ", ".join(f"a{i}" for i in range(13))
+    bare = tmp_path / "bare.py"
+    bare.write_text(f"@njit(cache=True)\ndef f({args}):\n    \"\"\"Sums.\"\"\"\n    return 0\n")
+    said = tmp_path / "said.py"
+    said.write_text(f"@chunk_kernel\ndef f({args}):\n    \"\"\"Sums. 13\n    parameters: why.\"\"\"\n    return 0\n")
+    twelve = tmp_path / "twelve.py"
+    twelve.write_text(f"@njit\ndef f({', '.join(f'a{i}' for i in range(12))}):\n    return 0\n")
+    assert long_signatures([bare]) == ["bare.py:2 f (13)"]
+    assert long_signatures([said, twelve]) == []

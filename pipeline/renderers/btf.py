@@ -215,6 +215,7 @@ def geometry_source(scene, options) -> str:
 def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_ground, cam, mip: bool, shadows: bool):
     """The ``BtfIntegrator`` of a dressed mesh and a texture under a camera (``pack_camera`` layout)."""
     from stages.core.geometry.triangles import build_triangle_mesh, uv_derivatives
+    from stages.render.camera import CAM_FORWARD, CAM_TAN_HALF_FOV, CAM_WIDTH
     from stages.render.integrators.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator
     from stages.render.lights import DIRECTIONAL
 
@@ -236,10 +237,11 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
     table = lights.table()
     quad = int(np.count_nonzero(table.lights[:, 0] != DIRECTIONAL))
     eps = ray_eps(V.min(0), V.max(0)) if len(V) else 1e-9
-    pixel_angle = 2.0 * float(cam[12]) / float(cam[13])
+    pixel_angle = 2.0 * float(cam[CAM_TAN_HALF_FOV]) / float(cam[CAM_WIDTH])
     return BtfIntegrator(mesh, shading, tex.texels, tex.table, tex.levels, int(tex.view_grid[0]),
                          int(tex.view_grid[1]), tex.light_dirs, table, quad, ground, has_ground, pixel_angle,
-                         np.ascontiguousarray(cam[3:6], np.float64), bool(mip), int(bool(shadows)), MAX_LAYERS, eps)
+                         np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
+                         int(bool(shadows)), MAX_LAYERS, eps)
 
 
 def film_setup(scene, options: dict):

@@ -190,6 +190,7 @@ def film_setup(scene, options: dict):
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.yarn.tubes import tube_pieces
     from stages.procedural.tables import yarn_key
+    from stages.render.camera import CAM_TAN_HALF_FOV
     from stages.render.film import VARIANCE_CHANNELS
     from stages.render.integrators.bysdf import MODES as KMODES, BysdfIntegrator
 
@@ -241,7 +242,7 @@ def film_setup(scene, options: dict):
     ground, has_ground = ground_array(scene.render)
     W, H = options["width"], options["height"]
     cam = camera_array(scene.camera, W, H)
-    pixel_angle = 2.0 * float(cam[12]) / W
+    pixel_angle = 2.0 * float(cam[CAM_TAN_HALF_FOV]) / W
     keys = np.array([yarn_key(FIBRE_SEED, y) for y in range(len(groups))], np.int64)
     max_depth = int(options["max_depth"])
     integ = BysdfIntegrator(bvh, cv, pieces, types, np.ascontiguousarray(ytypes.yarn_type, np.int32), keys, params,

@@ -54,7 +54,7 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.btf import cell_direction
-from stages.core.dispatch import is_tuple_class
+from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
@@ -140,7 +140,9 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
     cell of light_grid (module doc, "Cell averages"; ``lights_now`` (L, 3) scratch), else v and
     ``light_dirs`` themselves. Compiled without reference counting (its vectors on the machine stack):
     the two workers of ``acquire_texels`` would otherwise count references on the same arrays for every
-    ray."""
+    ray.
+    16 parameters: one (texel, view) job (texel, view and its cell, spp, key), the light set, the grids and four
+    output or scratch arrays; the fabric is one record (``PeriodicPaths``)."""
     W = paths.W
     H = paths.H
     L = light_dirs.shape[0]
@@ -172,7 +174,8 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
                 lights_now[k, 1] = ly
                 lights_now[k, 2] = lz
         rays += 1
-        h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, px, py, paths.z_hi, -vx, -vy, -vz, -1, paths.max_dist)
+        h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, px, py, paths.z_hi, -vx, -vy, -vz, runtime_value(-1),
+                         paths.max_dist)
         if math.isinf(h.t):
             continue
         hits += 1
@@ -212,7 +215,8 @@ def _view_sums(normal, rays):
 @chunk_kernel
 def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, radiance, alpha,
                      normal, rays, j0, j1):
-    """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v)."""
+    """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v).
+    15 parameters: a ``for_chunks`` chunk kernel: the jobs' inputs, the four output arrays and the chunk's range."""
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
     acc = np.empty((L, 3))   # per chunk (as numba's parallel loop hoisted them); texel_view_samples fills them

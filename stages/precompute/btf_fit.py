@@ -185,7 +185,9 @@ def _channel_error(x, K, rs, wv, Tv, views, lp, vp, lz, jac, JTJ, g, Jb, eb, nex
     """E of parameters ``x`` (scaled units) with the table ``Tv`` fixed; with ``jac`` also J^T W J (upper
     triangle) into ``JTJ`` and J^T W e into ``g``. The rows sqrt(w) J and sqrt(w) e go to ``Jb`` (P, M)
     and ``eb`` (M,) first, then the products are dot products over the samples. Returns inf when a
-    lobe overflows."""
+    lobe overflows.
+    15 parameters: the Levenberg-Marquardt residual of ``_fit_texel``: parameters, samples, weights, the table,
+    directions, and the scratch for J^T W J and J^T W e that the iteration reuses."""
     P = 1 + LOBE_PARAMS * K
     L = rs.shape[1]
     for k in range(K):
@@ -531,7 +533,8 @@ def _to_radiance(x, K, s, rho_out, lobes_out, c):
 @njit(cache=True)
 def _fit_texel(smp, alpha, frame, view_dirs, light_dirs, K, threshold, max_rounds, max_iter,
                rho_out, lobes_out, table_out, rmse_out, rmse_nt_out):
-    """Fit one texel (module doc); returns (rounds, converged, LM iterations)."""
+    """Fit one texel (module doc); returns (rounds, converged, LM iterations).
+    14 parameters: one texel's samples, frame, directions and fit settings, and its five outputs."""
     V = smp.shape[0]
     L = smp.shape[1]
     P = 1 + LOBE_PARAMS * K
@@ -665,7 +668,9 @@ def _fit_texel(smp, alpha, frame, view_dirs, light_dirs, K, threshold, max_round
 @chunk_kernel
 def _fit_all(samples, alpha, frames, view_dirs, light_dirs, K, threshold, max_rounds, max_iter,
              rho, lobes, table, rmse, rmse_nt, rounds, converged, iterations, t0, t1):
-    """Texels t0 .. t1 - 1 (``for_chunks``)."""
+    """Texels t0 .. t1 - 1 (``for_chunks``).
+    19 parameters: a ``for_chunks`` chunk kernel: the fit's inputs and settings, its eight output arrays and the
+    chunk's range."""
     for t in range(t0, t1):
         r, ok, n = _fit_texel(samples[t], alpha[t], frames[t], view_dirs, light_dirs, K, threshold, max_rounds,
                            max_iter, rho[t], lobes[t], table[t], rmse[t], rmse_nt[t])

@@ -106,7 +106,7 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from stages.core.dispatch import is_tuple_class
+from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.rng import uniform
 from stages.core.sampling import power_heuristic
 from stages.core.sh import sh_eval
@@ -326,7 +326,9 @@ def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, seed, key, 
     Y_j0(w0) 2 pi with NEE along the path's w0; True: light directions drawn per vertex and BCSDF-sampled
     escapes, power heuristic (``IirtfLight``; the path itself is ``periodic_path``'s). ``Y`` (J,) scratch,
     ``u`` (3, J) output (zeroed here). Random numbers (seed, key, dim0 + 6 per vertex). Returns the number
-    of rays cast."""
+    of rays cast.
+    14 parameters: the path's start (point, skipped fibre, w0, w1), the basis order and estimator, the random
+    stream (seed, key, dim0) and two arrays; the fabric is one record (``PeriodicPaths``)."""
     J = (order + 1) * (order + 1)
     for ch in range(3):
         for j in range(J):
@@ -353,7 +355,9 @@ def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, seed, key, 
 @chunk_kernel
 def _iirtf_cells(paths, cell_offsets, cell_segments, seg_mid, seg_fibre, c0, c1, order, mis, n_paths, seed, a_out,
                  se_out, rays_out, i0, i1):
-    """Cells c0 + i0 .. c0 + i1 - 1 into rows i0 .. i1 - 1 of the outputs (``for_chunks``)."""
+    """Cells c0 + i0 .. c0 + i1 - 1 into rows i0 .. i1 - 1 of the outputs (``for_chunks``).
+    16 parameters: a ``for_chunks`` chunk kernel: the cells' CSR and segments, the estimator's settings, three
+    output arrays and the chunk's range."""
     J = (order + 1) * (order + 1)
     S = np.empty((3, J, J))   # per chunk, zeroed per cell (as numba's parallel loop hoisted them)
     Q = np.empty((3, J, J))
@@ -465,7 +469,9 @@ def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order
 
 @chunk_kernel
 def _free_paths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, seed, max_depth, max_dist, eps, S, Nseg, p0, p1):
-    """Free paths p0 .. p1 - 1 (``for_chunks``)."""
+    """Free paths p0 .. p1 - 1 (``for_chunks``).
+    15 parameters: a ``for_chunks`` chunk kernel: the periodic fabric's parts, the path settings, the output and
+    the chunk's range."""
     for p in range(p0, p1):
         key = MFP_STREAM + p
         t_tan = np.empty(3)
@@ -482,7 +488,7 @@ def _free_paths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, seed, max_depth, max_d
         wo[0] = -r * math.cos(ph)
         wo[1] = -r * math.sin(ph)
         wo[2] = -z
-        h = periodic_hit(sc, z_lo, z_hi, x, y, z_hi, wo[0], wo[1], wo[2], -1, max_dist)
+        h = periodic_hit(sc, z_lo, z_hi, x, y, z_hi, wo[0], wo[1], wo[2], runtime_value(-1), max_dist)
         total = 0.0
         count = 0
         depth = 0

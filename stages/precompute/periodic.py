@@ -60,11 +60,14 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from stages.core.dispatch import runtime_value
 from stages.core.geometry.capsule import INSIDE, capsule_intersect, capsule_normal, point_segment_dist2
 from stages.core.rng import uniform
 from stages.core.sampling import continue_path
 from stages.core.shading.material import material_is_curve, material_prepare
 from stages.core.shell.traversal import flat_segment_hit, flat_segment_occluded
+
+WHOLE_FIBRE = 1 << 30   # a skip window longer than any fibre: ``ign_fiber`` is skipped whole
 
 PeriodicHit = namedtuple("PeriodicHit", ["t", "segment", "fibre", "wrapped", "x", "y", "z", "tx", "ty", "tz",
                                          "fx", "fy", "fz"])
@@ -103,7 +106,8 @@ def periodic_hit(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_dist):
     L = slab_length(oz, dz, z_lo, z_hi, max_dist)
     if L <= 0.0:
         return PeriodicHit(np.inf, -1, -1, -1, ox, oy, oz, 0.0, 0.0, 0.0, ox, oy, oz)
-    t, w, _k, _i, _j, fx, fy, fz = flat_segment_hit(sc, ox, oy, oz, dx, dy, dz, L, ign_fiber, 0, 1 << 30)
+    t, w, _k, _i, _j, fx, fy, fz = flat_segment_hit(sc, ox, oy, oz, dx, dy, dz, L, ign_fiber, runtime_value(0),
+                                                    runtime_value(WHOLE_FIBRE))
     if w < 0:
         return PeriodicHit(np.inf, -1, -1, -1, ox, oy, oz, 0.0, 0.0, 0.0, ox, oy, oz)
     a = sc.seg_a[w]
@@ -127,7 +131,8 @@ def periodic_occluded(sc, z_lo, z_hi, ox, oy, oz, dx, dy, dz, ign_fiber, max_dis
     L = slab_length(oz, dz, z_lo, z_hi, max_dist)
     if L <= 0.0:
         return False
-    return flat_segment_occluded(sc, ox, oy, oz, dx, dy, dz, L, ign_fiber, 0, 1 << 30)
+    return flat_segment_occluded(sc, ox, oy, oz, dx, dy, dz, L, ign_fiber, runtime_value(0),
+                                 runtime_value(WHOLE_FIBRE))
 
 
 @njit(cache=True)

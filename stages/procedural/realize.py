@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
+from stages.core.dispatch import runtime_value
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.core.yarn.model import (
     ALPHA,
@@ -156,7 +157,8 @@ def yarn_counts(tab, c, L, spacing):
     for k in range(P):
         for j in range(N):
             f = fo + k * N + j
-            m = _fiber_pieces(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], L, a0, a1, kind, 0)
+            m = _fiber_pieces(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], L, a0, a1, kind,
+                              runtime_value(0))
             for q in range(m):
                 verts[kind[q]] += max(2, int(math.ceil((a1[q] - a0[q]) / spacing - 1e-9)) + 1)
                 pieces[kind[q]] += 1
@@ -189,7 +191,9 @@ def realize_fill_window(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, 
 
 @chunk_kernel
 def _fill_pieces(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, nfull, offsets, points, radius, q0, q1):
-    """``realize_fill_window`` for pieces q0 .. q1 - 1."""
+    """``realize_fill_window`` for pieces q0 .. q1 - 1.
+    17 parameters: a ``for_chunks`` chunk kernel: the fabric, the pieces' plan (nine arrays), the three output
+    arrays and the chunk's range."""
     for q in range(q0, q1):
         c = yarn[q]
         t = tab.yarn_type[c]

@@ -82,7 +82,9 @@ def _seg_dist(p, a, b):
 @njit(cache=True)
 def query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fiber_index,
               lo, cell, dims, start, items, p, pad):
-    """``ReferenceLookup`` (inside, yarn, kind, dir_x, dir_y, dir_z, surface_gap, kind_tie) for one point."""
+    """``ReferenceLookup`` (inside, yarn, kind, dir_x, dir_y, dir_z, surface_gap, kind_tie) for one point.
+    14 parameters: the realized fibres' arrays and the uniform grid of a brute-force reference built in Python
+    (``RealizedReference``'s fields), and the point."""
     ijk = np.empty(3, np.int64)
     for d in range(3):
         g = int(math.floor((p[d] - lo[d]) / cell))
@@ -139,6 +141,8 @@ def query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fibe
 @njit(cache=True, parallel=True)
 def query_realized(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fiber_index,
                    lo, cell, dims, start, items, pts, pad):
+    """``query_one`` for every point of ``pts`` (N, 3), in parallel. 14 parameters: ``query_one``'s, for an
+    array of points."""
     N = pts.shape[0]
     inside = np.zeros(N, np.bool_)
     yarn = np.full(N, -1, np.int32)

@@ -49,7 +49,9 @@ def new_film(width, height):
 
 @njit(cache=True, inline="always")
 def add_pixel(film, row, col, sr, sg, sb, srr, sgg, sbb, sy, syy, sh, sd, sl, sn):
-    """Store one pixel's sums (the tile loop adds its samples in order, then stores)."""
+    """Store one pixel's sums (the tile loop adds its samples in order, then stores).
+    15 parameters: the film and pixel, then the pixel's twelve running sums, which the tile loop keeps in
+    registers."""
     film[row, col, F_R] = sr
     film[row, col, F_G] = sg
     film[row, col, F_B] = sb

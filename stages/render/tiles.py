@@ -25,14 +25,14 @@ from numba import njit
 
 from stages.core.geometry.stack import stack_vector3
 from stages.core.rng import uniform
-from stages.render.camera import camera_ray_into
+from stages.render.camera import CAM_WIDTH, camera_ray_into
 from stages.render.film import add_pixel
 from stages.render.integrator import radiance
 
 
 @njit(cache=True, inline="always")
 def _render_pixels(integ, cam, seed, stride, first, counts, row0, col0, row1, col1, film, row_off):
-    W = int(cam[13])
+    W = int(cam[CAM_WIDTH])
     o = stack_vector3()   # the camera ray, refilled per sample (integrators may move it along the path)
     d = stack_vector3()
     for row in range(row0, row1):

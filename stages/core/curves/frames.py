@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .spline import coeffs_s, locate, normalize3, segment_arclen_to, wrap_s
+from .spline import coeffs_s, locate, normalize3, point_unit_tangent_s, segment_arclen_to, wrap_s
 
 
 @njit(cache=True)
@@ -78,30 +78,12 @@ def frame_s(cv, c, i, t, s):
     """The RMF at (segment i, t) = arc length s (s already wrapped) as 12 scalars: position, unit
     tangent, normal, binormal (double reflection from the stored sample at or before it, closed
     curves' holonomy spread along the length). Allocation free."""
-    ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = coeffs_s(cv, i)
-    px = ((ax * t + bx) * t + cx) * t + dx
-    py = ((ay * t + by) * t + cy) * t + dy
-    pz = ((az * t + bz) * t + cz) * t + dz
-    tx = (3.0 * ax * t + 2.0 * bx) * t + cx
-    ty = (3.0 * ay * t + 2.0 * by) * t + cy
-    tz = (3.0 * az * t + 2.0 * bz) * t + cz
-    nt = math.sqrt(tx * tx + ty * ty + tz * tz)
-    tx /= nt
-    ty /= nt
-    tz /= nt
+    co = coeffs_s(cv, i)
+    px, py, pz, tx, ty, tz = point_unit_tangent_s(co, t)
     a, j, t0 = _frame_sample_index(cv, c, i, t, s)
     if j != i:
-        ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = coeffs_s(cv, j)
-    x0 = ((ax * t0 + bx) * t0 + cx) * t0 + dx
-    y0 = ((ay * t0 + by) * t0 + cy) * t0 + dy
-    z0 = ((az * t0 + bz) * t0 + cz) * t0 + dz
-    ux = (3.0 * ax * t0 + 2.0 * bx) * t0 + cx
-    uy = (3.0 * ay * t0 + 2.0 * by) * t0 + cy
-    uz = (3.0 * az * t0 + 2.0 * bz) * t0 + cz
-    nu = math.sqrt(ux * ux + uy * uy + uz * uz)
-    ux /= nu
-    uy /= nu
-    uz /= nu
+        co = coeffs_s(cv, j)
+    x0, y0, z0, ux, uy, uz = point_unit_tangent_s(co, t0)
     # double reflection (Wang et al. 2008) of the stored normal r0 from (x0, u) to (p, t)
     rx = cv.frame_normal[a, 0]
     ry = cv.frame_normal[a, 1]

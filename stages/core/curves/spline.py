@@ -74,6 +74,20 @@ def coeffs_s(cv, i):
 
 
 @njit(cache=True)
+def point_unit_tangent_s(co, t):
+    """(x, y, z, tx, ty, tz): the point and unit tangent at t of the segment whose ``coeffs_s`` are ``co``."""
+    ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = co
+    px = ((ax * t + bx) * t + cx) * t + dx
+    py = ((ay * t + by) * t + cy) * t + dy
+    pz = ((az * t + bz) * t + cz) * t + dz
+    tx = (3.0 * ax * t + 2.0 * bx) * t + cx
+    ty = (3.0 * ay * t + 2.0 * by) * t + cy
+    tz = (3.0 * az * t + 2.0 * bz) * t + cz
+    nt = math.sqrt(tx * tx + ty * ty + tz * tz)
+    return px, py, pz, tx / nt, ty / nt, tz / nt
+
+
+@njit(cache=True)
 def _speed_s(ax, ay, az, bx, by, bz, cx, cy, cz, t):
     x = (3.0 * ax * t + 2.0 * bx) * t + cx
     y = (3.0 * ay * t + 2.0 * by) * t + cy

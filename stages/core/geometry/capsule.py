@@ -61,7 +61,9 @@ def _sphere_root(ox, oy, oz, dx, dy, dz, cx, cy, cz, r, sign):
 def _body_root(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r, sign):
     """(t, y, |b - a|^2): the root t (sign -1: near, +1: far) of the infinite cylinder around a -> b
     along the ray from p, and its axial coordinate y (times |b - a|: within the body iff
-    0 < y < |b - a|^2); t = inf, y = -1 when the ray misses or runs parallel to the axis."""
+    0 < y < |b - a|^2); t = inf, y = -1 when the ray misses or runs parallel to the axis.
+    14 parameters: the ray and the capsule's axis as scalars, as ``capsule_intersect`` holds them (its inner
+    arithmetic)."""
     bax = bx - ax
     bay = by - ay
     baz = bz - az
@@ -94,7 +96,8 @@ def _misses_cylinder(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r):
     """True when the ray's line stays farther than r from the axis line a -> b: it then misses the body
     and both end spheres (they lie inside that infinite cylinder). The early rejection of most capsule
     tests in a traversal: ~20 flops and no square root. Never true for a line (nearly) parallel to the
-    axis (``_body_root``'s threshold), whose distance to it is left to the full test."""
+    axis (``_body_root``'s threshold), whose distance to it is left to the full test.
+    13 parameters: the ray and the capsule as scalars, as ``capsule_intersect`` holds them (its early rejection)."""
     bax = bx - ax
     bay = by - ay
     baz = bz - az
@@ -119,7 +122,10 @@ def _misses_cylinder(px, py, pz, dx, dy, dz, ax, ay, az, bx, by, bz, r):
 @njit(cache=True)
 def capsule_intersect(ox, oy, oz, dx, dy, dz, ax, ay, az, bx, by, bz, r, tmin):
     """Distance t > tmin to the first entering hit of the capsule (a, b, r) along unit direction d, or
-    its way out for a ray that starts inside (module doc); inf when none."""
+    its way out for a ray that starts inside (module doc); inf when none.
+    14 parameters: a ray, a capsule (end points, radius) and tmin as scalars: every tree keeps its capsules in a
+    layout of its own (packed rows, wrapped pieces, point arrays), so the innermost test of every walk takes the
+    numbers, not a record."""
     # move the origin next to the segment (t0 is added back at the end)
     mx = 0.5 * (ax + bx)
     my = 0.5 * (ay + by)

@@ -22,6 +22,9 @@ def safe_inverse(d):
 
 @njit(cache=True)
 def slab_enter(lx, ly, lz, hx, hy, hz, ox, oy, oz, ix, iy, iz, tmin, tmax):
+    """Entry distance of the ray (origin o, reciprocal direction i) into the box [l, h] within [tmin, tmax];
+    inf when it misses. 14 parameters: a box (lo, hi), the ray's origin and reciprocal direction and the
+    window, as scalars the walks already hold."""
     t0 = (lx - ox) * ix
     t1 = (hx - ox) * ix
     tn = min(t0, t1)

@@ -61,7 +61,9 @@ def segment_surface_hit(fibres, t, s, ox, oy, oz, dx, dy, dz):
 
 @njit(cache=True, inline="always")
 def capsule_surface_hit(t, s, fiber, r, ax, ay, az, bx, by, bz, ox, oy, oz, dx, dy, dz):
-    """The ``SurfaceHit`` of a ray (o, d) meeting capsule s (a -> b, radius r, of fibre ``fiber``) at t."""
+    """The ``SurfaceHit`` of a ray (o, d) meeting capsule s (a -> b, radius r, of fibre ``fiber``) at t.
+    16 parameters: the hit (t, segment, fibre, radius), the capsule's end points and the ray as scalars: every
+    scene class (BVH, Embree, shell) builds its ``SurfaceHit`` here from numbers it holds in a layout of its own."""
     tl = math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)
     if tl > 0.0:
         tx = (bx - ax) / tl

@@ -45,7 +45,7 @@ import numpy as np
 from numba import njit, prange
 from numba.extending import overload
 
-from stages.core.dispatch import is_tuple_class
+from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.bvh import segment_hit
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.slab import safe_inverse, slab_enter
@@ -177,23 +177,23 @@ def _shell_leaf_test(leaves, j, ray, tmin):
 
 
 @njit(cache=True, _nrt=False)
-def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
-    """Nearest capsule hit (t, segment) with tmin < t < tmax in the wide BVH rooted at ``root`` (ties:
-    lower index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar
-    segment ``ign_seg`` (-1: test everything)."""
-    t, s = wide_nearest(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window),
-                        Ray(ox, oy, oz, dx, dy, dz), tmin, tmin, tmax)
+def fiber_nearest(sc, root, ray, tmin, tmax, ign_fiber, ign_seg, ign_window):
+    """Nearest capsule hit (t, segment) with tmin < t < tmax along ``ray`` (a ``Ray``) in the wide BVH rooted at
+    ``root`` (ties: lower index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of
+    exemplar segment ``ign_seg`` (-1: test everything)."""
+    t, s = wide_nearest(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window), ray, tmin,
+                        tmin, tmax)
     if s < 0:
         return np.inf, -1
     return t, s
 
 
 @njit(cache=True, _nrt=False)
-def fiber_any(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
-    """Is there a capsule hit with tmin < t < tmax in the wide BVH rooted at ``root`` (skips as
+def fiber_any(sc, root, ray, tmin, tmax, ign_fiber, ign_seg, ign_window):
+    """Is there a capsule hit with tmin < t < tmax along ``ray`` in the wide BVH rooted at ``root`` (skips as
     ``fiber_nearest``)? Stops at the first one found: shadow rays need no nearest hit."""
-    return wide_any(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window),
-                    Ray(ox, oy, oz, dx, dy, dz), tmin, tmin, tmax) >= 0
+    return wide_any(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window), ray, tmin, tmin,
+                    tmax) >= 0
 
 
 @njit(cache=True)
@@ -238,13 +238,12 @@ def block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, an
                 ny = sc.ex_nblocks[k, 1]
                 shx = (i - (i % nx)) * bw
                 shy = (j - (j % ny)) * bh
+                ray = Ray(ax - shx, ay - shy, az, ux, uy, uz)
                 if any_hit:
-                    if fiber_any(sc, sc.ex_wide_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1, ign_fiber, ign_seg,
-                                 ign_window):
+                    if fiber_any(sc, sc.ex_wide_root[k], ray, s, s1, ign_fiber, ign_seg, ign_window):
                         return s, 0, k, i, j, 0.0, 0.0, 0.0
                 else:
-                    t, seg = fiber_nearest(sc, sc.ex_wide_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1,
-                                           ign_fiber, ign_seg, ign_window)
+                    t, seg = fiber_nearest(sc, sc.ex_wide_root[k], ray, s, s1, ign_fiber, ign_seg, ign_window)
                     if seg >= 0:
                         return t, seg, k, i, j, ax - shx + t * ux, ay - shy + t * uy, az + t * uz
             s = s1
@@ -277,7 +276,9 @@ def flat_segment_occluded(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign
 def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
     """The general query (see the module doc): a ray starting inside tetrahedron ``start_tet`` (-1: outside
     the shell) at t = tmin; fibre segments of ``ign_fiber`` near ``ign_seg`` skipped. Returns a
-    ``ShellHit``."""
+    ``ShellHit``.
+    13 parameters: the surface-scene interface's (``stages.core.geometry.surface``: scene, start cell, ray, window,
+    skipped fibre, segment and window), shared by every scene class and its callers."""
     zero = (0.0, 0.0, 0.0)
     tcur = tmin
     w2f = sc.w2f
@@ -348,7 +349,8 @@ def shell_trace(sc, start_tet, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ig
 @njit(cache=True)
 def shell_intersect(sc, ox, oy, oz, dx, dy, dz, tmax):
     """Primary rays (origin outside the shell): the ``ShellHit`` of shell_trace from t = 0."""
-    return shell_trace(sc, -1, ox, oy, oz, dx, dy, dz, 0.0, tmax, -1, -1, 0)
+    return shell_trace(sc, runtime_value(-1), ox, oy, oz, dx, dy, dz, 0.0, tmax, runtime_value(-1), runtime_value(-1),
+                       runtime_value(0))
 
 
 @njit(cache=True, parallel=True)
@@ -375,6 +377,8 @@ def trace_primary(sc, cam_o, dirs, tmax):
 # the surface-scene interface (stages.core.geometry.surface) for a ShellScene
 @njit(cache=True)
 def shell_surface_hit(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    """``surface_hit`` for a ``ShellScene``: ``shell_trace``'s hit as a ``SurfaceHit``. 13 parameters: the
+    surface-scene interface's, which it answers for a ``ShellScene``."""
     h = shell_trace(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
     tan = h.tangent
     nrm = h.normal

@@ -159,17 +159,9 @@ def regular_exact(cv, c, tp, yseed, fib, p, z):
 
 
 @njit(cache=True)
-def _hair_model(lf, tp, k, hs, t):
-    x, y, z = _hair_xyz(tp, k, hs, t)
-    return _model_map(lf, x, y, z)
-
-
-@njit(cache=True)
-def hair_closest(lf, tp, k, hs, p, t0):
-    """(model distance, t*) of hair ``hs`` of ply k to p: Gauss-Newton in t over the part of the
-    hair whose z lies in the model window [za, zb]; distance NO_HIT where no part does."""
-    za = lf.za
-    zb = lf.zb
+def hair_window(hs, za, zb):
+    """(ta, tb): the part of hair ``hs`` (z = z1 + t ze, t in [0, 1]) whose z lies in the window [za, zb];
+    empty (ta > tb) where none does."""
     z1 = hs.z1
     ze = hs.ze
     ta = 0.0
@@ -181,7 +173,21 @@ def hair_closest(lf, tp, k, hs, p, t0):
         ta = max(ta, (zb - z1) / ze)
         tb = min(tb, (za - z1) / ze)
     elif z1 < za or z1 > zb:
-        return NO_HIT, 0.0
+        return 1.0, 0.0
+    return ta, tb
+
+
+@njit(cache=True)
+def _hair_model(lf, tp, k, hs, t):
+    x, y, z = _hair_xyz(tp, k, hs, t)
+    return _model_map(lf, x, y, z)
+
+
+@njit(cache=True)
+def hair_closest(lf, tp, k, hs, p, t0):
+    """(model distance, t*) of hair ``hs`` of ply k to p: Gauss-Newton in t over the part of the
+    hair whose z lies in the model window [za, zb]; distance NO_HIT where no part does."""
+    ta, tb = hair_window(hs, lf.za, lf.zb)
     if ta > tb:
         return NO_HIT, 0.0
     t = min(max(t0, ta), tb)
@@ -335,23 +341,10 @@ def hair_closest_s(vis, k, hs, t0, tol):
     the sampled frames, over the part of the hair whose z lies in the visit's window [za, zb]
     (distance NO_HIT where no part does): Gauss-Newton in t with forward differences, until a step
     moves the hair point by less than tol."""
-    za = vis.za
-    zb = vis.zb
-    z1 = hs.z1
-    ze = hs.ze
     px = vis.px
     py = vis.py
     pz = vis.pz
-    ta = 0.0
-    tb = 1.0
-    if ze > 0.0:
-        ta = max(ta, (za - z1) / ze)
-        tb = min(tb, (zb - z1) / ze)
-    elif ze < 0.0:
-        ta = max(ta, (zb - z1) / ze)
-        tb = min(tb, (za - z1) / ze)
-    elif z1 < za or z1 > zb:
-        return NO_HIT, 0.0, 0.0, 0.0, 0.0
+    ta, tb = hair_window(hs, vis.za, vis.zb)
     if ta > tb:
         return NO_HIT, 0.0, 0.0, 0.0, 0.0
     t = min(max(t0, ta), tb)

@@ -19,6 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
+from stages.core.dispatch import runtime_value
 from stages.core.rng import hash_u64, uniform
 from stages.core.yarn.model import CLAMP, STREAM_TREE
 
@@ -187,7 +188,7 @@ def _traverse(L, n_hairs, mu, sig, node_seed, z, margin, prune, out_idx, out_z1,
 @njit(cache=True)
 def active_hairs(L, n_hairs, mu, sig, node_seed, z, margin, out_idx, out_z1, out_ze):
     """Algorithm 3: hairs of one ply active at z (index, z1, ze = z2 - z1); returns how many."""
-    return _traverse(L, n_hairs, mu, sig, node_seed, z, margin, True, out_idx, out_z1, out_ze)
+    return _traverse(L, n_hairs, mu, sig, node_seed, z, margin, runtime_value(True), out_idx, out_z1, out_ze)
 
 
 @njit(cache=True)
@@ -196,7 +197,7 @@ def all_hairs(L, n_hairs, mu, sig, node_seed):
     idx = np.empty(max(n_hairs, 1), np.int64)
     z1 = np.empty(max(n_hairs, 1))
     ze = np.empty(max(n_hairs, 1))
-    n = _traverse(L, n_hairs, mu, sig, node_seed, 0.0, 0.0, False, idx, z1, ze)
+    n = _traverse(L, n_hairs, mu, sig, node_seed, 0.0, 0.0, runtime_value(False), idx, z1, ze)
     o1 = np.empty(n)
     oe = np.empty(n)
     for i in range(n):

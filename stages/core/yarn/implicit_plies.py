@@ -303,7 +303,9 @@ def certified_first_entry(tp, k, ox, oy, oz, dx, dy, dz, u_lo, u_hi, u_c, slope_
     was none), 2: it ran out of steps (u_c kept). u_stop: the march also ends (status 0, u_c returned)
     once it has proved that no entry lies before u_stop (an entry of another ply already known: this
     ply cannot come first); math.inf to march to u_c's neighbourhood or u_hi. (G0, dG0): G and G' at
-    u_lo when the caller has them (``ray_membership``), else NaN."""
+    u_lo when the caller has them (``ray_membership``), else NaN.
+    17 parameters: the ply, the ray and the state of ``ply_hit``'s root finder (bracket, iterate, slope, Lipschitz
+    bound, tolerances), which it keeps as scalars across steps."""
     target = u_c - 2.0 * slope_c / K if u_c >= 0.0 else math.inf
     target = min(target, u_stop)
     a = u_lo

@@ -415,7 +415,9 @@ def lookup_point(cv, tab, px, py, pz, skip=-1):
 def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz, skip_key):
     """yarn_lookup at p's foot point on yarn c between coarse knots ka and kb (frame-sample hint ia,
     Newton from s0); OUTSIDE_KEYED when the foot point is farther than bound. (lookup_point's main
-    visit spells this out: returning the constant from an inlined call costs it ~20 %.)"""
+    visit spells this out: returning the constant from an inlined call costs it ~20 %.)
+    13 parameters: ``yarn_lookup``'s context (curves, tables, yarn, knot range, frame hint, Newton start, distance
+    bound, radius factor), the point and the skip key, as the lookup holds them."""
     fa = tab.kn_idx[ka]
     fb = tab.kn_idx[kb]
     s, i, d2 = foot_point(tab.fs_s, tab.fs_frame, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz,

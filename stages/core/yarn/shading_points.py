@@ -105,7 +105,9 @@ def offset_h(h_lo, h_hi, K, k, jitter):
 @njit(cache=True)
 def offset_points(yt, yarn_key, o, d, h0, h_lo, h_hi, K, jitter, xs, ts, ns, shadow, hit):
     """K near points at offsets h_k in [h_lo, h_hi] (``offset_h``) of the ray (o, d) whose own offset
-    is h0; fills xs, ts, ns (K, 3), shadow (K,), hit (K,) and returns the number of ply hits."""
+    is h0; fills xs, ts, ns (K, 3), shadow (K,), hit (K,) and returns the number of ply hits.
+    14 parameters: the yarn (type, key), the ray and its offset, the offsets' range and jitter, and five output
+    arrays."""
     R = yt.radius
     nh = 0
     for k in range(K):

@@ -86,11 +86,11 @@ def _period_leaf_test(leaves, j, ray, tmin):
 
 
 @njit(cache=True, inline="always")
-def _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny, ox, oy, oz, dx, dy, dz, L):
-    """``periodic_any_hit`` on the exemplar's wide nodes (``box``, ``child``, ``root``) and ``PeriodLeaves``: a DDA
-    over whole periods (bw nx by bh ny), each period's pieces walked by ``wide_walk.wide_any`` with the
-    origin shifted into it. 15 parameters: the ray and the period as scalars, as ``segment_image``'s pixel
-    loop holds them (it reuses ``_piece_hit`` on the pieces this returns)."""
+def _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny, ray, L):
+    """``periodic_any_hit`` of ``ray`` (a ``Ray``) on the exemplar's wide nodes (``box``, ``child``, ``root``) and
+    ``PeriodLeaves``: a DDA over whole periods (bw nx by bh ny), each period's pieces walked by
+    ``wide_walk.wide_any`` with the origin shifted into it."""
+    ox, oy, oz, dx, dy, dz = ray
     ci = int(math.floor(ox / bw)) // nx
     cj = int(math.floor(oy / bh)) // ny
     if dx > 0.0:
@@ -134,7 +134,7 @@ def periodic_any_hit(sc, k, ox, oy, oz, dx, dy, dz, L, ign_fiber):
     whole periods instead of blocks: the same capsules, the same roots)."""
     leaves = PeriodLeaves(sc.points, sc.seg_a, sc.seg_r, sc.seg_srcfiber, sc.fprim, ign_fiber)
     return _periodic_any_hit(sc.fw_box, sc.fw_child, sc.ex_wide_root[k], leaves, sc.block_size[0], sc.block_size[1],
-                             sc.ex_nblocks[k, 0], sc.ex_nblocks[k, 1], ox, oy, oz, dx, dy, dz, L)
+                             sc.ex_nblocks[k, 0], sc.ex_nblocks[k, 1], Ray(ox, oy, oz, dx, dy, dz), L)
 
 
 @njit(cache=True)
@@ -153,7 +153,9 @@ def direction_table(res_theta, res_phi):
 def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist, out, col_cache):
     """Bit-packed visibility image of segment midpoint m (skipping fibre ``fibre``; rays start on the
     surface of ``capsule``, see ``ray_start``) into ``out`` (bytes); ``dirs`` from direction_table;
-    scratch: ``col_cache`` (res_phi, 3) int64."""
+    scratch: ``col_cache`` (res_phi, 3) int64.
+    13 parameters: the scene and exemplar, the segment (midpoint, capsule, fibre), the direction table and
+    max_dist, the output row and a scratch."""
     P, seg_a, seg_r = sc.points, sc.seg_a, sc.seg_r
     box, child = sc.fw_box, sc.fw_child
     leaves = PeriodLeaves(P, seg_a, seg_r, sc.seg_srcfiber, sc.fprim, fibre)
@@ -192,8 +194,8 @@ def segment_image(sc, k, z_lo, z_hi, mx, my, mz, capsule, fibre, dirs, max_dist,
                         blocked = True
                         pp, pi, pj = q, qi, qj
                     else:
-                        q, qi, qj = _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny, ox, oy, oz, dx, dy,
-                                                      dz, L)
+                        q, qi, qj = _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny,
+                                                      Ray(ox, oy, oz, dx, dy, dz), L)
                         if q >= 0:
                             blocked = True
                             pp, pi, pj = q, qi, qj

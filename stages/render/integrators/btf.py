@@ -247,7 +247,9 @@ def texel_f1_rgb(texels, n_lobes, idx, lx, ly, lz, vx, vy, vz):
 
 @njit(cache=True)
 def layer_alpha(it, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, l0, l1, fl):
-    """Coverage of the surface a shadow ray (direction d) hits, for the line along d, at mip (l0, l1, fl)."""
+    """Coverage of the surface a shadow ray (direction d) hits, for the line along d, at mip (l0, l1, fl).
+    14 parameters: the integrator, the triangle hit (triangle, barycentrics, t), the ray and the mip level (two
+    levels and their blend)."""
     f = surface_frame(it.shading, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, 0.0)
     vx, vy, vz = to_local(f, -dx, -dy, -dz)
     i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(it.n_theta, it.n_phi, vx, vy, vz)

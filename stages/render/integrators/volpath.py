@@ -66,10 +66,12 @@ VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "ligh
 @njit(cache=True, _nrt=False)
 def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, index, dim, skip_fibre):
     """Ratio-tracked transmittance toward direction w (an infinitely far light), not counting fibre
-    ``skip_fibre``; the ground occludes."""
+    ``skip_fibre``; the ground occludes.
+    14 parameters: the medium, majorant and ground, the point and the light's direction as scalars, the random
+    stream (seed, index, dim) and the skipped fibre."""
     if ground_intersect(ground, ground_on, pz, wz, 0.0) < np.inf:
         return 0.0, dim, 0
-    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, runtime_value(dim), True,
+    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, runtime_value(dim), runtime_value(True),
                runtime_value(skip_fibre))
     return fl.transmittance, fl.dim, fl.lookups
 
@@ -156,7 +158,7 @@ def trace_path(it, o, d, seed, index):
     skip = np.int64(-1)  # the fibre the ray leaves after a fibre-phase collision (not met again)
     while True:
         tg = ground_intersect(ground, ground_on, oz, dz, 1e-9)
-        fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, runtime_value(dim), False,
+        fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, runtime_value(dim), runtime_value(False),
                    runtime_value(skip))
         rays += 1
         collided = fl.collided
@@ -241,7 +243,7 @@ def trace_path(it, o, d, seed, index):
                 f = phase_eval(S, -dx, -dy, -dz, lw[0], lw[1], lw[2])
                 if f > 0.0:
                     tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
-                                                 seed, index, dim, -1)
+                                                 seed, index, dim, runtime_value(-1))
                     lookups += lk
                     rays += 1
                     if tr > 0.0:
@@ -268,7 +270,7 @@ def trace_path(it, o, d, seed, index):
                 fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
                 if fr > 0.0 or fg > 0.0 or fb > 0.0:
                     tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
-                                                 seed, index, dim, -1)
+                                                 seed, index, dim, runtime_value(-1))
                     lookups += lk
                     rays += 1
                     if tr > 0.0:

@@ -83,7 +83,9 @@ BOX, RASTER = 0, 1  # what a walk does with each capsule
 
 @njit(cache=True, inline="always")
 def _emit(mode, box, mu, lo, cs, half_diag, res, px, py, pz, qx, qy, qz, r, den):
-    """One capsule (segment p-q, radius r, density bound den) of a walk: grow the box, or raster it."""
+    """One capsule (segment p-q, radius r, density bound den) of a walk: grow the box, or raster it.
+    15 parameters: the walk's accumulator (mode, box, grid, origin, cell size, half diagonal, resolution), the
+    capsule and its density bound."""
     if mode == BOX:
         box[0] = min(box[0], px, qx)
         box[1] = min(box[1], py, qy)
@@ -106,7 +108,8 @@ def _fabric_point(tab, lo, hi, i, x, y, z):
 @njit(cache=True)
 def _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, mode, box, mu, glo, cs, half_diag, res):
     """Every capsule of yarn c (module doc: core tube, loop cycles, hybrid-mode hairs; the extent
-    tube in the realization-free hair mode), each handed to _emit. Needs the derived frame samples."""
+    tube in the realization-free hair mode), each handed to _emit. Needs the derived frame samples.
+    13 parameters: the fabric and yarn, the walk's sampling settings and its accumulator (``_emit``'s)."""
     t = tab.yarn_type[c]
     tp = tab.tparams[t]
     den = tp[DENSITY]

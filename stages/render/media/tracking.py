@@ -115,7 +115,9 @@ def cell_half_diagonal(cs):
 
 @njit(cache=True, inline="always")
 def _cell_reached(lo, cs, half_diag, ix, iy, iz, ax, ay, az, bx, by, bz, r):
-    """The capsule a-b of radius r may reach cell (ix, iy, iz): its centre within r + half the diagonal."""
+    """The capsule a-b of radius r may reach cell (ix, iy, iz): its centre within r + half the diagonal.
+    13 parameters: the grid (origin, cell size, half diagonal), the cell and the capsule, as scalars in
+    ``raster_capsule``'s loop."""
     cx = lo[0] + (ix + 0.5) * cs[0]
     cy = lo[1] + (iy + 0.5) * cs[1]
     cz = lo[2] + (iz + 0.5) * cs[2]
@@ -150,7 +152,9 @@ def _dda_axis(o, d, c, cs, tm, n):
 
 @njit(cache=True, inline="always")
 def _dda_step(i, j, l, ti, tj, tl, si, sj, sl, di, dj, dl, ni, nj, nl):
-    """The DDA's next cell across the nearest boundary: (i, j, l, ti, tj, tl, inside the ni x nj x nl cells)."""
+    """The DDA's next cell across the nearest boundary: (i, j, l, ti, tj, tl, inside the ni x nj x nl cells).
+    15 parameters: the DDA's state (cell, next crossings, steps, deltas, sizes per axis), nine scalars it returns
+    updated."""
     if ti <= tj and ti <= tl:
         i += si
         ti += di
@@ -168,7 +172,8 @@ def _dda_step(i, j, l, ti, tj, tl, si, sj, sl, di, dj, dl, ni, nj, nl):
 def raster_capsule(mu, lo, cs, half_diag, res, ax, ay, az, bx, by, bz, r, den):
     """Raise to ``den`` every cell of ``mu`` (cell size cs, origin lo) the capsule a-b of radius r may
     reach: conservative, a cell within r of the segment has its centre within r + half its diagonal
-    (at most one cell looser than exact)."""
+    (at most one cell looser than exact).
+    13 parameters: the grid (array, origin, cell size, half diagonal, resolution), the capsule and its density."""
     x0, x1, y0, y1, z0, z1 = _capsule_cells(lo, cs, res, ax, ay, az, bx, by, bz, r)
     for iz in range(z0, z1 + 1):
         for iy in range(y0, y1 + 1):
@@ -237,7 +242,9 @@ _PASSED, _COLLIDED, _ENDED = 0, 1, 2  # _collide: reached t_exit; a real collisi
 def _collide(med, mu, t, t_exit, ox, oy, oz, dx, dy, dz, T, dim, lookups, seed, index, ratio, skip_fibre):
     """Tentative collisions at rate ``mu`` from t until t_exit (``track``'s inner loop): (state, t, T,
     dim, lookups, point) with state _PASSED (t past t_exit), _COLLIDED (delta tracking, point there)
-    or _ENDED (ratio tracking's Russian roulette)."""
+    or _ENDED (ratio tracking's Russian roulette).
+    17 parameters: ``track``'s inner loop state (majorant, t, exit, ray, transmittance, dim, lookups) and the
+    random stream and mode."""
     while True:
         u = uniform(seed, index, dim)
         dim += 1
@@ -253,7 +260,8 @@ def _collide(med, mu, t, t_exit, ox, oy, oz, dx, dy, dz, T, dim, lookups, seed, 
 @njit(cache=True, inline="always", _nrt=False)
 def _tentative(med, mu, t, ox, oy, oz, dx, dy, dz, T, dim, seed, index, ratio, skip_fibre):
     """One tentative collision at t under majorant mu: (state, T, dim, point), state _PASSED (a null
-    collision: go on), _COLLIDED (delta tracking accepted it) or _ENDED (ratio tracking's roulette)."""
+    collision: go on), _COLLIDED (delta tracking accepted it) or _ENDED (ratio tracking's roulette).
+    15 parameters: ``_collide``'s state for one collision."""
     m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz, skip_fibre)
     st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
     if ratio:
@@ -276,7 +284,9 @@ def _tentative(med, mu, t, ox, oy, oz, dx, dy, dz, T, dim, seed, index, ratio, s
 def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_fibre=-1):
     """Delta tracking (ratio=False) or ratio tracking (ratio=True) along o + t d, t in [0, tmax] through
     every fibre but ``skip_fibre`` (a MediumPoint.fibre, -1 none: ``medium_lookup``'s skip): a ray
-    leaving a fibre that scattered it as a whole does not meet that fibre again."""
+    leaving a fibre that scattered it as a whole does not meet that fibre again.
+    14 parameters: the medium and majorant, the ray and its length, the random stream (seed, index, dim), the mode
+    and the skipped fibre."""
     T = 1.0
     lookups = 0
     t_near, t_far = ray_box(maj.lo, maj.hi, ox, oy, oz, dx, dy, dz)
