@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from numba import njit
 
+from stages.core.dispatch import runtime_value
 from stages.core.rng import uniform
 from stages.core.shading.material import MAT_SIZE
 from stages.core.shading.sggx import fiber_sggx, phase_eval, projected_area
@@ -35,9 +36,11 @@ def _track_many(med, maj, o, d, tmax, n, seed):
     esc = np.empty(n)
     rat = np.empty(n)
     for k in range(n):
-        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed, k, np.int64(0), False, np.int64(-1))
+        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed, k, np.int64(0), runtime_value(False),
+                  np.int64(-1))
         esc[k] = 0.0 if r.collided else 1.0
-        r2 = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed + 1, k, np.int64(0), True, np.int64(-1))
+        r2 = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], tmax, seed + 1, k, np.int64(0), runtime_value(True),
+                   np.int64(-1))
         rat[k] = r2.transmittance
     return esc, rat
 
@@ -91,6 +94,18 @@ def test_transmittance_heterogeneous_grid():
     _check_transmittance(g, maj, o, d, 0.9, math.exp(-tau_half))
 
 
+def test_delta_and_ratio_tracking_share_one_compiled_track():
+    """Issue 55: ``track``'s mode reaches it as a runtime value (``runtime_value``), so delta and ratio
+    tracking through one medium class are one compilation, not one per literal (each 3-4 s on 2 cores)."""
+    g, den, lo, hi = _random_grid(np.random.default_rng(5), (3, 3, 3), 0.3)
+    res = np.array([2, 2, 2])
+    maj = make_majorant_grid(lo, hi, res, majorants_from_voxels(den, lo, hi, res))
+    d = np.array([1.0, 0.2, 0.1]) / math.sqrt(1.05)
+    _track_many(g, maj, np.array([-0.2, 0.3, 0.3]), d, np.inf, 4, 1)
+    grid_typings = [t for t in compiled_typings(track) if t.startswith("(GridMedium(")]
+    assert len(grid_typings) == 1, grid_typings
+
+
 def _refine(den, lo, hi, res, k, which):
     """The grid's majorants with the cells ``which`` (bool nz, ny, nx) refined into k^3 sub-cells whose
     majorants are those of the grid k times finer (``majorants_from_voxels``)."""
@@ -106,8 +121,8 @@ def _refine(den, lo, hi, res, k, which):
 def _tentative(med, maj, o, d, n, seed):
     total = 0
     for k in range(n):
-        total += track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, np.int64(0), True,
-                       np.int64(-1)).lookups
+        total += track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, np.int64(0),
+                       runtime_value(True), np.int64(-1)).lookups
     return total
 
 
