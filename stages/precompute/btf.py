@@ -64,10 +64,10 @@ from stages.precompute.periodic import (
     DIRECTION_DIMS,
     PathScratch,
     PeriodicPaths,
+    light_reaches,
     light_vertex,
     path_escaped,
     periodic_hit,
-    periodic_occluded,
     periodic_path,
 )
 
@@ -87,7 +87,6 @@ def _btf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     lights = tally.lights
     radiance = tally.radiance
     wl = v.wl
-    so = v.so
     tp0, tp1, tp2 = tp
     rays = 0
     for k in range(lights.shape[0]):
@@ -98,8 +97,7 @@ def _btf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
         if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
             continue
         rays += 1
-        if not periodic_occluded(paths.scene, paths.z_lo, paths.z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf,
-                                 paths.max_dist):
+        if light_reaches(paths, v, nf):
             radiance[k, 0] += tp0 * f0
             radiance[k, 1] += tp1 * f1
             radiance[k, 2] += tp2 * f2

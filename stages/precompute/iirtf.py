@@ -116,10 +116,10 @@ from stages.precompute.periodic import (
     DIRECTION_DIMS,
     PathScratch,
     PeriodicPaths,
+    light_reaches,
     light_vertex,
     path_escaped,
     periodic_hit,
-    periodic_occluded,
     periodic_path,
     periodic_scene,
     periodic_vertex,
@@ -281,9 +281,7 @@ def _iirtf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     f0, f1, f2, pf = material_eval_pdf(mat, v.ctx, v.t_tan, v.n, v.wi, wl)
     if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
         return 0
-    so = v.so
-    if not periodic_occluded(paths.scene, paths.z_lo, paths.z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf,
-                             paths.max_dist):
+    if light_reaches(paths, v, nf):
         tp0, tp1, tp2 = tp
         if tally.mis:
             # the power heuristic over P_LIGHT, folded into one division: power_heuristic(P_LIGHT, pf) / P_LIGHT

@@ -253,6 +253,16 @@ def path_escaped(tally, wo, tp, pdf):
     raise TypeError("path_escaped is only callable from numba-compiled code")
 
 
+@njit(cache=True)
+def light_reaches(paths, v, nf):
+    """Does the shadow ray from the vertex (``v.so``) along its light direction ``v.wl``, skipping fibre ``nf``,
+    leave the fabric? The one visibility test of every tally's ``light_vertex``."""
+    so = v.so
+    wl = v.wl
+    return not periodic_occluded(paths.scene, paths.z_lo, paths.z_hi, so[0], so[1], so[2], wl[0], wl[1], wl[2], nf,
+                                 paths.max_dist)
+
+
 DIRECTION_DIMS = 4   # per vertex: three uniforms for the sampled direction, one for Russian roulette
 
 
