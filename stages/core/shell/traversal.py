@@ -177,26 +177,23 @@ def _shell_leaf_test(leaves, j, ray, tmin):
 
 
 @njit(cache=True, _nrt=False)
-def fiber_nearest(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
-    """Nearest capsule hit (t, segment) with tmin < t < tmax in the wide BVH rooted at ``root`` (ties:
-    lower index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of exemplar
-    segment ``ign_seg`` (-1: test everything). 13 parameters: the ray as six scalars, not a ``Ray``: a ``Ray``
-    passed to this query (compiled on its own, not inlined) made fiberpath on the demo's tiling 20 % slower
-    (320 x 240 at 16 spp: 3.6-3.8 s against 3.0 s)."""
-    t, s = wide_nearest(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window),
-                        Ray(ox, oy, oz, dx, dy, dz), tmin, tmin, tmax)
+def fiber_nearest(sc, root, ray, tmin, tmax, ign_fiber, ign_seg, ign_window):
+    """Nearest capsule hit (t, segment) with tmin < t < tmax along ``ray`` (a ``Ray``) in the wide BVH rooted at
+    ``root`` (ties: lower index), skipping segments of exemplar fibre ``ign_fiber`` within ``ign_window`` of
+    exemplar segment ``ign_seg`` (-1: test everything)."""
+    t, s = wide_nearest(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window), ray, tmin,
+                        tmin, tmax)
     if s < 0:
         return np.inf, -1
     return t, s
 
 
 @njit(cache=True, _nrt=False)
-def fiber_any(sc, root, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_seg, ign_window):
-    """Is there a capsule hit with tmin < t < tmax in the wide BVH rooted at ``root`` (skips as
-    ``fiber_nearest``)? Stops at the first one found: shadow rays need no nearest hit. 13 parameters: as
-    ``fiber_nearest``."""
-    return wide_any(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window),
-                    Ray(ox, oy, oz, dx, dy, dz), tmin, tmin, tmax) >= 0
+def fiber_any(sc, root, ray, tmin, tmax, ign_fiber, ign_seg, ign_window):
+    """Is there a capsule hit with tmin < t < tmax along ``ray`` in the wide BVH rooted at ``root`` (skips as
+    ``fiber_nearest``)? Stops at the first one found: shadow rays need no nearest hit."""
+    return wide_any(sc.fw_box, sc.fw_child, root, ShellLeaves(sc, ign_fiber, ign_seg, ign_window), ray, tmin, tmin,
+                    tmax) >= 0
 
 
 @njit(cache=True)
@@ -241,13 +238,12 @@ def block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, an
                 ny = sc.ex_nblocks[k, 1]
                 shx = (i - (i % nx)) * bw
                 shy = (j - (j % ny)) * bh
+                ray = Ray(ax - shx, ay - shy, az, ux, uy, uz)
                 if any_hit:
-                    if fiber_any(sc, sc.ex_wide_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1, ign_fiber, ign_seg,
-                                 ign_window):
+                    if fiber_any(sc, sc.ex_wide_root[k], ray, s, s1, ign_fiber, ign_seg, ign_window):
                         return s, 0, k, i, j, 0.0, 0.0, 0.0
                 else:
-                    t, seg = fiber_nearest(sc, sc.ex_wide_root[k], ax - shx, ay - shy, az, ux, uy, uz, s, s1,
-                                           ign_fiber, ign_seg, ign_window)
+                    t, seg = fiber_nearest(sc, sc.ex_wide_root[k], ray, s, s1, ign_fiber, ign_seg, ign_window)
                     if seg >= 0:
                         return t, seg, k, i, j, ax - shx + t * ux, ay - shy + t * uy, az + t * uz
             s = s1

@@ -61,7 +61,7 @@ import numpy as np
 from numba import njit
 from numba.extending import overload
 
-from stages.core.dispatch import is_tuple_class
+from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.frames import face_towards_into
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import surface_hit
@@ -178,9 +178,7 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
     """Next-event estimation at a yarn vertex from (sx, sy, sz): one sample of each light, MIS-weighted
     against the side's sampling, added to L; returns the rays traced.
     26 parameters: the vertex's random stream, point and skip, the throughput and radiance, and the side's whole
-    shading state (``side_eval_pdf``'s) as ``trace_path`` holds it in its own scratch arrays. ``reflect`` stays a
-    literal: one compilation per side is 6.6 s of compile, and typed as a runtime value the bysdf render was 4 %
-    slower (320 x 240 at 16 spp)."""
+    shading state (``side_eval_pdf``'s) as ``trace_path`` holds it in its own scratch arrays."""
     lights = it.lights.lights
     env = it.lights.env
     marg = it.lights.marginal
@@ -400,8 +398,9 @@ def trace_path(it, o, d, seed, key):
                 side_w = 1.0 / pr
                 x = slot_x[pick]
                 sx, sy, sz = point_from_yarn(fr, x)
-                rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, side_w, prow, True, wi, m,
-                                   slot_t, slot_n, slot_s, no_exit, no_exit, no_exit, 1.0, 1.0, 1.0)
+                rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, side_w, prow,
+                                   runtime_value(True), wi, m, slot_t, slot_n, slot_s, no_exit, no_exit, no_exit, 1.0,
+                                   1.0, 1.0)
                 wv, w0, w1, w2, pf = B.reflect_sample(prow, slot_t[pick], slot_n[pick], wi, slot_s[pick],
                                                       uniform(seed, key, base + D_LOBE),
                                                       uniform(seed, key, base + D_DIR1),
@@ -450,8 +449,8 @@ def trace_path(it, o, d, seed, key):
                 tp[1] *= side_w
                 tp[2] *= side_w
                 sx, sy, sz = point_from_yarn(fr, yq)
-                rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, 1.0, prow, False, wi, m,
-                                   slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y)
+                rays += next_event(it, fr, seed, key, base, sx, sy, sz, c, h.prim, tp, L, 1.0, prow,
+                                   runtime_value(False), wi, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y)
                 wv, w0, w1, w2, pf = B.exit_sample(prow, ty, ny, din, att_s, att_d, s_y,
                                                    uniform(seed, key, base + D_LOBE), uniform(seed, key, base + D_DIR1),
                                                    uniform(seed, key, base + D_DIR2))
