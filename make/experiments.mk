@@ -23,7 +23,7 @@ HUGE_BUDGET ?= $(shell awk '/MemAvailable/ {print int($$2 / 1024 * 0.95)}' /proc
 AGREE ?= out/agreement
 AGREE_ARGS ?= --width 128 --height 96 --spp 64
 
-.PHONY: table1 sweep agreement prt-sweep prt-study btf-sweep
+.PHONY: table1 sweep agreement prt-sweep prt-study btf-sweep albedo-curves gallery
 
 # --- Luan et al. 2017, Table 1 ---
 # woven_large keeps one stored rotation-minimising-frame sample per spline segment (ingest's default is 4):
@@ -147,3 +147,10 @@ $(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/sce
 btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) ## Daubert et al. 2001: fitted textures of the damask's two satins against fiberpath, 12 lights (out/btf)
 	@for s in 41 14; do $(LL) evaluate --sweep data/sweeps/btf_flat$$s.toml -o $(BTF_DIR)/flat$$s || exit 1; done
 	@for s in 41 14; do echo "report: $(BTF_DIR)/flat$$s/report.md"; done
+
+# --- yarn colours (pipeline/dye.py) ---
+albedo-curves: $(VENV)/.installed ## measure the albedo curve of every bundled BCSDF on every bundled yarn -> data/bcsdf/albedo_curves.json
+	$(BIN)/python scripts/albedo_curves.py
+
+gallery: $(VENV)/.installed ## the material chart: every BCSDF preset x four yarn colours, studio-lit, and the colour check under a white sky (out/gallery, docs/img/material_chart.png)
+	$(BIN)/python scripts/colour_chart.py -o out/gallery --docs

@@ -12,6 +12,8 @@ import stages  # noqa: F401  (sets NUMBA_CACHE_DIR, keyed by the kernel sources,
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 os.environ.setdefault("LOOMLIGHT_PROGRESS", "0")  # no bars or compilation notices in captured output
+# albedo curves a test measures (pipeline/dye.py) go to a scratch directory, never the user's ~/.cache
+os.environ.setdefault("LOOMLIGHT_CACHE_DIR", str(ROOT / ".pytest_cache" / "loomlight"))
 
 
 if os.environ.get("LOOMLIGHT_COMPILE_LOG"):   # make compile-report: every compilation, by test file

@@ -111,7 +111,8 @@ YARNS = ArtifactInput("yarns", ("yarns",), "the yarn curves (loomlight ingest)")
 CLI_INPUTS = ("fibers", "tables", "grid")   # the artifact options ``render`` has; others come by --set
 
 _FIBERPATH_SETTINGS = (
-    Setting("tint", "yarn (default): both BCSDF lobe colours times the yarn's colour; none: the presets as fitted",
+    Setting("tint", "yarn (default): the BCSDF dyed so the yarn shows its colour under white diffuse light (C_TT from "
+                          "the yarn's albedo curve, C_R uncoloured; pipeline.dye); none: the presets as tabulated",
             ("yarn", "none")),
     Setting("tiling", "a tiling artifact (same as --fibers TILING.zarr)"),
     Setting("accel", "embree (default): realized fibres traced by Embree 4; bvh: by loomlight's own SAH BVH "
@@ -131,12 +132,12 @@ METHODS = {m.name: m for m in (
         default_source="procedural",
         settings=(Setting("majorant_cell", "majorant grid cell size in scene units (default: a quarter of the "
                                            "mean yarn extent bound)"),
-                  Setting("phase", "bcsdf (default): a collision scatters by the yarn's tinted fibre BCSDF, as "
+                  Setting("phase", "bcsdf (default): a collision scatters by the yarn's dyed fibre BCSDF, as "
                                     "fiberpath's fibres do; microflake: the specular micro-flakes of "
                                     "Luan, Zhao, Bala 2017",
                           ("bcsdf", "microflake")),
                   Setting("albedo", "micro-flakes' single-scattering albedo -- bcsdf (default): each yarn's "
-                                    "tinted BCSDF's mean albedo; color: the yarn's colour itself",
+                                    "dyed BCSDF's mean albedo; color: the yarn's colour itself",
                           ("bcsdf", "color")),
                   Setting("tables", "the tables artifact (same as --tables)"),
                   Setting("grid", "the grid artifact (same as --grid)"))),

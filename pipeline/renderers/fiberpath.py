@@ -12,10 +12,10 @@ scene's ``render.source``, which selects volpath's density source, is ignored. T
 (falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).
 Each yarn's colour (the scene's ``yarns.<group>.color``, else a WIF draft's thread colour, else the
-preset's albedo, as realized into the fibers artifact) tints
-its BCSDF: both lobe colours, C_R inside the Fresnel-like weight and C_TT, are multiplied by it
-(``--set tint=yarn``, the default), so a dyed yarn keeps its colour under a preset fitted to white
-fibres; ``--set tint=none`` renders the presets as fitted. A preset given as a ``.toml`` path in the scene
+preset's albedo, as realized into the fibers artifact) is what the yarn shows under white diffuse light
+(``--set tint=yarn``, the default): its BCSDF is dyed to that colour by the yarn's albedo curve
+(``pipeline.dye``: C_TT per channel, C_R uncoloured); ``--set tint=none`` renders the presets as
+tabulated and ignores the colour. A preset given as a ``.toml`` path in the scene
 is resolved against the scene file.
 On a tiling, each yarn's albedo is the scene's ``yarns.<group>.color``, else its WIF exemplar's draft
 colour, else the yarn preset's (``tiling_fibers``; docs/wif-colours.md).
@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from ..bcsdf_presets import load_bcsdf_preset
+from ..dye import Dyer
 from ..errors import LoomError, unknown
 from ..render_setup import GROUP_NAMES, Fibers, ground_array, load_fibers, pack_lights
 from ..scene import camera_array
@@ -69,7 +70,7 @@ def yarn_groups(yarn_group, n_yarns, names) -> np.ndarray:
 
 
 def yarn_bcsdfs(scene, yarn_group, n_yarns, used_yarns, options, required=True) -> list:
-    """The packed (untinted) BCSDF of every yarn, None where its group names none and not ``required``;
+    """The packed (undyed) BCSDF of every yarn, None where its group names none and not ``required``;
     a used yarn whose group names none is an error when ``required``."""
     names = bcsdf_names(scene, options)
     groups = yarn_groups(yarn_group, n_yarns, names)
@@ -90,13 +91,24 @@ def yarn_bcsdfs(scene, yarn_group, n_yarns, used_yarns, options, required=True) 
     return out
 
 
+def dyed_bcsdfs(scene, options, colours, yarn_group, params) -> list:
+    """Per yarn its BCSDF ``params[y]`` dyed to show colour ``colours[y]`` (``pipeline.dye``) on its group's
+    yarn geometry; None where ``params[y]`` is None. Warns once per group whose colour is out of reach."""
+    names = bcsdf_names(scene, options)
+    groups = yarn_groups(yarn_group, len(params), names)
+    dyer = Dyer(scene)
+    rows = [None if p is None else dyer.row(p, colours[y], GROUP_NAMES[groups[y]], names.get(int(groups[y]), ""))
+            for y, p in enumerate(params)]
+    dyer.report()
+    return rows
+
+
 def fiber_materials(scene, fibers, options):
     """(mat_of_fiber (F,) int32, materials (NM, MAT_SIZE)) for the chosen material model.
 
-    ``bcsdf`` with ``tint=yarn`` (the default): one material per yarn, its group's BCSDF with both lobe
-    colours times the yarn's colour (``stages.core.shading.bcsdf.tint_bcsdf``); ``tint=none``: the
-    presets as fitted, one material per preset. ``lambert``: the yarn's colour as albedo."""
-    from stages.core.shading.bcsdf import tint_bcsdf
+    ``bcsdf`` with ``tint=yarn`` (the default): one material per yarn, its group's BCSDF dyed to show the
+    yarn's colour (``pipeline.dye``: C_TT from the yarn's albedo curve, C_R uncoloured); ``tint=none``: the
+    presets as tabulated, one material per preset. ``lambert``: the yarn's colour as the fibres' albedo."""
     from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
 
     material = options.get("material") or "bcsdf"
@@ -111,8 +123,9 @@ def fiber_materials(scene, fibers, options):
     Y = len(fibers.yarn_albedo)
     params = yarn_bcsdfs(scene, fibers.yarn_group, Y, np.unique(fibers.fiber_yarn), options)
     if tint == "yarn":
-        mats = [pack_material_bcsdf(tint_bcsdf(p, fibers.yarn_albedo[y])) if p is not None
-                else pack_material_lambert(fibers.yarn_albedo[y]) for y, p in enumerate(params)]
+        rows = dyed_bcsdfs(scene, options, fibers.yarn_albedo, fibers.yarn_group, params)
+        mats = [pack_material_bcsdf(q) if q is not None else pack_material_lambert(fibers.yarn_albedo[y])
+                for y, q in enumerate(rows)]
         return fibers.fiber_yarn.astype(np.int32), np.stack(mats)
     index, rows, lut = {}, [], np.zeros(Y, np.int32)
     for y, p in enumerate(params):

@@ -11,11 +11,11 @@ Sources (``--source``, default the scene's ``render.source``, else procedural):
 
 Optics (``FibreOptics``): the volume stands for the fibres a fiberpath render shows. Its density is
 the fibres' projected area per volume (``pipeline.presets``); a collision with a fibre of a yarn
-whose group names a BCSDF (``yarns.<group>.bcsdf`` or ``--bcsdf``) scatters by that BCSDF tinted by
-the yarn's colour, exactly as fiberpath's fibres do (``stages.render.integrators.volpath``, "Fibre phase
-function"); ``--set phase=microflake`` (and every voxel-grid collision) uses seed 000's specular
-micro-flakes instead, with the tinted BCSDF's mean albedo as single-scattering albedo
-(``--set albedo=color``: the yarn's colour itself).
+whose group names a BCSDF (``yarns.<group>.bcsdf`` or ``--bcsdf``) scatters by that BCSDF dyed to
+the yarn's colour (``pipeline.dye``), exactly as fiberpath's fibres do
+(``stages.render.integrators.volpath``, "Fibre phase function"); ``--set phase=microflake`` (and every
+voxel-grid collision) uses seed 000's specular micro-flakes instead, with the dyed BCSDF's mean albedo
+as single-scattering albedo (``--set albedo=color``: the yarn's colour itself).
 
 Scene: camera, lights, ``render.max_depth``, ``render.rr_depth``, ``render.tile_size`` and the
 optional ``render.ground``. ``--set majorant_cell=X`` sets the majorant-grid cell size (scene units;
@@ -227,11 +227,11 @@ def grid_source(grid_path, cell, optics):
 class FibreOptics:
     """How the volume scatters, from the fibres it stands for (``--set phase`` and ``--set albedo``).
 
-    ``rows(colours, groups)`` -> (mats (Y, MAT_SIZE), has (Y,) bool): per yarn its group's BCSDF tinted
-    by its colour (``stages.core.shading.bcsdf.tint_bcsdf``), the fibre phase function of
+    ``rows(colours, groups)`` -> (mats (Y, MAT_SIZE), has (Y,) bool): per yarn its group's BCSDF dyed to
+    its colour (``pipeline.dye``, as fiberpath), the fibre phase function of
     ``stages.render.integrators.volpath``; model -1 (micro-flakes) where the scene names no BCSDF for the group or
-    with ``phase=microflake``. ``albedo(colours, groups)``: the micro-flake albedo, the tinted BCSDF's
-    mean albedo (``bcsdf_mean_albedo``) unless ``albedo=color`` or no BCSDF (then the colour itself).
+    with ``phase=microflake``. ``albedo(colours, groups)``: the micro-flake albedo, the dyed BCSDF's
+    mean albedo (``bcsdf_mean_albedo`` of the dyed BCSDF) unless ``albedo=color`` or no BCSDF (then the colour itself).
     ``groups`` None: the yarns are unknown (voxels): the scene's one BCSDF applies, if it names one."""
 
     def __init__(self, scene, options):
@@ -249,29 +249,48 @@ class FibreOptics:
 
         return yarn_bcsdfs(self.scene, groups, n, np.arange(n), self.options, required=False)
 
+    def _dyed(self, colours, groups):
+        """Per yarn its group's BCSDF dyed to the yarn's colour (``fiberpath.dyed_bcsdfs``), None where the
+        group names no BCSDF; ``groups`` None: every yarn 'other' (the scene's one BCSDF, if it names one)."""
+        from .fiberpath import dyed_bcsdfs
+
+        n = len(colours)
+        return dyed_bcsdfs(self.scene, self.options, colours, groups, self._params(n, groups))
+
     def albedo(self, colours, groups):
-        from stages.core.shading.bcsdf import bcsdf_mean_albedo, tint_bcsdf
+        from stages.core.shading.bcsdf import bcsdf_mean_albedo
 
         colours = np.asarray(colours, np.float64)
         if self.albedo_mode == "color":
             return colours
-        if groups is None:
+        flat = colours.reshape(-1, 3)
+        if groups is None:      # voxels: one BCSDF for all, dyed at once
+            from ..dye import Dyer
+            from .fiberpath import bcsdf_names
+
             p = self._params(1, None)[0]
-            return colours if p is None else bcsdf_mean_albedo(tint_bcsdf(p, colours))
-        return np.stack([c if p is None else bcsdf_mean_albedo(tint_bcsdf(p, c))
-                         for c, p in zip(colours, self._params(len(colours), groups))]).reshape(colours.shape)
+            if p is None:
+                return colours
+            names = bcsdf_names(self.scene, self.options)
+            named = sorted(set(names.values()))
+            name = names.get(3) or (named[0] if len(named) == 1 else "")   # the one yarn_bcsdfs took
+            dyer = Dyer(self.scene)
+            q = dyer.row(p, flat, "other", name)
+            dyer.report()
+            return bcsdf_mean_albedo(q).reshape(colours.shape)
+        rows = self._dyed(flat, groups)
+        return np.stack([c if q is None else bcsdf_mean_albedo(q) for c, q in zip(flat, rows)]).reshape(colours.shape)
 
     def rows(self, colours, groups):
-        from stages.core.shading.bcsdf import tint_bcsdf
         from stages.core.shading.material import MAT_SIZE, pack_material_bcsdf
 
         n = len(colours)
         mats = np.zeros((n, MAT_SIZE))
         mats[:, 0] = -1.0  # micro-flakes
         if self.phase == "bcsdf" and groups is not None:
-            for y, p in enumerate(self._params(n, groups)):
-                if p is not None:
-                    mats[y] = pack_material_bcsdf(tint_bcsdf(p, colours[y]))
+            for y, q in enumerate(self._dyed(np.asarray(colours, np.float64), groups)):
+                if q is not None:
+                    mats[y] = pack_material_bcsdf(q)
         return mats, mats[:, 0] >= 0.0
 
 

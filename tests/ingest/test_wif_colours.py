@@ -198,16 +198,25 @@ def scene_file(tmp_path, name, draft, yarns="", fabric_extra=""):
 RED = [0.7, 0.05, 0.05]
 
 
+def dyed_cotton(cotton, colour):
+    """The cotton BCSDF dyed to ``colour`` on the scenes' yarn (the default preset, cotton1): pipeline.dye."""
+    from pipeline import dye
+    from pipeline.presets import resolve_yarn_types
+
+    refl = dye.preset_reflection("cotton")
+    curve = dye.albedo_curve(cotton, refl, resolve_yarn_types([{}], [0.0])[0])
+    return dye.dyed_bcsdf(cotton, curve.invert(colour)[0], refl)
+
+
 def test_scene_colour_wins_and_every_stage_carries_the_result(tmp_path, cli):
     """Precedence: a scene's yarns.warp.color beats the draft's warp colour; the weft keeps the draft's.
     The yarns artifact records it (source scene / draft); the per-yarn albedo of tables, of realize's
-    fibres, of fiberpath's materials (tinted BCSDF) and of bysdf is exactly that."""
+    fibres, of fiberpath's materials (the BCSDF dyed to it) and of bysdf is exactly that."""
     from pipeline.bcsdf_presets import load_bcsdf_preset
     from pipeline.render_setup import load_fibers
     from pipeline.renderers.bysdf import yarn_setup
     from pipeline.renderers.fiberpath import fiber_materials
     from pipeline.scene import load_scene
-    from stages.core.shading.bcsdf import tint_bcsdf
     from stages.core.shading.material import pack_material_bcsdf
 
     sc = scene_file(tmp_path, "red", "54235plain.wif", yarns=f"[yarns.warp]\ncolor = {RED}\n")
@@ -226,13 +235,14 @@ def test_scene_colour_wins_and_every_stage_carries_the_result(tmp_path, cli):
     # float64 stages: the scene's colour as the scene gives it, the draft's as the yarns artifact stores it
     want64 = np.asarray([RED, RED, want[2], want[3]], np.float64)
     np.testing.assert_array_equal(Artifact(t, kind="tables")["yarn_albedo"], want64)
-    # fiberpath: every fibre's material is its group's BCSDF tinted by its yarn's colour
+    # fiberpath: every fibre's material is its group's BCSDF dyed to its yarn's colour
     fibers = load_fibers(f)
     mof, mats = fiber_materials(load_scene(sc), fibers, {"material": "bcsdf", "extra": {}})
     cotton = load_bcsdf_preset("cotton")
     for yarn in range(4):
         fib = int(np.flatnonzero(fibers.fiber_yarn == yarn)[0])
-        np.testing.assert_array_equal(mats[mof[fib]], pack_material_bcsdf(tint_bcsdf(cotton, want[yarn].astype(float))))
+        np.testing.assert_array_equal(mats[mof[fib]],
+                                      pack_material_bcsdf(dyed_cotton(cotton, want[yarn].astype(float))))
     # bysdf reads the same per-yarn albedo
     np.testing.assert_array_equal(yarn_setup(y)[2].albedo, want64)
 
@@ -279,7 +289,6 @@ def test_tiling_records_draft_colours_and_its_materials_use_them(tmp_path, cli):
     from pipeline.renderers.fiberpath import tiling_fibers
     from pipeline.runners.precompute import tiling_materials
     from pipeline.scene import load_scene
-    from stages.core.shading.bcsdf import tint_bcsdf
     from stages.core.shading.material import pack_material_bcsdf
 
     plain = scene_file(tmp_path, "plain", "54235plain.wif")
@@ -301,7 +310,7 @@ def test_tiling_records_draft_colours_and_its_materials_use_them(tmp_path, cli):
     cotton = load_bcsdf_preset("cotton")
     for yarn in (0, 2, 4):
         f0 = int(np.flatnonzero(fib.fiber_yarn == yarn)[0])
-        np.testing.assert_array_equal(mats[mof[f0]], pack_material_bcsdf(tint_bcsdf(cotton, fib.yarn_albedo[yarn])))
+        np.testing.assert_array_equal(mats[mof[f0]], pack_material_bcsdf(dyed_cotton(cotton, fib.yarn_albedo[yarn])))
     red = scene_file(tmp_path, "red", "54235plain.wif", yarns=f"[yarns.warp]\ncolor = {RED}\n")
     fib = tiling_fibers(load_scene(red), art)
     np.testing.assert_array_equal(fib.yarn_albedo[[0, 1, 4, 5]], np.tile(RED, (4, 1)))   # warp of both exemplars

@@ -2,7 +2,7 @@
 stands for the same fibres (``volpath`` on the realized fibres) agree on a small swatch.
 
 The volume's density and albedo derive from the fibres (``pipeline.presets``: fibre radius from the
-packing fraction, density from the fibre radius, the yarn's tinted BCSDF as phase function), so no
+packing fraction, density from the fibre radius, the yarn's dyed BCSDF as phase function), so no
 constant is tuned here. Reference: the mean intensity of each channel of the two renders agrees
 within 10 % (the issue's tolerance for two different models of one fabric) plus three standard errors
 of the difference, the standard errors from the renders' variance channels (variance of each pixel's
@@ -89,7 +89,7 @@ def test_fiberpath_and_volpath_agree_in_mean_intensity(swatch):   # a long one, 
     fp = fiberpath.render(scene, {**base, "seed": 1, "extra": {}})
     vp = volpath.render(scene, {**base, "seed": 2, "extra": {}})
     assert np.mean(fp.extra["A"]) > 0.99 and np.mean(vp.extra["A"]) > 0.99  # the swatch fills the view
-    assert vp.stats["fibre_phase_yarns"] == 8  # every yarn (4 ends, 4 picks) scatters by its tinted BCSDF
+    assert vp.stats["fibre_phase_yarns"] == 8  # every yarn (4 ends, 4 picks) scatters by its dyed BCSDF
     (m_fp, se_fp), (m_vp, se_vp) = _mean_and_error(fp), _mean_and_error(vp)
     slack = 0.10 * m_vp + 3.0 * np.hypot(se_fp, se_vp)
     assert np.all(np.abs(m_fp - m_vp) <= slack), (m_fp, m_vp, se_fp, se_vp)

@@ -298,7 +298,7 @@ def test_sum_of_sgs_against_monte_carlo(swatch):
     the sum of SGs itself in the integrand. Segments: three per exemplar, drawn among those partly
     visible (30-70 % of the upper hemisphere) and lying in the cloth (|t_z| < 0.5) that receive at least
     20 % of what an unoccluded fibre would (a non-negligible integral). Fibres: fleece (Fig. 10's) and
-    the segment's own (tinted cotton: a 1-degree R lobe).
+    the segment's own (dyed cotton).
 
     Measured on 24 such segments (relative L2 error over the 144 axes; ratio of the sums; median over
     the axes where the reference exceeds a tenth of its maximum of the relative error):

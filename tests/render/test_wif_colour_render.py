@@ -1,7 +1,7 @@
 """A WIF draft's thread colours show in the rendered cloth (issue 54 item 5; docs/wif-colours.md).
 
 Reference: the bundled plain weave ``data/drafts/54235plain.wif`` (green warp 0,102,0, white weft),
-repeated 4 x 4, ingested, realized and rendered by ``fiberpath`` (BCSDF tinted by each yarn's colour)
+repeated 4 x 4, ingested, realized and rendered by ``fiberpath`` (BCSDF dyed to each yarn's colour)
 from straight above. Where the draft's interlacement puts a warp end on top (``stages.core.curves.woven``
 places end e at x_e and pick p at y_p), the pixel over that crossing must be green: its chromaticity
 g / (r + g + b) near 1, since every path that meets a green fibre keeps no red or blue; where the weft is

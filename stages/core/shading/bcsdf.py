@@ -478,18 +478,6 @@ def bcsdf_albedo(p, theta_i):
     return out
 
 
-def tint_bcsdf(p, colour):
-    """The packed BCSDF of a dyed fibre: both lobe colours (C_R inside F_R, and C_TT) multiplied by the
-    fibre's colour. At grazing incidence F_R still tends to 1 (white), as a dielectric's reflection does.
-    ``colour`` may be (..., 3): the result is then (..., BCSDF_SIZE)."""
-    c = np.asarray(colour, np.float64)
-    c = np.broadcast_to(c, c.shape[:-1] + (3,)) if c.ndim else np.full(3, float(c))
-    q = np.array(np.broadcast_to(np.asarray(p, np.float64), c.shape[:-1] + (BCSDF_SIZE,)))
-    q[..., 0:3] *= c
-    q[..., 3:6] *= c
-    return q
-
-
 def _mean_fresnel_tail(nodes=64):
     """cos^2-weighted mean over theta in [-pi/2, pi/2] of (1 - |cos theta|)^5 (Gauss-Legendre)."""
     x, w = np.polynomial.legendre.leggauss(nodes)

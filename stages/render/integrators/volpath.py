@@ -12,9 +12,10 @@ max_depth = 1 shows only directly visible emitters). An optional diffuse ground 
 
 Fibre phase function. A volume that stands for explicit fibres (realized or procedural: the source
 knows the yarn of the covering fibre) can scatter as those fibres do: with ``mats`` holding a
-material row per yarn (``stages.core.shading.material``: the yarn's tinted fibre BCSDF), a collision
-in yarn y is fiberpath's BCSDF vertex -- next-event estimation with S(wi, wl) cos(theta_l), sampling
-by the BCSDF, the sample weight S cos / pdf carrying the fibre's albedo -- at the fibre tangent there.
+material row per yarn (``stages.core.shading.material``: the yarn's fibre BCSDF dyed to its colour by
+``pipeline.dye``), a collision in yarn y is fiberpath's BCSDF vertex -- next-event estimation with
+S(wi, wl) cos(theta_l), sampling by the BCSDF, the sample weight S cos / pdf carrying the fibre's albedo --
+at the fibre tangent there.
 This is the radiative transfer of a cloud of thin opaque fibres: extinction density x projected width
 (den sin(theta_t) with den = 2 / (pi r), the fibres' projected area per volume, ``pipeline.presets``),
 in-scattering sigma_t(wi) int S(wi, wo) cos(theta_o) L(wo) dwo, so volpath is the homogenised limit of

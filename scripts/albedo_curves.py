@@ -1,0 +1,59 @@
+"""Write data/bcsdf/albedo_curves.json: the albedo curve (pipeline/dye.py) of every bundled BCSDF preset on
+every bundled yarn preset, so that renders of bundled data never measure one at run time.
+
+    .venv/bin/python scripts/albedo_curves.py [--check]
+
+``--check`` measures nothing: it exits 1 when a bundled pair has no curve in the file (after a change to
+a preset, to the measurement or to CURVE_VERSION). Run by ``make albedo-curves``: 5-10 s per
+pair on 2 cores, 45 pairs.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def main() -> int:
+    from pipeline import dye
+    from pipeline.bcsdf_presets import bcsdf_presets, load_bcsdf_preset
+    from pipeline.presets import list_presets, resolve_yarn_types
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--check", action="store_true", help="only say whether every bundled pair has its curve")
+    args = ap.parse_args()
+    old = dye._read(dye.BUNDLED_CURVES)
+    new, missing = {}, []
+    for b in bcsdf_presets():
+        p = load_bcsdf_preset(b)
+        refl = dye.preset_reflection(b)
+        for y in list_presets():
+            geo = dye.unit_geometry(resolve_yarn_types([{"preset": y}], [0.0])[0])
+            key = dye.curve_key(p, refl, geo)
+            if key in old:
+                new[key] = old[key]
+                continue
+            missing.append(f"{b} on {y}")
+            if args.check:
+                continue
+            t0 = time.perf_counter()
+            c = dye.measure_curve(p, refl, geo)
+            new[key] = {"x": c.x.tolist(), "albedo": c.albedo.tolist(), "about": {"bcsdf": b, "yarn": y}}
+            print(f"{b:10s} {y:11s} A(0) {c.albedo[0]:.4f}  A(1) {c.albedo[-1]:.4f}  {time.perf_counter() - t0:.1f} s",
+                  flush=True)
+            dye.write_curves(dye.BUNDLED_CURVES, {**old, **new})
+    if args.check:
+        if missing:
+            print(f"{dye.BUNDLED_CURVES}: no curve for {', '.join(missing)}; run make albedo-curves", file=sys.stderr)
+            return 1
+        return 0
+    dye.write_curves(dye.BUNDLED_CURVES, new)      # drops curves of presets that changed
+    print(f"{dye.BUNDLED_CURVES}: {len(new)} curves ({len(missing)} measured)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
