@@ -211,7 +211,7 @@ def measure_curve(p, reflection: float, geometry: dict, rays: int = CURVE_RAYS) 
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.render.integrators.albedo_walk import yarn_albedo
 
-    from .renderers.fiberpath import SELF_WINDOW, ray_eps
+    from .render_setup import SELF_WINDOW, ray_eps
 
     pts, offs, rad = flat_cloth(geometry)
     bvh, _ = build_fiber_bvh(pts, offs, rad)

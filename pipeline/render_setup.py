@@ -19,6 +19,18 @@ from .errors import LoomError
 
 GROUP_NAMES = ("warp", "weft", "knit", "other")
 
+# Rays leaving a BCSDF vertex skip the whole fibre they leave (a window of segments wider than any
+# fibre): the curve BCSDF already integrates over the fibre's cross-section, and a ray that travels
+# inside a straight fibre at a grazing angle would otherwise 'enter' a joint sphere further along it.
+# The cost: a fibre never shadows its own distant turns (other fibres still do).
+SELF_WINDOW = 1 << 40
+
+
+def ray_eps(lo, hi):
+    """Ray offset: 1e-7 of the scene's size (its diagonal plus its largest coordinate)."""
+    lo, hi = np.asarray(lo), np.asarray(hi)
+    return 1e-7 * max(float(np.linalg.norm(hi - lo) + np.abs(np.concatenate([lo, hi])).max()), 1e-12)
+
 
 @dataclass
 class LightSet:

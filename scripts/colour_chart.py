@@ -73,8 +73,7 @@ def walk_mean(scene_path: Path, fibers: Path, bcsdf: str, colour, rays: int) -> 
     analog walk with every fibre's BCSDF dyed to ``colour`` (one yarn type: one row)."""
     from pipeline import dye
     from pipeline.bcsdf_presets import load_bcsdf_preset
-    from pipeline.render_setup import load_fibers
-    from pipeline.renderers.fiberpath import SELF_WINDOW, ray_eps
+    from pipeline.render_setup import SELF_WINDOW, load_fibers, ray_eps
     from pipeline.scene import load_scene
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.render.integrators.albedo_walk import yarn_albedo

@@ -219,7 +219,7 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
     from stages.render.integrators.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator
     from stages.render.lights import DIRECTIONAL
 
-    from .fiberpath import ray_eps
+    from ..render_setup import ray_eps
 
     V, F = geom.vertices, geom.triangles
     mesh = build_triangle_mesh(V, F)

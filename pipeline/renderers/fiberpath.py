@@ -30,15 +30,9 @@ import numpy as np
 from ..bcsdf_presets import load_bcsdf_preset
 from ..dye import Dyer
 from ..errors import LoomError, unknown
-from ..render_setup import GROUP_NAMES, Fibers, ground_array, load_fibers, pack_lights
+from ..render_setup import GROUP_NAMES, SELF_WINDOW, Fibers, ground_array, load_fibers, pack_lights, ray_eps
 from ..scene import camera_array
 from . import RenderResult
-
-# Rays leaving a BCSDF vertex skip the whole fibre they leave (a window of segments wider than any
-# fibre): the curve BCSDF already integrates over the fibre's cross-section, and a ray that travels
-# inside a straight fibre at a grazing angle would otherwise 'enter' a joint sphere further along it.
-# The cost: a fibre never shadows its own distant turns (other fibres still do).
-SELF_WINDOW = 1 << 40
 
 
 def bcsdf_names(scene, options) -> dict:
@@ -174,12 +168,6 @@ def tiling_fibers(scene, art) -> Fibers:
         albedo[here] = np.asarray(art["ex_yarn_color"], float)[here]
     return Fibers(art.path, art["ex_points"], art["ex_radius"], art["ex_offsets"], fy.astype(np.int32),
                   albedo, group)
-
-
-def ray_eps(lo, hi):
-    """Ray offset: 1e-7 of the scene's size (its diagonal plus its largest coordinate)."""
-    lo, hi = np.asarray(lo), np.asarray(hi)
-    return 1e-7 * max(float(np.linalg.norm(hi - lo) + np.abs(np.concatenate([lo, hi])).max()), 1e-12)
 
 
 ACCELS = ("embree", "bvh")

@@ -165,9 +165,8 @@ def film_setup(scene, options: dict):
     from stages.render.film import VARIANCE_CHANNELS
     from stages.render.integrators.prt import PrtIntegrator
 
-    from ..render_setup import ground_array, pack_lights
+    from ..render_setup import ground_array, pack_lights, ray_eps
     from ..scene import camera_array
-    from .fiberpath import ray_eps
     from .film import FilmSetup
 
     extra = options.get("extra") or {}

@@ -15,7 +15,7 @@ import pytest
 from pipeline import dye
 from pipeline.bcsdf_presets import bcsdf_presets, load_bcsdf_preset
 from pipeline.presets import resolve_yarn_types
-from pipeline.renderers.fiberpath import SELF_WINDOW
+from pipeline.render_setup import SELF_WINDOW
 from stages.core.geometry.bvh import build_fiber_bvh
 from stages.core.shading.bcsdf import BCSDF_SIZE, bcsdf_albedo, fresnel_R
 from stages.render.integrators.albedo_walk import yarn_albedo

@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit, prange
 
 from stages.core.geometry.surface import surface_hit
+from stages.core.geometry.wide_walk import Ray
 from stages.core.rng import uniform
 from stages.core.shading.bcsdf import (
     BETA_R,
@@ -70,9 +71,10 @@ def _exact_theta(p, lobe_r, theta_i, seed, key, dim):
 
 
 @njit(cache=True)
-def _walk(scene, p, ox, oy, oz, dx, dy, dz, seed, key, eps, window, max_events):
-    """1.0 when the path escapes, 0.0 when it is absorbed (or meets max_events); -1.0 when the camera ray
-    (o, d) misses the fibres."""
+def _walk(scene, p, camera_ray, seed, key, eps, window, max_events):
+    """1.0 when the path escapes, 0.0 when it is absorbed (or meets max_events); -1.0 when ``camera_ray``
+    (a ``Ray``) misses the fibres."""
+    ox, oy, oz, dx, dy, dz = camera_ray
     ign_f = -1
     ign_s = -1
     dim = 0
@@ -133,8 +135,8 @@ def yarn_albedo(scene, mats, corner, span_u, span_v, direction, n_rays, seed, ep
         oy = corner[1] + u * span_u[1] + v * span_v[1]
         oz = corner[2] + u * span_u[2] + v * span_v[2]
         for k in range(K):
-            s = _walk(scene, mats[k], ox, oy, oz, direction[0], direction[1], direction[2], seed, i * K + k, eps,
-                      window, max_events)
+            s = _walk(scene, mats[k], Ray(ox, oy, oz, direction[0], direction[1], direction[2]), seed, i * K + k,
+                      eps, window, max_events)
             if s < 0.0:
                 break
             met[i] = True
