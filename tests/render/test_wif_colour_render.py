@@ -4,8 +4,9 @@ Reference: the bundled plain weave ``data/drafts/54235plain.wif`` (green warp 0,
 repeated 4 x 4, ingested, realized and rendered by ``fiberpath`` (BCSDF dyed to each yarn's colour)
 from straight above. Where the draft's interlacement puts a warp end on top (``stages.core.curves.woven``
 places end e at x_e and pick p at y_p), the pixel over that crossing must be green: its chromaticity
-g / (r + g + b) near 1, since every path that meets a green fibre keeps no red or blue; where the weft is
-on top, near 1/3 (white fibres, grey light). Dropped colours (every yarn its preset's albedo) or swapped
+g / (r + g + b) well above 1/3 (median > 0.7), since light that passes through a green fibre keeps no red
+or blue -- only the fibres' uncoloured surface reflection (a dielectric's, pipeline/dye.py) is grey; where
+the weft is on top, near 1/3 (white fibres, grey light). Dropped colours (every yarn its preset's albedo) or swapped
 ones fail it.
 """
 from __future__ import annotations
@@ -87,7 +88,7 @@ def test_plain_weave_renders_in_the_drafts_colours(tmp_path, cli):
             chroma[bool(over[e, p])].append(float(np.median(block[:, 1] / s)))
     warp_top, weft_top = np.asarray(chroma[True]), np.asarray(chroma[False])
     assert len(warp_top) >= 8 and len(weft_top) >= 8
-    assert np.all(warp_top > 0.9), warp_top
+    assert np.all(warp_top > 0.4) and np.median(warp_top) > 0.7, warp_top
     # grey light on white fibres (the cotton BCSDF's own lobe colours make it slightly off-grey)
     assert np.all((weft_top > 0.2) & (weft_top < 0.5)), weft_top
     assert abs(float(np.median(weft_top)) - 1 / 3) < 0.03, weft_top

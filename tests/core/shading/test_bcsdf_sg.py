@@ -248,7 +248,11 @@ def gamma_errors(name, lam, fn):
 # lam = 100: 9.1e-3, 2.4e-3, 1.1e-4; lam = 200: 2.4e-3, 4.0e-4, 1.8e-7; lam = 1000: 1.1e-3, 8.3e-5,
 # 8.1e-9 -- the first two at theta_v = 80 deg with the axis 86 deg from the normal plane (the lobe
 # against the pole, where the theta integrand is cut at pi/2).
+# Cotton's broad TT lobe (27 x 38 deg) dominates since its R lobe is a dielectric's 0.047 (issue 52; it was
+# 0.96): away from grazing the 5-node theta rule is then 1.2e-3 / 1.7e-3 / 3.0e-6 off, lam = 100 / 200 / 1000
+# (and 4.6e-3 / 5.8e-4 / 5.6e-4 / 1.3e-4 for the first two bounds at lam = 200 and 1000), its own bounds.
 GAMMA_BOUNDS = {100.0: (1.2e-2, 3e-3, 2e-4), 200.0: (3.5e-3, 6e-4, 1e-6), 1000.0: (1.5e-3, 1.2e-4, 1e-7)}
+GAMMA_BOUNDS_BROAD_TT = {100.0: (1.2e-2, 3e-3, 1.6e-3), 200.0: (6e-3, 8e-4, 2.2e-3), 1000.0: (1.5e-3, 1.8e-4, 4e-6)}
 
 
 @pytest.mark.parametrize("lam", [100.0, 200.0, 1000.0])
@@ -260,7 +264,7 @@ def test_gamma_against_quadrature(name, lam):
     rel, ab, inner, peak = gamma_errors(name, lam, S.bcsdf_sg_gamma)
     print(f"{name} lam={lam:g}: max rel {rel:.2e}, max abs/peak {ab:.2e}, |theta_v| <= 57 deg {inner:.2e}")
     assert peak > 0.0
-    rel_bound, abs_bound, inner_bound = GAMMA_BOUNDS[lam]
+    rel_bound, abs_bound, inner_bound = (GAMMA_BOUNDS_BROAD_TT if name == "cotton" else GAMMA_BOUNDS)[lam]
     assert rel < rel_bound
     assert ab < abs_bound
     assert inner < inner_bound
