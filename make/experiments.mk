@@ -153,4 +153,4 @@ albedo-curves: $(VENV)/.installed ## measure the albedo curve of every bundled B
 	$(BIN)/python scripts/albedo_curves.py
 
 gallery: $(VENV)/.installed ## the material chart: every BCSDF preset x four yarn colours, studio-lit, and the colour check under a white sky (out/gallery, docs/img/material_chart.png)
-	$(BIN)/python scripts/colour_chart.py -o out/gallery --docs
+	$(BIN)/python scripts/colour_chart.py -o out/gallery --spp 256 --docs

@@ -59,6 +59,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.frames import orthonormal_basis
+from stages.core.rng import uniform
 
 # the packed row (pack_bcsdf), slot by slot
 C_R = 0           # R lobe colour, 3 slots
@@ -72,6 +73,9 @@ SQRT2 = math.sqrt(2.0)
 INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 HALF_PI = 0.5 * math.pi
 TWO_PI = 2.0 * math.pi
+EXACT_ACCEPTANCE_MIN = 0.01   # sample theta_o exactly (rejection) where cos^2 accepts >= 1 % (<= 100 tries)
+MAX_REJECTIONS = 2048         # tries of one exact draw; then the last try (a bias below 0.99^2048 = 1e-9)
+U53 = 9007199254740992.0      # 2^53: a uniform's bits as an integer key of the rejection's random numbers
 
 # 24-point Gauss-Legendre nodes/weights on [-1, 1] for G(mu, beta) near the interval ends.
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(24)
@@ -162,6 +166,49 @@ def sample_truncated_gauss(u, mu, beta, a, b):
         z = std_normal_quantile(pa + u * (pb - pa))
     x = mu + beta * z
     return min(max(x, a), b)
+
+
+@njit(cache=True)
+def longitudinal_density(theta_o, mu, beta, exact, inv_norm):
+    """Density in theta of ``sample_longitudinal``: g(theta) cos^2(theta) / G when ``exact``, else
+    g(theta) / Z (``inv_norm`` = 1 / G or 1 / Z, ``sampling_normaliser``)."""
+    d = gauss(theta_o, mu, beta) * inv_norm
+    if exact:
+        c = math.cos(theta_o)
+        d *= c * c
+    return d
+
+
+@njit(cache=True)
+def sampling_normaliser(mu, beta):
+    """(exact, 1 / normaliser) of the longitudinal sampler of a lobe g(theta; mu, beta) on [-pi/2, pi/2]:
+    exact (density g cos^2 / G, the lobe's own M, so the sample weight carries no cos^2 / E[cos^2] ratio)
+    where rejection accepts at least EXACT_ACCEPTANCE_MIN of the Gaussian's draws (G / Z), else the
+    truncated Gaussian itself (g / Z). (False, 0) for a lobe with no mass."""
+    z = gauss_mass(-HALF_PI, HALF_PI, mu, beta)
+    if z <= 0.0:
+        return False, 0.0
+    g = G_norm(mu, beta)
+    if g >= EXACT_ACCEPTANCE_MIN * z:
+        return True, 1.0 / g
+    return False, 1.0 / z
+
+
+@njit(cache=True)
+def sample_longitudinal(u, mu, beta, exact):
+    """theta_o in [-pi/2, pi/2] with density ``longitudinal_density``. Exact: truncated-Gaussian draws
+    kept with probability cos^2(theta); the first draw inverts ``u``, the next ones and the acceptance
+    tests use uniforms hashed from u's bits (``stages.core.rng``), so the result is a function of u."""
+    th = sample_truncated_gauss(u, mu, beta, -HALF_PI, HALF_PI)
+    if not exact:
+        return th
+    key = int(u * U53)
+    for k in range(MAX_REJECTIONS):
+        c = math.cos(th)
+        if uniform(key, k, 0) < c * c:
+            return th
+        th = sample_truncated_gauss(uniform(key, k, 1), mu, beta, -HALF_PI, HALF_PI)
+    return th
 
 
 @njit(cache=True)
@@ -307,15 +354,13 @@ def bcsdf_pdf_angles(p, theta_i, phi_i, theta_o, phi_o):
         return 0.0
     pdf = 0.0
     if pr > 0.0:
-        z = gauss_mass(-HALF_PI, HALF_PI, -theta_i, p[BETA_R])
-        if z > 0.0:
-            pdf += pr * gauss(theta_o, -theta_i, p[BETA_R]) / z / TWO_PI
+        exact, inv = sampling_normaliser(-theta_i, p[BETA_R])
+        pdf += pr * longitudinal_density(theta_o, -theta_i, p[BETA_R], exact, inv) / TWO_PI
     if pr < 1.0:
-        z = gauss_mass(-HALF_PI, HALF_PI, -theta_i, p[BETA_TT])
-        if z > 0.0:
-            phi_d = wrap_pi(phi_o - phi_i - math.pi)
-            pdf += ((1.0 - pr) * gauss(theta_o, -theta_i, p[BETA_TT]) / z
-                    * azimuthal_N_tt(phi_d, p[GAMMA_TT], p[TT_NORM]))
+        exact, inv = sampling_normaliser(-theta_i, p[BETA_TT])
+        phi_d = wrap_pi(phi_o - phi_i - math.pi)
+        pdf += ((1.0 - pr) * longitudinal_density(theta_o, -theta_i, p[BETA_TT], exact, inv)
+                * azimuthal_N_tt(phi_d, p[GAMMA_TT], p[TT_NORM]))
     return pdf / co
 
 
@@ -326,10 +371,19 @@ def bcsdf_sample_angles(p, theta_i, phi_i, u0, u1, u2):
     if pr < 0.0:
         return 0.0, 0.0, False
     if u0 < pr:
-        theta_o = sample_truncated_gauss(u1, -theta_i, p[BETA_R], -HALF_PI, HALF_PI)
+        return _sample_lobe_angles(p, theta_i, phi_i, True, sampling_normaliser(-theta_i, p[BETA_R])[0], u1, u2)
+    return _sample_lobe_angles(p, theta_i, phi_i, False, sampling_normaliser(-theta_i, p[BETA_TT])[0], u1, u2)
+
+
+@njit(cache=True)
+def _sample_lobe_angles(p, theta_i, phi_i, lobe_r, exact, u1, u2):
+    """(theta_o, phi_o, True) from lobe R (``lobe_r``) or TT: theta by ``sample_longitudinal`` (u1),
+    phi uniform (R) or from N_TT (u2)."""
+    if lobe_r:
+        theta_o = sample_longitudinal(u1, -theta_i, p[BETA_R], exact)
         phi_o = wrap_pi(TWO_PI * u2)
     else:
-        theta_o = sample_truncated_gauss(u1, -theta_i, p[BETA_TT], -HALF_PI, HALF_PI)
+        theta_o = sample_longitudinal(u1, -theta_i, p[BETA_TT], exact)
         I = p[TT_NORM]
         if u2 < I:
             phi_d = sample_truncated_gauss(u2 / I, 0.0, p[GAMMA_TT], -math.pi, math.pi)
@@ -381,12 +435,14 @@ CTX_PHI_I = 1     # phi_i
 CTX_F_R = 2       # F_R per channel, 3 slots
 CTX_INV_G_R = 5   # 1 / G_R (the R lobe's longitudinal normaliser)
 CTX_INV_G_TT = 6  # 1 / G_TT
-CTX_INV_Z_R = 7   # 1 / Z_R (the R lobe's sampled-mass normaliser)
-CTX_INV_Z_TT = 8  # 1 / Z_TT
+CTX_INV_Z_R = 7   # the R lobe's sampling normaliser: 1 / G_R when sampled exactly, else 1 / Z_R
+CTX_INV_Z_TT = 8  # the TT lobe's
 CTX_P_R = 9       # P_R, the probability of sampling the R lobe
 CTX_Y = 10        # the fibre frame's y axis, 3 slots
 CTX_Z = 13        # its z axis, 3 slots
-CTX_SIZE = 16
+CTX_EXACT_R = 16  # 1.0 when the R lobe's theta is sampled exactly (``sampling_normaliser``), else 0.0
+CTX_EXACT_TT = 17  # the TT lobe's
+CTX_SIZE = 18
 
 
 @njit(cache=True)
@@ -403,10 +459,12 @@ def bcsdf_context(p, t, wi, ctx):
     ctx[CTX_INV_G_R] = 1.0 / g if g > 0.0 else 0.0
     g = G_norm(-ti, p[BETA_TT])
     ctx[CTX_INV_G_TT] = 1.0 / g if g > 0.0 else 0.0
-    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[BETA_R])
-    ctx[CTX_INV_Z_R] = 1.0 / z if z > 0.0 else 0.0
-    z = gauss_mass(-HALF_PI, HALF_PI, -ti, p[BETA_TT])
-    ctx[CTX_INV_Z_TT] = 1.0 / z if z > 0.0 else 0.0
+    exact, inv = sampling_normaliser(-ti, p[BETA_R])
+    ctx[CTX_INV_Z_R] = inv
+    ctx[CTX_EXACT_R] = 1.0 if exact else 0.0
+    exact, inv = sampling_normaliser(-ti, p[BETA_TT])
+    ctx[CTX_INV_Z_TT] = inv
+    ctx[CTX_EXACT_TT] = 1.0 if exact else 0.0
     ctx[CTX_P_R] = lobe_probability_R(p, ti)
     ctx[CTX_Y] = y0
     ctx[CTX_Y + 1] = y1
@@ -434,7 +492,10 @@ def _eval_pdf_ctx_angles(p, ctx, theta_o, phi_o):
     pr = ctx[CTX_P_R]
     pdf = 0.0
     if pr >= 0.0:
-        pdf = (pr * g_r * ctx[CTX_INV_Z_R] * n_r + (1.0 - pr) * g_tt * ctx[CTX_INV_Z_TT] * n_tt) / co
+        c2 = co * co
+        q_r = g_r * ctx[CTX_INV_Z_R] * (c2 if ctx[CTX_EXACT_R] > 0.0 else 1.0)
+        q_tt = g_tt * ctx[CTX_INV_Z_TT] * (c2 if ctx[CTX_EXACT_TT] > 0.0 else 1.0)
+        pdf = (pr * q_r * n_r + (1.0 - pr) * q_tt * n_tt) / co
     return s0 * co, s1 * co, s2 * co, pdf
 
 
@@ -450,9 +511,12 @@ def bcsdf_eval_pdf_ctx(p, ctx, t, wo):
 @njit(cache=True)
 def bcsdf_sample_ctx(p, ctx, t, u0, u1, u2, wo):
     """Sample into ``wo`` (float64[3]); returns (weight r, g, b = S cos / pdf, pdf), pdf 0 on failure."""
-    to, phi_o, ok = bcsdf_sample_angles(p, ctx[CTX_THETA_I], ctx[CTX_PHI_I], u0, u1, u2)
-    if not ok:
+    pr = ctx[CTX_P_R]
+    if pr < 0.0:
         return 0.0, 0.0, 0.0, 0.0
+    lobe_r = u0 < pr
+    exact = (ctx[CTX_EXACT_R] if lobe_r else ctx[CTX_EXACT_TT]) > 0.0
+    to, phi_o, _ = _sample_lobe_angles(p, ctx[CTX_THETA_I], ctx[CTX_PHI_I], lobe_r, exact, u1, u2)
     st = math.sin(to)
     ct = math.cos(to)
     cp = math.cos(phi_o) * ct
