@@ -13,16 +13,16 @@ of the light (grey materials: one channel), so the walk
 1. absorbs the path with probability 1 - A(theta_i) (analog absorption: no weights);
 2. picks the R lobe with probability F_R / A, else TT;
 3. draws theta_o *exactly* from the lobe's longitudinal density M_p(theta_o) cos^2(theta_o) -- a
-   truncated Gaussian around -theta_i times cos^2 -- by rejection: a truncated-Gaussian sample is kept with
+   truncated Gaussian around -theta_i times cos^2 -- by rejection (as ``bcsdf.sample_longitudinal``, but with
+   no fallback and its own random numbers): a truncated-Gaussian sample is kept with
    probability cos^2(theta_o); phi_o from N_p (uniform for R; the wrapped Gaussian plus floor for TT);
 4. traces on from the hit, skipping the fibre it leaves (as fiberpath does), and scores 1 when it escapes.
 
-Every path scores 0 or 1, so the estimate's standard error is at most 0.5 / sqrt(rays). fiberpath's own
-estimator samples theta_o from the Gaussian without the cos^2 of M_p and carries the ratio
-(weights Z / G cos^2(theta_o), up to ~20 near grazing incidence) through every event; in a dense yarn a
-path meets hundreds of fibres, and those products make its yarn albedo heavy-tailed (0.80-1.14 over
-seeds at 65 k paths for a non-absorbing cotton yarn whose true albedo is 1). Here a non-absorbing material
-scores exactly 1 on every path (the white furnace, ``tests/core/test_dye.py``).
+Every path scores 0 or 1, so the estimate's standard error is at most 0.5 / sqrt(rays), and a non-absorbing
+material scores exactly 1 on every path (the white furnace, ``tests/render/test_yarn_colour.py``). A path
+tracer's estimate of the same quantity carries weights, next-event estimation and roulette through the
+hundreds of fibre events of a path in dense cloth; fiberpath's agrees with this walk since its BCSDF samples
+exactly too (``stages.core.shading.bcsdf``, Sampling), but its variance grows with the path length.
 
 Random numbers: ``uniform(seed, key, dim)`` with key = ray * K + material and dim counting up along the
 walk, so results do not depend on the thread count.
@@ -40,15 +40,12 @@ from stages.core.shading.bcsdf import (
     BETA_TT,
     C_R,
     C_TT,
-    GAMMA_TT,
     HALF_PI,
-    TT_NORM,
-    TWO_PI,
     angles,
     fresnel_R,
     from_angles,
+    sample_azimuth,
     sample_truncated_gauss,
-    wrap_pi,
 )
 
 MAX_REJECTIONS = 1_000_000   # theta_o tries per event (acceptance >= ~3e-4 even for 1-degree lobes at grazing)
@@ -104,16 +101,7 @@ def _walk(scene, p, camera_ray, seed, key, eps, window, max_events):
             return 0.0
         lobe_r = u_lobe * a < f_r
         theta_o, dim = _exact_theta(p, lobe_r, theta_i, seed, key, dim)
-        if lobe_r:
-            phi_o = wrap_pi(TWO_PI * u_phi)
-        else:
-            tt_norm = p[TT_NORM]
-            if u_phi < tt_norm:
-                phi_d = sample_truncated_gauss(u_phi / tt_norm, 0.0, p[GAMMA_TT], -math.pi, math.pi)
-            else:
-                phi_d = TWO_PI * (u_phi - tt_norm) / (1.0 - tt_norm) - math.pi
-            phi_o = wrap_pi(phi_d + phi_i + math.pi)
-        wo = from_angles(t, theta_o, phi_o)
+        wo = from_angles(t, theta_o, sample_azimuth(p, lobe_r, phi_i, u_phi))
         dx, dy, dz = wo[0], wo[1], wo[2]
         ign_f = h.fiber
         ign_s = h.prim
