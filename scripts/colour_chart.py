@@ -23,6 +23,7 @@ Warns (and with ``--strict`` exits 1) when a swatch (the walk) misses its colour
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import shutil
 import subprocess
@@ -69,19 +70,27 @@ def cloth_mean(exr: Path):
     return rgb[cloth].astype(np.float64).mean(axis=0), int(cloth.sum())
 
 
+@functools.lru_cache(maxsize=1)
+def _fibre_scene(fibers: str):
+    """(Fibers, FiberBVH) of a fibers artifact, built once for the presets that share one colour's fibres."""
+    from pipeline.render_setup import load_fibers
+    from stages.core.geometry.bvh import build_fiber_bvh
+
+    f = load_fibers(fibers)
+    return f, build_fiber_bvh(f.points, f.fiber_offsets, f.point_radius)[0]
+
+
 def walk_mean(scene_path: Path, fibers: Path, bcsdf: str, colour, rays: int) -> list:
     """The converged mean colour of the swatch's middle under the white sky (module doc): per channel, the
     analog walk with every fibre's BCSDF dyed to ``colour`` (one yarn type: one row)."""
     from pipeline import dye
     from pipeline.bcsdf_presets import load_bcsdf_preset
-    from pipeline.render_setup import SELF_WINDOW, load_fibers, ray_eps
+    from pipeline.render_setup import SELF_WINDOW, ray_eps
     from pipeline.scene import load_scene
-    from stages.core.geometry.bvh import build_fiber_bvh
     from stages.render.integrators.albedo_walk import yarn_albedo
 
     scene = load_scene(scene_path)
-    f = load_fibers(fibers)
-    bvh, _ = build_fiber_bvh(f.points, f.fiber_offsets, f.point_radius)
+    f, bvh = _fibre_scene(str(fibers))
     p = load_bcsdf_preset(bcsdf)
     row = dye.Dyer(scene).row(p, np.asarray(colour, np.float64), "default", bcsdf)
     mats = dye.dyed_bcsdf(p, np.repeat(row[3:6, None], 3, axis=1), row[0])
