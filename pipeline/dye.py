@@ -169,13 +169,11 @@ def curve_key(p, reflection: float, geometry: dict) -> str:
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
 
 
-def flat_cloth(geometry: dict):
-    """(points, offsets, radii) of the canonical cloth of a yarn of radius 1 (module doc): two crossed layers
-    of ``CLOTH_YARNS`` straight parallel yarns, ``CLOTH_SPACING`` apart, along x at z = +1 and along y at
-    z = -1 (the layers touch), realized by the procedural model."""
+def flat_cloth_curves(geometry: dict):
+    """(Curves, packed yarn type (1, P)) of the canonical cloth of a yarn of radius 1 (module doc): two crossed
+    layers of ``CLOTH_YARNS`` straight parallel yarns, ``CLOTH_SPACING`` apart, along x at z = +1 and along y
+    at z = -1 (the layers touch), every yarn of the one type ``geometry``."""
     from stages.ingest.spline_process import curves_from_arrays, process_curves
-    from stages.procedural.realize import realize_fill, realize_plan
-    from stages.procedural.tables import build_tables
 
     from .presets import DEFAULT_PRESET, DEFAULTS, load_preset, pack
 
@@ -194,7 +192,18 @@ def flat_cloth(geometry: dict):
     closed = np.zeros(Y, bool)
     rad = np.ones(Y)
     cv = curves_from_arrays(pts, off, closed, rad, process_curves(pts, off, closed, rad))
-    tab, _ = build_tables(cv, pack(dict(geometry))[None, :], np.zeros(Y, np.int32), np.ones((Y, 3)), CURVE_SEED)
+    return cv, pack(dict(geometry))[None, :]
+
+
+def flat_cloth(geometry: dict):
+    """(points, offsets, radii) of the fibres of the canonical cloth (``flat_cloth_curves``), realized by the
+    procedural model."""
+    from stages.procedural.realize import realize_fill, realize_plan
+    from stages.procedural.tables import build_tables
+
+    cv, tparams = flat_cloth_curves(geometry)
+    Y = len(cv.offsets) - 1
+    tab, _ = build_tables(cv, tparams, np.zeros(Y, np.int32), np.ones((Y, 3)), CURVE_SEED)
     yarn, ply, idx, kind, a0, a1, hz1, hze, nv = realize_plan(tab, cv.curve_length, CURVE_SPACING)
     offsets = np.zeros(len(nv) + 1, np.int64)
     np.cumsum(nv, out=offsets[1:])
@@ -248,12 +257,9 @@ def write_curves(path: Path, curves: dict) -> None:
 _MEMO: dict = {}
 
 
-def albedo_curve(p, reflection: float, preset: dict, about: dict | None = None) -> AlbedoCurve:
-    """The albedo curve of BCSDF ``p`` with surface reflection ``reflection`` on yarn ``preset`` (a resolved
-    preset dict): memoised, then the bundled file, then the user cache, else measured (and kept in the user
-    cache)."""
-    geometry = unit_geometry(preset)
-    key = curve_key(p, reflection, geometry)
+def stored_curve(key: str, measure, about: dict | None = None) -> AlbedoCurve:
+    """The albedo curve of ``key``: memoised, then the bundled file, then the user cache, else ``measure()``
+    (an ``AlbedoCurve``; kept in the user cache). ``about`` names it in the files and the progress line."""
     if key in _MEMO:
         return _MEMO[key]
     entry = _read(BUNDLED_CURVES).get(key) or _read(user_cache()).get(key)
@@ -262,7 +268,7 @@ def albedo_curve(p, reflection: float, preset: dict, about: dict | None = None) 
         from .progress import begin, end
         w = begin(f"albedo curve of {what} (once; kept in {user_cache()})")
         try:
-            c = measure_curve(p, reflection, geometry)
+            c = measure()
         finally:
             end(w)
         entry = {"x": c.x.tolist(), "albedo": c.albedo.tolist(), "about": about or {}}
@@ -275,6 +281,13 @@ def albedo_curve(p, reflection: float, preset: dict, about: dict | None = None) 
     curve = AlbedoCurve(np.asarray(entry["x"], np.float64), np.asarray(entry["albedo"], np.float64))
     _MEMO[key] = curve
     return curve
+
+
+def albedo_curve(p, reflection: float, preset: dict, about: dict | None = None) -> AlbedoCurve:
+    """The albedo curve of BCSDF ``p`` with surface reflection ``reflection`` on yarn ``preset`` (a resolved
+    preset dict), through ``stored_curve``."""
+    geometry = unit_geometry(preset)
+    return stored_curve(curve_key(p, reflection, geometry), lambda: measure_curve(p, reflection, geometry), about)
 
 
 class Dyer:

@@ -1,11 +1,12 @@
 """Write data/bcsdf/albedo_curves.json: the albedo curve (pipeline/dye.py) of every bundled BCSDF preset on
-every bundled yarn preset, so that renders of bundled data never measure one at run time.
+every bundled yarn preset, and bysdf's colour curve (pipeline/renderers/bysdf.py) of every bundled yarn
+preset with its default material, so that renders of bundled data never measure one at run time.
 
     .venv/bin/python scripts/albedo_curves.py [--check]
 
 ``--check`` measures nothing: it exits 1 when a bundled pair has no curve in the file (after a change to
 a preset, to the measurement or to CURVE_VERSION). Run by ``make albedo-curves``: 5-10 s per
-pair on 2 cores, 45 pairs.
+pair on 2 cores, 45 pairs, and ~10 s per bysdf curve, 9 yarns.
 """
 from __future__ import annotations
 
@@ -45,6 +46,24 @@ def main() -> int:
             print(f"{b:10s} {y:11s} A(0) {c.albedo[0]:.4f}  A(1) {c.albedo[-1]:.4f}  {time.perf_counter() - t0:.1f} s",
                   flush=True)
             dye.write_curves(dye.BUNDLED_CURVES, {**old, **new})
+    from pipeline.renderers import bysdf
+
+    for y in list_presets():
+        geo = resolve_yarn_types([{"preset": y}], [0.0])[0]
+        material, model = dict(bysdf.MATERIAL_DEFAULTS), bysdf.YarnModel()
+        key = bysdf.colour_curve_key(material, geo, model)
+        if key in old:
+            new[key] = old[key]
+            continue
+        missing.append(f"bysdf on {y}")
+        if args.check:
+            continue
+        t0 = time.perf_counter()
+        c = bysdf.measure_colour_curve(material, geo, model)
+        new[key] = {"x": c.x.tolist(), "albedo": c.albedo.tolist(), "about": {"method": "bysdf", "yarn": y}}
+        print(f"bysdf      {y:11s} A(0) {c.albedo[0]:.4f}  A(1) {c.albedo[-1]:.4f}  {time.perf_counter() - t0:.1f} s",
+              flush=True)
+        dye.write_curves(dye.BUNDLED_CURVES, {**old, **new})
     if args.check:
         if missing:
             print(f"{dye.BUNDLED_CURVES}: no curve for {', '.join(missing)}; run make albedo-curves", file=sys.stderr)

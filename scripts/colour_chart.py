@@ -15,7 +15,7 @@ Every BCSDF preset x four yarn colours (white, red, blue, black) on the standard
   ``OUT/colours.md``.
 
     .venv/bin/python scripts/colour_chart.py -o out/gallery [--presets cotton,silk] [--colours red,black]
-        [--spp 64] [--sky-spp 256] [--docs]
+        [--spp 64] [--sky-spp 256] [--docs] [--keep]
 
 Warns (and with ``--strict`` exits 1) when a swatch (the walk) misses its colour by more than
 ``--tolerance`` (default 5) ΔE2000. ``--chart-only`` renders the chart alone.
@@ -153,6 +153,8 @@ def main() -> int:
     ap.add_argument("--strict", action="store_true", help="exit 1 when a swatch misses by more than --tolerance")
     ap.add_argument("--chart-only", action="store_true", help="render the chart only (no colour check)")
     ap.add_argument("--docs", action="store_true", help="copy the chart to docs/img/material_chart.png")
+    ap.add_argument("--keep", action="store_true",
+                    help="reuse the artifacts and renders already in OUT (delete a method's EXRs to render it again)")
     args = ap.parse_args()
     presets = [p for p in args.presets.split(",") if p]
     colours = [c for c in args.colours.split(",") if c]
@@ -165,14 +167,16 @@ def main() -> int:
         base = out / f"swatch_{c}.toml"
         base.write_text(scene_text(col, presets[0], sky=False))
         yarns, fibers = out / f"yarns_{c}.zarr", out / f"fibers_{c}.zarr"
-        loomlight("ingest", base, "-o", yarns)
-        loomlight("realize", yarns, "-o", fibers)
+        if not (args.keep and yarns.exists() and fibers.exists()):
+            loomlight("ingest", base, "-o", yarns)
+            loomlight("realize", yarns, "-o", fibers)
         for b in presets:
             studio, sky = out / f"studio_{b}_{c}.toml", out / f"sky_{b}_{c}.toml"
             studio.write_text(scene_text(col, b, sky=False))
             sky.write_text(scene_text(col, b, sky=True))
-            loomlight("render", studio, "--method", "fiberpath", "--fibers", fibers, "--spp", args.spp,
-                      "-o", out / f"chart_{b}_{c}.exr")
+            if not (args.keep and (out / f"chart_{b}_{c}.exr").exists()):
+                loomlight("render", studio, "--method", "fiberpath", "--fibers", fibers, "--spp", args.spp,
+                          "-o", out / f"chart_{b}_{c}.exr")
             tiles[(b, c)] = out / f"chart_{b}_{c}.png"
             if args.chart_only:
                 continue
@@ -180,10 +184,12 @@ def main() -> int:
             walk = walk_mean(sky, fibers, b, col, WALK_RAYS)
             row["walk"] = {"mean": walk, "delta_e_requested": round(delta_e(walk, col), 2)}
             for m in methods:
-                exr = out / f"sky_{m}_{b}_{c}.exr"
+                # bysdf does not read the BCSDF preset: one render per colour serves every preset's row
+                exr = out / (f"sky_bysdf_{c}.exr" if m == "bysdf" else f"sky_{m}_{b}_{c}.exr")
                 extra = {"fiberpath": ["--fibers", fibers], "bysdf": ["--set", f"yarns={yarns}"],
                          "volpath": ["--source", "realized", "--fibers", fibers]}[m]
-                loomlight("render", sky, "--method", m, *extra, "--spp", args.sky_spp, "-o", exr)
+                if not (args.keep and exr.exists()):
+                    loomlight("render", sky, "--method", m, *extra, "--spp", args.sky_spp, "-o", exr)
                 mean, n = cloth_mean(exr)
                 row[m] = {"mean": [round(float(v), 4) for v in mean], "pixels": n}
             for m in methods:

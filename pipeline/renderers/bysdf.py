@@ -31,16 +31,36 @@ Settings (``--set KEY=VALUE``):
   0.6, the reference implementation's; 1 turns that shadowing off).
 
 BYSDF parameters of a yarn group: the defaults of ``stages.core.shading.bysdf.pack_bysdf`` (the
-reference implementation's example values) with the body colours set from the yarn's colour (the
-reflection side's ``body_r`` is the reduced albedo a' whose diffuse reflectance R_d(a') is the colour,
-``reduced_albedo``; the transmission side's ``body_t`` the colour itself) and the attenuations per yarn
-radius (``SCALE_DEFAULTS``), then the scene's ``[yarns.<group>.bysdf]`` table, then ``--set params=``. The
-scene's ``render.max_depth`` applies; this method's own default is 4, as the reference implementation's.
+reference implementation's example values) with the grey absorbers off (``MATERIAL_DEFAULTS``), then the
+scene's ``[yarns.<group>.bysdf]`` table, then the body colours from the yarn's colour by the colour curve,
+then ``--set params=``. The scene's ``render.max_depth`` applies; this method's own default is 4, as the
+reference implementation's.
+
+Colour
+------
+A yarn's ``color`` means what it means to every method (``pipeline.dye``): what a dense flat cloth of the
+yarn shows under white diffuse light. Here it sets the body colours: per channel a body colour x gives
+``body_r`` = the reduced albedo a' whose diffuse reflectance R_d(a') is x (``reduced_albedo``) and ``body_t``
+= x, which also filters the specular path through the yarn (``stages.core.shading.bysdf``, the model). The
+colour curve A(x) is what the canonical cloth of ``pipeline.dye`` shows, rendered by this method, for body
+colour x (``measure_colour_curve``, 16 nodes, three per render, ~1 s each); a colour c gets x = A^-1(c) per
+channel, interpolated as the fibre methods' curves are. The dye is then the yarn's only absorber: the
+reference's example absorbers (Beer-Lambert ``sigma_spec`` 5.5 and ``sigma_body`` 0.1 per unit length at its
+yarn radius 2, exit transmittance ``kt_exit`` 0.1) would hold a white cotton cloth at 0.15, and the
+single-scattering Lommel-Seeliger share of the body reflection (``ls_mix``) at 0.74, so the defaults are
+``MATERIAL_DEFAULTS`` (none of them, the diffusion term alone: the white furnace's material). A scene that
+sets them keeps them, and its curve is measured with them (colours above its A(1) are rendered at A(1)).
+The shadowing tables (``fibre_threshold``, ``ply_threshold``) are part of the curve's key; the curve is
+measured in ``near`` mode and serves ``far`` and ``multiscale`` too. Curves of the bundled yarn presets with
+the default material are in ``data/bcsdf/albedo_curves.json`` (``make albedo-curves``), others measured on
+first use into the user cache. ``fit-bysdf``'s parameters (``--set params=``) apply on top of the colour's
+body colours and are not part of the curve.
 """
 from __future__ import annotations
 
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -53,8 +73,8 @@ DEFAULT_K = 16
 DEFAULT_DEPTH = 4
 DEFAULT_FALLOFF = 40.0   # multiscale weights exp(-falloff |x_k - x_0| / R): the reference's exp(-20 |dx|) at radius 2
 GROUPS = ("warp", "weft", "knit", "other")
-# attenuation per yarn radius: the reference implementation's 5.5 and 0.1 per unit length at its yarn radius 2
-SCALE_DEFAULTS = {"sigma_spec": 11.0, "sigma_body": 0.2}
+# the grey absorbers off: the yarn's colour is its only absorber (module doc, Colour)
+MATERIAL_DEFAULTS = {"sigma_spec": 0.0, "sigma_body": 0.0, "kt_exit": 1.0, "ls_mix": 0.0}
 FIBRE_SEED = 0   # realize's and tables' default --seed
 
 
@@ -115,19 +135,52 @@ def _colour_scale(v, where, key) -> np.ndarray:
     return c
 
 
+class YarnModel(NamedTuple):
+    """How the yarn model is rendered (``--set`` settings, module doc): the integrator's mode index, K and
+    falloff, and the implicit plies' search (tolerance, iteration cap, thresholds, search name)."""
+    mode: int = 0
+    K: int = DEFAULT_K
+    falloff: float = DEFAULT_FALLOFF
+    tol: float = 1e-3
+    max_iter: int = 10
+    fibre_threshold: float = 0.5
+    ply_threshold: float = 0.6
+    search: str = "march"
+
+
+def yarn_model(extra: dict) -> YarnModel:
+    """The ``YarnModel`` of the ``--set`` settings (module doc), each checked."""
+    mode = extra.get("mode", "near")
+    if mode not in MODES:
+        raise LoomError(None, "--set mode", unknown("bysdf mode", mode, MODES))
+    search = extra.get("ply_search", "march")
+    if search not in PLY_SEARCHES:
+        raise LoomError(None, "--set ply_search", unknown("ply search", search, PLY_SEARCHES))
+    return YarnModel(MODES.index(mode), int(_number(extra, "k", DEFAULT_K, int, 1, 256)),
+                     _number(extra, "falloff", DEFAULT_FALLOFF, float, 0.0, 1e6),
+                     _number(extra, "ply_tol", 1e-3, float, 1e-9, 0.5),
+                     int(_number(extra, "ply_iter", 10, int, 3, 100)),
+                     _number(extra, "fibre_threshold", 0.5, float, 0.0, 1.0),
+                     _number(extra, "ply_threshold", 0.6, float, 0.0, 1.0), search)
+
+
 def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
-    """(Y, BYSDF_SIZE) packed BYSDF of every yarn: defaults, body colours from the yarn's colour, the
-    scene's ``[yarns.<group>.bysdf]``, then ``--set params=`` (or ``fitted``, the same {group: {name:
-    value}} as that file). ``body_r_scale`` / ``body_t_scale`` (three factors, or one) multiply the yarn's
-    colour per channel before it becomes the body colours (clipped to 1; the reflection side's through
-    ``reduced_albedo``): the per-channel freedom ``fit-bysdf`` fits. A ``body_r`` / ``body_t`` given
-    explicitly replaces the colour-derived one."""
+    """(Y, BYSDF_SIZE) packed BYSDF of every yarn: the yarn group's declared material (``MATERIAL_DEFAULTS``
+    and the scene's ``[yarns.<group>.bysdf]``), its body colour from the yarn's colour by the colour curve
+    (``colour_curve``: the convention of ``pipeline.dye``), then ``--set params=`` (or ``fitted``, the same
+    {group: {name: value}} as that file). ``body_r_scale`` / ``body_t_scale`` (three factors, or one)
+    multiply the body colour per channel (clipped to 1): the per-channel freedom ``fit-bysdf`` fits. A
+    ``body_r`` / ``body_t`` given explicitly replaces the colour-derived one."""
     from stages.core.shading.bysdf import pack_bysdf
+
+    from ..dye import Dyer
 
     extra = options.get("extra") or {}
     if fitted is None:
         fitted = read_params_file(extra["params"]) if extra.get("params") else {}
     where = extra.get("params") or scene.path
+    model = yarn_model(extra)
+    dyer = Dyer(scene)
     rows = []
     cache = {}
     for y in range(len(groups)):
@@ -135,20 +188,121 @@ def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
         key = (g, tuple(np.round(albedo[y], 12)))
         if key not in cache:
             place = f"yarns.{g}.bysdf"
-            kw = dict(scene.yarn_type(g).get("bysdf") or {})
+            declared = {**MATERIAL_DEFAULTS, **(scene.yarn_type(g).get("bysdf") or {})}
+            kw = dict(declared)
             for tab_name in ("default", g):
                 kw.update(fitted.get(tab_name, {}))
             scale = {k: _colour_scale(kw.pop(k), where, f"{place}.{k}") if k in kw else np.ones(3)
                      for k in COLOUR_SCALES}
-            colour_r = np.clip(np.asarray(albedo[y], float) * scale["body_r_scale"], 0.0, 1.0)
-            colour_t = np.clip(np.asarray(albedo[y], float) * scale["body_t_scale"], 0.0, 1.0)
-            kw = {"body_r": tuple(reduced_albedo(colour_r)), "body_t": tuple(colour_t), **SCALE_DEFAULTS, **kw}
+            material = {k: v for k, v in declared.items() if k not in COLOUR_SCALES}
+            body = np.asarray(albedo[y], float)
+            if not ("body_r" in material and "body_t" in material):
+                try:
+                    curve = colour_curve(material, dyer.geometry(g), model, g)
+                except (TypeError, ValueError) as e:
+                    raise LoomError(scene.path, place, str(e)) from None
+                body, reach = curve.invert(body)
+                if not np.all(reach):
+                    dyer.unreachable.setdefault(("bysdf", g), float(curve.albedo[0]))
+            colour_r = np.clip(body * scale["body_r_scale"], 0.0, 1.0)
+            colour_t = np.clip(body * scale["body_t_scale"], 0.0, 1.0)
+            kw = {"body_r": tuple(reduced_albedo(colour_r)), "body_t": tuple(colour_t), **kw}
             try:
                 cache[key] = pack_bysdf(**kw)
             except (TypeError, ValueError) as e:
                 raise LoomError(where, place, str(e)) from None
         rows.append(cache[key])
+    dyer.report()
     return np.ascontiguousarray(np.stack(rows))
+
+
+# ------------------------------------------------------------------------------------------------
+# the colour curve: a yarn's colour (pipeline.dye's convention) -> the BYSDF's body colour
+CURVE_VERSION = 1
+CURVE_PIXELS = 32             # the canonical cloth's picture, CURVE_PIXELS^2 pixels over its middle square
+CURVE_SPP = 32                # samples per pixel: 32,768 paths per node (standard error ~0.2 %)
+CURVE_DEPTH = 100_000         # every bounce (roulette ends the paths)
+CURVE_RR_DEPTH = 8
+CURVE_CAMERA_HEIGHT = 1000.0  # yarn radii above the cloth: camera rays within 0.1 degrees of straight down
+CURVE_SKY = [{"type": "constant", "radiance": 1.0}]
+
+
+def node_material(material: dict, x) -> dict:
+    """The BYSDF keywords of body colour ``x`` (a number or three): the reflection side's ``body_r`` the
+    reduced albedo whose diffuse reflectance is x (``reduced_albedo``), the transmission side's ``body_t`` x,
+    each unless ``material`` gives it."""
+    x = np.broadcast_to(np.asarray(x, np.float64), (3,))
+    return {"body_r": tuple(reduced_albedo(x)), "body_t": tuple(x), **material}
+
+
+def colour_curve_key(material: dict, geometry: dict, model: YarnModel) -> str:
+    import hashlib
+    import json
+
+    from stages.core.shading.bysdf import N_PARAMS, pack_bysdf
+
+    from .. import dye
+
+    row = pack_bysdf(**node_material(material, 0.0))[:N_PARAMS]
+    doc = {"method": "bysdf", "version": CURVE_VERSION, "pixels": CURVE_PIXELS, "spp": CURVE_SPP,
+           "nodes": dye.CURVE_NODES, "row": dye._round(row.tolist()), "geometry": dye.unit_geometry(geometry),
+           "thresholds": dye._round([model.fibre_threshold, model.ply_threshold])}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()[:20]
+
+
+def colour_curve(material: dict, geometry: dict, model: YarnModel, group: str = ""):
+    """The ``pipeline.dye.AlbedoCurve`` of the BYSDF ``material`` (keywords of ``pack_bysdf`` without body
+    colours) on yarn ``geometry`` (a resolved preset): A(x), what the canonical cloth (``pipeline.dye``)
+    rendered by this method shows under a white sky for body colour x (``node_material``), kept as the
+    fibre methods' curves are (``pipeline.dye.stored_curve``)."""
+    from .. import dye
+
+    key = colour_curve_key(material, geometry, model)
+    return dye.stored_curve(key, lambda: measure_colour_curve(material, geometry, model),
+                            {"method": "bysdf", "yarn": geometry.get("name", ""), "group": group})
+
+
+def measure_colour_curve(material: dict, geometry: dict, model: YarnModel, spp: int = CURVE_SPP):
+    """A(x) at ``pipeline.dye.curve_nodes()`` (three nodes per render, one per channel; the channels do not
+    mix): this method's near mode renders the canonical cloth of the yarn (``pipeline.dye.flat_cloth_curves``)
+    from ``CURVE_CAMERA_HEIGHT`` above onto its middle ``CLOTH_SPACING`` square, ``CURVE_PIXELS``^2 pixels
+    at ``spp``, under a uniform sky of radiance 1, every bounce; A is the mean over the samples whose camera
+    ray met a yarn (a pixel's alpha is that share of its samples and the others see the sky's 1), as the
+    fibre methods' walk counts the rays that meet a fibre."""
+    from stages.core.shading.bysdf import pack_bysdf
+    from stages.render.camera import CAM_TAN_HALF_FOV
+    from stages.render.film import VARIANCE_CHANNELS
+
+    from .. import dye
+    from ..render_setup import ground_array, pack_lights
+    from ..scene import camera_array
+    from .film import Sampling, render_film
+
+    cv, tparams = dye.flat_cloth_curves(dye.unit_geometry(geometry))
+    Y = len(cv.offsets) - 1
+    xs = dye.curve_nodes()
+    padded = np.concatenate([xs, np.full(-len(xs) % 3, xs[-1])]).reshape(-1, 3)
+    top = 2.0                     # the upper layer's top (yarns of radius 1 at z = 1)
+    half = math.degrees(math.atan(0.5 * dye.CLOTH_SPACING / (CURVE_CAMERA_HEIGHT - top)))
+    n = CURVE_PIXELS
+    cam = camera_array({"origin": [0.0, 0.0, CURVE_CAMERA_HEIGHT], "target": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0],
+                        "fov": 2.0 * half}, n, n)
+    lights = pack_lights(CURVE_SKY).table()
+    ground, has_ground = ground_array({})
+    albedo = []
+    for k, x3 in enumerate(padded):
+        row = pack_bysdf(**node_material(material, x3))
+        built = make_integrator(cv, tparams, np.zeros(Y, np.int32), np.repeat(row[None, :], Y, axis=0), lights,
+                                ground, has_ground, 2.0 * float(cam[CAM_TAN_HALF_FOV]) / n, CURVE_DEPTH,
+                                CURVE_RR_DEPTH, model._replace(mode=0))
+        run = render_film("bysdf colour curve", built.integ, cam, n, n, Sampling(int(spp)), dye.CURVE_SEED + k,
+                          16, VARIANCE_CHANNELS)
+        alpha = run.extra["A"].astype(np.float64)
+        hits = float(alpha.sum())
+        if hits <= 0.0:
+            raise ValueError("the canonical cloth's camera rays met no yarn")
+        albedo.append((run.rgb.astype(np.float64).sum(axis=(0, 1)) - float((1.0 - alpha).sum())) / hits)
+    return dye.AlbedoCurve(xs, np.concatenate(albedo)[:len(xs)])
 
 
 def yarn_setup(yarns_path):
@@ -185,16 +339,50 @@ def build_types(tparams, tol, max_iter, fibre_threshold=0.5, ply_threshold=0.6, 
     return tuple(out), time.perf_counter() - t0
 
 
-def film_setup(scene, options: dict):
-    """The ``FilmSetup`` of a bysdf render (``pipeline.renderers.film``)."""
+class BuiltIntegrator(NamedTuple):
+    integ: object           # stages.render.integrators.bysdf.BysdfIntegrator
+    pieces: object          # TubePieces
+    bvh: object             # FiberBVH of the tube pieces
+    types: tuple            # YarnType per yarn type
+    tables_s: float
+
+
+def make_integrator(cv, tparams, yarn_type, params, lights, ground, has_ground, pixel_angle, max_depth, rr_depth,
+                    model: YarnModel) -> BuiltIntegrator:
+    """The ``BysdfIntegrator`` of yarns ``cv`` (``Curves``) of packed types ``tparams`` (T, P), ``yarn_type``
+    (Y,), BYSDF rows ``params`` (Y, BYSDF_SIZE), a ``LightTable`` and a ground (``render_setup.ground_array``)."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.yarn.tubes import tube_pieces
     from stages.procedural.tables import yarn_key
+    from stages.render.integrators.bysdf import BysdfIntegrator
+
+    from ..render_setup import ray_eps
+
+    types, tables_s = build_types(tparams, model.tol, model.max_iter, model.fibre_threshold, model.ply_threshold,
+                                  model.search)
+    yarn_type = np.ascontiguousarray(yarn_type, np.int32)
+    radius = np.array([types[t].radius for t in yarn_type])
+    pieces = tube_pieces(cv, radius)
+    bvh, _ = build_fiber_bvh(pieces.points, pieces.offsets, pieces.radius)
+    # pieces skipped around the one a ray leaves: a window wider than 4 envelope radii of yarn
+    seg_len = np.linalg.norm(np.diff(pieces.points, axis=0), axis=1)
+    seg_len = seg_len[seg_len > 0]
+    window = (int(min(1 << 20, math.ceil(4.0 * radius.max() / max(float(seg_len.min()), 1e-30)) + 1))
+              if len(seg_len) else 1)
+    keys = np.array([yarn_key(FIBRE_SEED, y) for y in range(len(yarn_type))], np.int64)
+    integ = BysdfIntegrator(bvh, cv, pieces, types, yarn_type, keys, np.ascontiguousarray(params, np.float64),
+                            lights, ground, has_ground, np.ascontiguousarray(ground[1:4]), model.mode, model.K,
+                            model.falloff, pixel_angle, max_depth, rr_depth, window,
+                            ray_eps(pieces.points.min(axis=0), pieces.points.max(axis=0)), 64)
+    return BuiltIntegrator(integ, pieces, bvh, types, tables_s)
+
+
+def film_setup(scene, options: dict):
+    """The ``FilmSetup`` of a bysdf render (``pipeline.renderers.film``)."""
     from stages.render.camera import CAM_TAN_HALF_FOV
     from stages.render.film import VARIANCE_CHANNELS
-    from stages.render.integrators.bysdf import MODES as KMODES, BysdfIntegrator
 
-    from ..render_setup import ground_array, pack_lights, ray_eps
+    from ..render_setup import ground_array, pack_lights
     from ..scene import camera_array
     from .film import FilmSetup
 
@@ -205,18 +393,8 @@ def film_setup(scene, options: dict):
                         "bysdf needs the yarn curves: pass --set yarns=PATH.zarr (loomlight ingest)")
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
-    mode = extra.get("mode", "near")
-    if mode not in MODES:
-        raise LoomError(None, "--set mode", unknown("bysdf mode", mode, MODES))
-    K = int(_number(extra, "k", DEFAULT_K, int, 1, 256))
-    tol = _number(extra, "ply_tol", 1e-3, float, 1e-9, 0.5)
-    max_iter = int(_number(extra, "ply_iter", 10, int, 3, 100))
-    search = extra.get("ply_search", "march")
-    if search not in PLY_SEARCHES:
-        raise LoomError(None, "--set ply_search", unknown("ply search", search, PLY_SEARCHES))
-    fibre_thr = _number(extra, "fibre_threshold", 0.5, float, 0.0, 1.0)
-    ply_thr = _number(extra, "ply_threshold", 0.6, float, 0.0, 1.0)
-    falloff = _number(extra, "falloff", DEFAULT_FALLOFF, float, 0.0, 1e6)
+    model = yarn_model(extra)
+    mode = MODES[model.mode]
     lights = pack_lights(scene.lights, scene.path)
     if len(lights.lights) == 0:
         raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
@@ -228,33 +406,21 @@ def film_setup(scene, options: dict):
         if int(d["ply_num"]) > PLY_MAX:
             raise LoomError(path, f"yarn type {t} ({d.get('name', '?')}).ply_num",
                             f"{int(d['ply_num'])} plies; bysdf's implicit plies handle at most {PLY_MAX}")
-    types, tables_s = build_types(ytypes.tparams, tol, max_iter, fibre_thr, ply_thr, search)
-    radius = np.array([types[t].radius for t in ytypes.yarn_type])
-    pieces = tube_pieces(cv, radius)
-    bvh, _ = build_fiber_bvh(pieces.points, pieces.offsets, pieces.radius)
-    # pieces skipped around the one a ray leaves: a window wider than 4 envelope radii of yarn
-    seg_len = np.linalg.norm(np.diff(pieces.points, axis=0), axis=1)
-    seg_len = seg_len[seg_len > 0]
-    window = (int(min(1 << 20, math.ceil(4.0 * radius.max() / max(float(seg_len.min()), 1e-30)) + 1))
-              if len(seg_len) else 1)
     params = bysdf_rows(scene, groups, ytypes.albedo, options)
     ground, has_ground = ground_array(scene.render)
     W, H = options["width"], options["height"]
     cam = camera_array(scene.camera, W, H)
-    pixel_angle = 2.0 * float(cam[CAM_TAN_HALF_FOV]) / W
-    keys = np.array([yarn_key(FIBRE_SEED, y) for y in range(len(groups))], np.int64)
     max_depth = int(options["max_depth"])
-    integ = BysdfIntegrator(bvh, cv, pieces, types, np.ascontiguousarray(ytypes.yarn_type, np.int32), keys, params,
-                            lights.table(), ground, has_ground, np.ascontiguousarray(ground[1:4]),
-                            KMODES.index(mode), K, falloff, pixel_angle, max_depth, int(options["rr_depth"]), window,
-                            ray_eps(pieces.points.min(axis=0), pieces.points.max(axis=0)), 64)
+    built = make_integrator(cv, ytypes.tparams, ytypes.yarn_type, params, lights.table(), ground, has_ground,
+                            2.0 * float(cam[CAM_TAN_HALF_FOV]) / W, max_depth, int(options["rr_depth"]), model)
+    integ, pieces, bvh, types = built.integ, built.pieces, built.bvh, built.types
     geometry_bytes = int(sum(a.nbytes for a in (pieces.points, pieces.offsets, pieces.piece_seg, pieces.piece_t0,
                                                  pieces.piece_t1, pieces.piece_curve, pieces.radius))
                          + sum(a.nbytes for a in bvh if isinstance(a, np.ndarray))
                          + sum(a.nbytes for a in cv if isinstance(a, np.ndarray)))
-    stats = {"setup_s": time.perf_counter() - t0, "tables_s": tables_s, "yarns": len(groups),
+    stats = {"setup_s": time.perf_counter() - t0, "tables_s": built.tables_s, "yarns": len(groups),
              "yarn_types": len(types), "tube_pieces": len(bvh.seg_a), "geometry_bytes": geometry_bytes,
-             "mode": mode, "k": K, "ply_search": search, "max_depth": max_depth,
+             "mode": mode, "k": model.K, "ply_search": model.search, "max_depth": max_depth,
              "envelope_radius": [t.radius for t in types]}
     return FilmSetup(f"bysdf ({mode})", integ, cam, VARIANCE_CHANNELS, stats)
 

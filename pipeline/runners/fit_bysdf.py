@@ -18,8 +18,10 @@ freedom (front and back, per channel):
 - the energy split (``stages.core.shading.bysdf``), as the body energy reflected at the entry point,
   x = (1 - spec_weight) reflect_weight, and the body energy transmitted to the exit point,
   y = (1 - spec_weight) (1 - reflect_weight); the specular lobes take the rest, spec_weight = 1 - x - y,
-  fitted on the mean luminance: x <- x L_ref / L_bysdf (front), y <- y L_ref / L_bysdf (back), x + y
-  capped at 1 (no negative specular share; a binding cap is reported);
+  fitted on the mean luminances (front, back) by Newton steps, the slopes measured every round by two
+  more renders (``probed_jacobian``; the specular share crossing the yarn lights the back too, so the back's
+  light does not simply follow y);
+  x + y capped at 1 (no negative specular share; a binding cap is reported);
 - per-channel factors on the yarn colour that becomes the body colours (``body_r_scale`` for the
   reflection side, ``body_t_scale`` for the transmission side; ``pipeline.renderers.bysdf.bysdf_rows``),
   fitted on the chromaticity of the same setups: s_c <- s_c (ref_c / bysdf_c) / (L_ref / L_bysdf), then
@@ -30,9 +32,8 @@ lights instead of the front light (which becomes a prediction): the model's refl
 the fibres' as the light moves away from the view (docs/methods/bysdf.md, Limits), so a fit under the
 lights a picture is rendered with is what keeps that picture's colour.
 
-Both are fixed-point updates: a setup's light is mostly its side's, so each round (two renders) moves
-each number towards its target; where the uncoloured specular lobes make most of a setup's light, the
-colour factors converge slowly and clip (colours at most 1): the report names the setups left off.
+Each round (six renders) moves each number towards its target; where the uncoloured specular lobes make
+most of a setup's light, the colour factors converge slowly and clip (colours at most 1): the report names the setups left off.
 Output: a TOML of parameters (``[default]``: ``spec_weight``, ``reflect_weight``, ``body_r_scale``,
 ``body_t_scale``) for ``--set params=`` and a JSON report with, per setup, the reference and fitted means
 per channel, their relative errors and the SSIM of the two pictures (``stages.evaluate.metrics``).
@@ -124,16 +125,57 @@ def _ratio(ref, got):
     return np.asarray(ref, float) / np.maximum(np.asarray(got, float), 1e-12)
 
 
-def fit_step(st: FitState, ref: dict, got: dict, reflect: str = "front") -> FitState:
-    """One round of the fixed-point updates (module doc) from the means of the ``reflect`` setup (front, or
-    the scene's own lights) and of the back setup."""
-    lum_f = float(LUMA @ ref[reflect]) / max(float(LUMA @ got[reflect]), 1e-12)
-    lum_b = float(LUMA @ ref["back"]) / max(float(LUMA @ got["back"]), 1e-12)
-    x = float(np.clip(st.x * lum_f, 1e-4, 1.0))
-    y = float(np.clip(st.y * lum_b, 1e-4, 1.0))
+ENERGY_MIN = 1e-4            # the least body energy a side keeps
+STEP_FACTOR = 4.0            # a round moves a body energy by at most this factor
+
+
+def luminances(got: dict, reflect: str) -> np.ndarray:
+    """(L of the ``reflect`` setup, L of the back setup) of {setup: mean rgb}."""
+    return np.array([float(LUMA @ got[reflect]), float(LUMA @ got["back"])])
+
+
+def proportional_jacobian(st: "FitState", lum: np.ndarray) -> np.ndarray:
+    """The first guess of dL/d(x, y): each side's light proportional to its own body energy."""
+    return np.diag(lum / np.maximum([st.x, st.y], ENERGY_MIN))
+
+
+PROBE = 0.05                 # the finite-difference step on a body energy (absolute)
+
+
+def probed_jacobian(render_means, st: "FitState", lum: np.ndarray, reflect: str) -> np.ndarray:
+    """dL/d(x, y) at ``st`` by forward differences of ``PROBE`` (backwards where x + y would pass 1): the
+    luminances are linear in the body energies for fixed colours (every lobe's weight is), and the renders
+    share their random numbers, so two more renders per round measure the slopes with little noise."""
+    J = np.zeros((2, 2))
+    for k in range(2):
+        h = PROBE if st.x + st.y + PROBE <= 1.0 else -min(PROBE, 0.5 * (st.x if k == 0 else st.y))
+        probe = dataclasses.replace(st, x=st.x + h) if k == 0 else dataclasses.replace(st, y=st.y + h)
+        J[:, k] = (luminances(render_means(probe, (reflect, "back")), reflect) - lum) / h
+    return J
+
+
+def fit_step(st: FitState, ref: dict, got: dict, reflect: str = "front", J: np.ndarray | None = None) -> FitState:
+    """One round (module doc): the body energies (x, y) by a quasi-Newton step on the luminances of the
+    ``reflect`` setup (front, or the scene's own lights) and the back setup, with ``J`` dL/d(x, y)
+    (``probed_jacobian``; default ``proportional_jacobian``: the step x <- x L_ref / L, y <- y L_ref / L), each
+    moved by at most ``STEP_FACTOR`` and capped to x + y <= 1; the colour factors by their chromaticity."""
+    lum = luminances(got, reflect)
+    target = luminances(ref, reflect)
+    v = np.array([st.x, st.y])
+    if J is None:
+        J = proportional_jacobian(st, lum)
+    try:
+        dv = np.linalg.solve(J, target - lum)
+    except np.linalg.LinAlgError:
+        dv = v * (target / np.maximum(lum, 1e-12) - 1.0)
+    if not np.all(np.isfinite(dv)):
+        dv = v * (target / np.maximum(lum, 1e-12) - 1.0)
+    nv = np.clip(v + dv, np.maximum(v / STEP_FACTOR, ENERGY_MIN), np.minimum(v * STEP_FACTOR, 1.0))
+    x, y = float(nv[0]), float(nv[1])
     capped = x + y > 1.0
     if capped:
         x, y = x / (x + y), y / (x + y)
+    lum_f, lum_b = target / np.maximum(lum, 1e-12)
     scale_r = np.clip(st.scale_r * _ratio(ref[reflect], got[reflect]) / lum_f, SCALE_MIN, SCALE_MAX)
     scale_t = np.clip(st.scale_t * _ratio(ref["back"], got["back"]) / lum_b, SCALE_MIN, SCALE_MAX)
     return FitState(x, y, scale_r, scale_t, capped)
@@ -141,7 +183,10 @@ def fit_step(st: FitState, ref: dict, got: dict, reflect: str = "front") -> FitS
 
 def fit_rounds(render_means, ref: dict, st: FitState, iterations: int, progress=print, reflect: str = "front"):
     """(FitState, history): ``iterations`` rounds of ``fit_step``; ``render_means(state, setups)`` gives
-    {setup: mean rgb} of bysdf with the state's parameters (as written to the file)."""
+    {setup: mean rgb} of bysdf with the state's parameters (as written to the file). Each round measures the
+    luminances' slopes in the body energies (``probed_jacobian``): with the dye on both of the transmission
+    side's paths the back light does not follow y alone (the specular share 1 - x - y crosses the yarn too,
+    and where it crosses more freely than the body's light, less y is a brighter back)."""
     history = []
     for it in range(iterations):
         got = render_means(st, (reflect, "back"))
@@ -152,7 +197,7 @@ def fit_rounds(render_means, ref: dict, st: FitState, iterations: int, progress=
                         **{f"{n}_rel_error_rgb": err[n].tolist() for n in got}})
         progress(f"round {it + 1}/{iterations}: body energy reflected {st.x:.4f}, transmitted {st.y:.4f}: "
                  + ", ".join(f"{n} " + " ".join(f"{100 * e:+.1f}" for e in err[n]) + " %" for n in got))
-        st = fit_step(st, ref, got, reflect)
+        st = fit_step(st, ref, got, reflect, probed_jacobian(render_means, st, luminances(got, reflect), reflect))
     return st, history
 
 

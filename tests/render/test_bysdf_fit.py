@@ -42,29 +42,32 @@ def test_fit_moves_bysdf_towards_fiberpath(tmp_path, cli):
 
 def test_fit_recovers_known_colours_from_a_synthetic_target(tmp_path):
     """Reference: a synthetic target with known answers -- bysdf itself rendered with a known energy split
-    and per-channel colour factors, under the fit's front and back lights (same seed, so the fitted renders
-    see the same random numbers). From the defaults, the fit's rounds bring the front and back means within
-    1 % per channel of the target and recover the colour factors' chromaticity within 3 % and each side's
-    energy times their level within 5 %."""
+    and per-channel colour factors (none clipping a body colour at 1), under the fit's front and back lights
+    (same seed, so the fitted renders see the same random numbers). From the defaults, the fit's rounds
+    bring the front and back means within 1 % per channel of the target and recover the chromaticity of the
+    transmission side's body colour within 3 %."""
     from pipeline.runners.fit_bysdf import FitState, _Renderer, bysdf_means, fit_rounds, setup_lights
+    from stages.core.shading import bysdf as B
 
     scene, yarns = _make(tmp_path, "synthetic", _weave(2, L=0.2), origin=(0.05, -0.2, 0.3), w=24, h=18)
     lights = setup_lights(scene)
     by = _Renderer(scene, "bysdf", {"width": 24, "height": 18, "spp": 64, "seed": 3}, {"yarns": yarns})
-    _, render_means = bysdf_means(by, yarns, lights)
-    known = FitState(0.35, 0.3, np.array([0.6, 1.0, 1.3]), np.array([1.2, 0.8, 0.9]))
+    rows, render_means = bysdf_means(by, yarns, lights)
+    known = FitState(0.35, 0.3, np.array([0.5, 0.8, 1.0]), np.array([0.9, 0.6, 0.7]))
+    body_t = rows(known)[0, B.BODY_T_R:B.BODY_T_B + 1]
+    assert body_t.max() < 0.95               # identifiable: no channel clipped
     target = render_means(known, ("front", "back"))
     fit, history = fit_rounds(render_means, target, FitState(0.25, 0.25), 10, progress=lambda *_: None)
     got = render_means(fit, ("front", "back"))
     for n in ("front", "back"):
         np.testing.assert_allclose(got[n], target[n], rtol=0.01, err_msg=n)
-    # a side's brightness is its body energy times its colour factors' level (x s and y s render alike), and
-    # two means per channel cannot tell the uncoloured specular share from the body's level (measured: the
-    # fit ends at spec_weight 0.415 for the known 0.35, the transmission factors' chromaticity 1-2 % off,
-    # identical means): recovered are the factors' chromaticity within 3 % and the energy-weighted level
+    # The back light is the transmission side's body colour times a grey factor (the dye filters both the
+    # body's and the specular path's light), so its chromaticity is recovered; the energies are not: the
+    # front's grey specular reflection trades with the body's reflection level and colour, and the back's
+    # grey factor with the specular share (measured: spec_weight 0.13 for the known 0.35, the reflection
+    # side's chromaticity up to 16 % off, identical means).
     luma = np.array([0.2126, 0.7152, 0.0722])
-    for e, s, e0, s0 in ((fit.x, fit.scale_r, known.x, known.scale_r), (fit.y, fit.scale_t, known.y, known.scale_t)):
-        np.testing.assert_allclose(s / (luma @ s), s0 / (luma @ s0), rtol=0.03)
-        assert e * (luma @ s) == pytest.approx(e0 * (luma @ s0), rel=0.05)
+    fitted_t = rows(fit)[0, B.BODY_T_R:B.BODY_T_B + 1]
+    np.testing.assert_allclose(fitted_t / (luma @ fitted_t), body_t / (luma @ body_t), rtol=0.03)
     first = max(abs(v) for k, v in history[0].items() if k.endswith("_rel_error"))
     assert first > 0.05          # the defaults start away from the target

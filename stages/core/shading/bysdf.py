@@ -20,8 +20,15 @@ it leaves or arrives at) as (r, g, b) and the solid-angle pdf of the matching sa
 
 The model (beta = SPEC_WEIGHT, m_r = REFLECT_WEIGHT; the paper's Eq. 1 split into the two sides)
 --------------------------------------------------------------------------------------------------
-    f = beta     [ KS (f_sR + f_ms)(x)  +  T_x -> A_s -> KT (f_sT + f_keep)(y) ]         (specular, Eqs. 2-3)
+    f = beta     [ KS (f_sR + f_ms)(x)  +  T_x -> A_s -> BODY_T KT (f_sT + f_keep)(y) ]  (specular, Eqs. 2-3)
       + (1-beta) [ m_r S f_bR(x)  +  (1-m_r) A_d S_y f_bT(y) ]                          (body, Eqs. 4-5)
+
+The dye colours what crosses the yarn, on either path: the specular path's exit carries the
+transmission-side body colour BODY_T per channel, as the body's exit f_bT does. (The reference's
+specular path is grey, KT and sigma scalars: with its example absorbers, sigma_spec 5.5 per unit and
+KT 0.1, a white yarn's cloth returns 0.15 under a white sky; without them a black one returns 0.28,
+its grey specular transmission passing every colour. A dyed yarn needs both: ``pipeline.renderers.bysdf``
+maps a yarn's colour to BODY_R and BODY_T with the grey absorbers off.)
 
 The body's transmission takes its exit point y from the enter step's direction d but not its weight:
 the body's share of the energy reaching the far side is (1 - beta)(1 - m_r) already, and the Fresnel
@@ -49,7 +56,8 @@ the interface twice and lost beta's complement of F).
   -d); Walter's Eq. 21 with i = -d (index eta), o = wo (index 1), times |wo.n_y|, again the flux form:
       (1 - F) D(h) G1(-d) G1(wo) |d.h| |wo.h| / (|d.n_y| (eta d.h - wo.h)^2),   h ∝ eta d - wo;
   sampled by visible normals and refraction, weight (1 - F) G1(wo). Total internal reflection ends the
-  sample (pdf 0). Times KT = KT_EXIT and the specular path's weight since x (A_s times the enter step's).
+  sample (pdf 0). Times KT = KT_EXIT, the dye's BODY_T (per channel, applied by ``exit_eval_pdf``; the lobe
+  alone is grey) and the specular path's weight since x (A_s times the enter step's).
 - f_keep, what the exit keeps inside (the reference drops it): the light f_sT does not let out -- total
   internal reflection, the Fresnel reflection back inside and the microfacets' multiple scattering --
   stays in the yarn's fibres, scatters there and leaves diffusely: folded into the Lambertian exit at y,
@@ -122,7 +130,7 @@ are 3-tuples, so nothing here allocates and the integrator may call it without r
     enter_sample(p, t, n, wi, u1, u2) -> EnterSample(d, weight, pdf)                    T_x, scalar weight
     enter_eval_pdf(p, t, n, wi, d) -> (value, pdf)                                      value = weight * pdf
     exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y) -> BysdfValue
-        beta att_spec KT (f_sT + f_keep) + (1-beta)(1-m_r) att_body shadow_y f_bT; pdf of exit_sample
+        beta att_spec BODY_T KT (f_sT + f_keep) + (1-beta)(1-m_r) att_body shadow_y f_bT; pdf of exit_sample
         (att_spec: the specular path's weight since x, its Beer-Lambert attenuation times the enter weight)
     exit_sample(p, t_y, n_y, d, att_spec, att_body, shadow_y, u0, u1, u2) -> BysdfSample
     attenuation(p, distance, n_plies) -> (A_s, A_d)
@@ -754,14 +762,16 @@ ExitWeights = namedtuple("ExitWeights", ["spec", "body", "kept", "p_spec"])
 def _exit_lobe_weights(p, d, n_y, att_spec, att_body, shadow_y):
     """ExitWeights(spec, body, kept, p_spec) of the transmission side at y: the factor on KT f_sT, on
     f_bT, the Lambertian weight of the specular path's light the exit keeps inside (KT spec (1 - E_T(d.n_y)),
-    folded into the body exit), and the probability of the GGX-sampled lobe (< 0: no energy)."""
+    folded into the body exit), and the probability of the GGX-sampled lobe (< 0: no energy). The dye's
+    BODY_T on the specular path is the caller's (``exit_eval_pdf``); the energies here carry its mean."""
     beta = p[SPEC_WEIGHT]
     k_s = beta * max(att_spec, 0.0)
     k_b = (1.0 - beta) * (1.0 - p[REFLECT_WEIGHT]) * max(att_body, 0.0) * max(shadow_y, 0.0)
     e_t = exit_transmittance(p, d[0] * n_y[0] + d[1] * n_y[1] + d[2] * n_y[2])
+    dye = (p[BODY_T_R] + p[BODY_T_G] + p[BODY_T_B]) / 3.0
     kept = k_s * p[KT_EXIT] * (1.0 - e_t)
-    e_s = k_s * p[KT_EXIT] * e_t
-    e_b = kept + k_b * (p[BODY_T_R] + p[BODY_T_G] + p[BODY_T_B]) / 3.0
+    e_s = k_s * p[KT_EXIT] * e_t * dye
+    e_b = (kept + k_b) * dye
     if e_s + e_b <= 0.0:
         return ExitWeights(k_s, k_b, kept, -1.0)
     return ExitWeights(k_s, k_b, kept, e_s / (e_s + e_b))
@@ -769,7 +779,7 @@ def _exit_lobe_weights(p, d, n_y, att_spec, att_body, shadow_y):
 
 @njit(cache=True)
 def exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y):
-    """The transmission side at y: BysdfValue of beta att_spec KT (f_sT + (1 - E_T(d.n_y)) cos_o / pi)
+    """The transmission side at y: BysdfValue of beta att_spec BODY_T KT (f_sT + (1 - E_T(d.n_y)) cos_o / pi)
     + (1 - beta)(1 - m_r) att_body shadow_y f_bT (f cos) and the pdf of exit_sample; d the direction the
     path arrives along inside, att_spec the specular path's weight since x (its Beer-Lambert attenuation
     times the enter step's weight)."""
@@ -777,10 +787,9 @@ def exit_eval_pdf(p, t_y, n_y, d, wo, att_spec, att_body, shadow_y):
     if k.p_spec < 0.0:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
     s = spec_exit_eval_pdf(p, t_y, n_y, d, wo)
-    b = body_exit_eval_pdf(p, n_y, wo)
-    kept = k.kept * b.pdf                       # b.pdf = cos_o / pi
-    return BysdfValue(k.spec * s.r + k.body * b.r + kept, k.spec * s.g + k.body * b.g + kept,
-                      k.spec * s.b + k.body * b.b + kept, k.p_spec * s.pdf + (1.0 - k.p_spec) * b.pdf)
+    b = body_exit_eval_pdf(p, n_y, wo)         # BODY_T cos_o / pi
+    f = k.spec * s.r + (k.kept + k.body) * b.pdf    # per unit dye (f_sT is grey: s.r = s.g = s.b)
+    return BysdfValue(p[BODY_T_R] * f, p[BODY_T_G] * f, p[BODY_T_B] * f, k.p_spec * s.pdf + (1.0 - k.p_spec) * b.pdf)
 
 
 @njit(cache=True)
