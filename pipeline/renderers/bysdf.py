@@ -181,6 +181,7 @@ def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
     where = extra.get("params") or scene.path
     model = yarn_model(extra)
     dyer = Dyer(scene)
+    brighter: dict = {}
     rows = []
     cache = {}
     for y in range(len(groups)):
@@ -201,9 +202,12 @@ def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
                     curve = colour_curve(material, dyer.geometry(g), model, g)
                 except (TypeError, ValueError) as e:
                     raise LoomError(scene.path, place, str(e)) from None
+                bright = too_bright(curve, body)
                 body, reach = curve.invert(body)
                 if not np.all(reach):
                     dyer.unreachable.setdefault(("bysdf", g), float(curve.albedo[0]))
+                if np.any(bright):
+                    brighter.setdefault(g, float(curve.albedo[-1]))
             colour_r = np.clip(body * scale["body_r_scale"], 0.0, 1.0)
             colour_t = np.clip(body * scale["body_t_scale"], 0.0, 1.0)
             kw = {"body_r": tuple(reduced_albedo(colour_r)), "body_t": tuple(colour_t), **kw}
@@ -213,7 +217,17 @@ def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
                 raise LoomError(where, place, str(e)) from None
         rows.append(cache[key])
     dyer.report()
+    from ..progress import warn
+
+    for g, top in sorted(brighter.items()):
+        warn(f"yarns.{g}: a colour above {top:.3f} in some channel is brighter than the bysdf material of "
+             f"yarns.{g}.bysdf lets a yarn be; rendered at that ceiling")
     return np.ascontiguousarray(np.stack(rows))
+
+
+def too_bright(curve, colour) -> np.ndarray:
+    """Per channel: is ``colour`` above the curve's A(1), what the material shows with a white dye?"""
+    return np.asarray(colour, np.float64) > float(np.max(curve.albedo))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -263,12 +277,23 @@ def colour_curve(material: dict, geometry: dict, model: YarnModel, group: str = 
 
 
 def measure_colour_curve(material: dict, geometry: dict, model: YarnModel, spp: int = CURVE_SPP):
-    """A(x) at ``pipeline.dye.curve_nodes()`` (three nodes per render, one per channel; the channels do not
-    mix): this method's near mode renders the canonical cloth of the yarn (``pipeline.dye.flat_cloth_curves``)
-    from ``CURVE_CAMERA_HEIGHT`` above onto its middle ``CLOTH_SPACING`` square, ``CURVE_PIXELS``^2 pixels
-    at ``spp``, under a uniform sky of radiance 1, every bounce; A is the mean over the samples whose camera
-    ray met a yarn (a pixel's alpha is that share of its samples and the others see the sky's 1), as the
-    fibre methods' walk counts the rays that meet a fibre."""
+    """A(x) at ``pipeline.dye.curve_nodes()`` by ``cloth_albedo``, three nodes per render (one per channel; the
+    channels do not mix)."""
+    from .. import dye
+
+    xs = dye.curve_nodes()
+    padded = np.concatenate([xs, np.full(-len(xs) % 3, xs[-1])]).reshape(-1, 3)
+    return dye.AlbedoCurve(xs, cloth_albedo(material, geometry, model, padded, spp).reshape(-1)[:len(xs)])
+
+
+def cloth_albedo(material: dict, geometry: dict, model: YarnModel, body, spp: int = CURVE_SPP,
+                 seed: int | None = None) -> np.ndarray:
+    """(k, 3): for each of the k body colours ``body`` (k, 3), what the canonical cloth of the yarn
+    (``pipeline.dye.flat_cloth_curves``) shows under a uniform sky of radiance 1, every bounce: this method's
+    near mode renders it from ``CURVE_CAMERA_HEIGHT`` above onto its middle ``CLOTH_SPACING`` square,
+    ``CURVE_PIXELS``^2 pixels at ``spp`` (seeds ``seed`` + j, default ``pipeline.dye.CURVE_SEED``), and takes
+    the mean over the samples whose camera ray met a yarn (a pixel's alpha is that share of its samples and
+    the others see the sky's 1), as the fibre methods' walk counts the rays that meet a fibre."""
     from stages.core.shading.bysdf import pack_bysdf
     from stages.render.camera import CAM_TAN_HALF_FOV
     from stages.render.film import VARIANCE_CHANNELS
@@ -280,8 +305,6 @@ def measure_colour_curve(material: dict, geometry: dict, model: YarnModel, spp: 
 
     cv, tparams = dye.flat_cloth_curves(dye.unit_geometry(geometry))
     Y = len(cv.offsets) - 1
-    xs = dye.curve_nodes()
-    padded = np.concatenate([xs, np.full(-len(xs) % 3, xs[-1])]).reshape(-1, 3)
     top = 2.0                     # the upper layer's top (yarns of radius 1 at z = 1)
     half = math.degrees(math.atan(0.5 * dye.CLOTH_SPACING / (CURVE_CAMERA_HEIGHT - top)))
     n = CURVE_PIXELS
@@ -289,20 +312,21 @@ def measure_colour_curve(material: dict, geometry: dict, model: YarnModel, spp: 
                         "fov": 2.0 * half}, n, n)
     lights = pack_lights(CURVE_SKY).table()
     ground, has_ground = ground_array({})
-    albedo = []
-    for k, x3 in enumerate(padded):
+    seed = dye.CURVE_SEED if seed is None else int(seed)
+    out = []
+    for k, x3 in enumerate(np.asarray(body, np.float64).reshape(-1, 3)):
         row = pack_bysdf(**node_material(material, x3))
         built = make_integrator(cv, tparams, np.zeros(Y, np.int32), np.repeat(row[None, :], Y, axis=0), lights,
                                 ground, has_ground, 2.0 * float(cam[CAM_TAN_HALF_FOV]) / n, CURVE_DEPTH,
                                 CURVE_RR_DEPTH, model._replace(mode=0))
-        run = render_film("bysdf colour curve", built.integ, cam, n, n, Sampling(int(spp)), dye.CURVE_SEED + k,
-                          16, VARIANCE_CHANNELS)
+        run = render_film("bysdf canonical cloth", built.integ, cam, n, n, Sampling(int(spp)), seed + k, 16,
+                          VARIANCE_CHANNELS)
         alpha = run.extra["A"].astype(np.float64)
         hits = float(alpha.sum())
         if hits <= 0.0:
             raise ValueError("the canonical cloth's camera rays met no yarn")
-        albedo.append((run.rgb.astype(np.float64).sum(axis=(0, 1)) - float((1.0 - alpha).sum())) / hits)
-    return dye.AlbedoCurve(xs, np.concatenate(albedo)[:len(xs)])
+        out.append((run.rgb.astype(np.float64).sum(axis=(0, 1)) - float((1.0 - alpha).sum())) / hits)
+    return np.array(out)
 
 
 def yarn_setup(yarns_path):

@@ -288,3 +288,52 @@ def test_fit_bysdf_unknown_reflection_setup_exits_2(cli, weave, tmp_path):
                        "-o", str(out), "--fit-reflection", "sky")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--fit-reflection" in err, err
     assert not out.exists()
+
+
+def test_colour_round_trips_through_bysdf():
+    """Reference: bysdf's own canonical cloth (pipeline.dye's convention: what dense flat cloth of the yarn
+    shows under a white sky). Requested colour -> body colours by the bundled colour curve -> the cloth
+    rendered again with other random numbers shows the requested colour within 3 % + 0.005 (interpolation
+    between 16 nodes and the render's noise, ~0.2 %)."""
+    from pipeline.presets import resolve_yarn_types
+    from pipeline.renderers import bysdf as R
+
+    geo = resolve_yarn_types([{"preset": "cotton1"}], [0.0])[0]
+    material, model = dict(R.MATERIAL_DEFAULTS), R.YarnModel()
+    curve = R.colour_curve(material, geo, model)
+    want = np.array([[0.80, 0.22, 0.15], [0.12, 0.20, 0.60]])
+    body, reach = curve.invert(want)
+    assert reach.all()
+    got = R.cloth_albedo(material, geo, model, body, seed=101)
+    assert np.all(np.abs(got - want) <= 0.03 * want + 0.005), (got, want)
+
+
+def test_bysdf_rows_take_the_body_colour_from_the_curve(tmp_path):
+    """The packed rows: body_t = A^-1(colour) per channel and body_r its reduced albedo (the curve's own
+    node material); a body_t the scene states is kept; a scene material that differs (an absorber) has its
+    own curve, measured on first use, whose A(1) it cannot exceed (a white yarn with sigma_spec 11 renders
+    at its A(1), darker than asked; ``too_bright`` names such channels for the warning)."""
+    from pipeline.presets import resolve_yarn_types
+    from pipeline.renderers import bysdf as R
+    from stages.core.shading import bysdf as B
+
+    geo = resolve_yarn_types([{"preset": "cotton1"}], [0.0])[0]
+    curve = R.colour_curve(dict(R.MATERIAL_DEFAULTS), geo, R.YarnModel())
+    colour = np.array([0.7, 0.5, 0.3])
+    x, _ = curve.invert(colour)
+    for bysdf, body_t in (("", x), ("[yarns.default.bysdf]\nbody_t = 0.25\n", np.full(3, 0.25))):
+        d = tmp_path / f"rows{len(bysdf)}"
+        d.mkdir()
+        _write_yarns(d / "yarns.txt", _weave(2))
+        (d / "scene.toml").write_text(SCENE.format(name="rows", radius=0.02, origin=[0, 0, 1], target=[0, 0, 0],
+                                                   fov=30, w=8, h=6, lights=KEY_LIGHTS, bysdf=bysdf))
+        scene = load_scene(d / "scene.toml")
+        rows = R.bysdf_rows(scene, np.zeros(2, np.int64), np.tile(colour, (2, 1)), {"extra": {}})
+        np.testing.assert_allclose(rows[:, B.BODY_T_R:B.BODY_T_B + 1], np.tile(body_t, (2, 1)), rtol=1e-12)
+        if not bysdf:
+            np.testing.assert_allclose(rows[0, B.BODY_R_R:B.BODY_R_B + 1], R.reduced_albedo(x), rtol=1e-12)
+    absorbing = R.colour_curve({**R.MATERIAL_DEFAULTS, "sigma_spec": 11.0}, geo, R.YarnModel())
+    assert absorbing.albedo[-1] < curve.albedo[-1] - 0.05
+    x_abs, _ = absorbing.invert([0.99, 0.99, 0.99])
+    assert x_abs.tolist() == [1.0, 1.0, 1.0]
+    assert R.too_bright(absorbing, [0.99, 0.5, 0.1]).tolist() == [True, absorbing.albedo[-1] < 0.5, False]
