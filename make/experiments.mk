@@ -149,7 +149,7 @@ btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) ## Daubert 
 	@for s in 41 14; do echo "report: $(BTF_DIR)/flat$$s/report.md"; done
 
 # --- yarn colours (pipeline/dye.py) ---
-albedo-curves: $(VENV)/.installed ## measure the albedo curve of every bundled BCSDF on every bundled yarn -> data/bcsdf/albedo_curves.json
+albedo-curves: $(VENV)/.installed ## measure the albedo curve of every bundled BCSDF on every bundled yarn, and bysdf's colour curve of every yarn -> data/bcsdf/albedo_curves.json
 	$(BIN)/python scripts/albedo_curves.py
 
 gallery: $(VENV)/.installed ## the material chart: every BCSDF preset x four yarn colours, studio-lit, and the colour check under a white sky (out/gallery, docs/img/material_chart.png)

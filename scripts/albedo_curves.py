@@ -22,48 +22,40 @@ def main() -> int:
     from pipeline import dye
     from pipeline.bcsdf_presets import bcsdf_presets, load_bcsdf_preset
     from pipeline.presets import list_presets, resolve_yarn_types
+    from pipeline.renderers import bysdf
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--check", action="store_true", help="only say whether every bundled pair has its curve")
     args = ap.parse_args()
     old = dye._read(dye.BUNDLED_CURVES)
     new, missing = {}, []
-    for b in bcsdf_presets():
-        p = load_bcsdf_preset(b)
-        refl = dye.preset_reflection(b)
-        for y in list_presets():
-            geo = dye.unit_geometry(resolve_yarn_types([{"preset": y}], [0.0])[0])
-            key = dye.curve_key(p, refl, geo)
-            if key in old:
-                new[key] = old[key]
-                continue
-            missing.append(f"{b} on {y}")
-            if args.check:
-                continue
-            t0 = time.perf_counter()
-            c = dye.measure_curve(p, refl, geo)
-            new[key] = {"x": c.x.tolist(), "albedo": c.albedo.tolist(), "about": {"bcsdf": b, "yarn": y}}
-            print(f"{b:10s} {y:11s} A(0) {c.albedo[0]:.4f}  A(1) {c.albedo[-1]:.4f}  {time.perf_counter() - t0:.1f} s",
-                  flush=True)
-            dye.write_curves(dye.BUNDLED_CURVES, {**old, **new})
-    from pipeline.renderers import bysdf
 
-    for y in list_presets():
-        geo = resolve_yarn_types([{"preset": y}], [0.0])[0]
-        material, model = dict(bysdf.MATERIAL_DEFAULTS), bysdf.YarnModel()
-        key = bysdf.colour_curve_key(material, geo, model)
+    def keep_or_measure(key: str, about: dict, measure) -> None:
+        """Keep the bundled curve of ``key``, else (unless --check) measure it and write the file at once."""
         if key in old:
             new[key] = old[key]
-            continue
-        missing.append(f"bysdf on {y}")
+            return
+        what = f"{about.get('bcsdf', about.get('method'))} on {about['yarn']}"
+        missing.append(what)
         if args.check:
-            continue
+            return
         t0 = time.perf_counter()
-        c = bysdf.measure_colour_curve(material, geo, model)
-        new[key] = {"x": c.x.tolist(), "albedo": c.albedo.tolist(), "about": {"method": "bysdf", "yarn": y}}
-        print(f"bysdf      {y:11s} A(0) {c.albedo[0]:.4f}  A(1) {c.albedo[-1]:.4f}  {time.perf_counter() - t0:.1f} s",
+        c = measure()
+        new[key] = {"x": c.x.tolist(), "albedo": c.albedo.tolist(), "about": about}
+        print(f"{what:24s} A(0) {c.albedo[0]:.4f}  A(1) {c.albedo[-1]:.4f}  {time.perf_counter() - t0:.1f} s",
               flush=True)
         dye.write_curves(dye.BUNDLED_CURVES, {**old, **new})
+
+    for y in list_presets():
+        preset = resolve_yarn_types([{"preset": y}], [0.0])[0]
+        geo = dye.unit_geometry(preset)
+        for b in bcsdf_presets():
+            p, refl = load_bcsdf_preset(b), dye.preset_reflection(b)
+            keep_or_measure(dye.curve_key(p, refl, geo), {"bcsdf": b, "yarn": y},
+                            lambda p=p, refl=refl, geo=geo: dye.measure_curve(p, refl, geo))
+        material, model = dict(bysdf.MATERIAL_DEFAULTS), bysdf.YarnModel()
+        keep_or_measure(bysdf.colour_curve_key(material, preset, model), {"method": "bysdf", "yarn": y},
+                        lambda m=material, g=preset, k=model: bysdf.measure_colour_curve(m, g, k))
     if args.check:
         if missing:
             print(f"{dye.BUNDLED_CURVES}: no curve for {', '.join(missing)}; run make albedo-curves", file=sys.stderr)

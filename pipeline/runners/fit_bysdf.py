@@ -33,7 +33,8 @@ the fibres' as the light moves away from the view (docs/methods/bysdf.md, Limits
 lights a picture is rendered with is what keeps that picture's colour.
 
 Each round (six renders) moves each number towards its target; where the uncoloured specular lobes make
-most of a setup's light, the colour factors converge slowly and clip (colours at most 1): the report names the setups left off.
+most of a setup's light, the colour factors converge slowly and clip (colours at most 1): the report names
+the setups left off.
 Output: a TOML of parameters (``[default]``: ``spec_weight``, ``reflect_weight``, ``body_r_scale``,
 ``body_t_scale``) for ``--set params=`` and a JSON report with, per setup, the reference and fitted means
 per channel, their relative errors and the SSIM of the two pictures (``stages.evaluate.metrics``).
