@@ -40,8 +40,10 @@ exactly (no absorption: the white furnace), A(0) = what the reflection alone ret
 channel: ``C_TT = A^-1(colour)``, piecewise linear between (s, log A), s = sqrt(1 - x): diffusion's
 albedo falls nearly exponentially with the square root of the absorption, so log A is nearly linear in s
 (cotton on cotton1: A = 1, 0.69, 0.39, 0.24, 0.16 at s = 0, 1/11, 2/11, ...), except near s = 0, where
-A falls faster still: the nodes are dense there (``curve_nodes``; the round trip in
-tests/render/test_yarn_colour.py bounds the interpolation's error); colours below A(0) (darker than the
+A falls faster still, and near s = 1 (the darkest colours), where the reflection's floor bends it: the
+nodes are dense at both ends (``curve_nodes``: with 16 nodes dense near s = 0 only, silk's 0.04 black came
+out 0.035; the round trip in tests/render/test_yarn_colour.py bounds the interpolation's error); colours
+below A(0) (darker than the
 reflection alone allows) get C_TT = 0 and are reported. The yarn geometry is the scene's yarn type
 (``yarns.<group>``: preset, fibre radius), scale-free (a yarn scaled by S with its fibres is the same
 yarn); the fabric's own weave is not part of it (measured against the chart's swatch in
@@ -63,9 +65,9 @@ from typing import NamedTuple
 import numpy as np
 
 BUNDLED_CURVES = Path(__file__).resolve().parents[1] / "data" / "bcsdf" / "albedo_curves.json"
-CURVE_VERSION = 3            # part of every key: change it when the measurement changes
+CURVE_VERSION = 4            # part of every key: change it when the measurement changes
 ALBEDO_FLOOR = 1e-6          # log A is interpolated: albedos below this count as this
-CURVE_NODES = 16             # x nodes at s = sqrt(1 - x) = (k / 15)^2: dense near x = 1, where A is steepest
+CURVE_NODES = 20             # x nodes at s = sqrt(1 - x) = smoothstep(k / 19): dense near x = 1 and x = 0
 CURVE_RAYS = 32768           # camera rays per node (standard error <= 0.5 / sqrt(rays) = 0.28 %)
 CURVE_MAX_EVENTS = 1_000_000  # fibre events per path (a non-absorbing path always escapes long before)
 CURVE_SPACING = 0.05         # realization step along the yarns, in yarn radii
@@ -108,7 +110,8 @@ class AlbedoCurve(NamedTuple):
 
 
 def curve_nodes() -> np.ndarray:
-    s = np.linspace(0.0, 1.0, CURVE_NODES) ** 2
+    t = np.linspace(0.0, 1.0, CURVE_NODES)
+    s = t * t * (3.0 - 2.0 * t)
     return np.sort(1.0 - s * s)
 
 

@@ -43,7 +43,7 @@ yarn shows under white diffuse light. Here it sets the body colours: per channel
 ``body_r`` = the reduced albedo a' whose diffuse reflectance R_d(a') is x (``reduced_albedo``) and ``body_t``
 = x, which also filters the specular path through the yarn (``stages.core.shading.bysdf``, the model). The
 colour curve A(x) is what the canonical cloth of ``pipeline.dye`` shows, rendered by this method, for body
-colour x (``measure_colour_curve``, 16 nodes, three per render, ~1 s each); a colour c gets x = A^-1(c) per
+colour x (``measure_colour_curve``, 20 nodes, three per render, ~2 s in all); a colour c gets x = A^-1(c) per
 channel, interpolated as the fibre methods' curves are. The dye is then the yarn's only absorber: the
 reference's example absorbers (Beer-Lambert ``sigma_spec`` 5.5 and ``sigma_body`` 0.1 per unit length at its
 yarn radius 2, exit transmittance ``kt_exit`` 0.1) would hold a white cotton cloth at 0.15, and the
