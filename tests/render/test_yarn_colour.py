@@ -138,11 +138,12 @@ def test_chart_swatch_shows_its_colours(tmp_path):
     """Reference: the requested colours. The material chart's woven swatch (data/scenes/chart_swatch.toml:
     crimped, not the canonical cloth), cotton dyed red and black: its converged colour under the white sky
     (the analog walk through its realized fibres) within ΔE2000 5 of the request; the script's own exit
-    code says so too (scripts/colour_chart.py, make gallery)."""
+    code says so too (scripts/colour_chart.py, make gallery); bysdf's render of the same swatch (its own
+    colour curve) within ΔE2000 5 of the walk."""
     import json
 
     r = subprocess.run([sys.executable, str(ROOT / "scripts/colour_chart.py"), "-o", str(tmp_path), "--presets",
-                        "cotton", "--colours", "red,black", "--methods", "volpath", "--spp", "2", "--sky-spp", "4",
+                        "cotton", "--colours", "red,black", "--methods", "volpath,bysdf", "--spp", "2", "--sky-spp", "8",
                         "--strict"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr + r.stdout
@@ -150,6 +151,7 @@ def test_chart_swatch_shows_its_colours(tmp_path):
     assert [row["colour"] for row in rows] == ["red", "black"]
     for row in rows:
         assert row["walk"]["delta_e_requested"] <= 5.0, row
+        assert row["bysdf"]["delta_e_walk"] <= 5.0, row
     assert (tmp_path / "material_chart.png").stat().st_size > 0
 
 
