@@ -159,7 +159,9 @@ def fit_step(st: FitState, ref: dict, got: dict, reflect: str = "front", J: np.n
     """One round (module doc): the body energies (x, y) by a quasi-Newton step on the luminances of the
     ``reflect`` setup (front, or the scene's own lights) and the back setup, with ``J`` dL/d(x, y)
     (``probed_jacobian``; default ``proportional_jacobian``: the step x <- x L_ref / L, y <- y L_ref / L), each
-    moved by at most ``STEP_FACTOR`` and capped to x + y <= 1; the colour factors by their chromaticity."""
+    moved by at most ``STEP_FACTOR``; where the step would pass x + y = 1 (no negative specular share), the
+    point of that line the same linear model fits best instead; at that line or at ``ENERGY_MIN`` the colour
+    factors take the level the energies leave besides their chromaticity (else chromaticity alone)."""
     lum = luminances(got, reflect)
     target = luminances(ref, reflect)
     v = np.array([st.x, st.y])
@@ -174,11 +176,18 @@ def fit_step(st: FitState, ref: dict, got: dict, reflect: str = "front", J: np.n
     nv = np.clip(v + dv, np.maximum(v / STEP_FACTOR, ENERGY_MIN), np.minimum(v * STEP_FACTOR, 1.0))
     x, y = float(nv[0]), float(nv[1])
     capped = x + y > 1.0
-    if capped:
-        x, y = x / (x + y), y / (x + y)
+    if capped:      # the cap binds: the point of x + y = 1 that the same linear model fits best (relative errors)
+        w = 1.0 / np.maximum(target, 1e-12)
+        b = (J @ np.array([1.0, -1.0])) * w
+        a = (lum + J @ np.array([-st.x, 1.0 - st.y]) - target) * w
+        x = float(np.clip(-(a @ b) / (b @ b), ENERGY_MIN, 1.0 - ENERGY_MIN)) if b @ b > 0.0 else x / (x + y)
+        y = 1.0 - x
     lum_f, lum_b = target / np.maximum(lum, 1e-12)
-    scale_r = np.clip(st.scale_r * _ratio(ref[reflect], got[reflect]) / lum_f, SCALE_MIN, SCALE_MAX)
-    scale_t = np.clip(st.scale_t * _ratio(ref["back"], got["back"]) / lum_b, SCALE_MIN, SCALE_MAX)
+    level = np.ones(2)
+    if capped or np.any(v + dv < ENERGY_MIN):   # at a bound: what the energies cannot reach, the colours' level
+        level = target / np.maximum(lum + J @ (np.array([x, y]) - v), 1e-12)   # carries (as the model predicts)
+    scale_r = np.clip(st.scale_r * _ratio(ref[reflect], got[reflect]) / lum_f * level[0], SCALE_MIN, SCALE_MAX)
+    scale_t = np.clip(st.scale_t * _ratio(ref["back"], got["back"]) / lum_b * level[1], SCALE_MIN, SCALE_MAX)
     return FitState(x, y, scale_r, scale_t, capped)
 
 
