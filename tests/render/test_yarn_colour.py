@@ -143,8 +143,8 @@ def test_chart_swatch_shows_its_colours(tmp_path):
     import json
 
     r = subprocess.run([sys.executable, str(ROOT / "scripts/colour_chart.py"), "-o", str(tmp_path), "--presets",
-                        "cotton", "--colours", "red,black", "--methods", "volpath,bysdf", "--spp", "2", "--sky-spp", "8",
-                        "--strict"],
+                        "cotton", "--colours", "red,black", "--methods", "volpath,bysdf", "--spp", "2",
+                        "--sky-spp", "8", "--strict"],
                        capture_output=True, text=True)
     assert r.returncode == 0, r.stderr + r.stdout
     rows = json.loads((tmp_path / "colours.json").read_text())["rows"]
