@@ -20,7 +20,7 @@ ROWS = (("demo swatch", (("fiberpath (reference)", "fiberpath.png"), ("volpath (
                          ("bysdf (fitted)", "bysdf.png"))),
         ("draped damask", (("fiberpath (reference)", "damask.png"), ("prt", "damask_prt.png"),
                            ("btf", "damask_btf.png"))))
-LEFT, TOP, GAP = 28, 22, 6
+LEFT, TOP, GAP = 0, 22, 6
 
 
 def main() -> int:
@@ -45,11 +45,10 @@ def main() -> int:
     d = ImageDraw.Draw(img)
     for i, (name, row) in enumerate(ROWS):
         y = i * (h + TOP + GAP) + TOP
-        d.text((4, y + h // 2), name[:12], fill=(0, 0, 0))
         for j, ((label, _), tile) in enumerate(zip(row, tiles[i])):
             x = LEFT + j * (w + GAP)
             img.paste(tile.resize((w, h)), (x, y))
-            d.text((x + 4, y - TOP + 5), label, fill=(0, 0, 0))
+            d.text((x + 4, y - TOP + 5), f"{name}: {label}" if j == 0 else label, fill=(0, 0, 0))
     args.out.parent.mkdir(parents=True, exist_ok=True)
     img.save(args.out)
     print(args.out)
