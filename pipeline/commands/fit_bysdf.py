@@ -44,7 +44,8 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}, "
                    "body colour factors " + " ".join(f"{v:.3g}" for v in rep["body_r_scale"]) + " (reflection), "
                    + " ".join(f"{v:.3g}" for v in rep["body_t_scale"]) + " (transmission)"
-                   + (" (capped: the fibres are brighter than the yarn colours allow)" if rep["energy_capped"] else ""))
+                   + (" (capped: no specular share left; the body colours' level carries the rest)"
+                      if rep["energy_capped"] else ""))
         for n, r in rep["setups"].items():
             typer.echo(f"  {n:10s} mean error {100 * r['rel_error_luminance']:+.1f} % luminance, rgb "
                        + " ".join(f"{100 * e:+.1f}" for e in r["rel_error_rgb"]) + f" %, SSIM {r['ssim']:.3f}"

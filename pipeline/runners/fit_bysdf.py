@@ -20,12 +20,14 @@ freedom (front and back, per channel):
   y = (1 - spec_weight) (1 - reflect_weight); the specular lobes take the rest, spec_weight = 1 - x - y,
   fitted on the mean luminances (front, back) by Newton steps, the slopes measured every round by two
   more renders (``probed_jacobian``; the specular share crossing the yarn lights the back too, so the back's
-  light does not simply follow y);
-  x + y capped at 1 (no negative specular share; a binding cap is reported);
-- per-channel factors on the yarn colour that becomes the body colours (``body_r_scale`` for the
+  light does not simply follow y); x + y capped at 1 (no negative specular share; where a step would pass
+  it, the point of that line the linear model fits best; a binding cap is reported);
+- per-channel factors on the body colours that the yarn's colour gives (``body_r_scale`` for the
   reflection side, ``body_t_scale`` for the transmission side; ``pipeline.renderers.bysdf.bysdf_rows``),
-  fitted on the chromaticity of the same setups: s_c <- s_c (ref_c / bysdf_c) / (L_ref / L_bysdf), then
-  normalised to luminance weight 1 (x and y carry the brightness).
+  fitted on the chromaticity of the same setups: s_c <- s_c (ref_c / bysdf_c) / (L_ref / L_bysdf), x and y
+  carrying the brightness; at a bound of the energies (the cap, or ``ENERGY_MIN``) the factors also take the
+  level the energies cannot reach (the yarn's colour is calibrated under a white sky, not under these lights:
+  its cloth may reflect or transmit more along them than the fibres do).
 
 ``reflect="scene"`` (``--fit-reflection scene``) fits the reflection side's numbers to the scene's own
 lights instead of the front light (which becomes a prediction): the model's reflection does not follow
