@@ -152,5 +152,5 @@ btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) ## Daubert 
 albedo-curves: $(VENV)/.installed ## measure the albedo curve of every bundled BCSDF on every bundled yarn, and bysdf's colour curve of every yarn -> data/bcsdf/albedo_curves.json
 	$(BIN)/python scripts/albedo_curves.py
 
-gallery: $(VENV)/.installed ## the material chart: every BCSDF preset x four yarn colours, studio-lit, and the colour check under a white sky (out/gallery, docs/img/material_chart.png)
-	$(BIN)/python scripts/colour_chart.py -o out/gallery --spp 256 --docs
+gallery: $(VENV)/.installed ## the material chart: every BCSDF preset x four yarn colours, studio-lit, and the colour check under a white sky: the converged fibres, bysdf and volpath (out/gallery, docs/img/material_chart.png)
+	$(BIN)/python scripts/colour_chart.py -o out/gallery --spp 64 --sky-spp 128 --methods bysdf,volpath --docs
