@@ -25,7 +25,8 @@ Each method derives its own parameters from that colour:
   The preset's lobe widths are kept. ``--set tint=none`` renders the presets as tabulated (their C_R and
   C_TT, the yarn colour ignored).
 - ``volpath`` with ``phase=microflake``: the dyed BCSDF's mean single-scattering albedo.
-- ``bysdf``: its body albedos by its own inversion of the same colour (``pipeline.renderers.bysdf``).
+- ``bysdf``: its body colours by a colour curve of its own, the same canonical cloth rendered by ``bysdf``
+  (``pipeline.renderers.bysdf``, Colour), kept in the same store (``stored_curve``).
 
 The albedo curve (in the manner of Chiang et al. 2016, who map a hair colour to absorption through
 simulated hair volumes)
