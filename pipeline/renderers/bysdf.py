@@ -314,13 +314,15 @@ def cloth_albedo(material: dict, geometry: dict, model: YarnModel, body, spp: in
     ground, has_ground = ground_array({})
     seed = dye.CURVE_SEED if seed is None else int(seed)
     out = []
-    for k, x3 in enumerate(np.asarray(body, np.float64).reshape(-1, 3)):
-        row = pack_bysdf(**node_material(material, x3))
-        built = make_integrator(cv, tparams, np.zeros(Y, np.int32), np.repeat(row[None, :], Y, axis=0), lights,
-                                ground, has_ground, 2.0 * float(cam[CAM_TAN_HALF_FOV]) / n, CURVE_DEPTH,
-                                CURVE_RR_DEPTH, model._replace(mode=0))
-        run = render_film("bysdf canonical cloth", built.integ, cam, n, n, Sampling(int(spp)), seed + k, 16,
-                          VARIANCE_CHANNELS)
+    body = np.asarray(body, np.float64).reshape(-1, 3)
+    rows = [pack_bysdf(**node_material(material, x3)) for x3 in body]
+    # the geometry (tables, tube pieces, BVH) once; each body colour only swaps the rows
+    integ = make_integrator(cv, tparams, np.zeros(Y, np.int32), np.repeat(rows[0][None, :], Y, axis=0), lights,
+                            ground, has_ground, 2.0 * float(cam[CAM_TAN_HALF_FOV]) / n, CURVE_DEPTH, CURVE_RR_DEPTH,
+                            model._replace(mode=0)).integ
+    for k, row in enumerate(rows):
+        run = render_film("bysdf canonical cloth", integ._replace(params=np.repeat(row[None, :], Y, axis=0)), cam,
+                          n, n, Sampling(int(spp)), seed + k, 16, VARIANCE_CHANNELS)
         alpha = run.extra["A"].astype(np.float64)
         hits = float(alpha.sum())
         if hits <= 0.0:

@@ -137,11 +137,6 @@ def luminances(got: dict, reflect: str) -> np.ndarray:
     return np.array([float(LUMA @ got[reflect]), float(LUMA @ got["back"])])
 
 
-def proportional_jacobian(st: "FitState", lum: np.ndarray) -> np.ndarray:
-    """The first guess of dL/d(x, y): each side's light proportional to its own body energy."""
-    return np.diag(lum / np.maximum([st.x, st.y], ENERGY_MIN))
-
-
 PROBE = 0.05                 # the finite-difference step on a body energy (absolute)
 
 
@@ -157,22 +152,20 @@ def probed_jacobian(render_means, st: "FitState", lum: np.ndarray, reflect: str)
     return J
 
 
-def fit_step(st: FitState, ref: dict, got: dict, reflect: str = "front", J: np.ndarray | None = None) -> FitState:
-    """One round (module doc): the body energies (x, y) by a quasi-Newton step on the luminances of the
-    ``reflect`` setup (front, or the scene's own lights) and the back setup, with ``J`` dL/d(x, y)
-    (``probed_jacobian``; default ``proportional_jacobian``: the step x <- x L_ref / L, y <- y L_ref / L), each
+def fit_step(st: FitState, ref: dict, got: dict, reflect: str, J: np.ndarray) -> FitState:
+    """One round (module doc): the body energies (x, y) by a Newton step on the luminances of the ``reflect``
+    setup (front, or the scene's own lights) and the back setup, with ``J`` dL/d(x, y) (``probed_jacobian``;
+    a singular one falls back to the proportional step x <- x L_ref / L, y <- y L_ref / L), each
     moved by at most ``STEP_FACTOR``; where the step would pass x + y = 1 (no negative specular share), the
     point of that line the same linear model fits best instead; at that line or at ``ENERGY_MIN`` the colour
     factors take the level the energies leave besides their chromaticity (else chromaticity alone)."""
     lum = luminances(got, reflect)
     target = luminances(ref, reflect)
     v = np.array([st.x, st.y])
-    if J is None:
-        J = proportional_jacobian(st, lum)
     try:
         dv = np.linalg.solve(J, target - lum)
     except np.linalg.LinAlgError:
-        dv = v * (target / np.maximum(lum, 1e-12) - 1.0)
+        dv = np.full(2, np.nan)
     if not np.all(np.isfinite(dv)):
         dv = v * (target / np.maximum(lum, 1e-12) - 1.0)
     nv = np.clip(v + dv, np.maximum(v / STEP_FACTOR, ENERGY_MIN), np.minimum(v * STEP_FACTOR, 1.0))
