@@ -7,31 +7,19 @@ a private name (``_x``) from another module; the import graph has no circle.
 import ast
 from pathlib import Path
 
+from pipeline import source_graph
+from pipeline.source_graph import file_imports, sources
 from tests.helpers import ROOT
 
 STAGES = ROOT / "stages"
 
 
 def _imports(path: Path):
-    """(module, names) of every import in a file, relative imports made absolute."""
-    tree = ast.parse(path.read_text())
-    parts = list(path.relative_to(ROOT).with_suffix("").parts)
-    package = parts[:-1] if parts[-1] != "__init__" else parts[:-1]
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            for a in node.names:
-                yield a.name, []
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package[: len(package) - (node.level - 1)]
-                mod = ".".join(base + ([node.module] if node.module else []))
-            else:
-                mod = node.module or ""
-            yield mod, [a.name for a in node.names]
+    return file_imports(ROOT, path)
 
 
 def _sources(top):
-    return sorted(p for p in (ROOT / top).rglob("*.py") if "__pycache__" not in p.parts)
+    return sources(ROOT, top)
 
 
 def _floor(module: str):
@@ -96,26 +84,8 @@ def test_shared_compile_groups_name_real_test_files():
     assert all(n >= 2 for n in Counter(SHARED_COMPILE.values()).values()), "a group of one file groups nothing"
 
 
-def _module_name(path: Path) -> str:
-    parts = list(path.relative_to(ROOT).with_suffix("").parts)
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
 def import_graph(tops=("pipeline", "stages", "bench", "scripts")) -> dict:
-    """module -> the project modules its file imports, at its top or inside a function (a lazy import
-    still ties the two modules together). ``from pkg import name`` counts ``pkg.name`` when that is a
-    module; a script in ``bench/`` imports its neighbours by their bare names (``import embree_kernels``)."""
-    modules = {_module_name(p): p for top in tops for p in _sources(top)}
-    graph = {}
-    for name, path in modules.items():
-        top = name.split(".")[0]
-        targets = set()
-        for mod, names in _imports(path):
-            for m in (mod, f"{top}.{mod}" if top in ("bench", "scripts") else mod):
-                targets.add(m)
-                targets.update(f"{m}.{n}" for n in names)
-        graph[name] = sorted(t for t in targets if t in modules and t != name)
-    return graph
+    return source_graph.import_graph(ROOT, tops)
 
 
 def import_cycles(graph: dict) -> list[list[str]]:

@@ -11,7 +11,8 @@ gives the right picture fastest" for one scene (the comparison file: ``pipeline.
    per-channel variance of the mean is in ``channels/variance_r|g|b``, the batches' count, spp, time
    and noise in ``summary.reference``. It is keyed (``reference_key``) by the derived scene, the
    method and its arguments, the batch settings, the input artifacts' content and the *code version*
-   (``render_code_version``: the kernels of every stage but evaluate, the renderers' setup and the presets): an existing
+   (``render_code_version``: the kernels, the renderer's setup and the presets that the reference method's
+   renderer imports): an existing
    reference with the same key is reused, never re-rendered; one with another key is refused (exit
    2, naming what differs) unless it is being rebuilt (``--reference-only``, ``make references``).
    Default place ``DIR/reference/reference.zarr``; ``--ref PATH`` names another.
@@ -59,33 +60,53 @@ from ..toml_file import dumps_toml
 from .compare_file import CompareMethod, Comparison, derived_scene, load_comparison
 from .sweep import arg_hashes, cli_render, key_text, referenced_files, substitute
 
+ROOT = Path(__file__).resolve().parents[2]
 REFERENCE_SEED = 1_000_000      # batch k renders with seed REFERENCE_SEED + k; runs use seeds 1, 2, ...
 EQUAL_TIME_SEED = 500_000       # the equal-time strip's renders
 MEMORY_SEED = 700_000           # the peak-memory render in a process of its own
 RENDER_CODE = ("stages", "pipeline/renderers", "pipeline/render_setup.py", "pipeline/fibre_cache.py",
-               "pipeline/presets.py", "pipeline/scene.py", "pipeline/yarns.py", "data/yarns", "data/bcsdf")
+               "pipeline/presets.py", "pipeline/bcsdf_presets.py", "pipeline/dye.py", "pipeline/thread_colors.py",
+               "pipeline/scene.py", "pipeline/yarns.py", "pipeline/generators.py", "pipeline/io", "data/yarns",
+               "data/bcsdf")
 NOT_RENDER_CODE = ("stages/evaluate",)   # measures pictures, never makes them
+CODE_SUFFIXES = (".py", ".toml", ".json")   # sources, presets, the bundled colour curves
 
 Renderer = Callable[[Path, str, Path, list], None]
 
 
 # ------------------------------------------------------------------------------------------------
 # keys
-@functools.lru_cache(maxsize=None)
-def render_code_version() -> str:
-    """sha256 (16 hex digits) of what decides a picture: the kernels (every stage but evaluate), the
-    renderers' setup and the presets (``RENDER_CODE``); the evaluation and report code are not part of it.
-    Hashed once per process: every render's stamp and the reference's key ask for it."""
-    root = Path(__file__).resolve().parents[2]
-    h = hashlib.sha256()
+def render_code_files(method: str | None = None, root: Path = ROOT) -> list[Path]:
+    """What decides a picture: the kernels (every stage but evaluate), the renderers' setup, the presets
+    and the colour curves (``RENDER_CODE``); the evaluation and report code are not part of it. With
+    ``method``, only the Python files of ``RENDER_CODE`` that method's renderer
+    (``pipeline/renderers/<method>.py``) imports, directly or through others (``source_graph``), and the
+    data folders: work on ``bysdf`` leaves ``fiberpath``'s converged references current. A method without
+    a module there (a test's stand-in) gets every file."""
+    reached = None
+    if method is not None and (root / "pipeline" / "renderers" / f"{method}.py").is_file():
+        from ..source_graph import import_closure, import_graph, module_files
+
+        modules = module_files(root, ("pipeline", "stages"))
+        graph = import_graph(root, ("pipeline", "stages"))
+        reached = {modules[m] for m in import_closure(graph, f"pipeline.renderers.{method}")}
+    out = []
     for rel in RENDER_CODE:
         p = root / rel
-        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix in (".py", ".toml")) if p.is_dir() else [p]
-        for f in files:
-            if any(f.is_relative_to(root / x) for x in NOT_RENDER_CODE):
-                continue
-            h.update(str(f.relative_to(root)).encode())
-            h.update(f.read_bytes())
+        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix in CODE_SUFFIXES) if p.is_dir() else [p]
+        out += [f for f in files if not any(f.is_relative_to(root / x) for x in NOT_RENDER_CODE)
+                and (reached is None or f.suffix != ".py" or f in reached)]
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def render_code_version(method: str | None = None) -> str:
+    """sha256 (16 hex digits) of ``render_code_files(method)``, their paths and bytes. Hashed once per
+    process and method: every render's stamp and the reference's key ask for it."""
+    h = hashlib.sha256()
+    for f in render_code_files(method):
+        h.update(str(f.relative_to(ROOT)).encode())
+        h.update(f.read_bytes())
     return h.hexdigest()[:16]
 
 
@@ -112,7 +133,7 @@ def reference_key(cmp: Comparison, out: Path) -> dict:
             "inputs": hashlib.sha256(key_text({**referenced_files(raw), **arg_hashes(args)}).encode()).hexdigest()[:16],
             "settings": key_text({"spp": cmp.settings.spp, "pixel_error": cmp.settings.pixel_error,
                                    "mean_error": cmp.settings.mean_error}),
-            "code": render_code_version(), "version": __version__}
+            "code": render_code_version(m.method), "version": __version__}
 
 
 KEY_WHAT = {"scene": "another scene or settings of it (camera, lights, method, arguments)",
@@ -144,7 +165,7 @@ def render_once(cmp: Comparison, m: CompareMethod, out: Path, exr: Path, raw: di
     args = expand(cmp, out, m.args)
     text = scene_text(cmp, raw, what)
     key = hashlib.sha256(key_text({"scene": text, "method": m.method, "args": args, "version": __version__,
-                                    "code": render_code_version(),
+                                    "code": render_code_version(m.method),
                                     "files": {**referenced_files(raw), **arg_hashes(args)}}).encode()).hexdigest()
     stamp = exr.with_suffix(".stamp.json")
     if not force and exr.exists():

@@ -265,7 +265,7 @@ def test_reference_from_another_scene_or_code_is_refused(compare_file, tmp_path,
     with pytest.raises(LoomError) as e:
         rc.run_convergence(other, out, ref_path=ref, renderer=render, echo=lambda s: None)
     assert e.value.file == str(ref) and e.value.place == "summary.reference.key.scene"
-    monkeypatch.setattr(rc, "render_code_version", lambda: "0123456789abcdef")
+    monkeypatch.setattr(rc, "render_code_version", lambda method=None: "0123456789abcdef")
     with pytest.raises(LoomError) as e:
         rc.run_convergence(compare_file, out, ref_path=ref, renderer=render, echo=lambda s: None)
     assert e.value.place == "summary.reference.key.code" and "another code version" in e.value.message
@@ -350,3 +350,23 @@ def test_reference_made_before_its_folder_exists_is_reused(compare_file, tmp_pat
     rc.run_convergence(compare_file, out, reference_only=True, renderer=render, echo=lambda s: None)
     res = rc.run_convergence(compare_file, out, renderer=render, echo=lambda s: None)
     assert res.reference["reused"]
+
+
+def test_a_methods_code_version_covers_what_its_renderer_reaches():
+    """The reference's code key is the method's own code: fiberpath's covers its integrator, the shell and
+    BVH walks, the colour curves and their lookup, and none of bysdf, prt or btf, whose work must not make
+    fiberpath's converged references stale; bysdf's covers its own model."""
+    from pipeline.runners.convergence import ROOT, render_code_files
+
+    def rel(method):
+        return {str(f.relative_to(ROOT)) for f in render_code_files(method)}
+
+    every, fibres, yarns = rel(None), rel("fiberpath"), rel("bysdf")
+    assert fibres < every and yarns < every
+    for f in ("stages/render/integrators/fiberpath.py", "stages/core/shell/traversal.py",
+              "stages/core/geometry/bvh.py", "pipeline/dye.py", "data/bcsdf/albedo_curves.json",
+              "pipeline/renderers/fiberpath.py"):
+        assert f in fibres, f
+    assert not {f for f in fibres if "bysdf" in f or f.startswith("stages/precompute") or "btf" in f}
+    assert "stages/core/shading/bysdf.py" in yarns and "stages/render/integrators/fiberpath.py" not in yarns
+    assert not any(f.startswith("stages/evaluate") for f in every)
