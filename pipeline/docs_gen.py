@@ -560,12 +560,37 @@ def _bench_summary(path: Path) -> str:
     return " ".join(doc.split("\n\n")[0].split())
 
 
+KEPT = ", kept from the page's previous version"   # a benchmark section this run has no result for
+
+
+def kept_benchmarks(text: str) -> dict[str, tuple[dict, str]]:
+    """The measured benchmark sections of a measurements page (``measurements_md``'s text): name ->
+    (its flattened numbers as the page prints them, the date it was measured)."""
+    out = {}
+    body = text.split("\n## Benchmarks", 1)[-1].split("\n## ", 1)[0] if "\n## Benchmarks" in text else ""
+    for part in body.split('<a id="bench-')[1:]:
+        name = part.split('"', 1)[0]
+        m = re.search(r"^Measured (.+?)(?:" + re.escape(KEPT) + r")?\.$", part, re.M)
+        rows = [ln for ln in part.splitlines() if ln.startswith("| `")]
+        if not m or not rows:
+            continue
+        res = {}
+        for ln in rows:
+            key, value = ln[2:-2].split(" | ", 1)
+            res[key.strip("`")] = value.replace("\\|", "|")
+        out[name] = (res, m.group(1))
+    return out
+
+
 def load_measurements(bench_results: Path, compare_dir: Path, bench_dir: Path | None = None,
                       compare_files=None, now: str | None = None, host: str | None = None,
-                      revision: str | None = None) -> Measurements:
+                      revision: str | None = None, previous: Path | None = None) -> Measurements:
     """What ``measurements_md`` reports: every benchmark of ``bench_dir`` (``bench_*.py``) and every result in
     ``bench_results``; every comparison file (default ``data/compare/*.toml`` but make demo's
-    ``demo_quick``) and every ``compare_dir/<name>/convergence.json``. Missing directories are no results."""
+    ``demo_quick``) and every ``compare_dir/<name>/convergence.json``. Missing directories are no results.
+    ``previous`` (the page as it stands): a benchmark without a result here keeps the numbers and date the
+    page had for it, marked as kept (``make compare`` alone must not erase what ``make bench`` measured).
+    Comparisons are never kept: their references are tied to the code that made them."""
     bench_dir = bench_dir if bench_dir is not None else ROOT / "bench"
     if compare_files is None:
         compare_files = [p for p in sorted((ROOT / "data" / "compare").glob("*.toml")) if p.stem != "demo_quick"]
@@ -578,6 +603,10 @@ def load_measurements(bench_results: Path, compare_dir: Path, bench_dir: Path | 
             continue
         if isinstance(res, dict):
             bench[p.stem] = (res, _file_date(p), bench.get(p.stem, (None, None, ""))[2])
+    if previous is not None and Path(previous).is_file():
+        for name, (res, date) in kept_benchmarks(Path(previous).read_text()).items():
+            if bench.get(name, (None,))[0] is None and name != COMPILE_REPORT:
+                bench[name] = (res, date + KEPT, bench.get(name, (None, None, ""))[2])
     compare = {Path(f).stem: (None, None) for f in compare_files}
     for p in sorted(Path(compare_dir).glob("*/convergence.json")) if Path(compare_dir).is_dir() else ():
         try:
@@ -829,7 +858,7 @@ def generate(root: Path = ROOT, parts=PARTS, bench_results: Path | None = None, 
         changed.append(docs / "scenes.md")
     if "measurements" in parts and data is None:
         data = load_measurements(bench_results or Path(root) / "bench" / "results",
-                                 compare_dir or Path(root) / "out" / "compare")
+                                 compare_dir or Path(root) / "out" / "compare", previous=docs / "measurements.md")
     if "measurements" in parts:
         path = docs / "measurements.md"
         text = measurements_md(data)

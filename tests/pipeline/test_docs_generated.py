@@ -8,6 +8,7 @@ found by a walk of the raw JSON independent of the generator's), the renderer re
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 import shutil
@@ -241,3 +242,34 @@ def test_measurements_rewrite_keeps_the_file_when_only_the_header_changes(tmp_pa
     assert "2027-01-01" in (root / "docs" / "measurements.md").read_text()
     (results / "prtspeed.json").write_text(json.dumps({"paths_per_s": 1.0}))
     assert root / "docs" / "measurements.md" in run("2027-01-03 00:00 UTC")
+
+
+def test_a_run_without_benchmarks_keeps_the_pages_benchmark_numbers(tmp_path):
+    """``make compare`` alone regenerates the page: the benchmarks it did not run keep the numbers and date
+    the page had (round trip through the page's own tables), marked as kept; comparisons are never kept."""
+    bench_dir, results, compare = _synthetic(tmp_path)
+    first = docs_gen.load_measurements(results, compare, bench_dir=bench_dir, compare_files=[Path("flat.toml")],
+                                       now="2027-01-01 00:00 UTC", host="h", revision="r")
+    page = tmp_path / "measurements.md"
+    page.write_text(docs_gen.measurements_md(first))
+    again = docs_gen.load_measurements(tmp_path / "nothing", tmp_path / "none", bench_dir=bench_dir,
+                                       compare_files=[Path("flat.toml")], now="2027-01-02 00:00 UTC", host="h",
+                                       revision="r", previous=page)
+    md = docs_gen.measurements_md(again)
+
+    def section(text, anchor):
+        return text.split(f'<a id="{anchor}"></a>')[1].split("<a id=")[0]
+
+    old, new = section(page.read_text(), "bench-prtspeed"), section(md, "bench-prtspeed")
+    assert new.replace(docs_gen.KEPT, "") == old and docs_gen.KEPT in new
+    assert "Not measured in this run" in section(md, "bench-idle")
+    assert "Not measured in this run" in section(md, "compare-flat")
+    prt = dataclasses.replace(docs_gen.PAGES["prt"], benchmarks=("prtspeed",))
+    assert "| [prtspeed](../measurements.md#bench-prtspeed) | `paths_per_s` | 1.235e+04 |" in \
+        docs_gen.measurements_block(prt, again)
+    # kept twice: the mark does not pile up
+    page.write_text(md)
+    third = docs_gen.load_measurements(tmp_path / "nothing", tmp_path / "none", bench_dir=bench_dir,
+                                       compare_files=[], now="2027-01-03 00:00 UTC", host="h", revision="r",
+                                       previous=page)
+    assert section(docs_gen.measurements_md(third), "bench-prtspeed") == new
