@@ -165,12 +165,14 @@ docs: $(VENV)/.installed ## regenerate docs/scenes.md, the method pages' generat
 clean: ## remove out/, the numba cache and pytest's cache
 	rm -rf out .numba_cache .pytest_cache
 
-# pip's output goes to .venv/pip.log and is shown only when the install fails
+# pip's output goes to .venv/pip.log and is shown only when the install fails. The venv's own pip (python 3.11's,
+# 23.x) installs editable projects; --no-compile leaves byte-compiling to the first import, which then compiles
+# only the modules loomlight uses (of 7,400 files in the dependencies)
 PIP := $(BIN)/python -m pip --disable-pip-version-check --no-input
 $(VENV)/.installed: pyproject.toml
 	@test -x $(BIN)/python || { echo "creating $(VENV) (python3 -m venv)"; $(PY) -m venv $(VENV); }
 	@echo "installing loomlight and its dependencies into $(VENV) (log: $(VENV)/pip.log)"
-	@{ $(PIP) install -q --upgrade pip && $(PIP) install -q -e '.[test,dask]'; } > $(VENV)/pip.log 2>&1 \
+	@{ $(PIP) install -q --no-compile -e '.[test,dask]'; } > $(VENV)/pip.log 2>&1 \
 	    || { cat $(VENV)/pip.log; echo "error: pip install failed (log above, also in $(VENV)/pip.log)"; exit 1; }
 	@touch $@
 

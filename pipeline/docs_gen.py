@@ -565,12 +565,14 @@ KEPT = ", kept from the page's previous version"   # a benchmark section this ru
 
 def kept_benchmarks(text: str) -> dict[str, tuple[dict, str]]:
     """The measured benchmark sections of a measurements page (``measurements_md``'s text): name ->
-    (its flattened numbers as the page prints them, the date it was measured)."""
+    (its flattened numbers as the page prints them, when and where it was measured: the section's date and
+    the machine, from the section itself when it was kept before, else from the page's header)."""
     out = {}
+    host = re.search(r"^- Machine: (.+)$", text, re.M)
     body = text.split("\n## Benchmarks", 1)[-1].split("\n## ", 1)[0] if "\n## Benchmarks" in text else ""
     for part in body.split('<a id="bench-')[1:]:
         name = part.split('"', 1)[0]
-        m = re.search(r"^Measured (.+?)(?:" + re.escape(KEPT) + r")?\.$", part, re.M)
+        m = re.search(r"^Measured (.+?)(?:" + re.escape(KEPT) + r" \(on (.+)\))?\.$", part, re.M)
         rows = [ln for ln in part.splitlines() if ln.startswith("| `")]
         if not m or not rows:
             continue
@@ -578,7 +580,8 @@ def kept_benchmarks(text: str) -> dict[str, tuple[dict, str]]:
         for ln in rows:
             key, value = ln[2:-2].split(" | ", 1)
             res[key.strip("`")] = value.replace("\\|", "|")
-        out[name] = (res, m.group(1))
+        where = m.group(2) or (host.group(1) if host else "another machine")
+        out[name] = (res, f"{m.group(1)}{KEPT} (on {where})")
     return out
 
 
@@ -606,7 +609,7 @@ def load_measurements(bench_results: Path, compare_dir: Path, bench_dir: Path | 
     if previous is not None and Path(previous).is_file():
         for name, (res, date) in kept_benchmarks(Path(previous).read_text()).items():
             if bench.get(name, (None,))[0] is None and name != COMPILE_REPORT:
-                bench[name] = (res, date + KEPT, bench.get(name, (None, None, ""))[2])
+                bench[name] = (res, date, bench.get(name, (None, None, ""))[2])
     compare = {Path(f).stem: (None, None) for f in compare_files}
     for p in sorted(Path(compare_dir).glob("*/convergence.json")) if Path(compare_dir).is_dir() else ():
         try:
