@@ -76,6 +76,15 @@ Renderer = Callable[[Path, str, Path, list], None]
 
 # ------------------------------------------------------------------------------------------------
 # keys
+@functools.lru_cache(maxsize=None)
+def _source_graph(root: Path) -> tuple[dict, dict]:
+    """The modules of ``pipeline`` and ``stages`` and their import graph, read once per process for every
+    method a comparison keys."""
+    from ..source_graph import import_graph, module_files
+
+    return module_files(root, ("pipeline", "stages")), import_graph(root, ("pipeline", "stages"))
+
+
 def render_code_files(method: str | None = None, root: Path = ROOT) -> list[Path]:
     """What decides a picture: the kernels (every stage but evaluate), the renderers' setup, the presets
     and the colour curves (``RENDER_CODE``); the evaluation and report code are not part of it. With
@@ -85,10 +94,9 @@ def render_code_files(method: str | None = None, root: Path = ROOT) -> list[Path
     a module there (a test's stand-in) gets every file."""
     reached = None
     if method is not None and (root / "pipeline" / "renderers" / f"{method}.py").is_file():
-        from ..source_graph import import_closure, import_graph, module_files
+        from ..source_graph import import_closure
 
-        modules = module_files(root, ("pipeline", "stages"))
-        graph = import_graph(root, ("pipeline", "stages"))
+        modules, graph = _source_graph(root)
         reached = {modules[m] for m in import_closure(graph, f"pipeline.renderers.{method}")}
     out = []
     for rel in RENDER_CODE:
