@@ -76,6 +76,10 @@ GROUPS = ("warp", "weft", "knit", "other")
 # the grey absorbers off: the yarn's colour is its only absorber (module doc, Colour)
 MATERIAL_DEFAULTS = {"sigma_spec": 0.0, "sigma_body": 0.0, "kt_exit": 1.0, "ls_mix": 0.0}
 FIBRE_SEED = 0   # realize's and tables' default --seed
+# the integrator's tuple of yarn types is padded to a power of two, at least TYPE_SLOTS long (repeating the last
+# type, never indexed): numba types a tuple by its length, so scenes of 1 to 4 yarn types share one compiled
+# integrator where each count compiled its own (about 18 s of a cold `make test`: two counts)
+TYPE_SLOTS = 4
 
 
 def _number(extra, key, default, kind=float, lo=None, hi=None):
@@ -365,6 +369,14 @@ def build_types(tparams, tol, max_iter, fibre_threshold=0.5, ply_threshold=0.6, 
     return tuple(out), time.perf_counter() - t0
 
 
+def padded_types(types: tuple) -> tuple:
+    """``types`` with its last entry repeated up to the next power of two, at least ``TYPE_SLOTS`` (see there)."""
+    if not types:
+        return tuple(types)
+    slots = max(TYPE_SLOTS, 1 << (len(types) - 1).bit_length())
+    return tuple(types) + (types[-1],) * (slots - len(types))
+
+
 class BuiltIntegrator(NamedTuple):
     integ: object           # stages.render.integrators.bysdf.BysdfIntegrator
     pieces: object          # TubePieces
@@ -396,9 +408,10 @@ def make_integrator(cv, tparams, yarn_type, params, lights, ground, has_ground, 
     window = (int(min(1 << 20, math.ceil(4.0 * radius.max() / max(float(seg_len.min()), 1e-30)) + 1))
               if len(seg_len) else 1)
     keys = np.array([yarn_key(FIBRE_SEED, y) for y in range(len(yarn_type))], np.int64)
-    integ = BysdfIntegrator(bvh, cv, pieces, types, yarn_type, keys, np.ascontiguousarray(params, np.float64),
-                            lights, ground, has_ground, np.ascontiguousarray(ground[1:4]), model.mode, model.K,
-                            model.falloff, pixel_angle, max_depth, rr_depth, window,
+    integ = BysdfIntegrator(bvh, cv, pieces, padded_types(types), yarn_type, keys,
+                            np.ascontiguousarray(params, np.float64), lights, ground, has_ground,
+                            np.ascontiguousarray(ground[1:4]), model.mode, model.K, model.falloff, pixel_angle,
+                            max_depth, rr_depth, window,
                             ray_eps(pieces.points.min(axis=0), pieces.points.max(axis=0)), 64)
     return BuiltIntegrator(integ, pieces, bvh, types, tables_s)
 

@@ -337,3 +337,36 @@ def test_bysdf_rows_take_the_body_colour_from_the_curve(tmp_path):
     x_abs, _ = absorbing.invert([0.99, 0.99, 0.99])
     assert x_abs.tolist() == [1.0, 1.0, 1.0]
     assert R.too_bright(absorbing, [0.99, 0.5, 0.1]).tolist() == [True, absorbing.albedo[-1] < 0.5, False]
+
+
+def test_scenes_of_one_to_four_yarn_types_share_one_compiled_integrator():
+    """Contract (issue 55, compile once): numba types the integrator's tuple of yarn types by its length, so
+    ``make_integrator`` pads it (``padded_types``); integrators of 1 and 3 types have one numba type, hence
+    one compiled ``trace_path`` (a cold ``make test`` compiled it once per count, ~18 s each), 5 types the next
+    size. The padding repeats the last real type, and ``built.types`` keeps the real ones."""
+    import numba
+
+    from pipeline import dye
+    from pipeline.presets import resolve_yarn_types
+    from pipeline.render_setup import ground_array, pack_lights
+    from pipeline.renderers import bysdf as R
+    from stages.core.shading.bysdf import pack_bysdf
+
+    geo = resolve_yarn_types([{"preset": "cotton1"}], [0.0])[0]
+    cv, tparams = dye.flat_cloth_curves(dye.unit_geometry(geo))
+    Y = len(cv.offsets) - 1
+    row = pack_bysdf(**R.node_material(dict(R.MATERIAL_DEFAULTS), np.full(3, 0.5)))
+    lights = pack_lights([{"type": "constant", "radiance": 1.0}]).table()
+    ground, has_ground = ground_array({})
+    typed = {}
+    for n in (1, 3, 5):
+        built = R.make_integrator(cv, np.repeat(tparams[:1], n, axis=0), np.arange(Y, dtype=np.int32) % n,
+                                  np.repeat(row[None, :], Y, axis=0), lights, ground, has_ground, 0.01, 4, 3,
+                                  R.YarnModel())
+        assert len(built.types) == n
+        assert len(built.integ.types) == (4 if n <= 4 else 8)
+        expect = list(built.types) + [built.types[-1]] * (len(built.integ.types) - n)
+        assert all(a is b for a, b in zip(built.integ.types, expect))
+        typed[n] = numba.typeof(built.integ)
+    assert typed[1] == typed[3]
+    assert typed[5] != typed[1]

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from numba import njit
 
+from stages.core.dispatch import runtime_value
 from stages.render.media.medium import HomogeneousMedium
 from stages.render.media.tracking import make_majorant_grid, ray_box, track
 from tests.chisquare import chi2_test_1d
@@ -30,7 +31,8 @@ def _collisions(med, maj, o, d, n, seed):
     hit = np.empty(n, np.bool_)
     t = np.empty(n)
     for k in range(n):
-        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, np.int64(0), False, np.int64(-1))
+        r = track(med, maj, o[0], o[1], o[2], d[0], d[1], d[2], np.inf, seed, k, np.int64(0), runtime_value(False),
+                  np.int64(-1))   # a runtime flag: test_volpath's track_many shares this compiled track
         hit[k] = r.collided
         t[k] = r.t
     return hit, t
