@@ -139,11 +139,12 @@ def preset_reflection(name: str) -> float:
 
 def dyed_bcsdf(p, c_tt, reflection: float) -> np.ndarray:
     """The packed BCSDF of a dyed fibre: C_R = ``reflection`` in every channel (uncoloured), C_TT per
-    channel, the widths of ``p``; ``c_tt`` (..., 3) gives (..., BCSDF_SIZE)."""
+    channel, the widths of ``p``; ``c_tt`` (..., 3) gives (..., BCSDF_SIZE), in C order (a copy of the broadcast
+    rows keeps their layout, Fortran order, and numba compiles a kernel again for each layout)."""
     from stages.core.shading.bcsdf import C_R, C_TT
 
     c = np.clip(np.asarray(c_tt, np.float64), 0.0, 1.0)
-    q = np.array(np.broadcast_to(np.asarray(p, np.float64), c.shape[:-1] + (len(p),)))
+    q = np.array(np.broadcast_to(np.asarray(p, np.float64), c.shape[:-1] + (len(p),)), order="C")
     q[..., C_R:C_R + 3] = reflection
     q[..., C_TT:C_TT + 3] = c
     return q

@@ -38,9 +38,7 @@ def test_lone_fibre_returns_its_closed_form_albedo():
     bvh, _ = build_fiber_bvh(pts, np.array([0, 7]), np.full(7, 0.5))
     for name in bcsdf_presets():
         p = load_bcsdf_preset(name)
-        # C order, as the curve walk's rows: one compiled yarn_albedo for both tests
-        mats = np.ascontiguousarray(dye.dyed_bcsdf(p, np.array([[0.0] * 3, [0.5] * 3, [0.9] * 3]),
-                                                   dye.preset_reflection(name)))
+        mats = dye.dyed_bcsdf(p, np.array([[0.0] * 3, [0.5] * 3, [0.9] * 3]), dye.preset_reflection(name))
         a, se, met = yarn_albedo(bvh, mats, np.array([-1.0, -5.0, -0.4]), np.array([2.0, 0.0, 0.0]),
                                  np.array([0.0, 0.0, 0.8]), np.array([0.0, 1.0, 0.0]), RAYS, 3, 1e-7, SELF_WINDOW, 100)
         assert met == RAYS
