@@ -7,8 +7,10 @@ the first ply it meets; a ray that meets no ply passes on through the yarn. Shad
 BYSDF (``stages.core.shading.bysdf``) with ply and fibre shadowing.
 
 ``BysdfIntegrator`` fields: ``bvh`` (FiberBVH of the tube pieces), ``cv`` (the yarns' ``Curves``),
-``pieces`` (``TubePieces``), ``types`` (tuple of ``YarnType``, one per yarn type), ``yarn_type`` (Y,)
-int32, ``yarn_key`` (Y,) int64 random key of each yarn (fibre-table switching), ``params`` (Y,
+``pieces`` (``TubePieces``), ``types`` (tuple of ``YarnType``, one per yarn type, padded to 4, 8, ...
+entries by the setup so that a scene's count of types does not make numba compile again:
+``pipeline.renderers.bysdf.padded_types``), ``yarn_type`` (Y,) int32, ``yarn_key`` (Y,) int64 random key of
+each yarn (fibre-table switching), ``params`` (Y,
 BYSDF_SIZE) the BYSDF of each yarn, ``lights`` (``LightTable``), ``ground`` float64[4] and
 ``has_ground`` (``stages.render.ground``), ``ground_albedo`` (3,), ``mode`` (MODE_NEAR, MODE_FAR,
 MODE_MULTISCALE), ``K`` offsets per far / multiscale vertex, ``falloff`` (multiscale weights),
