@@ -240,7 +240,7 @@ $(OUT)/damask_btf.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_SCENE)
 	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
 	    --set btf=$(OUT)/damask_btf_fit.zarr --spp $(SPP) $(DEMO_SIZE) -o $@
 
-$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
+$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
 	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
@@ -249,7 +249,7 @@ $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FO
 $(OUT)/knit_fibers.zarr/zarr.json: $(OUT)/knit_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/knit_yarns.zarr -o $(OUT)/knit_fibers.zarr
 
-$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
+$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
 	$(LL) fit-bysdf $(KNIT_SCENE) --yarns $(OUT)/knit_yarns.zarr --fibers $(OUT)/knit_fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_bysdf.exr: $(OUT)/knit_yarns.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml $(KNIT_SCENE)

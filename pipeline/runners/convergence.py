@@ -9,7 +9,11 @@ gives the right picture fastest" for one scene (the comparison file: ``pipeline.
    within their targets (or ``max_batches``). Published as a ``render`` artifact ``reference.zarr``
    with ``reference.exr`` / ``.png`` and the relative standard error map ``reference_error.png``; its
    per-channel variance of the mean is in ``channels/variance_r|g|b``, the batches' count, spp, time
-   and noise in ``summary.reference``. It is keyed (``reference_key``) by the derived scene, the
+   and noise in ``summary.reference``. Its path depth is checked too (``depth_check``): batch 0's seed
+   rendered again at ``DEPTH_CHECK_FACTOR`` times ``render.max_depth`` follows the same paths further, so
+   the ratio of the two cloth means (per channel) is the share of the light the depth keeps; below
+   ``1 - DEPTH_TOLERANCE`` the reference is flagged as truncated (printed and reported). It is keyed
+   (``reference_key``) by the derived scene, the
    method and its arguments, the batch settings, the input artifacts' content and the *code version*
    (``render_code_version``: the kernels, the renderer's setup and the presets that the reference method's
    renderer imports): an existing
@@ -64,6 +68,8 @@ ROOT = Path(__file__).resolve().parents[2]
 REFERENCE_SEED = 1_000_000      # batch k renders with seed REFERENCE_SEED + k; runs use seeds 1, 2, ...
 EQUAL_TIME_SEED = 500_000       # the equal-time strip's renders
 MEMORY_SEED = 700_000           # the peak-memory render in a process of its own
+DEPTH_CHECK_FACTOR = 4          # the depth check renders batch 0 again at this many times render.max_depth
+DEPTH_TOLERANCE = 0.002         # light a reference may lose to its path depth: the cloth mean's noise target
 RENDER_CODE = ("stages", "pipeline/renderers", "pipeline/render_setup.py", "pipeline/fibre_cache.py",
                "pipeline/presets.py", "pipeline/bcsdf_presets.py", "pipeline/dye.py", "pipeline/thread_colors.py",
                "pipeline/scene.py", "pipeline/yarns.py", "pipeline/generators.py", "pipeline/io", "data/yarns",
@@ -292,6 +298,10 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
             break
         need = k * max((noise.pixel_median / s.pixel_error) ** 2, (noise.mean / s.mean_error) ** 2) * 1.1
         target = int(min(s.max_batches, max(k + 1, math.ceil(need))))
+    depth = depth_check(cmp, out, bdir, images[0], alpha, renderer, where)
+    echo(f"reference {cmp.name}: path depth {depth['max_depth']} keeps "
+         + " / ".join(f"{v:.4f}" for v in depth["kept_rgb"]) + f" of the light at depth {depth['check_depth']}"
+         + (" -- TRUNCATED: raise [compare] render.max_depth" if depth["truncated"] else ""))
     H, W = alpha.shape
     rgb = stats.mean.astype(np.float32)
     var_mean = stats.variance.mean(axis=2).astype(np.float32)
@@ -308,7 +318,8 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
                       "spp_per_batch": int(s.spp), "render_time_s": render_s,
                       "pixel_error_p50": noise.pixel_median, "pixel_error_p95": noise.pixel_p95,
                       "mean_error": noise.mean, "targets": {"pixel_error": s.pixel_error, "mean_error": s.mean_error},
-                      "targets_met": bool(met), "batch_seeds": [REFERENCE_SEED, REFERENCE_SEED + k - 1]},
+                      "targets_met": bool(met), "batch_seeds": [REFERENCE_SEED, REFERENCE_SEED + k - 1],
+                      "depth_check": depth},
     }
     exr_path = ref_path.with_suffix(".exr")
     err_png = ref_path.parent / "reference_error.png"
@@ -327,6 +338,30 @@ def build_reference(cmp: Comparison, out: Path, ref_path: Path, renderer: Render
                     dimension_names=("y", "x"))
         w.summary.update(summary)
     return load_reference(ref_path, key)
+
+
+def depth_check(cmp: Comparison, out: Path, bdir: Path, first: np.ndarray, alpha: np.ndarray, renderer: Renderer,
+                where: tuple = ()) -> dict:
+    """How much light the reference's path depth keeps: batch 0 (``first``) against the same seed rendered at
+    ``DEPTH_CHECK_FACTOR`` times the depth. Both follow the same random numbers up to the shallower depth (the
+    samplers are indexed by pixel, sample and dimension), so their difference is the light of the deeper
+    vertices alone, with little noise of its own. Per channel, over the cloth (alpha > 0.5)."""
+    from ..images import read_exr
+    from ..scene import RENDER_DEFAULTS
+
+    m = cmp.method(cmp.reference)
+    raw = derived_scene(cmp, m, cmp.settings.spp, REFERENCE_SEED)
+    raw["render"]["max_spp"] = 0
+    d = int(raw["render"].get("max_depth", RENDER_DEFAULTS["max_depth"]))
+    raw["render"]["max_depth"] = d * DEPTH_CHECK_FACTOR
+    exr = bdir / "depth_check.exr"
+    render_once(cmp, m, out, exr, raw, f"depth check at {d * DEPTH_CHECK_FACTOR}", renderer, where=where)
+    deep, _ = read_exr(exr)
+    cloth = alpha > 0.5
+    kept = [float(first[..., c][cloth].mean() / max(float(np.asarray(deep, np.float64)[..., c][cloth].mean()), 1e-30))
+            for c in range(3)] if cloth.any() else [1.0, 1.0, 1.0]
+    return {"max_depth": d, "check_depth": d * DEPTH_CHECK_FACTOR, "kept_rgb": kept,
+            "truncated": bool(min(kept) < 1.0 - DEPTH_TOLERANCE)}
 
 
 def _error_png(path: Path, rel_se: np.ndarray, alpha: np.ndarray, title: str) -> Path:
@@ -517,7 +552,7 @@ def run_convergence(path: str | Path, out_dir: str | Path, ref_path: str | Path 
                 "render_time_s": float(rs["render_time_s"]), "pixel_error_p50": rs["pixel_error_p50"],
                 "pixel_error_p95": rs["pixel_error_p95"], "mean_error": rs["mean_error"],
                 "targets_met": rs["targets_met"], "reused": ref.reused, "method": cmp.reference,
-                "code": rs["key"]["code"]}
+                "code": rs["key"]["code"], "depth_check": rs.get("depth_check")}
     echo(f"reference {cmp.name}: {ref.batches} batches, {ref_info['spp']} spp, "
          f"{ref_info['render_time_s']:.1f} s render "
          f"({'reused' if ref.reused else 'rendered'}); pixel error p50 {ref_info['pixel_error_p50']:.4f}, "

@@ -180,6 +180,17 @@ def winner_sentences(cmp, methods: dict) -> list[str]:
     return out
 
 
+def depth_sentence(dc: dict | None) -> str:
+    """The reference's path-depth check (``convergence.depth_check``) in a sentence."""
+    if not dc:
+        return "Its path depth was not checked (a reference made before the depth check)."
+    kept = ", ".join(f"{v:.4f}" for v in dc["kept_rgb"])
+    return (f"Its path depth {dc['max_depth']} keeps {kept} (per channel) of the light that depth "
+            f"{dc['check_depth']} gives on the same paths"
+            + (": **truncated — the reference misses light that deeper paths carry; raise the comparison's "
+               "render.max_depth**." if dc["truncated"] else "."))
+
+
 def write_outputs(cmp, out: Path, ref, ref_info: dict, methods: dict, strip: dict, targets: list, t_start: float):
     from ..artifacts import FILE, ArtifactWriter
 
@@ -214,7 +225,8 @@ def write_outputs(cmp, out: Path, ref, ref_info: dict, methods: dict, strip: dic
                   "95th percentile "
                   f"{ref_info['pixel_error_p95']:.3f}; of the cloth's mean {ref_info['mean_error']:.4f}"
                   + ("" if ref_info["targets_met"] else " (**its targets were not met within max_batches**)") + ". "
-                  "Every error below has the reference's own noise subtracted (E² − σ²_ref, with its uncertainty).")
+                  "Every error below has the reference's own noise subtracted (E² − σ²_ref, with its uncertainty). "
+                  + depth_sentence(ref_info.get("depth_check")))
     rep.image("reference/reference_error.png", "The reference's relative standard error per cloth pixel")
     rep.heading("Methods")
     lv = [f"{v:g}" for v in cmp.levels]

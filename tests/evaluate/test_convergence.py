@@ -154,6 +154,7 @@ target_speedup = 4.0
 SIGMA = 0.6                         # per-sample relative noise of the stand-in
 SECONDS_PER_SPP = {"procedural": 0.01, "realized": 0.001}
 BIAS = {"procedural": 0.0, "realized": 0.08}   # the realized stand-in is 8 % bright everywhere
+TAIL = 0.1                          # the stand-in's light beyond depth d: TAIL ** d of it (1 - TAIL ** d kept)
 
 
 def _standin_method():
@@ -179,7 +180,8 @@ def standin(monkeypatch):
         truth, alpha = _truth(h, w)
         rng = np.random.default_rng(seed * 7919 + spp)
         noise = SIGMA / math.sqrt(spp) * rng.standard_normal(truth.shape)
-        rgb = (truth * (1.0 + BIAS[src]) * (1.0 + noise)).astype(np.float32)
+        kept = 1.0 - TAIL ** sc.render["max_depth"]
+        rgb = (truth * kept * (1.0 + BIAS[src]) * (1.0 + noise)).astype(np.float32)
         write_render(exr, rgb, {"A": alpha.astype(np.float32)})
         g = zarr.open_group(str(exr.with_suffix(".zarr")), mode="w", zarr_format=3)
         g.attrs["summary"] = {"kind": "render", "render_time_s": SECONDS_PER_SPP[src] * spp, "spp": spp,
@@ -331,6 +333,29 @@ def test_reference_short_of_its_targets_is_extended(compare_file, tmp_path, stan
     new_seeds = {s for _, _, s in calls[n:]}
     assert again.reference["targets_met"] and again.reference["batches"] > 8
     assert min(new_seeds) == 1_000_000 + 8             # the first eight batches were reused, not re-rendered
+
+
+@pytest.mark.parametrize("depth", [1, 5])
+def test_reference_depth_check_finds_the_light_its_depth_cuts(compare_file, tmp_path, standin, depth):
+    """The reference's depth check: batch 0 again at 4x the depth, on the same random numbers, measures the share
+    of the light the depth keeps exactly (the stand-in keeps 1 - 0.1^d); a depth that loses more than the mean
+    error target (0.2 %) is flagged, printed and reported; a deep enough one is not."""
+    from pipeline.runners import convergence as rc
+
+    render, calls = standin
+    deep = f"equal_time_spp = 16\nrender = {{ max_depth = {depth} }}"
+    compare_file.write_text(compare_file.read_text().replace("equal_time_spp = 16", deep))
+    said = []
+    res = rc.run_convergence(compare_file, tmp_path / "out", reference_only=True, renderer=render, echo=said.append)
+    dc = res.reference["depth_check"]
+    want = (1.0 - TAIL ** depth) / (1.0 - TAIL ** (4 * depth))
+    assert dc["max_depth"] == depth and dc["check_depth"] == 4 * depth
+    assert dc["kept_rgb"] == pytest.approx([want] * 3, rel=1e-5)
+    assert dc["truncated"] == (depth == 1)
+    assert any(("TRUNCATED" in line) == (depth == 1) and "path depth" in line for line in said)
+    from pipeline.runners.convergence_report import depth_sentence
+
+    assert ("truncated" in depth_sentence(dc)) == (depth == 1)
 
 
 def test_reference_made_before_its_folder_exists_is_reused(compare_file, tmp_path, standin):
