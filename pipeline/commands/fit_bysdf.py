@@ -36,11 +36,11 @@ def register(app: typer.Typer) -> None:
 
         if fit_reflection not in REFLECT_SETUPS:
             raise LoomError(None, "--fit-reflection", unknown("setup", fit_reflection, REFLECT_SETUPS))
-        check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (ref_spp, "--ref-spp"),
                         (iterations, "--iterations"), (1 if max_depth is None else max_depth, "--max-depth")):
             if v <= 0:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
+        check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations,
                       max_depth=FIT_MAX_DEPTH if max_depth is None else max_depth,
                       scene_lights=False if no_scene_lights else None, reflect=fit_reflection,

@@ -16,7 +16,7 @@ from tests.render.test_bysdf_render import _make, _weave
 
 @pytest.mark.slow
 def test_fit_moves_bysdf_towards_fiberpath(tmp_path, cli):
-    from pipeline.runners.fit_bysdf import SETUPS, run_fit
+    from pipeline.runners.fit_bysdf import FIT_MAX_DEPTH, SETUPS, run_fit
     from pipeline.runners.realize import run_realize
 
     scene, yarns = _make(tmp_path, "fit", _weave(2, L=0.2), origin=(0.05, -0.2, 0.3), w=24, h=18)
@@ -27,6 +27,8 @@ def test_fit_moves_bysdf_towards_fiberpath(tmp_path, cli):
                   progress=lambda *_: None)
     first = rep["history"][0]
     final = rep["setups"]
+    assert rep["max_depth"] == FIT_MAX_DEPTH                  # the full transport, not the scene's depth
+    assert f"path depth {FIT_MAX_DEPTH}" in out.read_text().splitlines()[0]
     for n in SETUPS:
         assert math.isfinite(final[n]["rel_error_luminance"])
     if not rep["energy_capped"]:

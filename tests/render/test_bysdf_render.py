@@ -279,14 +279,15 @@ def test_bad_colour_scale_in_params_exits_2(cli, weave, tmp_path):
         assert not out.exists()
 
 
-def test_fit_bysdf_unknown_reflection_setup_exits_2(cli, weave, tmp_path):
-    """``fit-bysdf --fit-reflection`` names front or scene: anything else exits 2 with one line naming the
-    option, before any input is read, and writes nothing."""
+@pytest.mark.parametrize("option, value", [("--fit-reflection", "sky"), ("--max-depth", "0")])
+def test_fit_bysdf_bad_option_exits_2(cli, weave, tmp_path, option, value):
+    """``fit-bysdf --fit-reflection`` names front or scene, ``--max-depth`` is positive: anything else exits 2
+    with one line naming the option, before any input is read, and writes nothing."""
     scene, yarns = weave
     out = tmp_path / "fit.toml"
     code, _, err = cli("fit-bysdf", str(scene.path), "--yarns", yarns, "--fibers", str(tmp_path / "none.zarr"),
-                       "-o", str(out), "--fit-reflection", "sky")
-    assert code == 2 and len(err.strip().splitlines()) == 1 and "--fit-reflection" in err, err
+                       "-o", str(out), option, value)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and option in err, err
     assert not out.exists()
 
 
