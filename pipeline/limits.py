@@ -7,6 +7,7 @@
 - Light values (irradiance, radiance, power) are at most ``MAX_LIGHT``.
 - Path depths (``max_depth``, ``rr_depth`` of every render and precompute) are at most ``MAX_PATH_DEPTH``:
   they cap work that Russian roulette ends long before, so past it a number is a typo, not a setting.
+  ``FULL_TRANSPORT_DEPTH`` is the depth by which cloth's paths have carried all their light.
 - Counts a stage works through (paths per cell, SG counts) are bounded by time where their memory does
   not grow with them: ``WorkEstimate`` refuses a run whose least time exceeds the time limit
   (``LOOMLIGHT_TIME_LIMIT`` hours, default 24), with the estimate in the message, as
@@ -26,6 +27,11 @@ MAX_COORD = 1e6
 MAX_LENGTH = 1e6
 MAX_LIGHT = 1e9
 MAX_PATH_DEPTH = 10_000
+# The depth at which cloth's paths have carried their light: the default of what must hold the full transport
+# (fit-bysdf's renders, the IIRTF's paths, the comparisons' references). Cloth keeps light through many fibres:
+# fiberpath on the demo swatch keeps 0.60-0.68 of depth 1,024's light at depth 16, 0.82-0.87 at 32, 0.95-0.96 at
+# 64, 1.000 at 256 (docs/evaluate.md); Russian roulette ends most paths long before, so it costs little.
+FULL_TRANSPORT_DEPTH = 256
 
 
 def check_positive(value, place: str, file=None, upper: float = MAX_LENGTH):

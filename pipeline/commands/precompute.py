@@ -14,6 +14,7 @@ from typing import List
 
 import typer
 
+from ..limits import FULL_TRANSPORT_DEPTH
 from ..memory import BUDGET_HELP
 from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
@@ -86,7 +87,8 @@ def iirtf(
     cell_factor: float = typer.Option(1.0, "--cell-factor", help="Target cell side in mean free paths (§6.1: 1-2)."),
     paths: int = typer.Option(50000, "--paths", help="Monte Carlo paths per cell (§4.2: 50,000)."),
     mfp_paths: int = typer.Option(20000, "--mfp-paths", help="Paths traced to estimate the mean free path."),
-    max_depth: int = typer.Option(32, "--max-depth", help="Largest number of scattering events on a path."),
+    max_depth: int = typer.Option(FULL_TRANSPORT_DEPTH, "--max-depth",
+                                  help="Largest number of scattering events on a path (default: the full transport)."),
     rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
     light_sampling: str = typer.Option("uniform", "--light-sampling", metavar="<uniform | mis>",
                                        help="Estimator of the light integral: uniform (§4.2: light directions "

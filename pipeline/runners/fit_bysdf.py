@@ -51,13 +51,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LoomError
+from ..limits import FULL_TRANSPORT_DEPTH
 
 IRRADIANCE = 3.0
 # Both methods render the fit at this path depth, whatever the scene's render.max_depth (a picture's choice): the
-# fit matches the models' full transport. Measured on the demo swatch (fiberpath, 64 x 48, light along the view):
-# depth 16 keeps 0.60-0.68 of depth 1,024's light per channel, 32 0.82-0.87, 64 0.95-0.96, 128 0.99-1.00, 256 1.000;
-# bysdf's paths are shorter (the same bytes at 16, 32 and 64). Russian roulette still ends most paths early.
-FIT_MAX_DEPTH = 256
+# fit matches the models' full transport (``pipeline.limits.FULL_TRANSPORT_DEPTH``); bysdf's own paths are short
+# (the demo swatch renders the same bytes at depth 16, 32 and 64).
+FIT_MAX_DEPTH = FULL_TRANSPORT_DEPTH
 SETUPS = ("front", "back", "front+back")
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
