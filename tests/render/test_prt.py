@@ -22,6 +22,7 @@ from numba import njit
 
 from pipeline.artifacts import read_meta
 from pipeline.images import read_exr
+from pipeline.limits import FULL_TRANSPORT_DEPTH
 from stages.core.sg import sg_mass, spherical_fibonacci_axes
 from stages.core.shading.bcsdf import bcsdf_eval
 from stages.core.shading.bcsdf_sg import bcsdf_sg_gamma, sg_single_scatter
@@ -213,22 +214,24 @@ def test_single_scattering_against_fiberpath_depth_1(swatch, light):
 
 # ------------------------------------------------------------------------------------------------ all terms
 def test_all_terms_against_fiberpath(swatch):
-    """Reference: ``fiberpath`` at full depth (32 events, roulette from 5) and at depth 1, 48 x 36, 16 spp.
+    """Reference: ``fiberpath`` at full depth (``FULL_TRANSPORT_DEPTH`` events, roulette from 5, as the IIRTF's
+    paths) and at depth 1, 48 x 36, 16 spp.
 
     - terms=all is terms=single + terms=multi pixel by pixel (same seed: the terms share the camera
       samples and use disjoint random dimensions) to float32 rounding (measured 7e-7 at most).
     - The multiple-scattering term is positive in every channel and stands for fiberpath's
-      (full - depth 1): measured prt multi / fiberpath multi 0.85 / 0.83 / 0.76 (RGB); the IIRTF here
-      is order 2 from 200 paths per cell (the paper: order 4-5, 50,000 paths), and the SVF's midpoint
-      bias of the single-scattering test enters its first bounce as well (sigma 5.5-6.6 %). Bound: 0.5-1.5
-      (+ 3 sigma).
-    - The whole image: prt / fiberpath measured 0.90 / 0.89 / 0.86 (sigma 2.4-3.1 %). Bound: 0.75-1.1
-      (+ 3 sigma)."""
+      (full - depth 1): measured prt multi / fiberpath multi 1.00 / 1.02 / 1.06 (RGB; 0.85 / 0.83 / 0.76
+      while the IIRTF's paths and this reference stopped at depth 32); the IIRTF here is order 2 from 200
+      paths per cell (the paper: order 4-5, 50,000 paths), and the SVF's midpoint bias of the
+      single-scattering test enters its first bounce as well (sigma 5.5-6.6 %). Bound: 0.75-1.3 (+ 3 sigma).
+    - The whole image: prt / fiberpath measured 1.00 / 1.02 / 1.06 (sigma 3.2-5.1 %; 0.90 / 0.89 / 0.86 at
+      depth 32). Bound: 0.85-1.15 (+ 3 sigma): an IIRTF cut short of the fibres' transport fails it."""
     scene = swatch.scene(DIRECTIONAL.format(d=LIGHT_1))
     terms = {t: swatch.render(scene, *swatch.prt_args(), "--set", f"terms={t}", "--spp", "16")
              for t in ("single", "multi", "all")}
     fp1 = swatch.render(scene, "--method", "fiberpath", "--fibers", swatch.tiling, "--max-depth", "1", "--spp", "16")
-    fpa = swatch.render(scene, "--method", "fiberpath", "--fibers", swatch.tiling, "--spp", "16")
+    fpa = swatch.render(scene, "--method", "fiberpath", "--fibers", swatch.tiling, "--spp", "16",
+                        "--max-depth", str(FULL_TRANSPORT_DEPTH))
     a = terms["all"][0]
     np.testing.assert_allclose(a, terms["single"][0] + terms["multi"][0], rtol=1e-5, atol=1e-6 * a.max())
     (m_all, se_all), (m_multi, se_multi) = _mean_se(*terms["all"]), _mean_se(*terms["multi"])
@@ -237,9 +240,9 @@ def test_all_terms_against_fiberpath(swatch):
     fp_multi = m_fa - m_f1
     assert np.all(fp_multi > 0)
     s = 3.0 * math.sqrt(se_multi ** 2 + se_fa ** 2 + se_f1 ** 2)
-    assert np.all((m_multi > 0.5 * fp_multi - s) & (m_multi < 1.5 * fp_multi + s)), (m_multi / fp_multi, s / fp_multi)
+    assert np.all((m_multi > 0.75 * fp_multi - s) & (m_multi < 1.3 * fp_multi + s)), (m_multi / fp_multi, s / fp_multi)
     s = 3.0 * math.hypot(se_all, se_fa)
-    assert np.all((m_all > 0.75 * m_fa - s) & (m_all < 1.1 * m_fa + s)), (m_all / m_fa, s / m_fa)
+    assert np.all((m_all > 0.85 * m_fa - s) & (m_all < 1.15 * m_fa + s)), (m_all / m_fa, s / m_fa)
 
 
 # ------------------------------------------------------------------------------------------------ sum of SGs
