@@ -159,7 +159,8 @@ def btf(
                                         "holds cell averages, so fibre glints between grid directions are not lost "
                                         "or aliased); grid: the grid directions themselves (the point samples of "
                                         "Daubert et al. 2001)."),
-    max_depth: int = typer.Option(16, "--max-depth", help="Largest number of scattering events on a path."),
+    max_depth: int = typer.Option(FULL_TRANSPORT_DEPTH, "--max-depth",
+                                  help="Largest number of scattering events on a path (default: the full transport)."),
     rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
     bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>",
                               help="BCSDF preset for yarn groups the scene names none for."),

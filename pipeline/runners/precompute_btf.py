@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ..errors import LoomError
-from ..limits import MAX_PATH_DEPTH, largest_option
+from ..limits import FULL_TRANSPORT_DEPTH, MAX_PATH_DEPTH, largest_option
 from ..memory import Estimate, budget as memory_budget
 
 DIRECTIONS = ("cell", "grid")
@@ -57,8 +57,8 @@ class BtfParams:
     threshold: float = 0.1
     max_rounds: int = 10
     directions: str = "cell"         # cell: view and light uniform over each grid cell (averages); grid: the grid's
-    max_depth: int = 16
-    rr_depth: int = 5
+    max_depth: int = FULL_TRANSPORT_DEPTH   # at 16 the damask's ground-satin texture held 0.55 / 0.66 / 0.75 of
+    rr_depth: int = 5                       # its red / green / blue light at 256 (64 x 48 render, 8 spp)
     seed: int = 0
     material: dict = field(default_factory=dict)
 
