@@ -106,7 +106,7 @@ $(PRT)/flat%_tiling.zarr/zarr.json: data/tilings/flat_satin%.toml data/scenes/fl
 $(PRT)/flat%_svf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
 	$(LL) precompute svf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_svf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(PRT_SVF_ARGS)
 
-$(PRT)/flat%_iirtf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
+$(PRT)/flat%_iirtf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py
 	$(LL) precompute iirtf $(PRT)/flat$*_tiling.zarr -o $(PRT)/flat$*_iirtf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(PRT_IIRTF_ARGS)
 
 $(PRT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
@@ -115,7 +115,7 @@ $(PRT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(D
 $(PRT)/damask_svf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
 	$(LL) precompute svf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_svf.zarr $(PRT_SVF_ARGS)
 
-$(PRT)/damask_iirtf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
+$(PRT)/damask_iirtf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py
 	$(LL) precompute iirtf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_iirtf.zarr $(PRT_IIRTF_ARGS)
 
 .PRECIOUS: $(PRT)/damask_%.zarr/zarr.json $(PRT)/flat%_tiling.zarr/zarr.json $(PRT)/flat%_svf.zarr/zarr.json $(PRT)/flat%_iirtf.zarr/zarr.json
@@ -139,7 +139,7 @@ prt-study: $(VENV)/.installed ## Khungurn et al. 2017 §6.1: the cell-size and S
 # into out/btf/, against fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
 BTF_SWEEP_ARGS ?=
 
-$(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
+$(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py
 	$(LL) precompute btf $(PRT)/flat$*_tiling.zarr -o $(BTF_DIR)/flat$*_btf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(BTF_SWEEP_ARGS)
 
 .PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json
