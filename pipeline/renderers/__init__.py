@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 from ..errors import LoomError, did_you_mean, unknown  # noqa: F401 (did_you_mean: for the render runner)
-from ..limits import FULL_TRANSPORT_DEPTH, MAX_PATH_DEPTH
+from ..limits import MAX_PATH_DEPTH
 
 if TYPE_CHECKING:  # numpy stays out of `loomlight --help`
     import numpy as np
@@ -97,9 +97,8 @@ class RenderMethod:
 
 
 # settings every method shares: scene key render.<name> (camera.<name> for the image size), or the option
-# max_depth: the full transport (cloth cut at depth 32 kept 0.70-0.94 of its light per channel: docs/evaluate.md)
-COMMON_DEFAULTS = {"width": 320, "height": 240, "spp": 16, "seed": 0, "max_depth": FULL_TRANSPORT_DEPTH, "rr_depth": 5,
-                   "tile_size": 16, "max_spp": 0, "target_error": 0.05}  # max_spp 0: no adaptive sampling (film.py)
+COMMON_DEFAULTS = {"width": 320, "height": 240, "spp": 16, "seed": 0, "max_depth": 32, "rr_depth": 5, "tile_size": 16,
+                   "max_spp": 0, "target_error": 0.05}  # max_spp 0: no adaptive sampling (renderers/film.py)
 
 FIBERS = ArtifactInput("fibers", ("fibers",), "the realized fibres (loomlight realize)")
 TILING = ArtifactInput("fibers", ("tiling",), "a tiling artifact (loomlight tile)")
