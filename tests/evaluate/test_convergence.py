@@ -165,12 +165,17 @@ def _standin_method():
 
 
 @pytest.fixture
-def standin(monkeypatch):
+def standin(monkeypatch, request):
     """Register the stand-in render method; returns the renderer the runner calls and the calls made."""
     from pipeline.renderers import METHODS
     from pipeline.scene import load_scene
+    from pipeline.schemas import load_schema
 
     monkeypatch.setitem(METHODS, "standin", _standin_method())
+    # the scene schema lists the registry's methods and is cached: built again with the stand-in, and without it
+    # after (a cache filled here named "standin" to every later test of this process: docs --check saw it)
+    load_schema.cache_clear()
+    request.addfinalizer(load_schema.cache_clear)
     calls = []
 
     def render(scene_file, method, exr, args):
