@@ -5,6 +5,8 @@ from pathlib import Path
 
 import typer
 
+from ..limits import FULL_TRANSPORT_DEPTH
+
 
 def register(app: typer.Typer) -> None:
     @app.command("fit-bysdf")
@@ -19,9 +21,9 @@ def register(app: typer.Typer) -> None:
         spp: int = typer.Option(16, "--spp", help="Samples per pixel of the bysdf renders."),
         ref_spp: int = typer.Option(32, "--ref-spp", help="Samples per pixel of the fiberpath references."),
         iterations: int = typer.Option(6, "--iterations", help="Fitting rounds (each renders front and back)."),
-        max_depth: int = typer.Option(None, "--max-depth", show_default=False,
-                                      help="Path depth of every fitting render, both methods (default 256: the "
-                                           "full transport, whatever the scene's render.max_depth)."),
+        max_depth: int = typer.Option(FULL_TRANSPORT_DEPTH, "--max-depth",
+                                      help="Path depth of every fitting render, both methods (the full transport, "
+                                           "whatever the scene's render.max_depth)."),
         no_scene_lights: bool = typer.Option(False, "--no-scene-lights",
                                              help="Skip the comparison under the scene's own lights (a prediction "
                                                   "unless --fit-reflection scene)."),
@@ -32,17 +34,17 @@ def register(app: typer.Typer) -> None:
         """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and back light."""  # noqa: E501 (command help: --help shows its line breaks)
         from ..errors import LoomError, unknown
         from ..outputs import check_output
-        from ..runners.fit_bysdf import FIT_MAX_DEPTH, REFLECT_SETUPS, run_fit
+        from ..runners.fit_bysdf import REFLECT_SETUPS, run_fit
 
         if fit_reflection not in REFLECT_SETUPS:
             raise LoomError(None, "--fit-reflection", unknown("setup", fit_reflection, REFLECT_SETUPS))
         for v, name in ((width, "--width"), (height, "--height"), (spp, "--spp"), (ref_spp, "--ref-spp"),
-                        (iterations, "--iterations"), (1 if max_depth is None else max_depth, "--max-depth")):
+                        (iterations, "--iterations"), (max_depth, "--max-depth")):
             if v <= 0:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
         check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations,
-                      max_depth=FIT_MAX_DEPTH if max_depth is None else max_depth,
+                      max_depth=max_depth,
                       scene_lights=False if no_scene_lights else None, reflect=fit_reflection,
                       progress=typer.echo)
         typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}, "
