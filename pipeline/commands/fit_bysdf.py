@@ -30,6 +30,10 @@ def register(app: typer.Typer) -> None:
         fit_reflection: str = typer.Option("front", "--fit-reflection", metavar="<front | scene>",
                                            help="The setup the reflection side is fitted to: the front light (the "
                                                 "paper's protocol) or the scene's own lights."),
+        angles: str = typer.Option("", "--angles", metavar="A,B,...",
+                                   help="Also render both methods with the front light turned by these angles "
+                                        "(degrees, 0-89) towards the scene's key light, and report bysdf / "
+                                        "fiberpath per angle (JSON, and a plot beside the parameters). Not fitted."),
     ):
         """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and back light."""  # noqa: E501 (command help: --help shows its line breaks)
         from ..errors import LoomError, unknown
@@ -42,11 +46,12 @@ def register(app: typer.Typer) -> None:
                         (iterations, "--iterations"), (max_depth, "--max-depth")):
             if v <= 0:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
+        turned = parse_angles(angles)
         check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations,
                       max_depth=max_depth,
                       scene_lights=False if no_scene_lights else None, reflect=fit_reflection,
-                      progress=typer.echo)
+                      angles=turned, progress=typer.echo)
         typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}, "
                    "body colour factors " + " ".join(f"{v:.3g}" for v in rep["body_r_scale"]) + " (reflection), "
                    + " ".join(f"{v:.3g}" for v in rep["body_t_scale"]) + " (transmission)"
@@ -56,3 +61,29 @@ def register(app: typer.Typer) -> None:
             typer.echo(f"  {n:10s} mean error {100 * r['rel_error_luminance']:+.1f} % luminance, rgb "
                        + " ".join(f"{100 * e:+.1f}" for e in r["rel_error_rgb"]) + f" %, SSIM {r['ssim']:.3f}"
                        + ("" if r["fitted"] else " (not fitted)"))
+        for r in rep["angle_check"]:
+            typer.echo(f"  light {r['angle_deg']:4g} deg from the view: bysdf / fiberpath "
+                       + " ".join(f"{1 + e:.3f}" for e in r["rel_error_rgb"]) + " (not fitted)")
+        if rep["angle_check"]:
+            typer.echo(f"  angle check plot: {out.with_suffix('.angles.png')}")
+
+
+def parse_angles(text: str) -> tuple:
+    """``--angles`` "0,15,30" -> (0.0, 15.0, 30.0); each within [0, ANGLE_MAX] degrees, none twice."""
+    from ..errors import LoomError
+    from ..runners.fit_bysdf import ANGLE_MAX
+
+    if not text.strip():
+        return ()
+    out = []
+    for part in text.split(","):
+        try:
+            a = float(part)
+        except ValueError:
+            raise LoomError(None, "--angles", f"{part.strip()!r} is not a number of degrees") from None
+        if not 0.0 <= a <= ANGLE_MAX:
+            raise LoomError(None, "--angles", f"{a:g} degrees is outside [0, {ANGLE_MAX:g}]")
+        if a in out:
+            raise LoomError(None, "--angles", f"{a:g} degrees is given twice")
+        out.append(a)
+    return tuple(out)

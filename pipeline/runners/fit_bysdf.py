@@ -62,14 +62,47 @@ SETUPS = ("front", "back", "front+back")
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
-def setup_lights(scene) -> dict:
-    """The three light setups from the scene's camera."""
+def _view_direction(scene) -> np.ndarray:
     cam = scene.camera
     view = np.asarray(cam["target"], float) - np.asarray(cam["origin"], float)
-    view /= np.linalg.norm(view)
+    return view / np.linalg.norm(view)
+
+
+def setup_lights(scene) -> dict:
+    """The three light setups from the scene's camera."""
+    view = _view_direction(scene)
     front = {"type": "directional", "direction": [float(x) for x in view], "irradiance": IRRADIANCE}
     back = {"type": "directional", "direction": [float(-x) for x in view], "irradiance": IRRADIANCE}
     return {"front": [front], "back": [back], "front+back": [front, back]}
+
+
+ANGLE_MAX = 89.0     # degrees: the angle check's lights stay within a quarter turn of the view
+
+
+def angle_lights(scene, angles) -> dict:
+    """The angle check's setups {"angle A": [light]}: the front light turned by A degrees (``angles``) from the
+    view direction towards the scene's brightest directional light (its key), or, where the scene has none or
+    it lies along the view, towards straight down (the light rises above the camera). Angle 0 is the front
+    setup itself. The fibres' cloth and bysdf's part as the light leaves the view (docs/methods/bysdf.md,
+    Limits): this measures by how much, on the fit's own renders."""
+    view = _view_direction(scene)
+    keys = [lt for lt in scene.lights if lt.get("type") == "directional"]
+    towards = np.array([0.0, 0.0, -1.0])
+    if keys:
+        key = np.asarray(max(keys, key=lambda lt: float(np.mean(lt.get("irradiance", 1.0))))["direction"], float)
+        towards = key / np.linalg.norm(key)
+    axis = np.cross(view, towards)
+    if np.linalg.norm(axis) < 1e-6:              # the key lies along the view: rise towards straight down
+        axis = np.cross(view, np.array([0.0, 0.0, -1.0]))
+    if np.linalg.norm(axis) < 1e-6:              # a camera looking straight down: any axis across the view
+        axis = np.cross(view, np.array([1.0, 0.0, 0.0]))
+    axis /= np.linalg.norm(axis)
+    out = {}
+    for a in angles:
+        t = np.radians(a)
+        d = view * np.cos(t) + np.cross(axis, view) * np.sin(t) + axis * (axis @ view) * (1.0 - np.cos(t))
+        out[f"angle {a:g}"] = [{"type": "directional", "direction": [float(x) for x in d], "irradiance": IRRADIANCE}]
+    return out
 
 
 class _Renderer:
@@ -233,7 +266,8 @@ def bysdf_means(by: _Renderer, yarns, lights: dict, masks=None):
 
 
 def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, ref_spp=32, iterations=6,
-            max_depth=FIT_MAX_DEPTH, threads=None, scene_lights=None, reflect="front", progress=print) -> dict:
+            max_depth=FIT_MAX_DEPTH, threads=None, scene_lights=None, reflect="front", angles=(),
+            progress=print) -> dict:
     from stages.core.shading import bysdf as B
     from stages.evaluate import metrics as mt
 
@@ -262,6 +296,10 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     fp = _Renderer(scene, "fiberpath", {"width": width, "height": height, "spp": ref_spp, "seed": scene.seed,
                                         "fibers": str(fibers), "max_depth": max_depth, "threads": threads}, {})
     ref_img = {name: fp.image(lights[name]) for name in setups}
+    turned = angle_lights(scene, angles)
+    if turned:
+        progress("fiberpath, the angle check: " + ", ".join(turned))
+    ref_turned = {name: _mean(fp.image(ls)[0]) for name, ls in turned.items()}
     del fp
     ref_s = time.perf_counter() - t0
     p0 = B.pack_bysdf()
@@ -279,7 +317,6 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     st, history = fit_rounds(render_means, ref, st, iterations, progress, reflect)
     params = rows(st)
     final = {n: by.image(lights[n], params=params) for n in setups}
-    fit_s = time.perf_counter() - t1
     residual = {}
     for n in setups:
         (img_r, _), (img_b, _) = ref_img[n], final[n]
@@ -288,14 +325,53 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
                        "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
                        "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0),
                        "ssim": mt.ssim(mt.ssim_input(img_b), mt.ssim_input(img_r)), "fitted": n in (reflect, "back")}
+    angle_check = []
+    for name, ls in turned.items():
+        m_r, m_b = ref_turned[name], _mean(by.image(ls, params=params)[0])
+        angle_check.append({"angle_deg": float(name.split()[1]), "direction": ls[0]["direction"],
+                            "reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
+                            "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
+                            "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0)})
+    fit_s = time.perf_counter() - t1
     write_params(out, st, residual, max_depth)
     report = {"scene": str(scene.path), "yarns": str(yarns), "fibers": str(fibers), "width": width, "height": height,
               "spp": spp, "reference_spp": ref_spp, "max_depth": max_depth, "iterations": iterations,
               "reflection_setup": reflect,
               **st.table(),
-              "energy_capped": st.capped, "setups": residual, "history": history, "reference_s": ref_s, "fit_s": fit_s}
+              "energy_capped": st.capped, "setups": residual, "angle_check": angle_check, "history": history,
+              "reference_s": ref_s, "fit_s": fit_s}
     Path(out).with_suffix(".json").write_text(json.dumps(report, indent=2))
+    if angle_check:
+        plot_angle_check(angle_check, Path(out).with_suffix(".angles.png"), str(scene.path))
     return report
+
+
+def plot_angle_check(rows: list, path: Path, title: str) -> None:
+    """The angle check as a picture: both methods' mean luminance against the light's angle from the view
+    (left) and bysdf / fiberpath per channel (right, the fitted front at 0)."""
+    from ..report import pyplot, save_figure
+
+    plt = pyplot()
+    a = np.array([r["angle_deg"] for r in rows])
+    ref = np.array([r["reference_rgb"] for r in rows])
+    got = np.array([r["bysdf_rgb"] for r in rows])
+    fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(9.0, 3.4))
+    ax0.plot(a, ref @ LUMA, "o-", color="k", label="fiberpath")
+    ax0.plot(a, got @ LUMA, "s--", color="tab:purple", label="bysdf (fitted)")
+    ax0.set_xlabel("light's angle from the view (degrees)")
+    ax0.set_ylabel("image mean luminance")
+    ax0.set_ylim(bottom=0.0)
+    ax0.legend(frameon=False)
+    for c, col in enumerate(("tab:red", "tab:green", "tab:blue")):
+        ax1.plot(a, got[:, c] / np.maximum(ref[:, c], 1e-12), "o-", color=col, label="rgb"[c])
+    ax1.axhline(1.0, color="0.6", lw=0.8)
+    ax1.axhspan(0.95, 1.05, color="0.9", zorder=0)
+    ax1.set_xlabel("light's angle from the view (degrees)")
+    ax1.set_ylabel("bysdf / fiberpath")
+    ax1.legend(frameon=False, ncol=3)
+    fig.suptitle(f"fit-bysdf angle check: {title}", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, path)
 
 
 def split(x, y) -> dict:

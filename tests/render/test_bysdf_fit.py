@@ -24,7 +24,7 @@ def test_fit_moves_bysdf_towards_fiberpath(tmp_path, cli):
     run_realize(yarns, fibers)
     out = tmp_path / "fit" / "params.toml"
     rep = run_fit(scene.path, yarns, fibers, out, width=24, height=18, spp=8, ref_spp=16, iterations=3,
-                  progress=lambda *_: None)
+                  angles=(0.0, 40.0), progress=lambda *_: None)
     first = rep["history"][0]
     final = rep["setups"]
     assert rep["max_depth"] == FIT_MAX_DEPTH                  # the full transport, not the scene's depth
@@ -34,6 +34,12 @@ def test_fit_moves_bysdf_towards_fiberpath(tmp_path, cli):
     if not rep["energy_capped"]:
         assert abs(final["front"]["rel_error_luminance"]) < abs(first["front_rel_error"]) + 0.02
         assert abs(final["back"]["rel_error_luminance"]) < abs(first["back_rel_error"]) + 0.02
+    # the angle check: its 0 degrees is the front setup itself (same light, seed and parameters: same means)
+    at0, at40 = rep["angle_check"]
+    assert at0["angle_deg"] == 0.0 and at40["angle_deg"] == 40.0
+    np.testing.assert_allclose(at0["reference_rgb"], final["front"]["reference_rgb"], rtol=1e-12)
+    np.testing.assert_allclose(at0["bysdf_rgb"], final["front"]["bysdf_rgb"], rtol=1e-12)
+    assert (tmp_path / "fit" / "params.angles.png").stat().st_size > 0
     got = tomllib.loads(out.read_text())["default"]
     assert 0.0 <= got["spec_weight"] <= 1.0 and 0.0 <= got["reflect_weight"] <= 1.0
     assert (tmp_path / "fit" / "params.json").exists()
@@ -73,3 +79,34 @@ def test_fit_recovers_known_colours_from_a_synthetic_target(tmp_path):
     np.testing.assert_allclose(fitted_t / (luma @ fitted_t), body_t / (luma @ body_t), rtol=0.03)
     first = max(abs(v) for k, v in history[0].items() if k.endswith("_rel_error"))
     assert first > 0.05          # the defaults start away from the target
+
+
+def test_angle_check_lights_turn_from_the_view_towards_the_key(tmp_path):
+    """Reference: geometry. The angle check's light at A degrees makes angle A with the front light (the view
+    direction) and lies in the plane of the view and the scene's key light, moving towards the key."""
+    from pipeline.runners.fit_bysdf import angle_lights, setup_lights
+
+    scene, _ = _make(tmp_path, "angles", _weave(2, L=0.2), origin=(0.05, -0.2, 0.3), w=8, h=6)
+    view = np.asarray(setup_lights(scene)["front"][0]["direction"])
+    key = next(np.asarray(lt["direction"], float) for lt in scene.lights if lt["type"] == "directional")
+    key /= np.linalg.norm(key)
+    turned = angle_lights(scene, (0.0, 10.0, 35.0))
+    assert list(turned) == ["angle 0", "angle 10", "angle 35"]
+    between = math.degrees(math.acos(view @ key))
+    for a, (lt,) in zip((0.0, 10.0, 35.0), turned.values()):
+        d = np.asarray(lt["direction"])
+        assert lt["type"] == "directional" and lt["irradiance"] == 3.0
+        assert math.degrees(math.acos(np.clip(d @ view, -1, 1))) == pytest.approx(a, abs=1e-9)
+        assert abs(d @ np.cross(view, key)) < 1e-12                      # in the plane of view and key
+        assert math.degrees(math.acos(np.clip(d @ key, -1, 1))) == pytest.approx(abs(between - a), abs=1e-9)
+
+
+@pytest.mark.parametrize("angles, says", [("0,abc", "'abc' is not a number"), ("95", "outside [0, 89]"),
+                                          ("10,10", "given twice")])
+def test_fit_bysdf_refuses_bad_angles(tmp_path, cli, angles, says):
+    scene, yarns = _make(tmp_path, "bad", _weave(2, L=0.2), w=8, h=6)
+    out = tmp_path / "p.toml"
+    code, _, err = cli("fit-bysdf", str(scene.path), "--yarns", yarns, "--fibers", yarns, "-o", str(out),
+                       "--angles", angles)
+    assert code == 2 and "--angles" in err and says in err, err
+    assert not out.exists()
