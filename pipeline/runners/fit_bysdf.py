@@ -77,6 +77,7 @@ def setup_lights(scene) -> dict:
 
 
 ANGLE_MAX = 89.0     # degrees: the angle check's lights stay within a quarter turn of the view
+PARALLEL_SINE = 1e-6  # |a x b| of unit vectors below which they count as parallel (no plane to turn in)
 
 
 def angle_lights(scene, angles) -> dict:
@@ -92,9 +93,9 @@ def angle_lights(scene, angles) -> dict:
         key = np.asarray(max(keys, key=lambda lt: float(np.mean(lt.get("irradiance", 1.0))))["direction"], float)
         towards = key / np.linalg.norm(key)
     axis = np.cross(view, towards)
-    if np.linalg.norm(axis) < 1e-6:              # the key lies along the view: rise towards straight down
+    if np.linalg.norm(axis) < PARALLEL_SINE:      # the key lies along the view: rise towards straight down
         axis = np.cross(view, np.array([0.0, 0.0, -1.0]))
-    if np.linalg.norm(axis) < 1e-6:              # a camera looking straight down: any axis across the view
+    if np.linalg.norm(axis) < PARALLEL_SINE:      # a camera looking straight down: any axis across the view
         axis = np.cross(view, np.array([1.0, 0.0, 0.0]))
     axis /= np.linalg.norm(axis)
     out = {}
@@ -326,9 +327,9 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
                        "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0),
                        "ssim": mt.ssim(mt.ssim_input(img_b), mt.ssim_input(img_r)), "fitted": n in (reflect, "back")}
     angle_check = []
-    for name, ls in turned.items():
+    for a, (name, ls) in zip(angles, turned.items()):
         m_r, m_b = ref_turned[name], _mean(by.image(ls, params=params)[0])
-        angle_check.append({"angle_deg": float(name.split()[1]), "direction": ls[0]["direction"],
+        angle_check.append({"angle_deg": float(a), "direction": ls[0]["direction"],
                             "reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
                             "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
                             "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0)})
