@@ -125,9 +125,9 @@ PRT_SWEEP_INPUTS = $(foreach s,41 14,$(PRT)/flat$(s)_svf.zarr/zarr.json $(PRT)/f
 prt-sweep: $(PRT_SWEEP_INPUTS) ## Khungurn et al. 2017: prt against fiberpath on the damask's flat satins and the draped damask, 12 lights, split into terms (out/prt)
 	@for s in $(PRT_SWEEPS); do \
 	    $(LL) evaluate --sweep data/sweeps/prt_$$s.toml -o $(PRT)/$$s && \
-	    $(LL) study prt-terms data/sweeps/prt_$$s.toml --sweep-dir $(PRT)/$$s -o $(PRT)/$$s/terms || exit 1; \
+	    $(LL) study prt-terms data/sweeps/prt_$$s.toml --sweep-dir $(PRT)/$$s -o $(PRT)/$$s-terms || exit 1; \
 	done
-	@for s in $(PRT_SWEEPS); do echo "reports: $(PRT)/$$s/report.md $(PRT)/$$s/terms/attribution.md"; done
+	@for s in $(PRT_SWEEPS); do echo "reports: $(PRT)/$$s/report.md $(PRT)/$$s-terms/attribution.md"; done
 
 prt-study: $(VENV)/.installed ## Khungurn et al. 2017 §6.1: the cell-size and SH-order strips on one exemplar (out/prt/study)
 	$(LL) study prt-params data/studies/prt_params.toml -o $(PRT)/study
