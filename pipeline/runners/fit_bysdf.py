@@ -167,6 +167,14 @@ def _ratio(ref, got):
     return np.asarray(ref, float) / np.maximum(np.asarray(got, float), 1e-12)
 
 
+def _mean_errors(m_b, m_r) -> dict:
+    """bysdf's mean rgb ``m_b`` against fiberpath's ``m_r``: both, and the relative errors per channel and of
+    luminance."""
+    return {"reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
+            "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
+            "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0)}
+
+
 ENERGY_MIN = 1e-4            # the least body energy a side keeps
 STEP_FACTOR = 4.0            # a round moves a body energy by at most this factor
 
@@ -322,18 +330,12 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
     for n in setups:
         (img_r, _), (img_b, _) = ref_img[n], final[n]
         m_r, m_b = ref[n], _mean(img_b, masks.get(n))
-        residual[n] = {"reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
-                       "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
-                       "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0),
+        residual[n] = {**_mean_errors(m_b, m_r),
                        "ssim": mt.ssim(mt.ssim_input(img_b), mt.ssim_input(img_r)), "fitted": n in (reflect, "back")}
-    angle_check = []
-    for a, (name, ls) in zip(angles, turned.items()):
-        m_r, m_b = ref_turned[name], _mean(by.image(ls, params=params)[0])
-        angle_check.append({"angle_deg": float(a), "direction": ls[0]["direction"],
-                            "reference_rgb": m_r.tolist(), "bysdf_rgb": m_b.tolist(),
-                            "rel_error_rgb": (_ratio(m_b, m_r) - 1.0).tolist(),
-                            "rel_error_luminance": float(LUMA @ m_b / max(LUMA @ m_r, 1e-12) - 1.0)})
     fit_s = time.perf_counter() - t1
+    angle_check = [{"angle_deg": float(a), "direction": ls[0]["direction"],
+                    **_mean_errors(_mean(by.image(ls, params=params)[0]), ref_turned[name])}
+                   for a, (name, ls) in zip(angles, turned.items())]
     write_params(out, st, residual, max_depth)
     report = {"scene": str(scene.path), "yarns": str(yarns), "fibers": str(fibers), "width": width, "height": height,
               "spp": spp, "reference_spp": ref_spp, "max_depth": max_depth, "iterations": iterations,
