@@ -34,6 +34,25 @@ _EXEMPLAR = typer.Option(None, "--exemplar", help="Exemplar index to precompute 
 _FORCE = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged.")
 _BUDGET = typer.Option(None, "--budget", help=BUDGET_HELP)
 _THREADS = typer.Option(None, "--threads", help="numba threads (default: all cores); the bytes do not depend on it.")
+_SCENE = typer.Option(None, "--scene", help="Scene giving the yarn materials (default: the scene the tiling names).")
+_MAX_DEPTH = typer.Option(FULL_TRANSPORT_DEPTH, "--max-depth",
+                          help="Largest number of scattering events on a path (default: the full transport).")
+_RR_DEPTH = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on.")
+_BCSDF = typer.Option(None, "--bcsdf", metavar="<name | file.toml>",
+                      help="BCSDF preset for yarn groups the scene names none for.")
+_SET = typer.Option(None, "--set", metavar="<KEY=VALUE>", help="Material option KEY=VALUE (tint=yarn|none, as render).")
+
+
+def _run(runner, tiling, out, params, describe, *, force, budget, threads, scheduler, workers, threads_per_worker,
+         **where):
+    """Run one precompute (its output already checked): the memory budget and the scheduler resolved, then
+    'up to date' or ``describe(result)``."""
+    from ..chunks import resolve_scheduler
+    from ..memory import budget as memory_budget
+
+    res = runner(tiling, out, params, force=force, budget=memory_budget(budget), threads=threads,
+                 scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker), **where)
+    typer.echo(f"{out} is up to date" if res["skipped"] else f"wrote {out} ({describe(res)})")
 
 
 @app.command("svf")
@@ -60,36 +79,29 @@ def svf(
     Per fibre segment: the binary visibility image of the sky from its
     midpoint in the exemplar repeated without end, its spherical signed distance function (SSDF) compressed
     by PCA over the exemplar, and the sum-of-SGs representation."""
-    from ..chunks import resolve_scheduler
-    from ..memory import budget as memory_budget
     from ..outputs import ARTIFACT, check_output
     from ..runners.precompute import SvfParams, run_svf
 
     check_output(out, "-o", ARTIFACT, inputs=[tiling])
     p = SvfParams(resolution=resolution, components=components, sg_count=sg_count, sg_sharpness=sg_sharpness,
                   chunk=chunk, seed=seed)
-    res = run_svf(tiling, out, p, exemplars=exemplar or None, force=force, budget=memory_budget(budget),
-                  threads=threads, scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))
-    if res["skipped"]:
-        typer.echo(f"{out} is up to date")
-    else:
-        typer.echo(f"wrote {out} ({res['exemplars']} exemplars, {res['segments']:,} segments, "
-                   f"{res['rays_per_s'] / 1e6:.2f} M rays/s, PCA relative error {res['pca_rel_error']:.3f})")
+    _run(run_svf, tiling, out, p, lambda res: f"{res['exemplars']} exemplars, {res['segments']:,} segments, "
+         f"{res['rays_per_s'] / 1e6:.2f} M rays/s, PCA relative error {res['pca_rel_error']:.3f}",
+         force=force, budget=budget, threads=threads, scheduler=scheduler, workers=workers,
+         threads_per_worker=threads_per_worker, exemplars=exemplar or None)
 
 
 @app.command("iirtf")
 def iirtf(
     tiling: Path = _TILING,
     out: Path = _OUT,
-    scene: Path = typer.Option(None, "--scene", help="Scene giving the yarn materials (default: the scene the "
-                                                     "tiling names)."),
+    scene: Path = _SCENE,
     order: int = typer.Option(4, "--order", help="SH order L of the transfer matrices (§6.1: 4 or 5), 0..8."),
     cell_factor: float = typer.Option(1.0, "--cell-factor", help="Target cell side in mean free paths (§6.1: 1-2)."),
     paths: int = typer.Option(50000, "--paths", help="Monte Carlo paths per cell (§4.2: 50,000)."),
     mfp_paths: int = typer.Option(20000, "--mfp-paths", help="Paths traced to estimate the mean free path."),
-    max_depth: int = typer.Option(FULL_TRANSPORT_DEPTH, "--max-depth",
-                                  help="Largest number of scattering events on a path (default: the full transport)."),
-    rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
+    max_depth: int = _MAX_DEPTH,
+    rr_depth: int = _RR_DEPTH,
     light_sampling: str = typer.Option("uniform", "--light-sampling", metavar="<uniform | mis>",
                                        help="Estimator of the light integral: uniform (§4.2: light directions "
                                             "uniform on the hemisphere) or mis (the same integral, a path "
@@ -97,13 +109,11 @@ def iirtf(
                                             "much less variance for sharp BCSDFs)."),
     theta_samples: int = typer.Option(512, "--theta-samples",
                                       help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
-    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>",
-                              help="BCSDF preset for yarn groups the scene names none for."),
+    bcsdf: str = _BCSDF,
     chunk: int = typer.Option(16, "--chunk", help="Cells per chunk task."),
     seed: int = typer.Option(0, "--seed", help="Seed of the transfer matrices' Monte Carlo (the mean free path, "
                                                  "hence the cell grid, uses a fixed one)."),
-    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>",
-                                   help="Material option KEY=VALUE (tint=yarn|none, as render)."),
+    set_: List[str] = _SET,
     exemplar: List[int] = _EXEMPLAR,
     force: bool = _FORCE,
     budget: float = _BUDGET,
@@ -118,8 +128,6 @@ def iirtf(
     path, and per cell the SH matrix A_C taking light to the indirect incoming radiance at the cell's
     segments, estimated by path tracing the fibre BCSDF, with its standard error; plus the BCSDF's SH table
     C_S (§4.3) of every material."""
-    from ..chunks import resolve_scheduler
-    from ..memory import budget as memory_budget
     from ..outputs import ARTIFACT, check_output
     from ..runners.precompute import IirtfParams, parse_material_options, run_iirtf
 
@@ -127,14 +135,10 @@ def iirtf(
     p = IirtfParams(order=order, cell_factor=cell_factor, paths=paths, mfp_paths=mfp_paths, max_depth=max_depth,
                     rr_depth=rr_depth, light_sampling=light_sampling, theta_samples=theta_samples, chunk=chunk,
                     seed=seed, material=parse_material_options(set_ or [], bcsdf))
-    res = run_iirtf(tiling, out, p, scene=scene, exemplars=exemplar or None, force=force,
-                    budget=memory_budget(budget), threads=threads,
-                    scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))
-    if res["skipped"]:
-        typer.echo(f"{out} is up to date")
-    else:
-        typer.echo(f"wrote {out} ({res['exemplars']} exemplars, {res['cells']:,} cells, mean free path "
-                   f"{', '.join(f'{m:.4g}' for m in res['mean_free_path'])}, {res['paths_per_s'] / 1e3:.1f} k paths/s)")
+    _run(run_iirtf, tiling, out, p, lambda res: f"{res['exemplars']} exemplars, {res['cells']:,} cells, mean free "
+         f"path {', '.join(f'{m:.4g}' for m in res['mean_free_path'])}, {res['paths_per_s'] / 1e3:.1f} k paths/s",
+         force=force, budget=budget, threads=threads, scheduler=scheduler, workers=workers,
+         threads_per_worker=threads_per_worker, scene=scene, exemplars=exemplar or None)
 
 
 @app.command("btf")
@@ -142,8 +146,7 @@ def btf(
     tiling: Path = _TILING,
     out: Path = _OUT,
     exemplar: int = typer.Option(0, "--exemplar", help="The exemplar (repeat) of the tiling to fit."),
-    scene: Path = typer.Option(None, "--scene", help="Scene giving the yarn materials (default: the scene the "
-                                                     "tiling names)."),
+    scene: Path = _SCENE,
     resolution: int = typer.Option(32, "--resolution", help="Texels a side of the finest level (a power of two; "
                                                             "Daubert et al. 2001: 32)."),
     views: str = typer.Option("8x8", "--views", help="View grid THETAxPHI: rings of equal solid angle x azimuths "
@@ -159,14 +162,11 @@ def btf(
                                         "holds cell averages, so fibre glints between grid directions are not lost "
                                         "or aliased); grid: the grid directions themselves (the point samples of "
                                         "Daubert et al. 2001)."),
-    max_depth: int = typer.Option(FULL_TRANSPORT_DEPTH, "--max-depth",
-                                  help="Largest number of scattering events on a path (default: the full transport)."),
-    rr_depth: int = typer.Option(5, "--rr-depth", help="Russian roulette from this scattering event on."),
-    bcsdf: str = typer.Option(None, "--bcsdf", metavar="<name | file.toml>",
-                              help="BCSDF preset for yarn groups the scene names none for."),
+    max_depth: int = _MAX_DEPTH,
+    rr_depth: int = _RR_DEPTH,
+    bcsdf: str = _BCSDF,
     seed: int = typer.Option(0, "--seed", help="Seed of the Monte Carlo estimates."),
-    set_: List[str] = typer.Option(None, "--set", metavar="<KEY=VALUE>",
-                                   help="Material option KEY=VALUE (tint=yarn|none, as render)."),
+    set_: List[str] = _SET,
     force: bool = _FORCE,
     budget: float = _BUDGET,
     threads: int = _THREADS,
@@ -179,8 +179,6 @@ def btf(
     Radiance samples of the repeat over view x light grids, path traced on its explicit fibres with
     its copies all around, alpha and average normals per texel; per texel diffuse + Lafortune lobes
     times a view lookup table, and mip levels down to 1 x 1."""
-    from ..chunks import resolve_scheduler
-    from ..memory import budget as memory_budget
     from ..outputs import ARTIFACT, check_output
     from ..runners.precompute import parse_material_options
     from ..runners.precompute_btf import BtfParams, parse_grid, run_btf
@@ -190,12 +188,9 @@ def btf(
                   spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, directions=directions,
                   max_depth=max_depth,
                   rr_depth=rr_depth, seed=seed, material=parse_material_options(set_ or [], bcsdf))
-    res = run_btf(tiling, out, p, scene=scene, exemplar=exemplar, force=force, budget=memory_budget(budget),
-                  threads=threads, scheduler=resolve_scheduler(scheduler, None, workers, threads_per_worker))
-    if res["skipped"]:
-        typer.echo(f"{out} is up to date")
-    else:
-        typer.echo(f"wrote {out} ({res['resolution']}x{res['resolution']} texels, {res['views']} views x "
-                   f"{res['lights']} lights, {res['levels']} levels, {res['fit_bytes'] / 2**20:.2f} MiB fitted; "
-                   f"acquisition {res['acquire_s']:.1f} s, fit {res['fit_s']:.1f} s; fit RMSE level 0 "
-                   f"{res['fit_rmse'][0]:.4g} (without the table {res['fit_rmse_no_table'][0]:.4g})")
+    _run(run_btf, tiling, out, p, lambda res: f"{res['resolution']}x{res['resolution']} texels, {res['views']} "
+         f"views x {res['lights']} lights, {res['levels']} levels, {res['fit_bytes'] / 2**20:.2f} MiB fitted; "
+         f"acquisition {res['acquire_s']:.1f} s, fit {res['fit_s']:.1f} s; fit RMSE level 0 "
+         f"{res['fit_rmse'][0]:.4g} (without the table {res['fit_rmse_no_table'][0]:.4g})",
+         force=force, budget=budget, threads=threads, scheduler=scheduler, workers=workers,
+         threads_per_worker=threads_per_worker, scene=scene, exemplar=exemplar)

@@ -175,33 +175,32 @@ def _sh_store(out, l, m, q, cm, sm):
 # ------------------------------------------------------------------------------------------------
 # quadrature and projection
 @njit(cache=True)
+def legendre_and_derivative(n, z):
+    """(P_n(z), P_n'(z)) for n >= 1 by Bonnet's recurrence k P_k = (2k - 1) z P_{k-1} - (k - 1) P_{k-2}."""
+    p1 = 1.0
+    p = z
+    for k in range(2, n + 1):
+        p0 = p1
+        p1 = p
+        p = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k
+    return p, n * (z * p - p1) / (z * z - 1.0)
+
+
+@njit(cache=True)
 def gauss_legendre(n):
     """(nodes, weights) of the n-point Gauss-Legendre rule on [-1, 1], nodes ascending (Newton on P_n)."""
     x = np.empty(n)
     w = np.empty(n)
     for i in range((n + 1) // 2):
         z = math.cos(math.pi * (i + 0.75) / (n + 0.5))
-        dp = 1.0
         for _it in range(100):
-            p1 = 1.0
-            p = z
-            for k in range(2, n + 1):
-                p0 = p1
-                p1 = p
-                p = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k
-            dp = n * (z * p - p1) / (z * z - 1.0)
+            p, dp = legendre_and_derivative(n, z)
             dz = p / dp
             z -= dz
             if abs(dz) < 1e-16:
                 break
         # derivative at the converged node
-        p1 = 1.0
-        p = z
-        for k in range(2, n + 1):
-            p0 = p1
-            p1 = p
-            p = ((2.0 * k - 1.0) * z * p1 - (k - 1.0) * p0) / k
-        dp = n * (z * p - p1) / (z * z - 1.0)
+        _, dp = legendre_and_derivative(n, z)
         wk = 2.0 / ((1.0 - z * z) * dp * dp)
         x[i] = -z
         x[n - 1 - i] = z

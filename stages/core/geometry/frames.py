@@ -10,6 +10,10 @@ samplers, the fibre BCSDF's azimuth, the spherical Gaussian light.
 away from the unit direction w, or nearly (n.w < c_min), is bent towards w in the plane of n and w until
 n.w = c_min before renormalising (it ends with n.w > 0): a perturbed shading normal seen from behind
 still scatters what arrives instead of ending the path. Returns True when it bent n.
+
+``unit_rejection(v0, v1, v2, n0, n1, n2, c, tiny)`` -> (r0, r1, r2): the unit vector along v - c n, the part
+of v normal to the unit n when c = v.n (the caller passes c, clamped or not: one Gram-Schmidt step); where
+that part is shorter than ``tiny`` (v along n), orthonormal_basis(n)'s first vector.
 """
 import math
 
@@ -38,3 +42,14 @@ def face_towards_into(n, w, c_min):
     for q in range(3):
         n[q] /= ln
     return True
+
+
+@njit(cache=True)
+def unit_rejection(v0, v1, v2, n0, n1, n2, c, tiny):
+    r0 = v0 - c * n0
+    r1 = v1 - c * n1
+    r2 = v2 - c * n2
+    ln = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    if ln < tiny:
+        return orthonormal_basis(n0, n1, n2)[0]
+    return r0 / ln, r1 / ln, r2 / ln

@@ -203,6 +203,8 @@ SSG_LAMBDA_MAX = 100.0      # sum-of-SGs visibility at and below this sharpness 
 SSDF_LAMBDA_MIN = 200.0     # erf-of-SSDF visibility at and above this sharpness
 AZ_GH_MIN = 9.0             # TT azimuth by Gauss-Hermite when kappa gamma^2 >= 9 (D4c), else Fourier
 SSG_REFINE_REL = 1e-9       # sum-of-SGs terms below this share of the sum keep the paper's form
+MILLER_LIMIT = 1e250        # Miller's backward recurrence rescales its terms past this
+MILLER_RESCALE = 1e-250
 
 _hx, _hw = np.polynomial.hermite_e.hermegauss(5)
 GH_X = _hx.copy()                          # nodes for the weight exp(-x^2/2)
@@ -243,6 +245,16 @@ def bessel_i0e(x):
 
 
 @njit(cache=True)
+def miller_step(n, two_over_x, j, jp):
+    """One step of I_{n-1} = (2n/x) I_n + I_{n+1} from (j, jp) = (I_n, I_{n+1}) (unnormalised): (I_{n-1}, I_n,
+    rescaled), both multiplied by MILLER_RESCALE when I_{n-1} passes MILLER_LIMIT."""
+    jm = (n * two_over_x) * j + jp
+    if jm > MILLER_LIMIT:
+        return jm * MILLER_RESCALE, j * MILLER_RESCALE, True
+    return jm, j, False
+
+
+@njit(cache=True)
 def bessel_ratio_series(x, coef, n_max):
     """sum_{n=0}^{n_max} coef[n] I_n(x) / I_0(x) for x >= 0, by Miller's backward recurrence
     I_{n-1} = (2n/x) I_n + I_{n+1} started at n_max + 20 + 6 sqrt(x) (the start error is damped by
@@ -259,22 +271,13 @@ def bessel_ratio_series(x, coef, n_max):
     jp = 0.0
     j = 1.0
     for n in range(n_s, n_max, -1):     # above n_max: the recurrence alone
-        jm = (n * two_over_x) * j + jp
-        jp = j
-        j = jm
-        if j > 1e250:
-            j *= 1e-250
-            jp *= 1e-250
+        j, jp, _ = miller_step(n, two_over_x, j, jp)
     s = 0.0
     for n in range(n_max, 0, -1):
         s += coef[n] * j
-        jm = (n * two_over_x) * j + jp
-        jp = j
-        j = jm
-        if j > 1e250:
-            j *= 1e-250
-            jp *= 1e-250
-            s *= 1e-250
+        j, jp, rescaled = miller_step(n, two_over_x, j, jp)
+        if rescaled:
+            s *= MILLER_RESCALE
     return coef[0] + s / j
 
 

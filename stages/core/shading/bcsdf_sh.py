@@ -49,7 +49,7 @@ import math
 import numpy as np
 from numba import njit
 
-from stages.core.geometry.frames import orthonormal_basis
+from stages.core.geometry.frames import unit_rejection
 from stages.core.sh import SH_LMAX, gauss_legendre, sh_count, sh_eval
 from stages.core.shading.bcsdf import BETA_R, BETA_TT, C_R, C_TT, GAMMA_TT, TT_NORM, G_norm, fresnel_R, gauss
 
@@ -57,6 +57,7 @@ HALF_PI = 0.5 * math.pi
 TWO_PI = 2.0 * math.pi
 GL_PIECE_NODES = 16
 WINDOW_DEVIATIONS = 10.0
+VIEW_ALONG_TANGENT = 1e-12   # omega_o_frame: a view whose part normal to t is shorter is replaced
 
 
 @njit(cache=True)
@@ -191,16 +192,7 @@ def omega_o_frame(t, w, R):
     returns theta_v = asin(w . t). Rows: x = t, y = the part of w normal to t (normalised), z = x cross y."""
     d = w[0] * t[0] + w[1] * t[1] + w[2] * t[2]
     d = min(1.0, max(-1.0, d))
-    y0 = w[0] - d * t[0]
-    y1 = w[1] - d * t[1]
-    y2 = w[2] - d * t[2]
-    ny = math.sqrt(y0 * y0 + y1 * y1 + y2 * y2)
-    if ny < 1e-12:
-        (y0, y1, y2), _ = orthonormal_basis(t[0], t[1], t[2])
-    else:
-        y0 /= ny
-        y1 /= ny
-        y2 /= ny
+    y0, y1, y2 = unit_rejection(w[0], w[1], w[2], t[0], t[1], t[2], d, VIEW_ALONG_TANGENT)
     R[0, 0] = t[0]
     R[0, 1] = t[1]
     R[0, 2] = t[2]

@@ -166,7 +166,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from stages.core.geometry.frames import orthonormal_basis
+from stages.core.geometry.frames import unit_rejection
 from stages.core.shading.lambert import cosine_direction
 from stages.core.shading.microfacet import (
     COS_EPS,
@@ -208,6 +208,7 @@ BYSDF_SIZE = ET_Y + N_MU_EXIT
 
 ALPHA_MIN = 1e-4          # smallest GGX roughness (smaller values are clamped)
 LOSS_MIN = 1e-9           # an interface that loses less energy than this gets no compensation
+TANGENT_ALONG_NORMAL = 1e-9   # shading_frame: a tangent whose part normal to n is shorter is replaced
 MU_FLOOR = 1e-4           # the energy tables' grazing node is computed at this cosine
 P_R_MIN, P_R_MAX = 0.05, 0.95
 INV_PI = 1.0 / math.pi
@@ -303,16 +304,7 @@ def shading_frame(t, n):
     """(tx, ty, tz, bx, by, bz, nx, ny, nz): t made orthogonal to the unit n, b = n x t; any completion
     of n when t is (nearly) along n."""
     c = t[0] * n[0] + t[1] * n[1] + t[2] * n[2]
-    x0 = t[0] - c * n[0]
-    x1 = t[1] - c * n[1]
-    x2 = t[2] - c * n[2]
-    ln = math.sqrt(x0 * x0 + x1 * x1 + x2 * x2)
-    if ln < 1e-9:
-        (x0, x1, x2), _ = orthonormal_basis(n[0], n[1], n[2])
-    else:
-        x0 /= ln
-        x1 /= ln
-        x2 /= ln
+    x0, x1, x2 = unit_rejection(t[0], t[1], t[2], n[0], n[1], n[2], c, TANGENT_ALONG_NORMAL)
     b0 = n[1] * x2 - n[2] * x1
     b1 = n[2] * x0 - n[0] * x2
     b2 = n[0] * x1 - n[1] * x0
