@@ -34,10 +34,13 @@ then changes arrangement about as often as the model's fibres migrate; blend_len
 switch_length. Everything is deterministic (counter-based random numbers only).
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
+from stages.core.dispatch import is_tuple_class
 from stages.core.rng import hash_u64
 from stages.core.yarn.implicit_plies import ply_envelope_radius, ply_half_axes
 from stages.core.yarn.implicit_tables import FIBRE_FIELDS, FIBRE_NORMAL_ANGLE, FIBRE_PHASE, FIBRE_SHADOW, ImplicitTables
@@ -45,7 +48,6 @@ from stages.core.yarn.model import (
     ALPHA,
     E_LONG,
     E_SHORT,
-    FIBER_NUM,
     FIBER_RADIUS,
     PLY_NUM,
     PLY_RADIUS,
@@ -55,6 +57,7 @@ from stages.core.yarn.model import (
     USE_MIGRATION,
     fiber_twist,
     fiber_unit_radius,
+    fibre_counts,
     sample_regular_fibers,
 )
 
@@ -66,8 +69,7 @@ NUDGE = 1e-9             # a hit moves this far (in fibre / ply radii) back alon
 def fibre_arrangement(tp, type_key, m, M):
     """(x, y, twist): ply-frame centres (along d_r, d_t) of fibre table m's N fibres and the fibre twist
     at its height (module doc)."""
-    P = int(tp[PLY_NUM])
-    N = int(tp[FIBER_NUM])
+    P, N = fibre_counts(tp)
     migrate = tp[USE_MIGRATION] != 0.0
     key = np.uint64(type_key)
     if not migrate and m >= P:
@@ -89,30 +91,88 @@ def fibre_arrangement(tp, type_key, m, M):
 
 
 @njit(cache=True)
+def entry_t(A, B, C):
+    """Where a 2D ray s + t d (t > 0) enters a conic whose inside is A t^2 + 2 B t + C < 0 (A > 0): the smaller
+    root, 0 where s is inside, inf where the ray misses it or it lies behind."""
+    disc = B * B - A * C
+    if disc < 0.0:
+        return math.inf
+    sq = math.sqrt(disc)
+    t = (-B - sq) / A
+    if t <= 0.0:
+        if (-B + sq) / A <= 0.0:
+            return math.inf
+        t = 0.0
+    return t
+
+
+Circles = namedtuple("Circles", ["cx", "cy", "r"])
+Circles.__doc__ = """Circles of one radius r about the centres (cx, cy) (arrays): fibres in a ply's cross-section."""
+Ellipses = namedtuple("Ellipses", ["cx", "cy", "ca", "sa", "ar", "at"])
+Ellipses.__doc__ = """Ellipses about the centres (cx, cy), half axes ar along (ca, sa) and at across (arrays ca, sa):
+plies in a yarn's cross-section."""
+
+
+def conic_coefficients(conics, k, qx, qy, dx, dy):
+    """(A, B, C) of ``entry_t`` for conic k and the 2D ray s + t d, q = s - conic k's centre; numba-only (answered
+    per class, ``stages.core.dispatch``)."""
+    raise TypeError("conic_coefficients is only callable from numba-compiled code")
+
+
+@overload(conic_coefficients)
+def _circle_coefficients(conics, k, qx, qy, dx, dy):
+    if is_tuple_class(conics, Circles):
+        def impl(conics, k, qx, qy, dx, dy):
+            r = conics.r
+            return 1.0, qx * dx + qy * dy, qx * qx + qy * qy - r * r
+        return impl
+
+
+@overload(conic_coefficients)
+def _ellipse_coefficients(conics, k, qx, qy, dx, dy):
+    if is_tuple_class(conics, Ellipses):
+        def impl(conics, k, qx, qy, dx, dy):
+            ca = conics.ca[k]
+            sa = conics.sa[k]
+            p0 = (qx * ca + qy * sa) / conics.ar
+            q0 = (-qx * sa + qy * ca) / conics.at
+            p1 = (dx * ca + dy * sa) / conics.ar
+            q1 = (-dx * sa + dy * ca) / conics.at
+            return p1 * p1 + q1 * q1, p0 * p1 + q0 * q1, p0 * p0 + q0 * q0 - 1.0
+        return impl
+
+
+@njit(cache=True)
+def first_entered(conics, sx, sy, dx, dy, skip):
+    """(k, t): the first of the conics (``Circles`` or ``Ellipses``; conic ``skip`` left out) that the 2D ray
+    s + t d (t > 0) enters, and t; (-1, inf) where it meets none."""
+    best = math.inf
+    bk = -1
+    for k in range(conics.cx.shape[0]):
+        if k == skip:
+            continue
+        A, B, C = conic_coefficients(conics, k, sx - conics.cx[k], sy - conics.cy[k], dx, dy)
+        t = entry_t(A, B, C)
+        if t < best:
+            best = t
+            bk = k
+    return bk, best
+
+
+@njit(cache=True)
 def cast_circles(cx, cy, r, sx, sy, dx, dy, skip):
     """(j, t): the first circle (centres cx, cy, radius r; circle ``skip`` left out) that the 2D ray
     s + t d (t > 0, d unit) enters, and t; (-1, inf) where it meets none."""
-    best = math.inf
-    bj = -1
-    for j in range(cx.shape[0]):
-        if j == skip:
-            continue
-        qx = sx - cx[j]
-        qy = sy - cy[j]
-        b = qx * dx + qy * dy
-        c = qx * qx + qy * qy - r * r
-        disc = b * b - c
-        if disc < 0.0:
-            continue
-        t = -b - math.sqrt(disc)
-        if t <= 0.0:
-            if -b + math.sqrt(disc) <= 0.0:
-                continue
-            t = 0.0
-        if t < best:
-            best = t
-            bj = j
-    return bj, best
+    return first_entered(Circles(cx, cy, r), sx, sy, dx, dy, skip)
+
+
+@njit(cache=True)
+def half_circle_direction(q, n_rays, nx, ny):
+    """Direction q of n_rays spread evenly (midpoints) over the half circle about the unit vector (nx, ny)."""
+    beta = -0.5 * math.pi + math.pi * (q + 0.5) / n_rays
+    cb = math.cos(beta)
+    sb = math.sin(beta)
+    return cb * nx - sb * ny, sb * nx + cb * ny
 
 
 @njit(cache=True)
@@ -121,10 +181,8 @@ def open_fraction_circles(cx, cy, r, hx, hy, nx, ny, skip, n_rays):
     other than ``skip``."""
     free = 0
     for q in range(n_rays):
-        beta = -0.5 * math.pi + math.pi * (q + 0.5) / n_rays
-        cb = math.cos(beta)
-        sb = math.sin(beta)
-        j, _ = cast_circles(cx, cy, r, hx, hy, cb * nx - sb * ny, sb * nx + cb * ny, skip)
+        dx, dy = half_circle_direction(q, n_rays, nx, ny)
+        j, _ = cast_circles(cx, cy, r, hx, hy, dx, dy, skip)
         if j < 0:
             free += 1
     return free / n_rays
@@ -174,33 +232,7 @@ def fibre_table_of(tp, x, y, twist, NA, n_rays, thr):
 def cast_ellipses(cx, cy, ca, sa, ar, at, sx, sy, dx, dy, skip):
     """(k, t): the first ellipse (centres cx, cy, axes ar along (ca, sa) and at across; ``skip`` left out)
     that the 2D ray s + t d (t > 0) enters, and t; (-1, inf) where it meets none."""
-    best = math.inf
-    bk = -1
-    for k in range(cx.shape[0]):
-        if k == skip:
-            continue
-        qx = sx - cx[k]
-        qy = sy - cy[k]
-        p0 = (qx * ca[k] + qy * sa[k]) / ar
-        q0 = (-qx * sa[k] + qy * ca[k]) / at
-        p1 = (dx * ca[k] + dy * sa[k]) / ar
-        q1 = (-dx * sa[k] + dy * ca[k]) / at
-        A = p1 * p1 + q1 * q1
-        B = p0 * p1 + q0 * q1
-        C = p0 * p0 + q0 * q0 - 1.0
-        disc = B * B - A * C
-        if disc < 0.0:
-            continue
-        sq = math.sqrt(disc)
-        t = (-B - sq) / A
-        if t <= 0.0:
-            if (-B + sq) / A <= 0.0:
-                continue
-            t = 0.0
-        if t < best:
-            best = t
-            bk = k
-    return bk, best
+    return first_entered(Ellipses(cx, cy, ca, sa, ar, at), sx, sy, dx, dy, skip)
 
 
 @njit(cache=True)
@@ -247,10 +279,8 @@ def ply_shadow_table(tp, NA, n_rays, thr):
         nx, ny = nx / nn, ny / nn
         free = 0
         for q in range(n_rays):
-            beta = -0.5 * math.pi + math.pi * (q + 0.5) / n_rays
-            cb = math.cos(beta)
-            sb = math.sin(beta)
-            kk, _ = cast_ellipses(cx, cy, ca, sa, ar, at, hx, hy, cb * nx - sb * ny, sb * nx + cb * ny, k)
+            dx, dy = half_circle_direction(q, n_rays, nx, ny)
+            kk, _ = cast_ellipses(cx, cy, ca, sa, ar, at, hx, hy, dx, dy, k)
             if kk < 0:
                 free += 1
         out[i] = free / n_rays * (1.0 - thr) + thr

@@ -26,21 +26,23 @@ from stages.core.dispatch import runtime_value
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.core.yarn.model import (
     ALPHA,
-    FIBER_NUM,
     FIBER_RADIUS,
-    PLY_NUM,
     PLY_RADIUS,
     S_MIG,
     TWO_PI,
     USE_MIGRATION,
     YARN_ALPHA,
     cycle_of,
+    fibre_counts,
     hair_params,
     hair_point,
     loop_unit_radius,
     migration_phase,
     regular_xy,
 )
+from stages.core.yarn.tables import fibre_row
+
+STEP_SLACK = 1e-9   # a piece's length / spacing this little above a whole number (rounding) takes no extra step
 
 
 @njit(cache=True)
@@ -80,16 +82,39 @@ def _fiber_pieces(tp, yseed, k, j, Rj, th, th0, L, out_z0, out_z1, out_kind, n0)
 
 
 @njit(cache=True)
-def yarn_plan(tab, c, L, spacing):
-    """Pieces of yarn c: arrays (ply, index, kind, a0, a1, hair_z1, hair_ze, nverts)."""
+def _yarn_setup(tab, c, L):
+    """(type t, its parameters tp, plies P, fibres per ply N, yarn seed, migration cycles bound) of yarn c, length L:
+    what ``yarn_plan`` and ``yarn_counts`` start from."""
     t = tab.yarn_type[c]
     tp = tab.tparams[t]
-    P = int(tp[PLY_NUM])
-    N = int(tp[FIBER_NUM])
+    P, N = fibre_counts(tp)
     yseed = np.uint64(tab.yarn_seed[c])
     ncyc = 3
     if tp[USE_MIGRATION] != 0.0:
         ncyc = int(L * tp[S_MIG] / tp[ALPHA]) + 4
+    return t, tp, P, N, yseed, ncyc
+
+
+@njit(cache=True)
+def _piece_vertices(a0, a1, spacing):
+    """Vertices of a regular or loop piece over z in [a0, a1]: steps no longer than ``spacing``, at least 2."""
+    return max(2, int(math.ceil((a1 - a0) / spacing - STEP_SLACK)) + 1)
+
+
+@njit(cache=True)
+def _hair_vertices(tp, yseed, k, h, ze, spacing):
+    """Vertices of hair h of ply k (z extent ze): steps no longer than ``spacing`` in yarn-space arc length,
+    bounded by the hair's speed; at least 2."""
+    r0, r1, th1, pe = hair_params(tp, yseed, k, h)
+    rm = max(r0, r1) + tp[PLY_RADIUS]
+    speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
+    return max(2, int(math.ceil(speed / spacing)) + 1)
+
+
+@njit(cache=True)
+def yarn_plan(tab, c, L, spacing):
+    """Pieces of yarn c: arrays (ply, index, kind, a0, a1, hair_z1, hair_ze, nverts)."""
+    t, tp, P, N, yseed, ncyc = _yarn_setup(tab, c, L)
     g0 = tab.yarn_ply_off[c]
     nh = 0
     for k in range(P):
@@ -104,24 +129,20 @@ def yarn_plan(tab, c, L, spacing):
     hze = np.zeros(cap)
     nv = np.empty(cap, np.int64)
     n = 0
-    fo = tab.type_fib_off[t]
     for k in range(P):  # order: ply, regular (and loop) pieces before hairs, fibre index
         for j in range(N):
-            f = fo + k * N + j
+            f = fibre_row(tab, t, tp, k, j)
             m = _fiber_pieces(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], L, a0, a1, kind, n)
             for q in range(n, m):
                 ply[q] = k
                 idx[q] = j
-                nv[q] = max(2, int(math.ceil((a1[q] - a0[q]) / spacing - 1e-9)) + 1)
+                nv[q] = _piece_vertices(a0[q], a1[q], spacing)
             n = m
         g = g0 + k
         base = tab.hair_off[g]
         for h in range(tab.hair_count[g]):
             z1 = tab.hair_z1[base + h]
             ze = tab.hair_ze[base + h]
-            r0, r1, th1, pe = hair_params(tp, yseed, k, h)
-            rm = max(r0, r1) + tp[PLY_RADIUS]
-            speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
             ply[n] = k
             idx[n] = h
             kind[n] = 3
@@ -129,7 +150,7 @@ def yarn_plan(tab, c, L, spacing):
             a1[n] = 1.0
             hz1[n] = z1
             hze[n] = ze
-            nv[n] = max(2, int(math.ceil(speed / spacing)) + 1)
+            nv[n] = _hair_vertices(tp, yseed, k, h, ze, spacing)
             n += 1
     return ply[:n], idx[:n], kind[:n], a0[:n], a1[:n], hz1[:n], hze[:n], nv[:n]
 
@@ -138,38 +159,27 @@ def yarn_plan(tab, c, L, spacing):
 def yarn_counts(tab, c, L, spacing):
     """Size of yarn c's realization without listing its pieces: (vertices, pieces) per kind 1, 2, 3
     (as yarn_plan would count them)."""
-    t = tab.yarn_type[c]
-    tp = tab.tparams[t]
-    P = int(tp[PLY_NUM])
-    N = int(tp[FIBER_NUM])
-    yseed = np.uint64(tab.yarn_seed[c])
-    ncyc = 3
-    if tp[USE_MIGRATION] != 0.0:
-        ncyc = int(L * tp[S_MIG] / tp[ALPHA]) + 4
+    t, tp, P, N, yseed, ncyc = _yarn_setup(tab, c, L)
     cap = 2 * ncyc + 2
     a0 = np.empty(cap)
     a1 = np.empty(cap)
     kind = np.empty(cap, np.int8)
     verts = np.zeros(4, np.int64)
     pieces = np.zeros(4, np.int64)
-    fo = tab.type_fib_off[t]
     g0 = tab.yarn_ply_off[c]
     for k in range(P):
         for j in range(N):
-            f = fo + k * N + j
+            f = fibre_row(tab, t, tp, k, j)
             m = _fiber_pieces(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], L, a0, a1, kind,
                               runtime_value(0))
             for q in range(m):
-                verts[kind[q]] += max(2, int(math.ceil((a1[q] - a0[q]) / spacing - 1e-9)) + 1)
+                verts[kind[q]] += _piece_vertices(a0[q], a1[q], spacing)
                 pieces[kind[q]] += 1
         g = g0 + k
         base = tab.hair_off[g]
         for h in range(tab.hair_count[g]):
             ze = tab.hair_ze[base + h]
-            r0, r1, th1, pe = hair_params(tp, yseed, k, h)
-            rm = max(r0, r1) + tp[PLY_RADIUS]
-            speed = abs(ze) * (1.0 + rm * TWO_PI / tp[YARN_ALPHA]) + abs(r1 - r0) + max(r0, r1) * abs(pe)
-            verts[3] += max(2, int(math.ceil(speed / spacing)) + 1)
+            verts[3] += _hair_vertices(tp, yseed, k, h, ze, spacing)
             pieces[3] += 1
     return verts, pieces
 
@@ -216,7 +226,7 @@ def _fill_pieces(cv, tab, yarn, ply, idx, kind, a0, a1, hz1, hze, first, nfull, 
                     points[lo + m, d] = pos[d] + x * nn[d] + y * bn[d]
                 radius[lo + m] = rf
         else:
-            f = tab.type_fib_off[t] + k * int(tp[FIBER_NUM]) + j
+            f = fibre_row(tab, t, tp, k, j)
             for m in range(n):
                 z = a0[q] + (a1[q] - a0[q]) * ((m0 + m) / (nf - 1))
                 x, y, kd = regular_xy(tp, yseed, k, j, tab.fib_R[f], tab.fib_th[f], tab.fib_th0[f], z)

@@ -17,6 +17,7 @@ import numpy as np
 from numba import njit, prange
 
 from stages.core.sampling import NO_HIT
+from stages.core.yarn.lookup import point_answer_arrays, store_point_answer
 
 ReferenceLookup = namedtuple("ReferenceLookup", ["inside", "yarn", "kind", "dir_x", "dir_y", "dir_z", "surface_gap",
                                                  "kind_tie"])
@@ -144,22 +145,14 @@ def query_realized(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind,
     """``query_one`` for every point of ``pts`` (N, 3), in parallel. 14 parameters: ``query_one``'s, for an
     array of points."""
     N = pts.shape[0]
-    inside = np.zeros(N, np.bool_)
-    yarn = np.full(N, -1, np.int32)
-    kind = np.zeros(N, np.int8)
-    direction = np.zeros((N, 3))
+    inside, yarn, kind, direction = point_answer_arrays(N)
     gap = np.zeros(N)
     tie = np.zeros(N, np.bool_)
     for i in prange(N):
         p = pts[i].astype(np.float64)
         res = query_one(points, radius, seg_fiber, fiber_yarn, fiber_ply, fiber_kind, fiber_index,
                         lo, cell, dims, start, items, p, pad)
-        inside[i] = res.inside
-        yarn[i] = res.yarn
-        kind[i] = res.kind
-        direction[i, 0] = res.dir_x
-        direction[i, 1] = res.dir_y
-        direction[i, 2] = res.dir_z
+        store_point_answer(res, i, inside, yarn, kind, direction)
         gap[i] = res.surface_gap
         tie[i] = res.kind_tie
     return ReferenceLookups(inside, yarn, kind, direction, gap, tie)

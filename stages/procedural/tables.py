@@ -189,6 +189,22 @@ def _grow(a, cap):
     return b
 
 
+class CsrParts:
+    """Bin lists built part by part into one CSR: the bin starts (a leading 0, then each part's bin ends shifted by
+    the items of the parts before it) and the items (``build_tables``: regular-fibre bins, hair and loop z-bins)."""
+
+    def __init__(self):
+        self.starts = [np.zeros(1, np.int64)]
+        self.items = []
+        self.count = 0
+
+    def add(self, ends, items):
+        """Appends a part: its bins' ends (offsets into ``items``, its leading 0 left off) and its items."""
+        self.starts.append(ends + self.count)
+        self.items.append(items)
+        self.count += len(items)
+
+
 def uniform_zbins(lo, hi, L, h):
     """Fixed-width z-bins [b h, (b+1) h) over [0, L]; bin b lists (CSR, ascending) every entry whose
     [lo, hi] meets it. Returns (nbins, start (nbins+1,), items int32)."""
@@ -265,16 +281,12 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
                              + 2.0 * type_pad[t]) / gmin[c] for c, t in enumerate(yarn_type)])
     type_fib_off = np.zeros(T + 1, np.int64)
     type_bin_off = np.zeros(T + 1, np.int64)
-    starts = [np.zeros(1, np.int64)]
-    items = []
-    item_base = 0
+    bins = CsrParts()
     for t in range(T):
         type_fib_off[t + 1] = type_fib_off[t] + len(fib[t][0])
         nb = int(tparams[t, PLY_NUM]) * nbins
         type_bin_off[t + 1] = type_bin_off[t] + nb
-        starts.append(fib[t][5] + item_base)
-        items.append(fib[t][6])
-        item_base += len(fib[t][6])
+        bins.add(fib[t][5], fib[t][6])
     ykeys = np.array([yarn_key(seed, c) for c in range(Y)], np.int64)
     ply_off = np.zeros(Y + 1, np.int64)
     for c in range(Y):
@@ -283,14 +295,12 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
     hcount = np.zeros(S, np.int64)
     hoff = np.zeros(S + 1, np.int64)
     hzoff = np.zeros(S + 1, np.int64)
-    z1s, zes, bps, hstarts, hitems = [], [], [], [np.zeros(1, np.int64)], []
+    z1s, zes, bps, hair_bins = [], [], [], CsrParts()
     hshape = [np.zeros((0, 4))]
     lp_off = np.zeros(S + 1, np.int64)
     lz_off = np.zeros(S + 1, np.int64)
     lz_h = np.zeros(S)
-    lfib, lU, lcyc, lstarts, litems = [], [], [], [np.zeros(1, np.int64)], []
-    litem_base = 0
-    hitem_base = 0
+    lfib, lU, lcyc, loop_bins = [], [], [], CsrParts()
     for c in range(Y):
         tp = tparams[yarn_type[c]]
         L = float(cv.curve_length[c])
@@ -319,18 +329,14 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
             lfib.append(lf)
             lU.append(lu)
             lcyc.append(lcy)
-            lstarts.append(lst[1:] + litem_base)
-            litems.append(lit)
-            litem_base += len(lit)
+            loop_bins.add(lst[1:], lit)
             hzoff[g + 1] = hzoff[g] + len(bp) if len(bp) else hzoff[g] + 1
             if not len(bp):
                 bp = np.zeros(1)  # one breakpoint, no bins
             z1s.append(z1)
             zes.append(ze)
             bps.append(bp)
-            hstarts.append(st[1:] + hitem_base)
-            hitems.append(it)
-            hitem_base += len(it)
+            hair_bins.add(st[1:], it)
     def cat(xs, dt):
         return np.ascontiguousarray(np.concatenate(xs) if xs else np.zeros(0), dtype=dt)
     shape = np.ascontiguousarray(np.concatenate(hshape), np.float64)
@@ -339,17 +345,19 @@ def build_tables(cv, tparams, yarn_type, yarn_albedo, seed, nbins=32, hair_mode=
         fib_R=cat([f[0] for f in fib], np.float64), fib_th=cat([f[1] for f in fib], np.float64),
         fib_th0=cat([f[2] for f in fib], np.float64), fib_rlo=cat([f[3] for f in fib], np.float64),
         fib_rhi=cat([f[4] for f in fib], np.float64), type_nbins=np.full(T, nbins, np.int64),
-        type_bin_off=type_bin_off, bin_start=cat(starts, np.int64), bin_items=cat(items, np.int32),
+        type_bin_off=type_bin_off, bin_start=cat(bins.starts, np.int64), bin_items=cat(bins.items, np.int32),
         yarn_type=np.ascontiguousarray(yarn_type, np.int32), yarn_seed=ykeys, yarn_extent=ext, yarn_gmin=gmin,
         yarn_albedo=np.ascontiguousarray(yarn_albedo, np.float64), yarn_ply_off=ply_off, hair_count=hcount,
         hair_off=hoff, hair_z1=cat(z1s, np.float64), hair_ze=cat(zes, np.float64),
         hair_r0=np.ascontiguousarray(shape[:, 0]), hair_r1=np.ascontiguousarray(shape[:, 1]),
         hair_th1=np.ascontiguousarray(shape[:, 2]), hair_pe=np.ascontiguousarray(shape[:, 3]),
-        hb_zoff=hzoff, hb_z=cat(bps, np.float64), hb_start=cat(hstarts, np.int64), hb_items=cat(hitems, np.int32),
+        hb_zoff=hzoff, hb_z=cat(bps, np.float64), hb_start=cat(hair_bins.starts, np.int64),
+        hb_items=cat(hair_bins.items, np.int32),
         hair_mode=np.array([hair_mode], np.int64), yarn_length=np.ascontiguousarray(cv.curve_length[:Y], np.float64),
         max_extent=np.array([ext.max() if Y else 0.0]), fib_mask=cat([f[7] for f in fib], np.uint64),
         lp_off=lp_off, lp_fib=cat(lfib, np.int32), lp_U=cat(lU, np.float64), lp_cyc=cat(lcyc, np.int32),
-        lz_off=lz_off, lz_h=lz_h, lz_start=cat(lstarts, np.int64), lz_items=cat(litems, np.int32),
+        lz_off=lz_off, lz_h=lz_h, lz_start=cat(loop_bins.starts, np.int64),
+        lz_items=cat(loop_bins.items, np.int32),
         type_pad=type_pad, yarn_kappa=np.ascontiguousarray(kap, np.float64))
     tab = Tables(**stored, **dict(zip(DERIVED_FIELDS, empty_accel(Y))))
     info = {"curvature_max": kap, "g_raw": g_raw, "extent": ext, "folded": kap * ext >= fold_cap}

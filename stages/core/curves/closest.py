@@ -174,6 +174,18 @@ def nearest_segments_in_cell(cv, p):
 
 
 @njit(cache=True)
+def _closer_on_segment(cv, i, p, best, best_i, best_t):
+    """(squared distance, segment, t) of the closest point to p found so far, ``best`` at ``best_i``, ``best_t``,
+    or of segment i's closest point where that is nearer (its box first: no nearer point, no test)."""
+    if _segment_box_dist2(cv, i, p) >= best:
+        return best, best_i, best_t
+    t, d2 = closest_on_segment(cv, i, p)
+    if d2 < best:
+        return d2, i, t
+    return best, best_i, best_t
+
+
+@njit(cache=True)
 def closest_point_on_curve(cv, c, p):
     """(s, squared distance) of the closest point of curve c to p: the global minimum.
 
@@ -188,24 +200,12 @@ def closest_point_on_curve(cv, c, p):
         i = cv.grid_items[k]
         if cv.seg_curve[i] != c:
             continue
-        if _segment_box_dist2(cv, i, p) >= best:
-            continue
-        t, d2 = closest_on_segment(cv, i, p)
-        if d2 < best:
-            best = d2
-            best_i = i
-            best_t = t
+        best, best_i, best_t = _closer_on_segment(cv, i, p, best, best_i, best_t)
     if best > cv.grid_pad[c] * cv.grid_pad[c]:
         lo = cv.offsets[c]
         nseg = cv.offsets[c + 1] - lo - (0 if cv.closed[c] else 1)
         for i in range(lo, lo + nseg):
-            if _segment_box_dist2(cv, i, p) >= best:
-                continue
-            t, d2 = closest_on_segment(cv, i, p)
-            if d2 < best:
-                best = d2
-                best_i = i
-                best_t = t
+            best, best_i, best_t = _closer_on_segment(cv, i, p, best, best_i, best_t)
     s = cv.seg_arclen[best_i] + segment_arclen_to(cv, best_i, best_t)
     return s, best
 

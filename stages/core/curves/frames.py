@@ -18,7 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .spline import coeffs_s, locate, normalize3, point_unit_tangent_s, segment_arclen_to, wrap_s
+from .spline import coeffs_s, last_at_or_below, locate, normalize3, point_unit_tangent_s, segment_arclen_to, wrap_s
 
 
 @njit(cache=True)
@@ -61,14 +61,7 @@ def _frame_sample_index(cv, c, i, t, s):
         elif q > K:
             q = K
         return fo + (i - lo) * K + q, i, q / K
-    a = fo
-    b = fo + nf - 1
-    while a < b:
-        m = (a + b + 1) // 2
-        if cv.frame_s[m] <= s:
-            a = m
-        else:
-            b = m - 1
+    a = last_at_or_below(cv.frame_s, fo, fo + nf - 1, s)
     j, t0 = locate(cv, c, cv.frame_s[a])
     return a, j, t0
 
@@ -96,31 +89,15 @@ def frame_s(cv, c, i, t, s):
     # last bits) the chord direction is noise and the two reflections could compose to a half turn
     # about t: take the stored normal, as the reflections would at the exact same point
     if c1 > 1e-24 * (1.0 + px * px + py * py + pz * pz):
-        f = (2.0 / c1) * (vx * rx + vy * ry + vz * rz)
-        rx -= f * vx
-        ry -= f * vy
-        rz -= f * vz
-        f = (2.0 / c1) * (vx * ux + vy * uy + vz * uz)
-        ux -= f * vx
-        uy -= f * vy
-        uz -= f * vz
+        rx, ry, rz = _reflect(rx, ry, rz, vx, vy, vz, c1)
+        ux, uy, uz = _reflect(ux, uy, uz, vx, vy, vz, c1)
         vx = tx - ux
         vy = ty - uy
         vz = tz - uz
         c2 = vx * vx + vy * vy + vz * vz
         if c2 >= 1e-300:
-            f = (2.0 / c2) * (vx * rx + vy * ry + vz * rz)
-            rx -= f * vx
-            ry -= f * vy
-            rz -= f * vz
-    f = rx * tx + ry * ty + rz * tz
-    rx -= f * tx
-    ry -= f * ty
-    rz -= f * tz
-    nr = math.sqrt(rx * rx + ry * ry + rz * rz)
-    rx /= nr
-    ry /= nr
-    rz /= nr
+            rx, ry, rz = _reflect(rx, ry, rz, vx, vy, vz, c2)
+    rx, ry, rz = _unit_normal_part(rx, ry, rz, tx, ty, tz)
     tw = cv.frame_twist[c]
     if tw != 0.0:  # Rodrigues rotation about t by -tw s / L
         ang = -tw * s / cv.curve_length[c]
@@ -133,16 +110,27 @@ def frame_s(cv, c, i, t, s):
         rx = rx * ca + kx * sa + tx * f
         ry = ry * ca + ky * sa + ty * f
         rz = rz * ca + kz * sa + tz * f
+    rx, ry, rz = _unit_normal_part(rx, ry, rz, tx, ty, tz)
+    return (px, py, pz, tx, ty, tz, rx, ry, rz,
+            ty * rz - tz * ry, tz * rx - tx * rz, tx * ry - ty * rx)
+
+
+@njit(cache=True)
+def _reflect(rx, ry, rz, vx, vy, vz, c):
+    """r reflected in the plane normal to v, c = |v|^2: r - (2 / c) (v . r) v (a step of the double reflection)."""
+    f = (2.0 / c) * (vx * rx + vy * ry + vz * rz)
+    return rx - f * vx, ry - f * vy, rz - f * vz
+
+
+@njit(cache=True)
+def _unit_normal_part(rx, ry, rz, tx, ty, tz):
+    """r's part normal to the unit vector t, normalised: (r - (r . t) t) / |r - (r . t) t|."""
     f = rx * tx + ry * ty + rz * tz
     rx -= f * tx
     ry -= f * ty
     rz -= f * tz
     nr = math.sqrt(rx * rx + ry * ry + rz * rz)
-    rx /= nr
-    ry /= nr
-    rz /= nr
-    return (px, py, pz, tx, ty, tz, rx, ry, rz,
-            ty * rz - tz * ry, tz * rx - tx * rz, tx * ry - ty * rx)
+    return rx / nr, ry / nr, rz / nr
 
 
 @njit(cache=True)

@@ -10,11 +10,13 @@ Kernels
 -------
 segment_coeffs(cv, i)           power-basis coefficients a t^3 + b t^2 + c t + d of segment i
 coeffs_s(cv, i)                 the same as 12 scalars (allocation-free, for hot loops)
+velocity_s / acceleration_s     dP/dt and d2P/dt2 from those scalars
 segment_point / segment_deriv   position / dP/dt on segment i at t in [0, 1]
 segment_arclen_to(cv, i, t)     arc length from the segment start to t (Gauss-Legendre)
 arclen_coeffs(a, b, c, t0, t1)  arc length of a cubic's piece from its derivative's coefficients
 wrap_s(cv, c, s)                arc length wrapped into a closed curve's period (clamped when open)
 locate(cv, c, s)                (segment, t) at arc length s
+last_at_or_below(arr, a, b, x)  the bisection of a sorted array that ``locate`` and the frame lookups use
 curve_point_at(cv, c, s)        position at arc length s
 normalize3, cross3              3-vector helpers
 
@@ -80,18 +82,26 @@ def point_unit_tangent_s(co, t):
     px = ((ax * t + bx) * t + cx) * t + dx
     py = ((ay * t + by) * t + cy) * t + dy
     pz = ((az * t + bz) * t + cz) * t + dz
-    tx = (3.0 * ax * t + 2.0 * bx) * t + cx
-    ty = (3.0 * ay * t + 2.0 * by) * t + cy
-    tz = (3.0 * az * t + 2.0 * bz) * t + cz
+    tx, ty, tz = velocity_s(ax, ay, az, bx, by, bz, cx, cy, cz, t)
     nt = math.sqrt(tx * tx + ty * ty + tz * tz)
     return px, py, pz, tx / nt, ty / nt, tz / nt
 
 
 @njit(cache=True)
+def velocity_s(ax, ay, az, bx, by, bz, cx, cy, cz, t):
+    """P'(t) = (3 a t + 2 b) t + c of a segment with power-basis coefficients a, b, c (``coeffs_s``), 3 scalars."""
+    return (3.0 * ax * t + 2.0 * bx) * t + cx, (3.0 * ay * t + 2.0 * by) * t + cy, (3.0 * az * t + 2.0 * bz) * t + cz
+
+
+@njit(cache=True)
+def acceleration_s(ax, ay, az, bx, by, bz, t):
+    """P''(t) = 6 a t + 2 b of a segment with power-basis coefficients a, b (``coeffs_s``), 3 scalars."""
+    return 6.0 * ax * t + 2.0 * bx, 6.0 * ay * t + 2.0 * by, 6.0 * az * t + 2.0 * bz
+
+
+@njit(cache=True)
 def _speed_s(ax, ay, az, bx, by, bz, cx, cy, cz, t):
-    x = (3.0 * ax * t + 2.0 * bx) * t + cx
-    y = (3.0 * ay * t + 2.0 * by) * t + cy
-    z = (3.0 * az * t + 2.0 * bz) * t + cz
+    x, y, z = velocity_s(ax, ay, az, bx, by, bz, cx, cy, cz, t)
     return math.sqrt(x * x + y * y + z * z)
 
 
@@ -205,15 +215,20 @@ def locate(cv, c, s):
     nseg = cv.offsets[c + 1] - lo - (0 if cv.closed[c] else 1)
     hi = lo + nseg - 1
     # last segment whose start arc length <= s
-    a = lo
-    b = hi
+    a = last_at_or_below(cv.seg_arclen, lo, hi, s)
+    return a, segment_t_at(cv, a, s - cv.seg_arclen[a])
+
+
+@njit(cache=True)
+def last_at_or_below(arr, a, b, x):
+    """The last index m in [a, b] with arr[m] <= x (a where there is none), by bisection of the sorted arr[a..b]."""
     while a < b:
         m = (a + b + 1) // 2
-        if cv.seg_arclen[m] <= s:
+        if arr[m] <= x:
             a = m
         else:
             b = m - 1
-    return a, segment_t_at(cv, a, s - cv.seg_arclen[a])
+    return a
 
 
 @njit(cache=True)

@@ -66,6 +66,7 @@ from stages.core.geometry.wide_walk import LEAF_CODE, Ray, leaf_test, wide_any, 
 
 LEAF_MAX = 2
 N_BINS = 16
+EMPTY_BOX = (np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf)   # (lo, hi) of no box: what a sweep grows from
 EMPTY = -1       # an unused slot of a wide node (an empty leaf behind an empty box)
 
 FiberBVH = namedtuple("FiberBVH", ["points", "seg_a", "seg_r", "seg_fiber",
@@ -141,6 +142,13 @@ def _area(lx, ly, lz, hx, hy, hz):
     dy = max(hy - ly, 0.0)
     dz = max(hz - lz, 0.0)
     return dx * dy + dy * dz + dz * dx
+
+
+@njit(cache=True)
+def _grow_by_bin(box, bin_lo, bin_hi, b):
+    """The box (lo x, y, z, hi x, y, z) grown by bin b's box (``bin_lo[b]``, ``bin_hi[b]``)."""
+    return (min(box[0], bin_lo[b, 0]), min(box[1], bin_lo[b, 1]), min(box[2], bin_lo[b, 2]),
+            max(box[3], bin_hi[b, 0]), max(box[4], bin_hi[b, 1]), max(box[5], bin_hi[b, 2]))
 
 
 @njit(cache=True)
@@ -240,43 +248,23 @@ def build_bvh_nodes(lo, hi):
                     bin_lo[b, k] = min(bin_lo[b, k], lo[p, k])
                     bin_hi[b, k] = max(bin_hi[b, k], hi[p, k])
             # sweep from the right
-            rl0 = np.inf
-            rl1 = np.inf
-            rl2 = np.inf
-            rh0 = -np.inf
-            rh1 = -np.inf
-            rh2 = -np.inf
+            rbox = EMPTY_BOX
             rc = 0
             for b in range(N_BINS - 1, 0, -1):
                 rc += bin_cnt[b]
                 if bin_cnt[b] > 0:
-                    rl0 = min(rl0, bin_lo[b, 0])
-                    rl1 = min(rl1, bin_lo[b, 1])
-                    rl2 = min(rl2, bin_lo[b, 2])
-                    rh0 = max(rh0, bin_hi[b, 0])
-                    rh1 = max(rh1, bin_hi[b, 1])
-                    rh2 = max(rh2, bin_hi[b, 2])
+                    rbox = _grow_by_bin(rbox, bin_lo, bin_hi, b)
                 right_cnt[b] = rc
-                right_area[b] = _area(rl0, rl1, rl2, rh0, rh1, rh2) if rc > 0 else 0.0
-            ll0 = np.inf
-            ll1 = np.inf
-            ll2 = np.inf
-            lh0 = -np.inf
-            lh1 = -np.inf
-            lh2 = -np.inf
+                right_area[b] = _area(*rbox) if rc > 0 else 0.0
+            lbox = EMPTY_BOX
             lc = 0
             for b in range(N_BINS - 1):
                 lc += bin_cnt[b]
                 if bin_cnt[b] > 0:
-                    ll0 = min(ll0, bin_lo[b, 0])
-                    ll1 = min(ll1, bin_lo[b, 1])
-                    ll2 = min(ll2, bin_lo[b, 2])
-                    lh0 = max(lh0, bin_hi[b, 0])
-                    lh1 = max(lh1, bin_hi[b, 1])
-                    lh2 = max(lh2, bin_hi[b, 2])
+                    lbox = _grow_by_bin(lbox, bin_lo, bin_hi, b)
                 if lc == 0 or right_cnt[b + 1] == 0:
                     continue
-                cost = lc * _area(ll0, ll1, ll2, lh0, lh1, lh2) + right_cnt[b + 1] * right_area[b + 1]
+                cost = lc * _area(*lbox) + right_cnt[b + 1] * right_area[b + 1]
                 if cost < best_cost:
                     best_cost = cost
                     best_axis = ax

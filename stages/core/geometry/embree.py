@@ -73,12 +73,11 @@ from collections import namedtuple
 import numpy as np
 from llvmlite import ir
 from numba import cfunc, njit, types
-from numba.extending import intrinsic, overload
+from numba.extending import intrinsic
 
-from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.bvh import ignore_range, segments_from_fibers
 from stages.core.geometry.capsule import capsule_intersect, point_segment_dist2
-from stages.core.geometry.surface import capsule_surface_hit, segment_surface_hit, surface_hit, surface_occluded
+from stages.core.geometry.surface import answer_surface_queries, capsule_surface_hit, segment_surface_hit
 
 EmbreeFibers = namedtuple("EmbreeFibers", ["handle", "filter", "rows", "exact32", "points", "seg_a", "seg_r",
                                            "seg_fiber", "fiber_seg_offsets"])
@@ -468,17 +467,4 @@ def embree_surface_hit(sc, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_pr
     return capsule_surface_hit(t, s, f, r, ax, ay, az, bx, by, bz, ox, oy, oz, dx, dy, dz)
 
 
-@overload(surface_hit)
-def _embree_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    if is_tuple_class(scene, EmbreeFibers):
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return embree_surface_hit(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
-        return impl
-
-
-@overload(surface_occluded)
-def _embree_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    if is_tuple_class(scene, EmbreeFibers):
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return embree_occluded(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
-        return impl
+answer_surface_queries(EmbreeFibers, embree_surface_hit, embree_occluded)

@@ -2,10 +2,10 @@
 
 ``slab_enter(lx, ly, lz, hx, hy, hz, ox, oy, oz, ix, iy, iz, tmin, tmax)`` -> the entry distance
 max over axes of the near plane distance, for the box [l, h], the ray origin o and the reciprocal
-direction i = 1 / d (``safe_inverse``: a zero component becomes ``INVERSE_OF_ZERO``, so the slab of a parallel
-axis is all or nothing); inf when the ray misses the box, leaves it before ``tmin`` or enters it
-beyond ``tmax``. The BVH traversals (``stages.core.geometry.bvh``, ``stages.core.shell.traversal``)
-call it for every node they visit.
+direction i = 1 / d (``inverse_direction``, ``safe_inverse`` of each component: a zero component becomes
+``INVERSE_OF_ZERO``, so the slab of a parallel axis is all or nothing); inf when the ray misses the box, leaves
+it before ``tmin`` or enters it beyond ``tmax``. The BVH traversals (``stages.core.geometry.bvh``,
+``stages.core.shell.traversal``) call it for every node they visit.
 """
 import numpy as np
 from numba import njit
@@ -18,6 +18,12 @@ def safe_inverse(d):
     if d == 0.0:
         return INVERSE_OF_ZERO
     return 1.0 / d
+
+
+@njit(cache=True)
+def inverse_direction(dx, dy, dz):
+    """(ix, iy, iz): the ray's reciprocal direction, ``safe_inverse`` of each component."""
+    return safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
 
 
 @njit(cache=True)

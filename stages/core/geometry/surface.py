@@ -18,7 +18,8 @@ outward normal at the hit, ``radius`` the capsule radius. Segments of fibre ``ig
 
 Scene classes: ``FiberBVH`` (``stages.core.geometry.bvh``: realized fibres in one SAH BVH; below),
 ``EmbreeFibers`` (``stages.core.geometry.embree``: the same fibres traced by Embree 4) and
-``ShellScene`` (``stages.core.shell.traversal``: tiled exemplars under a shell map).
+``ShellScene`` (``stages.core.shell.traversal``: tiled exemplars under a shell map); each answers both queries
+through ``answer_surface_queries(scene_class, hit, any_hit)``.
 """
 import math
 from collections import namedtuple
@@ -42,6 +43,28 @@ def surface_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_
 def surface_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
     """Any fibre along the ray; numba-only (overloaded per scene class)."""
     raise TypeError("surface_occluded is only callable from numba-compiled code")
+
+
+def answer_surface_queries(scene_class, hit, any_hit, with_cell=False):
+    """Answers ``surface_hit`` / ``surface_occluded`` for ``scene_class`` (overloads) by the kernels ``hit`` /
+    ``any_hit``, which take the scene, with ``with_cell`` the ray's starting cell, then the ray, window and skips."""
+    _answer_by(surface_hit, scene_class, hit, with_cell)
+    _answer_by(surface_occluded, scene_class, any_hit, with_cell)
+
+
+def _answer_by(generic, scene_class, kernel, with_cell):
+    """Overloads ``generic`` for ``scene_class`` by a call of ``kernel`` (``answer_surface_queries``)."""
+    if with_cell:
+        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+            return kernel(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+    else:
+        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+            return kernel(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+
+    @overload(generic)
+    def _of_class(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+        if is_tuple_class(scene, scene_class):
+            return impl
 
 
 # ------------------------------------------------------------------------------------------------
@@ -83,18 +106,5 @@ def bvh_surface_hit(bvh, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim
     return segment_surface_hit(bvh, t, s, ox, oy, oz, dx, dy, dz)
 
 
-@overload(surface_hit)
-def _bvh_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    if is_tuple_class(scene, FiberBVH):
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return bvh_surface_hit(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
-        return impl
-
-
-@overload(surface_occluded)
-def _bvh_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    if is_tuple_class(scene, FiberBVH):
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return occluded(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
-        return impl
+answer_surface_queries(FiberBVH, bvh_surface_hit, occluded)
 

@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.bvh import build_bvh_nodes
-from stages.core.geometry.slab import safe_inverse, slab_enter
+from stages.core.geometry.slab import inverse_direction, slab_enter
 from stages.core.geometry.stack import traversal_stack
 
 TriangleMesh = namedtuple("TriangleMesh", ["vertices", "triangles", "nodes", "tris"])
@@ -173,6 +173,25 @@ def ray_triangle(tris, j, ox, oy, oz, dx, dy, dz, tmin, tmax):
 
 
 @njit(cache=True)
+def node_links(nodes, n):
+    """(leaf, a, b) of node n (the layout of ``nodes``, module doc): a leaf's first triangle and count, else the
+    inner node's two children."""
+    a = int(nodes[n, 6])
+    b = int(nodes[n, 7])
+    if a < 0:
+        return True, -1 - a, b
+    return False, a, b
+
+
+@njit(cache=True)
+def node_enter(nodes, n, ox, oy, oz, ix, iy, iz, tmin, tmax):
+    """``slab_enter`` of node n's box (the bounds in its row of ``nodes``): the ray's entry distance, inf when it
+    misses."""
+    return slab_enter(nodes[n, 0], nodes[n, 1], nodes[n, 2], nodes[n, 3], nodes[n, 4], nodes[n, 5],
+                      ox, oy, oz, ix, iy, iz, tmin, tmax)
+
+
+@njit(cache=True)
 def mesh_intersect(mesh, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """Nearest hit in (tmin, tmax) (``TriangleHit``; module doc)."""
     nodes = mesh.nodes
@@ -184,11 +203,8 @@ def mesh_intersect(mesh, ox, oy, oz, dx, dy, dz, tmin, tmax):
     best_b2 = 0.0
     if tris.shape[0] == 0:
         return TriangleHit(np.inf, -1, 0.0, 0.0)
-    ix = safe_inverse(dx)
-    iy = safe_inverse(dy)
-    iz = safe_inverse(dz)
-    t_root = slab_enter(nodes[0, 0], nodes[0, 1], nodes[0, 2], nodes[0, 3], nodes[0, 4], nodes[0, 5],
-                        ox, oy, oz, ix, iy, iz, tmin, best_t)
+    ix, iy, iz = inverse_direction(dx, dy, dz)
+    t_root = node_enter(nodes, 0, ox, oy, oz, ix, iy, iz, tmin, best_t)
     if t_root == np.inf:
         return TriangleHit(np.inf, -1, 0.0, 0.0)
     stack, stack_t = traversal_stack()   # stack_t: entry distance of each pushed node, skipped if a nearer hit
@@ -196,11 +212,9 @@ def mesh_intersect(mesh, ox, oy, oz, dx, dy, dz, tmin, tmax):
     node = 0
     sp = 0
     while True:
-        a = int(nodes[node, 6])
-        b = int(nodes[node, 7])
-        if a < 0:
-            j0 = -1 - a
-            for j in range(j0, j0 + b):
+        leaf, a, b = node_links(nodes, node)
+        if leaf:
+            for j in range(a, a + b):
                 t, b1, b2 = ray_triangle(tris, j, ox, oy, oz, dx, dy, dz, tmin, tmax)
                 if t > best_t or t == np.inf:
                     continue
@@ -212,10 +226,8 @@ def mesh_intersect(mesh, ox, oy, oz, dx, dy, dz, tmin, tmax):
                     best_b1 = b1
                     best_b2 = b2
         else:
-            tl = slab_enter(nodes[a, 0], nodes[a, 1], nodes[a, 2], nodes[a, 3], nodes[a, 4], nodes[a, 5],
-                            ox, oy, oz, ix, iy, iz, tmin, best_t)
-            tr = slab_enter(nodes[b, 0], nodes[b, 1], nodes[b, 2], nodes[b, 3], nodes[b, 4], nodes[b, 5],
-                            ox, oy, oz, ix, iy, iz, tmin, best_t)
+            tl = node_enter(nodes, a, ox, oy, oz, ix, iy, iz, tmin, best_t)
+            tr = node_enter(nodes, b, ox, oy, oz, ix, iy, iz, tmin, best_t)
             if tl != np.inf or tr != np.inf:   # go on into the nearer child, the farther one waits on the stack
                 if tr < tl:
                     a, b, tl, tr = b, a, tr, tl
@@ -245,11 +257,8 @@ def mesh_occluded(mesh, ox, oy, oz, dx, dy, dz, tmin, tmax):
     tris = mesh.tris
     if tris.shape[0] == 0:
         return False
-    ix = safe_inverse(dx)
-    iy = safe_inverse(dy)
-    iz = safe_inverse(dz)
-    if slab_enter(nodes[0, 0], nodes[0, 1], nodes[0, 2], nodes[0, 3], nodes[0, 4], nodes[0, 5],
-                  ox, oy, oz, ix, iy, iz, tmin, tmax) == np.inf:
+    ix, iy, iz = inverse_direction(dx, dy, dz)
+    if node_enter(nodes, 0, ox, oy, oz, ix, iy, iz, tmin, tmax) == np.inf:
         return False
     stack, _stack_t = traversal_stack()
     stack[0] = 0
@@ -257,18 +266,15 @@ def mesh_occluded(mesh, ox, oy, oz, dx, dy, dz, tmin, tmax):
     while sp > 0:
         sp -= 1
         node = stack[sp]
-        a = int(nodes[node, 6])
-        b = int(nodes[node, 7])
-        if a < 0:
-            j0 = -1 - a
-            for j in range(j0, j0 + b):
+        leaf, a, b = node_links(nodes, node)
+        if leaf:
+            for j in range(a, a + b):
                 t, _b1, _b2 = ray_triangle(tris, j, ox, oy, oz, dx, dy, dz, tmin, tmax)
                 if t != np.inf:
                     return True
             continue
         for c in (a, b):
-            if slab_enter(nodes[c, 0], nodes[c, 1], nodes[c, 2], nodes[c, 3], nodes[c, 4], nodes[c, 5],
-                          ox, oy, oz, ix, iy, iz, tmin, tmax) != np.inf:
+            if node_enter(nodes, c, ox, oy, oz, ix, iy, iz, tmin, tmax) != np.inf:
                 stack[sp] = c
                 sp += 1
     return False

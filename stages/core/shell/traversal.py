@@ -48,9 +48,10 @@ from numba.extending import overload
 from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.bvh import segment_hit
 from stages.core.geometry.capsule import capsule_normal
-from stages.core.geometry.slab import safe_inverse, slab_enter
+from stages.core.geometry.dda import dda_axis, dda_next
+from stages.core.geometry.slab import inverse_direction, slab_enter
 from stages.core.geometry.stack import STACK_SIZE, stack_array
-from stages.core.geometry.surface import SurfaceHit, surface_hit, surface_occluded
+from stages.core.geometry.surface import SurfaceHit, answer_surface_queries
 from stages.core.geometry.wide_walk import Ray, leaf_test, wide_any, wide_nearest
 
 ShellScene = namedtuple("ShellScene", [
@@ -106,7 +107,7 @@ def enter_shell(sc, ox, oy, oz, dx, dy, dz, tmin, tmax):
     """(t, boundary face) of the nearest boundary face entered at tmin <= t < tmax; (inf, -1) if none."""
     if sc.bprim.shape[0] == 0:
         return np.inf, -1
-    ix, iy, iz = safe_inverse(dx), safe_inverse(dy), safe_inverse(dz)
+    ix, iy, iz = inverse_direction(dx, dy, dz)
     stack = stack_array(STACK_SIZE, np.int64)
     stack[0] = 0
     sp = 1
@@ -214,18 +215,8 @@ def block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, an
     nbv = sc.block_map.shape[1]
     i = _floor_div(ax, bw)
     j = _floor_div(ay, bh)
-    if ux > 0.0:
-        stx, tmx, tdx = 1, ((i + 1) * bw - ax) / ux, bw / ux
-    elif ux < 0.0:
-        stx, tmx, tdx = -1, (i * bw - ax) / ux, -bw / ux
-    else:
-        stx, tmx, tdx = 0, np.inf, np.inf
-    if uy > 0.0:
-        sty, tmy, tdy = 1, ((j + 1) * bh - ay) / uy, bh / uy
-    elif uy < 0.0:
-        sty, tmy, tdy = -1, (j * bh - ay) / uy, -bh / uy
-    else:
-        sty, tmy, tdy = 0, np.inf, np.inf
+    stx, tmx, tdx = dda_axis(i * bw, (i + 1) * bw, bw, ax, ux)
+    sty, tmy, tdy = dda_axis(j * bh, (j + 1) * bh, bh, ay, uy)
     s = 0.0
     steps = 0
     while s < L and steps < MAX_STEPS:
@@ -247,12 +238,7 @@ def block_walk(sc, ax, ay, az, ux, uy, uz, L, ign_fiber, ign_seg, ign_window, an
                     if seg >= 0:
                         return t, seg, k, i, j, ax - shx + t * ux, ay - shy + t * uy, az + t * uz
             s = s1
-        if tmx < tmy:
-            i += stx
-            tmx += tdx
-        else:
-            j += sty
-            tmy += tdy
+        i, j, tmx, tmy = dda_next(i, j, tmx, tmy, stx, sty, tdx, tdy)
         if tmx == np.inf and tmy == np.inf:
             break
     return np.inf, -1, -1, 0, 0, 0.0, 0.0, 0.0
@@ -385,18 +371,11 @@ def shell_surface_hit(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, i
     return SurfaceHit(h.t, h.segment, h.fibre, h.tet, tan[0], tan[1], tan[2], nrm[0], nrm[1], nrm[2], h.radius)
 
 
-@overload(surface_hit)
-def _shell_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    if is_tuple_class(scene, ShellScene):
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return shell_surface_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
-        return impl
+@njit(cache=True)
+def shell_surface_occluded(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    """``surface_occluded`` for a ``ShellScene``: does ``shell_trace`` find a hit? 13 parameters: the
+    surface-scene interface's, which it answers for a ``ShellScene``."""
+    return shell_trace(sc, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window).t < np.inf
 
 
-@overload(surface_occluded)
-def _shell_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-    if is_tuple_class(scene, ShellScene):
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return shell_trace(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim,
-                               ign_window).t < np.inf
-        return impl
+answer_surface_queries(ShellScene, shell_surface_hit, shell_surface_occluded, with_cell=True)

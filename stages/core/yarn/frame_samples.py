@@ -41,7 +41,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.curves.frames import curve_frame_at
-from stages.core.curves.spline import coeffs_s, locate, segment_t_at
+from stages.core.curves.spline import acceleration_s, coeffs_s, last_at_or_below, locate, segment_t_at, velocity_s
 from stages.core.threads import chunk_kernel, for_chunks
 
 # fs_frame columns: position 0-2, unit tangent 3-5, normal 6-8, binormal 9-11; then, on the row of
@@ -115,12 +115,8 @@ def _curvature_vector(cv, j, s):
     (P'' - (P'' . T) T) / |P'|^2 in the segment's parameter t."""
     ax, ay, az, bx, by, bz, cx, cy, cz, dx, dy, dz = coeffs_s(cv, j)
     t = segment_t_at(cv, j, s - cv.seg_arclen[j])
-    vx = (3.0 * ax * t + 2.0 * bx) * t + cx
-    vy = (3.0 * ay * t + 2.0 * by) * t + cy
-    vz = (3.0 * az * t + 2.0 * bz) * t + cz
-    qx = 6.0 * ax * t + 2.0 * bx
-    qy = 6.0 * ay * t + 2.0 * by
-    qz = 6.0 * az * t + 2.0 * bz
+    vx, vy, vz = velocity_s(ax, ay, az, bx, by, bz, cx, cy, cz, t)
+    qx, qy, qz = acceleration_s(ax, ay, az, bx, by, bz, t)
     v2 = vx * vx + vy * vy + vz * vz
     if v2 <= 0.0:
         return 0.0, 0.0, 0.0
@@ -232,13 +228,7 @@ def locate_step(s_arr, lo, hi, i, z):
         return a
     if z >= s_arr[b]:
         return b
-    while a < b:
-        m = (a + b + 1) // 2
-        if s_arr[m] <= z:
-            a = m
-        else:
-            b = m - 1
-    return a
+    return last_at_or_below(s_arr, a, b, z)
 
 
 @njit(cache=True, inline="always")

@@ -131,7 +131,7 @@ from numba import njit
 
 from stages.core.geometry.stack import stack_array
 
-from .model import E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, TWO_PI, YARN_ALPHA, YARN_SGN, ply_angle
+from .model import E_LONG, E_SHORT, FIBER_RADIUS, PLY_NUM, PLY_RADIUS, TWO_PI, YARN_ALPHA, YARN_SGN, ply_frame
 
 PlyHit = namedtuple("PlyHit", ["hit", "ply", "u", "point", "tangent", "normal", "ply_angle", "plies_crossed",
                                "iterations", "converged", "corrections"])
@@ -174,12 +174,10 @@ def ply_reach_radius(tp):
 @njit(cache=True)
 def ply_centre(tp, k, z):
     """(cx, cy, dcx, dcy, cos phi_k, sin phi_k): ply k's centre at z, its z-derivative and the ply frame."""
-    a = ply_angle(tp, k, z)
-    ca = math.cos(a)
-    sa = math.sin(a)
+    cx, cy, ca, sa = ply_frame(tp, k, z)
     rp = tp[PLY_RADIUS]
     w = tp[YARN_SGN] * TWO_PI / tp[YARN_ALPHA]
-    return rp * ca, rp * sa, -rp * w * sa, rp * w * ca, ca, sa
+    return cx, cy, -rp * w * sa, rp * w * ca, ca, sa
 
 
 @njit(cache=True)
@@ -188,9 +186,7 @@ def ray_membership(tp, k, ox, oy, oz, dx, dy, dz, u):
     ar, at = ply_half_axes(tp)
     x = ox + u * dx
     y = oy + u * dy
-    phi = ply_angle(tp, k, oz + u * dz)
-    c = math.cos(phi)
-    s = math.sin(phi)
+    _, _, c, s = ply_frame(tp, k, oz + u * dz)
     a = x * c + y * s - tp[PLY_RADIUS]
     b = -x * s + y * c
     wd = tp[YARN_SGN] * TWO_PI / tp[YARN_ALPHA] * dz

@@ -76,14 +76,13 @@ from stages.core.yarn.model import (
     DENSITY,
     E_LONG,
     E_SHORT,
-    FIBER_NUM,
     FIBER_RADIUS,
-    PLY_NUM,
     PLY_RADIUS,
     YARN_ALPHA,
     ZE_MU,
     ZE_SIG,
     fiber_twist,
+    fibre_counts,
     hair_params,
     ply_frame,
     reach_factor,
@@ -150,8 +149,7 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key):
         return OUTSIDE_KEYED  # beyond an end of the yarn by more than any fibre's cap reaches
     K = tab.type_K[t]
     yseed = np.uint64(tab.yarn_seed[c])
-    P = int(tp[PLY_NUM])
-    N = int(tp[FIBER_NUM])
+    P, N = fibre_counts(tp)
     B = tab.type_nbins[t]
     es = tp[E_SHORT]
     el = tp[E_LONG]
@@ -468,14 +466,30 @@ def _near_seam(tab, c, bound, rf, eps, px, py, pz):
     return dx * dx + dy * dy + dz * dz < r * r
 
 
+@njit(cache=True)
+def point_answer_arrays(N):
+    """(inside (N,) bool, yarn (N,) int32, kind (N,) int8, direction (N, 3)) for N points' answers, all outside
+    (yarn -1): the arrays ``lookup_points`` and the realized reference (``stages.procedural.realized_reference``)
+    fill."""
+    return np.zeros(N, np.bool_), np.full(N, -1, np.int32), np.zeros(N, np.int8), np.zeros((N, 3))
+
+
+@njit(cache=True)
+def store_point_answer(r, i, inside, yarn, kind, direction):
+    """Writes answer r's inside, yarn, kind and direction (dir_x, dir_y, dir_z) into row i of those arrays."""
+    inside[i] = r.inside
+    yarn[i] = r.yarn
+    kind[i] = r.kind
+    direction[i, 0] = r.dir_x
+    direction[i, 1] = r.dir_y
+    direction[i, 2] = r.dir_z
+
+
 def lookup_points(cv, tab, pts):
     """Vectorised lookup_point over (N, 3) points, on threads (``stages.core.threads``): ``FibreLookups``
     (inside, yarn, kind, direction (N, 3), density, albedo (N, 3))."""
     N = pts.shape[0]
-    inside = np.zeros(N, np.bool_)
-    yarn = np.full(N, -1, np.int32)
-    kind = np.zeros(N, np.int8)
-    direction = np.zeros((N, 3))
+    inside, yarn, kind, direction = point_answer_arrays(N)
     density = np.zeros(N)
     albedo = np.zeros((N, 3))
     for_chunks(_lookup_range, N, cv, tab, pts, inside, yarn, kind, direction, density, albedo)
@@ -488,12 +502,7 @@ def _lookup_range(cv, tab, pts, inside, yarn, kind, direction, density, albedo, 
     for i in range(i0, i1):
         # skip typed as volpath passes it (not a literal): lookup_point compiles once for both
         r = lookup_point(cv, tab, pts[i, 0], pts[i, 1], pts[i, 2], np.int64(-1))
-        inside[i] = r.inside
-        yarn[i] = r.yarn
-        kind[i] = r.kind
-        direction[i, 0] = r.dir_x
-        direction[i, 1] = r.dir_y
-        direction[i, 2] = r.dir_z
+        store_point_answer(r, i, inside, yarn, kind, direction)
         density[i] = r.density
         albedo[i, 0] = r.albedo_r
         albedo[i, 1] = r.albedo_g

@@ -74,10 +74,15 @@ def cross_section_density(tp, R):
 
 
 @njit(cache=True)
+def fibre_counts(tp):
+    """(P, N): the plies of a yarn of type tp and the regular fibres of each ply."""
+    return int(tp[PLY_NUM]), int(tp[FIBER_NUM])
+
+
+@njit(cache=True)
 def sample_regular_fibers(tp, type_key):
     """(R, theta, theta0) arrays of shape (P, N): rejection sampling of Eq. 3, uniform angles."""
-    P = int(tp[PLY_NUM])
-    N = int(tp[FIBER_NUM])
+    P, N = fibre_counts(tp)
     R = np.empty((P, N))
     th = np.empty((P, N))
     th0 = np.empty((P, N))

@@ -131,12 +131,18 @@ def empty_accel(Y):
 
 
 @njit(cache=True)
+def fibre_row(tab, t, tp, k, j):
+    """Row of regular fibre j of ply k in the fibre tables (fib_R, fib_th, ...) of yarn type t, tp its parameters."""
+    return tab.type_fib_off[t] + k * int(tp[FIBER_NUM]) + j
+
+
+@njit(cache=True)
 def loop_fibre(tab, tp, c, k, e):
     """Loop e of ply k of yarn c (tp its type's parameters): (j its fibre's index in the ply, fi that
     fibre's row in the type's fibre tables, [z0, z1] the z range of its migration cycle lp_cyc[e],
     clipped to the yarn)."""
     j = tab.lp_fib[e]
-    fi = tab.type_fib_off[tab.yarn_type[c]] + k * int(tp[FIBER_NUM]) + j
+    fi = fibre_row(tab, tab.yarn_type[c], tp, k, j)
     w = tp[S_MIG] * 2.0 * math.pi / tp[ALPHA]  # migration phase per unit z
     cyc = tab.lp_cyc[e]
     th0 = tab.fib_th0[fi]

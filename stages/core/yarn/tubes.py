@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.curves.frames import frame_at_segment_s
-from stages.core.curves.spline import coeffs_s
+from stages.core.curves.spline import acceleration_s, coeffs_s, velocity_s
 
 # One yarn's polyline: points of curve c at offsets[c]:offsets[c + 1]; piece j (first point j) covers the
 # spline segment piece_seg[j] from piece_t0[j] to piece_t1[j].
@@ -154,12 +154,8 @@ def yarn_hit_frame(cv, pieces, j, px, py, pz):
         qx = ((ax * t + bx) * t + cx) * t + dx - px
         qy = ((ay * t + by) * t + cy) * t + dy - py
         qz = ((az * t + bz) * t + cz) * t + dz - pz
-        ux = (3.0 * ax * t + 2.0 * bx) * t + cx
-        uy = (3.0 * ay * t + 2.0 * by) * t + cy
-        uz = (3.0 * az * t + 2.0 * bz) * t + cz
-        vx = 6.0 * ax * t + 2.0 * bx
-        vy = 6.0 * ay * t + 2.0 * by
-        vz = 6.0 * az * t + 2.0 * bz
+        ux, uy, uz = velocity_s(ax, ay, az, bx, by, bz, cx, cy, cz, t)
+        vx, vy, vz = acceleration_s(ax, ay, az, bx, by, bz, t)
         g = qx * ux + qy * uy + qz * uz
         gp = ux * ux + uy * uy + uz * uz + qx * vx + qy * vy + qz * vz
         if gp <= 0.0:

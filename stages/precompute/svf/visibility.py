@@ -12,6 +12,7 @@ from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.capsule import INSIDE, capsule_intersect, point_segment_dist2
+from stages.core.geometry.dda import dda_axis, dda_next
 from stages.core.geometry.wide_walk import Ray, leaf_test, wide_any
 from stages.core.svf import pixel_direction
 from stages.precompute.periodic import ray_start, slab_length
@@ -93,18 +94,8 @@ def _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny, ray, L):
     ox, oy, oz, dx, dy, dz = ray
     ci = int(math.floor(ox / bw)) // nx
     cj = int(math.floor(oy / bh)) // ny
-    if dx > 0.0:
-        stx, tmx, tdx = 1, ((ci + 1) * nx * bw - ox) / dx, nx * bw / dx
-    elif dx < 0.0:
-        stx, tmx, tdx = -1, (ci * nx * bw - ox) / dx, -nx * bw / dx
-    else:
-        stx, tmx, tdx = 0, np.inf, np.inf
-    if dy > 0.0:
-        sty, tmy, tdy = 1, ((cj + 1) * ny * bh - oy) / dy, ny * bh / dy
-    elif dy < 0.0:
-        sty, tmy, tdy = -1, (cj * ny * bh - oy) / dy, -ny * bh / dy
-    else:
-        sty, tmy, tdy = 0, np.inf, np.inf
+    stx, tmx, tdx = dda_axis(ci * nx * bw, (ci + 1) * nx * bw, nx * bw, ox, dx)
+    sty, tmy, tdy = dda_axis(cj * ny * bh, (cj + 1) * ny * bh, ny * bh, oy, dy)
     s = 0.0
     while s < L:
         s1 = min(tmx, tmy, L)
@@ -115,12 +106,7 @@ def _periodic_any_hit(box, child, root, leaves, bw, bh, nx, ny, ray, L):
             if p >= 0:
                 return p, ci, cj
             s = s1
-        if tmx < tmy:
-            ci += stx
-            tmx += tdx
-        else:
-            cj += sty
-            tmy += tdy
+        ci, cj, tmx, tmy = dda_next(ci, cj, tmx, tmy, stx, sty, tdx, tdy)
         if tmx == np.inf and tmy == np.inf:
             break
     return -1, 0, 0
