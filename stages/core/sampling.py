@@ -7,10 +7,11 @@
 - ``roulette_survival(t0, t1, t2)``: Russian roulette's survival probability from a path's RGB
   throughput, its largest channel capped at ``RR_MAX_SURVIVAL`` so that every path can end; a path
   that survives divides its throughput by it (unbiased: E[survive / q] = 1).
-- ``continue_path(mat, ctx, t, n, wi, u, roulette, u_rr, tp, wo)``: a fibre path's scattering step at a
-  vertex of material ``mat`` (``stages.core.shading.material``): the next direction sampled into ``wo``
-  from the uniforms ``u``, the throughput ``tp`` weighted by f cos / pdf and, when ``roulette``, Russian
-  roulette decided by ``u_rr``; returns a ``PathStep`` (alive, pdf, the new throughput).
+- ``continue_path(mat, ctx, t, n, wi, roulette, seed, key, base, tp, wo)``: a fibre path's scattering step at
+  a vertex of material ``mat`` (``stages.core.shading.material``): the next direction sampled into ``wo``
+  from the uniforms of dimensions ``base`` .. ``base + 2``, the throughput ``tp`` weighted by f cos / pdf and,
+  when ``roulette``, Russian roulette decided by the uniform of dimension ``base + 3``; returns a
+  ``PathStep`` (alive, pdf, the new throughput).
 - ``NO_HIT``: the distance a query answers when it found nothing (no surface, no fibre within the
   window); finite, so that comparisons and products with zero stay ordinary numbers.
 
@@ -22,6 +23,7 @@ from collections import namedtuple
 
 from numba import njit
 
+from stages.core.rng import uniform
 from stages.core.shading.material import material_sample
 
 # A path whose throughput stays near 1 (white fibres in dense cloth meet hundreds of fibres) survives each
@@ -30,8 +32,9 @@ from stages.core.shading.material import material_sample
 RR_MAX_SURVIVAL = 0.999
 NO_HIT = 1e300
 
-PathStep = namedtuple("PathStep", ["alive", "pdf", "tp0", "tp1", "tp2"])
-PathStep.__doc__ = """continue_path's answer: whether the path goes on, the sampled direction's pdf, its throughput."""
+PathStep = namedtuple("PathStep", ["alive", "pdf", "tp"])
+PathStep.__doc__ = """continue_path's answer: whether the path goes on, the sampled direction's pdf, its throughput
+(r, g, b)."""
 
 
 @njit(cache=True, inline="always")
@@ -48,25 +51,27 @@ def roulette_survival(t0, t1, t2):
 
 
 @njit(cache=True, inline="always")
-def continue_path(mat, ctx, t, n, wi, u, roulette, u_rr, tp, wo):
+def continue_path(mat, ctx, t, n, wi, roulette, seed, key, base, tp, wo):
     """The scattering step of a fibre path at a vertex (material row ``mat``, its prepared context ``ctx``,
-    tangent ``t``, normal ``n``, towards-the-viewer ``wi``): a direction sampled into ``wo`` from the three
-    uniforms ``u``, the throughput ``tp`` (r, g, b) times f cos / pdf, then, if ``roulette``, Russian
-    roulette with ``u_rr``. Dead (``alive`` False) where the sample has no density or the roulette ends it."""
-    s0, s1, s2, pf = material_sample(mat, ctx, t, n, wi, u[0], u[1], u[2], wo)
+    tangent ``t``, normal ``n``, towards-the-viewer ``wi``): a direction sampled into ``wo`` from the
+    uniforms (seed, key, base .. base + 2), the throughput ``tp`` (r, g, b) times f cos / pdf, then, if
+    ``roulette``, Russian roulette with the uniform (seed, key, base + 3). Dead (``alive`` False) where the
+    sample has no density or the roulette ends it."""
+    s0, s1, s2, pf = material_sample(mat, ctx, t, n, wi, uniform(seed, key, base), uniform(seed, key, base + 1),
+                                     uniform(seed, key, base + 2), wo)
     tp0 = tp[0]
     tp1 = tp[1]
     tp2 = tp[2]
     if pf <= 0.0:
-        return PathStep(False, pf, tp0, tp1, tp2)
+        return PathStep(False, pf, (tp0, tp1, tp2))
     tp0 *= s0
     tp1 *= s1
     tp2 *= s2
     if roulette:
         q = roulette_survival(tp0, tp1, tp2)
-        if u_rr >= q:
-            return PathStep(False, pf, tp0, tp1, tp2)
+        if uniform(seed, key, base + 3) >= q:
+            return PathStep(False, pf, (tp0, tp1, tp2))
         tp0 /= q
         tp1 /= q
         tp2 /= q
-    return PathStep(True, pf, tp0, tp1, tp2)
+    return PathStep(True, pf, (tp0, tp1, tp2))

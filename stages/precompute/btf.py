@@ -51,10 +51,9 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-from numba.extending import overload
 
 from stages.core.btf import cell_direction
-from stages.core.dispatch import is_tuple_class, runtime_value
+from stages.core.dispatch import runtime_value
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
@@ -65,10 +64,9 @@ from stages.precompute.periodic import (
     PathScratch,
     PeriodicPaths,
     light_reaches,
-    light_vertex,
-    path_escaped,
     periodic_hit,
     periodic_path,
+    register_tally,
 )
 
 FIRST_DIMS = 2           # the point's jitter (then, for cell averages, the view's and every light's cell jitter)
@@ -104,17 +102,7 @@ def _btf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     return rays
 
 
-@overload(light_vertex)
-def _light_vertex_btf(tally, paths, v, mat, nf, tp, seed, key, base):
-    if is_tuple_class(tally, BtfLights):
-        return lambda tally, paths, v, mat, nf, tp, seed, key, base: _btf_light_vertex(
-            tally, paths, v, mat, nf, tp, seed, key, base)
-
-
-@overload(path_escaped)
-def _path_escaped_btf(tally, wo, tp, pdf):
-    if is_tuple_class(tally, BtfLights):   # the lights are counted at the vertices: an escape adds nothing
-        return lambda tally, wo, tp, pdf: None
+register_tally(BtfLights, _btf_light_vertex)   # the lights are counted at the vertices: an escape adds nothing
 
 
 @njit(cache=True)

@@ -104,9 +104,8 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-from numba.extending import overload
 
-from stages.core.dispatch import is_tuple_class, runtime_value
+from stages.core.dispatch import runtime_value
 from stages.core.rng import uniform
 from stages.core.sampling import power_heuristic
 from stages.core.sh import sh_eval
@@ -117,12 +116,11 @@ from stages.precompute.periodic import (
     PathScratch,
     PeriodicPaths,
     light_reaches,
-    light_vertex,
-    path_escaped,
     periodic_hit,
     periodic_path,
     periodic_scene,
     periodic_vertex,
+    register_tally,
 )
 
 MAX_ORDER = 8
@@ -304,17 +302,7 @@ def _iirtf_escaped(tally, wo, tp, pdf):
                         tp0, tp1, tp2)
 
 
-@overload(light_vertex)
-def _light_vertex_iirtf(tally, paths, v, mat, nf, tp, seed, key, base):
-    if is_tuple_class(tally, IirtfLight):
-        return lambda tally, paths, v, mat, nf, tp, seed, key, base: _iirtf_light_vertex(
-            tally, paths, v, mat, nf, tp, seed, key, base)
-
-
-@overload(path_escaped)
-def _path_escaped_iirtf(tally, wo, tp, pdf):
-    if is_tuple_class(tally, IirtfLight):
-        return lambda tally, wo, tp, pdf: _iirtf_escaped(tally, wo, tp, pdf)
+register_tally(IirtfLight, _iirtf_light_vertex, _iirtf_escaped)
 
 
 @njit(cache=True)

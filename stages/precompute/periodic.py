@@ -51,18 +51,18 @@ acquisition's camera paths are one path tracer -- vertex set-up, next-event esti
 sampling with Russian roulette (``stages.core.sampling.continue_path``), the next ray -- that differ
 only in which light directions a vertex is lit from and what an escape adds. Those two are a *tally*'s,
 a namedtuple each precompute defines (``IirtfLight``, ``BtfLights``) and answers ``light_vertex`` and
-``path_escaped`` for (``numba.extending.overload``, as ``stages.core.dispatch`` describes), so the loop is
-written once and compiled once per tally.
+``path_escaped`` for (``register_tally``: ``numba.extending.overload``, as ``stages.core.dispatch``
+describes), so the loop is written once and compiled once per tally.
 """
 import math
 from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
-from stages.core.dispatch import runtime_value
+from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.capsule import INSIDE, capsule_intersect, capsule_normal, point_segment_dist2
-from stages.core.rng import uniform
 from stages.core.sampling import continue_path
 from stages.core.shading.material import material_is_curve, material_prepare
 from stages.core.shell.traversal import flat_segment_hit, flat_segment_occluded
@@ -242,7 +242,7 @@ def light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     the tally takes, the vertex's f(wi, wl) times the throughput ``tp`` (r, g, b) where the shadow ray
     from ``v.so`` (skipping fibre ``nf``) leaves the fabric, added to what the tally records; returns the
     number of shadow rays cast. Random dimensions from ``base + DIRECTION_DIMS`` are the tally's. numba-only:
-    each tally class (``stages.precompute.iirtf``, ``stages.precompute.btf``) overloads it."""
+    each tally class (``stages.precompute.iirtf``, ``stages.precompute.btf``) overloads it (``register_tally``)."""
     raise TypeError("light_vertex is only callable from numba-compiled code")
 
 
@@ -251,6 +251,23 @@ def path_escaped(tally, wo, tp, pdf):
     ``pdf``) with throughput ``tp``: what the tally adds for the light it meets there. numba-only
     (overloaded per tally class)."""
     raise TypeError("path_escaped is only callable from numba-compiled code")
+
+
+def register_tally(cls, vertex, escaped=None):
+    """Overloads ``light_vertex`` and ``path_escaped`` for tallies of namedtuple class ``cls`` with the kernels
+    ``vertex`` and ``escaped`` (same arguments); ``escaped`` None: an escape adds nothing."""
+    @overload(light_vertex)
+    def _light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
+        if is_tuple_class(tally, cls):
+            return lambda tally, paths, v, mat, nf, tp, seed, key, base: vertex(
+                tally, paths, v, mat, nf, tp, seed, key, base)
+
+    @overload(path_escaped)
+    def _path_escaped(tally, wo, tp, pdf):
+        if is_tuple_class(tally, cls):
+            if escaped is None:
+                return lambda tally, wo, tp, pdf: None
+            return lambda tally, wo, tp, pdf: escaped(tally, wo, tp, pdf)
 
 
 @njit(cache=True)
@@ -288,9 +305,7 @@ def periodic_path(paths, tally, v, h, seed, key, dim0, dims_per_vertex):
     wi = v.wi
     wo = v.wo
     ctx = v.ctx
-    tp0 = 1.0
-    tp1 = 1.0
-    tp2 = 1.0
+    tp = (1.0, 1.0, 1.0)   # the path's throughput (r, g, b)
     rays = 0
     depth = 1
     while True:
@@ -300,23 +315,19 @@ def periodic_path(paths, tally, v, h, seed, key, dim0, dims_per_vertex):
         material_prepare(mat, t_tan, n, wi, ctx)
         base = dim0 + dims_per_vertex * (depth - 1)
         # emitter sampling
-        rays += light_vertex(tally, paths, v, mat, nf, (tp0, tp1, tp2), seed, key, base)
+        rays += light_vertex(tally, paths, v, mat, nf, tp, seed, key, base)
         if depth >= paths.max_depth:
             break
         # material sampling and Russian roulette
-        u_dir = (uniform(seed, key, base), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
-        step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth >= paths.rr_depth, uniform(seed, key, base + 3),
-                             (tp0, tp1, tp2), wo)
+        step = continue_path(mat, ctx, t_tan, n, wi, depth >= paths.rr_depth, seed, key, base, tp, wo)
         if not step.alive:
             break
-        tp0 = step.tp0
-        tp1 = step.tp1
-        tp2 = step.tp2
+        tp = step.tp
         # the next ray
         rays += 1
         h = periodic_hit(sc, paths.z_lo, paths.z_hi, so[0], so[1], so[2], wo[0], wo[1], wo[2], nf, paths.max_dist)
         if math.isinf(h.t):
-            path_escaped(tally, wo, (tp0, tp1, tp2), step.pdf)
+            path_escaped(tally, wo, tp, step.pdf)
             break
         wi[0] = -wo[0]
         wi[1] = -wo[1]

@@ -32,8 +32,10 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
 from stages.core.curves.frames import curve_frame_at
+from stages.core.dispatch import is_tuple_class
 from stages.core.sampling import NO_HIT
 from stages.core.yarn.frame_samples import eq7, frame_at
 from stages.core.yarn.model import PLY_RADIUS, YARN_ALPHA, hair_point, hair_speed_bound, regular_xy
@@ -119,6 +121,20 @@ def _exact_map(cv, c, x, y, z):
 
 
 @njit(cache=True)
+def _distance(F, p):
+    """|F - p| of two points (arrays)."""
+    r = F - p
+    return math.sqrt(np.dot(r, r))
+
+
+@njit(cache=True)
+def _gn_terms(Fp, Fm, F0, p, step):
+    """((F0 - p) . D, D . D) with D = (Fp - Fm) / step: a Gauss-Newton step's numerator and denominator."""
+    D = (Fp - Fm) / step
+    return np.dot(F0 - p, D), np.dot(D, D)
+
+
+@njit(cache=True)
 def _reg_model(lf, tp, yseed, fib, z):
     x, y, kind = fibre_xy(tp, yseed, fib, z)
     return _model_map(lf, x, y, z)
@@ -130,32 +146,14 @@ def regular_closest(lf, tp, yseed, fib, p, z0):
     over [za, zb] from z0."""
     za = lf.za
     zb = lf.zb
-    h = 1e-3 * (zb - za)
-    z = min(max(z0, za), zb)
-    for _it in range(12):
-        zp = min(z + h, zb)
-        zn = max(z - h, za)
-        Fp = _reg_model(lf, tp, yseed, fib, zp)
-        Fm = _reg_model(lf, tp, yseed, fib, zn)
-        F0 = _reg_model(lf, tp, yseed, fib, z)
-        D = (Fp - Fm) / (zp - zn)
-        znew = min(max(z - np.dot(F0 - p, D) / np.dot(D, D), za), zb)
-        if abs(znew - z) < 1e-13 * (1.0 + zb):
-            z = znew
-            break
-        z = znew
-    F = _reg_model(lf, tp, yseed, fib, z)
-    r = F - p
-    return math.sqrt(np.dot(r, r)), z
+    return _model_closest(lf, tp, yseed, fib, p, za, zb, z0, 1e-3 * (zb - za), 1e-13 * (1.0 + zb), False)
 
 
 @njit(cache=True)
 def regular_exact(cv, c, tp, yseed, fib, p, z):
     """Exact (distance, kind) of regular fibre ``fib`` of yarn c at z."""
     x, y, kind = fibre_xy(tp, yseed, fib, z)
-    F = _exact_map(cv, c, x, y, z)
-    r = F - p
-    return math.sqrt(np.dot(r, r)), kind
+    return _distance(_exact_map(cv, c, x, y, z), p), kind
 
 
 @njit(cache=True)
@@ -183,6 +181,45 @@ def _hair_model(lf, tp, k, hs, t):
     return _model_map(lf, x, y, z)
 
 
+def _model_point(lf, tp, key, curve, t):
+    """The local model's point (array) at parameter t of ``curve``: a ``RegularFibre`` (key: its yarn's random key)
+    or a ``HairShape`` (key: its ply); numba-only (``stages.core.dispatch``)."""
+    raise TypeError("_model_point is only callable from numba-compiled code")
+
+
+@overload(_model_point)
+def _model_point_overload(lf, tp, key, curve, t):
+    if is_tuple_class(curve, RegularFibre):
+        return lambda lf, tp, key, curve, t: _reg_model(lf, tp, key, curve, t)
+    if is_tuple_class(curve, HairShape):
+        return lambda lf, tp, key, curve, t: _hair_model(lf, tp, key, curve, t)
+
+
+@njit(cache=True)
+def _model_closest(lf, tp, key, curve, p, lo, hi, t0, h, tol, guarded):
+    """(model distance, t*) of ``curve`` (``_model_point``) to p: Gauss-Newton with central differences of
+    step h on the local model ``lf`` over [lo, hi] from t0, until a step is below tol; ``guarded``: also stop
+    where the differences or the step degenerate (a hair's window may shrink to a point)."""
+    t = min(max(t0, lo), hi)
+    for _it in range(12):
+        tp_ = min(t + h, hi)
+        tm = max(t - h, lo)
+        if guarded and tp_ <= tm:
+            break
+        Fp = _model_point(lf, tp, key, curve, tp_)
+        Fm = _model_point(lf, tp, key, curve, tm)
+        F0 = _model_point(lf, tp, key, curve, t)
+        g, dd = _gn_terms(Fp, Fm, F0, p, tp_ - tm)
+        if guarded and dd <= 0.0:
+            break
+        tn = min(max(t - g / dd, lo), hi)
+        if abs(tn - t) < tol:
+            t = tn
+            break
+        t = tn
+    return _distance(_model_point(lf, tp, key, curve, t), p), t
+
+
 @njit(cache=True)
 def hair_closest(lf, tp, k, hs, p, t0):
     """(model distance, t*) of hair ``hs`` of ply k to p: Gauss-Newton in t over the part of the
@@ -190,36 +227,28 @@ def hair_closest(lf, tp, k, hs, p, t0):
     ta, tb = hair_window(hs, lf.za, lf.zb)
     if ta > tb:
         return NO_HIT, 0.0
-    t = min(max(t0, ta), tb)
-    h = max(1e-3 * (tb - ta), 1e-9)
-    for _it in range(12):
-        tp_ = min(t + h, tb)
-        tm = max(t - h, ta)
-        if tp_ <= tm:
-            break
-        Fp = _hair_model(lf, tp, k, hs, tp_)
-        Fm = _hair_model(lf, tp, k, hs, tm)
-        F0 = _hair_model(lf, tp, k, hs, t)
-        D = (Fp - Fm) / (tp_ - tm)
-        dd = np.dot(D, D)
-        if dd <= 0.0:
-            break
-        tn = min(max(t - np.dot(F0 - p, D) / dd, ta), tb)
-        if abs(tn - t) < 1e-13:
-            t = tn
-            break
-        t = tn
-    F = _hair_model(lf, tp, k, hs, t)
-    r = F - p
-    return math.sqrt(np.dot(r, r)), t
+    return _model_closest(lf, tp, k, hs, p, ta, tb, t0, max(1e-3 * (tb - ta), 1e-9), 1e-13, True)
 
 
 @njit(cache=True)
 def hair_exact(cv, c, tp, k, hs, p, t):
     """Exact distance of hair ``hs`` of ply k of yarn c to p at t."""
     x, y, z = _hair_xyz(tp, k, hs, t)
-    r = _exact_map(cv, c, x, y, z) - p
-    return math.sqrt(np.dot(r, r))
+    return _distance(_exact_map(cv, c, x, y, z), p)
+
+
+@njit(cache=True)
+def hair_near_z(hs, z, limit):
+    """(ta, tb): the part of hair ``hs`` (z = z1 + t ze, t in [0, 1]) whose z lies within ``limit`` of z, empty
+    (ta > tb) where none does; all of it, (0, 1), for a hair of constant z (ze = 0)."""
+    ta = 0.0
+    tb = 1.0
+    if hs.ze != 0.0:
+        t1 = (z - limit - hs.z1) / hs.ze
+        t2 = (z + limit - hs.z1) / hs.ze
+        ta = max(ta, min(t1, t2))
+        tb = min(tb, max(t1, t2))
+    return ta, tb
 
 
 @njit(cache=True)
@@ -229,18 +258,8 @@ def hair_quick_reject(tp, hs, rho_k, s, limit):
     limit of s, and its radius R(t) within limit (+ the ply centre's drift over limit in z) of rho_k."""
     r0 = hs.r0
     r1 = hs.r1
-    z1 = hs.z1
-    ze = hs.ze
-    ta = 0.0
-    tb = 1.0
-    if ze != 0.0:
-        t1 = (s - limit - z1) / ze
-        t2 = (s + limit - z1) / ze
-        ta = max(ta, min(t1, t2))
-        tb = min(tb, max(t1, t2))
-        if ta > tb:
-            return True
-    elif abs(z1 - s) > limit:
+    ta, tb = hair_near_z(hs, s, limit)
+    if ta > tb or (hs.ze == 0.0 and abs(hs.z1 - s) > limit):
         return True
     Ra = r0 + (r1 - r0) * ta
     Rb = r0 + (r1 - r0) * tb
@@ -253,17 +272,9 @@ def hair_prefilter(tp, k, hs, x, y, z, limit):
     """Yarn-space distance from (x, y, z) to the hair's polyline sampled over the part of the hair
     whose z lies within ``limit`` of z (the only part that can come within limit), less the chord
     slack; returns (lower bound of that distance, best t)."""
-    z1 = hs.z1
-    ze = hs.ze
-    ta = 0.0
-    tb = 1.0
-    if ze != 0.0:
-        t1 = (z - limit - z1) / ze
-        t2 = (z + limit - z1) / ze
-        ta = max(ta, min(t1, t2))
-        tb = min(tb, max(t1, t2))
-        if ta > tb:
-            return NO_HIT, 0.0
+    ta, tb = hair_near_z(hs, z, limit)
+    if ta > tb:
+        return NO_HIT, 0.0
     n = min(HAIR_SAMPLES, max(1, int(math.ceil((tb - ta) * HAIR_SAMPLES))))
     best = NO_HIT
     bt = ta
@@ -278,11 +289,34 @@ def hair_prefilter(tp, k, hs, x, y, z, limit):
             best = d2
             bt = t
     # speed bound of the hair in yarn space -> arc length per sample interval
-    return math.sqrt(best) - 0.5 * hair_speed_bound(tp, hs.r0, hs.r1, hs.pe, ze) * (tb - ta) / n, bt
+    return math.sqrt(best) - 0.5 * hair_speed_bound(tp, hs.r0, hs.r1, hs.pe, hs.ze) * (tb - ta) / n, bt
 
 
 # ------------------------------------------------------------------------------------------------
 # distances under the sampled frames (scalar, allocation-free)
+@njit(cache=True, inline="always")
+def _gn_terms_s(fx, fy, fz, ax, ay, az, inv, px, py, pz):
+    """(D, D . D, (f - p) . D) with D = (a - f) inv: the forward-difference tangent at f (the point a one step
+    on, inv = 1 / step) and a Gauss-Newton step's denominator and numerator towards p, scalars."""
+    Dx = (ax - fx) * inv
+    Dy = (ay - fy) * inv
+    Dz = (az - fz) * inv
+    return Dx, Dy, Dz, Dx * Dx + Dy * Dy + Dz * Dz, (fx - px) * Dx + (fy - py) * Dy + (fz - pz) * Dz
+
+
+@njit(cache=True, inline="always")
+def _closest_s(fx, fy, fz, px, py, pz, Dx, Dy, Dz):
+    """(|f - p|, D / |D|): the distance of p to the closest point f and the unit tangent there (D where it
+    is 0)."""
+    rx, ry, rz = fx - px, fy - py, fz - pz
+    n = math.sqrt(Dx * Dx + Dy * Dy + Dz * Dz)
+    if n > 0.0:
+        Dx /= n
+        Dy /= n
+        Dz /= n
+    return math.sqrt(rx * rx + ry * ry + rz * rz), Dx, Dy, Dz
+
+
 @njit(cache=True, inline="always")
 def _reg_at(vis, fib, i, z):
     """(step, F(z), kind) of regular fibre ``fib`` under the visit's sampled frames."""
@@ -313,18 +347,13 @@ def regular_closest_s(vis, fib, z0, tol):
         i, fx, fy, fz, kind = _reg_at(vis, fib, i, z)
         zh = z + h if z + h <= zb else z - h
         i, ax, ay, az, kd = _reg_at(vis, fib, i, zh)
-        inv = 1.0 / (zh - z)
-        Dx = (ax - fx) * inv
-        Dy = (ay - fy) * inv
-        Dz = (az - fz) * inv
-        dd = Dx * Dx + Dy * Dy + Dz * Dz
-        znew = min(max(z - ((fx - px) * Dx + (fy - py) * Dy + (fz - pz) * Dz) / dd, za), zb)
+        Dx, Dy, Dz, dd, g = _gn_terms_s(fx, fy, fz, ax, ay, az, 1.0 / (zh - z), px, py, pz)
+        znew = min(max(z - g / dd, za), zb)
         if abs(znew - z) * math.sqrt(dd) < tol:
             break
         z = znew
-    rx, ry, rz = fx - px, fy - py, fz - pz
-    n = math.sqrt(Dx * Dx + Dy * Dy + Dz * Dz)
-    return math.sqrt(rx * rx + ry * ry + rz * rz), z, Dx / n, Dy / n, Dz / n, kind
+    d, Dx, Dy, Dz = _closest_s(fx, fy, fz, px, py, pz, Dx, Dy, Dz)
+    return d, z, Dx, Dy, Dz, kind
 
 
 @njit(cache=True, inline="always")
@@ -356,24 +385,15 @@ def hair_closest_s(vis, k, hs, t0, tol):
         i, fx, fy, fz = _hair_at(vis, k, hs, i, t)
         th_ = t + h if t + h <= 1.0 else t - h
         i, ax, ay, az = _hair_at(vis, k, hs, i, th_)
-        inv = 1.0 / (th_ - t)
-        Dx = (ax - fx) * inv
-        Dy = (ay - fy) * inv
-        Dz = (az - fz) * inv
-        dd = Dx * Dx + Dy * Dy + Dz * Dz
+        Dx, Dy, Dz, dd, g = _gn_terms_s(fx, fy, fz, ax, ay, az, 1.0 / (th_ - t), px, py, pz)
         if dd <= 0.0:
             break
-        tn = min(max(t - ((fx - px) * Dx + (fy - py) * Dy + (fz - pz) * Dz) / dd, ta), tb)
+        tn = min(max(t - g / dd, ta), tb)
         if abs(tn - t) * math.sqrt(dd) < tol:
             break
         t = tn
-    rx, ry, rz = fx - px, fy - py, fz - pz
-    n = math.sqrt(Dx * Dx + Dy * Dy + Dz * Dz)
-    if n > 0.0:
-        Dx /= n
-        Dy /= n
-        Dz /= n
-    return math.sqrt(rx * rx + ry * ry + rz * rz), t, Dx, Dy, Dz
+    d, Dx, Dy, Dz = _closest_s(fx, fy, fz, px, py, pz, Dx, Dy, Dz)
+    return d, t, Dx, Dy, Dz
 
 
 # ------------------------------------------------------------------------------------------------

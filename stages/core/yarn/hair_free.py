@@ -21,6 +21,7 @@ from numba import njit
 
 from stages.core.dispatch import runtime_value
 from stages.core.rng import hash_u64, uniform
+from stages.core.shading.bcsdf import std_normal_quantile
 from stages.core.yarn.model import CLAMP, STREAM_TREE
 
 MAX_DEPTH = 24
@@ -29,39 +30,6 @@ MAX_DEPTH = 24
 @njit(cache=True)
 def norm_cdf(x):
     return 0.5 * math.erfc(-x / math.sqrt(2.0))
-
-
-@njit(cache=True)
-def norm_ppf(p):
-    """Inverse standard normal CDF (Acklam's rational approximation + one Halley step)."""
-    if p <= 0.0:
-        return -40.0
-    if p >= 1.0:
-        return 40.0
-    a = (-3.969683028665376e+01, 2.209460984245205e+02, -2.759285104469687e+02, 1.383577518672690e+02,
-         -3.066479806614716e+01, 2.506628277459239e+00)
-    b = (-5.447609879822406e+01, 1.615858368580409e+02, -1.556989798598866e+02, 6.680131188771972e+01,
-         -1.328068155288572e+01)
-    c = (-7.784894002430293e-03, -3.223964580411365e-01, -2.400758277161838e+00, -2.549732539343734e+00,
-         4.374664141464968e+00, 2.938163982698783e+00)
-    d = (7.784695709041462e-03, 3.224671290700398e-01, 2.445134137142996e+00, 3.754408661907416e+00)
-    plow = 0.02425
-    if p < plow:
-        q = math.sqrt(-2 * math.log(p))
-        x = (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
-            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1)
-    elif p > 1 - plow:
-        q = math.sqrt(-2 * math.log(1 - p))
-        x = -(((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5]) / \
-            ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1)
-    else:
-        q = p - 0.5
-        r = q * q
-        x = (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q / \
-            (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1)
-    e = norm_cdf(x) - p
-    u = e * math.sqrt(2 * math.pi) * math.exp(x * x / 2)
-    return x - u / (1 + x * u / 2)
 
 
 @njit(cache=True)
@@ -78,7 +46,7 @@ def _draw_leaf(mu, sig, a, b, c, d, u1, u2):
         return z1, mu
     fc = _ze_cdf(mu, sig, c)
     fd = _ze_cdf(mu, sig, d)
-    ze = mu + sig * norm_ppf(fc + (fd - fc) * u2)
+    ze = mu + sig * std_normal_quantile(fc + (fd - fc) * u2)
     return z1, min(max(ze, c), d)
 
 

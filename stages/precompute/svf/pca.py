@@ -9,8 +9,8 @@ import numpy as np
 from numba import njit, prange
 
 from stages.core.rng import normal
-from stages.precompute.svf.pixels import packed_bytes, unpack_into
-from stages.precompute.svf.ssdf import ssdf_images, ssdf_of_image, ssdf_tables
+from stages.precompute.svf.pixels import packed_bytes
+from stages.precompute.svf.ssdf import segment_ssdf, ssdf_images, ssdf_tables
 
 SsdfPca = namedtuple("SsdfPca", ["mean", "basis", "eigenvalues", "variance", "segments"])
 SsdfPca.__doc__ = """ssdf_pca's result: mean (D,) float32, basis (n, D) float32 (orthonormal rows),
@@ -245,11 +245,7 @@ def _project_kernel(packed, R, C, mean, basis, basis_t, coeffs, parts):
     D = R * C
     n = basis.shape[0]
     for s in prange(packed.shape[0]):
-        img = np.empty(D, np.uint8)
-        near = np.empty((2, R, C), np.int32)
-        buf = np.empty(D)
-        unpack_into(packed, s, img)
-        ssdf_of_image(img, R, C, tabs, near, buf)
+        img, buf = segment_ssdf(packed, s, R, C, tabs)
         x = np.empty(D)
         for d in range(D):
             x[d] = np.float32(buf[d])          # the SSDF as the PCA saw it

@@ -123,16 +123,24 @@ def ssdf_of_image(img, R, C, tabs, near, out):
                 out[i] = m if v == 1 else -m
 
 
+@njit(cache=True)
+def segment_ssdf(packed, s, R, C, tabs):
+    """(binary image, SSDF) of packed image s (R x C pixels, flattened; ``tabs`` from ``ssdf_tables``)."""
+    D = R * C
+    img = np.empty(D, np.uint8)
+    near = np.empty((2, R, C), np.int32)
+    buf = np.empty(D)
+    unpack_into(packed, s, img)
+    ssdf_of_image(img, R, C, tabs, near, buf)
+    return img, buf
+
+
 @njit(cache=True, parallel=True)
 def _ssdf_kernel(packed, R, C, out):
     tabs = ssdf_tables(R, C)
     D = R * C
     for s in prange(packed.shape[0]):
-        img = np.empty(D, np.uint8)
-        near = np.empty((2, R, C), np.int32)
-        buf = np.empty(D)
-        unpack_into(packed, s, img)
-        ssdf_of_image(img, R, C, tabs, near, buf)
+        _img, buf = segment_ssdf(packed, s, R, C, tabs)
         for i in range(D):
             out[s, i] = buf[i]
 

@@ -245,6 +245,27 @@ def texel_f1_rgb(texels, n_lobes, idx, lx, ly, lz, vx, vy, vz):
     return lz * s0, lz * s1, lz * s2     # Eq. 2: l_z (rho + sum of lobes)
 
 
+@njit(cache=True, inline="always")
+def add_f1(s, texels, n_lobes, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2):
+    """The sums s = (a r, a g, a b, b r, b g, b b) plus (e0, e1, e2) f_1(l, v) of texel row ia and, when ``two``,
+    of row ib (``texel_f1_rgb``).
+    15 parameters: the sums, the texels and their lobe count, the two rows, l and v as scalars, the weights."""
+    f0, f1, f2 = texel_f1_rgb(texels, n_lobes, ia, lx, ly, lz, vx, vy, vz)
+    sa0 = s[0] + e0 * f0
+    sa1 = s[1] + e1 * f1
+    sa2 = s[2] + e2 * f2
+    if not two:
+        return sa0, sa1, sa2, s[3], s[4], s[5]
+    f0, f1, f2 = texel_f1_rgb(texels, n_lobes, ib, lx, ly, lz, vx, vy, vz)
+    return sa0, sa1, sa2, s[3] + e0 * f0, s[4] + e1 * f1, s[5] + e2 * f2
+
+
+@njit(cache=True, inline="always")
+def add6(s, q):
+    """The element-wise sum of two 6-tuples of sums (a r, a g, a b, b r, b g, b b)."""
+    return s[0] + q[0], s[1] + q[1], s[2] + q[2], s[3] + q[3], s[4] + q[4], s[5] + q[5]
+
+
 @njit(cache=True)
 def layer_alpha(it, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, l0, l1, fl):
     """Coverage of the surface a shadow ray (direction d) hits, for the line along d, at mip (l0, l1, fl).
@@ -291,12 +312,7 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
     ld = it.light_dirs
     dw = 2.0 * math.pi / ld.shape[0]   # each grid direction's solid angle
     w = np.empty(3)
-    sa0 = 0.0
-    sa1 = 0.0
-    sa2 = 0.0
-    sb0 = 0.0
-    sb1 = 0.0
-    sb2 = 0.0
+    s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     for j in range(ld.shape[0]):
         lx = ld[j, 0]
         ly = ld[j, 1]
@@ -318,16 +334,8 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
         r0 *= dw
         r1 *= dw
         r2 *= dw
-        f0, f1, f2 = texel_f1_rgb(texels, K, ia, lx, ly, lz, vx, vy, vz)
-        sa0 += r0 * f0
-        sa1 += r1 * f1
-        sa2 += r2 * f2
-        if two:
-            f0, f1, f2 = texel_f1_rgb(texels, K, ib, lx, ly, lz, vx, vy, vz)
-            sb0 += r0 * f0
-            sb1 += r1 * f1
-            sb2 += r2 * f2
-    return sa0, sa1, sa2, sb0, sb1, sb2
+        s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, r0, r1, r2)
+    return s
 
 
 @njit(cache=True)
@@ -341,12 +349,7 @@ def sg_f1(it, f, k, ia, ib, two, vx, vy, vz):
     texels = it.texels
     K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
     n = SG_U * SG_V
-    sa0 = 0.0
-    sa1 = 0.0
-    sa2 = 0.0
-    sb0 = 0.0
-    sb1 = 0.0
-    sb2 = 0.0
+    s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     for i in range(SG_U):
         for j in range(SG_V):
             w, r, g, b, pdf, _delta = light_sample(lights, k, it.lights.env, it.lights.marginal,
@@ -359,16 +362,8 @@ def sg_f1(it, f, k, ia, ib, two, vx, vy, vz):
             e0 = r / (pdf * n)
             e1 = g / (pdf * n)
             e2 = b / (pdf * n)
-            f0, f1, f2 = texel_f1_rgb(texels, K, ia, lx, ly, lz, vx, vy, vz)
-            sa0 += e0 * f0
-            sa1 += e1 * f1
-            sa2 += e2 * f2
-            if two:
-                f0, f1, f2 = texel_f1_rgb(texels, K, ib, lx, ly, lz, vx, vy, vz)
-                sb0 += e0 * f0
-                sb1 += e1 * f1
-                sb2 += e2 * f2
-    return sa0, sa1, sa2, sb0, sb1, sb2
+            s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2)
+    return s
 
 
 @njit(cache=True, inline="always")
@@ -401,23 +396,12 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
         tb2 = ab * view_lookup(table, ib, i0, i1, i2, i3, w0, w1, w2, w3, 2)
     cover = aa + ab
     # sums over the lights of E f_1 (a: the texel of level l0, b: of level l1)
-    sa0 = 0.0
-    sa1 = 0.0
-    sa2 = 0.0
-    sb0 = 0.0
-    sb1 = 0.0
-    sb2 = 0.0
+    s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     rays = 0
     if cover > 0.0:
         for k in range(lights.shape[0]):
             if lights[k, 0] == SG:
-                q0, q1, q2, q3, q4, q5 = sg_f1(it, f, k, ia, ib, two, vx, vy, vz)
-                sa0 += q0
-                sa1 += q1
-                sa2 += q2
-                sb0 += q3
-                sb1 += q4
-                sb2 += q5
+                s = add6(s, sg_f1(it, f, k, ia, ib, two, vx, vy, vz))
                 continue
             if lights[k, 0] != DIRECTIONAL:
                 continue
@@ -436,24 +420,10 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
             e0 = lights[k, 1] * vis
             e1 = lights[k, 2] * vis
             e2 = lights[k, 3] * vis
-            f0, f1, f2 = texel_f1_rgb(texels, K, ia, lx, ly, lz, vx, vy, vz)
-            sa0 += e0 * f0
-            sa1 += e1 * f1
-            sa2 += e2 * f2
-            if two:
-                f0, f1, f2 = texel_f1_rgb(texels, K, ib, lx, ly, lz, vx, vy, vz)
-                sb0 += e0 * f0
-                sb1 += e1 * f1
-                sb2 += e2 * f2
+            s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2)
         if it.quad_lights > 0:
-            q0, q1, q2, q3, q4, q5 = quadrature_f1(it, f, ia, ib, two, vx, vy, vz)
-            sa0 += q0
-            sa1 += q1
-            sa2 += q2
-            sb0 += q3
-            sb1 += q4
-            sb2 += q5
-    return ta0 * sa0 + tb0 * sb0, ta1 * sa1 + tb1 * sb1, ta2 * sa2 + tb2 * sb2, min(max(cover, 0.0), 1.0), rays
+            s = add6(s, quadrature_f1(it, f, ia, ib, two, vx, vy, vz))
+    return ta0 * s[0] + tb0 * s[3], ta1 * s[1] + tb1 * s[4], ta2 * s[2] + tb2 * s[5], min(max(cover, 0.0), 1.0), rays
 
 
 @njit(cache=True)

@@ -179,14 +179,10 @@ def _trace(it, o, d, seed, key):
             L1 += tp1 * f1 * lg * w
             L2 += tp2 * f2 * lb * w
         # scatter: the next direction, the throughput, Russian roulette from event rr_depth on
-        u_dir = (uniform(seed, key, base + 0), uniform(seed, key, base + 1), uniform(seed, key, base + 2))
-        step = continue_path(mat, ctx, t_tan, n, wi, u_dir, depth + 1 >= it.rr_depth, uniform(seed, key, base + 3),
-                             (tp0, tp1, tp2), wo)
+        step = continue_path(mat, ctx, t_tan, n, wi, depth + 1 >= it.rr_depth, seed, key, base, (tp0, tp1, tp2), wo)
         if not step.alive:
             break
-        tp0 = step.tp0
-        tp1 = step.tp1
-        tp2 = step.tp2
+        tp0, tp1, tp2 = step.tp
         depth += 1
         pdf_prev = step.pdf
         for k in range(3):

@@ -103,6 +103,31 @@ def _escaped(lt, n, prev_pdf, dx, dy, dz):
     return r, g, b
 
 
+@njit(cache=True, _nrt=False)
+def _add_light(it, px, py, pz, lw, seed, index, dim, skip_fibre, lpdf, ldelta, pdf_scatter, scale, a0, a1, a2,
+               Lr, Lg, Lb):
+    """(Lr, Lg, Lb, dim, lookups) after next-event estimation toward the light sample lw from p: L += a c with
+    c = scale x the transmittance (``_transmittance``, not counting fibre ``skip_fibre``) x the MIS weight
+    against scattering's pdf (1 for a delta light) / the light's pdf; L unchanged where the light is shadowed.
+    19 parameters: the integrator, the point and light direction, the random stream (seed, index, dim), the
+    skipped fibre, the two pdfs and whether the light is a delta, the scale, the path's unshadowed
+    contribution per channel and the radiance so far, all scalars kept in registers."""
+    tr, dim, lk = _transmittance(it.medium, it.majorant, it.ground, it.has_ground, px, py, pz, lw[0], lw[1], lw[2],
+                                 seed, index, dim, skip_fibre)
+    if tr > 0.0:
+        c = scale * tr * (1.0 if ldelta else power_heuristic(lpdf, pdf_scatter)) / lpdf
+        Lr += a0 * c
+        Lg += a1 * c
+        Lb += a2 * c
+    return Lr, Lg, Lb, dim, lk
+
+
+@njit(cache=True, _nrt=False)
+def _scattered(br, bg, bb, w0, w1, w2, wsc):
+    """(the throughput times the sample weight (w0, w1, w2), the sampled direction in ``wsc``)."""
+    return br * w0, bg * w1, bb * w2, wsc[0], wsc[1], wsc[2]
+
+
 @njit(cache=True, inline="always")
 def fibre_phase(yarn, mats):
     """True when the collision is with a fibre of a yarn that has a material row (fibre phase function;
@@ -209,26 +234,16 @@ def trace_path(it, o, d, seed, index):
             if lpdf > 0.0:
                 f0, f1, f2, pf = material_eval_pdf(mat, ctx, tan, tan, wi, lw)
                 if f0 > 0.0 or f1 > 0.0 or f2 > 0.0:
-                    tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
-                                                 seed, index, dim, m.fibre)
+                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, seed, index, dim, m.fibre, lpdf, ldelta, pf,
+                                                     1.0, br * ler * f0, bg * leg * f1, bb * leb * f2, Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
-                    if tr > 0.0:
-                        c = tr * (1.0 if ldelta else power_heuristic(lpdf, pf)) / lpdf
-                        Lr += br * ler * f0 * c
-                        Lg += bg * leg * f1 * c
-                        Lb += bb * leb * f2 * c
             u6 = uniform(seed, index, dim)
             dim += 1
             w0, w1, w2, pdf = material_sample(mat, ctx, tan, tan, wi, u6, u4, u5, wsc)
             if pdf <= 0.0:
                 break
-            br *= w0
-            bg *= w1
-            bb *= w2
-            wx = wsc[0]
-            wy = wsc[1]
-            wz = wsc[2]
+            br, bg, bb, wx, wy, wz = _scattered(br, bg, bb, w0, w1, w2, wsc)
             prev_pdf = pdf
             next_skip = m.fibre
         elif collided:
@@ -243,15 +258,10 @@ def trace_path(it, o, d, seed, index):
             if lpdf > 0.0:
                 f = phase_eval(S, -dx, -dy, -dz, lw[0], lw[1], lw[2])
                 if f > 0.0:
-                    tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
-                                                 seed, index, dim, runtime_value(-1))
+                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, seed, index, dim, runtime_value(-1), lpdf,
+                                                     ldelta, f, f, br * ler, bg * leg, bb * leb, Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
-                    if tr > 0.0:
-                        c = f * tr * (1.0 if ldelta else power_heuristic(lpdf, f)) / lpdf
-                        Lr += br * ler * c
-                        Lg += bg * leg * c
-                        Lb += bb * leb * c
             wx, wy, wz, pdf = phase_sample(S, -dx, -dy, -dz, u4, u5)
             if pdf <= 0.0:
                 break
@@ -270,24 +280,15 @@ def trace_path(it, o, d, seed, index):
             if lpdf > 0.0:
                 fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
                 if fr > 0.0 or fg > 0.0 or fb > 0.0:
-                    tr, dim, lk = _transmittance(med, maj, ground, ground_on, px, py, pz, lw[0], lw[1], lw[2],
-                                                 seed, index, dim, runtime_value(-1))
+                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, seed, index, dim, runtime_value(-1), lpdf,
+                                                     ldelta, lambert_pdf(alb, nrm, wi, lw), 1.0,
+                                                     br * ler * fr, bg * leg * fg, bb * leb * fb, Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
-                    if tr > 0.0:
-                        c = tr * (1.0 if ldelta else power_heuristic(lpdf, lambert_pdf(alb, nrm, wi, lw))) / lpdf
-                        Lr += br * ler * fr * c
-                        Lg += bg * leg * fg * c
-                        Lb += bb * leb * fb * c
             wr, wg, wb, pdf = lambert_sample_into(alb, nrm, wi, u4, u5, wsc)
             if pdf <= 0.0:
                 break
-            br *= wr
-            bg *= wg
-            bb *= wb
-            wx = wsc[0]
-            wy = wsc[1]
-            wz = wsc[2]
+            br, bg, bb, wx, wy, wz = _scattered(br, bg, bb, wr, wg, wb, wsc)
             prev_pdf = pdf
         ox = px
         oy = py

@@ -46,13 +46,11 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-from numba.extending import overload
 
 from stages.core.curves.spline import curve_point_at
-from stages.core.dispatch import is_tuple_class
 from stages.core.yarn.lookup import FIBRE_ID_STRIDE, ORDER_STRIDE
 from stages.render.camera import camera_ray_into
-from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, register_medium
 from stages.render.media.procedural_medium import procedural_lookup
 from stages.render.media.realized_medium import covering_segment_arrays, segment_tangent
 from stages.render.media.tracking import ray_box
@@ -113,10 +111,7 @@ def fibre_cache_lookup(med, x, y, z, skip=-1):
                        med.yarn_albedo[c, 2], med.yarn_roughness[c], np.int64(c), med.fibre_id[f])
 
 
-@overload(medium_lookup)
-def _fibre_cache_overload(med, x, y, z, skip):
-    if is_tuple_class(med, FibreCacheMedium):
-        return lambda med, x, y, z, skip: fibre_cache_lookup(med, x, y, z, skip)
+register_medium(FibreCacheMedium, fibre_cache_lookup)
 
 
 # ------------------------------------------------------------------------------------------------

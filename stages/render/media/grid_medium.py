@@ -21,10 +21,8 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-from numba.extending import overload
 
-from stages.core.dispatch import is_tuple_class
-from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup, outside_box, register_medium
 
 GridMedium = namedtuple("GridMedium", ["lo", "hi", "density", "direction", "albedo", "roughness"])
 
@@ -33,7 +31,7 @@ GridMedium = namedtuple("GridMedium", ["lo", "hi", "density", "direction", "albe
 def grid_lookup(med, x, y, z):
     lo = med.lo
     hi = med.hi
-    if x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]:
+    if outside_box(lo, hi, x, y, z):
         return NO_MEDIUM
     nz, ny, nx = med.density.shape
     ux = (x - lo[0]) / (hi[0] - lo[0]) * nx - 0.5
@@ -78,10 +76,7 @@ def grid_lookup(med, x, y, z):
                        np.int64(-1))
 
 
-@overload(medium_lookup)
-def _grid_overload(med, x, y, z, skip):
-    if is_tuple_class(med, GridMedium):
-        return lambda med, x, y, z, skip: grid_lookup(med, x, y, z)  # voxels know no fibres
+register_medium(GridMedium, grid_lookup, knows_fibres=False)   # voxels know no fibres
 
 
 @njit(cache=True)

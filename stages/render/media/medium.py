@@ -13,7 +13,8 @@ distance serves all three channels. Because sigma_S(w) <= 1, den(p) itself bound
 every direction: a majorant for den bounds the extinction.
 
 A *density source* is a namedtuple class whose numba implementation of
-``medium_lookup(med, x, y, z, skip)`` is registered with ``numba.extending.overload``; it returns a
+``medium_lookup(med, x, y, z, skip)`` is registered with ``register_medium`` (``numba.extending.overload``);
+it returns a
 ``MediumPoint``
 
     (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness, yarn, fibre)
@@ -52,6 +53,24 @@ def medium_lookup(med, x, y, z, skip):
     raise TypeError("medium_lookup is only callable from numba-compiled code")
 
 
+def register_medium(cls, lookup, knows_fibres=True):
+    """Overloads ``medium_lookup`` for density sources of namedtuple class ``cls`` with the kernel
+    ``lookup(med, x, y, z, skip)``; ``knows_fibres`` False: ``lookup(med, x, y, z)``, a source with no fibres
+    to tell apart (voxels, boxes), which ignores ``skip``."""
+    @overload(medium_lookup)
+    def _medium_lookup(med, x, y, z, skip):
+        if is_tuple_class(med, cls):
+            if knows_fibres:
+                return lambda med, x, y, z, skip: lookup(med, x, y, z, skip)
+            return lambda med, x, y, z, skip: lookup(med, x, y, z)
+
+
+@njit(cache=True)
+def outside_box(lo, hi, x, y, z):
+    """True where (x, y, z) lies outside the box [lo, hi]."""
+    return x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]
+
+
 @njit(cache=True)
 def extinction(den, tx, ty, tz, roughness, wx, wy, wz):
     """sigma_t(w) = den * sigma_S(w) for the fibre-like SGGX of (t, roughness)."""
@@ -71,9 +90,7 @@ isotropic (sigma_t = density in every direction), the textbook homogeneous mediu
 
 @njit(cache=True)
 def homogeneous_lookup(med, x, y, z):
-    lo = med.lo
-    hi = med.hi
-    if x < lo[0] or x > hi[0] or y < lo[1] or y > hi[1] or z < lo[2] or z > hi[2]:
+    if outside_box(med.lo, med.hi, x, y, z):
         return NO_MEDIUM
     t = med.tangent
     a = med.albedo
@@ -82,7 +99,4 @@ def homogeneous_lookup(med, x, y, z):
                        np.int64(-1))
 
 
-@overload(medium_lookup)
-def _homogeneous_overload(med, x, y, z, skip):
-    if is_tuple_class(med, HomogeneousMedium):
-        return lambda med, x, y, z, skip: homogeneous_lookup(med, x, y, z)  # no fibres to tell apart
+register_medium(HomogeneousMedium, homogeneous_lookup, knows_fibres=False)

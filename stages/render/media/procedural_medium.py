@@ -24,10 +24,8 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-from numba.extending import overload
 
 from stages.core.curves.spline import curve_point_at
-from stages.core.dispatch import is_tuple_class
 from stages.core.threads import chunk_kernel, for_chunks
 from stages.core.yarn.fibre_tests import stored_hair
 from stages.core.yarn.frame_samples import eq7, frame_at
@@ -49,7 +47,7 @@ from stages.core.yarn.model import (
     transverse_speed_bound,
 )
 from stages.core.yarn.tables import loop_fibre
-from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, register_medium
 from stages.render.media.tracking import cell_half_diagonal, raster_capsule
 
 ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
@@ -65,10 +63,7 @@ def procedural_lookup(med, x, y, z, skip=-1):
                        np.int64(r.yarn), np.int64(r.fibre))
 
 
-@overload(medium_lookup)
-def _procedural_overload(med, x, y, z, skip):
-    if is_tuple_class(med, ProceduralMedium):
-        return lambda med, x, y, z, skip: procedural_lookup(med, x, y, z, skip)
+register_medium(ProceduralMedium, procedural_lookup)
 
 
 @njit(cache=True)

@@ -21,14 +21,12 @@ from collections import namedtuple
 
 import numpy as np
 from numba import njit
-from numba.extending import overload
 
-from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.box4 import box4_contains
 from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.geometry.stack import STACK_SIZE, stack_array
 from stages.core.geometry.wide_walk import leaf_range
-from stages.render.media.medium import NO_MEDIUM, MediumPoint, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, MediumPoint, register_medium
 
 RealizedMedium = namedtuple("RealizedMedium", ["bvh", "fiber_yarn", "yarn_density", "yarn_albedo", "yarn_roughness",
                                                "fibre_id"])
@@ -111,10 +109,7 @@ def realized_lookup(med, x, y, z, skip=-1):
                        np.float64(a[c, 2]), np.float64(med.yarn_roughness[c]), np.int64(c), fid)
 
 
-@overload(medium_lookup)
-def _realized_overload(med, x, y, z, skip):
-    if is_tuple_class(med, RealizedMedium):
-        return lambda med, x, y, z, skip: realized_lookup(med, x, y, z, skip)
+register_medium(RealizedMedium, realized_lookup)
 
 
 @njit(cache=True)
