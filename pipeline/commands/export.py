@@ -5,7 +5,7 @@ from pathlib import Path
 
 import typer
 
-from ..memory import BUDGET_HELP
+from .options import BUDGET
 
 
 def register(app: typer.Typer) -> None:
@@ -15,7 +15,7 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "-o", "--out", help=".txt: Mitsuba 3 curve text ('x y z r' per line, blank "
                                                         "line between curves); .bcc: polyline Binary Curve "
                                                         "Collection."),
-        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
+        budget: float = BUDGET,
     ):
         """Write realized fibres as Mitsuba 3 curve text or a polyline BCC file."""
         from ..memory import budget as memory_budget

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import typer
 
-from ..memory import BUDGET_HELP
+from .options import BUDGET, FORCE
 
 
 def register(app: typer.Typer) -> None:
@@ -24,8 +24,8 @@ def register(app: typer.Typer) -> None:
                                                     "them."),
         frame_samples: int = typer.Option(4, "--frame-samples", min=1, help="Stored RMF samples per spline segment."),
         write: Path = typer.Option(None, "--write", help="Also write the validated curves as .bcc, .obj or .txt."),
-        force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
-        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
+        force: bool = FORCE,
+        budget: float = BUDGET,
     ):
         """Read, validate and spline yarn curves and publish them as a yarns artifact.
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import typer
 
-from ..memory import BUDGET_HELP
+from .options import BUDGET
 
 
 def register(app: typer.Typer) -> None:
@@ -15,7 +15,7 @@ def register(app: typer.Typer) -> None:
         points: Path = typer.Option(..., "--points", help="(N, 3) float array of fabric-space points (.npy)."),
         out: Path = typer.Option(..., "-o", "--out",
                                  help="Output .npz: inside, yarn, kind, direction, density, albedo."),
-        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
+        budget: float = BUDGET,
     ):
         """Look up the procedural fibres at given points (Luan, Zhao, Bala 2017 Algorithm 1).
 

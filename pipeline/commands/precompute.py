@@ -15,7 +15,7 @@ from typing import List
 import typer
 
 from ..limits import FULL_TRANSPORT_DEPTH
-from ..memory import BUDGET_HELP
+from .options import BUDGET, FORCE
 from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 app = typer.Typer(name="precompute", no_args_is_help=True, add_completion=False, pretty_exceptions_enable=False,
@@ -31,8 +31,6 @@ def register(root: typer.Typer) -> None:
 _TILING = typer.Argument(..., help="A tiling artifact (loomlight tile).")
 _OUT = typer.Option(..., "-o", "--out", help="Output artifact (directory ending in .zarr).")
 _EXEMPLAR = typer.Option(None, "--exemplar", help="Exemplar index to precompute (repeatable; default: all).")
-_FORCE = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged.")
-_BUDGET = typer.Option(None, "--budget", help=BUDGET_HELP)
 _THREADS = typer.Option(None, "--threads", help="numba threads (default: all cores); the bytes do not depend on it.")
 _SCENE = typer.Option(None, "--scene", help="Scene giving the yarn materials (default: the scene the tiling names).")
 _MAX_DEPTH = typer.Option(FULL_TRANSPORT_DEPTH, "--max-depth",
@@ -67,8 +65,8 @@ def svf(
     chunk: int = typer.Option(1024, "--chunk", help="Segments per chunk task."),
     seed: int = typer.Option(0, "--seed", help="Seed of the per-segment SG rotations and the PCA sketch."),
     exemplar: List[int] = _EXEMPLAR,
-    force: bool = _FORCE,
-    budget: float = _BUDGET,
+    force: bool = FORCE,
+    budget: float = BUDGET,
     threads: int = _THREADS,
     scheduler: str = SCHEDULER,
     workers: int = WORKERS,
@@ -115,8 +113,8 @@ def iirtf(
                                                  "hence the cell grid, uses a fixed one)."),
     set_: List[str] = _SET,
     exemplar: List[int] = _EXEMPLAR,
-    force: bool = _FORCE,
-    budget: float = _BUDGET,
+    force: bool = FORCE,
+    budget: float = BUDGET,
     threads: int = _THREADS,
     scheduler: str = SCHEDULER,
     workers: int = WORKERS,
@@ -167,8 +165,8 @@ def btf(
     bcsdf: str = _BCSDF,
     seed: int = typer.Option(0, "--seed", help="Seed of the Monte Carlo estimates."),
     set_: List[str] = _SET,
-    force: bool = _FORCE,
-    budget: float = _BUDGET,
+    force: bool = FORCE,
+    budget: float = BUDGET,
     threads: int = _THREADS,
     scheduler: str = SCHEDULER,
     workers: int = WORKERS,

@@ -5,25 +5,23 @@ from pathlib import Path
 
 import typer
 
-from ..memory import BUDGET_HELP
+from .options import BUDGET, FORCE, PRESET, RADIUS, YARNS
 from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 
 def register(app: typer.Typer) -> None:
     @app.command("realize")
     def realize(
-        yarns: Path = typer.Argument(..., help="A yarns artifact (loomlight ingest)."),
+        yarns: Path = YARNS,
         out: Path = typer.Option(..., "-o", "--out", help="Output fibers artifact (directory ending in .zarr)."),
-        preset: str = typer.Option(None, "--preset", metavar="<name>",
-                                   help="Give every yarn this preset (data/yarns/NAME.toml)."),
-        radius: float = typer.Option(None, "--radius",
-                                     help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
+        preset: str = PRESET,
+        radius: float = RADIUS,
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers (as for tables)."),
         spacing: float = typer.Option(0.002, "--spacing",
                                       help="Largest step between vertices along z (scene units; positive, at most "
                                            "1e6)."),
-        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
-        force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
+        budget: float = BUDGET,
+        force: bool = FORCE,
         scheduler: str = SCHEDULER,
         workers: int = WORKERS,
         threads_per_worker: int = THREADS_PER_WORKER,

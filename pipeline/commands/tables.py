@@ -5,25 +5,23 @@ from pathlib import Path
 
 import typer
 
-from ..memory import BUDGET_HELP
+from .options import BUDGET, FORCE, PRESET, RADIUS, YARNS
 
 
 def register(app: typer.Typer) -> None:
     @app.command("tables")
     def tables(
-        yarns: Path = typer.Argument(..., help="A yarns artifact (loomlight ingest)."),
+        yarns: Path = YARNS,
         out: Path = typer.Option(..., "-o", "--out", help="Output tables artifact (directory ending in .zarr)."),
-        preset: str = typer.Option(None, "--preset", metavar="<name>",
-                                   help="Give every yarn this preset (data/yarns/NAME.toml)."),
-        radius: float = typer.Option(None, "--radius",
-                                     help="Scale every yarn type to this yarn radius (positive, at most 1e6)."),
+        preset: str = PRESET,
+        radius: float = RADIUS,
         seed: int = typer.Option(0, "--seed", min=0, help="Seed of the procedural random numbers."),
         bins: int = typer.Option(32, "--bins",
                                  help="Azimuth bins of the regular-fibre tables (Luan, Zhao, Bala 2017 Fig. 7)."),
         hair_mode: str = typer.Option("hybrid", "--hair-mode", metavar="<hybrid | free>",
                                       help="'hybrid' (stored hair z extents, z-bins) or 'free' (Algorithm 3)."),
-        force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
-        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
+        force: bool = FORCE,
+        budget: float = BUDGET,
     ):
         """Build the procedural fibre tables of a yarns artifact (Luan, Zhao, Bala 2017), all a renderer needs.
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import typer
 
-from ..memory import BUDGET_HELP
+from .options import BUDGET, FORCE
 
 
 def register(app: typer.Typer) -> None:
@@ -14,8 +14,8 @@ def register(app: typer.Typer) -> None:
         config: Path = typer.Argument(..., help="A tiling configuration (.toml, schemas/tile-config.schema.json): "
                                                 "exemplar weaves, yarn, block map, base surface, scene."),
         out: Path = typer.Option(..., "-o", "--out", help="Output tiling artifact (directory ending in .zarr)."),
-        force: bool = typer.Option(False, "--force", help="Rebuild even when inputs and parameters are unchanged."),
-        budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
+        force: bool = FORCE,
+        budget: float = BUDGET,
     ):
         """Lay fibre exemplars of weave drafts over a surface and build the shell that maps them onto it.
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import typer
 
-from ..memory import BUDGET_HELP
+from .options import BUDGET, FORCE
 from .scheduling import SCHEDULER, THREADS_PER_WORKER, WORKERS
 
 
@@ -26,9 +26,8 @@ def register(app: typer.Typer) -> None:
                      supersample: int = typer.Option(2, "--supersample", help="Lookups per voxel along each axis."),
                      export_npy: Path = typer.Option(None, "--export-npy",
                                                      help="Also write raw numpy volumes to this directory."),
-                     force: bool = typer.Option(False, "--force",
-                                                help="Rebuild even when inputs and parameters are unchanged."),
-                     budget: float = typer.Option(None, "--budget", help=BUDGET_HELP),
+                     force: bool = FORCE,
+                     budget: float = BUDGET,
                      scheduler: str = SCHEDULER, workers: int = WORKERS, threads_per_worker: int = THREADS_PER_WORKER):
         """Voxelize the procedural fibre medium: density and mean fibre direction per voxel."""
         from ..chunks import resolve_scheduler
