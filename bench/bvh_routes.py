@@ -69,7 +69,8 @@ import numpy as np  # noqa: E402  (after sys.path and stages set-up)
 from numba import njit, types  # noqa: E402  (after sys.path and stages set-up)
 
 from stages.core.geometry.embree import embree_intersect  # noqa: E402  (after sys.path and stages set-up)
-from stages.core.geometry.surface import surface_hit  # noqa: E402  (after sys.path and stages set-up)
+from stages.core.geometry.surface import Skip, surface_hit  # noqa: E402  (after sys.path and stages set-up)
+from stages.core.geometry.wide_walk import Ray  # noqa: E402  (after sys.path and stages set-up)
 from stages.core.rng import uniform  # noqa: E402  (after sys.path and stages set-up)
 from stages.render.camera import camera_ray  # noqa: E402  (after sys.path and stages set-up)
 from stages.render.media.realized_medium import covering_segment_arrays  # noqa: E402  (after sys.path and stages set-up)
@@ -215,7 +216,7 @@ def _bounce_rays(G, Oc, Dc, eps, win, O, D, F, S):
         for k in range(3):
             o[k] = Oc[idx, k]
             d[k] = Dc[idx, k]
-        h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, -1, -1, win)
+        h = surface_hit(G, -1, Ray(o[0], o[1], o[2], d[0], d[1], d[2]), eps, np.inf, Skip(-1, -1, win))
         if h.prim < 0:
             continue
         _capsule_normal(G, h.prim, o, d, h.t, nrm)
@@ -233,7 +234,8 @@ def _bounce_rays(G, Oc, Dc, eps, win, O, D, F, S):
 def _walk(G, O, D, F, S, order, eps, win):
     acc = 0.0
     for i in order:
-        h = surface_hit(G, -1, O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1], D[i, 2], eps, np.inf, F[i], S[i], win)
+        h = surface_hit(G, -1, Ray(O[i, 0], O[i, 1], O[i, 2], D[i, 0], D[i, 1], D[i, 2]), eps, np.inf,
+                        Skip(F[i], S[i], win))
         if h.prim >= 0:
             acc += h.t
     return acc
@@ -388,7 +390,7 @@ def _path_tracer(nearest):
 def _nearest_loomlight(scene, o, d, n):
     """``_path_tracer``'s traversal on loomlight's BVH; scene = (FiberBVH, ignore window)."""
     G, win = scene
-    h = surface_hit(G, -1, o[0], o[1], o[2], d[0], d[1], d[2], 0.0, np.inf, -1, -1, win)
+    h = surface_hit(G, -1, Ray(o[0], o[1], o[2], d[0], d[1], d[2]), 0.0, np.inf, Skip(-1, -1, win))
     if h.prim < 0:
         return np.inf
     _capsule_normal(G, h.prim, o, d, h.t, n)

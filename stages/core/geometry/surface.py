@@ -4,17 +4,19 @@ Integrators that shade fibre surfaces (``stages.render.integrators.fiberpath``, 
 ask a *surface scene* two things, each a generic kernel answered per scene class (dispatch:
 ``stages.core.dispatch``):
 
-    surface_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
-        -> SurfaceHit, the nearest fibre hit along the ray (unit d) in (tmin, tmax)
-    surface_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+    surface_hit(scene, cell, ray, tmin, tmax, skip)
+        -> SurfaceHit, the nearest fibre hit along the ray (a ``Ray``, unit d) in (tmin, tmax)
+    surface_occluded(scene, cell, ray, tmin, tmax, skip)
         -> True when any fibre lies along the ray in (tmin, tmax)
 
 ``SurfaceHit`` fields: ``t`` (inf on a miss), ``prim`` (the hit capsule segment, -1 on a miss),
 ``fiber`` (its fibre: the material index), ``cell`` (where a continuation ray starts: the shell
 tetrahedron, -1 for flat scenes), ``tx, ty, tz`` the unit fibre tangent, ``nx, ny, nz`` the capsule's
-outward normal at the hit, ``radius`` the capsule radius. Segments of fibre ``ign_fiber`` within
-``ign_window`` of segment ``ign_prim`` are skipped (a ray leaving a fibre through its BCSDF);
-``cell`` is the ray's starting cell (-1: outside / unknown).
+outward normal at the hit, ``radius`` the capsule radius. ``skip``, a ``Skip`` (fields ``fiber``, ``prim``,
+``window``): segments of fibre ``fiber`` within ``window`` segments of segment ``prim`` are skipped (a ray leaving
+a fibre through its BCSDF; fiber -1 skips nothing); ``cell`` is the ray's starting cell (-1: outside / unknown).
+``Ray`` (``stages.core.geometry.wide_walk``) and ``Skip`` are tuples of scalars, passed by value; the scene
+classes' own kernels take the scalars.
 
 Scene classes: ``FiberBVH`` (``stages.core.geometry.bvh``: realized fibres in one SAH BVH; below),
 ``EmbreeFibers`` (``stages.core.geometry.embree``: the same fibres traced by Embree 4) and
@@ -33,14 +35,17 @@ from stages.core.geometry.bvh import FiberBVH, intersect, occluded
 from stages.core.geometry.capsule import capsule_normal
 
 SurfaceHit = namedtuple("SurfaceHit", ["t", "prim", "fiber", "cell", "tx", "ty", "tz", "nx", "ny", "nz", "radius"])
+Skip = namedtuple("Skip", ["fiber", "prim", "window"])
+Skip.__doc__ = """The segments a surface query passes over: those of fibre ``fiber`` within ``window`` segments of
+segment ``prim`` (the fibre a ray leaves; fiber -1: none)."""
 
 
-def surface_hit(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+def surface_hit(scene, cell, ray, tmin, tmax, skip):
     """The nearest fibre hit (``SurfaceHit``); numba-only (overloaded per scene class)."""
     raise TypeError("surface_hit is only callable from numba-compiled code")
 
 
-def surface_occluded(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+def surface_occluded(scene, cell, ray, tmin, tmax, skip):
     """Any fibre along the ray; numba-only (overloaded per scene class)."""
     raise TypeError("surface_occluded is only callable from numba-compiled code")
 
@@ -55,14 +60,16 @@ def answer_surface_queries(scene_class, hit, any_hit, with_cell=False):
 def _answer_by(generic, scene_class, kernel, with_cell):
     """Overloads ``generic`` for ``scene_class`` by a call of ``kernel`` (``answer_surface_queries``)."""
     if with_cell:
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return kernel(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+        def impl(scene, cell, ray, tmin, tmax, skip):
+            return kernel(scene, cell, ray.ox, ray.oy, ray.oz, ray.dx, ray.dy, ray.dz, tmin, tmax, skip.fiber,
+                          skip.prim, skip.window)
     else:
-        def impl(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
-            return kernel(scene, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window)
+        def impl(scene, cell, ray, tmin, tmax, skip):
+            return kernel(scene, ray.ox, ray.oy, ray.oz, ray.dx, ray.dy, ray.dz, tmin, tmax, skip.fiber, skip.prim,
+                          skip.window)
 
     @overload(generic)
-    def _of_class(scene, cell, ox, oy, oz, dx, dy, dz, tmin, tmax, ign_fiber, ign_prim, ign_window):
+    def _of_class(scene, cell, ray, tmin, tmax, skip):
         if is_tuple_class(scene, scene_class):
             return impl
 

@@ -32,7 +32,7 @@ import math
 import numpy as np
 from numba import njit, prange
 
-from stages.core.geometry.surface import surface_hit
+from stages.core.geometry.surface import Skip, surface_hit
 from stages.core.geometry.wide_walk import Ray
 from stages.core.rng import uniform
 from stages.core.shading.bcsdf import (
@@ -78,7 +78,7 @@ def _walk(scene, p, camera_ray, seed, key, eps, window, max_events):
     t = np.empty(3)
     wi = np.empty(3)
     for event in range(max_events):
-        h = surface_hit(scene, -1, ox, oy, oz, dx, dy, dz, eps, np.inf, ign_f, ign_s, window)
+        h = surface_hit(scene, -1, Ray(ox, oy, oz, dx, dy, dz), eps, np.inf, Skip(ign_f, ign_s, window))
         if h.prim < 0:
             return -1.0 if event == 0 else 1.0
         ox += h.t * dx

@@ -66,7 +66,8 @@ from numba.extending import overload
 from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.frames import face_towards_into
 from stages.core.geometry.stack import stack_array, stack_vector3
-from stages.core.geometry.surface import surface_hit
+from stages.core.geometry.surface import Skip, surface_hit
+from stages.core.geometry.wide_walk import Ray
 from stages.core.rng import uniform
 from stages.core.sampling import power_heuristic, roulette_survival
 from stages.core.shading import bysdf as B
@@ -135,7 +136,7 @@ def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
     if ground_intersect(it.ground, it.has_ground, oz, dz, it.eps) < np.inf:
         return False, rays
     for _ in range(it.max_passes):
-        h = surface_hit(it.bvh, -1, ox, oy, oz, dx, dy, dz, it.eps, np.inf, ign_y, ign_s, it.window)
+        h = surface_hit(it.bvh, -1, Ray(ox, oy, oz, dx, dy, dz), it.eps, np.inf, Skip(ign_y, ign_s, it.window))
         rays += 1
         if h.prim < 0:
             return True, rays
@@ -256,7 +257,8 @@ def trace_path(it, o, d, seed, key):
     dy = stack_vector3()
     no_exit = (0.0, 0.0, 0.0)   # the exit-point arguments of the reflection side (unused there)
     while True:
-        h = surface_hit(it.bvh, -1, o[0], o[1], o[2], d[0], d[1], d[2], it.eps, np.inf, ign_y, ign_s, it.window)
+        h = surface_hit(it.bvh, -1, Ray(o[0], o[1], o[2], d[0], d[1], d[2]), it.eps, np.inf,
+                        Skip(ign_y, ign_s, it.window))
         rays += 1
         t_hit = h.t
         on_ground = False

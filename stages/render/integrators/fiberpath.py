@@ -50,7 +50,8 @@ from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.stack import stack_array, stack_vector3
-from stages.core.geometry.surface import surface_hit, surface_occluded
+from stages.core.geometry.surface import Skip, surface_hit, surface_occluded
+from stages.core.geometry.wide_walk import Ray
 from stages.core.rng import uniform
 from stages.core.sampling import continue_path, power_heuristic
 from stages.core.shading.material import (
@@ -103,8 +104,8 @@ def _trace(it, o, d, seed, key):
     wl = stack_vector3()
     depth = 0
     while True:
-        h = surface_hit(it.scene, cell, o[0], o[1], o[2], d[0], d[1], d[2], eps, np.inf, ign_f, ign_s,
-                        it.ign_window)
+        h = surface_hit(it.scene, cell, Ray(o[0], o[1], o[2], d[0], d[1], d[2]), eps, np.inf,
+                        Skip(ign_f, ign_s, it.ign_window))
         t_hit = h.t
         rays += 1
         on_ground = False
@@ -166,8 +167,8 @@ def _trace(it, o, d, seed, key):
             if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                 continue
             rays += 1
-            if surface_occluded(it.scene, next_cell, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, np.inf, nf, ns,
-                                it.ign_window):
+            if surface_occluded(it.scene, next_cell, Ray(so[0], so[1], so[2], wl[0], wl[1], wl[2]), eps, np.inf,
+                                Skip(nf, ns, it.ign_window)):
                 continue
             if ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < np.inf:
                 continue

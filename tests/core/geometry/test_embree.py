@@ -7,7 +7,8 @@ from numba import njit
 
 from stages.core.geometry.bvh import build_fiber_bvh, intersect_brute
 from stages.core.geometry.embree import EmbreeScene, embree_intersect, embree_occluded
-from stages.core.geometry.surface import surface_hit
+from stages.core.geometry.surface import Skip, surface_hit
+from stages.core.geometry.wide_walk import Ray
 from tests.core.geometry.test_bvh import _unit, random_fibres
 
 WINDOW = 2
@@ -35,8 +36,8 @@ def _queries(bvh, sc, O, D, tmin, ign_f, ign_s, window):
             out[k, 4] = embree_occluded(sc, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], tmin,
                                         np.inf, ign_f[k], ign_s[k], window)
             out[k, 5] = 1.0
-        h = surface_hit(sc, -1, O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2], tmin, np.inf,
-                        ign_f[k], ign_s[k], window)
+        h = surface_hit(sc, -1, Ray(O[k, 0], O[k, 1], O[k, 2], D[k, 0], D[k, 1], D[k, 2]), tmin, np.inf,
+                        Skip(ign_f[k], ign_s[k], window))
         out[k, 6] = h.prim
     return out
 
