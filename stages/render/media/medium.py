@@ -14,8 +14,7 @@ every direction: a majorant for den bounds the extinction.
 
 A *density source* is a namedtuple class whose numba implementation of
 ``medium_lookup(med, x, y, z, skip)`` is registered with ``register_medium`` (``numba.extending.overload``);
-it returns a
-``MediumPoint``
+it returns a ``MediumPoint``
 
     (den, tx, ty, tz, albedo_r, albedo_g, albedo_b, roughness, yarn, fibre)
 
