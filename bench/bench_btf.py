@@ -39,23 +39,24 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
         w.write("light_dirs", hemisphere_grid(*light_grid))
         for lv in range(levels):
             r = res >> lv
-            w.write(f"level_{lv}/rho", rng.uniform(0.02, 0.25, (r, r, 3)).astype(np.float32))
+            w.write(f"level_{lv}/rho", rng.uniform(0.02, 0.25, (1, r, r, 3)).astype(np.float32))
             lob = np.empty((r, r, lobes, 3, 4), np.float32)
             lob[..., 0] = rng.uniform(-1.2, -0.6, (r, r, lobes, 1))
             lob[..., 1] = lob[..., 0] * 1.22
             lob[..., 2] = rng.uniform(0.6, 1.0, (r, r, lobes, 1))
             lob[..., 3] = rng.uniform(2.0, 30.0, (r, r, lobes, 1))
-            w.write(f"level_{lv}/lobes", lob)
+            w.write(f"level_{lv}/lobes", lob[None])
             tb = rng.uniform(0.6, 1.4, (r, r, V, 4)).astype(np.float32)
             tb[..., 3] = np.where(rng.uniform(size=(r, r, V)) < 0.05, 0.0, 1.0)
-            w.write(f"level_{lv}/table", tb)
+            w.write(f"level_{lv}/table", tb[None])
             n = np.stack([rng.normal(0, 0.1, (r, r)), rng.normal(0, 0.1, (r, r)), np.ones((r, r))], -1)
             n /= np.linalg.norm(n, axis=-1, keepdims=True)
             t = np.cross(np.cross(n, [1.0, 0.0, 0.0]), n)
             t /= np.linalg.norm(t, axis=-1, keepdims=True)
-            w.write(f"level_{lv}/frame", np.stack([n, t], -2).astype(np.float32))
-        w.summary.update(kind="btf", source="synthetic", source_hash="synthetic", exemplar=0,
-                         exemplar_name="synthetic", period=list(period), resolution=res, levels=levels, lobes=lobes,
+            w.write(f"level_{lv}/frame", np.stack([n, t], -2).astype(np.float32)[None])
+        w.summary.update(kind="btf", source="synthetic", source_hash="synthetic", exemplars=[0],
+                         exemplar_names=["synthetic"], periods=[list(period)], resolution=res, levels=levels,
+                         lobes=lobes,
                          view_grid=list(view_grid), light_grid=list(light_grid))
 
 
@@ -65,7 +66,7 @@ def run(out_dir) -> dict:
     import numba
 
     from pipeline.render_setup import pack_lights
-    from pipeline.renderers.btf import DressedMesh, load_btf, pack_integrator
+    from pipeline.renderers.btf import ONE_EXEMPLAR, DressedMesh, load_btf, pack_integrator
     from pipeline.scene import camera_array, load_scene
     from stages.core.geometry.triangles import area_weighted_normals
     from stages.render.film import F_HIT, new_film, tile_grid
@@ -80,7 +81,7 @@ def run(out_dir) -> dict:
         synthetic_btf(path)
     tex = load_btf(path)
     V, UV, F = sphere_drape(4.0, 1.0, 40, 40, folds=6, fold_amplitude=0.25)
-    geom = DressedMesh(V, F, area_weighted_normals(V, F), UV * 8.0, "draped damask base surface")
+    geom = DressedMesh(V, F, area_weighted_normals(V, F), UV * 8.0, ONE_EXEMPLAR, "draped damask base surface")
     scene = load_scene(ROOT / "data" / "scenes" / "draped_damask.toml")
     lights = pack_lights([lt for lt in scene.lights if lt["type"] == "directional"][:1], scene.path)
     cam = camera_array(scene.camera, W, H)

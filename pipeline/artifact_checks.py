@@ -228,11 +228,14 @@ def _btf(a: _Arrays) -> None:
     res, levels, K = a.value("resolution"), a.value("levels"), a.value("lobes")
     nt, nph = a.value("view_grid", list)
     lt, lph = a.value("light_grid", list)
+    E = len(a.value("exemplars", list))
     have = len({n.split("/", 1)[0] for n in a.arrays if n.startswith("level_") and "/" in n})
     a.same("levels", levels, have, f"the artifact holds {have} level groups")
-    r0 = a.dim("level_0/rho", 0, "resolution")
+    e0 = a.dim("level_0/rho", 0, "exemplars")
+    a.same("exemplars", E, e0, f"array level_0/rho holds {e0} exemplar(s)")
+    r0 = a.dim("level_0/rho", 1, "resolution")
     a.same("resolution", res, r0, f"array level_0/rho holds {r0} x {r0} texels")
-    k0 = a.dim("level_0/lobes", 2, "lobes")
+    k0 = a.dim("level_0/lobes", 3, "lobes")
     a.same("lobes", K, k0, f"array level_0/lobes holds {k0}")
     v = a.rows("view_dirs", "view_grid")
     a.same("view_grid", nt * nph, v, f"array view_dirs holds {v} views", f"{nt} x {nph} = {nt * nph} views")
@@ -240,9 +243,9 @@ def _btf(a: _Arrays) -> None:
     a.same("light_grid", lt * lph, li, f"array light_dirs holds {li} lights", f"{lt} x {lph} = {lt * lph} lights")
     for lv in range(levels):
         r = res >> lv
-        for name, want in (("rho", [r, r, 3]), ("lobes", [r, r, K, 3, 4]), ("table", [r, r, nt * nph, 4]),
-                           ("frame", [r, r, 2, 3])):
-            a.shaped(f"level_{lv}/{name}", want, "resolution, levels, lobes and view_grid")
+        for name, want in (("rho", [E, r, r, 3]), ("lobes", [E, r, r, K, 3, 4]), ("table", [E, r, r, nt * nph, 4]),
+                           ("frame", [E, r, r, 2, 3])):
+            a.shaped(f"level_{lv}/{name}", want, "exemplars, resolution, levels, lobes and view_grid")
     a.shaped("view_dirs", [nt * nph, 3], "view_grid")
     a.shaped("light_dirs", [lt * lph, 3], "light_grid")
 

@@ -15,8 +15,8 @@ tiling     ``tile``                                                    a tiling 
 svf        ``precompute svf`` (128 x 128 images, 48 components, 48 SGs) the tiling
 iirtf      ``precompute iirtf`` (order 4, cells of 1 mean free path,  the tiling; the render scene's yarn
            50,000 paths per cell, uniform light sampling)              materials (``--bcsdf``, ``--set tint``)
-btf        ``precompute btf`` (exemplar 0, 32 x 32 texels, 8x8 views   the tiling; the render scene's materials
-           and lights, 16 rays)
+btf        ``precompute btf`` (the exemplars the block map uses,      the tiling; the render scene's materials
+           32 x 32 texels, 8x8 views and lights, 16 rays)
 =========  ===========================================================  ==========================================
 
 The tiling configuration: ``--set tiling=CONFIG.toml`` (or ``--fibers CONFIG.toml``), else the scene's
@@ -244,9 +244,9 @@ class Planner:
         p = BtfParams(material=parse_material_options([], self.options.get("bcsdf")))
         ref, tpath, needs = self._tiling_ref("btf")
         scene_path = self.scene.path
-        return self.node("btf", {"args": asdict(p), "exemplar": 0, **ref,
+        return self.node("btf", {"args": asdict(p), "exemplars": "used by the block map", **ref,
                                  "materials": materials_identity(self.scene, p.material)},
-                         lambda path: run_btf(tpath, path, p, scene=scene_path, exemplar=0, budget=self.budget,
+                         lambda path: run_btf(tpath, path, p, scene=scene_path, budget=self.budget,
                                               threads=self.options.get("threads"), scheduler=self.scheduler),
                          needs=needs, before=lambda: btf_size(tpath, p))
 
@@ -353,10 +353,15 @@ def iirtf_size(tiling: Path, p) -> str:
 
 
 def btf_size(tiling: Path, p) -> str:
-    s = _tiling_summary(tiling)
+    from .artifacts import Artifact
+    from .runners.precompute_btf import used_exemplars
+
+    art = Artifact(tiling, kind="tiling")
+    E = len(used_exemplars(art))
     r, (vt, vp), (lt, lp) = p.resolution, p.views, p.lights
-    n = r * r * vt * vp * lt * lp * p.spp
-    return (f"precompute btf at its defaults (exemplar 0 of {int(s.get('exemplars', 0))}, {r}x{r} texels, "
+    n = E * r * r * vt * vp * lt * lp * p.spp
+    return (f"precompute btf at its defaults ({E} exemplar(s) of {int(art.summary.get('exemplars', 0))}: those its "
+            f"block map uses, {r}x{r} texels, "
             f"{vt}x{vp} views x {lt}x{lp} lights, {p.spp} rays): {n / 1e6:,.0f} M radiance samples")
 
 

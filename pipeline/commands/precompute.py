@@ -143,7 +143,9 @@ def iirtf(
 def btf(
     tiling: Path = _TILING,
     out: Path = _OUT,
-    exemplar: int = typer.Option(0, "--exemplar", help="The exemplar (repeat) of the tiling to fit."),
+    exemplar: List[int] = typer.Option(None, "--exemplar",
+                                       help="An exemplar (repeat) of the tiling to fit (repeatable; default: every "
+                                            "exemplar the tiling's block map uses)."),
     scene: Path = _SCENE,
     resolution: int = typer.Option(32, "--resolution", help="Texels a side of the finest level (a power of two; "
                                                             "Daubert et al. 2001: 32)."),
@@ -172,11 +174,12 @@ def btf(
     workers: int = WORKERS,
     threads_per_worker: int = THREADS_PER_WORKER,
 ):
-    """Fit one exemplar of a tiling as a view-dependent cloth texture (Daubert et al. 2001 §4-§5).
+    """Fit the exemplars of a tiling as view-dependent cloth textures (Daubert et al. 2001 §4-§5).
 
-    Radiance samples of the repeat over view x light grids, path traced on its explicit fibres with
-    its copies all around, alpha and average normals per texel; per texel diffuse + Lafortune lobes
-    times a view lookup table, and mip levels down to 1 x 1."""
+    Per exemplar: radiance samples of the repeat over view x light grids, path traced on its explicit
+    fibres with its copies all around, alpha and average normals per texel; per texel diffuse + Lafortune
+    lobes times a view lookup table, and mip levels down to 1 x 1. The btf renderer dresses a tiling with
+    each exemplar's texture where its block map places that exemplar."""
     from ..outputs import ARTIFACT, check_output
     from ..runners.precompute import parse_material_options
     from ..runners.precompute_btf import BtfParams, parse_grid, run_btf
@@ -186,9 +189,10 @@ def btf(
                   spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, directions=directions,
                   max_depth=max_depth,
                   rr_depth=rr_depth, seed=seed, material=parse_material_options(set_ or [], bcsdf))
-    _run(run_btf, tiling, out, p, lambda res: f"{res['resolution']}x{res['resolution']} texels, {res['views']} "
+    _run(run_btf, tiling, out, p, lambda res: f"{res['exemplars']} exemplar(s), "
+         f"{res['resolution']}x{res['resolution']} texels, {res['views']} "
          f"views x {res['lights']} lights, {res['levels']} levels, {res['fit_bytes'] / 2**20:.2f} MiB fitted; "
          f"acquisition {res['acquire_s']:.1f} s, fit {res['fit_s']:.1f} s; fit RMSE level 0 "
          f"{res['fit_rmse'][0]:.4g} (without the table {res['fit_rmse_no_table'][0]:.4g})",
          force=force, budget=budget, threads=threads, scheduler=scheduler, workers=workers,
-         threads_per_worker=threads_per_worker, scene=scene, exemplar=exemplar)
+         threads_per_worker=threads_per_worker, scene=scene, exemplars=exemplar or None)

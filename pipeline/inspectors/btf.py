@@ -4,14 +4,18 @@ Top rows, for two view/light pairs (a view near the normal with a light at mid e
 grazing view with the light opposite it): the acquired radiance per texel r(l, v) beside the fitted
 model f_r(l, v) = T(v) . f_1(l, v) of level 0 (seed 002 Eq. 1-2), on one shared scale per pair
 (sRGB-encoded, the scale in the title), the texel's alpha for that view, and the per-texel difference.
-Bottom row: the mip pyramid, the fitted model of every level for the first pair, each level's
-texels drawn at the size of level 0 (seed 002 §5.1), with the level's fit RMSE.
+A texture of several exemplars (a damask's) shows the first pair for each exemplar instead (at most
+``MAX_EXEMPLAR_ROWS``), each on its own scale.
+Bottom row: the mip pyramid of the first exemplar, the fitted model of every level for the first pair,
+each level's texels drawn at the size of level 0 (seed 002 §5.1), with the level's fit RMSE.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from . import finish, pyplot
+
+MAX_EXEMPLAR_ROWS = 3
 
 
 def _pairs(summary):
@@ -59,20 +63,24 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
     levels = int(s["levels"])
     lev0 = {n: art[f"level_0/{n}"] for n in ("rho", "lobes", "table", "frame")}
     pairs = _pairs(s)
+    names = s.get("exemplar_names", [])
+    E = int(lev0["rho"].shape[0])
+    rows = [(0, pr) for pr in pairs] if E == 1 else [(e, pairs[0]) for e in range(min(E, MAX_EXEMPLAR_ROWS))]
     with pyplot(show) as plt:
         fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), layout="constrained")
-        top = fig.subfigures(3, 1, height_ratios=[1, 1, 0.9])
-        for row, (vi, li) in enumerate(pairs):
-            acq = samples[:, :, vi, li, :].astype(np.float64)
-            fit = model_image(lev0["rho"], lev0["lobes"], lev0["table"], lev0["frame"], s["view_grid"], views[vi],
-                              lights[li])
+        top = fig.subfigures(len(rows) + 1, 1, height_ratios=[1] * len(rows) + [0.9])
+        for row, (e, (vi, li)) in enumerate(rows):
+            acq = samples[e, :, :, vi, li, :].astype(np.float64)
+            fit = model_image(lev0["rho"][e], lev0["lobes"][e], lev0["table"][e], lev0["frame"][e], s["view_grid"],
+                              views[vi], lights[li])
             scale = float(max(np.percentile(acq, 99.5), 1e-6))
             axes = top[row].subplots(1, 4)
             axes[0].imshow(_srgb(acq, scale), origin="lower", interpolation="nearest")
             axes[0].set_title(f"acquired r(l, v), scale {scale:.3g}")
             axes[1].imshow(_srgb(fit, scale), origin="lower", interpolation="nearest")
             axes[1].set_title("fitted T(v) f₁(l, v), level 0")
-            im = axes[2].imshow(alpha[:, :, vi], origin="lower", vmin=0, vmax=1, cmap="gray", interpolation="nearest")
+            im = axes[2].imshow(alpha[e, :, :, vi], origin="lower", vmin=0, vmax=1, cmap="gray",
+                                interpolation="nearest")
             axes[2].set_title("alpha of this view")
             fig.colorbar(im, ax=axes[2], shrink=0.8)
             diff = (fit - acq).mean(axis=-1) / scale
@@ -83,21 +91,25 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
             for ax in axes:
                 ax.set_xticks([])
                 ax.set_yticks([])
-            top[row].suptitle(f"view {_angles(views[vi])}, light {_angles(lights[li])}  (texels x → , y ↑)")
-        axes = top[2].subplots(1, levels)
+            who = f"{names[e]}: " if E > 1 and e < len(names) else ""
+            top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(lights[li])}  (texels x → , y ↑)")
+        axes = top[len(rows)].subplots(1, levels)
         axes = np.atleast_1d(axes)
         vi, li = pairs[0]
-        acq0 = samples[:, :, vi, li, :].astype(np.float64)
+        acq0 = samples[0, :, :, vi, li, :].astype(np.float64)
         scale = float(max(np.percentile(acq0, 99.5), 1e-6))
         res = int(s["resolution"])
-        rmse = s.get("fit_rmse", [])
+        per = s.get("per_exemplar") or [{}]
+        rmse = per[0].get("fit_rmse", s.get("fit_rmse", []))
         for lev, ax in enumerate(axes):
-            f = {n: art[f"level_{lev}/{n}"] for n in ("rho", "lobes", "table", "frame")}
+            f = {n: art[f"level_{lev}/{n}"][0] for n in ("rho", "lobes", "table", "frame")}
             img = model_image(f["rho"], f["lobes"], f["table"], f["frame"], s["view_grid"], views[vi], lights[li])
             rep = res // img.shape[0]
             ax.imshow(_srgb(np.kron(img, np.ones((rep, rep, 1))), scale), origin="lower", interpolation="nearest")
             ax.set_title(f"level {lev}: {img.shape[0]}²" + (f"\nRMSE {rmse[lev]:.3g}" if lev < len(rmse) else ""))
             ax.set_xticks([])
             ax.set_yticks([])
-        top[2].suptitle(f"mip pyramid (first pair) -- {s['exemplar_name']} of {s['source']}, {s['lobes']} lobe(s)")
+        first = names[0] if names else "exemplar 0"
+        top[len(rows)].suptitle(f"mip pyramid (first pair) -- {first} of {s['source']}, {s['lobes']} lobe(s)"
+                                + (f"; {E} exemplars" if E > 1 else ""))
         return finish(fig, png, show)

@@ -22,8 +22,11 @@ texture over the mesh's texture coordinates. Two geometries (``--source``, else 
   covers one exemplar period, exactly where the tiling puts the exemplar; the surface is moved out along
   its normals to the top of the exemplar's fibres (the texture's ``top``: where acquisition sampled it).
   The texture must have been fitted from this tiling: its recorded source hash must be the tiling's
-  content hash (a texture of another tiling's repeat is refused, naming both). A tiling of several
-  exemplars (a damask) is rendered with the one exemplar the texture was fitted to, everywhere.
+  content hash (a texture of another tiling's repeat is refused, naming both). On a tiling of several
+  exemplars (a damask) each point of the cloth reads the texture of the exemplar the tiling's block map
+  places there (the texture must hold every exemplar the map uses: ``precompute btf`` fits them all by
+  default), so the figure of a damask shows as it does in ``fiberpath``. On a mesh, the texture's first
+  exemplar covers it all.
 
 Settings (``--set KEY=VALUE``):
 
@@ -52,7 +55,6 @@ second on 2 threads (``bench/bench_btf.py``), the default 16 at about 7.
 """
 from __future__ import annotations
 
-import math
 import time
 from collections import namedtuple
 from pathlib import Path
@@ -61,13 +63,19 @@ import numpy as np
 
 from ..errors import LoomError
 from . import RenderResult
+from .settings import number_setting
 
-# a surface to dress: vertices, triangles, unit vertex normals, vertex pattern coordinates (in repeats)
-DressedMesh = namedtuple("DressedMesh", ["vertices", "triangles", "normals", "pattern_uv", "what"])
+# a surface to dress: vertices, triangles, unit vertex normals, vertex pattern coordinates (in repeats of the
+# texture's first exemplar), and which exemplar covers which part of it (``Blocks``)
+DressedMesh = namedtuple("DressedMesh", ["vertices", "triangles", "normals", "pattern_uv", "blocks", "what"])
+# the texture's exemplar (its index in the texture, -1: none) per block of the flat fabric, the flat size of a
+# block and of one pattern unit (``stages.render.integrators.btf``: ``block_map``, ``block_size``, ``flat_period``)
+Blocks = namedtuple("Blocks", ["block_map", "block_size", "flat_period"])
+ONE_EXEMPLAR = Blocks(np.zeros((1, 1), np.int64), np.ones(2), np.zeros(2))   # a mesh: the texture's first exemplar
 # the texture, every level flattened and packed (``stages.render.integrators.btf`` module doc: ``texels``, ``table``,
 # ``levels``), with what else the renderer needs from the artifact
-BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "period",
-                                       "fit_bytes", "summary"])
+BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "periods",
+                                       "exemplars", "fit_bytes", "summary"])
 SOURCES = ("mesh", "tiling")
 ON_OFF = {"on": True, "off": False}
 
@@ -81,6 +89,14 @@ def load_btf(path) -> BtfTexture:
 
     art = Artifact(path, kind="btf")
     s = art.summary
+    if not isinstance(s.get("exemplars"), list) or not s["exemplars"]:
+        raise LoomError(path, "summary.exemplars", "missing: a texture written before btf artifacts held every "
+                        "exemplar of a tiling; run loomlight precompute btf again")
+    E = len(s["exemplars"])
+    periods = np.asarray(s.get("periods"), np.float64)
+    if periods.shape != (E, 2) or not np.all(np.isfinite(periods)) or not np.all(periods > 0):
+        raise LoomError(path, "summary.periods",
+                        f"expected a positive [W, H] per exemplar ({E}), got {s.get('periods')}")
     res, levels, K = int(s["resolution"]), int(s["levels"]), int(s["lobes"])
     nt, nph = (int(x) for x in s["view_grid"])
     lt, lph = (int(x) for x in s["light_grid"])
@@ -102,28 +118,34 @@ def load_btf(path) -> BtfTexture:
                             "(stages.core.btf.hemisphere_grid): the renderer interpolates and sums on that grid")
     texels, tables, levels_rows = [], [], []
     n = 0
+    stacks = []
     for lv in range(levels):
         r = res >> lv
-        want = {"rho": (r, r, 3), "lobes": (r, r, K, 3, 4), "table": (r, r, V, 4), "frame": (r, r, 2, 3)}
+        want = {"rho": (E, r, r, 3), "lobes": (E, r, r, K, 3, 4), "table": (E, r, r, V, 4), "frame": (E, r, r, 2, 3)}
         x = {}
         for a, shape in want.items():
             x[a] = np.asarray(art[f"level_{lv}/{a}"], np.float64)
             if x[a].shape != shape:
-                raise LoomError(path, f"array level_{lv}/{a}", f"has shape {list(x[a].shape)}, expected {list(shape)}")
+                raise LoomError(path, f"array level_{lv}/{a}", f"has shape {list(x[a].shape)}, expected {list(shape)} "
+                                "(exemplars, texels, ...)")
             if not np.all(np.isfinite(x[a])):
                 raise LoomError(path, f"array level_{lv}/{a}", "holds nan or inf")
-        nrm, tan = x["frame"][..., 0, :], x["frame"][..., 1, :]
-        texels.append(np.concatenate([x["rho"], nrm, tan, np.cross(nrm, tan), x["lobes"].reshape(r, r, -1)],
-                                     axis=-1).reshape(r * r, -1))
-        tables.append(x["table"].reshape(r * r, V, 4))
-        levels_rows.append((n, r))
-        n += r * r
+        stacks.append(x)
+    for e in range(E):                  # exemplar e's levels, finest first, then the next exemplar's
+        for lv, x in enumerate(stacks):
+            r = res >> lv
+            nrm, tan = x["frame"][e, ..., 0, :], x["frame"][e, ..., 1, :]
+            texels.append(np.concatenate([x["rho"][e], nrm, tan, np.cross(nrm, tan), x["lobes"][e].reshape(r, r, -1)],
+                                         axis=-1).reshape(r * r, -1))
+            tables.append(x["table"][e].reshape(r * r, V, 4))
+            levels_rows.append((n, r))
+            n += r * r
     fit_bytes = sum(int(np.prod(have[k].shape)) * np.dtype(have[k].dtype).itemsize for k in names)
     return BtfTexture(np.ascontiguousarray(np.concatenate(texels)),
                       np.ascontiguousarray(np.concatenate(tables), np.float32),
-                      np.asarray(levels_rows, np.int64), K, (nt, nph),
-                      np.ascontiguousarray(art["light_dirs"], np.float64), tuple(float(v) for v in s["period"]),
-                      fit_bytes, s)
+                      np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
+                      np.ascontiguousarray(art["light_dirs"], np.float64), periods,
+                      [int(k) for k in s["exemplars"]], fit_bytes, s)
 
 
 # ------------------------------------------------------------------------------------------------ geometry
@@ -148,51 +170,55 @@ def load_obj(path, repeat: float) -> DressedMesh:
     if N is None:
         N = area_weighted_normals(V, F)
         what = "area-weighted normals"
-    return DressedMesh(V, F, N, UV * repeat, f"{p.name} ({len(F)} triangles, {what}, repeat {repeat:g})")
+    return DressedMesh(V, F, N, UV * repeat, ONE_EXEMPLAR, f"{p.name} ({len(F)} triangles, {what}, repeat {repeat:g})")
 
 
 def load_tiling_surface(path, btf_path, tex: BtfTexture) -> DressedMesh:
-    """A tiling's base surface (``--fibers``) dressed with the texture fitted from its repeat."""
+    """A tiling's base surface (``--fibers``) dressed with the textures fitted from its exemplars, each where the
+    tiling's block map places that exemplar."""
     from ..artifacts import Artifact
 
     art = Artifact(path, kind="tiling")
     s = tex.summary
     mine = art.meta.get("content_hash")
+    names = art.summary.get("exemplar_names") or []
     if s.get("source_hash") != mine:
-        names = art.summary.get("exemplar_names") or []
+        fitted = ", ".join(f"{k} ('{n}')" for k, n in zip(s.get("exemplars", []), s.get("exemplar_names", [])))
         raise LoomError(btf_path, "summary.source_hash",
-                        f"a BTF from a different repeat than the scene names: {btf_path} was fitted to exemplar "
-                        f"{s.get('exemplar')} ('{s.get('exemplar_name')}') of {s.get('source')} (content hash "
+                        f"a BTF from a different repeat than the scene names: {btf_path} was fitted to exemplar(s) "
+                        f"{fitted} of {s.get('source')} (content hash "
                         f"{str(s.get('source_hash'))[:12]}), but the tiling is {path} (exemplars "
                         f"{', '.join(repr(x) for x in names)}, content hash {str(mine)[:12]}); run loomlight "
                         f"precompute btf on {path}")
+    tiling_map = np.asarray(art["block_map"], np.int64)
+    index = {k: i for i, k in enumerate(tex.exemplars)}
+    used = sorted(int(k) for k in np.unique(tiling_map) if k >= 0)
+    missing = [k for k in used if k not in index]
+    if missing:
+        name = names[missing[0]] if missing[0] < len(names) else "?"
+        raise LoomError(btf_path, "summary.exemplars",
+                        f"has no texture of exemplar {missing[0]} ('{name}'), "
+                        f"which the block map of {path} uses (the texture holds {tex.exemplars}); run loomlight "
+                        "precompute btf without --exemplar")
+    to_texture = np.full(max(used + [0]) + 1, -1, np.int64)   # tiling exemplar -> its index in the texture
+    for k in used:
+        to_texture[k] = index[k]
+    block_map = np.where(tiling_map >= 0, to_texture[np.clip(tiling_map, 0, len(to_texture) - 1)], -1)
+    p0 = tex.periods[0]
+    blocks = Blocks(np.ascontiguousarray(block_map, np.int64), np.asarray(art["block_size"], np.float64), p0.copy())
     flat = np.asarray(art.summary["flat_size"], np.float64)
-    scale = flat / np.asarray(tex.period, np.float64)   # base uv in [0, 1] spans flat_size; one repeat = period
+    scale = flat / p0   # base uv in [0, 1] spans flat_size; one repeat (of the first exemplar) = its period
     N = np.asarray(art["base_normals"], np.float64)
     N = N / np.maximum(np.linalg.norm(N, axis=1), 1e-300)[:, None]
     # the texture lives on the top face of the repeat's box (seed 002 §4): the base surface moved out
     # along its normals to the top of the exemplar's fibres (the shell's flat z is world length there)
     V = np.asarray(art["base_vertices"], np.float64) + float(s.get("top", 0.0)) * N
     F = np.asarray(art["base_triangles"], np.int64)
-    return DressedMesh(V, F, N, np.asarray(art["base_uv"], np.float64) * scale[None, :],
-                       f"{Path(path).name} base surface ({len(F)} triangles)")
+    return DressedMesh(V, F, N, np.asarray(art["base_uv"], np.float64) * scale[None, :], blocks,
+                       f"{Path(path).name} base surface ({len(F)} triangles, {len(used)} exemplar(s))")
 
 
 # ------------------------------------------------------------------------------------------------ setup
-def _repeat(extra) -> float:
-    v = extra.get("repeat")
-    if v is None:
-        return 1.0
-    try:
-        x = float(v)
-    except ValueError:
-        raise LoomError(None, "--set repeat", f"expected a number of texture repeats across uv [0, 1], got {v!r}") \
-            from None
-    if not (math.isfinite(x) and x > 0):
-        raise LoomError(None, "--set repeat", f"must be a finite number > 0 (texture repeats across uv), got {v!r}")
-    return x
-
-
 def geometry_source(scene, options) -> str:
     """'mesh' or 'tiling': ``--source``, the scene's ``render.source`` when it names one of them, else the
     geometry given (``--set mesh`` or ``--fibers``); both or neither given is an error."""
@@ -233,12 +259,14 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
     shading[:, 9:15] = geom.pattern_uv[F].reshape(-1, 6)
     shading[:, 15:18] = unit(dpdx)
     shading[:, 18:21] = unit(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]))
-    shading[:, 21] = np.sqrt(np.linalg.norm(np.cross(dpdx, dpdy), axis=1)) / float(tex.levels[0, 1])
+    shading[:, 21] = np.sqrt(np.linalg.norm(np.cross(dpdx, dpdy), axis=1)) / float(tex.levels[0, 0, 1])
     table = lights.table()
     quad = int(np.count_nonzero(table.lights[:, 0] != DIRECTIONAL))
     eps = ray_eps(V.min(0), V.max(0)) if len(V) else 1e-9
     pixel_angle = 2.0 * float(cam[CAM_TAN_HALF_FOV]) / float(cam[CAM_WIDTH])
-    return BtfIntegrator(mesh, shading, tex.texels, tex.table, tex.levels, int(tex.view_grid[0]),
+    return BtfIntegrator(mesh, shading, tex.texels, tex.table, tex.levels,
+                         np.ascontiguousarray(tex.periods[0][None, :] / tex.periods), geom.blocks.block_map,
+                         geom.blocks.block_size, geom.blocks.flat_period, int(tex.view_grid[0]),
                          int(tex.view_grid[1]), tex.light_dirs, table, quad, ground, has_ground, pixel_angle,
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
                          int(bool(shadows)), MAX_LAYERS, eps)
@@ -263,7 +291,7 @@ def film_setup(scene, options: dict):
         raise LoomError(None, "--set btf", "btf needs the fitted texture: pass --set btf=PATH.zarr (loomlight "
                                            "precompute btf)")
     src = geometry_source(scene, options)
-    repeat = _repeat(extra)
+    repeat = number_setting(extra, "repeat", 1.0, above=0.0, what="texture repeats across uv [0, 1]")
     t0 = time.perf_counter()
     tex = load_btf(btf_path)
     if src == "mesh":
@@ -277,8 +305,9 @@ def film_setup(scene, options: dict):
     integ = pack_integrator(geom, tex, lights, ground, has_ground, cam, mip, shadows)
     load_s = time.perf_counter() - t0
     stats = {"load_s": load_s, "geometry": geom.what, "source": src, "triangles": int(len(geom.triangles)),
-             "bvh_nodes": int(len(integ.mesh.nodes)), "btf_resolution": int(tex.levels[0, 1]),
-             "btf_levels": int(len(tex.levels)), "btf_lobes": int(tex.lobes),
+             "bvh_nodes": int(len(integ.mesh.nodes)), "btf_resolution": int(tex.levels[0, 0, 1]),
+             "btf_levels": int(tex.levels.shape[1]), "btf_exemplars": int(tex.levels.shape[0]),
+             "btf_lobes": int(tex.lobes),
              "btf_views": int(tex.table.shape[1]), "btf_lights": int(len(tex.light_dirs)),
              "fit_bytes": int(tex.fit_bytes), "mip": "on" if mip else "off", "shadows": "on" if shadows else "off",
              "max_layers": int(integ.max_layers)}

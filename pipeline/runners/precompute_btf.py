@@ -1,6 +1,7 @@
 """``precompute btf``: one repeat of a tiling fitted to seed 002's per-texel BRDFs (a ``btf`` artifact).
 
-``run_btf`` takes exemplar ``k`` of a tiling (a woven repeat, or a knitted one), the fibre materials
+``run_btf`` takes exemplars of a tiling (woven repeats, or knitted ones: by default every exemplar its block map
+uses, so a damask's texture holds both of its weaves; ``--exemplar`` picks), the fibre materials
 the scene gives it (the same as ``fiberpath`` renders and ``precompute iirtf`` uses:
 ``pipeline.runners.precompute.tiling_materials``), and
 
@@ -9,13 +10,18 @@ the scene gives it (the same as ``fiberpath`` renders and ``precompute iirtf`` u
    the default: each sample's view and each path's lights uniform over their cells, so the table holds
    cell averages; ``grid``: the grid directions themselves, seed 002's point samples) the radiance per unit
    irradiance r(l, v), the alpha of each view and the texel's average normal and tangent, path traced
-   in the repeat repeated without end. One chunk task per texel row (``pipeline.chunks``: here or on a
-   Dask scheduler); each writes its row of ``samples`` (float16) and ``alpha`` into the artifact.
+   in the repeat repeated without end. One chunk task per exemplar and texel row (``pipeline.chunks``: here
+   or on a Dask scheduler); each writes its row of ``samples`` (float16) and ``alpha`` into the artifact.
 2. **fits** (seed 002 §5, ``stages.precompute.btf_fit``) per texel and channel the diffuse term and
    1-2 Lafortune lobes by Levenberg-Marquardt alternating with the lookup table T(v) of Eq. 4, and the
    mip levels from 2 x 2 groups of texels (§5.1) down to 1 x 1, each level's fit RMSE with and without
    the table (the paper's Fig. 5 point) recorded in the summary. The fit reads the stored (float16)
    samples, so a refit from the artifact reproduces it.
+
+Every array but the two direction grids has a leading exemplar axis (``samples`` (E, res, res, V, L, 3),
+``alpha`` (E, res, res, V), ``level_l/rho`` (E, r, r, 3), ...), in the order of the summary's ``exemplars`` (the
+tiling's exemplar indices) with ``exemplar_names`` and ``periods``; the fit statistics are over every exemplar's
+texels, and per exemplar in ``per_exemplar``.
 
 Defaults: 32 x 32 texels (the paper's), views and lights on 8 x 8 grids of equal solid angle (64 each,
 the paper's 64-entry tables; ``--views 4x8`` gives the paper's 32), 16 samples per texel and view, two
@@ -98,15 +104,17 @@ def parse_grid(text: str, option: str) -> tuple[int, int]:
     return int(parts[0]), int(parts[1])
 
 
-def btf_estimate(res, V, L, segments) -> Estimate:
-    """Peak memory of the acquisition and the fit: the samples (float16 stored, float32 read, float64 in
-    the fit) and the tables and lobes of every level; each part names the option it grows with."""
+def btf_estimate(res, V, L, segments, exemplars=1) -> Estimate:
+    """Peak memory of the acquisition and the fit: one exemplar's samples (float16 stored, float32 read, float64
+    in the fit: the exemplars are fitted one after the other) and the tables and lobes of every level of every
+    exemplar; each part names the option it grows with."""
     est = Estimate("loomlight precompute btf")
     est.add("tiling scene", 520.0 * segments, f"{segments:,} segments")
     grows = "--resolution" if res * res >= V * L else _grid_option(V, L)
     est.add("samples", float(res) * res * V * L * 3 * (2 + 4 + 8), f"{res}x{res} texels x {V:,} views x {L:,} lights "
             f"(float16 stored, float32 read, float64 fit) ({grows})")
-    est.add("fit", float(res) * res * V * 4 * 8 * 6, "tables and lobes of every level (--resolution)")
+    est.add("fit", float(res) * res * V * 4 * 8 * 6 * exemplars,
+            f"tables and lobes of every level of {exemplars} exemplar(s) (--resolution, --exemplar)")
     return est
 
 
@@ -114,18 +122,18 @@ def _grid_option(V, L) -> str:
     return "--views" if V >= L else "--lights"
 
 
-def btf_work(res, V, L, p: "BtfParams", threads: int):
-    """The least time of the acquisition (``WorkEstimate``): every sample of every texel and view casts a
-    camera ray, and with cell averages (the default) draws one direction in each light's cell."""
+def btf_work(res, V, L, p: "BtfParams", threads: int, exemplars: int = 1):
+    """The least time of the acquisition (``WorkEstimate``): every sample of every texel and view of every
+    exemplar casts a camera ray, and with cell averages (the default) draws one direction in each light's cell."""
     from ..limits import WorkEstimate
 
-    samples = float(res) * res * V * p.spp
+    samples = float(res) * res * V * p.spp * exemplars
+    what = f"{exemplars} exemplar(s) x {res}x{res} texels x {V:,} views x {p.spp:,} samples"
     est = WorkEstimate("loomlight precompute btf", threads)
-    est.add("camera rays", samples, SAMPLES_PER_THREAD_S,
-            f"{res}x{res} texels x {V:,} views x {p.spp:,} samples (--spp)")
+    est.add("camera rays", samples, SAMPLES_PER_THREAD_S, f"{what} (--spp)")
     if p.directions == "cell":
         est.add("light directions", samples * L, LIGHT_DIRECTIONS_PER_THREAD_S,
-                f"{res}x{res} texels x {V:,} views x {p.spp:,} samples x {L:,} lights "
+                f"{what} x {L:,} lights "
                 f"({'--spp' if p.spp >= max(V, L) else _grid_option(V, L)})")
     return est
 
@@ -138,8 +146,9 @@ def direction_grids(p: dict) -> tuple:
     return tuple(int(x) for x in p["views"]), tuple(int(x) for x in p["lights"])
 
 
-def _btf_row_task(tiling, tiling_hash, store, k, iy, mof, mats, view_dirs, light_dirs, p: dict):
-    """Chunk task: texel row iy -- samples and alpha into the artifact; returns normal sums and timings."""
+def _btf_row_task(tiling, tiling_hash, store, e, k, iy, mof, mats, view_dirs, light_dirs, p: dict):
+    """Chunk task: texel row iy of exemplar k (the artifact's exemplar e) -- samples and alpha into the artifact;
+    returns normal sums and timings."""
     from stages.precompute.btf import acquire_texels
     from stages.precompute.iirtf import exemplar_slabs
     from stages.precompute.periodic import periodic_scene
@@ -156,8 +165,8 @@ def _btf_row_task(tiling, tiling_hash, store, k, iy, mof, mats, view_dirs, light
                                             res, iy * res, (iy + 1) * res, view_dirs, light_dirs, p["spp"], p["seed"],
                                             p["max_depth"], p["rr_depth"], _max_dist(W, H, slab), _eps(W, H, slab),
                                             *direction_grids(p))
-    open_for_chunk(store, "samples")[iy] = rad.astype(np.float16)
-    open_for_chunk(store, "alpha")[iy] = alpha
+    open_for_chunk(store, "samples")[e, iy] = rad.astype(np.float16)
+    open_for_chunk(store, "alpha")[e, iy] = alpha
     return {"normal": nsum, "rays": int(rays.sum()), "s": time.perf_counter() - t0}
 
 
@@ -170,7 +179,28 @@ def _eps(W, H, slab) -> float:
     return 1e-7 * (max(W, H) + abs(float(slab[0])) + abs(float(slab[1])))
 
 
-def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budget=None, threads=None,
+def used_exemplars(art) -> list[int]:
+    """The exemplars a tiling's block map places somewhere (all of them when the map is empty)."""
+    used = sorted(int(k) for k in np.unique(np.asarray(art["block_map"])) if k >= 0)
+    return used or list(range(int(art.summary["exemplars"])))
+
+
+def _fit_record(levels, res, V, K) -> dict:
+    """Per level, the arrays one exemplar's fit writes (``level_l/...``, without the exemplar axis)."""
+    out = []
+    for lev, f in enumerate(levels):
+        r = res >> lev
+        out.append({"rho": f.rho.reshape(r, r, 3), "lobes": f.lobes.reshape(r, r, K, 3, 4),
+                    "table": f.table.reshape(r, r, V, 4), "frame": f.frames.reshape(r, r, 2, 3),
+                    "rmse": f.rmse.reshape(r, r, 3)})
+    return out
+
+
+def _rms(parts) -> float:
+    return float(np.sqrt(np.mean(np.concatenate([np.square(np.asarray(a, np.float64)).ravel() for a in parts]))))
+
+
+def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, budget=None, threads=None,
             scheduler=None) -> dict:
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.core.btf import hemisphere_grid
@@ -187,13 +217,16 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
     start_precompute(p, threads)
     import numba
 
+    tiling, art, ks = open_tiling(tiling, exemplars)
+    if not exemplars:
+        ks = used_exemplars(art)
+    E = len(ks)
     V, L = p.views[0] * p.views[1], p.lights[0] * p.lights[1]
-    work = btf_work(p.resolution, V, L, p, numba.get_num_threads())
-    work.check(None, largest_option(work, "--spp"), "lower it (or --resolution, --views, --lights)")
-    tiling, art, (k,) = open_tiling(tiling, [exemplar])
+    work = btf_work(p.resolution, V, L, p, numba.get_num_threads(), E)
+    work.check(None, largest_option(work, "--spp"), "lower it (or --resolution, --views, --lights, --exemplar)")
     scene_path, sc_obj = materials_scene(tiling, art, scene)
     mof, mats = tiling_materials(sc_obj, art, p.material)
-    w = ArtifactWriter(out, kind="btf", stage="precompute btf", params={**asdict(p), "exemplar": k},
+    w = ArtifactWriter(out, kind="btf", stage="precompute btf", params={**asdict(p), "exemplars": ks},
                        inputs={"tiling": (tiling, "tiling"), "scene": (scene_path, FILE)}, started=t_start)
     if not force and w.up_to_date():
         return {"skipped": True}
@@ -202,67 +235,75 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplar=0, force=False, budg
     light_dirs = hemisphere_grid(*p.lights)
     V, L = len(view_dirs), len(light_dirs)
     limit = budget or memory_budget()
-    est = btf_estimate(res, V, L, int(art.summary["segments"]))
+    est = btf_estimate(res, V, L, int(art.summary["segments"]), E)
     est.check(limit, None, largest_option(est, "--resolution"), "lower it, or raise --budget")
     tiling_hash = art.meta["content_hash"]
     tiling_abs = str(tiling.resolve())  # chunk tasks may run in another directory
     sc, _ = periodic_scenes(tiling_abs, tiling_hash)
-    slab = exemplar_slabs(art["ex_points"], art["ex_radius"], art["ex_offsets"], art["ex_fibers"])[k]
-    W, H = (float(v) for v in art["ex_period"][k])
+    slabs = exemplar_slabs(art["ex_points"], art["ex_radius"], art["ex_offsets"], art["ex_fibers"])
+    periods = [[float(v) for v in art["ex_period"][k]] for k in ks]
+    k0, (W, H) = ks[0], periods[0]
+    slab = slabs[k0]
     t0 = time.perf_counter()  # compile (or load) the acquisition kernel on one texel, one view, one light
-    acquire_texels(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, res, 0, 1, view_dirs[:1],
+    acquire_texels(periodic_scene(sc, k0), float(slab[0]), float(slab[1]), W, H, mof, mats, res, 0, 1, view_dirs[:1],
                    light_dirs[:1], 1, p.seed, 2, 2, _max_dist(W, H, slab), _eps(W, H, slab),
                    *direction_grids(asdict(p)))   # the grids the chunk tasks pass: the same specialisation
     compile_s = time.perf_counter() - t0
     pdict = {key: v for key, v in asdict(p).items() if key != "material"}
+    names = [str(art.summary["exemplar_names"][k]) for k in ks]
     with session(scheduler), w:
         store = w.store_path
         w.write("view_dirs", view_dirs)
         w.write("light_dirs", light_dirs)
-        w.create("samples", (res, res, V, L, 3), np.float16, (1, res, V, L, 3),
-                 dimension_names=("y", "x", "view", "light", "c"))
-        w.create("alpha", (res, res, V), np.float32, (1, res, V), dimension_names=("y", "x", "view"))
+        w.create("samples", (E, res, res, V, L, 3), np.float16, (1, 1, res, V, L, 3),
+                 dimension_names=("exemplar", "y", "x", "view", "light", "c"))
+        w.create("alpha", (E, res, res, V), np.float32, (1, 1, res, V), dimension_names=("exemplar", "y", "x", "view"))
         t0 = time.perf_counter()
-        parts = run_tasks([ChunkTask(_btf_row_task, (tiling_abs, tiling_hash, str(store), k, iy, mof, mats, view_dirs,
-                                                     light_dirs, pdict)) for iy in range(res)],
-                          f"btf: acquisition, {res}x{res} texels x {V} views x {L} lights")
+        tasks = [ChunkTask(_btf_row_task, (tiling_abs, tiling_hash, str(store), e, k, iy, mof, mats, view_dirs,
+                                           light_dirs, pdict)) for e, k in enumerate(ks) for iy in range(res)]
+        parts = run_tasks(tasks, f"btf: acquisition, {E} exemplar(s) x {res}x{res} texels x {V} views x {L} lights")
         acquire_s = time.perf_counter() - t0
         rays = sum(r["rays"] for r in parts)
-        frames = texel_frames(np.concatenate([r["normal"] for r in parts])).reshape(res, res, 2, 3)
-        samples = w.group["samples"][...].astype(np.float32)
-        alpha = w.group["alpha"][...]
-        t0 = time.perf_counter()
-        with status(f"btf: fitting {res}x{res} texels and their mip levels"):
-            levels = fit_levels(samples, alpha, frames, view_dirs, light_dirs, p.lobes, p.threshold,
-                                max_rounds=p.max_rounds)
-        fit_s = time.perf_counter() - t0
-        del samples
+        fits, fit_s, per_exemplar, no_table, unconverged = [], 0.0, [], [], 0
+        for e, k in enumerate(ks):
+            rows = parts[e * res:(e + 1) * res]
+            frames = texel_frames(np.concatenate([r["normal"] for r in rows])).reshape(res, res, 2, 3)
+            samples = w.group["samples"][e].astype(np.float32)
+            alpha = w.group["alpha"][e]
+            t0 = time.perf_counter()
+            with status(f"btf: fitting {res}x{res} texels of '{names[e]}' and their mip levels"):
+                levels = fit_levels(samples, alpha, frames, view_dirs, light_dirs, p.lobes, p.threshold,
+                                    max_rounds=p.max_rounds)
+            fit_s += time.perf_counter() - t0
+            fits.append(_fit_record(levels, res, V, p.lobes))
+            mean_e = float(np.mean(samples))
+            per_exemplar.append({"exemplar": k, "name": names[e], "mean_radiance": mean_e,
+                                 "fit_rmse": [_rms([f.rmse]) for f in levels], "alpha_mean": float(np.mean(alpha))})
+            no_table.append([f.rmse_no_table for f in levels])
+            unconverged += sum(int(np.count_nonzero(~np.asarray(f.converged))) for f in levels)
+            del samples
+        n_levels = len(fits[0])
         fit_bytes = 0
-        rmse, rmse_nt, unconverged = [], [], 0
-        for lev, f in enumerate(levels):
-            r = res >> lev
-            g = f"level_{lev}/"
-            arrays = {"rho": f.rho.reshape(r, r, 3), "lobes": f.lobes.reshape(r, r, p.lobes, 3, 4),
-                      "table": f.table.reshape(r, r, V, 4), "frame": f.frames.reshape(r, r, 2, 3),
-                      "rmse": f.rmse.reshape(r, r, 3)}
-            for name, a in arrays.items():
-                a = np.ascontiguousarray(a, np.float32)
-                w.write(g + name, a)
+        for lev in range(n_levels):
+            for name in ("rho", "lobes", "table", "frame", "rmse"):
+                a = np.ascontiguousarray(np.stack([f[lev][name] for f in fits]), np.float32)
+                w.write(f"level_{lev}/{name}", a)
                 if name != "rmse":
                     fit_bytes += a.nbytes
-            rmse.append(float(np.sqrt(np.mean(np.square(f.rmse)))))
-            rmse_nt.append(float(np.sqrt(np.mean(np.square(f.rmse_no_table)))))
-            unconverged += int(np.count_nonzero(~np.asarray(f.converged)))
-        mean_r = float(np.mean(w.group["samples"][...].astype(np.float32)))
-        w.summary.update(kind="btf", source=str(tiling), source_hash=tiling_hash, scene=str(scene_path), exemplar=k,
-                         exemplar_name=str(art.summary["exemplar_names"][k]), period=[W, H],
-                         top=float(slab[1]), bottom=float(slab[0]), resolution=res,
-                         levels=len(levels), lobes=p.lobes, view_grid=list(p.views), light_grid=list(p.lights),
+        rmse = [_rms([f[lev]["rmse"] for f in fits]) for lev in range(n_levels)]
+        rmse_nt = [_rms([x[lev] for x in no_table]) for lev in range(n_levels)]
+        mean_r = float(np.mean([x["mean_radiance"] for x in per_exemplar]))   # the exemplars hold as many samples each
+        tops, bottoms = [float(slabs[k][1]) for k in ks], [float(slabs[k][0]) for k in ks]
+        w.summary.update(kind="btf", source=str(tiling), source_hash=tiling_hash, scene=str(scene_path), exemplars=ks,
+                         exemplar_names=names, periods=periods, per_exemplar=per_exemplar,
+                         top=max(tops), bottom=min(bottoms), resolution=res,
+                         levels=n_levels, lobes=p.lobes, view_grid=list(p.views), light_grid=list(p.lights),
                          spp=p.spp, fit_rmse=rmse, fit_rmse_no_table=rmse_nt, fit_bytes=int(fit_bytes),
                          mean_radiance=mean_r, relative_fit_rmse=[x / max(mean_r, 1e-12) for x in rmse],
-                         unconverged_texels=unconverged, alpha_mean=float(np.mean(alpha)), rays=int(rays),
+                         unconverged_texels=unconverged,
+                         alpha_mean=float(np.mean(w.group["alpha"][...])), rays=int(rays),
                          rays_per_s=rays / max(acquire_s, 1e-9), acquire_s=acquire_s, fit_s=fit_s,
                          compile_s=compile_s)
-    return {"skipped": False, "resolution": res, "views": V, "lights": L, "levels": len(levels), "fit_rmse": rmse,
-            "fit_rmse_no_table": rmse_nt, "acquire_s": acquire_s, "fit_s": fit_s, "fit_bytes": int(fit_bytes),
-            "mean_radiance": mean_r}
+    return {"skipped": False, "exemplars": E, "resolution": res, "views": V, "lights": L, "levels": n_levels,
+            "fit_rmse": rmse, "fit_rmse_no_table": rmse_nt, "acquire_s": acquire_s, "fit_s": fit_s,
+            "fit_bytes": int(fit_bytes), "mean_radiance": mean_r}

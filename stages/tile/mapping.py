@@ -7,11 +7,13 @@ Within tetrahedron ``tet`` the shell map is affine (barycentric, piecewise linea
 - ``flat_to_uvw(q, flat_size, thickness)``: (X / flat_size_x, Y / flat_size_y, Z / thickness);
 - ``flat_to_exemplar(q, block, ...)``: flat point -> (exemplar, point in that exemplar) by the block map
   (``tiling``): block (i, j) = floor(X / bw), floor(Y / bh) wrapped periodically over the map; its
-  exemplar k; the point shifted by whole exemplar periods into [0, W_k) x [0, H_k).
+  exemplar k; the point shifted by whole exemplar periods into [0, W_k) x [0, H_k) (the block itself:
+  ``stages.core.blocks.block_of``, which the btf renderer shares).
 """
-import math
 
 from numba import njit
+
+from stages.core.blocks import block_of
 
 
 @njit(cache=True)
@@ -34,14 +36,6 @@ def flat_to_world(f2w, tet, q):
 @njit(cache=True)
 def flat_to_uvw(q, flat_size, thickness):
     return q[0] / flat_size[0], q[1] / flat_size[1], q[2] / thickness
-
-
-@njit(cache=True)
-def block_of(x, y, block_size, nbu, nbv):
-    """Block (i, j) of a flat point, wrapped periodically over the nbu x nbv block map."""
-    i = int(math.floor(x / block_size[0]))
-    j = int(math.floor(y / block_size[1]))
-    return i % nbu, j % nbv, i, j
 
 
 @njit(cache=True)

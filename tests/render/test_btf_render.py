@@ -14,7 +14,8 @@ What is compared with what (each test names its reference):
 - mip: a spatially uniform texture renders the same with mip on and off; levels of distinct colours
   give the blend of the two levels the closed-form footprint selects, on the exact camera rays;
 - the texture's repeat: uv shifted by one period gives the same bytes (by half a period, not);
-- a tiling's base surface equals the same surface written as an OBJ with repeat = flat size / period;
+- a tiling's base surface equals the same surface written as an OBJ with repeat = flat size / period; on a
+  tiling of two exemplars each pixel is the one or the other exemplar's render where the block map says;
 - the same bytes at 1 and 2 threads; bad settings and a texture of another repeat: exit 2, nothing
   written.
 """
@@ -98,40 +99,47 @@ def _cli(*args):
 
 
 def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, table=None, lobe_params=None,
-              period=(0.5, 0.5), source_hash="none", source="none", frame=None):
-    """A btf artifact. ``rho``: an rgb (every texel of every level) or a function (level, r) -> (r, r, 3);
-    ``alpha``: a number or a function (level, r, views) -> (r, r, V); ``table``: None (T = 1) or a function
-    (level, r, views) -> (r, r, V, 3); ``lobe_params`` None (no lobes: C = 0) or (r, r, K, 3, 4) per level
-    via a function (level, r)."""
+              period=(0.5, 0.5), source_hash="none", source="none", frame=None, exemplars=(0,)):
+    """A btf artifact of the tiling exemplars ``exemplars``. ``rho``: an rgb (every texel of every level) or a
+    function (level, r) -> (r, r, 3), or a list of those, one per exemplar; ``alpha``: a number or a function
+    (level, r, views) -> (r, r, V); ``table``: None (T = 1) or a function (level, r, views) -> (r, r, V, 3);
+    ``lobe_params`` None (no lobes: C = 0) or (r, r, K, 3, 4) per level via a function (level, r); ``period``
+    one [W, H] for every exemplar or a list of them."""
     path = str(path)
     shutil.rmtree(path, ignore_errors=True)
     views = hemisphere_grid(*VIEW_GRID)
     V = len(views)
+    E = len(exemplars)
+    rhos = rho if isinstance(rho, list) else [rho] * E
+    periods = [list(p) for p in period] if isinstance(period[0], (list, tuple)) else [list(period)] * E
+
+    def each(per_exemplar):
+        return np.stack(per_exemplar).astype(np.float32)
     with ArtifactWriter(path, kind="btf", stage="precompute btf", params={"test": 1}, inputs={}) as w:
         w.write("view_dirs", views)
         w.write("light_dirs", hemisphere_grid(*LIGHT_GRID))
         for lv in range(levels):
             r = res >> lv
-            w.write(f"level_{lv}/rho",
-                    (rho(lv, r) if callable(rho) else np.broadcast_to(rho, (r, r, 3))).astype(np.float32))
+            w.write(f"level_{lv}/rho", each([c(lv, r) if callable(c) else np.broadcast_to(c, (r, r, 3)) for c in rhos]))
             lob = np.zeros((r, r, lobes, 3, 4), np.float32)
             lob[..., 3] = 1.0
             if lobe_params is not None:
                 lob[...] = lobe_params(lv, r)
-            w.write(f"level_{lv}/lobes", lob)
+            w.write(f"level_{lv}/lobes", each([lob] * E))
             tb = np.ones((r, r, V, 4), np.float32)
             if table is not None:
                 tb[..., :3] = table(lv, r, views)
             tb[..., 3] = alpha(lv, r, views) if callable(alpha) else alpha
-            w.write(f"level_{lv}/table", tb)
+            w.write(f"level_{lv}/table", each([tb] * E))
             fr = np.zeros((r, r, 2, 3), np.float32)
             fr[..., 0, 2] = 1.0
             fr[..., 1, 0] = 1.0
             if frame is not None:
                 fr[...] = frame(lv, r)
-            w.write(f"level_{lv}/frame", fr)
-        w.summary.update(kind="btf", source=source, source_hash=source_hash, exemplar=0, exemplar_name="test",
-                         period=list(period), resolution=res, levels=levels, lobes=lobes, view_grid=list(VIEW_GRID),
+            w.write(f"level_{lv}/frame", each([fr] * E))
+        w.summary.update(kind="btf", source=source, source_hash=source_hash, exemplars=list(exemplars),
+                         exemplar_names=[f"test {k}" if E > 1 else "test" for k in exemplars], periods=periods,
+                         resolution=res, levels=levels, lobes=lobes, view_grid=list(VIEW_GRID),
                          light_grid=list(LIGHT_GRID))
     return path
 
@@ -322,7 +330,7 @@ def test_packed_texels_equal_the_core_model(tmp_path):
     art = Artifact(path)
     cat = np.concatenate
     def g(a):
-        return cat([np.asarray(art[f"level_{lv}/{a}"], np.float64).reshape((-1,) + art[f"level_{lv}/{a}"].shape[2:])
+        return cat([np.asarray(art[f"level_{lv}/{a}"], np.float64).reshape((-1,) + art[f"level_{lv}/{a}"].shape[3:])
                     for lv in range(2)])
 
     L = rng.normal(size=(60, 3))
@@ -582,6 +590,74 @@ def test_tiling_base_surface_and_foreign_texture(bench):
     assert code == 2, err
     assert "a BTF from a different repeat than the scene names" in err and "elsewhere.zarr" in err
     assert str(tiling) in err and "'plain'" in err and "'test'" in err
+    assert not out.exists()
+
+
+TWO_EXEMPLARS = """
+seed = 3
+[yarn]
+fibers_per_ply = 2
+[weave]
+spacing = [0.1, 0.1]
+[[exemplars]]
+name = "left"
+pattern = "plain"
+[[exemplars]]
+name = "right"
+pattern = "plain"
+[tiling]
+repeat = [2, 2]
+block_map = [[0, 1]]
+[surface]
+kind = "flat"
+resolution = [3, 3]
+"""
+
+
+def test_tiling_of_two_exemplars_reads_each_texture_where_the_block_map_places_it(bench):
+    """Reference: the tiling's base surface as an OBJ dressed with one exemplar's texture alone (the test above:
+    the same bytes as the tiling). A flat tiling of two exemplars, the block map's left half exemplar 0 and
+    its right half exemplar 1, dressed with a texture of both (red, blue Lambertian): every pixel equals, to
+    the byte, the red-only or the blue-only render, red on the left of each image row and blue on its right
+    (the camera looks straight down, image x along the flat u), about half each. A texture that lacks an
+    exemplar the map uses: exit 2 naming it, nothing written."""
+    from pipeline.artifacts import Artifact
+
+    (bench.d / "two.toml").write_text(TWO_EXEMPLARS)
+    tiling = bench.d / "two.zarr"
+    code, _, err = _cli("tile", bench.d / "two.toml", "-o", tiling)
+    assert code == 0, err
+    art = Artifact(tiling)
+    bm = np.asarray(art["block_map"])
+    assert set(np.unique(bm)) == {0, 1} and np.all(bm[: bm.shape[0] // 2] == 0) and np.all(bm[bm.shape[0] // 2:] == 1)
+    red, blue = (0.6, 0.1, 0.1), (0.1, 0.1, 0.6)
+    both = write_btf(bench.name("both").with_suffix(".zarr"), res=8, levels=4, rho=[red, blue], period=(0.2, 0.2),
+                     exemplars=(0, 1), source=str(tiling), source_hash=art.meta["content_hash"])
+    mesh = write_obj(bench.name("base").with_suffix(".obj"), art["base_vertices"], art["base_uv"],
+                     art["base_triangles"])
+    scene = bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0), origin=(0.2, 0.2, 0.4), target=(0.2, 0.2, 0.0),
+                        width=32, height=24)
+    on_tiling, ch, _ = bench.render(scene, "--set", f"btf={both}", "--fibers", tiling)
+    alone = []
+    for c in (red, blue):
+        one = write_btf(bench.name("one").with_suffix(".zarr"), res=8, levels=4, rho=c, period=(0.2, 0.2))
+        alone.append(bench.render(scene, "--set", f"btf={one}", "--set", f"mesh={mesh}", "--set", "repeat=2")[0])
+    cloth = ch["A"] > 0
+    assert cloth.mean() > 0.9
+    is_red = np.all(on_tiling == alone[0], axis=-1) & cloth
+    is_blue = np.all(on_tiling == alone[1], axis=-1) & cloth
+    assert np.all(is_red | is_blue | ~cloth)
+    assert 0.3 < is_red.sum() / cloth.sum() < 0.7
+    for row in range(on_tiling.shape[0]):      # left to right: red, then blue
+        cols = np.flatnonzero(cloth[row])
+        kinds = is_blue[row, cols].astype(int)
+        assert np.all(np.diff(kinds) >= 0), (row, kinds)
+    first = write_btf(bench.name("first").with_suffix(".zarr"), period=(0.2, 0.2), source=str(tiling),
+                      source_hash=art.meta["content_hash"])
+    out = bench.d / "lacking.exr"
+    code, _, err = _cli("render", scene, "-o", out, "--method", "btf", "--set", f"btf={first}", "--fibers", tiling)
+    assert code == 2, err
+    assert "has no texture of exemplar 1 ('right')" in err and len(err.strip().splitlines()) == 1
     assert not out.exists()
 
 

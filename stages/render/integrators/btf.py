@@ -9,8 +9,11 @@ four steps (§6):
    space. A ray that meets a triangle's back face sees the cloth's other side: n is flipped towards
    the viewer (t kept, so b flips too), and the back shows the same texture, mirrored.
 2. **texel**: the pattern coordinate (the corners' pattern coordinates interpolated, counted in
-   repeats) modulo 1 picks texel (floor(frac(y) r), floor(frac(x) r)) of a level of r x r texels: the
-   nearest texel, no filtering within a level.
+   repeats) picks the exemplar whose texture is read -- on a tiling of several exemplars (a damask),
+   the one the tiling's block map places at that flat point (``texel_exemplar``, the tile stage's own
+   ``stages.core.blocks.block_of``; none: no cloth there, the ray goes on); on a mesh, the first --
+   and, counted in that exemplar's repeats, modulo 1 picks texel (floor(frac(y) r), floor(frac(x) r))
+   of a level of r x r texels: the nearest texel, no filtering within a level.
 3. **f_r**: light l and view v = -d in the local frame give f_r(l, v) = T(v) . f_1(l, v) (Eq. 1-2: the
    Lafortune lobes with l, v in the texel's own frame, ``stages.core.btf``; T(v) and alpha bilinear on
    the view grid with ``grid_weights``, once per ray for every texel it reads). f_r includes l_z.
@@ -43,9 +46,13 @@ The lights of the quadrature are not shadowed.
 
 ``BtfIntegrator`` fields: ``mesh`` (``TriangleMesh``); ``shading`` (T, SHADING_SIZE) per triangle: its
 corners' unit normals (9), their pattern coordinates in repeats (6), the unit tangent dP/dx (3), the
-unit geometric normal (3) and the world width of a level-0 texel on it (1); the texture, all levels
-flattened (level l's texel (iy, ix) is row ``levels[l, 0] + iy levels[l, 1] + ix``, ``levels[l, 1]``
-its resolution): ``texels`` (N, TEXEL_HEAD + 12 K) rho (3), the texel frame's n, t, b = n x t (9),
+unit geometric normal (3) and the world width of a level-0 texel on it (1), both for the first exemplar's
+repeat; the texture, every exemplar's levels flattened (exemplar e's level l's texel (iy, ix) is row
+``levels[e, l, 0] + iy levels[e, l, 1] + ix``, ``levels[e, l, 1]`` its resolution; ``exemplar_scale`` (E, 2) the
+first exemplar's period over exemplar e's, which turns a pattern coordinate into e's repeats); ``block_map``
+(nbu, nbv) the texture's exemplar per block of the flat fabric (-1: none), ``block_size`` (2) and
+``flat_period`` (2) the flat size of a block and of one pattern unit (a mesh: a 1 x 1 map of exemplar 0);
+``texels`` (N, TEXEL_HEAD + 12 K) rho (3), the texel frame's n, t, b = n x t (9),
 then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb and alpha;
 ``n_theta``, ``n_phi`` the view grid, ``light_dirs`` (L, 3) the light grid (pattern space);
 ``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional, ``ground``,
@@ -69,6 +76,7 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
+from stages.core.blocks import block_of
 from stages.core.btf import LOBE_PARAMS, grid_weights, lafortune_lobe
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.triangles import TriangleHit, mesh_intersect
@@ -80,7 +88,8 @@ SG_U = 8    # SG lights: stratified points along the lobe's cos theta ...
 SG_V = 8    # ... and around its axis (sg_f1)
 
 BtfIntegrator = namedtuple("BtfIntegrator", [
-    "mesh", "shading", "texels", "table", "levels", "n_theta", "n_phi", "light_dirs",
+    "mesh", "shading", "texels", "table", "levels", "exemplar_scale", "block_map", "block_size", "flat_period",
+    "n_theta", "n_phi", "light_dirs",
     "lights", "quad_lights", "ground", "has_ground", "pixel_angle", "forward",
     "mip", "shadows", "max_layers", "eps"])
 
@@ -182,18 +191,32 @@ def to_local(f, wx, wy, wz):
 
 
 @njit(cache=True, inline="always")
-def texel_index(levels, level, pu, pv):
-    """Row of the flattened texture: level ``level``'s nearest texel to pattern coordinate (pu, pv)."""
-    r = levels[level, 1]
+def texel_exemplar(it, pu, pv):
+    """(exemplar e, its pattern coordinate) at pattern coordinate (pu, pv): the block map's exemplar of the flat
+    point (pu, pv) x ``flat_period`` (``stages.core.blocks.block_of``), -1 where the map places none; the
+    coordinate counted in repeats of exemplar e (``exemplar_scale``)."""
+    bm = it.block_map
+    i, j, _ri, _rj = block_of(pu * it.flat_period[0], pv * it.flat_period[1], it.block_size, bm.shape[0],
+                              bm.shape[1])
+    e = bm[i, j]
+    if e < 0:
+        return -1, pu, pv
+    return e, pu * it.exemplar_scale[e, 0], pv * it.exemplar_scale[e, 1]
+
+
+@njit(cache=True, inline="always")
+def texel_index(levels, e, level, pu, pv):
+    """Row of the flattened texture: exemplar e's level ``level``'s nearest texel to pattern coordinate (pu, pv)."""
+    r = levels[e, level, 1]
     ix = min(int((pu - math.floor(pu)) * r), r - 1)
     iy = min(int((pv - math.floor(pv)) * r), r - 1)
-    return levels[level, 0] + iy * r + ix
+    return levels[e, level, 0] + iy * r + ix
 
 
 @njit(cache=True, inline="always")
 def mip_blend(it, width, texel_width):
     """(level l0, level l1, weight of l1) for a footprint ``width`` over level-0 texels of ``texel_width``."""
-    top = it.levels.shape[0] - 1
+    top = it.levels.shape[1] - 1
     if not it.mip or top == 0 or not (width > 0.0 and texel_width > 0.0):
         return 0, 0, 0.0
     lam = math.log2(width / texel_width)
@@ -272,11 +295,14 @@ def layer_alpha(it, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, l0, l1, fl):
     14 parameters: the integrator, the triangle hit (triangle, barycentrics, t), the ray and the mip level (two
     levels and their blend)."""
     f = surface_frame(it.shading, tri, b1, b2, t, ox, oy, oz, dx, dy, dz, 0.0)
+    e, pu, pv = texel_exemplar(it, f.pu, f.pv)
+    if e < 0:
+        return 0.0
     vx, vy, vz = to_local(f, -dx, -dy, -dz)
     i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(it.n_theta, it.n_phi, vx, vy, vz)
-    a = view_lookup(it.table, texel_index(it.levels, l0, f.pu, f.pv), i0, i1, i2, i3, w0, w1, w2, w3, 3)
+    a = view_lookup(it.table, texel_index(it.levels, e, l0, pu, pv), i0, i1, i2, i3, w0, w1, w2, w3, 3)
     if fl > 0.0:
-        a1 = view_lookup(it.table, texel_index(it.levels, l1, f.pu, f.pv), i0, i1, i2, i3, w0, w1, w2, w3, 3)
+        a1 = view_lookup(it.table, texel_index(it.levels, e, l1, pu, pv), i0, i1, i2, i3, w0, w1, w2, w3, 3)
         a = (1.0 - fl) * a + fl * a1
     return min(max(a, 0.0), 1.0)
 
@@ -374,12 +400,16 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
     table = it.table
     texels = it.texels
     K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
+    e, pu, pv = texel_exemplar(it, f.pu, f.pv)
+    if e < 0:       # no exemplar in this block of the tiling: no cloth here
+        return 0.0, 0.0, 0.0, 0.0, 0
     vx, vy, vz = to_local(f, -dx, -dy, -dz)
     i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(it.n_theta, it.n_phi, vx, vy, vz)
-    l0, l1, fl = mip_blend(it, footprint(it, t, f.cos_i, dx, dy, dz), it.shading[tri, S_TEXEL_WIDTH])
+    texel_width = it.shading[tri, S_TEXEL_WIDTH] / math.sqrt(it.exemplar_scale[e, 0] * it.exemplar_scale[e, 1])
+    l0, l1, fl = mip_blend(it, footprint(it, t, f.cos_i, dx, dy, dz), texel_width)
     two = fl > 0.0
-    ia = texel_index(it.levels, l0, f.pu, f.pv)
-    ib = texel_index(it.levels, l1, f.pu, f.pv)
+    ia = texel_index(it.levels, e, l0, pu, pv)
+    ib = texel_index(it.levels, e, l1, pu, pv)
     # T(v) and alpha of the (one or two) texels, premultiplied by alpha and their mip weights
     aa = (1.0 - fl) * view_lookup(table, ia, i0, i1, i2, i3, w0, w1, w2, w3, 3)
     ta0 = aa * view_lookup(table, ia, i0, i1, i2, i3, w0, w1, w2, w3, 0)
