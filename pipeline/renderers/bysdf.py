@@ -66,6 +66,7 @@ import numpy as np
 
 from ..errors import LoomError, unknown
 from . import RenderResult
+from .settings import number_setting
 
 MODES = ("near", "far", "multiscale")
 PLY_SEARCHES = ("march", "iteration")   # stages.core.yarn.implicit_plies.SEARCHES
@@ -80,20 +81,6 @@ FIBRE_SEED = 0   # realize's and tables' default --seed
 # type, never indexed): numba types a tuple by its length, so scenes of 1 to 4 yarn types share one compiled
 # integrator where each count compiled its own (about 18 s of a cold `make test`: two counts)
 TYPE_SLOTS = 4
-
-
-def _number(extra, key, default, kind=float, lo=None, hi=None):
-    v = extra.get(key)
-    if v is None:
-        return default
-    try:
-        x = kind(v)
-    except ValueError:
-        raise LoomError(None, f"--set {key}",
-                        f"expected {'an integer' if kind is int else 'a number'}, got {v!r}") from None
-    if not math.isfinite(x) or (lo is not None and x < lo) or (hi is not None and x > hi):
-        raise LoomError(None, f"--set {key}", f"{x:g} is outside [{lo:g}, {hi:g}]")
-    return x
 
 
 def reduced_albedo(colour, eta=1.5) -> np.ndarray:
@@ -160,12 +147,12 @@ def yarn_model(extra: dict) -> YarnModel:
     search = extra.get("ply_search", "march")
     if search not in PLY_SEARCHES:
         raise LoomError(None, "--set ply_search", unknown("ply search", search, PLY_SEARCHES))
-    return YarnModel(MODES.index(mode), int(_number(extra, "k", DEFAULT_K, int, 1, 256)),
-                     _number(extra, "falloff", DEFAULT_FALLOFF, float, 0.0, 1e6),
-                     _number(extra, "ply_tol", 1e-3, float, 1e-9, 0.5),
-                     int(_number(extra, "ply_iter", 10, int, 3, 100)),
-                     _number(extra, "fibre_threshold", 0.5, float, 0.0, 1.0),
-                     _number(extra, "ply_threshold", 0.6, float, 0.0, 1.0), search)
+    return YarnModel(MODES.index(mode), int(number_setting(extra, "k", DEFAULT_K, int, 1, 256)),
+                     number_setting(extra, "falloff", DEFAULT_FALLOFF, float, 0.0, 1e6),
+                     number_setting(extra, "ply_tol", 1e-3, float, 1e-9, 0.5),
+                     int(number_setting(extra, "ply_iter", 10, int, 3, 100)),
+                     number_setting(extra, "fibre_threshold", 0.5, float, 0.0, 1.0),
+                     number_setting(extra, "ply_threshold", 0.6, float, 0.0, 1.0), search)
 
 
 def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:

@@ -21,13 +21,13 @@ multiple scattering's angular detail. Integrator: ``stages.render.integrators.pr
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 
 from ..errors import LoomError, unknown
 from . import RenderResult
+from .settings import number_setting
 
 TERMS = {"all": 3, "single": 1, "multi": 2, "hits": 0}
 SH_WINDOWS = ("none", "hann", "lanczos")
@@ -62,19 +62,6 @@ def _check_precompute(art_path, kind, tiling_path, tiling_id):
 def _used_exemplars(art) -> list[int]:
     bm = art["block_map"]
     return sorted(int(k) for k in np.unique(bm) if k >= 0)
-
-
-def _float_setting(extra, key, default):
-    v = extra.get(key)
-    if v is None:
-        return default
-    try:
-        x = float(v)
-    except ValueError:
-        raise LoomError(None, f"--set {key}", f"expected a number, got {v!r}") from None
-    if not (math.isfinite(x) and x >= 0):
-        raise LoomError(None, f"--set {key}", f"must be a finite number >= 0, got {v!r}")
-    return x
 
 
 def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
@@ -190,7 +177,8 @@ def film_setup(scene, options: dict):
     if window != "none":
         arr["transfer"] = np.ascontiguousarray(arr["transfer"]
                                                * (w[:, None] * w[None, :]).astype(arr["transfer"].dtype))
-    sigma = _float_setting(extra, "sigma_glo", float(art.summary.get("exemplar_thickness", art.summary["thickness"])))
+    sigma = number_setting(extra, "sigma_glo", float(art.summary.get("exemplar_thickness", art.summary["thickness"])),
+                           lo=0.0)
     ground, has_ground = ground_array(scene.render)
     cam = camera_array(scene.camera, options["width"], options["height"])
     flat_size = np.asarray(art.summary["flat_size"], np.float64)

@@ -41,7 +41,7 @@ from pathlib import Path
 from ..errors import LoomError, unknown
 from ..schemas import validate
 from ..toml_file import read_toml
-from .sweep_file import absolute_paths, base_scene, check_method_names
+from .sweep_file import absolute_paths, check_method_names, read_study
 
 BUDGET_KINDS = ("spp", "max_spp")
 DEFAULT_LEVELS = (0.3, 0.2, 0.1)
@@ -107,11 +107,8 @@ def _method(path: Path, i: int, m: dict) -> CompareMethod:
 
 
 def load_comparison(path: str | Path) -> Comparison:
-    path = Path(path)
-    raw = read_toml(path, what="comparison file")
-    validate(raw, "compare", path)
+    path, raw, scene_path = read_study(path, "compare", "comparison file")
     cp = raw["compare"]
-    scene_path = base_scene(path, cp["scene"], "compare.scene")
     methods = tuple(_method(path, i, m) for i, m in enumerate(raw["methods"]))
     check_method_names(path, [m.name for m in methods], cp["reference"], "compare.reference")
     r = raw["reference"]

@@ -127,15 +127,20 @@ def absolute_paths(raw: dict, scene_path: Path) -> dict:
     return raw
 
 
-def base_scene(path: Path, name: str, place: str) -> Path:
-    """The scene file ``name`` that the file ``path`` names at ``place`` (relative to it), checked and read."""
-    scene_path = Path(name)
+def read_study(path: str | Path, kind: str, what: str) -> tuple[Path, dict, Path]:
+    """(path, the file's TOML, its base scene's path) of a sweep or comparison file (``kind``: its schema and its
+    top table): read (``what`` names it in errors), validated, and the scene its ``<kind>.scene`` names
+    (relative to it) checked and read."""
+    path = Path(path)
+    raw = read_toml(path, what=what)
+    validate(raw, kind, path)
+    scene_path = Path(raw[kind]["scene"])
     if not scene_path.is_absolute():
         scene_path = (path.parent / scene_path).resolve()
     if not scene_path.is_file():
-        raise LoomError(path, place, f"scene file {scene_path} not found")
+        raise LoomError(path, f"{kind}.scene", f"scene file {scene_path} not found")
     load_scene(scene_path)  # the base scene's names checked now, not at each derived render
-    return scene_path
+    return path, raw, scene_path
 
 
 def check_method_names(path: Path, names: list[str], reference: str, place: str) -> None:
@@ -148,11 +153,8 @@ def check_method_names(path: Path, names: list[str], reference: str, place: str)
 
 
 def load_sweep(path: str | Path) -> Sweep:
-    path = Path(path)
-    raw = read_toml(path, what="sweep file")
-    validate(raw, "sweep", path)
+    path, raw, scene_path = read_study(path, "sweep", "sweep file")
     sw = raw["sweep"]
-    scene_path = base_scene(path, sw["scene"], "sweep.scene")
     scene_raw = read_toml(scene_path, what="scene file")
     methods = [Method(m["name"], m.get("method", m["name"]), dict(m.get("render", {})), list(m.get("args", [])))
                for m in raw["methods"]]
