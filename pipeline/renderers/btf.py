@@ -240,10 +240,11 @@ def geometry_source(scene, options) -> str:
 
 def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_ground, cam, mip: bool, shadows: bool):
     """The ``BtfIntegrator`` of a dressed mesh and a texture under a camera (``pack_camera`` layout)."""
+    from stages.core.btf import hemisphere_grid
     from stages.core.geometry.triangles import build_triangle_mesh, uv_derivatives
     from stages.render.camera import CAM_FORWARD, CAM_TAN_HALF_FOV, CAM_WIDTH
-    from stages.render.integrators.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator
-    from stages.render.lights import DIRECTIONAL
+    from stages.render.integrators.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator, sky_table
+    from stages.render.lights import CONSTANT, DIRECTIONAL, ENVMAP
 
     from ..render_setup import ray_eps
 
@@ -261,13 +262,22 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
     shading[:, 18:21] = unit(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]))
     shading[:, 21] = np.sqrt(np.linalg.norm(np.cross(dpdx, dpdy), axis=1)) / float(tex.levels[0, 0, 1])
     table = lights.table()
-    quad = int(np.count_nonzero(table.lights[:, 0] != DIRECTIONAL))
+    kinds = table.lights[:, 0]
+    quad = int(np.count_nonzero(kinds != DIRECTIONAL))
+    env = int(np.count_nonzero(kinds == ENVMAP))
+    constant = kinds == CONSTANT
+    has_sky = bool(constant.any())
+    # a constant light's quadrature, per texel and grid view, once (``stages.render.integrators.btf.sky_table``)
+    sky = (sky_table(tex.texels, tex.light_dirs, hemisphere_grid(*tex.view_grid)) if has_sky
+           else np.zeros((1, 1, 3), np.float32))
+    sky_radiance = np.ascontiguousarray(table.lights[constant, 1:4].sum(axis=0), np.float64)
     eps = ray_eps(V.min(0), V.max(0)) if len(V) else 1e-9
     pixel_angle = 2.0 * float(cam[CAM_TAN_HALF_FOV]) / float(cam[CAM_WIDTH])
     return BtfIntegrator(mesh, shading, tex.texels, tex.table, tex.levels,
                          np.ascontiguousarray(tex.periods[0][None, :] / tex.periods), geom.blocks.block_map,
                          geom.blocks.block_size, geom.blocks.flat_period, int(tex.view_grid[0]),
-                         int(tex.view_grid[1]), tex.light_dirs, table, quad, ground, has_ground, pixel_angle,
+                         int(tex.view_grid[1]), tex.light_dirs, table, quad, env, sky, sky_radiance, has_sky, ground,
+                         has_ground, pixel_angle,
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
                          int(bool(shadows)), MAX_LAYERS, eps)
 

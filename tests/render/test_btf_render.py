@@ -301,12 +301,29 @@ def _packed_vs_core(texels, table, rho, lobes, frame, tab, L, Vd, nt, nph):
     return err
 
 
+@njit
+def _sky_brute(rho, lobes, frame, L, Vd):
+    """sum_j (2 pi / L) f_1(l_j, v_i) per texel, view and channel by ``stages.core.btf.texel_f1``."""
+    out = np.zeros((len(rho), len(Vd), 3))
+    dw = 2.0 * np.pi / len(L)
+    for i in range(len(rho)):
+        for v in range(len(Vd)):
+            for j in range(len(L)):
+                for c in range(3):
+                    out[i, v, c] += dw * texel_f1(rho[i], lobes[i], frame[i], c, L[j, 0], L[j, 1], L[j, 2],
+                                                  Vd[v, 0], Vd[v, 1], Vd[v, 2])
+    return out
+
+
 def test_packed_texels_equal_the_core_model(tmp_path):
     """Reference: ``stages.core.btf.texel_f1`` and ``table_lookup`` (Eq. 1-2 as the fit reads it) on the
     artifact's own arrays: the renderer's packed texels (``pipeline.renderers.btf.load_btf``) give the
     same f_1 (relative 1e-12) and T(v), alpha (1e-6, float32 table) for random texels with two
-    anisotropic lobes and tilted frames, random lights and views of the upper hemisphere."""
+    anisotropic lobes and tilted frames, random lights and views of the upper hemisphere. The constant
+    sky's table (``sky_table``) is the light grid's quadrature of that f_1 at every grid view (float32:
+    relative 1e-6)."""
     from pipeline.renderers.btf import load_btf
+    from stages.render.integrators.btf import sky_table
 
     rng = np.random.default_rng(7)
 
@@ -341,6 +358,11 @@ def test_packed_texels_equal_the_core_model(tmp_path):
     Vd /= np.linalg.norm(Vd, axis=1)[:, None]
     err = _packed_vs_core(tex.texels, tex.table, g("rho"), g("lobes"), g("frame"), g("table"), L, Vd, *VIEW_GRID)
     assert err < 1e-6
+    views = hemisphere_grid(*VIEW_GRID)
+    sky = sky_table(tex.texels, tex.light_dirs, views)
+    ref = _sky_brute(g("rho"), g("lobes"), g("frame"), tex.light_dirs, views)
+    assert sky.shape == ref.shape and sky.dtype == np.float32
+    assert np.max(np.abs(sky - ref) / np.maximum(np.abs(ref), 1e-6)) < 1e-6
     assert tex.fit_bytes == sum(a.nbytes for name, a in art.arrays().items()
                                 if name.startswith(("level_", "view_", "light_")))
 

@@ -20,9 +20,12 @@ four steps (§6):
 4. **radiance**: a directional light of irradiance E (``stages.render.lights``) adds E f_r(l, v);
    an SG light of power P adds (P / n) sum_i f_r(l_i, v) over n = 64 fixed stratified points l_i of its
    own distribution (``sg_f1``: exact in the sharp limit, where the light grid would miss the lobe);
-   constant and environment lights are summed over the texture's own light grid (the equal-area
-   hemisphere grid of the fit, every direction 2 pi / L of solid angle):
-   sum_j (2 pi / L) L_light(l_j) f_r(l_j, v), l_j taken from the local frame to the world.
+   environment maps are summed over the texture's own light grid (the equal-area hemisphere grid of
+   the fit, every direction 2 pi / L of solid angle): sum_j (2 pi / L) L_light(l_j) f_r(l_j, v), l_j
+   taken from the local frame to the world; a constant light (radiance L from everywhere) by the same
+   sum, which then does not depend on the frame: L sum_j (2 pi / L) f_1(l_j, v) is tabulated per texel
+   at the view grid's directions once per render (``sky_table``) and read at the view's grid weights as
+   T(v) is (``sky_f1``; exact at the grid's views, interpolated between them).
 
 **Alpha** (§3, §6): the table's alpha at the view is the texel's coverage for that view, 0 at a hole
 in the weave. The ray goes on through the surface (the next hit along the same ray, up to
@@ -55,7 +58,10 @@ first exemplar's period over exemplar e's, which turns a pattern coordinate into
 ``texels`` (N, TEXEL_HEAD + 12 K) rho (3), the texel frame's n, t, b = n x t (9),
 then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb and alpha;
 ``n_theta``, ``n_phi`` the view grid, ``light_dirs`` (L, 3) the light grid (pattern space);
-``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional, ``ground``,
+``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional (the ground's
+quadrature), ``env_lights`` how many are environment maps (the surface's quadrature), ``sky`` (N, V, 3)
+the ``sky_table`` when ``has_sky`` (a constant light is there; else (1, 1, 3) unused) and ``sky_radiance``
+(3) the constant lights' total radiance, ``ground``,
 ``has_ground``; ``pixel_angle`` 2 tan(fov / 2) / width and ``forward`` the camera axis; ``mip``,
 ``shadows`` (0 or 1), ``max_layers``, ``eps`` (ray offset, scene units). Nothing is random: the
 estimate is exact per camera ray (the tile loop's jitter places the ray in its pixel).
@@ -72,7 +78,7 @@ import math
 from collections import namedtuple
 
 import numpy as np
-from numba import njit, types
+from numba import njit, prange, types
 from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
@@ -82,16 +88,15 @@ from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.triangles import TriangleHit, mesh_intersect
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import DIRECTIONAL, SG, environment_radiance, light_eval, light_sample
+from stages.render.lights import CONSTANT, DIRECTIONAL, SG, environment_radiance, light_eval, light_sample
 
 SG_U = 8    # SG lights: stratified points along the lobe's cos theta ...
 SG_V = 8    # ... and around its axis (sg_f1)
 
 BtfIntegrator = namedtuple("BtfIntegrator", [
     "mesh", "shading", "texels", "table", "levels", "exemplar_scale", "block_map", "block_size", "flat_period",
-    "n_theta", "n_phi", "light_dirs",
-    "lights", "quad_lights", "ground", "has_ground", "pixel_angle", "forward",
-    "mip", "shadows", "max_layers", "eps"])
+    "n_theta", "n_phi", "light_dirs", "lights", "quad_lights", "env_lights", "sky", "sky_radiance", "has_sky",
+    "ground", "has_ground", "pixel_angle", "forward", "mip", "shadows", "max_layers", "eps"])
 
 MAX_LAYERS = 4
 INV_PI = 1.0 / math.pi
@@ -330,8 +335,8 @@ def shadow_transmittance(it, px, py, pz, lx, ly, lz, l0, l1, fl):
 
 @njit(cache=True)
 def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
-    """sum_j (2 pi / L) L_light(l_j) f_1(l_j, v) over the light grid, all non-directional lights, for texel
-    rows ia and (when ``two``) ib: (a r, a g, a b, b r, b g, b b)."""
+    """sum_j (2 pi / L) L_light(l_j) f_1(l_j, v) over the light grid, the environment maps (constant lights:
+    ``sky_f1``; SG lights: ``sg_f1``), for texel rows ia and (when ``two``) ib: (a r, a g, a b, b r, b g, b b)."""
     lights = it.lights.lights
     texels = it.texels
     K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
@@ -350,7 +355,7 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
         r1 = 0.0
         r2 = 0.0
         for k in range(lights.shape[0]):
-            if lights[k, 0] != DIRECTIONAL and lights[k, 0] != SG:   # SG lights: sg_f1
+            if lights[k, 0] != DIRECTIONAL and lights[k, 0] != SG and lights[k, 0] != CONSTANT:   # sg_f1, sky
                 q0, q1, q2 = light_eval(lights, k, it.lights.env, it.lights.marginal, it.lights.conditional, w)
                 r0 += q0
                 r1 += q1
@@ -362,6 +367,52 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
         r2 *= dw
         s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, r0, r1, r2)
     return s
+
+
+@njit(cache=True, parallel=True)
+def sky_table(texels, light_dirs, view_dirs):
+    """(N, V, 3) float32: per texel row and grid view v_i (``view_dirs``, the texture's view grid), the light
+    grid's quadrature sum_j (2 pi / L) f_1(l_j, v_i) -- the texel's answer to a constant sky of unit radiance.
+    A constant light's radiance is the same from every direction, so this sum does not depend on where the
+    texel lies on the mesh (its frame), only on the view: ``quadrature_f1`` of a constant light, computed once
+    per texel and grid view instead of once per pixel."""
+    N = texels.shape[0]
+    K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
+    L = light_dirs.shape[0]
+    dw = 2.0 * math.pi / L
+    out = np.empty((N, view_dirs.shape[0], 3), np.float32)
+    for idx in prange(N):
+        for i in range(view_dirs.shape[0]):
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            for j in range(L):
+                f0, f1, f2 = texel_f1_rgb(texels, K, idx, light_dirs[j, 0], light_dirs[j, 1], light_dirs[j, 2],
+                                          view_dirs[i, 0], view_dirs[i, 1], view_dirs[i, 2])
+                s0 += dw * f0
+                s1 += dw * f1
+                s2 += dw * f2
+            out[idx, i, 0] = s0
+            out[idx, i, 1] = s1
+            out[idx, i, 2] = s2
+    return out
+
+
+@njit(cache=True, inline="always")
+def sky_f1(it, ia, ib, two, i0, i1, i2, i3, w0, w1, w2, w3):
+    """The constant lights' sum_j (2 pi / L) L f_1(l_j, v) for texel rows ia and (when ``two``) ib: the
+    ``sky`` table of each row read at the view's grid weights (as T(v)), times the lights' total radiance."""
+    L0 = it.sky_radiance[0]
+    L1 = it.sky_radiance[1]
+    L2 = it.sky_radiance[2]
+    a0 = L0 * view_lookup(it.sky, ia, i0, i1, i2, i3, w0, w1, w2, w3, 0)
+    a1 = L1 * view_lookup(it.sky, ia, i0, i1, i2, i3, w0, w1, w2, w3, 1)
+    a2 = L2 * view_lookup(it.sky, ia, i0, i1, i2, i3, w0, w1, w2, w3, 2)
+    if not two:
+        return a0, a1, a2, 0.0, 0.0, 0.0
+    return (a0, a1, a2, L0 * view_lookup(it.sky, ib, i0, i1, i2, i3, w0, w1, w2, w3, 0),
+            L1 * view_lookup(it.sky, ib, i0, i1, i2, i3, w0, w1, w2, w3, 1),
+            L2 * view_lookup(it.sky, ib, i0, i1, i2, i3, w0, w1, w2, w3, 2))
 
 
 @njit(cache=True)
@@ -451,7 +502,9 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
             e1 = lights[k, 2] * vis
             e2 = lights[k, 3] * vis
             s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2)
-        if it.quad_lights > 0:
+        if it.has_sky:
+            s = add6(s, sky_f1(it, ia, ib, two, i0, i1, i2, i3, w0, w1, w2, w3))
+        if it.env_lights > 0:
             s = add6(s, quadrature_f1(it, f, ia, ib, two, vx, vy, vz))
     return ta0 * s[0] + tb0 * s[3], ta1 * s[1] + tb1 * s[4], ta2 * s[2] + tb2 * s[5], min(max(cover, 0.0), 1.0), rays
 
