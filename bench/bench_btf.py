@@ -136,7 +136,7 @@ def run(out_dir) -> dict:
         "fps_tiles_16": fps16, "cpu_s_per_frame_tiles_16": cpu16,
         "fps_1_thread": fps1, "cpu_s_per_frame_1_thread": cpu1, "fps_mip_off": fps_nomip,
         "fps_shadows_on": fps_shadows, "scene_lights": ", ".join(lt["type"] for lt in scene.lights),
-        "fps_scene_lights": fps_sky, "fps_scene_lights_target": 10.0, "cpu_s_per_frame_scene_lights": cpu_sky,
+        "scene_lights_fps": fps_sky, "scene_lights_fps_target": 10.0, "scene_lights_cpu_s_per_frame": cpu_sky,
         "sky_table_s": sky_s, "pixels_per_s": fps2 * W * H, "load_average_before": load,
         "setup_s": setup_s, "first_tile_incl_compile_s": compile_s,
     }
