@@ -8,6 +8,9 @@
   coloured by yarn group (warp / weft), drawn bottom to top and darker the deeper they lie, so the weave
   (which yarn floats over which) is visible; the exemplar's block grid with the block ids
   (bx + nbx by) on top.
+
+A picture smaller than ``FULL_LAYOUT`` (pixels) has no room for the exemplar panels at legible type sizes:
+it shows the base view and its legend alone, and says so in its title.
 """
 from __future__ import annotations
 
@@ -20,6 +23,7 @@ PALETTE = np.array([[0.85, 0.70, 0.35], [0.55, 0.12, 0.16], [0.20, 0.45, 0.70], 
 GROUP_COLORS = {0: ("warp", (0.90, 0.60, 0.10)), 1: ("weft", (0.15, 0.38, 0.80)), 2: ("knit", (0.75, 0.25, 0.20))}
 SHELL_COLOR = "lightblue"
 MAX_BLOCK_LABELS = 64
+FULL_LAYOUT = (900, 500)     # the least (width, height) in pixels that holds the exemplar panels
 
 
 def block_texture(block_map):
@@ -145,6 +149,8 @@ def inspect(art, png, show=False, yarn=-1, size=(1200, 900), **_):
         plotter.add_legend([[lab, col] for lab, col in base_legend(art)], bcolor="white", face="rectangle",
                            size=(0.3, 0.2))
         plotter.show()
+    if size[0] < FULL_LAYOUT[0] or size[1] < FULL_LAYOUT[1]:
+        return _compact(art, pv, png, show, size, base_title)
     wl = size[0] * 0.45
     img = screenshot(base_view(art, pv, (wl, size[1]), off_screen=True))
     # figure height from the content: the base view at its aspect in the left 45%, titles and legends
@@ -167,4 +173,22 @@ def inspect(art, png, show=False, yarn=-1, size=(1200, 900), **_):
                      if np.any(art["ex_yarn_group"] == g)], loc="upper left",
             bbox_to_anchor=(0.0, -0.16), ncol=2, frameon=False, title="yarn (darker = deeper in the cloth)",
             alignment="left")
+        return finish(fig, png, show)
+
+
+def _compact(art, pv, png, show, size, base_title):
+    """The base view and its legend alone, at ``size`` (smaller than ``FULL_LAYOUT``)."""
+    from matplotlib.patches import Patch
+
+    img = screenshot(base_view(art, pv, (size[0] * 0.55, size[1]), off_screen=True))
+    with pyplot(show) as plt:
+        fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), layout="constrained")
+        ax_img, ax_leg = fig.subplots(1, 2, width_ratios=[1.2, 1])
+        image_panel(ax_img, img, "")
+        fig.suptitle(base_title)        # across the figure: the view's own width is too narrow for it
+        ax_leg.set_axis_off()
+        ax_leg.legend(handles=[Patch(facecolor=c, edgecolor="0.3", alpha=0.5 if c == SHELL_COLOR else 1, label=l)
+                               for l, c in base_legend(art)], loc="center left", frameon=False,
+                      title=f"block colours (exemplar panels:\n{FULL_LAYOUT[0]} x {FULL_LAYOUT[1]} px or more)",
+                      alignment="left")
         return finish(fig, png, show)
