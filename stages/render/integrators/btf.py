@@ -38,8 +38,9 @@ lit by the same lights, the same quadrature) or the lights seen directly (the ba
 angle off the camera axis; at distance t and incidence cos_i to the triangle its footprint on the
 surface is t sqrt(solid angle) / cos_i wide along its long axis (what OpenGL's level selection takes).
 A level-0 texel on triangle k is sqrt(|dP/dx x dP/dy|) / res wide (dP/dx, dP/dy: the world size of
-one repeat along the pattern's axes). The level is log2(footprint / texel) clamped to [0, levels - 1],
-blended linearly between the two nearest levels: alpha and alpha-weighted colour (premultiplied), so
+one repeat along the pattern's axes; for exemplar e that width over sqrt of its ``exemplar_scale``). The
+level is log2(footprint / texel) clamped to [0, levels - 1], blended linearly between the two nearest
+levels: alpha and alpha-weighted colour (premultiplied), so
 holes fade into the coarser levels' partial coverage.
 
 **Shadows** (``shadows``): a directional light's shadow ray from the hit towards the light passes the
