@@ -40,8 +40,8 @@ surface is t sqrt(solid angle) / cos_i wide along its long axis (what OpenGL's l
 A level-0 texel on triangle k is sqrt(|dP/dx x dP/dy|) / res wide (dP/dx, dP/dy: the world size of
 one repeat along the pattern's axes; for exemplar e that width over sqrt of its ``exemplar_scale``). The
 level is log2(footprint / texel) clamped to [0, levels - 1], blended linearly between the two nearest
-levels: alpha and alpha-weighted colour (premultiplied), so
-holes fade into the coarser levels' partial coverage.
+levels: alpha and alpha-weighted colour (premultiplied), so holes fade into the coarser levels' partial
+coverage.
 
 **Shadows** (``shadows``): a directional light's shadow ray from the hit towards the light passes the
 mesh's surfaces with their coverage, transmittance prod (1 - alpha), alpha read at each surface for
