@@ -160,7 +160,8 @@ def test_btf_fits_every_exemplar_the_block_map_uses_each_as_alone(tiny_tiling, c
     """Contract (pipeline/runners/precompute_btf.py): without --exemplar, precompute btf fits every exemplar the
     tiling's block map uses (the tiny tiling's map uses both), each array with a leading exemplar axis in the
     summary's order; reference: each exemplar fitted alone (--exemplar K) gives the same bytes as its slice of
-    the joint artifact (an exemplar's acquisition and fit do not depend on the others)."""
+    the joint artifact (an exemplar's acquisition and fit do not depend on the others). Both pictures of
+    ``loomlight inspect`` are drawn."""
     from pipeline.artifacts import Artifact
 
     tiling = tiny_tiling[0]
@@ -181,3 +182,10 @@ def test_btf_fits_every_exemplar_the_block_map_uses_each_as_alone(tiny_tiling, c
         assert x.shape[0] == 2 and y.shape[0] == 1, n
         assert x[1].tobytes() == y[0].tobytes(), n
     assert not np.array_equal(np.asarray(a["samples"][0]), np.asarray(a["samples"][1]))
+    from tests.inspector_checks import assert_legible_png
+
+    for art in (both, one):         # a row per exemplar, or the two view/light pairs of the one
+        png = tmp_path / f"{art.stem}.png"
+        code, _, err = cli("inspect", art, "--png", png)
+        assert code == 0, err
+        assert_legible_png(png)
