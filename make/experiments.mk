@@ -136,7 +136,8 @@ prt-study: $(VENV)/.installed ## Khungurn et al. 2017 §6.1: the cell-size and S
 # --- Daubert et al. 2001 ---
 # make btf-sweep: Daubert et al. 2001 fitted texture of each damask exemplar alone on its flat patch (the prt sweep's
 # tilings, out/prt/flat41_tiling.zarr and flat14), fitted at the defaults of precompute btf (BTF_SWEEP_ARGS)
-# into out/btf/, against fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
+# into out/btf/, and of the knit swatch's stitch (make compare's, out/compare/inputs/knit_btf.zarr), against
+# fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
 BTF_SWEEP_ARGS ?=
 
 $(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py
@@ -144,9 +145,9 @@ $(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/sce
 
 .PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json
 
-btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) ## Daubert et al. 2001: fitted textures of the damask's two satins against fiberpath, 12 lights (out/btf)
-	@for s in 41 14; do $(LL) evaluate --sweep data/sweeps/btf_flat$$s.toml -o $(BTF_DIR)/flat$$s || exit 1; done
-	@for s in 41 14; do echo "report: $(BTF_DIR)/flat$$s/report.md"; done
+btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) $(COMPARE_IN)/knit_btf.zarr/zarr.json ## Daubert et al. 2001: fitted textures of the damask's two satins and a knit against fiberpath, 12 lights (out/btf)
+	@for s in flat41 flat14 knit; do $(LL) evaluate --sweep data/sweeps/btf_$$s.toml -o $(BTF_DIR)/$$s || exit 1; done
+	@for s in flat41 flat14 knit; do echo "report: $(BTF_DIR)/$$s/report.md"; done
 
 # --- yarn colours (pipeline/dye.py) ---
 albedo-curves: $(VENV)/.installed ## measure the albedo curve of every bundled BCSDF on every bundled yarn, and bysdf's colour curve of every yarn -> data/bcsdf/albedo_curves.json
