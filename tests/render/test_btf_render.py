@@ -548,9 +548,13 @@ def test_repeat_shifted_by_one_period_is_the_same_image(bench):
     assert not np.allclose(out[0], out[2])
 
 
-def test_threads_do_not_change_the_bytes(bench):
+def test_threads_and_tiles_do_not_change_the_bytes(bench):
     """Reference: the render at 1 thread. 2 threads give the same EXR image bytes (textured quads with
-    holes over a ground, shadows on, mip on, a directional and a constant light)."""
+    holes over a ground, shadows on, mip on, a directional and a constant light), and so do the house's
+    16-pixel tiles (``[render] tile_size = 16``) in place of btf's own default of 64 (the registry's)."""
+    from pipeline.renderers import method
+
+    assert method("btf").default("tile_size") == 64
     btf = write_btf(bench.name("checker").with_suffix(".zarr"), res=8, levels=4, rho=_checker,
                     alpha=lambda lv, r, v: np.where(v[:, 2] > 0.5, 0.4, 1.0)[None, None, :] * np.ones((r, r, 1)))
     V, UV, F = quad(size=3.0)
@@ -563,6 +567,10 @@ def test_threads_do_not_change_the_bytes(bench):
     a, _, _ = bench.render(scene, *args, threads=1)
     b, _, _ = bench.render(scene, *args, threads=2)
     assert np.array_equal(a, b) and a.max() > 0
+    small = bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0) + SKY.format(l=0.3), width=40, height=30,
+                        render="[render]\ntile_size = 16\n" + GROUND)
+    c, _, _ = bench.render(small, *args, threads=2)
+    assert np.array_equal(a, c)
 
 
 # ------------------------------------------------------------------------------------------------ tiling
