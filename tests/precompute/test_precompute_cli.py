@@ -159,17 +159,18 @@ BTF_ARGS = ["--resolution", "2", "--views", "2x4", "--lights", "2x4", "--spp", "
 def test_btf_fits_every_exemplar_the_block_map_uses_each_as_alone(tiny_tiling, cli, tmp_path):
     """Contract (pipeline/runners/precompute_btf.py): without --exemplar, precompute btf fits every exemplar the
     tiling's block map uses (the tiny tiling's map uses both), each array with a leading exemplar axis in the
-    summary's order; reference: each exemplar fitted alone (--exemplar K) gives the same bytes as its slice of
-    the joint artifact (an exemplar's acquisition and fit do not depend on the others). Both pictures of
+    summary's order; reference: each exemplar fitted alone (--exemplar K, on 1 thread) gives the same bytes as its
+    slice of the joint artifact (2 threads): an exemplar's acquisition and fit depend neither on the others nor
+    on the threads. Both pictures of
     ``loomlight inspect`` are drawn."""
     from pipeline.artifacts import Artifact
 
     tiling = tiny_tiling[0]
     both, one = tmp_path / "both.zarr", tmp_path / "one.zarr"
-    code, out, err = cli("precompute", "btf", tiling, "-o", both, *BTF_ARGS)
+    code, out, err = cli("precompute", "btf", tiling, "-o", both, *BTF_ARGS, "--threads", "2")
     assert code == 0, err
     assert "2 exemplar(s)" in out
-    code, _, err = cli("precompute", "btf", tiling, "-o", one, *BTF_ARGS, "--exemplar", "1")
+    code, _, err = cli("precompute", "btf", tiling, "-o", one, *BTF_ARGS, "--exemplar", "1", "--threads", "1")
     assert code == 0, err
     a, b = Artifact(both), Artifact(one)
     assert a.summary["exemplars"] == [0, 1] and a.summary["exemplar_names"] == ["plain", "satin"]
