@@ -185,8 +185,8 @@ def used_exemplars(art) -> list[int]:
     return used or list(range(int(art.summary["exemplars"])))
 
 
-def _fit_record(levels, res, V, K) -> dict:
-    """Per level, the arrays one exemplar's fit writes (``level_l/...``, without the exemplar axis)."""
+def _fit_record(levels, res, V, K) -> list[dict]:
+    """Per level, the arrays one exemplar's fit writes (``level_l/...``, without the exemplar axis), finest first."""
     out = []
     for lev, f in enumerate(levels):
         r = res >> lev
