@@ -623,25 +623,9 @@ def test_tiling_base_surface_and_foreign_texture(bench):
     assert not out.exists()
 
 
-TWO_EXEMPLARS = """
-seed = 3
-[yarn]
-fibers_per_ply = 2
-[weave]
-spacing = [0.1, 0.1]
-[[exemplars]]
-name = "left"
-pattern = "plain"
-[[exemplars]]
-name = "right"
-pattern = "plain"
-[tiling]
-repeat = [2, 2]
-block_map = [[0, 1]]
-[surface]
-kind = "flat"
-resolution = [3, 3]
-"""
+# the tiling above with a second exemplar on the right half of its block map
+TWO_EXEMPLARS = TILING.replace("[tiling]\n", '[[exemplars]]\nname = "right"\npattern = "plain"\n[tiling]\n'
+                               "block_map = [[0, 1]]\n")
 
 
 def test_tiling_of_two_exemplars_reads_each_texture_where_the_block_map_places_it(bench):
