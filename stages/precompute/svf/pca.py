@@ -1,5 +1,5 @@
-"""3. PCA of the SSDFs (the package doc): randomised subspace iteration with a deterministic order of
-every reduction, the projection of each segment and the error report."""
+"""3. PCA of the SSDFs (the package doc): the distinct images, weighted by their count, through the deterministic
+randomised subspace iteration of ``stages.precompute.pca``; the projection of each segment and the error report."""
 
 import math
 from collections import namedtuple
@@ -8,7 +8,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from stages.core.rng import normal
+from stages.precompute.pca import subspace_pca
 from stages.precompute.svf.pixels import packed_bytes
 from stages.precompute.svf.ssdf import segment_ssdf, ssdf_images, ssdf_tables
 
@@ -16,117 +16,6 @@ SsdfPca = namedtuple("SsdfPca", ["mean", "basis", "eigenvalues", "variance", "se
 SsdfPca.__doc__ = """ssdf_pca's result: mean (D,) float32, basis (n, D) float32 (orthonormal rows),
 eigenvalues (n,) float64 (variance per segment along each row), variance (total variance per segment,
 float), segments (S)."""
-
-
-BLOCK = 32
-
-
-@njit(cache=True, parallel=True)
-def _acc_mean(X, m, acc):
-    """acc[d] += m[s] X[s, d], s ascending."""
-    S, D = X.shape
-    nb = (D + BLOCK - 1) // BLOCK
-    for b in prange(nb):
-        d0 = b * BLOCK
-        d1 = min(D, d0 + BLOCK)
-        for s in range(S):
-            for d in range(d0, d1):
-                acc[d] += m[s] * X[s, d]
-
-
-@njit(cache=True, parallel=True)
-def _times_z(X, mean, Z, W):
-    """W[s, :] = (X[s] - mean) Z  (Z (D, p)), d ascending."""
-    S, D = X.shape
-    p = Z.shape[1]
-    for s in prange(S):
-        acc = np.zeros(p)
-        for d in range(D):
-            x = X[s, d] - mean[d]
-            for j in range(p):
-                acc[j] += x * Z[d, j]
-        for j in range(p):
-            W[s, j] = acc[j]
-
-
-@njit(cache=True, parallel=True)
-def _acc_xtw(X, m, mean, W, Y, sq):
-    """Y[d, :] += m[s] (X[s, d] - mean[d]) W[s, :] and sq[d] += m[s] (X[s, d] - mean[d])^2, s ascending."""
-    S, D = X.shape
-    p = W.shape[1]
-    nb = (D + BLOCK - 1) // BLOCK
-    for b in prange(nb):
-        d0 = b * BLOCK
-        d1 = min(D, d0 + BLOCK)
-        for s in range(S):
-            for d in range(d0, d1):
-                x = X[s, d] - mean[d]
-                mx = m[s] * x
-                sq[d] += mx * x
-                for j in range(p):
-                    Y[d, j] += mx * W[s, j]
-
-
-@njit(cache=True)
-def _acc_gram(W, m, G):
-    """G[i, j] += m[s] W[s, i] W[s, j], s ascending."""
-    S, p = W.shape
-    for s in range(S):
-        for i in range(p):
-            w = m[s] * W[s, i]
-            for j in range(p):
-                G[i, j] += w * W[s, j]
-
-
-@njit(cache=True)
-def _orthonormalise(Zt, seed, salt):
-    """Rows of Zt (p, D) orthonormalised in place by modified Gram-Schmidt, twice; a row that vanishes
-    (rank deficiency) is replaced by normals from rng (seed, salt + row, ...) and orthonormalised again."""
-    p, D = Zt.shape
-    for j in range(p):
-        for attempt in range(4):
-            n0 = 0.0
-            for d in range(D):
-                n0 += Zt[j, d] * Zt[j, d]
-            n0 = math.sqrt(n0)
-            for _rep in range(2):
-                for i in range(j):
-                    rr = 0.0
-                    for d in range(D):
-                        rr += Zt[i, d] * Zt[j, d]
-                    for d in range(D):
-                        Zt[j, d] -= rr * Zt[i, d]
-            nn = 0.0
-            for d in range(D):
-                nn += Zt[j, d] * Zt[j, d]
-            nn = math.sqrt(nn)
-            if nn > 1e-10 * n0 and nn > 0.0:
-                for d in range(D):
-                    Zt[j, d] /= nn
-                break
-            for d in range(D):
-                Zt[j, d] = normal(seed, salt + 1000003 * (attempt + 1) + j, 2 * d)
-
-
-@njit(cache=True)
-def _omega(seed, D, p, out):
-    """out (p, D): standard normals normal(seed, d, 2 j)."""
-    for d in range(D):
-        for j in range(p):
-            out[j, d] = normal(seed, d, 2 * j)
-
-
-@njit(cache=True)
-def _basis_rows(Zt, U, out):
-    """out[k, d] = sum_j Zt[j, d] U[j, k], j ascending."""
-    p, D = Zt.shape
-    n = out.shape[0]
-    for k in range(n):
-        for d in range(D):
-            acc = 0.0
-            for j in range(p):
-                acc += Zt[j, d] * U[j, k]
-            out[k, d] = acc
 
 
 def svf_memory_estimate(S: int, res_theta: int, res_phi: int, n_components: int, *, hold: bool = True,
@@ -185,7 +74,6 @@ def ssdf_pca(packed, res_theta: int, res_phi: int, n_components: int = 48, seed:
     n = int(n_components)
     if not 1 <= n <= D:
         raise ValueError(f"n_components must be in 1..{D}, got {n}")
-    p = min(D, n + int(oversample))
     uniq, _, counts = unique_images(packed)
     m = counts.astype(np.float64)
     parts = _chunks(len(uniq), max(1, int(chunk)))
@@ -195,44 +83,8 @@ def ssdf_pca(packed, res_theta: int, res_phi: int, n_components: int = 48, seed:
         for a, b in parts:
             yield (X_all[a:b] if hold else ssdf_images(uniq[a:b], res_theta, res_phi)), m[a:b]
 
-    acc = np.zeros(D)
-    for X, mb in blocks():
-        _acc_mean(X, mb, acc)
-    mean = acc / S
-    Zt = np.empty((p, D))
-    _omega(int(seed), D, p, Zt)
-    _orthonormalise(Zt, int(seed), 1 << 40)
-    sq = np.zeros(D)
-    for it in range(max(0, int(power_iters))):
-        Z = np.ascontiguousarray(Zt.T)
-        Y = np.zeros((D, p))
-        sq[:] = 0.0
-        for X, mb in blocks():
-            W = np.empty((X.shape[0], p))
-            _times_z(X, mean, Z, W)
-            _acc_xtw(X, mb, mean, W, Y, sq)
-        Zt = np.ascontiguousarray(Y.T)
-        _orthonormalise(Zt, int(seed), (it + 2) << 40)
-    Z = np.ascontiguousarray(Zt.T)
-    G = np.zeros((p, p))
-    if power_iters <= 0:
-        sq[:] = 0.0
-    for X, mb in blocks():
-        W = np.empty((X.shape[0], p))
-        _times_z(X, mean, Z, W)
-        _acc_gram(W, mb, G)
-        if power_iters <= 0:
-            _acc_xtw(X, mb, mean, W, np.zeros((D, p)), sq)
-    evals, U = np.linalg.eigh(G)
-    order = np.argsort(-evals, kind="stable")[:n]
-    U = np.ascontiguousarray(U[:, order])
-    basis = np.empty((n, D))
-    _basis_rows(Zt, U, basis)
-    big = np.argmax(np.abs(basis), axis=1)
-    basis *= np.where(basis[np.arange(n), big] < 0.0, -1.0, 1.0)[:, None]
-    variance = float(sq.sum()) / S
-    return SsdfPca(mean.astype(np.float32), basis.astype(np.float32),
-                   np.maximum(evals[order], 0.0) / S, variance, S)
+    pca = subspace_pca(blocks, S, D, n, seed, oversample, power_iters)
+    return SsdfPca(pca.mean.astype(np.float32), pca.basis.astype(np.float32), pca.eigenvalues, pca.variance, S)
 
 
 @njit(cache=True, parallel=True)
