@@ -135,13 +135,14 @@ prt-study: $(VENV)/.installed ## Khungurn et al. 2017 §6.1: the cell-size and S
 
 # --- Daubert et al. 2001 ---
 # make btf-sweep: Daubert et al. 2001 fitted texture of each damask exemplar alone on its flat patch (the prt sweep's
-# tilings, out/prt/flat41_tiling.zarr and flat14), fitted at the defaults of precompute btf (BTF_SWEEP_ARGS)
+# tilings, out/prt/flat41_tiling.zarr and flat14), fitted at the defaults of precompute btf (BTF_SWEEP_ARGS) with
+# both models (the Lafortune fit and the compressed table: --model tabulated)
 # into out/btf/, and of the knit swatch's stitch (make compare's, out/compare/inputs/knit_btf.zarr), against
 # fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
 BTF_SWEEP_ARGS ?=
 
 $(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py
-	$(LL) precompute btf $(PRT)/flat$*_tiling.zarr -o $(BTF_DIR)/flat$*_btf.zarr --exemplar $(PRT_EXEMPLAR_$*) $(BTF_SWEEP_ARGS)
+	$(LL) precompute btf $(PRT)/flat$*_tiling.zarr -o $(BTF_DIR)/flat$*_btf.zarr --exemplar $(PRT_EXEMPLAR_$*) --model tabulated $(BTF_SWEEP_ARGS)
 
 .PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json
 

@@ -1,9 +1,10 @@
 """loomlight's own import graph, read from the source (never by importing it).
 
-Two users: the house rules (``tests/test_layers.py``: floors, no import circles) and the equal-error
+Three users: the house rules (``tests/test_layers.py``: floors, no import circles), the equal-error
 comparison's code version (``runners.convergence.render_code_version``), which keys a method's pictures
 by the files that method's renderer can reach, so work on one method does not make another method's
-converged reference stale.
+converged reference stale, and ``code_version``, the same kind of key for a stage's step (``precompute
+btf``'s acquisition, which a refit or a new table reuses).
 
 ``import_graph(root, tops)``: module -> the project modules its file imports, at its top or inside a
 function (a lazy import still ties the two modules together). ``from pkg import name`` counts
@@ -75,3 +76,21 @@ def import_closure(graph: dict[str, list[str]], start: str) -> set[str]:
         todo.extend(".".join(parts[:i]) for i in range(1, len(parts)))
         todo.extend(graph[m])
     return seen
+
+
+def code_version(root: Path, starts, data=()) -> str:
+    """sha256 (16 hex digits) over the paths and bytes of the ``pipeline``/``stages`` files that the modules
+    ``starts`` reach and the .py/.toml/.json files under the folders ``data``: a key that changes when what a
+    computation runs changes, and only then (``precompute btf`` keys its acquisition so)."""
+    import hashlib
+
+    modules = module_files(root, ("pipeline", "stages"))
+    graph = import_graph(root, ("pipeline", "stages"))
+    files = sorted({modules[m] for s in starts for m in import_closure(graph, s)})
+    for d in data:
+        files += sorted(f for f in (root / d).rglob("*") if f.is_file() and f.suffix in (".py", ".toml", ".json"))
+    h = hashlib.sha256()
+    for f in files:
+        h.update(str(f.relative_to(root)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]

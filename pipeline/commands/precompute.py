@@ -157,6 +157,13 @@ def btf(
     threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "
                                                              "mean change is below this (Daubert et al. 2001: 0.1)."),
     max_rounds: int = typer.Option(10, "--max-rounds", help="At most this many lobe/table alternations."),
+    model: str = typer.Option("lafortune", "--model", metavar="<lafortune | tabulated>",
+                              help="lafortune: seed 002's fit (the btf renderer's default); tabulated: the fit and "
+                                   "the acquired table itself, compressed by local PCA (render with --set "
+                                   "model=tabulated)."),
+    clusters: int = typer.Option(8, "--clusters", help="Tabulated: clusters of texels, each with its own mean and "
+                                                       "components (1: plain PCA)."),
+    components: int = typer.Option(8, "--components", help="Tabulated: principal components per cluster."),
     directions: str = typer.Option("cell", "--directions", metavar="<cell | grid>",
                                    help="cell: each sample's view and light uniform over its grid cell (the texture "
                                         "holds cell averages, so fibre glints between grid directions are not lost "
@@ -187,12 +194,16 @@ def btf(
     check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
     p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=parse_grid(lights, "--lights"),
                   spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, directions=directions,
+                  model=model, clusters=clusters, components=components,
                   max_depth=max_depth,
                   rr_depth=rr_depth, seed=seed, material=parse_material_options(set_ or [], bcsdf))
     _run(run_btf, tiling, out, p, lambda res: f"{res['exemplars']} exemplar(s), "
          f"{res['resolution']}x{res['resolution']} texels, {res['views']} "
          f"views x {res['lights']} lights, {res['levels']} levels, {res['fit_bytes'] / 2**20:.2f} MiB fitted; "
          f"acquisition {res['acquire_s']:.1f} s, fit {res['fit_s']:.1f} s; fit RMSE level 0 "
-         f"{res['fit_rmse'][0]:.4g} (without the table {res['fit_rmse_no_table'][0]:.4g})",
+         f"{res['fit_rmse'][0]:.4g} (without the table {res['fit_rmse_no_table'][0]:.4g})"
+         + (f"; tabulated {res['table_bytes'] / 2**20:.2f} MiB, relative RMSE {res['table_rel_rmse']:.3f}, "
+            f"compression {res['compress_s']:.1f} s" if res["table_bytes"] else "")
+         + ("; acquisition reused" if res["acquisition_reused"] else ""),
          force=force, budget=budget, threads=threads, scheduler=scheduler, workers=workers,
          threads_per_worker=threads_per_worker, scene=scene, exemplars=exemplar or None)

@@ -170,8 +170,8 @@ METHODS = {m.name: m for m in (
                   Setting("tint", "yarn (default) or none, as fiberpath (must match the IIRTF's materials)",
                           ("yarn", "none")))),
     RenderMethod(
-        "btf", "a fitted cloth texture (Lafortune lobes x view table, mip-mapped) on a triangle mesh "
-               "(Daubert et al. 2001)",
+        "btf", "a fitted cloth texture (Lafortune lobes x view table, or the compressed acquired table; mip-mapped) "
+               "on a triangle mesh (Daubert et al. 2001)",
         "btf",
         sources=(Source("mesh", (BTF,), "an OBJ with texture coordinates (--set mesh=, --set repeat=) and the "
                                         "texture (--set btf=)"),
@@ -185,7 +185,10 @@ METHODS = {m.name: m for m in (
                   Setting("mip", "on (default): the mip level of each pixel's footprint, blended between levels; "
                                  "off: level 0 everywhere", ("on", "off")),
                   Setting("shadows", "off (default) or on: shadow rays towards directional lights through the "
-                                     "mesh's alpha", ("off", "on"))),
+                                     "mesh's alpha", ("off", "on")),
+                  Setting("model", "lafortune (default): seed 002's fitted lobes x view table; tabulated: the "
+                                   "acquired table, compressed (precompute btf --model tabulated)",
+                          ("lafortune", "tabulated"))),
         # a pixel costs well under a microsecond: 16-pixel tiles spend as long handing tiles to threads as on
         # the pixels (730 x 400: about 10 frames per second on 2 threads, 24 with 64; bench/bench_btf.py)
         defaults=(("tile_size", 64),)),

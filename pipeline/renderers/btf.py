@@ -39,6 +39,11 @@ Settings (``--set KEY=VALUE``):
   Within a level the nearest texel is read (no bilinear filter).
 - ``shadows`` = off (default) | on: shadow rays from each hit towards the directional lights, through
   the mesh's surfaces with their alpha (holes let light through) and blocked by the ground.
+- ``model`` = lafortune (default) | tabulated: seed 002's fit, or the acquired table itself -- r(l, v) per texel
+  over the view and light grids, compressed by local PCA (``precompute btf --model tabulated``,
+  ``stages.precompute.btf_compress``), decoded once per render and read bilinearly on both grids. The
+  tabulated model keeps what the lobes cannot follow (the fibres' narrow glints, as far as the grids resolve
+  them) at the cost of the table's bytes (``table_bytes``: 3.6 MiB an exemplar at 8 clusters x 8 components).
 
 Alpha: where the texture's alpha (its coverage at the view) is below 1 -- a hole in a loose weave or
 knit -- the ray goes on through the surface, and the pixel is alpha x the cloth + (1 - alpha) x what
@@ -79,14 +84,17 @@ ONE_EXEMPLAR = Blocks(np.zeros((1, 1), np.int64), np.ones(2), np.zeros(2))   # a
 # the texture, every level flattened and packed (``stages.render.integrators.btf`` module doc: ``texels``, ``table``,
 # ``levels``), with what else the renderer needs from the artifact
 BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "periods",
-                                       "exemplars", "fit_bytes", "summary"])
+                                       "exemplars", "fit_bytes", "summary", "model", "radiance", "light_grid"])
+MODELS = ("lafortune", "tabulated")
 SOURCES = ("mesh", "tiling")
 ON_OFF = {"on": True, "off": False}
 
 
 # ------------------------------------------------------------------------------------------------ texture
-def load_btf(path) -> BtfTexture:
-    """The texture of a ``btf`` artifact, its levels flattened and checked (grids, shapes, finite values)."""
+def load_btf(path, model: str = "lafortune") -> BtfTexture:
+    """The texture of a ``btf`` artifact, its levels flattened and checked (grids, shapes, finite values); with
+    ``model`` tabulated, its compressed table decoded in the same row order (``radiance`` (N, V, L, 3) float32,
+    negative values clamped to 0; else (1, 1, 1, 3) zeros)."""
     from stages.core.btf import hemisphere_grid
 
     from ..artifacts import Artifact
@@ -145,11 +153,45 @@ def load_btf(path) -> BtfTexture:
             levels_rows.append((n, r))
             n += r * r
     fit_bytes = sum(int(np.prod(have[k].shape)) * np.dtype(have[k].dtype).itemsize for k in names)
+    radiance = np.zeros((1, 1, 1, 3), np.float32)
+    if model == "tabulated":
+        radiance, fit_bytes = load_table(art, path, E, res, levels, nt * nph, lt * lph), int(s.get("table_bytes", 0))
     return BtfTexture(np.ascontiguousarray(np.concatenate(texels)),
                       np.ascontiguousarray(np.concatenate(tables), np.float32),
                       np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), periods,
-                      [int(k) for k in s["exemplars"]], fit_bytes, s)
+                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph))
+
+
+def load_table(art, path, E, res, levels, V, L) -> np.ndarray:
+    """The tabulated model's table of every exemplar, decoded (``stages.core.btf.decode_texels``, negative values
+    clamped to 0): (N, V, L, 3) float32, rows as ``load_btf``'s (exemplar, level, row-major texel)."""
+    from stages.core.btf import decode_texels
+
+    have = art.arrays()
+    if "tabulated/weights" not in have:
+        raise LoomError(path, "array tabulated/weights", "missing: the texture holds the Lafortune fit only; run "
+                        "loomlight precompute btf --model tabulated (it reuses the acquisition) or render with "
+                        "--set model=lafortune")
+    rows = sum((res >> lv) ** 2 for lv in range(levels))
+    cluster = np.asarray(art["tabulated/cluster"], np.int32)
+    mean = np.asarray(art["tabulated/mean"], np.float32)
+    basis = np.asarray(art["tabulated/basis"], np.float32)
+    weights = np.asarray(art["tabulated/weights"], np.float32)
+    C, K = basis.shape[1], basis.shape[2]
+    for name, a, shape in (("cluster", cluster, (E, rows)), ("mean", mean, (E, C, V, L, 3)),
+                           ("basis", basis, (E, C, K, V, L, 3)), ("weights", weights, (E, rows, K))):
+        if a.shape != shape:
+            raise LoomError(path, f"array tabulated/{name}", f"has shape {list(a.shape)}, expected {list(shape)} "
+                            "(exemplars, texels of every level, clusters, components, views, lights, channels)")
+        if not np.all(np.isfinite(a)):
+            raise LoomError(path, f"array tabulated/{name}", "holds nan or inf")
+    if cluster.size and (cluster.min() < 0 or cluster.max() >= C):
+        raise LoomError(path, "array tabulated/cluster", f"holds a cluster outside 0..{C - 1}")
+    out = np.empty((E, rows, V * L * 3), np.float32)
+    for e in range(E):
+        decode_texels(cluster[e], mean[e].reshape(C, -1), basis[e].reshape(C, K, -1), weights[e], out[e], True)
+    return out.reshape(E * rows, V, L, 3)
 
 
 # ------------------------------------------------------------------------------------------------ geometry
@@ -247,7 +289,7 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
     from stages.core.btf import hemisphere_grid
     from stages.core.geometry.triangles import build_triangle_mesh, uv_derivatives
     from stages.render.camera import CAM_FORWARD, CAM_TAN_HALF_FOV, CAM_WIDTH
-    from stages.render.integrators.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator, sky_table
+    from stages.render.integrators.btf import MAX_LAYERS, SHADING_SIZE, BtfIntegrator, sky_table, tabulated_sky_table
     from stages.render.lights import CONSTANT, DIRECTIONAL, ENVMAP
 
     from ..render_setup import ray_eps
@@ -271,19 +313,29 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
     env = int(np.count_nonzero(kinds == ENVMAP))
     constant = kinds == CONSTANT
     has_sky = bool(constant.any())
+    tabulated = tex.model == "tabulated"
     # a constant light's quadrature, per texel and grid view, once (``stages.render.integrators.btf.sky_table``)
-    sky = (sky_table(tex.texels, tex.light_dirs, hemisphere_grid(*tex.view_grid)) if has_sky
-           else np.zeros((1, 1, 3), np.float32))
+    if not has_sky:
+        sky = np.zeros((1, 1, 3), np.float32)
+    elif tabulated:
+        sky = tabulated_sky_table(tex.radiance)
+    else:
+        sky = sky_table(tex.texels, tex.light_dirs, hemisphere_grid(*tex.view_grid))
+    tab = tex.table
+    if tabulated:   # the table's r(l, v) is the whole f_r: T(v) = 1, alpha kept
+        tab = tab.copy()
+        tab[..., :3] = 1.0
     sky_radiance = np.ascontiguousarray(table.lights[constant, 1:4].sum(axis=0), np.float64)
     eps = ray_eps(V.min(0), V.max(0)) if len(V) else 1e-9
     pixel_angle = 2.0 * float(cam[CAM_TAN_HALF_FOV]) / float(cam[CAM_WIDTH])
-    return BtfIntegrator(mesh, shading, tex.texels, tex.table, tex.levels,
+    return BtfIntegrator(mesh, shading, tex.texels, tab, tex.levels,
                          np.ascontiguousarray(tex.periods[0][None, :] / tex.periods), geom.blocks.block_map,
                          geom.blocks.block_size, geom.blocks.flat_period, int(tex.view_grid[0]),
                          int(tex.view_grid[1]), tex.light_dirs, table, quad, env, sky, sky_radiance, has_sky, ground,
                          has_ground, pixel_angle,
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
-                         int(bool(shadows)), MAX_LAYERS, eps)
+                         int(bool(shadows)), MAX_LAYERS, eps, tabulated, tex.radiance, int(tex.light_grid[0]),
+                         int(tex.light_grid[1]))
 
 
 def film_setup(scene, options: dict):
@@ -307,7 +359,8 @@ def film_setup(scene, options: dict):
     src = geometry_source(scene, options)
     repeat = number_setting(extra, "repeat", 1.0, above=0.0, what="texture repeats across uv [0, 1]")
     t0 = time.perf_counter()
-    tex = load_btf(btf_path)
+    model = extra.get("model", "lafortune")
+    tex = load_btf(btf_path, model)
     if src == "mesh":
         geom = load_obj(extra["mesh"], repeat)
     else:
@@ -321,7 +374,7 @@ def film_setup(scene, options: dict):
     stats = {"load_s": load_s, "geometry": geom.what, "source": src, "triangles": int(len(geom.triangles)),
              "bvh_nodes": int(len(integ.mesh.nodes)), "btf_resolution": int(tex.levels[0, 0, 1]),
              "btf_levels": int(tex.levels.shape[1]), "btf_exemplars": int(tex.levels.shape[0]),
-             "btf_lobes": int(tex.lobes),
+             "btf_lobes": int(tex.lobes), "btf_model": model,
              "btf_views": int(tex.table.shape[1]), "btf_lights": int(len(tex.light_dirs)),
              "fit_bytes": int(tex.fit_bytes), "mip": "on" if mip else "off", "shadows": "on" if shadows else "off",
              "max_layers": int(integ.max_layers)}

@@ -31,7 +31,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections import namedtuple
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -40,6 +42,10 @@ from ..limits import FULL_TRANSPORT_DEPTH, MAX_PATH_DEPTH, largest_option
 from ..memory import Estimate, budget as memory_budget
 
 DIRECTIONS = ("cell", "grid")
+MODELS = ("lafortune", "tabulated")   # what the artifact holds beside the samples: the fit, or the fit and the table
+# parameters that change the fit or the table, not the acquisition: an artifact at the output path acquired with
+# the same other parameters from the same inputs lends its samples (``reusable_acquisition``)
+FIT_PARAMS = ("lobes", "threshold", "max_rounds", "model", "clusters", "components")
 # Bounds of the count options. Memory (``btf_estimate``: the samples grow with texels x views x lights) and
 # time (``btf_work``, ``pipeline.limits.WorkEstimate``, at rates no thread reaches: every sample casts a camera
 # ray, and with ``--directions cell`` draws a direction in each light's cell; measured on a small tiling: about
@@ -67,6 +73,9 @@ class BtfParams:
     rr_depth: int = 5                       # its red / green / blue light at 256 (64 x 48 render, 8 spp)
     seed: int = 0
     material: dict = field(default_factory=dict)
+    model: str = "lafortune"         # tabulated: the compressed table too (stages.precompute.btf_compress)
+    clusters: int = 8                # the table's local PCA: clusters of texels ...
+    components: int = 8              # ... and components per cluster
 
     def check(self) -> None:
         r = self.resolution
@@ -90,10 +99,33 @@ class BtfParams:
                 raise LoomError(None, name, f"{v:,} is past the cap of {cap:,} {what}; lower it")
         if self.directions not in DIRECTIONS:
             raise LoomError(None, "--directions", f"must be one of {', '.join(DIRECTIONS)}, got {self.directions!r}")
+        if self.model not in MODELS:
+            raise LoomError(None, "--model", f"must be one of {', '.join(MODELS)}, got {self.model!r}")
+        if self.model == "tabulated":
+            self.check_table()
         if self.lobes not in (1, 2):
             raise LoomError(None, "--lobes", f"must be 1 or 2 (Daubert et al. 2001 §7), got {self.lobes}")
         if not (math.isfinite(self.threshold) and self.threshold > 0):
             raise LoomError(None, "--threshold", f"must be a positive number, got {self.threshold}")
+
+
+    def check_table(self) -> None:
+        """The tabulated model's counts: components within the table's rank bound, clusters within its texels."""
+        from stages.precompute.btf_compress import rank_bound
+
+        rows = texel_rows(self.resolution)
+        dims = self.views[0] * self.views[1] * self.lights[0] * self.lights[1] * 3
+        if not 1 <= self.components <= rank_bound(rows, dims):
+            raise LoomError(None, "--components", f"must be from 1 to {rank_bound(rows, dims):,}, the rank bound of "
+                            f"the table's {rows:,} texels (every mip level) x {dims:,} values; got {self.components}")
+        if not 1 <= self.clusters <= rows:
+            raise LoomError(None, "--clusters", f"must be from 1 to {rows:,} (the texels of every mip level), got "
+                            f"{self.clusters}")
+
+
+def texel_rows(res: int) -> int:
+    """Texels of every mip level of a res x res texture: res^2 + (res/2)^2 + ... + 1."""
+    return sum((int(res) >> lv) ** 2 for lv in range(int(res).bit_length()))
 
 
 def parse_grid(text: str, option: str) -> tuple[int, int]:
@@ -104,10 +136,11 @@ def parse_grid(text: str, option: str) -> tuple[int, int]:
     return int(parts[0]), int(parts[1])
 
 
-def btf_estimate(res, V, L, segments, exemplars=1) -> Estimate:
+def btf_estimate(res, V, L, segments, exemplars=1, p: "BtfParams | None" = None) -> Estimate:
     """Peak memory of the acquisition and the fit: one exemplar's samples (float16 stored, float32 read, float64
     in the fit: the exemplars are fitted one after the other) and the tables and lobes of every level of every
-    exemplar; each part names the option it grows with."""
+    exemplar; with the tabulated model, one exemplar's rows of every level and their reconstruction (float32) and
+    every exemplar's compressed table; each part names the option it grows with."""
     est = Estimate("loomlight precompute btf")
     est.add("tiling scene", 520.0 * segments, f"{segments:,} segments")
     grows = "--resolution" if res * res >= V * L else _grid_option(V, L)
@@ -115,6 +148,13 @@ def btf_estimate(res, V, L, segments, exemplars=1) -> Estimate:
             f"(float16 stored, float32 read, float64 fit) ({grows})")
     est.add("fit", float(res) * res * V * 4 * 8 * 6 * exemplars,
             f"tables and lobes of every level of {exemplars} exemplar(s) (--resolution, --exemplar)")
+    if p is not None and p.model == "tabulated":
+        rows, D = texel_rows(res), V * L * 3
+        est.add("table rows", float(rows) * D * (4 + 4 + 4), f"{rows:,} texels of every level x {D:,} values "
+                f"(rows, reconstruction, clusters' rows) ({grows})")
+        est.add("compressed table", exemplars * (p.clusters * (p.components + 1) * D + rows * p.components) * 4.0,
+                f"{exemplars} exemplar(s) x {p.clusters} clusters x {p.components} components (--clusters, "
+                "--components)")
     return est
 
 
@@ -196,6 +236,70 @@ def _fit_record(levels, res, V, K) -> list[dict]:
     return out
 
 
+Reused = namedtuple("Reused", ["samples", "alpha", "frames", "rays", "acquire_s"])
+Reused.__doc__ = """An earlier artifact's acquisition: samples (E, res, res, V, L, 3) float16, alpha (E, res, res, V),
+level-0 frames (E, res, res, 2, 3) float32, its rays and acquisition seconds."""
+
+
+def acquisition_key(w, p: BtfParams) -> str:
+    """What the acquisition depends on: every parameter but ``FIT_PARAMS``, the inputs' identities and the code the
+    acquisition runs (``pipeline.source_graph.code_version`` of the acquisition kernel and of the runner that
+    turns the scene into fibre materials, with the bundled yarn and BCSDF presets)."""
+    import hashlib
+    import json
+
+    from ..source_graph import code_version
+
+    params = {k: v for k, v in w.params.items() if k not in FIT_PARAMS}
+    code = code_version(Path(__file__).resolve().parents[2], ("stages.precompute.btf", "pipeline.runners.precompute"),
+                        ("data/yarns", "data/bcsdf"))
+    doc = {"params": params, "inputs": w.input_identities(), "code": code}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def reusable_acquisition(out, key: str) -> Reused | None:
+    """The acquisition of the btf artifact at ``out`` when its summary's ``acquisition_key`` is ``key`` (a refit,
+    or a table added, from the same samples), read and checked; else None."""
+    from ..artifacts import Artifact
+
+    try:
+        art = Artifact(out, kind="btf")
+        if art.summary.get("acquisition_key") != key:
+            return None
+        levels = art.summary["levels"]
+        frames = np.asarray(art["level_0/frame"], np.float32)
+        return Reused(np.asarray(art["samples"], np.float16), np.asarray(art["alpha"], np.float32), frames,
+                      int(art.summary["rays"]), float(art.summary["acquire_s"])) if levels >= 1 else None
+    except (LoomError, KeyError):
+        return None
+
+
+def level_rows(samples, alpha, frames, res) -> np.ndarray:
+    """(T, V L 3) float32: the texels of every mip level (``btf_fit.group_level``: the alpha-weighted means the fit
+    sees), finest level first, each row-major -- the table's rows, in the renderer's order within an exemplar."""
+    from stages.precompute.btf_fit import group_level
+
+    rows = []
+    for lv in range(int(res).bit_length()):
+        g = group_level(samples, alpha, frames, res, lv)
+        rows.append(np.asarray(g.samples, np.float32).reshape(len(g.samples), -1))
+    return np.ascontiguousarray(np.concatenate(rows))
+
+
+def write_tables(w, tables, V, L) -> int:
+    """The exemplars' compressed tables into ``tabulated/`` (every array with a leading exemplar axis); their bytes."""
+    E = len(tables)
+    C, K, _ = tables[0].basis.shape
+    arrays = {"cluster": np.stack([t.cluster for t in tables]),
+              "mean": np.stack([t.mean for t in tables]).reshape(E, C, V, L, 3),
+              "basis": np.stack([t.basis for t in tables]).reshape(E, C, K, V, L, 3),
+              "weights": np.stack([t.weights for t in tables]),
+              "rel_rmse_by_components": np.stack([t.rel_rmse_by_components for t in tables])}
+    for name, a in arrays.items():
+        w.write(f"tabulated/{name}", np.ascontiguousarray(a))
+    return sum(a.nbytes for n, a in arrays.items() if n != "rel_rmse_by_components")
+
+
 def _rms(parts) -> float:
     return float(np.sqrt(np.mean(np.concatenate([np.square(np.asarray(a, np.float64)).ravel() for a in parts]))))
 
@@ -205,13 +309,14 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
     from stages.core.btf import hemisphere_grid
     from stages.precompute.btf import acquire_texels, texel_frames
+    from stages.precompute.btf_compress import compress_texels
     from stages.precompute.btf_fit import fit_levels
     from stages.precompute.iirtf import exemplar_slabs
     from stages.precompute.periodic import periodic_scene
 
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session
-    from ..progress import status
+    from ..progress import info, status
     from .precompute import materials_scene, open_tiling, periodic_scenes, start_precompute, tiling_materials
 
     start_precompute(p, threads)
@@ -235,7 +340,7 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     light_dirs = hemisphere_grid(*p.lights)
     V, L = len(view_dirs), len(light_dirs)
     limit = budget or memory_budget()
-    est = btf_estimate(res, V, L, int(art.summary["segments"]), E)
+    est = btf_estimate(res, V, L, int(art.summary["segments"]), E, p)
     est.check(limit, None, largest_option(est, "--resolution"), "lower it, or raise --budget")
     tiling_hash = art.meta["content_hash"]
     tiling_abs = str(tiling.resolve())  # chunk tasks may run in another directory
@@ -244,30 +349,48 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     periods = [[float(v) for v in art["ex_period"][k]] for k in ks]
     k0, (W, H) = ks[0], periods[0]
     slab = slabs[k0]
-    t0 = time.perf_counter()  # compile (or load) the acquisition kernel on one texel, one view, one light
-    acquire_texels(periodic_scene(sc, k0), float(slab[0]), float(slab[1]), W, H, mof, mats, res, 0, 1, view_dirs[:1],
-                   light_dirs[:1], 1, p.seed, 2, 2, _max_dist(W, H, slab), _eps(W, H, slab),
-                   *direction_grids(asdict(p)))   # the grids the chunk tasks pass: the same specialisation
-    compile_s = time.perf_counter() - t0
+    acq_key = acquisition_key(w, p)
+    reused = None if force else reusable_acquisition(out, acq_key)
+    compile_s = 0.0
+    if reused is None:
+        t0 = time.perf_counter()  # compile (or load) the acquisition kernel on one texel, one view, one light
+        acquire_texels(periodic_scene(sc, k0), float(slab[0]), float(slab[1]), W, H, mof, mats, res, 0, 1,
+                       view_dirs[:1], light_dirs[:1], 1, p.seed, 2, 2, _max_dist(W, H, slab), _eps(W, H, slab),
+                       *direction_grids(asdict(p)))   # the grids the chunk tasks pass: the same specialisation
+        compile_s = time.perf_counter() - t0
     pdict = {key: v for key, v in asdict(p).items() if key != "material"}
     names = [str(art.summary["exemplar_names"][k]) for k in ks]
     with session(scheduler), w:
         store = w.store_path
         w.write("view_dirs", view_dirs)
         w.write("light_dirs", light_dirs)
-        w.create("samples", (E, res, res, V, L, 3), np.float16, (1, 1, res, V, L, 3),
-                 dimension_names=("exemplar", "y", "x", "view", "light", "c"))
-        w.create("alpha", (E, res, res, V), np.float32, (1, 1, res, V), dimension_names=("exemplar", "y", "x", "view"))
-        t0 = time.perf_counter()
-        tasks = [ChunkTask(_btf_row_task, (tiling_abs, tiling_hash, str(store), e, k, iy, mof, mats, view_dirs,
-                                           light_dirs, pdict)) for e, k in enumerate(ks) for iy in range(res)]
-        parts = run_tasks(tasks, f"btf: acquisition, {E} exemplar(s) x {res}x{res} texels x {V} views x {L} lights")
-        acquire_s = time.perf_counter() - t0
-        rays = sum(r["rays"] for r in parts)
+        if reused is None:
+            w.create("samples", (E, res, res, V, L, 3), np.float16, (1, 1, res, V, L, 3),
+                     dimension_names=("exemplar", "y", "x", "view", "light", "c"))
+            w.create("alpha", (E, res, res, V), np.float32, (1, 1, res, V),
+                     dimension_names=("exemplar", "y", "x", "view"))
+            t0 = time.perf_counter()
+            tasks = [ChunkTask(_btf_row_task, (tiling_abs, tiling_hash, str(store), e, k, iy, mof, mats, view_dirs,
+                                               light_dirs, pdict)) for e, k in enumerate(ks) for iy in range(res)]
+            parts = run_tasks(tasks, f"btf: acquisition, {E} exemplar(s) x {res}x{res} texels x {V} views x "
+                                     f"{L} lights")
+            acquire_s = time.perf_counter() - t0
+            rays = sum(r["rays"] for r in parts)
+            normals = [np.concatenate([r["normal"] for r in parts[e * res:(e + 1) * res]]) for e in range(E)]
+            # rounded as stored (level_0/frame), so a refit from the artifact fits the same frames
+            frames_all = [texel_frames(n).reshape(res, res, 2, 3).astype(np.float32) for n in normals]
+        else:
+            info(f"btf: the acquisition of {out} reused (same tiling, scene and acquisition parameters; "
+                        "--force acquires again)")
+            w.write("samples", reused.samples, chunks=(1, 1, res, V, L, 3),
+                    dimension_names=("exemplar", "y", "x", "view", "light", "c"))
+            w.write("alpha", reused.alpha, chunks=(1, 1, res, V), dimension_names=("exemplar", "y", "x", "view"))
+            frames_all = list(reused.frames)
+            rays, acquire_s = reused.rays, reused.acquire_s
         fits, fit_s, per_exemplar, no_table, unconverged = [], 0.0, [], [], 0
+        tables, compress_s = [], 0.0
         for e, k in enumerate(ks):
-            rows = parts[e * res:(e + 1) * res]
-            frames = texel_frames(np.concatenate([r["normal"] for r in rows])).reshape(res, res, 2, 3)
+            frames = frames_all[e].astype(np.float64)
             samples = w.group["samples"][e].astype(np.float32)
             alpha = w.group["alpha"][e]
             t0 = time.perf_counter()
@@ -281,6 +404,16 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                                  "fit_rmse": [_rms([f.rmse]) for f in levels], "alpha_mean": float(np.mean(alpha))})
             no_table.append([f.rmse_no_table for f in levels])
             unconverged += sum(int(np.count_nonzero(~np.asarray(f.converged))) for f in levels)
+            if p.model == "tabulated":
+                t0 = time.perf_counter()
+                with status(f"btf: compressing the table of '{names[e]}' ({p.clusters} clusters x "
+                            f"{p.components} components)"):
+                    tables.append(compress_texels(level_rows(samples, alpha, frames, res), p.clusters, p.components,
+                                                  p.seed))
+                compress_s += time.perf_counter() - t0
+                per_exemplar[-1]["table_rel_rmse"] = float(tables[-1].rel_rmse)
+                per_exemplar[-1]["table_rel_rmse_by_components"] = [float(x) for x in
+                                                                    tables[-1].rel_rmse_by_components]
             del samples
         n_levels = len(fits[0])
         fit_bytes = 0
@@ -290,6 +423,7 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                 w.write(f"level_{lev}/{name}", a)
                 if name != "rmse":
                     fit_bytes += a.nbytes
+        table_bytes = write_tables(w, tables, V, L) if tables else 0
         rmse = [_rms([f[lev]["rmse"] for f in fits]) for lev in range(n_levels)]
         rmse_nt = [_rms([x[lev] for x in no_table]) for lev in range(n_levels)]
         mean_r = float(np.mean([x["mean_radiance"] for x in per_exemplar]))   # the exemplars hold as many samples each
@@ -303,7 +437,14 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                          unconverged_texels=unconverged,
                          alpha_mean=float(np.mean(w.group["alpha"][...])), rays=int(rays),
                          rays_per_s=rays / max(acquire_s, 1e-9), acquire_s=acquire_s, fit_s=fit_s,
-                         compile_s=compile_s)
+                         compile_s=compile_s, acquisition_key=acq_key, acquisition_reused=reused is not None,
+                         models=["lafortune", "tabulated"] if tables else ["lafortune"])
+        if tables:
+            w.summary.update(table_clusters=p.clusters, table_components=p.components, table_bytes=int(table_bytes),
+                             table_rel_rmse=_rms([[x["table_rel_rmse"]] for x in per_exemplar]),
+                             compress_s=compress_s)
     return {"skipped": False, "exemplars": E, "resolution": res, "views": V, "lights": L, "levels": n_levels,
             "fit_rmse": rmse, "fit_rmse_no_table": rmse_nt, "acquire_s": acquire_s, "fit_s": fit_s,
-            "fit_bytes": int(fit_bytes), "mean_radiance": mean_r}
+            "fit_bytes": int(fit_bytes), "mean_radiance": mean_r, "acquisition_reused": reused is not None,
+            "table_bytes": int(table_bytes), "table_rel_rmse": w.summary.get("table_rel_rmse"),
+            "compress_s": compress_s}

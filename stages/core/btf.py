@@ -29,7 +29,7 @@ it is the renderer's quadrature for environment and SG lights.
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 TWO_PI = 2.0 * math.pi
 LOBE_PARAMS = 4          # C_x, C_y, C_z, N
@@ -126,3 +126,42 @@ def table_lookup(table, n_theta, n_phi, vx, vy, vz, c):
     """T(v) channel c (0-2) or alpha (c = 3), bilinear on the view grid; ``table`` (V, 4)."""
     i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(n_theta, n_phi, vx, vy, vz)
     return w0 * table[i0, c] + w1 * table[i1, c] + w2 * table[i2, c] + w3 * table[i3, c]
+
+
+@njit(cache=True, parallel=True)
+def decode_texels(cluster, mean, basis, weights, out, clamp):
+    """The tabulated texture's rows (``stages.precompute.btf_compress``): out[t] = mean[c] + sum_k weights[t, k]
+    basis[c, k] with c = cluster[t] (float64 sums, k ascending; stored float32). ``clamp``: negative values
+    (a truncated expansion can undershoot near 0) become 0, as radiance must. ``cluster`` (T,), ``mean`` (C, D),
+    ``basis`` (C, K, D), ``weights`` (T, K), ``out`` (T, D)."""
+    T, D = out.shape
+    K = weights.shape[1]
+    for t in prange(T):
+        c = cluster[t]
+        for d in range(D):
+            acc = np.float64(mean[c, d])
+            for k in range(K):
+                acc += np.float64(weights[t, k]) * np.float64(basis[c, k, d])
+            out[t, d] = max(acc, 0.0) if clamp else acc
+
+
+@njit(cache=True, inline="always")
+def table_rgb(radiance, idx, lt, lph, lx, ly, lz, vt, vph, vx, vy, vz):
+    """The tabulated texture's f_1(l, v) = r(l, v), three channels, of texel row idx: ``radiance`` (N, V, L, 3)
+    bilinear on the view grid (vt x vph) and on the light grid (lt x lph) (``grid_weights``: exact at the grid's
+    directions); 0 for l_z <= 0. r holds the light's l_z as f_1 does (radiance per unit irradiance)."""
+    if lz <= 0.0:
+        return 0.0, 0.0, 0.0
+    a0, a1, a2, a3, p0, p1, p2, p3 = grid_weights(vt, vph, vx, vy, vz)
+    b0, b1, b2, b3, q0, q1, q2, q3 = grid_weights(lt, lph, lx, ly, lz)
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    for iv, wv in ((a0, p0), (a1, p1), (a2, p2), (a3, p3)):
+        if wv == 0.0:
+            continue
+        r = radiance
+        s0 += wv * (q0 * r[idx, iv, b0, 0] + q1 * r[idx, iv, b1, 0] + q2 * r[idx, iv, b2, 0] + q3 * r[idx, iv, b3, 0])
+        s1 += wv * (q0 * r[idx, iv, b0, 1] + q1 * r[idx, iv, b1, 1] + q2 * r[idx, iv, b2, 1] + q3 * r[idx, iv, b3, 1])
+        s2 += wv * (q0 * r[idx, iv, b0, 2] + q1 * r[idx, iv, b1, 2] + q2 * r[idx, iv, b2, 2] + q3 * r[idx, iv, b3, 2])
+    return s0, s1, s2

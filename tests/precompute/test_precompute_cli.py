@@ -119,10 +119,19 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
 
 @pytest.mark.parametrize("extra,needle", [(["--directions", "diagonal"], "--directions"),
                                           (["--lobes", "3"], "--lobes"),
-                                          (["--threads", "-2"], "--threads")])   # was an internal error
+                                          (["--threads", "-2"], "--threads"),   # was an internal error
+                                          (["--model", "neural"], "--model"),
+                                          (["--model", "tabulated", "--components", "0"], "--components"),
+                                          # 2 x 2 texels + 1 x 1: 5 rows, rank bound 4
+                                          (["--model", "tabulated", "--components", "5"], "rank bound"),
+                                          (["--model", "tabulated", "--components", "2", "--clusters", "0"],
+                                           "--clusters"),
+                                          (["--model", "tabulated", "--components", "2", "--clusters", "6"],
+                                           "--clusters")])
 def test_btf_bad_options_exit_2_nothing_written(built, cli, tmp_path, extra, needle):
-    """precompute btf: an unknown direction scheme or lobe count, or a thread count below 1, is refused before
-    any work: exit 2, one line naming the option, no artifact."""
+    """precompute btf: an unknown direction scheme, lobe count or model, a thread count below 1, a component count
+    below 1 or above the table's rank bound, a cluster count below 1 or above the texels, is refused before any
+    work: exit 2, one line naming the option, no artifact."""
     tiling, _ = built
     fresh = tmp_path / "fresh_btf.zarr"
     code, out, err = cli("precompute", "btf", tiling, "-o", fresh, "--resolution", "2", *extra)
@@ -190,3 +199,39 @@ def test_btf_fits_every_exemplar_the_block_map_uses_each_as_alone(tiny_tiling, c
         code, _, err = cli("inspect", art, "--png", png)
         assert code == 0, err
         assert_legible_png(png)
+
+
+def test_btf_tabulated_reuses_the_acquisition_and_is_thread_independent(tiny_tiling, cli, tmp_path):
+    """Contract (pipeline/runners/precompute_btf.py, stages/precompute/btf_compress.py): ``--model tabulated`` on an
+    artifact acquired with the same acquisition parameters reuses its samples (said on the output) and adds the
+    compressed table; the Lafortune fit stays byte-identical to the one made without the table; the table's error
+    never rises with the component count and its last entry is the recorded error of the stored table; the
+    table's bytes are the same on 1 and 2 threads (a fresh acquisition each)."""
+    from pipeline.artifacts import Artifact
+
+    tiling = tiny_tiling[0]
+    path = tmp_path / "tex.zarr"
+    code, out, err = cli("precompute", "btf", tiling, "-o", path, *BTF_ARGS, "--threads", "2")
+    assert code == 0, err
+    before = Artifact(path)
+    fit = {n: np.asarray(before[n]).tobytes() for n in before.arrays() if n.startswith("level_") or n == "samples"}
+    tab = ["--model", "tabulated", "--clusters", "2", "--components", "3"]
+    code, out, err = cli("precompute", "btf", tiling, "-o", path, *BTF_ARGS, *tab, "--threads", "2")
+    assert code == 0, err
+    assert "acquisition reused" in out and "tabulated" in out
+    a = Artifact(path)
+    assert a.summary["acquisition_reused"] and a.summary["models"] == ["lafortune", "tabulated"]
+    for n, b in fit.items():
+        assert np.asarray(a[n]).tobytes() == b, n
+    curve = np.asarray(a["tabulated/rel_rmse_by_components"])
+    assert curve.shape == (2, 4)
+    assert np.all(np.diff(curve, axis=1) <= 1e-12)
+    for e in range(2):
+        assert abs(curve[e, -1] - a.summary["per_exemplar"][e]["table_rel_rmse"]) <= 1e-5 * max(curve[e, 0], 1e-12)
+    one = tmp_path / "one.zarr"
+    code, out, err = cli("precompute", "btf", tiling, "-o", one, *BTF_ARGS, *tab, "--threads", "1")
+    assert code == 0, err
+    assert "acquisition reused" not in out
+    b = Artifact(one)
+    for n in [n for n in a.arrays() if n.startswith("tabulated/")]:
+        assert np.asarray(a[n]).tobytes() == np.asarray(b[n]).tobytes(), n

@@ -99,12 +99,16 @@ def _cli(*args):
 
 
 def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, table=None, lobe_params=None,
-              period=(0.5, 0.5), source_hash="none", source="none", frame=None, exemplars=(0,)):
+              period=(0.5, 0.5), source_hash="none", source="none", frame=None, exemplars=(0,), tabulated=None):
     """A btf artifact of the tiling exemplars ``exemplars``. ``rho``: an rgb (every texel of every level) or a
     function (level, r) -> (r, r, 3), or a list of those, one per exemplar; ``alpha``: a number or a function
     (level, r, views) -> (r, r, V); ``table``: None (T = 1) or a function (level, r, views) -> (r, r, V, 3);
     ``lobe_params`` None (no lobes: C = 0) or (r, r, K, 3, 4) per level via a function (level, r); ``period``
-    one [W, H] for every exemplar or a list of them."""
+    one [W, H] for every exemplar or a list of them; ``tabulated`` None or a function (views, lights) -> (V, L, 3):
+    every texel's table r(l, v), compressed by ``compress_texels`` (1 cluster, 1 component) into ``tabulated/``."""
+    from pipeline.runners.precompute_btf import write_tables
+    from stages.precompute.btf_compress import compress_texels
+
     path = str(path)
     shutil.rmtree(path, ignore_errors=True)
     views = hemisphere_grid(*VIEW_GRID)
@@ -137,6 +141,10 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
             if frame is not None:
                 fr[...] = frame(lv, r)
             w.write(f"level_{lv}/frame", each([fr] * E))
+        if tabulated is not None:
+            row = np.asarray(tabulated(views, hemisphere_grid(*LIGHT_GRID)), np.float32).reshape(1, -1)
+            rows = np.repeat(row, sum((res >> lv) ** 2 for lv in range(levels)), axis=0)
+            write_tables(w, [compress_texels(rows, 1, 1)] * E, V, len(row[0]) // (3 * V))
         w.summary.update(kind="btf", source=source, source_hash=source_hash, exemplars=list(exemplars),
                          exemplar_names=[f"test {k}" if E > 1 else "test" for k in exemplars], periods=periods,
                          resolution=res, levels=levels, lobes=lobes, view_grid=list(VIEW_GRID),
@@ -400,6 +408,35 @@ def test_lambertian_quad_closed_form(bench):
     rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0)), "--set", f"btf={btf}",
                               "--set", f"mesh={tilted}")
     assert np.allclose(rgb[ch["A"] > 0], 2.0 * a / math.pi * float(-d @ n / np.linalg.norm(d)), rtol=1e-6)
+
+
+def test_tabulated_lambertian_quad_closed_form(bench):
+    """Reference: closed form, as ``test_lambertian_quad_closed_form``, for the tabulated model (``--set
+    model=tabulated``): a table r(l, v) = l_z a / pi at every grid direction (``compress_texels``, one cluster, one
+    component: the rows are equal, so the table is its mean) under a directional light whose l_z lies between the
+    light grid's first and last rings (the rings are equally spaced in cos theta, so bilinear interpolation of l_z
+    is exact there) gives E a / pi cos(theta) in every pixel, and under a constant light L a (float32 EXR: 1e-6).
+    The texture's Lafortune fit is zero (rho = 0): every pixel comes from the table."""
+    a = np.array([0.6, 0.4, 0.2])
+
+    def lambert(views, lights):
+        return np.broadcast_to(lights[None, :, 2, None] * a[None, None, :] / math.pi,
+                               (len(views), len(lights), 3))
+    btf = write_btf(bench.name("tab").with_suffix(".zarr"), rho=(0.0, 0.0, 0.0), tabulated=lambert)
+    V, UV, F = quad()
+    mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+    d = np.array([-0.5, 0.3, -0.6])
+    cos = -d[2] / np.linalg.norm(d)
+    assert 0.5 / LIGHT_GRID[0] < cos < 1.0 - 0.5 / LIGHT_GRID[0]
+    args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=3", "--set", "model=tabulated")
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args)
+    hit = ch["A"] > 0
+    assert hit.mean() > 0.5
+    assert np.allclose(rgb[hit], 2.0 * a / math.pi * cos, rtol=1e-6, atol=0)
+    rgb, ch, _ = bench.render(bench.scene(SKY.format(l=0.7)), *args)
+    assert np.allclose(rgb[ch["A"] > 0], 0.7 * a, rtol=1e-6)
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args[:-2])
+    assert np.all(rgb[ch["A"] > 0] == 0.0)                             # the Lafortune fit of the same artifact
 
 
 def test_sg_light_limits(bench):
@@ -684,6 +721,8 @@ def test_tiling_of_two_exemplars_reads_each_texture_where_the_block_map_places_i
     ("mip=maybe", "unknown mip"),
     ("shadows=yes", "unknown shadows"),
     ("colour=red", "no setting 'colour'"),
+    ("model=neural", "unknown model"),
+    ("model=tabulated", "tabulated/weights"),
     ("no btf", "--set btf"),
     ("no mesh", "--set mesh"),
     ("btf is not a btf", "expected a 'btf' artifact"),

@@ -27,6 +27,12 @@ four steps (§6):
    at the view grid's directions once per render (``sky_table``) and read at the view's grid weights as
    T(v) is (``sky_f1``; exact at the grid's views, interpolated between them).
 
+**The tabulated model** (``tabulated``; ``stages.precompute.btf_compress``, decoded to ``radiance`` (N, V, L, 3)
+float32 once per render): step 3 reads the acquired table instead of the lobes, f_r(l, v) = r(l, v) bilinear on
+the view grid and on the light grid (``stages.core.btf.table_rgb``), T(v) = 1 and alpha as before. Everything
+else -- mip levels, alpha, lights, shadows, the sky table (``tabulated_sky_table``: the table's own light-grid
+sum) -- is the same.
+
 **Alpha** (§3, §6): the table's alpha at the view is the texel's coverage for that view, 0 at a hole
 in the weave. The ray goes on through the surface (the next hit along the same ray, up to
 ``max_layers`` surfaces; further ones are not seen) and the pixel is alpha C_front + (1 - alpha)
@@ -58,7 +64,9 @@ first exemplar's period over exemplar e's, which turns a pattern coordinate into
 ``flat_period`` (2) the flat size of a block and of one pattern unit (a mesh: a 1 x 1 map of exemplar 0);
 ``texels`` (N, TEXEL_HEAD + 12 K) rho (3), the texel frame's n, t, b = n x t (9),
 then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb and alpha;
-``n_theta``, ``n_phi`` the view grid, ``light_dirs`` (L, 3) the light grid (pattern space);
+``n_theta``, ``n_phi`` the view grid, ``light_dirs`` (L, 3) the light grid (pattern space), ``l_theta``, ``l_phi``
+its shape; ``tabulated`` (bool) and ``radiance`` (N, V, L, 3) float32 the tabulated model's decoded table ((1, 1, 1, 3)
+unused for the Lafortune model);
 ``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional (the ground's
 quadrature), ``env_lights`` how many are environment maps (the surface's quadrature), ``sky`` (N, V, 3)
 the ``sky_table`` when ``has_sky`` (a constant light is there; else (1, 1, 3) unused) and ``sky_radiance``
@@ -84,7 +92,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
 from stages.core.blocks import block_of
-from stages.core.btf import LOBE_PARAMS, grid_weights, lafortune_lobe
+from stages.core.btf import LOBE_PARAMS, grid_weights, lafortune_lobe, table_rgb
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.triangles import TriangleHit, mesh_intersect
 from stages.render.ground import ground_intersect
@@ -97,7 +105,8 @@ SG_V = 8    # ... and around its axis (sg_f1)
 BtfIntegrator = namedtuple("BtfIntegrator", [
     "mesh", "shading", "texels", "table", "levels", "exemplar_scale", "block_map", "block_size", "flat_period",
     "n_theta", "n_phi", "light_dirs", "lights", "quad_lights", "env_lights", "sky", "sky_radiance", "has_sky",
-    "ground", "has_ground", "pixel_angle", "forward", "mip", "shadows", "max_layers", "eps"])
+    "ground", "has_ground", "pixel_angle", "forward", "mip", "shadows", "max_layers", "eps", "tabulated", "radiance",
+    "l_theta", "l_phi"])
 
 MAX_LAYERS = 4
 INV_PI = 1.0 / math.pi
@@ -275,17 +284,27 @@ def texel_f1_rgb(texels, n_lobes, idx, lx, ly, lz, vx, vy, vz):
 
 
 @njit(cache=True, inline="always")
-def add_f1(s, texels, n_lobes, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2):
+def texel_rgb(it, idx, lx, ly, lz, vx, vy, vz):
+    """f_1(l, v) of texel row idx, three channels, by the texture's model: the tabulated table (``tabulated``:
+    ``stages.core.btf.table_rgb``, its T(v) is 1) or the Lafortune lobes (``texel_f1_rgb``)."""
+    if it.tabulated:
+        return table_rgb(it.radiance, idx, it.l_theta, it.l_phi, lx, ly, lz, it.n_theta, it.n_phi, vx, vy, vz)
+    texels = it.texels
+    return texel_f1_rgb(texels, (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS), idx, lx, ly, lz, vx, vy, vz)
+
+
+@njit(cache=True, inline="always")
+def add_f1(s, it, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2):
     """The sums s = (a r, a g, a b, b r, b g, b b) plus (e0, e1, e2) f_1(l, v) of texel row ia and, when ``two``,
-    of row ib (``texel_f1_rgb``).
-    15 parameters: the sums, the texels and their lobe count, the two rows, l and v as scalars, the weights."""
-    f0, f1, f2 = texel_f1_rgb(texels, n_lobes, ia, lx, ly, lz, vx, vy, vz)
+    of row ib (``texel_rgb``).
+    14 parameters: the sums, the integrator, the two rows, l and v as scalars, the weights."""
+    f0, f1, f2 = texel_rgb(it, ia, lx, ly, lz, vx, vy, vz)
     sa0 = s[0] + e0 * f0
     sa1 = s[1] + e1 * f1
     sa2 = s[2] + e2 * f2
     if not two:
         return sa0, sa1, sa2, s[3], s[4], s[5]
-    f0, f1, f2 = texel_f1_rgb(texels, n_lobes, ib, lx, ly, lz, vx, vy, vz)
+    f0, f1, f2 = texel_rgb(it, ib, lx, ly, lz, vx, vy, vz)
     return sa0, sa1, sa2, s[3] + e0 * f0, s[4] + e1 * f1, s[5] + e2 * f2
 
 
@@ -339,8 +358,6 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
     """sum_j (2 pi / L) L_light(l_j) f_1(l_j, v) over the light grid, the environment maps (constant lights:
     ``sky_f1``; SG lights: ``sg_f1``), for texel rows ia and (when ``two``) ib: (a r, a g, a b, b r, b g, b b)."""
     lights = it.lights.lights
-    texels = it.texels
-    K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
     ld = it.light_dirs
     dw = 2.0 * math.pi / ld.shape[0]   # each grid direction's solid angle
     w = np.empty(3)
@@ -366,7 +383,7 @@ def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
         r0 *= dw
         r1 *= dw
         r2 *= dw
-        s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, r0, r1, r2)
+        s = add_f1(s, it, ia, ib, two, lx, ly, lz, vx, vy, vz, r0, r1, r2)
     return s
 
 
@@ -399,6 +416,23 @@ def sky_table(texels, light_dirs, view_dirs):
     return out
 
 
+@njit(cache=True, parallel=True)
+def tabulated_sky_table(radiance):
+    """``sky_table`` of the tabulated model: per texel row and grid view, sum_j (2 pi / L) r(l_j, v_i) over the table's
+    own light grid -- exact, the table holds r at those directions; ``radiance`` (N, V, L, 3)."""
+    N, V, L, _ = radiance.shape
+    dw = 2.0 * math.pi / L
+    out = np.empty((N, V, 3), np.float32)
+    for idx in prange(N):
+        for i in range(V):
+            for c in range(3):
+                acc = 0.0
+                for j in range(L):
+                    acc += dw * radiance[idx, i, j, c]
+                out[idx, i, c] = acc
+    return out
+
+
 @njit(cache=True, inline="always")
 def sky_f1(it, ia, ib, two, i0, i1, i2, i3, w0, w1, w2, w3):
     """The constant lights' sum_j (2 pi / L) L f_1(l_j, v) for texel rows ia and (when ``two``) ib: the
@@ -424,8 +458,6 @@ def sg_f1(it, f, k, ia, ib, two, vx, vy, vz):
     limit (every point at the axis: a directional light of irradiance P), deterministic, and unlike the
     light grid it does not miss a lobe narrower than the grid's spacing."""
     lights = it.lights.lights
-    texels = it.texels
-    K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
     n = SG_U * SG_V
     s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     for i in range(SG_U):
@@ -440,7 +472,7 @@ def sg_f1(it, f, k, ia, ib, two, vx, vy, vz):
             e0 = r / (pdf * n)
             e1 = g / (pdf * n)
             e2 = b / (pdf * n)
-            s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2)
+            s = add_f1(s, it, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2)
     return s
 
 
@@ -450,8 +482,6 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
     towards -d and the coverage, both blended over the mip levels (module doc)."""
     lights = it.lights.lights
     table = it.table
-    texels = it.texels
-    K = (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS)
     e, pu, pv = texel_exemplar(it, f.pu, f.pv)
     if e < 0:       # no exemplar in this block of the tiling: no cloth here
         return 0.0, 0.0, 0.0, 0.0, 0
@@ -502,7 +532,7 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
             e0 = lights[k, 1] * vis
             e1 = lights[k, 2] * vis
             e2 = lights[k, 3] * vis
-            s = add_f1(s, texels, K, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2)
+            s = add_f1(s, it, ia, ib, two, lx, ly, lz, vx, vy, vz, e0, e1, e2)
         if it.has_sky:
             s = add6(s, sky_f1(it, ia, ib, two, i0, i1, i2, i3, w0, w1, w2, w3))
         if it.env_lights > 0:
