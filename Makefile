@@ -40,7 +40,7 @@ IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis
 
 # Daubert et al. 2001 in the demo: the damask's ground exemplar fitted as a cloth texture, reduced (the defaults: 32 x 32
 # texels, 8x8 views and lights, 16 rays) and dressed on the draped cloth
-BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8
+BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8 --model tabulated
 
 # the multi-scale yarn model in the demo: the yarn-level model fitted to fiberpath (front / back / both lights, small renders) on
 # the demo swatch and on the knitted swatch (data/scenes/knit.toml: its own yarn colour and fleece BCSDF), the
@@ -106,6 +106,7 @@ demo: $(VENV)/.installed ## set up .venv if needed, run the demo scene end to en
 	@echo "  damask, prt (Khungurn et al. 2017): $(OUT)/damask_prt.exr ($(OUT)/damask_prt.png)"
 	@echo "  damask texture (Daubert et al. 2001): $(OUT)/damask_btf_fit.zarr ($(OUT)/damask_btf_fit.png)"
 	@echo "  damask, btf (Daubert et al. 2001): $(OUT)/damask_btf.exr ($(OUT)/damask_btf.png)"
+	@echo "  damask, btf's tabulated model: $(OUT)/damask_btf_tabulated.exr ($(OUT)/damask_btf_tabulated.png)"
 	@echo "  prt, btf vs fiberpath: $(OUT)/eval/damask/report.md ($(OUT)/eval/damask/report.html)"
 	@echo "  bysdf fitted to fiberpath (A Multi-scale Yarn Appearance Model with Fiber Details): $(OUT)/bysdf_fit.toml, $(OUT)/knit_bysdf_fit.toml (.json reports)"
 	@echo "  knit, bysdf (A Multi-scale Yarn Appearance Model with Fiber Details): $(OUT)/knit_bysdf.exr ($(OUT)/knit_bysdf.png)"
@@ -119,7 +120,7 @@ demo-quick: ## the demo at small sizes and reduced precomputes, a first look (ou
 	@$(MAKE) --no-print-directory demo OUT=$(QUICK_OUT) DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
 	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
 	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
-	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4" \
+	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4 --model tabulated" \
 	    FIT_ARGS="--width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3"
 
 # make test: everything but the tests marked slow; make test-all: all of them
@@ -240,6 +241,10 @@ $(OUT)/damask_btf.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_SCENE)
 	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
 	    --set btf=$(OUT)/damask_btf_fit.zarr --spp $(SPP) $(DEMO_SIZE) -o $@
 
+$(OUT)/damask_btf_tabulated.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_SCENE)
+	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
+	    --set btf=$(OUT)/damask_btf_fit.zarr --set model=tabulated --spp $(SPP) $(DEMO_SIZE) -o $@
+
 $(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
 	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FIT_ARGS)
 
@@ -265,8 +270,9 @@ $(OUT)/eval/knit/report.md: $(OUT)/knit_fiberpath.exr $(OUT)/knit_bysdf.exr
 
 # precomputed light transport and the fitted texture against their reference on the same view, error maps
 # and times
-$(OUT)/eval/damask/report.md: $(OUT)/damask.exr $(OUT)/damask_prt.exr $(OUT)/damask_btf.exr
-	$(LL) evaluate --ref $(OUT)/damask.exr --test $(OUT)/damask_prt.exr --test $(OUT)/damask_btf.exr -o $(OUT)/eval/damask
+$(OUT)/eval/damask/report.md: $(OUT)/damask.exr $(OUT)/damask_prt.exr $(OUT)/damask_btf.exr $(OUT)/damask_btf_tabulated.exr
+	$(LL) evaluate --ref $(OUT)/damask.exr --test $(OUT)/damask_prt.exr --test $(OUT)/damask_btf.exr \
+	    --test $(OUT)/damask_btf_tabulated.exr -o $(OUT)/eval/damask
 
 # --- evaluation set: the same view, small, procedural vs realized volpath and fiberpath ---
 # (the procedural render with --cache 0: every point answered by the exact lookups, not by cached fibres)

@@ -6,7 +6,11 @@ radius 1, 40 x 40 quads, 3200 triangles, ``stages.tile.base_surfaces.sphere_drap
 repeats across its uv. Texture: a synthetic btf of the paper's size -- 32 x 32 texels, 6 levels,
 2 lobes, 64 views (8 x 8) and 64 lights -- random rho, lobes, view table and frames with a few holes,
 written as an artifact (float32 arrays) and read back by the renderer's loader, so ``fit_bytes`` is
-the bytes of the arrays it reads (target <= 4 MB, the paper's "4 MB ... including all mip-map levels").
+the bytes of the arrays it reads (target <= 4 MB, the paper's "4 MB ... including all mip-map levels"). The
+same artifact holds a tabulated model (``--set model=tabulated``): random non-negative rows of rank 24 over the
+64 x 64 x 3 (view, light, channel) values of every texel of every level, compressed by ``compress_texels`` at the
+defaults (8 clusters x 8 components; ``table_bytes``, target <= 16 MB a fabric), timed the same way
+(``tabulated_fps``, ``tabulated_scene_lights_fps``).
 Camera: the draped damask scene's at 730 x 400, 1 spp, one directional light, no shadow rays, mip on; and
 under the scene's own lights (its directional light and its constant sky, whose light-grid quadrature
 the renderer tabulates per texel and grid view once: ``sky_table``, timed apart as ``sky_table_s``).
@@ -56,10 +60,21 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
             t = np.cross(np.cross(n, [1.0, 0.0, 0.0]), n)
             t /= np.linalg.norm(t, axis=-1, keepdims=True)
             w.write(f"level_{lv}/frame", np.stack([n, t], -2).astype(np.float32)[None])
+        table_bytes = tabulated_rows(w, rng, res, levels, V, light_grid[0] * light_grid[1])
         w.summary.update(kind="btf", source="synthetic", source_hash="synthetic", exemplars=[0],
                          exemplar_names=["synthetic"], periods=[list(period)], resolution=res, levels=levels,
-                         lobes=lobes,
+                         lobes=lobes, table_bytes=table_bytes,
                          view_grid=list(view_grid), light_grid=list(light_grid))
+
+
+def tabulated_rows(w, rng, res, levels, V, L, rank=24) -> int:
+    """Write a tabulated model of random rows (module doc) into the artifact; its bytes."""
+    from pipeline.runners.precompute_btf import write_tables
+    from stages.precompute.btf_compress import compress_texels
+
+    rows = sum((res >> lv) ** 2 for lv in range(levels))
+    X = (rng.uniform(0.0, 1.0, (rows, rank)) @ rng.uniform(0.0, 0.02, (rank, V * L * 3))).astype(np.float32)
+    return write_tables(w, [compress_texels(X, 8, 8)], V, L)
 
 
 def run(out_dir) -> dict:
@@ -128,6 +143,12 @@ def run(out_dir) -> dict:
     sky_table(tex.texels, tex.light_dirs, hemisphere_grid(*tex.view_grid))
     sky_s = time.perf_counter() - t0
     fps_sky, _, cpu_sky = fps(integ_sky, threads)
+    tab = load_btf(path, "tabulated")
+    integ_tab = pack_integrator(geom, tab, lights, ground, has_ground, cam, mip=True, shadows=False)
+    fps_tab, _, cpu_tab = fps(integ_tab, threads)
+    integ_tab_sky = pack_integrator(geom, tab, pack_lights(scene.lights, scene.path), ground, has_ground, cam,
+                                    mip=True, shadows=False)
+    fps_tab_sky, _, _ = fps(integ_tab_sky, threads)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     return {
         "image": f"{W}x{H} @ 1 spp", "triangles": int(len(F)), "btf": "32 x 32, 6 levels, 2 lobes, 64 views, 64 lights",
@@ -139,6 +160,9 @@ def run(out_dir) -> dict:
         "scene_lights_fps": fps_sky, "scene_lights_fps_target": 10.0, "scene_lights_cpu_s_per_frame": cpu_sky,
         "sky_table_s": sky_s, "pixels_per_s": fps2 * W * H, "load_average_before": load,
         "setup_s": setup_s, "first_tile_incl_compile_s": compile_s,
+        "table_bytes": int(tab.fit_bytes), "table_bytes_target": 16 * 2**20, "tabulated_fps": fps_tab,
+        "tabulated_fps_target": 10.0, "tabulated_cpu_s_per_frame": cpu_tab, "tabulated_scene_lights_fps": fps_tab_sky,
+        "tabulated_scene_lights_fps_target": 10.0,
     }
 
 

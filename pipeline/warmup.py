@@ -73,10 +73,15 @@ METHOD_STEPS: dict[str, tuple[Step, ...]] = {
     ),
     "btf": (
         _TILE,
-        Step("BTF acquisition and fit", ("precompute", "btf", "{d}/tiling.zarr", "-o", "{d}/btf_fit.zarr", "--exemplar",
-                                         "0", "--resolution", "2", "--views", "2x2", "--lights", "2x2", "--spp", "1")),
+        # every exemplar the damask's block map uses (the render refuses a texture without one of them)
+        Step("BTF acquisition, fit and table", ("precompute", "btf", "{d}/tiling.zarr", "-o", "{d}/btf_fit.zarr",
+                                                "--resolution", "2", "--views", "2x2", "--lights", "2x2", "--spp",
+                                                "1", "--model", "tabulated", "--clusters", "2", "--components", "2")),
         Step("btf", ("render", DAMASK, "--method", "btf", "--source", "tiling", "--fibers", "{d}/tiling.zarr",
                      "--set", "btf={d}/btf_fit.zarr", *TINY, "-o", "{d}/btf.exr")),
+        Step("btf, tabulated", ("render", DAMASK, "--method", "btf", "--source", "tiling", "--fibers",
+                                "{d}/tiling.zarr", "--set", "btf={d}/btf_fit.zarr", "--set", "model=tabulated", *TINY,
+                                "-o", "{d}/btf_tabulated.exr")),
     ),
     "bysdf": (
         _INGEST, _REALIZE,

@@ -8,6 +8,10 @@ A texture of several exemplars (a damask's) shows the first pair for each exempl
 ``MAX_EXEMPLAR_ROWS``), each on its own scale.
 Bottom row: the mip pyramid of the first exemplar, the fitted model of every level for the first pair,
 each level's texels drawn at the size of level 0 (seed 002 §5.1), with the level's fit RMSE.
+A texture with the tabulated model (``precompute btf --model tabulated``) shows, in each top row, the decoded
+table of level 0 beside the fit (the same view and light, the same scale) and both differences from the acquired
+data; and at the end of the bottom row, the compression's relative RMSE against the component count per
+exemplar (``tabulated/rel_rmse_by_components``: 0 components = the cluster means).
 """
 from __future__ import annotations
 
@@ -44,6 +48,21 @@ def model_image(rho, lobes, table, frame, view_grid, v_dir, l_dir):
     return out
 
 
+def table_level0(art, e, res):
+    """(res, res, V, L, 3) the tabulated model's decoded level 0 of exemplar e (``stages.core.btf.decode_texels``)."""
+    from stages.core.btf import decode_texels
+
+    basis = np.asarray(art["tabulated/basis"][e], np.float32)
+    C, K = basis.shape[0], basis.shape[1]
+    rows = res * res
+    V, L = basis.shape[2], basis.shape[3]
+    out = np.empty((rows, V * L * 3), np.float32)
+    decode_texels(np.asarray(art["tabulated/cluster"][e, :rows], np.int32),
+                  np.asarray(art["tabulated/mean"][e], np.float32).reshape(C, -1), basis.reshape(C, K, -1),
+                  np.asarray(art["tabulated/weights"][e, :rows], np.float32), out, True)
+    return out.reshape(res, res, V, L, 3)
+
+
 def _srgb(x, scale):
     y = np.clip(np.asarray(x, float) / max(scale, 1e-12), 0.0, 1.0)
     return np.where(y <= 0.0031308, 12.92 * y, 1.055 * np.power(y, 1 / 2.4) - 0.055)
@@ -66,6 +85,9 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
     names = s.get("exemplar_names", [])
     E = int(lev0["rho"].shape[0])
     rows = [(0, pr) for pr in pairs] if E == 1 else [(e, pairs[0]) for e in range(min(E, MAX_EXEMPLAR_ROWS))]
+    res = int(s["resolution"])
+    tabulated = "tabulated/weights" in art.arrays()
+    tables = {e: table_level0(art, e, res) for e, _ in rows} if tabulated else {}
     with pyplot(show) as plt:
         fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), layout="constrained")
         top = fig.subfigures(len(rows) + 1, 1, height_ratios=[1] * len(rows) + [0.9])
@@ -74,31 +96,48 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
             fit = model_image(lev0["rho"][e], lev0["lobes"][e], lev0["table"][e], lev0["frame"][e], s["view_grid"],
                               views[vi], lights[li])
             scale = float(max(np.percentile(acq, 99.5), 1e-6))
-            axes = top[row].subplots(1, 4)
+            models = [("fitted T(v) f₁(l, v)" if not tabulated else "Lafortune fit", "fit", fit)]
+            if tabulated:
+                models.append(("tabulated (decoded)", "table", tables[e][:, :, vi, li, :].astype(float)))
+            axes = list(top[row].subplots(1, 2 + 2 * len(models)))
             axes[0].imshow(_srgb(acq, scale), origin="lower", interpolation="nearest")
-            axes[0].set_title(f"acquired r(l, v), scale {scale:.3g}")
-            axes[1].imshow(_srgb(fit, scale), origin="lower", interpolation="nearest")
-            axes[1].set_title("fitted T(v) f₁(l, v), level 0")
-            im = axes[2].imshow(alpha[e, :, :, vi], origin="lower", vmin=0, vmax=1, cmap="gray",
-                                interpolation="nearest")
-            axes[2].set_title("alpha of this view")
-            fig.colorbar(im, ax=axes[2], shrink=0.8)
-            diff = (fit - acq).mean(axis=-1) / scale
-            lim = max(float(np.abs(diff).max()), 1e-6)
-            im = axes[3].imshow(diff, origin="lower", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
-            axes[3].set_title("fitted − acquired (/ scale)")
-            fig.colorbar(im, ax=axes[3], shrink=0.8)
+            axes[0].set_title(f"acquired, scale {scale:.3g}" if tabulated else f"acquired r(l, v), scale {scale:.3g}")
+            for ax, (title, _, img) in zip(axes[1:], models):
+                ax.imshow(_srgb(img, scale), origin="lower", interpolation="nearest")
+                ax.set_title(title)
+            a_ax = axes[1 + len(models)]
+            im = a_ax.imshow(alpha[e, :, :, vi], origin="lower", vmin=0, vmax=1, cmap="gray", interpolation="nearest")
+            a_ax.set_title("alpha" if tabulated else "alpha of this view")
+            fig.colorbar(im, ax=a_ax, shrink=0.8)
+            diffs = [(img - acq).mean(axis=-1) / scale for _, _, img in models]
+            lim = max(max(float(np.abs(d).max()) for d in diffs), 1e-6)
+            for ax, (_, short, _), diff in zip(axes[2 + len(models):], models, diffs):
+                im = ax.imshow(diff, origin="lower", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+                ax.set_title(f"{short} − acquired" + ("" if tabulated else " (/ scale)"))
+                fig.colorbar(im, ax=ax, shrink=0.8)
             for ax in axes:
                 ax.set_xticks([])
                 ax.set_yticks([])
             who = f"{names[e]}: " if E > 1 and e < len(names) else ""
-            top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(lights[li])}  (texels x → , y ↑)")
-        axes = top[len(rows)].subplots(1, levels)
-        axes = np.atleast_1d(axes)
+            top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(lights[li])}  (level 0, texels x → , y ↑"
+                              + ("; differences / scale)" if tabulated else ")"))
+        axes = np.atleast_1d(top[len(rows)].subplots(1, levels + (1 if tabulated else 0)))
+        if tabulated:
+            ax = axes[-1]
+            curves = np.asarray(art["tabulated/rel_rmse_by_components"])
+            for e in range(curves.shape[0]):
+                ax.plot(np.arange(curves.shape[1]), curves[e], marker="o", ms=3,
+                        label=names[e] if e < len(names) else f"exemplar {e}")
+            ax.set_xlabel("components per cluster")
+            ax.xaxis.get_major_locator().set_params(integer=True)
+            ax.set_ylabel("relative RMSE of the table")
+            ax.set_title(f"compression: {s.get('table_clusters', '?')} clusters")
+            ax.set_ylim(bottom=0)
+            ax.legend(fontsize=7)
+            axes = axes[:-1]
         vi, li = pairs[0]
         acq0 = samples[0, :, :, vi, li, :].astype(np.float64)
         scale = float(max(np.percentile(acq0, 99.5), 1e-6))
-        res = int(s["resolution"])
         per = s.get("per_exemplar") or [{}]
         rmse = per[0].get("fit_rmse", s.get("fit_rmse", []))
         for lev, ax in enumerate(axes):

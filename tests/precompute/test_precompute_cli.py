@@ -206,7 +206,8 @@ def test_btf_tabulated_reuses_the_acquisition_and_is_thread_independent(tiny_til
     artifact acquired with the same acquisition parameters reuses its samples (said on the output) and adds the
     compressed table; the Lafortune fit stays byte-identical to the one made without the table; the table's error
     never rises with the component count and its last entry is the recorded error of the stored table; the
-    table's bytes are the same on 1 and 2 threads (a fresh acquisition each)."""
+    table's bytes are the same on 1 and 2 threads (a fresh acquisition each). ``loomlight inspect`` draws the table
+    beside the fit and the error curve."""
     from pipeline.artifacts import Artifact
 
     tiling = tiny_tiling[0]
@@ -235,3 +236,9 @@ def test_btf_tabulated_reuses_the_acquisition_and_is_thread_independent(tiny_til
     b = Artifact(one)
     for n in [n for n in a.arrays() if n.startswith("tabulated/")]:
         assert np.asarray(a[n]).tobytes() == np.asarray(b[n]).tobytes(), n
+    from tests.inspector_checks import assert_legible_png
+
+    png = tmp_path / "tex.png"
+    code, _, err = cli("inspect", path, "--png", png)
+    assert code == 0, err
+    assert_legible_png(png)
