@@ -49,7 +49,8 @@ def test_demo_quick_is_the_whole_demo_small_in_its_own_directory():
 def test_demo_renders_at_the_documented_size_and_precompute():
     demo = _dry_run("-B", "demo")
     main_renders = [r for r in _commands(demo, "render") if "/eval/" not in r]
-    assert len(main_renders) == 8   # volpath, fiberpath, damask fiberpath, prt, btf fit and table, knit bysdf and fiberpath
+    # volpath, fiberpath; damask: fiberpath, prt, btf's fit and table; knit: bysdf, fiberpath
+    assert len(main_renders) == 8
     assert all("--width 240 --height 180" in r for r in main_renders)
     # the main volpath picture: procedural lookups with the fibre cache (issue 21); the evaluation's
     # procedural render: lookups only, against the realized source
