@@ -16,7 +16,17 @@ the scene gives it (the same as ``fiberpath`` renders and ``precompute iirtf`` u
    1-2 Lafortune lobes by Levenberg-Marquardt alternating with the lookup table T(v) of Eq. 4, and the
    mip levels from 2 x 2 groups of texels (§5.1) down to 1 x 1, each level's fit RMSE with and without
    the table (the paper's Fig. 5 point) recorded in the summary. The fit reads the stored (float16)
-   samples, so a refit from the artifact reproduces it.
+   samples and the level-0 frames as stored (float32), so a refit from the artifact reproduces it.
+3. with ``--model tabulated``, **compresses** (``stages.precompute.btf_compress``: local PCA, ``--clusters`` x
+   ``--components``) the table of every texel of every mip level -- the same alpha-weighted samples the fit
+   sees -- into ``tabulated/`` (``cluster`` (E, T), ``mean`` (E, C, V, L, 3), ``basis`` (E, C, K, V, L, 3),
+   ``weights`` (E, T, K), ``rel_rmse_by_components`` (E, K + 1); T the texels of every level, finest first);
+   the summary's ``models`` lists what the artifact holds, ``table_bytes`` its size.
+
+**Reusing an acquisition.** The summary records ``acquisition_key``: every parameter but the fit's and the
+table's (``FIT_PARAMS``), the inputs' identities and the acquisition code's version. When the artifact at the
+output path has the key of a new run, its samples, alpha and frames are taken instead of tracing them again
+(said on the output; ``--force`` acquires anyway): a refit or an added table costs seconds, not minutes.
 
 Every array but the two direction grids has a leading exemplar axis (``samples`` (E, res, res, V, L, 3),
 ``alpha`` (E, res, res, V), ``level_l/rho`` (E, r, r, 3), ...), in the order of the summary's ``exemplars`` (the
@@ -25,7 +35,8 @@ texels, and per exemplar in ``per_exemplar``.
 
 Defaults: 32 x 32 texels (the paper's), views and lights on 8 x 8 grids of equal solid angle (64 each,
 the paper's 64-entry tables; ``--views 4x8`` gives the paper's 32), 16 samples per texel and view, two
-lobes, threshold 0.1 (the paper's), paths of at most 16 scattering events.
+lobes, threshold 0.1 (the paper's), paths of up to the full transport's depth (``FULL_TRANSPORT_DEPTH``); the
+Lafortune model only (``--model tabulated``: 8 clusters x 8 components).
 """
 from __future__ import annotations
 
@@ -107,7 +118,6 @@ class BtfParams:
             raise LoomError(None, "--lobes", f"must be 1 or 2 (Daubert et al. 2001 §7), got {self.lobes}")
         if not (math.isfinite(self.threshold) and self.threshold > 0):
             raise LoomError(None, "--threshold", f"must be a positive number, got {self.threshold}")
-
 
     def check_table(self) -> None:
         """The tabulated model's counts: components within the table's rank bound, clusters within its texels."""
@@ -266,10 +276,9 @@ def reusable_acquisition(out, key: str) -> Reused | None:
         art = Artifact(out, kind="btf")
         if art.summary.get("acquisition_key") != key:
             return None
-        levels = art.summary["levels"]
-        frames = np.asarray(art["level_0/frame"], np.float32)
-        return Reused(np.asarray(art["samples"], np.float16), np.asarray(art["alpha"], np.float32), frames,
-                      int(art.summary["rays"]), float(art.summary["acquire_s"])) if levels >= 1 else None
+        return Reused(np.asarray(art["samples"], np.float16), np.asarray(art["alpha"], np.float32),
+                      np.asarray(art["level_0/frame"], np.float32), int(art.summary["rays"]),
+                      float(art.summary["acquire_s"]))
     except (LoomError, KeyError):
         return None
 
