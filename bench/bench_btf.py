@@ -60,10 +60,10 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
             t = np.cross(np.cross(n, [1.0, 0.0, 0.0]), n)
             t /= np.linalg.norm(t, axis=-1, keepdims=True)
             w.write(f"level_{lv}/frame", np.stack([n, t], -2).astype(np.float32)[None])
-        table_bytes = tabulated_rows(w, rng, res, levels, V, light_grid[0] * light_grid[1])
+        tabulated_rows(w, rng, res, levels, V, light_grid[0] * light_grid[1])
         w.summary.update(kind="btf", source="synthetic", source_hash="synthetic", exemplars=[0],
                          exemplar_names=["synthetic"], periods=[list(period)], resolution=res, levels=levels,
-                         lobes=lobes, table_bytes=table_bytes,
+                         lobes=lobes,
                          view_grid=list(view_grid), light_grid=list(light_grid))
 
 

@@ -248,6 +248,14 @@ def _btf(a: _Arrays) -> None:
             a.shaped(f"level_{lv}/{name}", want, "exemplars, resolution, levels, lobes and view_grid")
     a.shaped("view_dirs", [nt * nph, 3], "view_grid")
     a.shaped("light_dirs", [lt * lph, 3], "light_grid")
+    if "tabulated/weights" in a.arrays:     # the tabulated model (precompute btf --model tabulated)
+        C, K = a.value("table_clusters"), a.value("table_components")
+        T = sum((res >> lv) ** 2 for lv in range(levels))
+        keys = "exemplars, resolution, levels, view_grid, light_grid, table_clusters and table_components"
+        for name, want in (("cluster", [E, T]), ("mean", [E, C, nt * nph, lt * lph, 3]),
+                           ("basis", [E, C, K, nt * nph, lt * lph, 3]), ("weights", [E, T, K]),
+                           ("rel_rmse_by_components", [E, K + 1])):
+            a.shaped(f"tabulated/{name}", want, keys)
 
 
 def _yarns(a: _Arrays) -> None:

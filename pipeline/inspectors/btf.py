@@ -131,7 +131,7 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
             ax.set_xlabel("components per cluster")
             ax.xaxis.get_major_locator().set_params(integer=True)
             ax.set_ylabel("relative RMSE of the table")
-            ax.set_title(f"compression: {s.get('table_clusters', '?')} clusters")
+            ax.set_title(f"table: {s.get('table_clusters', '?')} clusters")
             ax.set_ylim(bottom=0)
             ax.legend(fontsize=7)
             axes = axes[:-1]

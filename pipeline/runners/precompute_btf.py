@@ -296,7 +296,8 @@ def level_rows(samples, alpha, frames, res) -> np.ndarray:
 
 
 def write_tables(w, tables, V, L) -> int:
-    """The exemplars' compressed tables into ``tabulated/`` (every array with a leading exemplar axis); their bytes."""
+    """The exemplars' compressed tables into ``tabulated/`` (every array with a leading exemplar axis) and their shape
+    and size into the summary (``table_clusters``, ``table_components``, ``table_bytes``); their bytes."""
     E = len(tables)
     C, K, _ = tables[0].basis.shape
     arrays = {"cluster": np.stack([t.cluster for t in tables]),
@@ -306,7 +307,9 @@ def write_tables(w, tables, V, L) -> int:
               "rel_rmse_by_components": np.stack([t.rel_rmse_by_components for t in tables])}
     for name, a in arrays.items():
         w.write(f"tabulated/{name}", np.ascontiguousarray(a))
-    return sum(a.nbytes for n, a in arrays.items() if n != "rel_rmse_by_components")
+    size = sum(a.nbytes for n, a in arrays.items() if n != "rel_rmse_by_components")
+    w.summary.update(table_clusters=int(C), table_components=int(K), table_bytes=int(size))
+    return size
 
 
 def _rms(parts) -> float:
@@ -449,8 +452,7 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                          compile_s=compile_s, acquisition_key=acq_key, acquisition_reused=reused is not None,
                          models=["lafortune", "tabulated"] if tables else ["lafortune"])
         if tables:
-            w.summary.update(table_clusters=p.clusters, table_components=p.components, table_bytes=int(table_bytes),
-                             table_rel_rmse=_rms([[x["table_rel_rmse"]] for x in per_exemplar]),
+            w.summary.update(table_rel_rmse=_rms([[x["table_rel_rmse"]] for x in per_exemplar]),
                              compress_s=compress_s)
     return {"skipped": False, "exemplars": E, "resolution": res, "views": V, "lights": L, "levels": n_levels,
             "fit_rmse": rmse, "fit_rmse_no_table": rmse_nt, "acquire_s": acquire_s, "fit_s": fit_s,
