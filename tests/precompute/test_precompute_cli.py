@@ -201,6 +201,7 @@ def test_btf_fits_every_exemplar_the_block_map_uses_each_as_alone(tiny_tiling, c
         assert_legible_png(png)
 
 
+@pytest.mark.slow   # three acquisitions and the table's kernels: kept out of make test's budget (make test-all)
 def test_btf_tabulated_reuses_the_acquisition(tiny_tiling, cli, tmp_path):
     """Contract (pipeline/runners/precompute_btf.py, stages/precompute/btf_compress.py): ``--model tabulated`` on an
     artifact acquired with the same acquisition parameters reuses its samples (said on the output) and adds the
