@@ -48,21 +48,6 @@ def model_image(rho, lobes, table, frame, view_grid, v_dir, l_dir):
     return out
 
 
-def table_level0(art, e, res):
-    """(res, res, V, L, 3) the tabulated model's decoded level 0 of exemplar e (``stages.core.btf.decode_texels``)."""
-    from stages.core.btf import decode_texels
-
-    basis = np.asarray(art["tabulated/basis"][e], np.float32)
-    C, K = basis.shape[0], basis.shape[1]
-    rows = res * res
-    V, L = basis.shape[2], basis.shape[3]
-    out = np.empty((rows, V * L * 3), np.float32)
-    decode_texels(np.asarray(art["tabulated/cluster"][e, :rows], np.int32),
-                  np.asarray(art["tabulated/mean"][e], np.float32).reshape(C, -1), basis.reshape(C, K, -1),
-                  np.asarray(art["tabulated/weights"][e, :rows], np.float32), out, True)
-    return out.reshape(res, res, V, L, 3)
-
-
 def _srgb(x, scale):
     y = np.clip(np.asarray(x, float) / max(scale, 1e-12), 0.0, 1.0)
     return np.where(y <= 0.0031308, 12.92 * y, 1.055 * np.power(y, 1 / 2.4) - 0.055)
@@ -87,7 +72,14 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
     rows = [(0, pr) for pr in pairs] if E == 1 else [(e, pairs[0]) for e in range(min(E, MAX_EXEMPLAR_ROWS))]
     res = int(s["resolution"])
     tabulated = "tabulated/weights" in art.arrays()
-    tables = {e: table_level0(art, e, res) for e, _ in rows} if tabulated else {}
+    tables = {}
+    if tabulated:       # the renderer's decoded table (pipeline.renderers.btf.load_table): exemplar e's level 0
+        from ..renderers.btf import load_table
+
+        V, L = len(views), len(lights)
+        table = load_table(art, art.path, E, res, levels, V, L)
+        per = len(table) // E
+        tables = {e: table[e * per:e * per + res * res].reshape(res, res, V, L, 3) for e, _ in rows}
     with pyplot(show) as plt:
         fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), layout="constrained")
         top = fig.subfigures(len(rows) + 1, 1, height_ratios=[1] * len(rows) + [0.9])
