@@ -79,8 +79,9 @@ Speed: the estimator is inlined into the tile loop and reads the integrator thro
 copy whose arrays carry no reference count: numba's atomic reference counting of the integrator's
 arrays at every helper call, and passing the whole integrator to a function once per ray, cost more
 than tracing and shading together (measured: 0.14 -> 0.09 s a 730 x 400 frame on one core). The rare
-paths (shadow rays, the light-grid quadrature, the ground) stay separate functions, which keeps the
-tile loop's first compilation near 30 s. The triangle traversal keeps its stack on the machine stack
+paths (shadow rays, the light-grid quadrature, the ground) and the per-light texel models
+(``texel_f1_rgb``, ``table_rgb``) stay separate functions, which keeps the tile loop's first compilation
+near 50 s. The triangle traversal keeps its stack on the machine stack
 (``stages.core.geometry.triangles``), so a ray allocates nothing.
 """
 import math
@@ -256,10 +257,12 @@ def view_lookup(table, idx, i0, i1, i2, i3, w0, w1, w2, w3, c):
     return w0 * table[idx, i0, c] + w1 * table[idx, i1, c] + w2 * table[idx, i2, c] + w3 * table[idx, i3, c]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def texel_f1_rgb(texels, n_lobes, idx, lx, ly, lz, vx, vy, vz):
     """f_1(l, v) of texel row idx, three channels (Eq. 2; ``stages.core.btf.texel_f1`` on the packed
-    texel, with l and v taken into the texel frame once for the three channels); 0 for l_z <= 0."""
+    texel, with l and v taken into the texel frame once for the three channels); 0 for l_z <= 0. A plain call,
+    not inlined (as ``stages.core.btf.table_rgb``): inlined at its two call sites per ``add_f1`` it added 15 s to
+    the tile loop's first compilation (65-71 -> 53 s) and no measurable speed (``bench/bench_btf.py``)."""
     if lz <= 0.0:
         return 0.0, 0.0, 0.0
     X = texels
