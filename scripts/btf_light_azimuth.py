@@ -43,12 +43,12 @@ DISTANCE = 20.0
 FOV = 2.86                       # degrees: about one unit of cloth across at DISTANCE
 
 
-def grid_direction(i: int, j: int) -> np.ndarray:
-    """Direction (ring i, azimuth j) of the hemisphere grid (``hemisphere_grid``'s formula)."""
-    c = 1.0 - (i + 0.5) / GRID[0]
-    s = math.sqrt(1.0 - c * c)
-    p = 2.0 * math.pi * (j + 0.5) / GRID[1]
-    return np.array([s * math.cos(p), s * math.sin(p), c])
+def ring_direction(ring: int, azimuth_deg: float) -> tuple[float, float, float]:
+    """Unit direction on ring ``ring`` of the hemisphere grid at an azimuth (``stages.core.btf.cell_direction``
+    with the ring's centre, u1 past the cell when the azimuth is: cos and sin wrap)."""
+    from stages.core.btf import cell_direction
+
+    return cell_direction(ring * GRID[1], GRID[0], GRID[1], 0.5, azimuth_deg / 360.0 * GRID[1])
 
 
 def _run(cmd: list[str]) -> None:
@@ -66,12 +66,9 @@ def fiberpath_curve(out: Path, view: np.ndarray, light_ring: int, step: float, s
     origin = [float(t + DISTANCE * v) for t, v in zip(TARGET, view)]
     doc["camera"] = {"origin": origin, "target": list(TARGET), "up": [0.0, 0.0, 1.0], "fov": FOV,
                      "width": 96, "height": 72}
-    cz = 1.0 - (light_ring + 0.5) / GRID[0]
-    sz = math.sqrt(1.0 - cz * cz)
     curve = []
     for deg in np.arange(0.0, 360.0, step):
-        p = math.radians(deg)
-        toward = (sz * math.cos(p), sz * math.sin(p), cz)
+        toward = ring_direction(light_ring, float(deg))
         doc["lights"] = [{"type": "directional", "direction": [-float(x) for x in toward], "irradiance": IRRADIANCE}]
         scene = out / "scene.toml"
         scene.write_text(dumps_toml(doc))
@@ -93,12 +90,9 @@ def table_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[f
     S = np.asarray(g["samples"][0], dtype=np.float64)      # (res, res, V, L, 3)
     A = np.asarray(g["alpha"][0], dtype=np.float64)        # (res, res, V)
     per_light = IRRADIANCE * (A[:, :, view_index, None, None] * S[:, :, view_index]).mean(axis=(0, 1)).mean(axis=-1)
-    cz = 1.0 - (light_ring + 0.5) / GRID[0]
-    sz = math.sqrt(1.0 - cz * cz)
     curve = []
     for deg in np.arange(0.0, 360.0, 1.0):
-        p = math.radians(deg)
-        i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(GRID[0], GRID[1], sz * math.cos(p), sz * math.sin(p), cz)
+        i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(GRID[0], GRID[1], *ring_direction(light_ring, float(deg)))
         curve.append([float(deg), float(w0 * per_light[i0] + w1 * per_light[i1] + w2 * per_light[i2]
                                          + w3 * per_light[i3])])
     return curve
@@ -148,14 +142,15 @@ def main(argv: list[str] | None = None) -> int:
         sys.exit(f"btf_light_azimuth: --view and --light-ring must lie on the {GRID[0]}x{GRID[1]} grid")
     a.out.mkdir(parents=True, exist_ok=True)
     data = {"view": [vi, vj], "light_ring": a.light_ring, "step": a.step, "spp": a.spp, "acq_spp": a.acq_spp,
-            "light_theta_deg": math.degrees(math.acos(1.0 - (a.light_ring + 0.5) / GRID[0]))}
+            "light_theta_deg": math.degrees(math.acos(ring_direction(a.light_ring, 0.0)[2]))}
     for directions in ("grid", "cell"):
         art = a.out / f"flat14_d1_{directions}.zarr"
         print(f"acquisition ({directions}): {art}", flush=True)
         _run([LL, "precompute", "btf", TILING, "-o", str(art), "--exemplar", str(EXEMPLAR), "--resolution", "16",
               "--max-depth", "1", "--spp", str(a.acq_spp), "--directions", directions])
         data[directions] = table_curve(art, vi * GRID[1] + vj, a.light_ring)
-    data["fiberpath"] = fiberpath_curve(a.out, grid_direction(vi, vj), a.light_ring, a.step, a.spp)
+    view = np.array(ring_direction(vi, (vj + 0.5) * 360.0 / GRID[1]))      # the grid view (vi, vj) itself
+    data["fiberpath"] = fiberpath_curve(a.out, view, a.light_ring, a.step, a.spp)
     (a.out / "azimuth.json").write_text(json.dumps(data, indent=1))
     png = a.out / "btf_light_azimuth.png"
     plot(data, png)
