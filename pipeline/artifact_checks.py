@@ -239,15 +239,20 @@ def _btf(a: _Arrays) -> None:
     a.same("lobes", K, k0, f"array level_0/lobes holds {k0}")
     v = a.rows("view_dirs", "view_grid")
     a.same("view_grid", nt * nph, v, f"array view_dirs holds {v} views", f"{nt} x {nph} = {nt * nph} views")
-    li = a.rows("light_dirs", "light_grid")
-    a.same("light_grid", lt * lph, li, f"array light_dirs holds {li} lights", f"{lt} x {lph} = {lt * lph} lights")
+    half = a.summary.get("light_coords", "hemisphere") == "half"   # half-vector cells: light_dirs is the fit's grid
+    fkey = "fit_light_grid" if half else "light_grid"
+    ft, fph = a.value(fkey, list)
+    li = a.rows("light_dirs", fkey)
+    a.same(fkey, ft * fph, li, f"array light_dirs holds {li} lights", f"{ft} x {fph} = {ft * fph} lights")
     for lv in range(levels):
         r = res >> lv
         for name, want in (("rho", [E, r, r, 3]), ("lobes", [E, r, r, K, 3, 4]), ("table", [E, r, r, nt * nph, 4]),
                            ("frame", [E, r, r, 2, 3])):
             a.shaped(f"level_{lv}/{name}", want, "exemplars, resolution, levels, lobes and view_grid")
     a.shaped("view_dirs", [nt * nph, 3], "view_grid")
-    a.shaped("light_dirs", [lt * lph, 3], "light_grid")
+    a.shaped("light_dirs", [ft * fph, 3], fkey)
+    if half:
+        a.shaped("half_dirs", [lt * lph, 3], "light_grid")
     if "tabulated/weights" in a.arrays:     # the tabulated model (precompute btf --model tabulated)
         C, K = a.value("table_clusters"), a.value("table_components")
         T = sum((res >> lv) ** 2 for lv in range(levels))

@@ -151,7 +151,13 @@ def btf(
                                                             "Daubert et al. 2001: 32)."),
     views: str = typer.Option("8x8", "--views", help="View grid THETAxPHI: rings of equal solid angle x azimuths "
                                                     "(8x8 = the paper's 64 table entries; 4x8 its 32)."),
-    lights: str = typer.Option("8x8", "--lights", help="Light grid THETAxPHI, as --views."),
+    lights: str = typer.Option(None, "--lights", help="Light grid THETAxPHI, as --views (default 8x8); with "
+                                                      "--light-coords half NXxNY cells of the half vector's (x, y) "
+                                                      "square (default 15x15)."),
+    light_coords: str = typer.Option("hemisphere", "--light-coords", metavar="<hemisphere | half>",
+                                     help="hemisphere: light cells of equal solid angle (Daubert et al. 2001); half: "
+                                          "cells of the half vector between light and view, where fibre glints stay "
+                                          "put as the view moves (the tabulated model reads them sharper)."),
     spp: int = typer.Option(16, "--spp", help="Rays per texel and view (super-sampled alpha and radiance)."),
     lobes: int = typer.Option(2, "--lobes", help="Lafortune lobes per texel: 1 or 2."),
     threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "
@@ -189,10 +195,11 @@ def btf(
     each exemplar's texture where its block map places that exemplar."""
     from ..outputs import ARTIFACT, check_output
     from ..runners.precompute import parse_material_options
-    from ..runners.precompute_btf import BtfParams, parse_grid, run_btf
+    from ..runners.precompute_btf import DEFAULT_LIGHTS, BtfParams, parse_grid, run_btf
 
     check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
-    p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=parse_grid(lights, "--lights"),
+    grid = parse_grid(lights, "--lights") if lights is not None else DEFAULT_LIGHTS.get(light_coords, (8, 8))
+    p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=grid, light_coords=light_coords,
                   spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, directions=directions,
                   model=model, clusters=clusters, components=components,
                   max_depth=max_depth,

@@ -22,14 +22,30 @@ from . import finish, pyplot
 MAX_EXEMPLAR_ROWS = 3
 
 
-def _pairs(summary):
+def _pairs(summary, views):
+    """[(view index, light index, light direction)] x 2: the light index is the samples' (a half-vector cell with
+    ``light_coords`` half: the one whose centre, seen from the view, is nearest the hemisphere grid's choice)."""
+    from stages.core.btf import half_cell_direction, hemisphere_grid
+
     nv_t, nv_p = summary["view_grid"]
-    nl_t, nl_p = summary["light_grid"]
+    half = summary.get("light_coords", "hemisphere") == "half"
+    nl_t, nl_p = summary["fit_light_grid"] if half else summary["light_grid"]
+    grid = hemisphere_grid(nl_t, nl_p)
     v0 = 0
     l0 = (nl_t // 2) * nl_p
     v1 = (max(nv_t - 2, 0)) * nv_p
     l1 = (nl_t // 2) * nl_p + nl_p // 2
-    return [(v0, l0), (v1, l1)]
+    out = []
+    for vi, li in ((v0, l0), (v1, l1)):
+        if not half:
+            out.append((vi, li, grid[li]))
+            continue
+        nx, ny = summary["light_grid"]
+        cells = np.array([half_cell_direction(j, nx, ny, 0.5, 0.5, *(float(x) for x in views[vi]))
+                          for j in range(nx * ny)])
+        j = int(np.argmax(np.where(cells[:, 2] > 0.0, cells @ grid[li], -np.inf)))
+        out.append((vi, j, cells[j]))
+    return out
 
 
 def model_image(rho, lobes, table, frame, view_grid, v_dir, l_dir):
@@ -61,12 +77,12 @@ def _angles(d):
 
 def inspect(art, png, show=False, size=(1200, 900), **_):
     s = art.summary
-    views, lights = art["view_dirs"], art["light_dirs"]
+    views = art["view_dirs"]
     samples = art["samples"]
     alpha = art["alpha"]
     levels = int(s["levels"])
     lev0 = {n: art[f"level_0/{n}"] for n in ("rho", "lobes", "table", "frame")}
-    pairs = _pairs(s)
+    pairs = _pairs(s, views)
     names = s.get("exemplar_names", [])
     E = int(lev0["rho"].shape[0])
     rows = [(0, pr) for pr in pairs] if E == 1 else [(e, pairs[0]) for e in range(min(E, MAX_EXEMPLAR_ROWS))]
@@ -76,17 +92,17 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
     if tabulated:       # the renderer's decoded table (pipeline.renderers.btf.load_table): exemplar e's level 0
         from ..renderers.btf import load_table
 
-        V, L = len(views), len(lights)
+        V, L = len(views), int(np.prod(s["light_grid"]))
         table = load_table(art, art.path, E, res, levels, V, L)
         per = len(table) // E
         tables = {e: table[e * per:e * per + res * res].reshape(res, res, V, L, 3) for e, _ in rows}
     with pyplot(show) as plt:
         fig = plt.figure(figsize=(size[0] / 100, size[1] / 100), layout="constrained")
         top = fig.subfigures(len(rows) + 1, 1, height_ratios=[1] * len(rows) + [0.9])
-        for row, (e, (vi, li)) in enumerate(rows):
+        for row, (e, (vi, li, ldir)) in enumerate(rows):
             acq = samples[e, :, :, vi, li, :].astype(np.float64)
             fit = model_image(lev0["rho"][e], lev0["lobes"][e], lev0["table"][e], lev0["frame"][e], s["view_grid"],
-                              views[vi], lights[li])
+                              views[vi], ldir)
             scale = float(max(np.percentile(acq, 99.5), 1e-6))
             models = [("fitted T(v) f₁(l, v)" if not tabulated else "Lafortune fit", "fit", fit)]
             if tabulated:
@@ -111,7 +127,7 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
                 ax.set_xticks([])
                 ax.set_yticks([])
             who = f"{names[e]}: " if E > 1 and e < len(names) else ""
-            top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(lights[li])}  (level 0, texels x → , y ↑"
+            top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(ldir)}  (level 0, texels x → , y ↑"
                               + ("; differences / scale)" if tabulated else ")"))
         axes = np.atleast_1d(top[len(rows)].subplots(1, levels + (1 if tabulated else 0)))
         if tabulated:
@@ -127,14 +143,14 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
             ax.set_ylim(bottom=0)
             ax.legend(fontsize=7)
             axes = axes[:-1]
-        vi, li = pairs[0]
+        vi, li, ldir = pairs[0]
         acq0 = samples[0, :, :, vi, li, :].astype(np.float64)
         scale = float(max(np.percentile(acq0, 99.5), 1e-6))
         per = s.get("per_exemplar") or [{}]
         rmse = per[0].get("fit_rmse", s.get("fit_rmse", []))
         for lev, ax in enumerate(axes):
             f = {n: art[f"level_{lev}/{n}"][0] for n in ("rho", "lobes", "table", "frame")}
-            img = model_image(f["rho"], f["lobes"], f["table"], f["frame"], s["view_grid"], views[vi], lights[li])
+            img = model_image(f["rho"], f["lobes"], f["table"], f["frame"], s["view_grid"], views[vi], ldir)
             rep = res // img.shape[0]
             ax.imshow(_srgb(np.kron(img, np.ones((rep, rep, 1))), scale), origin="lower", interpolation="nearest")
             ax.set_title(f"level {lev}: {img.shape[0]}²" + (f"\nRMSE {rmse[lev]:.3g}" if lev < len(rmse) else ""))

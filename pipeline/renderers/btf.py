@@ -85,7 +85,8 @@ ONE_EXEMPLAR = Blocks(np.zeros((1, 1), np.int64), np.ones(2), np.zeros(2))   # a
 # the texture, every level flattened and packed (``stages.render.integrators.btf`` module doc: ``texels``, ``table``,
 # ``levels``), with what else the renderer needs from the artifact
 BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "periods",
-                                       "exemplars", "fit_bytes", "summary", "model", "radiance", "light_grid"])
+                                       "exemplars", "fit_bytes", "summary", "model", "radiance", "light_grid",
+                                       "half", "valid", "solid"])
 SOURCES = ("mesh", "tiling")
 ON_OFF = {"on": True, "off": False}
 
@@ -94,8 +95,10 @@ ON_OFF = {"on": True, "off": False}
 def load_btf(path, model: str = "lafortune") -> BtfTexture:
     """The texture of a ``btf`` artifact, its levels flattened and checked (grids, shapes, finite values); with
     ``model`` tabulated, its compressed table decoded in the same row order (``radiance`` (N, V, L, 3) float32,
-    negative values clamped to 0; else (1, 1, 1, 3) zeros)."""
-    from stages.core.btf import hemisphere_grid
+    negative values clamped to 0; else (1, 1, 1, 3) zeros). ``half``: the table's lights are half-vector cells
+    (``precompute btf --light-coords half``), whose valid fractions and solid angles per view cell
+    (``stages.core.btf.half_cell_geometry``) are ``valid`` and ``solid`` (V, L); else (1, 1) ones and zeros."""
+    from stages.core.btf import half_cell_geometry, hemisphere_grid
 
     from ..artifacts import Artifact
 
@@ -112,6 +115,11 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     res, levels, K = int(s["resolution"]), int(s["levels"]), int(s["lobes"])
     nt, nph = (int(x) for x in s["view_grid"])
     lt, lph = (int(x) for x in s["light_grid"])
+    coords = s.get("light_coords", "hemisphere")
+    if coords not in ("hemisphere", "half"):
+        raise LoomError(path, "summary.light_coords", f"must be hemisphere or half, got {coords!r}")
+    half = coords == "half"
+    ft, fph = (int(x) for x in s.get("fit_light_grid", [lt, lph]))
     if res & (res - 1) or not 1 <= levels <= res.bit_length():
         raise LoomError(path, "summary", f"resolution {res} with {levels} levels: the resolution must be a power "
                         f"of two and the levels at most log2(resolution) + 1")
@@ -123,7 +131,8 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     if missing:
         raise LoomError(path, f"array {missing[0]}", "missing: the renderer reads every level's rho, lobes, table "
                         "and frame and the view and light directions")
-    for name, grid, (a, b) in (("view_dirs", "view_grid", (nt, nph)), ("light_dirs", "light_grid", (lt, lph))):
+    for name, grid, (a, b) in (("view_dirs", "view_grid", (nt, nph)),
+                               ("light_dirs", "fit_light_grid" if half else "light_grid", (ft, fph))):
         d = np.asarray(art[name], np.float64)
         if d.shape != (a * b, 3) or not np.allclose(d, hemisphere_grid(a, b), atol=1e-5):
             raise LoomError(path, f"array {name}", f"is not the hemisphere grid of summary.{grid} = [{a}, {b}] "
@@ -156,11 +165,15 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     radiance = np.zeros((1, 1, 1, 3), np.float32)
     if model == "tabulated":
         radiance, fit_bytes = load_table(art, path, E, res, levels, nt * nph, lt * lph), int(s.get("table_bytes", 0))
+    valid, solid = np.ones((1, 1)), np.zeros((1, 1))
+    if half:    # the cells seen from each view cell, as the acquisition saw them (cell averages or centres)
+        valid, solid = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
     return BtfTexture(np.ascontiguousarray(np.concatenate(texels)),
                       np.ascontiguousarray(np.concatenate(tables), np.float32),
                       np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), periods,
-                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph))
+                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, valid,
+                      solid)
 
 
 def load_table(art, path, E, res, levels, V, L) -> np.ndarray:
@@ -318,7 +331,7 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
     if not has_sky:
         sky = np.zeros((1, 1, 3), np.float32)
     elif tabulated:
-        sky = tabulated_sky_table(tex.radiance)
+        sky = tabulated_sky_table(tex.radiance, sky_weights(tex))
     else:
         sky = sky_table(tex.texels, tex.light_dirs, hemisphere_grid(*tex.view_grid))
     tab = tex.table
@@ -335,7 +348,19 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
                          has_ground, pixel_angle,
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
                          int(bool(shadows)), MAX_LAYERS, eps, tabulated, tex.radiance, int(tex.light_grid[0]),
-                         int(tex.light_grid[1]))
+                         int(tex.light_grid[1]), int(tex.half), tex.valid)
+
+
+def sky_weights(tex: BtfTexture) -> np.ndarray:
+    """(V, L) the tabulated table's quadrature weights per view cell and light cell: 2 pi / L on the hemisphere grid
+    (every cell the same solid angle); a half-vector cell's solid angle over its valid fraction (its cell average
+    counts the invalid part as 0; ``stages.core.btf`` module doc), 0 where it has no light."""
+    from stages.core.btf import MIN_VALID
+
+    V, L = tex.table.shape[1], tex.light_grid[0] * tex.light_grid[1]
+    if not tex.half:
+        return np.full((V, L), 2.0 * np.pi / L)
+    return np.where(tex.valid >= MIN_VALID, tex.solid / np.maximum(tex.valid, MIN_VALID), 0.0)
 
 
 def film_setup(scene, options: dict):

@@ -53,6 +53,10 @@ from ..limits import FULL_TRANSPORT_DEPTH, MAX_PATH_DEPTH, largest_option
 from ..memory import Estimate, budget as memory_budget
 
 DIRECTIONS = ("cell", "grid")
+LIGHT_COORDS = ("hemisphere", "half")   # the light grid: equal-area rings and azimuths, or half-vector cells
+DEFAULT_LIGHTS = {"hemisphere": (8, 8), "half": (15, 15)}   # --lights when not given (half: a cell at h = 0)
+FIT_LIGHT_GRID = (8, 8)   # half-vector acquisitions: the hemisphere grid the Lafortune fit (and the renderer's
+                          # quadrature) reads them on (stages.core.btf.half_to_hemisphere)
 MODELS = ("lafortune", "tabulated")   # what the artifact holds beside the samples: the fit, or the fit and the table
 # parameters that change the fit or the table, not the acquisition: an artifact at the output path acquired with
 # the same other parameters from the same inputs lends its samples (``reusable_acquisition``)
@@ -74,12 +78,13 @@ MAX_ROUNDS = 1_000
 class BtfParams:
     resolution: int = 32
     views: tuple = (8, 8)            # (n_theta, n_phi) of the view grid
-    lights: tuple = (8, 8)           # (n_theta, n_phi) of the light grid
+    lights: tuple = (8, 8)           # (n_theta, n_phi) of the light grid; (nx, ny) with light_coords "half"
     spp: int = 16
     lobes: int = 2
     threshold: float = 0.1
     max_rounds: int = 10
     directions: str = "cell"         # cell: view and light uniform over each grid cell (averages); grid: the grid's
+    light_coords: str = "hemisphere"  # half: light cells in half-vector coordinates (stages.core.btf)
     max_depth: int = FULL_TRANSPORT_DEPTH   # at 16 the damask's ground-satin texture held 0.55 / 0.66 / 0.75 of
     rr_depth: int = 5                       # its red / green / blue light at 256 (64 x 48 render, 8 spp)
     seed: int = 0
@@ -110,6 +115,9 @@ class BtfParams:
                 raise LoomError(None, name, f"{v:,} is past the cap of {cap:,} {what}; lower it")
         if self.directions not in DIRECTIONS:
             raise LoomError(None, "--directions", f"must be one of {', '.join(DIRECTIONS)}, got {self.directions!r}")
+        if self.light_coords not in LIGHT_COORDS:
+            raise LoomError(None, "--light-coords", f"must be one of {', '.join(LIGHT_COORDS)}, got "
+                                                    f"{self.light_coords!r}")
         if self.model not in MODELS:
             raise LoomError(None, "--model", f"must be one of {', '.join(MODELS)}, got {self.model!r}")
         if self.model == "tabulated":
@@ -189,11 +197,32 @@ def btf_work(res, V, L, p: "BtfParams", threads: int, exemplars: int = 1):
 
 
 def direction_grids(p: dict) -> tuple:
-    """(view_grid, light_grid) for ``acquire_texels``: the grids with ``directions = "cell"`` (averages over
-    each grid cell), (0, 0) each with "grid" (the grid directions themselves)."""
+    """(view_grid, light_grid, light_coords) for ``acquire_texels``: the grids with ``directions = "cell"`` (averages
+    over each grid cell), (0, 0) each with "grid" (the grid directions themselves) -- but a half-vector light grid
+    always, its cells being seen from each view (``stages.core.btf.half_cell_direction``)."""
+    from stages.core.btf import HALF, HEMISPHERE
+
+    half = p.get("light_coords", "hemisphere") == "half"
+    lights = tuple(int(x) for x in p["lights"])
+    coords = HALF if half else HEMISPHERE
     if p.get("directions", "cell") == "grid":
-        return (0, 0), (0, 0)
-    return tuple(int(x) for x in p["views"]), tuple(int(x) for x in p["lights"])
+        return (0, 0), lights if half else (0, 0), coords
+    return tuple(int(x) for x in p["views"]), lights, coords
+
+
+def light_cells(p: "BtfParams"):
+    """(the acquisition's light directions (L, 3), the fit's (M, 3)): the hemisphere grid of ``--lights`` twice; for
+    half-vector cells, the cells' centre half vectors (h_z 0 off the unit disk: what ``half_dirs`` stores; the
+    acquisition takes only their count) and the hemisphere grid of FIT_LIGHT_GRID."""
+    from stages.core.btf import hemisphere_grid
+
+    if p.light_coords != "half":
+        grid = hemisphere_grid(*p.lights)
+        return grid, grid
+    nx, ny = p.lights
+    hx, hy = np.meshgrid(-1.0 + 2.0 * (np.arange(nx) + 0.5) / nx, -1.0 + 2.0 * (np.arange(ny) + 0.5) / ny)
+    hz = np.sqrt(np.maximum(0.0, 1.0 - hx * hx - hy * hy))
+    return np.stack([hx, hy, hz], axis=-1).reshape(-1, 3), hemisphere_grid(*FIT_LIGHT_GRID)
 
 
 def _btf_row_task(tiling, tiling_hash, store, e, k, iy, mof, mats, view_dirs, light_dirs, p: dict):
@@ -319,7 +348,7 @@ def _rms(parts) -> float:
 def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, budget=None, threads=None,
             scheduler=None) -> dict:
     t_start = time.perf_counter()  # wall_time_s: the whole stage, imports and input reading too
-    from stages.core.btf import hemisphere_grid
+    from stages.core.btf import half_cell_geometry, half_to_hemisphere, hemisphere_grid
     from stages.precompute.btf import acquire_texels, texel_frames
     from stages.precompute.btf_compress import compress_texels
     from stages.precompute.btf_fit import fit_levels
@@ -349,7 +378,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
         return {"skipped": True}
     res = p.resolution
     view_dirs = hemisphere_grid(*p.views)
-    light_dirs = hemisphere_grid(*p.lights)
+    light_dirs, fit_dirs = light_cells(p)
+    half = p.light_coords == "half"
     V, L = len(view_dirs), len(light_dirs)
     limit = budget or memory_budget()
     est = btf_estimate(res, V, L, int(art.summary["segments"]), E, p)
@@ -375,7 +405,10 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     with session(scheduler), w:
         store = w.store_path
         w.write("view_dirs", view_dirs)
-        w.write("light_dirs", light_dirs)
+        w.write("light_dirs", fit_dirs)     # the fit's light grid (the acquisition's with hemisphere coordinates)
+        if half:
+            w.write("half_dirs", light_dirs)
+            valid = half_cell_geometry(p.views[0], p.views[1], p.lights[0], p.lights[1], p.directions == "cell")[0]
         if reused is None:
             w.create("samples", (E, res, res, V, L, 3), np.float16, (1, 1, res, V, L, 3),
                      dimension_names=("exemplar", "y", "x", "view", "light", "c"))
@@ -406,8 +439,12 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
             samples = w.group["samples"][e].astype(np.float32)
             alpha = w.group["alpha"][e]
             t0 = time.perf_counter()
+            fit_samples = samples
+            if half:   # the fit's lobes take the lights of a hemisphere grid: the table read there from each view
+                fit_samples = half_to_hemisphere(samples.reshape(res * res, V, L, 3), valid, p.lights[0], p.lights[1],
+                                                 view_dirs, fit_dirs).reshape(res, res, V, len(fit_dirs), 3)
             with status(f"btf: fitting {res}x{res} texels of '{names[e]}' and their mip levels"):
-                levels = fit_levels(samples, alpha, frames, view_dirs, light_dirs, p.lobes, p.threshold,
+                levels = fit_levels(fit_samples, alpha, frames, view_dirs, fit_dirs, p.lobes, p.threshold,
                                     max_rounds=p.max_rounds)
             fit_s += time.perf_counter() - t0
             fits.append(_fit_record(levels, res, V, p.lobes))
@@ -444,6 +481,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                          exemplar_names=names, periods=periods, per_exemplar=per_exemplar,
                          top=max(tops), bottom=min(bottoms), resolution=res,
                          levels=n_levels, lobes=p.lobes, view_grid=list(p.views), light_grid=list(p.lights),
+                         light_coords=p.light_coords, directions=p.directions,
+                         fit_light_grid=list(FIT_LIGHT_GRID if half else p.lights),
                          spp=p.spp, fit_rmse=rmse, fit_rmse_no_table=rmse_nt, fit_bytes=int(fit_bytes),
                          mean_radiance=mean_r, relative_fit_rmse=[x / max(mean_r, 1e-12) for x in rmse],
                          unconverged_texels=unconverged,

@@ -25,6 +25,22 @@ direction stands for the same solid angle 2 pi / (n_theta n_phi). ``grid_weights
 bilinear interpolation weights on that grid (rings clamped at the pole and the horizon, azimuth
 wrapped), so T(v) and alpha are continuous in v. Light directions use the same grid, and the sum over
 it is the renderer's quadrature for environment and SG lights.
+
+**Half-vector light cells** (``light_coords = HALF``; ``precompute btf --light-coords half``). A fibre's glint is
+where its tangent t is perpendicular to the half vector h = (l + v) / |l + v|, and a yarn of twist angle a
+along x holds fibres whose tangents make every angle up to a with it, so its floats glint for |h_x| <= sin a
+whatever the view (Rusinkiewicz 1998 chose half-vector coordinates for the same reason: specular features
+sit still in them). On the hemisphere grid the glint's edges move with v, so interpolating between the
+view grid's directions blurs them; in half-vector coordinates they stay on the same cells. So the light
+of cell j of an ``nx`` x ``ny`` grid over the square of projected half vectors (h_x, h_y) in [-1, 1]^2
+(column ix = j % nx, row iy = j // nx, centre h_x = -1 + 2 (ix + 1/2) / nx) seen from v is the mirror
+direction of v about h: l = 2 (v.h) h - v (``half_cell_direction``). Not every (h, v) gives a light above
+the fabric (|h_xy| >= 1, v.h <= 0 or l_z <= 0: *invalid*, no light); ``half_cell_geometry`` gives each (view
+cell, light cell) its valid fraction (of the cell's h area: the acquisition's samples there carry the light,
+the others 0) and its solid angle (the light directions whose half vector with v lies in the cell: the
+cells partition the hemisphere, summing to 2 pi for every view). The acquisition's cell averages are over
+the whole cell (invalid samples 0); the renderer reads them normalised by the valid fraction, which makes a
+cell cut by the horizon the mean over the part that has light (``half_rgb``).
 """
 import math
 
@@ -33,6 +49,11 @@ from numba import njit, prange
 
 TWO_PI = 2.0 * math.pi
 LOBE_PARAMS = 4          # C_x, C_y, C_z, N
+HEMISPHERE = 0           # light coordinates: the hemisphere grid (the default) ...
+HALF = 1                 # ... or half-vector cells (module doc)
+MIN_VALID = 1e-6         # a view row of the half-vector table whose light weights' valid fraction is below this
+                         # holds no light near the direction: it is left out of the view interpolation
+GEOMETRY_SUB = 8         # ``half_cell_geometry``: sub-samples per axis of a view cell and of a light cell
 
 
 def hemisphere_grid(n_theta: int, n_phi: int) -> np.ndarray:
@@ -84,6 +105,158 @@ def grid_weights(n_theta, n_phi, vx, vy, vz):
     c1 = (c0 + 1) % n_phi
     return (r0 * n_phi + c0, r0 * n_phi + c1, r1 * n_phi + c0, r1 * n_phi + c1,
             (1.0 - fa) * (1.0 - fb), (1.0 - fa) * fb, fa * (1.0 - fb), fa * fb)
+
+
+@njit(cache=True)
+def half_cell_direction(index, nx, ny, u0, u1, vx, vy, vz):
+    """(l_x, l_y, l_z): the light at (u0, u1) in [0, 1)^2 of cell ``index`` of the nx x ny half-vector grid seen from
+    the unit view v (module doc): l = 2 (v.h) h - v, and (0, 0, -1) -- l_z <= 0: no light -- where h is off the
+    unit disk, faces away from v, or mirrors v below the fabric. (0.5, 0.5) is the cell's centre."""
+    iy = index // nx
+    ix = index - iy * nx
+    hx = -1.0 + 2.0 * (ix + u0) / nx
+    hy = -1.0 + 2.0 * (iy + u1) / ny
+    s = hx * hx + hy * hy
+    if s >= 1.0:
+        return 0.0, 0.0, -1.0
+    hz = math.sqrt(1.0 - s)
+    d = hx * vx + hy * vy + hz * vz
+    if d <= 0.0:
+        return 0.0, 0.0, -1.0
+    lz = 2.0 * d * hz - vz
+    if lz <= 0.0:
+        return 0.0, 0.0, -1.0
+    return 2.0 * d * hx - vx, 2.0 * d * hy - vy, lz
+
+
+@njit(cache=True)
+def half_weights(nx, ny, lx, ly, lz, vx, vy, vz):
+    """Bilinear weights of the half vector of l and v (unit, or any length) on the nx x ny half-vector grid's cell
+    centres, clamped at the square's edges: (i0, i1, i2, i3, w0, w1, w2, w3), indices into the light axis."""
+    ln = math.sqrt(lx * lx + ly * ly + lz * lz)
+    vn = math.sqrt(vx * vx + vy * vy + vz * vz)
+    hx = lx / ln + vx / vn
+    hy = ly / ln + vy / vn
+    hz = lz / ln + vz / vn
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    a = min(max((hx / hn + 1.0) * 0.5 * nx - 0.5, 0.0), nx - 1.0)
+    b = min(max((hy / hn + 1.0) * 0.5 * ny - 0.5, 0.0), ny - 1.0)
+    c0 = int(math.floor(a))
+    r0 = int(math.floor(b))
+    c1 = min(c0 + 1, nx - 1)
+    r1 = min(r0 + 1, ny - 1)
+    fa = a - c0
+    fb = b - r0
+    return (r0 * nx + c0, r0 * nx + c1, r1 * nx + c0, r1 * nx + c1,
+            (1.0 - fb) * (1.0 - fa), (1.0 - fb) * fa, fb * (1.0 - fa), fb * fa)
+
+
+@njit(cache=True, parallel=True)
+def half_cell_geometry(vt, vph, nx, ny, jitter):
+    """(valid (V, L), solid (V, L)) of the nx x ny half-vector grid seen from each cell of the vt x vph view grid
+    (module doc): the fraction of light cell j's h area that gives a light above the fabric, and the solid angle of
+    the lights whose half vector with the view lies in cell j: the integral of the Jacobian |dl/dh| = 4 (v.h) / h_z
+    (dl = 4 (v.h) dh, dh = dh_x dh_y / h_z) over the cell's valid part by the midpoint rule on GEOMETRY_SUB^2
+    points, each view's row then scaled to 2 pi (the rule under-counts the cells on the unit circle, where 1 / h_z
+    grows without bound; the interior cells agree with binning 32,768 light directions by their cell to its own
+    resolution). ``jitter``: averaged over GEOMETRY_SUB^2 views spread over the view's cell, as the acquisition's
+    cell averages see it; else at the grid view itself."""
+    V = vt * vph
+    L = nx * ny
+    valid = np.zeros((V, L))
+    solid = np.zeros((V, L))
+    G = GEOMETRY_SUB
+    S = G if jitter else 1
+    area = 4.0 / (nx * ny * G * G * S * S)     # one h point's share of its cell's area, over the S^2 views
+    for iv in prange(V):
+        for a in range(S):
+            for b in range(S):
+                vx, vy, vz = cell_direction(iv, vt, vph, (a + 0.5) / S, (b + 0.5) / S)
+                for j in range(L):
+                    iy = j // nx
+                    ix = j - iy * nx
+                    for c in range(G):
+                        for d in range(G):
+                            hx = -1.0 + 2.0 * (ix + (c + 0.5) / G) / nx
+                            hy = -1.0 + 2.0 * (iy + (d + 0.5) / G) / ny
+                            if half_cell_direction(j, nx, ny, (c + 0.5) / G, (d + 0.5) / G, vx, vy, vz)[2] <= 0.0:
+                                continue
+                            hz = math.sqrt(1.0 - hx * hx - hy * hy)
+                            valid[iv, j] += 1.0 / (G * G * S * S)
+                            solid[iv, j] += area * 4.0 * (hx * vx + hy * vy + hz * vz) / hz
+        total = 0.0
+        for j in range(L):
+            total += solid[iv, j]
+        for j in range(L):
+            solid[iv, j] *= TWO_PI / total
+    return valid, solid
+
+
+@njit(cache=True)
+def half_row(radiance, valid, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3):
+    """(r, g, b, valid fraction) of view row iv of texel row idx of a half-vector table at the light weights
+    (``half_weights``): the weighted cell averages over the weighted valid fractions -- the mean radiance where
+    the cells have light; (0, 0, 0, den) when the valid fraction ``den`` is below MIN_VALID."""
+    den = q0 * valid[iv, b0] + q1 * valid[iv, b1] + q2 * valid[iv, b2] + q3 * valid[iv, b3]
+    if den < MIN_VALID:
+        return 0.0, 0.0, 0.0, den
+    r = radiance
+    s0 = q0 * r[idx, iv, b0, 0] + q1 * r[idx, iv, b1, 0] + q2 * r[idx, iv, b2, 0] + q3 * r[idx, iv, b3, 0]
+    s1 = q0 * r[idx, iv, b0, 1] + q1 * r[idx, iv, b1, 1] + q2 * r[idx, iv, b2, 1] + q3 * r[idx, iv, b3, 1]
+    s2 = q0 * r[idx, iv, b0, 2] + q1 * r[idx, iv, b1, 2] + q2 * r[idx, iv, b2, 2] + q3 * r[idx, iv, b3, 2]
+    return s0 / den, s1 / den, s2 / den, den
+
+
+@njit(cache=True)
+def half_rgb(radiance, valid, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
+    """``table_rgb`` of a half-vector table (module doc): r(l, v) of texel row idx, three channels, bilinear on the view
+    grid (vt x vph) and, in every view row, on the half-vector grid (lnx x lny) at the half vector of (l, v) itself
+    (``half_row``), the rows without light there left out and the others' weights renormalised; 0 for l_z <= 0.
+    ``valid`` (V, L): ``half_cell_geometry``'s valid fractions."""
+    if lz <= 0.0:
+        return 0.0, 0.0, 0.0
+    a0, a1, a2, a3, p0, p1, p2, p3 = grid_weights(vt, vph, vx, vy, vz)
+    b0, b1, b2, b3, q0, q1, q2, q3 = half_weights(lnx, lny, lx, ly, lz, vx, vy, vz)
+    s0 = 0.0
+    s1 = 0.0
+    s2 = 0.0
+    wsum = 0.0
+    for iv, wv in ((a0, p0), (a1, p1), (a2, p2), (a3, p3)):
+        if wv == 0.0:
+            continue
+        r0, r1, r2, den = half_row(radiance, valid, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3)
+        if den < MIN_VALID:
+            continue
+        s0 += wv * r0
+        s1 += wv * r1
+        s2 += wv * r2
+        wsum += wv
+    if wsum <= 0.0:
+        return 0.0, 0.0, 0.0
+    return s0 / wsum, s1 / wsum, s2 / wsum
+
+
+@njit(cache=True, parallel=True)
+def half_to_hemisphere(radiance, valid, lnx, lny, view_dirs, light_dirs):
+    """A half-vector table (T, V, L, 3) read at other lights (``light_dirs`` (M, 3), e.g. a hemisphere grid) from each
+    grid view v_i (``view_dirs`` (V, 3)) -- ``half_row`` of row i, no view interpolation: (T, V, M, 3) float32, what
+    the Lafortune fit sees of a half-vector acquisition."""
+    T, V, _L, _ = radiance.shape
+    M = light_dirs.shape[0]
+    out = np.zeros((T, V, M, 3), np.float32)
+    for t in prange(T):
+        for i in range(V):
+            vx, vy, vz = view_dirs[i, 0], view_dirs[i, 1], view_dirs[i, 2]
+            for m in range(M):
+                lx, ly, lz = light_dirs[m, 0], light_dirs[m, 1], light_dirs[m, 2]
+                if lz <= 0.0:
+                    continue
+                b0, b1, b2, b3, q0, q1, q2, q3 = half_weights(lnx, lny, lx, ly, lz, vx, vy, vz)
+                r0, r1, r2, _den = half_row(radiance, valid, t, i, b0, b1, b2, b3, q0, q1, q2, q3)
+                out[t, i, m, 0] = r0
+                out[t, i, m, 1] = r1
+                out[t, i, m, 2] = r2
+    return out
 
 
 @njit(cache=True, inline="always")

@@ -52,7 +52,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from stages.core.btf import cell_direction
+from stages.core.btf import HALF, cell_direction, half_cell_direction
 from stages.core.dispatch import runtime_value
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
@@ -88,6 +88,8 @@ def _btf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     tp0, tp1, tp2 = tp
     rays = 0
     for k in range(lights.shape[0]):
+        if lights[k, 2] <= 0.0:   # a half-vector cell's light below the fabric (stages.core.btf): none
+            continue
         wl[0] = lights[k, 0]
         wl[1] = lights[k, 1]
         wl[2] = lights[k, 2]
@@ -119,16 +121,18 @@ def _first_normal(sc, h, out):
 
 @njit(cache=True, _nrt=False)
 def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key0, radiance, normal, view_cell,
-                       view_grid, light_grid, lights_now):
+                       view_grid, light_grid, light_coords, lights_now):
     """Radiance sums (L, 3) of texel ``texel`` seen from v over ``spp`` samples into ``radiance`` (zeroed
     here) and the first-hit normals into ``normal`` (added); returns (hits, rays). With view_grid[0] > 0
     each sample's view is uniform in grid cell ``view_cell`` and each light's direction uniform in its
     cell of light_grid (module doc, "Cell averages"; ``lights_now`` (L, 3) scratch), else v and
-    ``light_dirs`` themselves. Compiled without reference counting (its vectors on the machine stack):
-    the two workers of ``acquire_texels`` would otherwise count references on the same arrays for every
-    ray.
-    16 parameters: one (texel, view) job (texel, view and its cell, spp, key), the light set, the grids and four
-    output or scratch arrays; the fabric is one record (``PeriodicPaths``)."""
+    ``light_dirs`` themselves. ``light_coords`` HALF: light k is half-vector cell k of light_grid seen from the
+    sample's view (``stages.core.btf.half_cell_direction``: uniform over the cell with the grids, its centre
+    without), ``light_dirs`` then only gives the count. Compiled without reference counting (its vectors on the
+    machine stack): the two workers of ``acquire_texels`` would otherwise count references on the same arrays for
+    every ray.
+    17 parameters: one (texel, view) job (texel, view and its cell, spp, key), the light set, the grids and their
+    light coordinates and four output or scratch arrays; the fabric is one record (``PeriodicPaths``)."""
     W = paths.W
     H = paths.H
     L = light_dirs.shape[0]
@@ -138,7 +142,14 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
         for c in range(3):
             lights_now[k, c] = light_dirs[k, c]
     jitter = view_grid[0] > 0
+    half = light_coords == HALF
     first_dims = FIRST_DIMS + (2 + 2 * L if jitter else 0)
+    if half and not jitter:   # the cells' centres seen from v, the same for every sample
+        for k in range(L):
+            lx, ly, lz = half_cell_direction(k, light_grid[0], light_grid[1], 0.5, 0.5, vx, vy, vz)
+            lights_now[k, 0] = lx
+            lights_now[k, 1] = ly
+            lights_now[k, 2] = lz
     iy = texel // res
     ix = texel - iy * res
     v = PathScratch(stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(),
@@ -154,8 +165,12 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
             vx, vy, vz = cell_direction(view_cell, view_grid[0], view_grid[1], uniform(seed, key, FIRST_DIMS),
                                         uniform(seed, key, FIRST_DIMS + 1))
             for k in range(L):
-                lx, ly, lz = cell_direction(k, light_grid[0], light_grid[1], uniform(seed, key, FIRST_DIMS + 2 + 2 * k),
-                                            uniform(seed, key, FIRST_DIMS + 3 + 2 * k))
+                u0 = uniform(seed, key, FIRST_DIMS + 2 + 2 * k)
+                u1 = uniform(seed, key, FIRST_DIMS + 3 + 2 * k)
+                if half:
+                    lx, ly, lz = half_cell_direction(k, light_grid[0], light_grid[1], u0, u1, vx, vy, vz)
+                else:
+                    lx, ly, lz = cell_direction(k, light_grid[0], light_grid[1], u0, u1)
                 lights_now[k, 0] = lx
                 lights_now[k, 1] = ly
                 lights_now[k, 2] = lz
@@ -174,12 +189,14 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
 
 
 def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_dirs, light_dirs, spp, seed,
-                   max_depth, rr_depth, max_dist, eps, view_grid, light_grid):
+                   max_depth, rr_depth, max_dist, eps, view_grid, light_grid, light_coords):
     """Texels t0..t1-1 (row-major ids of the res x res grid): (radiance (T, V, L, 3) float32 mean over the
     hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc. ``view_grid`` and
     ``light_grid`` (n_theta, n_phi) of the grids that ``view_dirs`` and ``light_dirs`` are: cell averages
-    (module doc); (0, 0): the directions themselves. Both are always passed (no defaults), so every caller
-    shares one compiled specialisation of the kernel. (texel, view) jobs on threads (``stages.core.threads``)."""
+    (module doc); (0, 0): the directions themselves. ``light_coords``: ``stages.core.btf.HEMISPHERE``, or HALF
+    (``light_grid`` then the half-vector grid's (nx, ny), given also without cell averages). All three are always
+    passed (no defaults), so every caller shares one compiled specialisation of the kernel. (texel, view) jobs on
+    threads (``stages.core.threads``)."""
     T = t1 - t0
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
@@ -189,7 +206,7 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
     rays = np.zeros((T, V), np.int64)
     paths = PeriodicPaths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps)
     for_chunks(_texel_view_jobs, T * V, paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid,
-               radiance, alpha, normal, rays, chunks_per_thread=JOB_CHUNKS_PER_THREAD)
+               light_coords, radiance, alpha, normal, rays, chunks_per_thread=JOB_CHUNKS_PER_THREAD)
     return (radiance, alpha) + _view_sums(normal, rays)
 
 
@@ -199,10 +216,10 @@ def _view_sums(normal, rays):
 
 
 @chunk_kernel
-def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, radiance, alpha,
-                     normal, rays, j0, j1):
+def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, light_coords, radiance,
+                     alpha, normal, rays, j0, j1):
     """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v).
-    15 parameters: a ``for_chunks`` chunk kernel: the jobs' inputs, the four output arrays and the chunk's range."""
+    16 parameters: a ``for_chunks`` chunk kernel: the jobs' inputs, the four output arrays and the chunk's range."""
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
     acc = np.empty((L, 3))   # per chunk (as numba's parallel loop hoisted them); texel_view_samples fills them
@@ -213,7 +230,8 @@ def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid
         texel = t0 + i
         key0 = (texel * V + v) * spp
         hits, r = texel_view_samples(paths, res, texel, view_dirs[v, 0], view_dirs[v, 1], view_dirs[v, 2],
-                                     light_dirs, spp, seed, key0, acc, normal[i, v], v, view_grid, light_grid, now)
+                                     light_dirs, spp, seed, key0, acc, normal[i, v], v, view_grid, light_grid,
+                                     light_coords, now)
         rays[i, v] = r
         alpha[i, v] = hits / spp
         if hits > 0:

@@ -11,6 +11,7 @@ import numba
 import numpy as np
 import pytest
 
+from stages.core.btf import HEMISPHERE
 from stages.core.rng import uniform
 from stages.precompute.btf import acquire_texels, texel_frames
 from stages.precompute.iirtf import exemplar_slabs
@@ -61,7 +62,7 @@ def acquired(tiny_tiling):
     views = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
     lights = np.array([[0.0, 0.0, 1.0], [0.0, 0.6, 0.8], [-0.8, 0.0, 0.6]])
     args = (periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, RES, 0, RES * RES, views, lights,
-            SPP, 5, 6, 3, 64.0 * max(W, H), 1e-9, (0, 0), (0, 0))
+            SPP, 5, 6, 3, 64.0 * max(W, H), 1e-9, (0, 0), (0, 0), HEMISPHERE)
     return art, k, W, H, args
 
 
@@ -107,6 +108,38 @@ def test_same_bytes_at_1_and_2_threads(acquired):
         numba.set_num_threads(n)
     for x, y in zip(one, two):
         assert np.array_equal(x, y)
+
+
+def test_half_vector_cells_are_the_mirror_lights_of_the_view(acquired):
+    """Reference: the same acquisition on explicit lights (exact equality). Half-vector light cells without cell
+    averages (``light_coords`` HALF, view grid (0, 0)) light the view from its cells' centres mirrored about it
+    (``stages.core.btf.half_cell_direction``), the invalid ones not at all: the bytes of the hemisphere path given
+    those directions as its light list (the invalid ones as (0, 0, -1), which it skips), at 1 and 2 threads alike;
+    the invalid cells hold exactly 0."""
+    from stages.core.btf import HALF, half_cell_direction
+
+    *_, args = acquired
+    nx, ny = 5, 4
+    v = args[10][1]                                      # the oblique view, alone (the random keys count views)
+    lights = np.array([half_cell_direction(j, nx, ny, 0.5, 0.5, *v) for j in range(nx * ny)])
+    invalid = lights[:, 2] <= 0.0
+    assert invalid.any() and (~invalid).any()
+    base = list(args)
+    base[10] = args[10][1:2]
+    ref = acquire_texels(*base[:11], lights, *base[12:])
+    base[11] = np.zeros((nx * ny, 3))                     # only the count is read
+    base[19], base[20] = (nx, ny), HALF
+    n = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        half = acquire_texels(*base)
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = acquire_texels(*base)
+    finally:
+        numba.set_num_threads(n)
+    for x, y, z in zip(half, two, ref):
+        assert np.array_equal(x, y) and np.array_equal(x, z)
+    assert np.all(half[0][:, 0, invalid] == 0.0) and np.any(half[0][:, 0, ~invalid] > 0.0)
 
 
 def test_cell_direction_covers_its_grid_cell():
@@ -157,7 +190,7 @@ def test_cell_averages_are_the_mean_over_the_cell(acquired):
     base = list(args)
     base[5], base[6], base[7], base[9] = mof, mats, res, res * res
     base[12] = 512                                              # spp
-    cell = acquire_texels(*base[:10], grid, grid, *base[12:18], (2, 2), (2, 2))
+    cell = acquire_texels(*base[:10], grid, grid, *base[12:18], (2, 2), (2, 2), HEMISPHERE)
     sub = np.array([[cell_direction(c, 2, 2, (a + 0.5) / 3, (b + 0.5) / 3) for a in range(3) for b in range(3)]
                     for c in range(4)])                          # (4 cells, 9, 3)
     base[12] = 64

@@ -99,13 +99,16 @@ def _cli(*args):
 
 
 def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, table=None, lobe_params=None,
-              period=(0.5, 0.5), source_hash="none", source="none", frame=None, exemplars=(0,), tabulated=None):
+              period=(0.5, 0.5), source_hash="none", source="none", frame=None, exemplars=(0,), tabulated=None,
+              half=None):
     """A btf artifact of the tiling exemplars ``exemplars``. ``rho``: an rgb (every texel of every level) or a
     function (level, r) -> (r, r, 3), or a list of those, one per exemplar; ``alpha``: a number or a function
     (level, r, views) -> (r, r, V); ``table``: None (T = 1) or a function (level, r, views) -> (r, r, V, 3);
     ``lobe_params`` None (no lobes: C = 0) or (r, r, K, 3, 4) per level via a function (level, r); ``period``
     one [W, H] for every exemplar or a list of them; ``tabulated`` None or a function (views, lights) -> (V, L, 3):
-    every texel's table r(l, v), compressed by ``compress_texels`` (1 cluster, 1 component) into ``tabulated/``."""
+    every texel's table r(l, v), compressed by ``compress_texels`` (1 cluster, 1 component) into ``tabulated/``;
+    ``half`` None or (nx, ny): the table's lights are half-vector cells (``--light-coords half``), ``tabulated`` then
+    a function (views, valid fractions (V, L)) -> (V, L, 3)."""
     from pipeline.runners.precompute_btf import write_tables
     from stages.precompute.btf_compress import compress_texels
 
@@ -141,14 +144,21 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
             if frame is not None:
                 fr[...] = frame(lv, r)
             w.write(f"level_{lv}/frame", each([fr] * E))
+        if half is not None:
+            from stages.core.btf import half_cell_geometry
+
+            w.write("half_dirs", np.zeros((half[0] * half[1], 3)))
         if tabulated is not None:
-            row = np.asarray(tabulated(views, hemisphere_grid(*LIGHT_GRID)), np.float32).reshape(1, -1)
+            lights = hemisphere_grid(*LIGHT_GRID) if half is None else half_cell_geometry(*VIEW_GRID, *half, True)[0]
+            row = np.asarray(tabulated(views, lights), np.float32).reshape(1, -1)
             rows = np.repeat(row, sum((res >> lv) ** 2 for lv in range(levels)), axis=0)
             write_tables(w, [compress_texels(rows, 1, 1)] * E, V, len(row[0]) // (3 * V))
         w.summary.update(kind="btf", source=source, source_hash=source_hash, exemplars=list(exemplars),
                          exemplar_names=[f"test {k}" if E > 1 else "test" for k in exemplars], periods=periods,
                          resolution=res, levels=levels, lobes=lobes, view_grid=list(VIEW_GRID),
-                         light_grid=list(LIGHT_GRID))
+                         light_grid=list(LIGHT_GRID if half is None else half))
+        if half is not None:
+            w.summary.update(light_coords="half", fit_light_grid=list(LIGHT_GRID), directions="cell")
     return path
 
 
@@ -437,6 +447,27 @@ def test_tabulated_lambertian_quad_closed_form(bench):
     assert np.allclose(rgb[ch["A"] > 0], 0.7 * a, rtol=1e-6)
     rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args[:-2])
     assert np.all(rgb[ch["A"] > 0] == 0.0)                             # the Lafortune fit of the same artifact
+
+
+def test_tabulated_half_vector_constant_closed_form(bench):
+    """Reference: closed form. A half-vector table (``precompute btf --light-coords half``) of the same radiance c in
+    every cell, written as the acquisition averages it (the cell's valid fraction times c: ``stages.core.btf``
+    module doc), renders E c in every pixel under a directional light of irradiance E and 2 pi c L under a constant
+    light L (its solid angles over valid fractions; float32 EXR: 1e-6). The Lafortune fit of the artifact is 0."""
+    c = np.array([0.05, 0.08, 0.11])
+    btf = write_btf(bench.name("half").with_suffix(".zarr"), rho=(0.0, 0.0, 0.0), half=(9, 7),
+                    tabulated=lambda views, valid: valid[:, :, None] * c[None, None, :])
+    V, UV, F = quad()
+    mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+    args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=3", "--set", "model=tabulated")
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args)
+    hit = ch["A"] > 0
+    assert hit.mean() > 0.5
+    assert np.allclose(rgb[hit], 2.0 * c, rtol=1e-6, atol=0)
+    rgb, ch, _ = bench.render(bench.scene(SKY.format(l=0.7)), *args)
+    assert np.allclose(rgb[ch["A"] > 0], 0.7 * 2 * math.pi * c, rtol=1e-6)
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args[:-2])
+    assert np.all(rgb[ch["A"] > 0] == 0.0)
 
 
 def test_sg_light_limits(bench):

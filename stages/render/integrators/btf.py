@@ -66,7 +66,9 @@ first exemplar's period over exemplar e's, which turns a pattern coordinate into
 then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb and alpha;
 ``n_theta``, ``n_phi`` the view grid, ``light_dirs`` (L, 3) the light grid (pattern space), ``l_theta``, ``l_phi``
 its shape; ``tabulated`` (bool) and ``radiance`` (N, V, L, 3) float32 the tabulated model's decoded table ((1, 1, 1, 3)
-unused for the Lafortune model);
+unused for the Lafortune model); ``half`` (0 or 1): the table's lights are half-vector cells (``l_theta`` x
+``l_phi`` = nx x ny, read by ``stages.core.btf.half_rgb``; ``light_dirs`` then the fit's hemisphere grid, the
+quadrature's) with ``half_valid`` (V, L) their valid fractions ((1, 1) unused otherwise);
 ``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional (the ground's
 quadrature), ``env_lights`` how many are environment maps (the surface's quadrature), ``sky`` (N, V, 3)
 the ``sky_table`` when ``has_sky`` (a constant light is there; else (1, 1, 3) unused) and ``sky_radiance``
@@ -93,7 +95,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
 from stages.core.blocks import block_of
-from stages.core.btf import LOBE_PARAMS, grid_weights, lafortune_lobe, table_rgb
+from stages.core.btf import LOBE_PARAMS, grid_weights, half_rgb, lafortune_lobe, table_rgb
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.triangles import TriangleHit, mesh_intersect
 from stages.render.ground import ground_intersect
@@ -107,7 +109,7 @@ BtfIntegrator = namedtuple("BtfIntegrator", [
     "mesh", "shading", "texels", "table", "levels", "exemplar_scale", "block_map", "block_size", "flat_period",
     "n_theta", "n_phi", "light_dirs", "lights", "quad_lights", "env_lights", "sky", "sky_radiance", "has_sky",
     "ground", "has_ground", "pixel_angle", "forward", "mip", "shadows", "max_layers", "eps", "tabulated", "radiance",
-    "l_theta", "l_phi"])
+    "l_theta", "l_phi", "half", "half_valid"])
 
 MAX_LAYERS = 4
 INV_PI = 1.0 / math.pi
@@ -291,6 +293,9 @@ def texel_rgb(it, idx, lx, ly, lz, vx, vy, vz):
     """f_1(l, v) of texel row idx, three channels, by the texture's model: the tabulated table (``tabulated``:
     ``stages.core.btf.table_rgb``, its T(v) is 1) or the Lafortune lobes (``texel_f1_rgb``)."""
     if it.tabulated:
+        if it.half:
+            return half_rgb(it.radiance, it.half_valid, idx, it.l_theta, it.l_phi, lx, ly, lz, it.n_theta, it.n_phi,
+                            vx, vy, vz)
         return table_rgb(it.radiance, idx, it.l_theta, it.l_phi, lx, ly, lz, it.n_theta, it.n_phi, vx, vy, vz)
     texels = it.texels
     return texel_f1_rgb(texels, (texels.shape[1] - TEXEL_HEAD) // (3 * LOBE_PARAMS), idx, lx, ly, lz, vx, vy, vz)
@@ -420,18 +425,18 @@ def sky_table(texels, light_dirs, view_dirs):
 
 
 @njit(cache=True, parallel=True)
-def tabulated_sky_table(radiance):
-    """``sky_table`` of the tabulated model: per texel row and grid view, sum_j (2 pi / L) r(l_j, v_i) over the table's
-    own light grid -- exact, the table holds r at those directions; ``radiance`` (N, V, L, 3)."""
+def tabulated_sky_table(radiance, weights):
+    """``sky_table`` of the tabulated model: per texel row and grid view, sum_j w_ij r(l_j, v_i) over the table's own
+    light cells, ``weights`` (V, L) their solid angles (2 pi / L on the hemisphere grid; a half-vector cell's solid
+    angle over its valid fraction: ``pipeline.renderers.btf.sky_weights``); ``radiance`` (N, V, L, 3)."""
     N, V, L, _ = radiance.shape
-    dw = 2.0 * math.pi / L
     out = np.empty((N, V, 3), np.float32)
     for idx in prange(N):
         for i in range(V):
             for c in range(3):
                 acc = 0.0
                 for j in range(L):
-                    acc += dw * radiance[idx, i, j, c]
+                    acc += weights[i, j] * radiance[idx, i, j, c]
                 out[idx, i, c] = acc
     return out
 
