@@ -127,7 +127,8 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
                 ax.set_xticks([])
                 ax.set_yticks([])
             who = f"{names[e]}: " if E > 1 and e < len(names) else ""
-            top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(ldir)}  (level 0, texels x → , y ↑"
+            cell = f" (half-vector cell {li}'s centre)" if s.get("light_coords") == "half" else ""
+            top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(ldir)}{cell}  (level 0, texels x → , y ↑"
                               + ("; differences / scale)" if tabulated else ")"))
         axes = np.atleast_1d(top[len(rows)].subplots(1, levels + (1 if tabulated else 0)))
         if tabulated:

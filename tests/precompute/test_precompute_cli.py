@@ -118,6 +118,8 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
 
 
 @pytest.mark.parametrize("extra,needle", [(["--directions", "diagonal"], "--directions"),
+                                          (["--light-coords", "polar"], "--light-coords"),
+                                          (["--light-coords", "half", "--lights", "0x15"], "--lights"),
                                           (["--lobes", "3"], "--lobes"),
                                           (["--threads", "-2"], "--threads"),   # was an internal error
                                           (["--model", "neural"], "--model"),
@@ -129,9 +131,9 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
                                           (["--model", "tabulated", "--components", "2", "--clusters", "6"],
                                            "--clusters")])
 def test_btf_bad_options_exit_2_nothing_written(built, cli, tmp_path, extra, needle):
-    """precompute btf: an unknown direction scheme, lobe count or model, a thread count below 1, a component count
-    below 1 or above the table's rank bound, a cluster count below 1 or above the texels, is refused before any
-    work: exit 2, one line naming the option, no artifact."""
+    """precompute btf: an unknown direction scheme, light coordinates, lobe count or model, an empty light grid, a
+    thread count below 1, a component count below 1 or above the table's rank bound, a cluster count below 1 or
+    above the texels, is refused before any work: exit 2, one line naming the option, no artifact."""
     tiling, _ = built
     fresh = tmp_path / "fresh_btf.zarr"
     code, out, err = cli("precompute", "btf", tiling, "-o", fresh, "--resolution", "2", *extra)
