@@ -10,7 +10,9 @@ the bytes of the arrays it reads (target <= 4 MB, the paper's "4 MB ... includin
 same artifact holds a tabulated model (``--set model=tabulated``): random non-negative rows of rank 24 over the
 64 x 64 x 3 (view, light, channel) values of every texel of every level, compressed by ``compress_texels`` at the
 defaults (8 clusters x 8 components; ``table_bytes``, target <= 16 MB a fabric), timed the same way
-(``tabulated_fps``, ``tabulated_scene_lights_fps``).
+(``tabulated_fps``, ``tabulated_scene_lights_fps``); and a second artifact's table on 15 x 15 half-vector light cells
+(``precompute btf --light-coords half``: the rows zero where a cell has no light, as an acquisition leaves them;
+``tabulated_half_fps``, ``tabulated_half_scene_lights_fps``, ``table_half_bytes``).
 Camera: the draped damask scene's at 730 x 400, 1 spp, one directional light, no shadow rays, mip on; and
 under the scene's own lights (its directional light and its constant sky, whose light-grid quadrature
 the renderer tabulates per texel and grid view once: ``sky_table``, timed apart as ``sky_table_s``).
@@ -33,16 +35,23 @@ ROOT = Path(__file__).resolve().parents[1]
 W, H = 730, 400
 
 
-def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=(8, 8), period=(0.5, 0.5), seed=0):
-    """A btf artifact of random (plausible) texels; every level independent."""
+def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=(8, 8), period=(0.5, 0.5), seed=0,
+                  half=False):
+    """A btf artifact of random (plausible) texels; every level independent. ``half``: the table's lights are
+    half-vector cells (``light_grid`` (nx, ny); the fit's grid 8 x 8)."""
     from pipeline.artifacts import ArtifactWriter
-    from stages.core.btf import hemisphere_grid
+    from stages.core.btf import half_cell_geometry, hemisphere_grid
 
     rng = np.random.default_rng(seed)
     V = view_grid[0] * view_grid[1]
+    fit_grid = (8, 8) if half else light_grid
     with ArtifactWriter(path, kind="btf", stage="precompute btf", params={"synthetic": seed}, inputs={}) as w:
         w.write("view_dirs", hemisphere_grid(*view_grid))
-        w.write("light_dirs", hemisphere_grid(*light_grid))
+        w.write("light_dirs", hemisphere_grid(*fit_grid))
+        mask = None
+        if half:
+            w.write("half_dirs", np.zeros((light_grid[0] * light_grid[1], 3)))
+            mask = half_cell_geometry(*view_grid, *light_grid, True)[0]
         for lv in range(levels):
             r = res >> lv
             w.write(f"level_{lv}/rho", rng.uniform(0.02, 0.25, (1, r, r, 3)).astype(np.float32))
@@ -60,20 +69,26 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
             t = np.cross(np.cross(n, [1.0, 0.0, 0.0]), n)
             t /= np.linalg.norm(t, axis=-1, keepdims=True)
             w.write(f"level_{lv}/frame", np.stack([n, t], -2).astype(np.float32)[None])
-        tabulated_rows(w, rng, res, levels, V, light_grid[0] * light_grid[1])
+        tabulated_rows(w, rng, res, levels, V, light_grid[0] * light_grid[1], mask=mask)
         w.summary.update(kind="btf", source="synthetic", source_hash="synthetic", exemplars=[0],
                          exemplar_names=["synthetic"], periods=[list(period)], resolution=res, levels=levels,
                          lobes=lobes,
                          view_grid=list(view_grid), light_grid=list(light_grid))
+        if half:
+            w.summary.update(light_coords="half", fit_light_grid=list(fit_grid), directions="cell")
 
 
-def tabulated_rows(w, rng, res, levels, V, L, rank=24) -> int:
-    """Write a tabulated model of random rows (module doc) into the artifact; its bytes."""
+def tabulated_rows(w, rng, res, levels, V, L, rank=24, mask=None) -> int:
+    """Write a tabulated model of random rows (module doc) into the artifact, times ``mask`` (V, L) when given; its
+    bytes."""
     from pipeline.runners.precompute_btf import write_tables
     from stages.precompute.btf_compress import compress_texels
 
     rows = sum((res >> lv) ** 2 for lv in range(levels))
-    X = (rng.uniform(0.0, 1.0, (rows, rank)) @ rng.uniform(0.0, 0.02, (rank, V * L * 3))).astype(np.float32)
+    B = rng.uniform(0.0, 0.02, (rank, V, L, 3))
+    if mask is not None:
+        B *= mask[None, :, :, None]
+    X = (rng.uniform(0.0, 1.0, (rows, rank)) @ B.reshape(rank, -1)).astype(np.float32)
     return write_tables(w, [compress_texels(X, 8, 8)], V, L)
 
 
@@ -152,6 +167,16 @@ def run(out_dir) -> dict:
     integ_tab_sky = pack_integrator(geom, tab, pack_lights(scene.lights, scene.path), ground, has_ground, cam,
                                     mip=True, shadows=False)
     fps_tab_sky, _, _ = fps(integ_tab_sky, threads)
+    path_half = out / "bench_btf_half.zarr"
+    try:
+        half = load_btf(path_half, "tabulated")
+    except LoomError:
+        synthetic_btf(path_half, light_grid=(15, 15), half=True)
+        half = load_btf(path_half, "tabulated")
+    fps_half, _, cpu_half = fps(pack_integrator(geom, half, lights, ground, has_ground, cam, mip=True, shadows=False),
+                                threads)
+    fps_half_sky, _, _ = fps(pack_integrator(geom, half, pack_lights(scene.lights, scene.path), ground, has_ground,
+                                             cam, mip=True, shadows=False), threads)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     return {
         "image": f"{W}x{H} @ 1 spp", "triangles": int(len(F)), "btf": "32 x 32, 6 levels, 2 lobes, 64 views, 64 lights",
@@ -165,7 +190,9 @@ def run(out_dir) -> dict:
         "setup_s": setup_s, "first_tile_incl_compile_s": compile_s,
         "table_bytes": int(tab.fit_bytes), "table_bytes_target": 16 * 2**20, "tabulated_fps": fps_tab,
         "tabulated_fps_target": 10.0, "tabulated_cpu_s_per_frame": cpu_tab, "tabulated_scene_lights_fps": fps_tab_sky,
-        "tabulated_scene_lights_fps_target": 10.0,
+        "tabulated_scene_lights_fps_target": 10.0, "table_half_bytes": int(half.fit_bytes),
+        "tabulated_half_fps": fps_half, "tabulated_half_fps_target": 10.0, "tabulated_half_cpu_s_per_frame": cpu_half,
+        "tabulated_half_scene_lights_fps": fps_half_sky, "tabulated_half_scene_lights_fps_target": 10.0,
     }
 
 

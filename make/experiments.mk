@@ -138,15 +138,23 @@ prt-study: $(VENV)/.installed ## Khungurn et al. 2017 §6.1: the cell-size and S
 # tilings, out/prt/flat41_tiling.zarr and flat14), fitted at the defaults of precompute btf (BTF_SWEEP_ARGS) with
 # both models (the Lafortune fit and the compressed table: --model tabulated)
 # into out/btf/, and of the knit swatch's stitch (make compare's, out/compare/inputs/knit_btf.zarr), against
-# fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml)
+# fiberpath under the demo sweep's 12 lights (data/sweeps/btf_*.toml); beside them the table acquired on
+# half-vector light cells (--light-coords half: out/btf/*_btf_half.zarr)
 BTF_SWEEP_ARGS ?=
+BTF_HALF_DEPS := $(wildcard stages/precompute/*.py stages/precompute/*/*.py) stages/core/btf.py pipeline/limits.py pipeline/runners/precompute_btf.py
 
 $(BTF_DIR)/flat%_btf.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py
 	$(LL) precompute btf $(PRT)/flat$*_tiling.zarr -o $(BTF_DIR)/flat$*_btf.zarr --exemplar $(PRT_EXEMPLAR_$*) --model tabulated $(BTF_SWEEP_ARGS)
 
-.PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json
+$(BTF_DIR)/flat%_btf_half.zarr/zarr.json: $(PRT)/flat%_tiling.zarr/zarr.json data/scenes/flat_satin.toml $(BTF_HALF_DEPS)
+	$(LL) precompute btf $(PRT)/flat$*_tiling.zarr -o $(BTF_DIR)/flat$*_btf_half.zarr --exemplar $(PRT_EXEMPLAR_$*) --model tabulated --light-coords half $(BTF_SWEEP_ARGS)
 
-btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json) $(COMPARE_IN)/knit_btf.zarr/zarr.json ## Daubert et al. 2001: fitted textures of the damask's two satins and a knit against fiberpath, 12 lights (out/btf)
+$(BTF_DIR)/knit_btf_half.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(BTF_HALF_DEPS)
+	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(BTF_DIR)/knit_btf_half.zarr --model tabulated --light-coords half $(BTF_SWEEP_ARGS)
+
+.PRECIOUS: $(BTF_DIR)/flat%_btf.zarr/zarr.json $(BTF_DIR)/flat%_btf_half.zarr/zarr.json $(BTF_DIR)/knit_btf_half.zarr/zarr.json
+
+btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json $(BTF_DIR)/flat$(s)_btf_half.zarr/zarr.json) $(COMPARE_IN)/knit_btf.zarr/zarr.json $(BTF_DIR)/knit_btf_half.zarr/zarr.json ## Daubert et al. 2001: fitted textures of the damask's two satins and a knit against fiberpath, 12 lights, hemisphere and half-vector light cells (out/btf)
 	@for s in flat41 flat14 knit; do $(LL) evaluate --sweep data/sweeps/btf_$$s.toml -o $(BTF_DIR)/$$s || exit 1; done
 	@for s in flat41 flat14 knit; do echo "report: $(BTF_DIR)/$$s/report.md"; done
 

@@ -8,13 +8,15 @@ azimuth steps round the circle, single scattering only (depth 1, where the fibre
 
 - **fiberpath**: the image mean of each step (``--step`` degrees, ``--spp`` samples a pixel);
 - **the btf acquisition** of the same exemplar at that depth (``precompute btf --resolution 16 --max-depth 1``,
-  ``--acq-spp`` samples a texel and view), twice: ``--directions grid`` (point samples at the grid's
-  directions) and ``--directions cell`` (the default: cell averages), each read as the renderer reads the
-  tabulated model (bilinear on the light grid, ``stages.core.btf.grid_weights``), times the light's irradiance,
-  averaged over the texels with their alpha, at the grid view itself (no view interpolation).
+  ``--acq-spp`` samples a texel and view), three times: ``--directions grid`` (point samples at the grid's
+  directions) and ``--directions cell`` (the default: cell averages) on the 8 x 8 light grid, and cell averages
+  over 15 x 15 half-vector cells (``--light-coords half``), each read as the renderer reads the tabulated model
+  (bilinear on the light grid, ``stages.core.btf.grid_weights``; on the half-vector cells at the half vector of
+  light and view, ``stages.core.btf.half_row``), times the light's irradiance, averaged over the texels with
+  their alpha, at the grid view itself (no view interpolation).
 
 Writes ``OUT/azimuth.json`` (the steps and the three curves) and ``OUT/btf_light_azimuth.png``; ``--docs`` copies
-the picture to docs/img/. About 4 minutes on 2 cores (72 renders of 96 x 72 and two 20-second acquisitions).
+the picture to docs/img/. About 5 minutes on 2 cores (72 renders of 96 x 72 and three acquisitions of 20-40 s).
 
     .venv/bin/python scripts/btf_light_azimuth.py -o out/btf/azimuth [--step 5] [--spp 16] [--docs]
 """
@@ -98,6 +100,30 @@ def table_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[f
     return curve
 
 
+def half_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[float]]:
+    """[(azimuth degrees, mean)] of a half-vector acquisition read at the grid view (``stages.core.btf.half_row``)."""
+    import zarr
+
+    from stages.core.btf import half_cell_geometry, half_row, half_weights, hemisphere_grid
+
+    g = zarr.open_group(str(artifact), mode="r")
+    nx, ny = (int(x) for x in g.attrs["summary"]["light_grid"])
+    S = np.asarray(g["samples"][0], dtype=np.float64)      # (res, res, V, L, 3)
+    A = np.asarray(g["alpha"][0], dtype=np.float64)        # (res, res, V)
+    per_light = (A[:, :, view_index, None, None] * S[:, :, view_index]).mean(axis=(0, 1))   # (L, 3)
+    table = np.zeros((1, GRID[0] * GRID[1], nx * ny, 3))
+    table[0, view_index] = per_light
+    valid = half_cell_geometry(GRID[0], GRID[1], nx, ny, True)[0]
+    view = hemisphere_grid(*GRID)[view_index]
+    curve = []
+    for deg in np.arange(0.0, 360.0, 1.0):
+        light = ring_direction(light_ring, float(deg))
+        q = half_weights(nx, ny, *light, *view)
+        r = half_row(table, valid, 0, view_index, *q)
+        curve.append([float(deg), IRRADIANCE * float(np.mean(r[:3]))])
+    return curve
+
+
 def plot(data: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -107,7 +133,10 @@ def plot(data: dict, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(8, 3.6), dpi=110)
     ax.plot(fp[:, 0], fp[:, 1], "k.-", lw=1.2, ms=4, label=f"fiberpath (the fibres), {data['step']:g}° steps")
     for key, label, style in (("grid", "8×8 grid, point samples (--directions grid), read bilinearly", "C0-"),
-                              ("cell", "8×8 grid, cell averages (the default), read bilinearly", "C3-")):
+                              ("cell", "8×8 grid, cell averages (the default), read bilinearly", "C3-"),
+                              ("half", "15×15 half-vector cells, cell averages (--light-coords half)", "C2-")):
+        if key not in data:
+            continue
         c = np.array(data[key])
         ax.plot(c[:, 0], c[:, 1], style, lw=1.5, label=label)
     for k in range(GRID[1] + 1):
@@ -149,6 +178,11 @@ def main(argv: list[str] | None = None) -> int:
         _run([LL, "precompute", "btf", TILING, "-o", str(art), "--exemplar", str(EXEMPLAR), "--resolution", "16",
               "--max-depth", "1", "--spp", str(a.acq_spp), "--directions", directions])
         data[directions] = table_curve(art, vi * GRID[1] + vj, a.light_ring)
+    art = a.out / "flat14_d1_half.zarr"
+    print(f"acquisition (half-vector cells): {art}", flush=True)
+    _run([LL, "precompute", "btf", TILING, "-o", str(art), "--exemplar", str(EXEMPLAR), "--resolution", "16",
+          "--max-depth", "1", "--spp", str(a.acq_spp), "--light-coords", "half"])
+    data["half"] = half_curve(art, vi * GRID[1] + vj, a.light_ring)
     view = np.array(ring_direction(vi, (vj + 0.5) * 360.0 / GRID[1]))      # the grid view (vi, vj) itself
     data["fiberpath"] = fiberpath_curve(a.out, view, a.light_ring, a.step, a.spp)
     (a.out / "azimuth.json").write_text(json.dumps(data, indent=1))

@@ -8,12 +8,14 @@ the scene gives it (the same as ``fiberpath`` renders and ``precompute iirtf`` u
 1. **acquires** (seed 002 §4, ``stages.precompute.btf``) per texel of a res x res grid over the repeat's
    top face, per view cell of the view grid and per light cell of the light grid (``--directions cell``,
    the default: each sample's view and each path's lights uniform over their cells, so the table holds
-   cell averages; ``grid``: the grid directions themselves, seed 002's point samples) the radiance per unit
+   cell averages; ``grid``: the grid directions themselves, seed 002's point samples; ``--light-coords half``: the
+   light cells in half-vector coordinates, ``stages.core.btf``) the radiance per unit
    irradiance r(l, v), the alpha of each view and the texel's average normal and tangent, path traced
    in the repeat repeated without end. One chunk task per exemplar and texel row (``pipeline.chunks``: here
    or on a Dask scheduler); each writes its row of ``samples`` (float16) and ``alpha`` into the artifact.
-2. **fits** (seed 002 §5, ``stages.precompute.btf_fit``) per texel and channel the diffuse term and
-   1-2 Lafortune lobes by Levenberg-Marquardt alternating with the lookup table T(v) of Eq. 4, and the
+2. **fits** (seed 002 §5, ``stages.precompute.btf_fit``; half-vector cells read first on the FIT_LIGHT_GRID
+   hemisphere grid from each grid view, ``stages.core.btf.half_to_hemisphere``) per texel and channel the diffuse
+   term and 1-2 Lafortune lobes by Levenberg-Marquardt alternating with the lookup table T(v) of Eq. 4, and the
    mip levels from 2 x 2 groups of texels (§5.1) down to 1 x 1, each level's fit RMSE with and without
    the table (the paper's Fig. 5 point) recorded in the summary. The fit reads the stored (float16)
    samples and the level-0 frames as stored (float32), so a refit from the artifact reproduces it.
@@ -28,7 +30,11 @@ table's (``FIT_PARAMS``), the inputs' identities and the acquisition code's vers
 output path has the key of a new run, its samples, alpha and frames are taken instead of tracing them again
 (said on the output; ``--force`` acquires anyway): a refit or an added table costs seconds, not minutes.
 
-Every array but the two direction grids has a leading exemplar axis (``samples`` (E, res, res, V, L, 3),
+With half-vector cells the summary says ``light_coords = "half"``, ``light_grid`` is the cells' (nx, ny) (the samples'
+and the table's light axis), ``fit_light_grid`` the fit's hemisphere grid, whose directions ``light_dirs`` holds;
+``half_dirs`` (L, 3) the cells' centre half vectors; ``directions`` says whether the cells were averaged.
+
+Every array but the direction grids has a leading exemplar axis (``samples`` (E, res, res, V, L, 3),
 ``alpha`` (E, res, res, V), ``level_l/rho`` (E, r, r, 3), ...), in the order of the summary's ``exemplars`` (the
 tiling's exemplar indices) with ``exemplar_names`` and ``periods``; the fit statistics are over every exemplar's
 texels, and per exemplar in ``per_exemplar``.

@@ -38,6 +38,11 @@ r(l, v) over both cells. Random dimensions: 2-3 the view, 4 + 2k and 5 + 2k ligh
 vertices'. Without the grids (``--directions grid``) the samples are the paper's point samples and the
 dimensions as before (the same bytes as before 2026-12-02).
 
+Half-vector light cells (``light_coords`` HALF, ``precompute btf --light-coords half``): light k is then cell k of
+the half-vector grid seen from the sample's view (``stages.core.btf.half_cell_direction``: the view's mirror
+direction about a half vector uniform over the cell, with the same random dimensions; without the grids, about
+the cell's centre), and a cell whose light would lie below the fabric adds nothing (its shadow ray is not cast).
+
 Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
 is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
 ``alpha`` = hits / spp. Per texel: the sum of the first hits' surface normals (the capsule's outward
