@@ -3,6 +3,7 @@ contract, skipping when up to date, identical array bytes at 1 and 2 threads (re
 every array recorded at write), the inspector pictures, and every bad input -> exit code 2, one line,
 nothing written and an existing artifact untouched."""
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -201,6 +202,45 @@ def test_btf_fits_every_exemplar_the_block_map_uses_each_as_alone(tiny_tiling, c
         code, _, err = cli("inspect", art, "--png", png)
         assert code == 0, err
         assert_legible_png(png)
+
+
+def test_btf_half_vector_cells_end_to_end(tiny_tiling, cli, tmp_path):
+    """Contract (pipeline/runners/precompute_btf.py, stages/core/btf.py module doc): ``--light-coords half`` acquires
+    on nx x ny half-vector cells (the samples' light axis), records them (``light_coords``, ``half_dirs``), fits the
+    Lafortune lobes on the 8 x 8 hemisphere grid (``light_dirs``, ``fit_light_grid``); a cell that has no light
+    from any view of a view cell (valid fraction 0: ``half_cell_geometry``) holds exactly 0 in every texel; the
+    artifact renders with the tabulated model, and ``loomlight inspect`` draws it."""
+    from pipeline.artifacts import Artifact
+    from stages.core.btf import half_cell_geometry, hemisphere_grid
+    from tests.inspector_checks import assert_legible_png
+
+    tiling = tiny_tiling[0]
+    path = tmp_path / "half.zarr"
+    args = [a if a != "2x4" or i != BTF_ARGS.index("--lights") + 1 else "5x4" for i, a in enumerate(BTF_ARGS)]
+    code, out, err = cli("precompute", "btf", tiling, "-o", path, *args, "--light-coords", "half", "--model",
+                         "tabulated", "--clusters", "1", "--components", "2", "--threads", "2")
+    assert code == 0, err
+    a = Artifact(path)
+    s = a.summary
+    assert s["light_coords"] == "half" and s["light_grid"] == [5, 4] and s["fit_light_grid"] == [8, 8]
+    assert np.asarray(a["half_dirs"]).shape == (20, 3)
+    assert np.allclose(np.asarray(a["light_dirs"]), hemisphere_grid(8, 8))
+    samples = np.asarray(a["samples"], np.float64)          # (2 exemplars, 2, 2, 8 views, 20 cells, 3)
+    assert samples.shape == (2, 2, 2, 8, 20, 3)
+    valid = half_cell_geometry(2, 4, 5, 4, True)[0]
+    assert (valid == 0).any() and np.any(samples[..., valid > 0, :] > 0)
+    assert np.all(samples[..., valid == 0, :] == 0.0)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(Path("data/scenes/flat_satin.toml").read_text())
+    exr = tmp_path / "render.exr"
+    code, _, err = cli("render", scene, "--method", "btf", "--source", "tiling", "--fibers", tiling, "--set",
+                       f"btf={path}", "--set", "model=tabulated", "--width", "24", "--height", "18", "--spp", "1",
+                       "-o", exr)
+    assert code == 0, err
+    png = tmp_path / "half.png"
+    code, _, err = cli("inspect", path, "--png", png)
+    assert code == 0, err
+    assert_legible_png(png)
 
 
 @pytest.mark.slow   # three acquisitions and the table's kernels: kept out of make test's budget (make test-all)
