@@ -101,10 +101,11 @@ def table_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[f
 
 
 def half_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[float]]:
-    """[(azimuth degrees, mean)] of a half-vector acquisition read at the grid view (``stages.core.btf.half_row``)."""
+    """[(azimuth degrees, mean)] of a half-vector acquisition read at the grid view (``stages.core.btf.half_row``,
+    times the light's max(l_z, COSINE_FLOOR), as ``half_rgb``)."""
     import zarr
 
-    from stages.core.btf import half_cell_geometry, half_row, half_weights, hemisphere_grid
+    from stages.core.btf import COSINE_FLOOR, half_cell_geometry, half_row, half_weights, hemisphere_grid
 
     g = zarr.open_group(str(artifact), mode="r")
     nx, ny = (int(x) for x in g.attrs["summary"]["light_grid"])
@@ -119,8 +120,8 @@ def half_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[fl
     for deg in np.arange(0.0, 360.0, 1.0):
         light = ring_direction(light_ring, float(deg))
         q = half_weights(nx, ny, *light, *view)
-        r = half_row(table, valid, 0, view_index, *q)
-        curve.append([float(deg), IRRADIANCE * float(np.mean(r[:3]))])
+        r = half_row(table, valid, 0, view_index, *q)       # g = r / max(l_z, COSINE_FLOOR)
+        curve.append([float(deg), IRRADIANCE * max(light[2], COSINE_FLOOR) * float(np.mean(r[:3]))])
     return curve
 
 
