@@ -51,7 +51,7 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
         mask = None
         if half:
             w.write("half_dirs", np.zeros((light_grid[0] * light_grid[1], 3)))
-            mask = half_cell_geometry(*view_grid, *light_grid, True)[0]
+            mask = half_cell_geometry(*view_grid, *light_grid, True).valid
         for lv in range(levels):
             r = res >> lv
             w.write(f"level_{lv}/rho", rng.uniform(0.02, 0.25, (1, r, r, 3)).astype(np.float32))

@@ -114,13 +114,13 @@ def half_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[fl
     per_light = (A[:, :, view_index, None, None] * S[:, :, view_index]).mean(axis=(0, 1))   # (L, 3)
     table = np.zeros((1, GRID[0] * GRID[1], nx * ny, 3))
     table[0, view_index] = per_light
-    valid = half_cell_geometry(GRID[0], GRID[1], nx, ny, True)[0]
+    cosine = half_cell_geometry(GRID[0], GRID[1], nx, ny, True).cosine
     view = hemisphere_grid(*GRID)[view_index]
     curve = []
     for deg in np.arange(0.0, 360.0, 1.0):
         light = ring_direction(light_ring, float(deg))
         q = half_weights(nx, ny, *light, *view)
-        r = half_row(table, valid, 0, view_index, *q)       # g = r / max(l_z, COSINE_FLOOR)
+        r = half_row(table, cosine, 0, view_index, *q)      # r with the foreshortening factored out
         curve.append([float(deg), IRRADIANCE * max(light[2], COSINE_FLOOR) * float(np.mean(r[:3]))])
     return curve
 

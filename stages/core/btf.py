@@ -35,23 +35,27 @@ view grid's directions blurs them; in half-vector coordinates they stay on the s
 of cell j of an ``nx`` x ``ny`` grid over the square of projected half vectors (h_x, h_y) in [-1, 1]^2
 (column ix = j % nx, row iy = j // nx, centre h_x = -1 + 2 (ix + 1/2) / nx) seen from v is the mirror
 direction of v about h: l = 2 (v.h) h - v (``half_cell_direction``). Not every (h, v) gives a light above
-the fabric (|h_xy| >= 1, v.h <= 0 or l_z <= 0: *invalid*, no light); ``half_cell_geometry`` gives each (view
-cell, light cell) its valid fraction (of the cell's h area: the acquisition's samples there carry the light,
-the others 0) and its solid angle (the light directions whose half vector with v lies in the cell: the
-cells partition the hemisphere). The acquisition's cell averages are over the whole cell (invalid samples 0);
-the renderer reads them normalised by the valid fraction, which makes a cell cut by the horizon the mean over
-the part that has light (``half_rgb``).
+the fabric (|h_xy| >= 1, v.h <= 0 or l_z <= 0: *invalid*, no light). The acquisition's cell averages R are over
+the whole cell (invalid samples 0). ``half_cell_geometry`` gives each (view cell, light cell) what does not
+depend on the fabric: its valid fraction f (of the cell's h area, over the view cell's spread), its mean
+foreshortening C, the mean of max(l_z, COSINE_FLOOR) over the same samples (invalid 0), and its projected solid
+angle P, the integral of max(l_z, COSINE_FLOOR) over the light directions whose half vector with v lies in the
+cell (the cells partition the hemisphere).
 
-The foreshortening is factored out: a half-vector table holds g = r / max(l_z, COSINE_FLOOR) per sample, and a
-read multiplies by the light's own max(l_z, COSINE_FLOOR). Reading between the view grid's directions at a fixed
-h mirrors each grid view about h to another light -- 45 degrees of view azimuth apart, the lights' l_z differ by
-a quarter (0.53 and 0.71 for the flat satins' camera under the light 45 degrees from the normal) -- and r carries
-l_z, a function of the light, not of h: averaged across the views the foreshortening came out 8-13 % dark there.
-The floor keeps g bounded at grazing lights, where a layer of fibres still catches light that l_z would divide.
-The sky then weighs each cell by its projected solid angle, the integral of max(l_z, COSINE_FLOOR) over the
-cell's lights (``half_cell_geometry``; a whole row sums to pi (1 + COSINE_FLOOR^2)).
+A read (``half_rgb``) is R / C times the light's own max(l_z, COSINE_FLOOR), bilinear in the cells as a
+normalised convolution (sum w R / sum w C): the foreshortening is factored out. Reading between the view grid's
+directions at a fixed h mirrors each grid view about h to another light -- 45 degrees of view azimuth apart, the
+lights' l_z differ by a quarter (0.53 and 0.71 for the flat satins' camera under the light 45 degrees from the
+normal) -- and r carries l_z, a function of the light, not of h: left in, the foreshortening came out 8-13 % dark
+there. Dividing each sample by its l_z instead biases the cell average up (the mean of 1 / l_z over a cell whose
+views spread is above 1 / its mean l_z: +5-8 % measured); the ratio of the means does not, is exact for a
+Lambertian texel (r = k l_z, so R = k C), and makes a cell cut by the horizon the mean over its part with light.
+The floor keeps grazing lights (l_z below 0.1), where a layer of fibres still catches light, from reading 0.
+A constant sky sums the same reads over each cell: sum_j (R_j / C_j) P_j (``pipeline.renderers.btf.sky_weights``;
+exact for a Lambertian texel).
 """
 import math
+from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
@@ -60,11 +64,15 @@ TWO_PI = 2.0 * math.pi
 LOBE_PARAMS = 4          # C_x, C_y, C_z, N
 HEMISPHERE = 0           # light coordinates: the hemisphere grid (the default) ...
 HALF = 1                 # ... or half-vector cells (module doc)
-MIN_VALID = 1e-6         # a view row of the half-vector table whose light weights' valid fraction is below this
-                         # holds no light near the direction: it is left out of the view interpolation
+MIN_VALID = 1e-6         # a view row of the half-vector table whose light weights' mean foreshortening is below
+                         # this holds no light near the direction: it is left out of the view interpolation
 GEOMETRY_SUB = 8         # ``half_cell_geometry``: sub-samples per axis of a view cell and of a light cell
-COSINE_FLOOR = 0.1       # half-vector tables hold r / max(l_z, COSINE_FLOOR) (module doc): l_z below 0.1 (5.7
-                         # degrees above the horizon) is not divided out
+
+HalfCells = namedtuple("HalfCells", ["valid", "cosine", "projected"])
+HalfCells.__doc__ = """What a half-vector light grid is seen from each view cell (``half_cell_geometry``), each (V, L):
+the cells' valid fractions, mean foreshortenings max(l_z, COSINE_FLOOR) (invalid 0) and projected solid angles."""
+COSINE_FLOOR = 0.1       # a half-vector read's foreshortening is max(l_z, COSINE_FLOOR) (module doc): below 0.1
+                         # (5.7 degrees above the horizon) it is not factored out
 PROJECTED_HEMISPHERE = math.pi * (1.0 + COSINE_FLOOR * COSINE_FLOOR)   # the integral of max(l_z, floor) over it
 
 
@@ -165,22 +173,25 @@ def half_weights(nx, ny, lx, ly, lz, vx, vy, vz):
 
 @njit(cache=True, parallel=True)
 def half_cell_geometry(vt, vph, nx, ny, jitter):
-    """(valid (V, L), solid (V, L)) of the nx x ny half-vector grid seen from each cell of the vt x vph view grid
-    (module doc): the fraction of light cell j's h area that gives a light above the fabric, and the projected
-    solid angle of the lights whose half vector with the view lies in cell j, the integral of max(l_z,
-    COSINE_FLOOR) over them: over the cell's valid part, max(l_z, COSINE_FLOOR) times the Jacobian |dl/dh| = 4
-    (v.h) / h_z (dl = 4 (v.h) dh, dh = dh_x dh_y / h_z) by the midpoint rule on GEOMETRY_SUB^2 points, each view's
-    row then scaled to its closed form pi (1 + COSINE_FLOOR^2) (the rule under-counts the cells on the unit
-    circle, where 1 / h_z grows without bound; the interior cells agree with light directions binned by their
-    cell to the binning's resolution, within 1.5 % binning 131,072). ``jitter``: averaged over GEOMETRY_SUB^2
-    views spread over the view's cell, as the acquisition's cell averages see it; else at the grid view itself."""
+    """``HalfCells`` (valid, cosine, projected), each (V, L), of the nx x ny half-vector grid seen from each cell of
+    the vt x vph view grid (module doc): the fraction of light cell j's h area that gives a light above the fabric;
+    the mean over the same points of max(l_z, COSINE_FLOOR) (invalid points 0); and the projected solid angle of
+    the lights whose half vector with the view lies in cell j, the integral of max(l_z, COSINE_FLOOR) times the
+    Jacobian |dl/dh| = 4 (v.h) / h_z (dl = 4 (v.h) dh, dh = dh_x dh_y / h_z) over the cell's valid part -- each by
+    the midpoint rule on GEOMETRY_SUB^2 points of the cell, each view's projected solid angles then scaled to their
+    closed form pi (1 + COSINE_FLOOR^2) (the rule under-counts the cells on the unit circle, where 1 / h_z grows
+    without bound; the interior cells agree with light directions binned by their cell to the binning's
+    resolution, within 3 % binning 131,072). ``jitter``: averaged over GEOMETRY_SUB^2 views
+    spread over the view's cell, as the acquisition's cell averages see it; else at the grid view itself."""
     V = vt * vph
     L = nx * ny
     valid = np.zeros((V, L))
-    solid = np.zeros((V, L))
+    cosine = np.zeros((V, L))
+    projected = np.zeros((V, L))
     G = GEOMETRY_SUB
     S = G if jitter else 1
-    area = 4.0 / (nx * ny * G * G * S * S)     # one h point's share of its cell's area, over the S^2 views
+    share = 1.0 / (G * G * S * S)              # one (view, h) point's share of the cell's mean
+    area = 4.0 / (nx * ny) * share             # ... and of its h area
     for iv in prange(V):
         for a in range(S):
             for b in range(S):
@@ -190,28 +201,30 @@ def half_cell_geometry(vt, vph, nx, ny, jitter):
                     ix = j - iy * nx
                     for c in range(G):
                         for d in range(G):
+                            lz = half_cell_direction(j, nx, ny, (c + 0.5) / G, (d + 0.5) / G, vx, vy, vz)[2]
+                            if lz <= 0.0:
+                                continue
                             hx = -1.0 + 2.0 * (ix + (c + 0.5) / G) / nx
                             hy = -1.0 + 2.0 * (iy + (d + 0.5) / G) / ny
-                            if half_cell_direction(j, nx, ny, (c + 0.5) / G, (d + 0.5) / G, vx, vy, vz)[2] <= 0.0:
-                                continue
                             hz = math.sqrt(1.0 - hx * hx - hy * hy)
-                            d = hx * vx + hy * vy + hz * vz
-                            valid[iv, j] += 1.0 / (G * G * S * S)
-                            solid[iv, j] += area * 4.0 * d / hz * max(2.0 * d * hz - vz, COSINE_FLOOR)
+                            fz = max(lz, COSINE_FLOOR)
+                            valid[iv, j] += share
+                            cosine[iv, j] += share * fz
+                            projected[iv, j] += area * 4.0 * (hx * vx + hy * vy + hz * vz) / hz * fz
         total = 0.0
         for j in range(L):
-            total += solid[iv, j]
+            total += projected[iv, j]
         for j in range(L):
-            solid[iv, j] *= PROJECTED_HEMISPHERE / total
-    return valid, solid
+            projected[iv, j] *= PROJECTED_HEMISPHERE / total
+    return HalfCells(valid, cosine, projected)
 
 
 @njit(cache=True)
-def half_row(radiance, valid, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3):
-    """(r, g, b, valid fraction) of view row iv of texel row idx of a half-vector table at the light weights
-    (``half_weights``): the weighted cell averages over the weighted valid fractions -- the mean of g = r / max(l_z,
-    COSINE_FLOOR) where the cells have light; (0, 0, 0, den) when the valid fraction ``den`` is below MIN_VALID."""
-    den = q0 * valid[iv, b0] + q1 * valid[iv, b1] + q2 * valid[iv, b2] + q3 * valid[iv, b3]
+def half_row(radiance, cosine, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3):
+    """(r, g, b, den) of view row iv of texel row idx of a half-vector table at the light weights (``half_weights``):
+    the weighted cell averages over the weighted mean foreshortenings ``den`` (``HalfCells.cosine``) -- r with the
+    foreshortening factored out (module doc); (0, 0, 0, den) when den is below MIN_VALID (no light there)."""
+    den = q0 * cosine[iv, b0] + q1 * cosine[iv, b1] + q2 * cosine[iv, b2] + q3 * cosine[iv, b3]
     if den < MIN_VALID:
         return 0.0, 0.0, 0.0, den
     r = radiance
@@ -222,12 +235,11 @@ def half_row(radiance, valid, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3):
 
 
 @njit(cache=True)
-def half_rgb(radiance, valid, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
+def half_rgb(radiance, cosine, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
     """``table_rgb`` of a half-vector table (module doc): r(l, v) of texel row idx, three channels, bilinear on the view
     grid (vt x vph) and, in every view row, on the half-vector grid (lnx x lny) at the half vector of (l, v) itself
     (``half_row``), the rows without light there left out and the others' weights renormalised, times max(l_z,
-    COSINE_FLOOR) (the table holds g = r / max(l_z, COSINE_FLOOR)); 0 for l_z <= 0. ``valid`` (V, L):
-    ``half_cell_geometry``'s valid fractions."""
+    COSINE_FLOOR) (module doc); 0 for l_z <= 0. ``cosine`` (V, L): ``HalfCells.cosine``."""
     if lz <= 0.0:
         return 0.0, 0.0, 0.0
     a0, a1, a2, a3, p0, p1, p2, p3 = grid_weights(vt, vph, vx, vy, vz)
@@ -239,7 +251,7 @@ def half_rgb(radiance, valid, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
     for iv, wv in ((a0, p0), (a1, p1), (a2, p2), (a3, p3)):
         if wv == 0.0:
             continue
-        r0, r1, r2, den = half_row(radiance, valid, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3)
+        r0, r1, r2, den = half_row(radiance, cosine, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3)
         if den < MIN_VALID:
             continue
         s0 += wv * r0
@@ -253,7 +265,7 @@ def half_rgb(radiance, valid, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
 
 
 @njit(cache=True, parallel=True)
-def half_to_hemisphere(radiance, valid, lnx, lny, view_dirs, light_dirs):
+def half_to_hemisphere(radiance, cosine, lnx, lny, view_dirs, light_dirs):
     """A half-vector table (T, V, L, 3) read at other lights (``light_dirs`` (M, 3), e.g. a hemisphere grid) from each
     grid view v_i (``view_dirs`` (V, 3)) -- ``half_row`` of row i times max(l_z, COSINE_FLOOR), no view
     interpolation: r, (T, V, M, 3) float32, what the Lafortune fit sees of a half-vector acquisition."""
@@ -268,7 +280,7 @@ def half_to_hemisphere(radiance, valid, lnx, lny, view_dirs, light_dirs):
                 if lz <= 0.0:
                     continue
                 b0, b1, b2, b3, q0, q1, q2, q3 = half_weights(lnx, lny, lx, ly, lz, vx, vy, vz)
-                r0, r1, r2, _den = half_row(radiance, valid, t, i, b0, b1, b2, b3, q0, q1, q2, q3)
+                r0, r1, r2, _den = half_row(radiance, cosine, t, i, b0, b1, b2, b3, q0, q1, q2, q3)
                 c = max(lz, COSINE_FLOOR)
                 out[t, i, m, 0] = r0 * c
                 out[t, i, m, 1] = r1 * c

@@ -42,8 +42,6 @@ Half-vector light cells (``light_coords`` HALF, ``precompute btf --light-coords 
 the half-vector grid seen from the sample's view (``stages.core.btf.half_cell_direction``: the view's mirror
 direction about a half vector uniform over the cell, with the same random dimensions; without the grids, about
 the cell's centre), and a cell whose light would lie below the fabric adds nothing (its shadow ray is not cast).
-Each light's radiance is divided by max(l_z, COSINE_FLOOR) of the light it had on that sample (the table holds the
-foreshortening factored out: ``stages.core.btf`` module doc).
 
 Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
 is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
@@ -59,7 +57,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from stages.core.btf import COSINE_FLOOR, HALF, cell_direction, half_cell_direction
+from stages.core.btf import HALF, cell_direction, half_cell_direction
 from stages.core.dispatch import runtime_value
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
@@ -83,8 +81,7 @@ JOB_CHUNKS_PER_THREAD = 64  # (texel, view) jobs cost from a few rays (nothing h
 
 BtfLights = namedtuple("BtfLights", ["radiance", "lights"])
 BtfLights.__doc__ = """What one acquisition path records (a tally of ``periodic.periodic_path``): for every light
-direction of ``lights`` (L, 4) (unit irradiance; column 3 a weight, 1 but for half-vector cells), the radiance it sends
-along the path times its weight into ``radiance`` (L, 3)."""
+direction of ``lights`` (L, 3) (unit irradiance), the radiance it sends along the path into ``radiance`` (L, 3)."""
 
 
 @njit(cache=True)
@@ -106,10 +103,9 @@ def _btf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
             continue
         rays += 1
         if light_reaches(paths, v, nf):
-            w = lights[k, 3]
-            radiance[k, 0] += tp0 * f0 * w
-            radiance[k, 1] += tp1 * f1 * w
-            radiance[k, 2] += tp2 * f2 * w
+            radiance[k, 0] += tp0 * f0
+            radiance[k, 1] += tp1 * f1
+            radiance[k, 2] += tp2 * f2
     return rays
 
 
@@ -150,7 +146,6 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
             radiance[k, c] = 0.0
         for c in range(3):
             lights_now[k, c] = light_dirs[k, c]
-        lights_now[k, 3] = 1.0
     jitter = view_grid[0] > 0
     half = light_coords == HALF
     first_dims = FIRST_DIMS + (2 + 2 * L if jitter else 0)
@@ -160,7 +155,6 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
             lights_now[k, 0] = lx
             lights_now[k, 1] = ly
             lights_now[k, 2] = lz
-            lights_now[k, 3] = 1.0 / max(lz, COSINE_FLOOR)
     iy = texel // res
     ix = texel - iy * res
     v = PathScratch(stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(),
@@ -180,7 +174,6 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
                 u1 = uniform(seed, key, FIRST_DIMS + 3 + 2 * k)
                 if half:
                     lx, ly, lz = half_cell_direction(k, light_grid[0], light_grid[1], u0, u1, vx, vy, vz)
-                    lights_now[k, 3] = 1.0 / max(lz, COSINE_FLOOR)
                 else:
                     lx, ly, lz = cell_direction(k, light_grid[0], light_grid[1], u0, u1)
                 lights_now[k, 0] = lx
@@ -235,7 +228,7 @@ def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
     acc = np.empty((L, 3))   # per chunk (as numba's parallel loop hoisted them); texel_view_samples fills them
-    now = np.empty((L, 4))
+    now = np.empty((L, 3))
     for job in range(j0, j1):
         i = job // V
         v = job - i * V

@@ -227,7 +227,7 @@ def test_btf_half_vector_cells_end_to_end(tiny_tiling, cli, tmp_path):
     assert np.allclose(np.asarray(a["light_dirs"]), hemisphere_grid(8, 8))
     samples = np.asarray(a["samples"], np.float64)          # (2 exemplars, 2, 2, 8 views, 20 cells, 3)
     assert samples.shape == (2, 2, 2, 8, 20, 3)
-    valid = half_cell_geometry(2, 4, 5, 4, True)[0]
+    valid = half_cell_geometry(2, 4, 5, 4, True).valid
     assert (valid == 0).any() and np.any(samples[..., valid > 0, :] > 0)
     assert np.all(samples[..., valid == 0, :] == 0.0)
     scene = tmp_path / "scene.toml"
