@@ -101,11 +101,10 @@ def table_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[f
 
 
 def half_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[float]]:
-    """[(azimuth degrees, mean)] of a half-vector acquisition read at the grid view (``stages.core.btf.half_row``,
-    times the light's max(l_z, COSINE_FLOOR), as ``half_rgb``)."""
+    """[(azimuth degrees, mean)] of a half-vector acquisition read at the grid view (``stages.core.btf.half_row``)."""
     import zarr
 
-    from stages.core.btf import COSINE_FLOOR, half_cell_geometry, half_row, half_weights, hemisphere_grid
+    from stages.core.btf import half_cell_geometry, half_row, half_weights, hemisphere_grid
 
     g = zarr.open_group(str(artifact), mode="r")
     nx, ny = (int(x) for x in g.attrs["summary"]["light_grid"])
@@ -114,14 +113,14 @@ def half_curve(artifact: Path, view_index: int, light_ring: int) -> list[list[fl
     per_light = (A[:, :, view_index, None, None] * S[:, :, view_index]).mean(axis=(0, 1))   # (L, 3)
     table = np.zeros((1, GRID[0] * GRID[1], nx * ny, 3))
     table[0, view_index] = per_light
-    cosine = half_cell_geometry(GRID[0], GRID[1], nx, ny, True).cosine
+    valid = half_cell_geometry(GRID[0], GRID[1], nx, ny, True).valid
     view = hemisphere_grid(*GRID)[view_index]
     curve = []
     for deg in np.arange(0.0, 360.0, 1.0):
         light = ring_direction(light_ring, float(deg))
         q = half_weights(nx, ny, *light, *view)
-        r = half_row(table, cosine, 0, view_index, *q)      # r with the foreshortening factored out
-        curve.append([float(deg), IRRADIANCE * max(light[2], COSINE_FLOOR) * float(np.mean(r[:3]))])
+        r = half_row(table, valid, 0, view_index, *q)
+        curve.append([float(deg), IRRADIANCE * float(np.mean(r[:3]))])
     return curve
 
 

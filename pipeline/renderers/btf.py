@@ -86,7 +86,7 @@ ONE_EXEMPLAR = Blocks(np.zeros((1, 1), np.int64), np.ones(2), np.zeros(2))   # a
 # ``levels``), with what else the renderer needs from the artifact
 BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "periods",
                                        "exemplars", "fit_bytes", "summary", "model", "radiance", "light_grid",
-                                       "half", "cells"])
+                                       "half", "valid", "solid"])
 SOURCES = ("mesh", "tiling")
 ON_OFF = {"on": True, "off": False}
 
@@ -97,7 +97,7 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     ``model`` tabulated, its compressed table decoded in the same row order (``radiance`` (N, V, L, 3) float32,
     negative values clamped to 0; else (1, 1, 1, 3) zeros). ``half``: the table's lights are half-vector cells
     (``precompute btf --light-coords half``), whose valid fractions and solid angles per view cell
-    (``stages.core.btf.half_cell_geometry``) are ``cells`` (``HalfCells``); else None."""
+    (``stages.core.btf.half_cell_geometry``) are ``valid`` and ``solid`` (V, L); else (1, 1) ones and zeros."""
     from stages.core.btf import half_cell_geometry, hemisphere_grid
 
     from ..artifacts import Artifact
@@ -165,14 +165,15 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     radiance = np.zeros((1, 1, 1, 3), np.float32)
     if model == "tabulated":
         radiance, fit_bytes = load_table(art, path, E, res, levels, nt * nph, lt * lph), int(s.get("table_bytes", 0))
-    cells = None
+    valid, solid = np.ones((1, 1)), np.zeros((1, 1))
     if half:    # the cells seen from each view cell, as the acquisition saw them (cell averages or centres)
-        cells = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
+        valid, solid = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
     return BtfTexture(np.ascontiguousarray(np.concatenate(texels)),
                       np.ascontiguousarray(np.concatenate(tables), np.float32),
                       np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), periods,
-                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, cells)
+                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, valid,
+                      solid)
 
 
 def load_table(art, path, E, res, levels, V, L) -> np.ndarray:
@@ -347,20 +348,19 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
                          has_ground, pixel_angle,
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
                          int(bool(shadows)), MAX_LAYERS, eps, tabulated, tex.radiance, int(tex.light_grid[0]),
-                         int(tex.light_grid[1]), int(tex.half), tex.cells.cosine if tex.half else np.ones((1, 1)))
+                         int(tex.light_grid[1]), int(tex.half), tex.valid)
 
 
 def sky_weights(tex: BtfTexture) -> np.ndarray:
     """(V, L) the tabulated table's quadrature weights per view cell and light cell: 2 pi / L on the hemisphere grid
-    (every cell the same solid angle); a half-vector cell's projected solid angle over its mean foreshortening (the
-    cell's read, integrated over the cell: ``stages.core.btf`` module doc), 0 where it has no light."""
+    (every cell the same solid angle); a half-vector cell's solid angle over its valid fraction (its cell average
+    counts the invalid part as 0; ``stages.core.btf`` module doc), 0 where it has no light."""
     from stages.core.btf import MIN_VALID
 
     V, L = tex.table.shape[1], tex.light_grid[0] * tex.light_grid[1]
     if not tex.half:
         return np.full((V, L), 2.0 * np.pi / L)
-    cosine, projected = tex.cells.cosine, tex.cells.projected
-    return np.where(cosine >= MIN_VALID, projected / np.maximum(cosine, MIN_VALID), 0.0)
+    return np.where(tex.valid >= MIN_VALID, tex.solid / np.maximum(tex.valid, MIN_VALID), 0.0)
 
 
 def film_setup(scene, options: dict):

@@ -414,7 +414,7 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
         w.write("light_dirs", fit_dirs)     # the fit's light grid (the acquisition's with hemisphere coordinates)
         if half:
             w.write("half_dirs", light_dirs)
-            cosine = half_cell_geometry(p.views[0], p.views[1], p.lights[0], p.lights[1], p.directions == "cell").cosine
+            valid = half_cell_geometry(p.views[0], p.views[1], p.lights[0], p.lights[1], p.directions == "cell").valid
         if reused is None:
             w.create("samples", (E, res, res, V, L, 3), np.float16, (1, 1, res, V, L, 3),
                      dimension_names=("exemplar", "y", "x", "view", "light", "c"))
@@ -447,7 +447,7 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
             t0 = time.perf_counter()
             fit_samples = samples
             if half:   # the fit's lobes take the lights of a hemisphere grid: the table read there from each view
-                fit_samples = half_to_hemisphere(samples.reshape(res * res, V, L, 3), cosine, p.lights[0], p.lights[1],
+                fit_samples = half_to_hemisphere(samples.reshape(res * res, V, L, 3), valid, p.lights[0], p.lights[1],
                                                  view_dirs, fit_dirs).reshape(res, res, V, len(fit_dirs), 3)
             with status(f"btf: fitting {res}x{res} texels of '{names[e]}' and their mip levels"):
                 levels = fit_levels(fit_samples, alpha, frames, view_dirs, fit_dirs, p.lobes, p.threshold,

@@ -30,29 +30,26 @@ it is the renderer's quadrature for environment and SG lights.
 where its tangent t is perpendicular to the half vector h = (l + v) / |l + v|, and a yarn of twist angle a
 along x holds fibres whose tangents make every angle up to a with it, so its floats glint for |h_x| <= sin a
 whatever the view (Rusinkiewicz 1998 chose half-vector coordinates for the same reason: specular features
-sit still in them). On the hemisphere grid the glint's edges move with v, so interpolating between the
-view grid's directions blurs them; in half-vector coordinates they stay on the same cells. So the light
-of cell j of an ``nx`` x ``ny`` grid over the square of projected half vectors (h_x, h_y) in [-1, 1]^2
-(column ix = j % nx, row iy = j // nx, centre h_x = -1 + 2 (ix + 1/2) / nx) seen from v is the mirror
-direction of v about h: l = 2 (v.h) h - v (``half_cell_direction``). Not every (h, v) gives a light above
-the fabric (|h_xy| >= 1, v.h <= 0 or l_z <= 0: *invalid*, no light). The acquisition's cell averages R are over
-the whole cell (invalid samples 0). ``half_cell_geometry`` gives each (view cell, light cell) what does not
-depend on the fabric: its valid fraction f (of the cell's h area, over the view cell's spread), its mean
-foreshortening C, the mean of max(l_z, COSINE_FLOOR) over the same samples (invalid 0), and its projected solid
-angle P, the integral of max(l_z, COSINE_FLOOR) over the light directions whose half vector with v lies in the
-cell (the cells partition the hemisphere).
+sit still in them). A cell of the hemisphere grid that a glint's edge crosses averages bright and dark; cells
+of the half vector put those edges near cell boundaries, the same ones for every view. So the light of cell j
+of an ``nx`` x ``ny`` grid over the square of projected half vectors (h_x, h_y) in [-1, 1]^2 (column
+ix = j % nx, row iy = j // nx, centre h_x = -1 + 2 (ix + 1/2) / nx) seen from v is the mirror direction of v
+about h: l = 2 (v.h) h - v (``half_cell_direction``). Not every (h, v) gives a light above
+the fabric (|h_xy| >= 1, v.h <= 0 or l_z <= 0: *invalid*, no light); ``half_cell_geometry`` gives each (view
+cell, light cell) its valid fraction (of the cell's h area: the acquisition's samples there carry the light,
+the others 0) and its solid angle (the light directions whose half vector with v lies in the cell: the
+cells partition the hemisphere, summing to 2 pi for every view). The acquisition's cell averages are over
+the whole cell (invalid samples 0); a read normalises them by the valid fraction, which makes a cell cut by
+the horizon the mean over the part that has light (``half_row``).
 
-A read (``half_rgb``) is R / C times the light's own max(l_z, COSINE_FLOOR), bilinear in the cells as a
-normalised convolution (sum w R / sum w C): the foreshortening is factored out. Reading between the view grid's
-directions at a fixed h mirrors each grid view about h to another light -- 45 degrees of view azimuth apart, the
-lights' l_z differ by a quarter (0.53 and 0.71 for the flat satins' camera under the light 45 degrees from the
-normal) -- and r carries l_z, a function of the light, not of h: left in, the foreshortening came out 8-13 % dark
-there. Dividing each sample by its l_z instead biases the cell average up (the mean of 1 / l_z over a cell whose
-views spread is above 1 / its mean l_z: +5-8 % measured); the ratio of the means does not, is exact for a
-Lambertian texel (r = k l_z, so R = k C), and makes a cell cut by the horizon the mean over its part with light.
-The floor keeps grazing lights (l_z below 0.1), where a layer of fibres still catches light, from reading 0.
-A constant sky sums the same reads over each cell: sum_j (R_j / C_j) P_j (``pipeline.renderers.btf.sky_weights``;
-exact for a Lambertian texel).
+A read at (l, v) (``half_rgb``) interpolates the view grid's four rows at the light l itself, each row's cells
+at the half vector of l and that row's own view -- as the hemisphere grid does, with the light axis in
+half-vector cells. Reading every row at the half vector of (l, v) instead keeps a glint on one cell across
+the rows but mirrors each row's view to another light: 45 degrees of view azimuth apart, lights whose l_z
+differ by a quarter (0.53 and 0.71 for the flat satins' camera under the light 45 degrees from the normal), and
+r carries the light's foreshortening, so that read came out 8-13 % dark there; dividing the foreshortening out
+of the cells and back in at the light came out 2-12 % bright on the satins (r of a layer of fibres is not
+proportional to l_z) though 3 % on the knit (``make btf-sweep``, CHANGES 2026-12-06).
 """
 import math
 from collections import namedtuple
@@ -64,16 +61,13 @@ TWO_PI = 2.0 * math.pi
 LOBE_PARAMS = 4          # C_x, C_y, C_z, N
 HEMISPHERE = 0           # light coordinates: the hemisphere grid (the default) ...
 HALF = 1                 # ... or half-vector cells (module doc)
-MIN_VALID = 1e-6         # a view row of the half-vector table whose light weights' mean foreshortening is below
-                         # this holds no light near the direction: it is left out of the view interpolation
+MIN_VALID = 1e-6         # a view row of the half-vector table whose light weights' valid fraction is below this
+                         # holds no light near the direction: it is left out of the view interpolation
 GEOMETRY_SUB = 8         # ``half_cell_geometry``: sub-samples per axis of a view cell and of a light cell
 
-HalfCells = namedtuple("HalfCells", ["valid", "cosine", "projected"])
+HalfCells = namedtuple("HalfCells", ["valid", "solid"])
 HalfCells.__doc__ = """What a half-vector light grid is seen from each view cell (``half_cell_geometry``), each (V, L):
-the cells' valid fractions, mean foreshortenings max(l_z, COSINE_FLOOR) (invalid 0) and projected solid angles."""
-COSINE_FLOOR = 0.1       # a half-vector read's foreshortening is max(l_z, COSINE_FLOOR) (module doc): below 0.1
-                         # (5.7 degrees above the horizon) it is not factored out
-PROJECTED_HEMISPHERE = math.pi * (1.0 + COSINE_FLOOR * COSINE_FLOOR)   # the integral of max(l_z, floor) over it
+the cells' valid fractions and solid angles."""
 
 
 def hemisphere_grid(n_theta: int, n_phi: int) -> np.ndarray:
@@ -173,25 +167,22 @@ def half_weights(nx, ny, lx, ly, lz, vx, vy, vz):
 
 @njit(cache=True, parallel=True)
 def half_cell_geometry(vt, vph, nx, ny, jitter):
-    """``HalfCells`` (valid, cosine, projected), each (V, L), of the nx x ny half-vector grid seen from each cell of
-    the vt x vph view grid (module doc): the fraction of light cell j's h area that gives a light above the fabric;
-    the mean over the same points of max(l_z, COSINE_FLOOR) (invalid points 0); and the projected solid angle of
-    the lights whose half vector with the view lies in cell j, the integral of max(l_z, COSINE_FLOOR) times the
-    Jacobian |dl/dh| = 4 (v.h) / h_z (dl = 4 (v.h) dh, dh = dh_x dh_y / h_z) over the cell's valid part -- each by
-    the midpoint rule on GEOMETRY_SUB^2 points of the cell, each view's projected solid angles then scaled to their
-    closed form pi (1 + COSINE_FLOOR^2) (the rule under-counts the cells on the unit circle, where 1 / h_z grows
-    without bound; the interior cells agree with light directions binned by their cell to the binning's
-    resolution, within 3 % binning 131,072). ``jitter``: averaged over GEOMETRY_SUB^2 views
-    spread over the view's cell, as the acquisition's cell averages see it; else at the grid view itself."""
+    """``HalfCells`` (valid (V, L), solid (V, L)) of the nx x ny half-vector grid seen from each cell of the vt x vph
+    view grid (module doc): the fraction of light cell j's h area that gives a light above the fabric, and the
+    solid angle of the lights whose half vector with the view lies in cell j, the integral of the Jacobian
+    |dl/dh| = 4 (v.h) / h_z (dl = 4 (v.h) dh, dh = dh_x dh_y / h_z) over the cell's valid part, both by the
+    midpoint rule on GEOMETRY_SUB^2 points; each view's solid angles then scaled to 2 pi (the rule under-counts the
+    cells on the unit circle, where 1 / h_z grows without bound; the interior cells agree with light directions
+    binned by their cell to the binning's resolution, within 1.5 % binning 131,072). ``jitter``: averaged over
+    GEOMETRY_SUB^2 views spread over the view's cell, as the acquisition's cell averages see it; else at the grid
+    view itself."""
     V = vt * vph
     L = nx * ny
     valid = np.zeros((V, L))
-    cosine = np.zeros((V, L))
-    projected = np.zeros((V, L))
+    solid = np.zeros((V, L))
     G = GEOMETRY_SUB
     S = G if jitter else 1
-    share = 1.0 / (G * G * S * S)              # one (view, h) point's share of the cell's mean
-    area = 4.0 / (nx * ny) * share             # ... and of its h area
+    area = 4.0 / (nx * ny * G * G * S * S)     # one h point's share of its cell's area, over the S^2 views
     for iv in prange(V):
         for a in range(S):
             for b in range(S):
@@ -201,30 +192,27 @@ def half_cell_geometry(vt, vph, nx, ny, jitter):
                     ix = j - iy * nx
                     for c in range(G):
                         for d in range(G):
-                            lz = half_cell_direction(j, nx, ny, (c + 0.5) / G, (d + 0.5) / G, vx, vy, vz)[2]
-                            if lz <= 0.0:
-                                continue
                             hx = -1.0 + 2.0 * (ix + (c + 0.5) / G) / nx
                             hy = -1.0 + 2.0 * (iy + (d + 0.5) / G) / ny
+                            if half_cell_direction(j, nx, ny, (c + 0.5) / G, (d + 0.5) / G, vx, vy, vz)[2] <= 0.0:
+                                continue
                             hz = math.sqrt(1.0 - hx * hx - hy * hy)
-                            fz = max(lz, COSINE_FLOOR)
-                            valid[iv, j] += share
-                            cosine[iv, j] += share * fz
-                            projected[iv, j] += area * 4.0 * (hx * vx + hy * vy + hz * vz) / hz * fz
+                            valid[iv, j] += 1.0 / (G * G * S * S)
+                            solid[iv, j] += area * 4.0 * (hx * vx + hy * vy + hz * vz) / hz
         total = 0.0
         for j in range(L):
-            total += projected[iv, j]
+            total += solid[iv, j]
         for j in range(L):
-            projected[iv, j] *= PROJECTED_HEMISPHERE / total
-    return HalfCells(valid, cosine, projected)
+            solid[iv, j] *= TWO_PI / total
+    return HalfCells(valid, solid)
 
 
 @njit(cache=True)
-def half_row(radiance, cosine, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3):
-    """(r, g, b, den) of view row iv of texel row idx of a half-vector table at the light weights (``half_weights``):
-    the weighted cell averages over the weighted mean foreshortenings ``den`` (``HalfCells.cosine``) -- r with the
-    foreshortening factored out (module doc); (0, 0, 0, den) when den is below MIN_VALID (no light there)."""
-    den = q0 * cosine[iv, b0] + q1 * cosine[iv, b1] + q2 * cosine[iv, b2] + q3 * cosine[iv, b3]
+def half_row(radiance, valid, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3):
+    """(r, g, b, valid fraction) of view row iv of texel row idx of a half-vector table at the light weights
+    (``half_weights``): the weighted cell averages over the weighted valid fractions -- the mean radiance where
+    the cells have light; (0, 0, 0, den) when the valid fraction ``den`` is below MIN_VALID."""
+    den = q0 * valid[iv, b0] + q1 * valid[iv, b1] + q2 * valid[iv, b2] + q3 * valid[iv, b3]
     if den < MIN_VALID:
         return 0.0, 0.0, 0.0, den
     r = radiance
@@ -235,15 +223,14 @@ def half_row(radiance, cosine, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3):
 
 
 @njit(cache=True)
-def half_rgb(radiance, cosine, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
+def half_rgb(radiance, valid, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
     """``table_rgb`` of a half-vector table (module doc): r(l, v) of texel row idx, three channels, bilinear on the view
-    grid (vt x vph) and, in every view row, on the half-vector grid (lnx x lny) at the half vector of (l, v) itself
-    (``half_row``), the rows without light there left out and the others' weights renormalised, times max(l_z,
-    COSINE_FLOOR) (module doc); 0 for l_z <= 0. ``cosine`` (V, L): ``HalfCells.cosine``."""
+    grid (vt x vph) and, in each of the four view rows, on the half-vector grid (lnx x lny) at the half vector of l
+    and the row's grid view (``half_row``); the rows without light there left out and the others' weights
+    renormalised; 0 for l_z <= 0. ``valid`` (V, L): ``HalfCells.valid``."""
     if lz <= 0.0:
         return 0.0, 0.0, 0.0
     a0, a1, a2, a3, p0, p1, p2, p3 = grid_weights(vt, vph, vx, vy, vz)
-    b0, b1, b2, b3, q0, q1, q2, q3 = half_weights(lnx, lny, lx, ly, lz, vx, vy, vz)
     s0 = 0.0
     s1 = 0.0
     s2 = 0.0
@@ -251,7 +238,9 @@ def half_rgb(radiance, cosine, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
     for iv, wv in ((a0, p0), (a1, p1), (a2, p2), (a3, p3)):
         if wv == 0.0:
             continue
-        r0, r1, r2, den = half_row(radiance, cosine, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3)
+        gx, gy, gz = cell_direction(iv, vt, vph, 0.5, 0.5)     # the row's grid view
+        b0, b1, b2, b3, q0, q1, q2, q3 = half_weights(lnx, lny, lx, ly, lz, gx, gy, gz)
+        r0, r1, r2, den = half_row(radiance, valid, idx, iv, b0, b1, b2, b3, q0, q1, q2, q3)
         if den < MIN_VALID:
             continue
         s0 += wv * r0
@@ -260,15 +249,14 @@ def half_rgb(radiance, cosine, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
         wsum += wv
     if wsum <= 0.0:
         return 0.0, 0.0, 0.0
-    c = max(lz, COSINE_FLOOR) / wsum
-    return s0 * c, s1 * c, s2 * c
+    return s0 / wsum, s1 / wsum, s2 / wsum
 
 
 @njit(cache=True, parallel=True)
-def half_to_hemisphere(radiance, cosine, lnx, lny, view_dirs, light_dirs):
+def half_to_hemisphere(radiance, valid, lnx, lny, view_dirs, light_dirs):
     """A half-vector table (T, V, L, 3) read at other lights (``light_dirs`` (M, 3), e.g. a hemisphere grid) from each
-    grid view v_i (``view_dirs`` (V, 3)) -- ``half_row`` of row i times max(l_z, COSINE_FLOOR), no view
-    interpolation: r, (T, V, M, 3) float32, what the Lafortune fit sees of a half-vector acquisition."""
+    grid view v_i (``view_dirs`` (V, 3)) -- ``half_row`` of row i, no view interpolation: (T, V, M, 3) float32, what
+    the Lafortune fit sees of a half-vector acquisition."""
     T, V, _L, _ = radiance.shape
     M = light_dirs.shape[0]
     out = np.zeros((T, V, M, 3), np.float32)
@@ -280,11 +268,10 @@ def half_to_hemisphere(radiance, cosine, lnx, lny, view_dirs, light_dirs):
                 if lz <= 0.0:
                     continue
                 b0, b1, b2, b3, q0, q1, q2, q3 = half_weights(lnx, lny, lx, ly, lz, vx, vy, vz)
-                r0, r1, r2, _den = half_row(radiance, cosine, t, i, b0, b1, b2, b3, q0, q1, q2, q3)
-                c = max(lz, COSINE_FLOOR)
-                out[t, i, m, 0] = r0 * c
-                out[t, i, m, 1] = r1 * c
-                out[t, i, m, 2] = r2 * c
+                r0, r1, r2, _den = half_row(radiance, valid, t, i, b0, b1, b2, b3, q0, q1, q2, q3)
+                out[t, i, m, 0] = r0
+                out[t, i, m, 1] = r1
+                out[t, i, m, 2] = r2
     return out
 
 

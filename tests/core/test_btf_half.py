@@ -1,10 +1,9 @@
 """Half-vector light cells of the btf table (``stages.core.btf``, module doc "Half-vector light cells").
 
 References: the cell's centre seen from a view is a grid point of the bilinear weights (exact); the cells'
-projected solid angles against light directions binned by their half vector (an independent count); a Lambertian
-texel r = c max(l_z, COSINE_FLOOR) written as the acquisition averages it (each cell's mean foreshortening times c)
-reads back exactly that at every direction with light and integrates to pi (1 + COSINE_FLOOR^2) c under a
-constant sky (the closed form; float precision).
+solid angles against light directions binned by their half vector (an independent count); a table that is the
+same radiance c in every cell, written as the acquisition writes it (cell averages with the invalid part 0),
+reads back c at every direction with light (float precision) and integrates to 2 pi c under a constant sky.
 """
 import math
 
@@ -12,9 +11,7 @@ import numpy as np
 import pytest
 
 from stages.core.btf import (
-    COSINE_FLOOR,
     MIN_VALID,
-    PROJECTED_HEMISPHERE,
     cell_direction,
     half_cell_direction,
     half_cell_geometry,
@@ -50,15 +47,12 @@ def test_cell_centres_are_the_weights_grid_points():
 
 @pytest.mark.parametrize("jitter", [False, True])
 def test_cell_solid_angles_against_binned_lights(jitter):
-    """Each view's cells partition its hemisphere (projected solid angles sum to pi (1 + COSINE_FLOOR^2), the closed
-    form); the cells wholly inside the valid region hold the projected solid angle (max(l_z, COSINE_FLOOR) d omega)
-    of an equal-area grid of 131,072 light directions binned by their half vector's cell (the binning's own
+    """Each view's cells partition its hemisphere (sum 2 pi); the cells wholly inside the valid region hold the solid
+    angle of an equal-area grid of 131,072 light directions binned by their half vector's cell (the binning's own
     resolution: a few hundred directions a cell, 3 %); the cells the valid fractions call empty hold under 1 % of the
-    binned lights, and the rows differ by under 5 % of pi in all (the rim cells, where 1 / h_z is singular)."""
-    valid, cosine, solid = half_cell_geometry(*VIEW_GRID, NX, NY, jitter)
-    assert np.allclose(solid.sum(axis=1), PROJECTED_HEMISPHERE, rtol=1e-12)
-    assert PROJECTED_HEMISPHERE == pytest.approx(math.pi * (1 + COSINE_FLOOR ** 2), rel=1e-15)
-    assert np.all(cosine <= valid + 1e-12) and np.all(cosine >= COSINE_FLOOR * valid - 1e-12)
+    binned lights, and the rows differ by under 5 % of 2 pi in all (the rim cells, where 1 / h_z is singular)."""
+    valid, solid = half_cell_geometry(*VIEW_GRID, NX, NY, jitter)
+    assert np.allclose(solid.sum(axis=1), 2 * math.pi, rtol=1e-12)
     assert np.all((valid >= 0) & (valid <= 1 + 1e-12))
     lights = hemisphere_grid(256, 512)
     ix, iy = np.arange(NX * NY) % NX, np.arange(NX * NY) // NX
@@ -69,34 +63,33 @@ def test_cell_solid_angles_against_binned_lights(jitter):
             sub = [cell_direction(iv, *VIEW_GRID, (a + 0.5) / 4, (b + 0.5) / 4) for a in range(4) for b in range(4)]
         else:
             sub = [cell_direction(iv, *VIEW_GRID, 0.5, 0.5)]
-        projected = np.zeros(NX * NY)
+        binned = np.zeros(NX * NY)
         for v in sub:
             h = lights + np.asarray(v)
             h /= np.linalg.norm(h, axis=1)[:, None]
             cx = np.minimum(((h[:, 0] + 1) * 0.5 * NX).astype(int), NX - 1)
             cy = np.minimum(((h[:, 1] + 1) * 0.5 * NY).astype(int), NY - 1)
-            projected += np.bincount(cy * NX + cx, weights=np.maximum(lights[:, 2], COSINE_FLOOR),
-                                     minlength=NX * NY) * 2 * math.pi / len(lights) / len(sub)
+            binned += np.bincount(cy * NX + cx, minlength=NX * NY) * 2 * math.pi / len(lights) / len(sub)
         inner = (valid[iv] > 0.999) & (corner < 0.9)     # wholly valid, away from the unit circle's singularity
         assert inner.sum() >= 4
-        assert np.allclose(solid[iv, inner], projected[inner], rtol=0.03)
-        assert projected[valid[iv] == 0].sum() < 0.01 * math.pi   # slivers the 8 x 8 points of a cell miss
-        assert np.abs(solid[iv] - projected).sum() < 0.05 * math.pi   # the rim cells' rule, all cells together
+        assert np.allclose(solid[iv, inner], binned[inner], rtol=0.03)
+        assert binned[valid[iv] == 0].sum() < 0.01 * 2 * math.pi   # slivers the 8 x 8 points of a cell miss
+        assert np.abs(solid[iv] - binned).sum() < 0.05 * 2 * math.pi   # the rim cells' rule, all cells together
 
 
-def _lambert_table(c, jitter):
-    """One texel r = c max(l_z, COSINE_FLOOR), as the acquisition averages it (mean foreshortening x c), its cells."""
-    cells = half_cell_geometry(*VIEW_GRID, NX, NY, jitter)
-    return (cells.cosine[None, :, :, None] * np.asarray(c)[None, None, None, :]).astype(np.float32), cells
+def _constant_table(c, jitter):
+    """One texel's table of radiance c wherever there is light, as the acquisition averages it (valid fraction x c)."""
+    valid, solid = half_cell_geometry(*VIEW_GRID, NX, NY, jitter)
+    return (valid[None, :, :, None] * np.asarray(c)[None, None, None, :]).astype(np.float32), valid, solid
 
 
-def test_lambertian_table_reads_back_everywhere_and_integrates_in_closed_form():
-    """A Lambertian texel r = c max(l_z, COSINE_FLOOR) reads back exactly that (float32) at every (l, v) with light --
-    grazing ones included, where the cells are cut by the horizon -- and 0 below the fabric; its sky sum (solid
-    angle over mean foreshortening, per view) is pi (1 + COSINE_FLOOR^2) c; read on a hemisphere grid from the grid
-    views (the Lafortune fit's input) it is c max(l_z, COSINE_FLOOR) everywhere."""
+def test_constant_table_reads_back_everywhere_and_integrates_to_2pi():
+    """A table of the same radiance c in every cell reads back c (float32) at every (l, v) with light -- grazing ones
+    included, where the cells are cut by the horizon -- and 0 below the fabric; its sky sum (solid angle over valid
+    fraction, per view) is 2 pi c; read on a hemisphere grid from the grid views (the Lafortune fit's input) it is
+    c everywhere."""
     c = np.array([0.3, 0.5, 0.7])
-    table, (valid, cosine, solid) = _lambert_table(c, True)
+    table, valid, solid = _constant_table(c, True)
     rng = np.random.default_rng(3)
     for _ in range(400):
         v = rng.normal(size=3)
@@ -105,11 +98,10 @@ def test_lambertian_table_reads_back_everywhere_and_integrates_in_closed_form():
         l[2] = abs(l[2])
         v /= np.linalg.norm(v)
         l /= np.linalg.norm(l)
-        got = half_rgb(table, cosine, 0, NX, NY, *l, *VIEW_GRID, *v)
-        assert np.allclose(got, max(l[2], COSINE_FLOOR) * c, rtol=1e-6), (l, v, got)
-    assert half_rgb(table, cosine, 0, NX, NY, 0.3, 0.2, -0.1, *VIEW_GRID, 0.0, 0.0, 1.0) == (0.0, 0.0, 0.0)
-    w = np.where(cosine >= MIN_VALID, solid / np.maximum(cosine, MIN_VALID), 0.0)
-    assert np.allclose(np.einsum("vl,vlc->vc", w, table[0].astype(np.float64)), PROJECTED_HEMISPHERE * c, rtol=1e-6)
-    grid = hemisphere_grid(8, 8)
-    fit = half_to_hemisphere(table, cosine, NX, NY, hemisphere_grid(*VIEW_GRID), grid)
-    assert np.allclose(fit, np.maximum(grid[:, 2], COSINE_FLOOR)[None, None, :, None] * c, rtol=1e-6)
+        got = half_rgb(table, valid, 0, NX, NY, *l, *VIEW_GRID, *v)
+        assert np.allclose(got, c, rtol=1e-6), (l, v, got)
+    assert half_rgb(table, valid, 0, NX, NY, 0.3, 0.2, -0.1, *VIEW_GRID, 0.0, 0.0, 1.0) == (0.0, 0.0, 0.0)
+    w = np.where(valid >= MIN_VALID, solid / np.maximum(valid, MIN_VALID), 0.0)
+    assert np.allclose(np.einsum("vl,vlc->vc", w, table[0].astype(np.float64)), 2 * math.pi * c, rtol=1e-6)
+    fit = half_to_hemisphere(table, valid, NX, NY, hemisphere_grid(*VIEW_GRID), hemisphere_grid(8, 8))
+    assert np.allclose(fit, c, rtol=1e-6)

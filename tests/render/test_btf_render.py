@@ -108,7 +108,7 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
     one [W, H] for every exemplar or a list of them; ``tabulated`` None or a function (views, lights) -> (V, L, 3):
     every texel's table r(l, v), compressed by ``compress_texels`` (1 cluster, 1 component) into ``tabulated/``;
     ``half`` None or (nx, ny): the table's lights are half-vector cells (``--light-coords half``), ``tabulated`` then
-    a function (views, ``stages.core.btf.HalfCells``) -> (V, L, 3)."""
+    a function (views, valid fractions (V, L)) -> (V, L, 3)."""
     from pipeline.runners.precompute_btf import write_tables
     from stages.precompute.btf_compress import compress_texels
 
@@ -149,7 +149,7 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
 
             w.write("half_dirs", np.zeros((half[0] * half[1], 3)))
         if tabulated is not None:
-            lights = hemisphere_grid(*LIGHT_GRID) if half is None else half_cell_geometry(*VIEW_GRID, *half, True)
+            lights = hemisphere_grid(*LIGHT_GRID) if half is None else half_cell_geometry(*VIEW_GRID, *half, True).valid
             row = np.asarray(tabulated(views, lights), np.float32).reshape(1, -1)
             rows = np.repeat(row, sum((res >> lv) ** 2 for lv in range(levels)), axis=0)
             write_tables(w, [compress_texels(rows, 1, 1)] * E, V, len(row[0]) // (3 * V))
@@ -450,26 +450,22 @@ def test_tabulated_lambertian_quad_closed_form(bench):
 
 
 def test_tabulated_half_vector_constant_closed_form(bench):
-    """Reference: closed form. A Lambertian texel r = c max(l_z, COSINE_FLOOR) on half-vector cells (``precompute btf
-    --light-coords half``), written as the acquisition averages it (each cell's mean foreshortening times c:
-    ``stages.core.btf`` module doc), renders E l_z c in every pixel under a directional light of irradiance E from
-    l_z above the floor and L c pi (1 + COSINE_FLOOR^2) under a constant light L (float32 EXR: 1e-6). The
-    Lafortune fit of the artifact is 0."""
-    from stages.core.btf import PROJECTED_HEMISPHERE
-
+    """Reference: closed form. A half-vector table (``precompute btf --light-coords half``) of the same radiance c in
+    every cell, written as the acquisition averages it (the cell's valid fraction times c: ``stages.core.btf``
+    module doc), renders E c in every pixel under a directional light of irradiance E and 2 pi c L under a constant
+    light L (its solid angles over valid fractions; float32 EXR: 1e-6). The Lafortune fit of the artifact is 0."""
     c = np.array([0.05, 0.08, 0.11])
     btf = write_btf(bench.name("half").with_suffix(".zarr"), rho=(0.0, 0.0, 0.0), half=(9, 7),
-                    tabulated=lambda views, cells: cells.cosine[:, :, None] * c[None, None, :])
+                    tabulated=lambda views, valid: valid[:, :, None] * c[None, None, :])
     V, UV, F = quad()
     mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
     args = ("--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=3", "--set", "model=tabulated")
-    cos = 0.6 / math.sqrt(0.25 + 0.09 + 0.36)
     rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args)
     hit = ch["A"] > 0
     assert hit.mean() > 0.5
-    assert np.allclose(rgb[hit], 2.0 * cos * c, rtol=1e-6, atol=0)
+    assert np.allclose(rgb[hit], 2.0 * c, rtol=1e-6, atol=0)
     rgb, ch, _ = bench.render(bench.scene(SKY.format(l=0.7)), *args)
-    assert np.allclose(rgb[ch["A"] > 0], 0.7 * PROJECTED_HEMISPHERE * c, rtol=1e-6)
+    assert np.allclose(rgb[ch["A"] > 0], 0.7 * 2 * math.pi * c, rtol=1e-6)
     rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args[:-2])
     assert np.all(rgb[ch["A"] > 0] == 0.0)
 

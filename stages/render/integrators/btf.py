@@ -68,8 +68,7 @@ then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb
 its shape; ``tabulated`` (bool) and ``radiance`` (N, V, L, 3) float32 the tabulated model's decoded table ((1, 1, 1, 3)
 unused for the Lafortune model); ``half`` (0 or 1): the table's lights are half-vector cells (``l_theta`` x
 ``l_phi`` = nx x ny, read by ``stages.core.btf.half_rgb``; ``light_dirs`` then the fit's hemisphere grid, the
-quadrature's) with ``half_cosine`` (V, L) their mean foreshortenings (``stages.core.btf.HalfCells``; (1, 1) unused
-otherwise);
+quadrature's) with ``half_valid`` (V, L) their valid fractions ((1, 1) unused otherwise);
 ``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional (the ground's
 quadrature), ``env_lights`` how many are environment maps (the surface's quadrature), ``sky`` (N, V, 3)
 the ``sky_table`` when ``has_sky`` (a constant light is there; else (1, 1, 3) unused) and ``sky_radiance``
@@ -110,7 +109,7 @@ BtfIntegrator = namedtuple("BtfIntegrator", [
     "mesh", "shading", "texels", "table", "levels", "exemplar_scale", "block_map", "block_size", "flat_period",
     "n_theta", "n_phi", "light_dirs", "lights", "quad_lights", "env_lights", "sky", "sky_radiance", "has_sky",
     "ground", "has_ground", "pixel_angle", "forward", "mip", "shadows", "max_layers", "eps", "tabulated", "radiance",
-    "l_theta", "l_phi", "half", "half_cosine"])
+    "l_theta", "l_phi", "half", "half_valid"])
 
 MAX_LAYERS = 4
 INV_PI = 1.0 / math.pi
@@ -295,7 +294,7 @@ def texel_rgb(it, idx, lx, ly, lz, vx, vy, vz):
     ``stages.core.btf.table_rgb``, its T(v) is 1) or the Lafortune lobes (``texel_f1_rgb``)."""
     if it.tabulated:
         if it.half:
-            return half_rgb(it.radiance, it.half_cosine, idx, it.l_theta, it.l_phi, lx, ly, lz, it.n_theta, it.n_phi,
+            return half_rgb(it.radiance, it.half_valid, idx, it.l_theta, it.l_phi, lx, ly, lz, it.n_theta, it.n_phi,
                             vx, vy, vz)
         return table_rgb(it.radiance, idx, it.l_theta, it.l_phi, lx, ly, lz, it.n_theta, it.n_phi, vx, vy, vz)
     texels = it.texels
