@@ -47,9 +47,10 @@ at the half vector of l and that row's own view -- as the hemisphere grid does, 
 half-vector cells. Reading every row at the half vector of (l, v) instead keeps a glint on one cell across
 the rows but mirrors each row's view to another light: 45 degrees of view azimuth apart, lights whose l_z
 differ by a quarter (0.53 and 0.71 for the flat satins' camera under the light 45 degrees from the normal), and
-r carries the light's foreshortening, so that read came out 8-13 % dark there; dividing the foreshortening out
-of the cells and back in at the light came out 2-12 % bright on the satins (r of a layer of fibres is not
-proportional to l_z) though 3 % on the knit (``make btf-sweep``, CHANGES 2026-12-06).
+r carries the light's foreshortening, so that read came out 7-8 % dark there on the satins; dividing the
+foreshortening out of the cells and back in at the light came out 2-12 % bright on the satins (r of a layer of
+fibres is not proportional to l_z), though it was the best read of the knit (``make btf-sweep``, CHANGES
+2026-12-06).
 """
 import math
 from collections import namedtuple
