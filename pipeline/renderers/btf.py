@@ -86,7 +86,7 @@ ONE_EXEMPLAR = Blocks(np.zeros((1, 1), np.int64), np.ones(2), np.zeros(2))   # a
 # ``levels``), with what else the renderer needs from the artifact
 BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "periods",
                                        "exemplars", "fit_bytes", "summary", "model", "radiance", "light_grid",
-                                       "half", "valid", "solid"])
+                                       "half", "cells"])
 SOURCES = ("mesh", "tiling")
 ON_OFF = {"on": True, "off": False}
 
@@ -96,8 +96,8 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     """The texture of a ``btf`` artifact, its levels flattened and checked (grids, shapes, finite values); with
     ``model`` tabulated, its compressed table decoded in the same row order (``radiance`` (N, V, L, 3) float32,
     negative values clamped to 0; else (1, 1, 1, 3) zeros). ``half``: the table's lights are half-vector cells
-    (``precompute btf --light-coords half``), whose valid fractions and solid angles per view cell
-    (``stages.core.btf.half_cell_geometry``) are ``valid`` and ``solid`` (V, L); else (1, 1) ones and zeros."""
+    (``precompute btf --light-coords half``), seen from each view cell as ``cells`` (``stages.core.btf.HalfCells``:
+    valid fractions and solid angles); else None."""
     from stages.core.btf import half_cell_geometry, hemisphere_grid
 
     from ..artifacts import Artifact
@@ -165,15 +165,14 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     radiance = np.zeros((1, 1, 1, 3), np.float32)
     if model == "tabulated":
         radiance, fit_bytes = load_table(art, path, E, res, levels, nt * nph, lt * lph), int(s.get("table_bytes", 0))
-    valid, solid = np.ones((1, 1)), np.zeros((1, 1))
+    cells = None
     if half:    # the cells seen from each view cell, as the acquisition saw them (cell averages or centres)
-        valid, solid = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
+        cells = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
     return BtfTexture(np.ascontiguousarray(np.concatenate(texels)),
                       np.ascontiguousarray(np.concatenate(tables), np.float32),
                       np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), periods,
-                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, valid,
-                      solid)
+                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, cells)
 
 
 def load_table(art, path, E, res, levels, V, L) -> np.ndarray:
@@ -348,7 +347,7 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
                          has_ground, pixel_angle,
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
                          int(bool(shadows)), MAX_LAYERS, eps, tabulated, tex.radiance, int(tex.light_grid[0]),
-                         int(tex.light_grid[1]), int(tex.half), tex.valid)
+                         int(tex.light_grid[1]), int(tex.half), tex.cells.valid if tex.half else np.ones((1, 1)))
 
 
 def sky_weights(tex: BtfTexture) -> np.ndarray:
@@ -360,7 +359,8 @@ def sky_weights(tex: BtfTexture) -> np.ndarray:
     V, L = tex.table.shape[1], tex.light_grid[0] * tex.light_grid[1]
     if not tex.half:
         return np.full((V, L), 2.0 * np.pi / L)
-    return np.where(tex.valid >= MIN_VALID, tex.solid / np.maximum(tex.valid, MIN_VALID), 0.0)
+    valid, solid = tex.cells
+    return np.where(valid >= MIN_VALID, solid / np.maximum(valid, MIN_VALID), 0.0)
 
 
 def film_setup(scene, options: dict):
