@@ -228,7 +228,9 @@ def half_rgb(radiance, valid, idx, lnx, lny, lx, ly, lz, vt, vph, vx, vy, vz):
     """``table_rgb`` of a half-vector table (module doc): r(l, v) of texel row idx, three channels, bilinear on the view
     grid (vt x vph) and, in each of the four view rows, on the half-vector grid (lnx x lny) at the half vector of l
     and the row's grid view (``half_row``); the rows without light there left out and the others' weights
-    renormalised; 0 for l_z <= 0. ``valid`` (V, L): ``HalfCells.valid``."""
+    renormalised; 0 for l_z <= 0. ``valid`` (V, L): ``HalfCells.valid``.
+    13 parameters: ``table_rgb``'s twelve (the table, the row, both grids' shapes, l and v as scalars) and the cells'
+    valid fractions; a plain call from the btf tile loop, as ``table_rgb``."""
     if lz <= 0.0:
         return 0.0, 0.0, 0.0
     a0, a1, a2, a3, p0, p1, p2, p3 = grid_weights(vt, vph, vx, vy, vz)
