@@ -204,6 +204,7 @@ def test_btf_fits_every_exemplar_the_block_map_uses_each_as_alone(tiny_tiling, c
         assert_legible_png(png)
 
 
+@pytest.mark.slow   # an acquisition, a fit, a table, a render and a picture: make test-all (make test's budget)
 def test_btf_half_vector_cells_end_to_end(tiny_tiling, cli, tmp_path):
     """Contract (pipeline/runners/precompute_btf.py, stages/core/btf.py module doc): ``--light-coords half`` acquires
     on nx x ny half-vector cells (the samples' light axis), records them (``light_coords``, ``half_dirs``), fits the
