@@ -40,7 +40,7 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
     """A btf artifact of random (plausible) texels; every level independent. ``half``: the table's lights are
     half-vector cells (``light_grid`` (nx, ny); the fit's grid 8 x 8)."""
     from pipeline.artifacts import ArtifactWriter
-    from stages.core.btf import half_cell_geometry, hemisphere_grid
+    from stages.core.btf import half_cell_geometry, half_grid, hemisphere_grid
 
     rng = np.random.default_rng(seed)
     V = view_grid[0] * view_grid[1]
@@ -50,7 +50,7 @@ def synthetic_btf(path, res=32, levels=6, lobes=2, view_grid=(8, 8), light_grid=
         w.write("light_dirs", hemisphere_grid(*fit_grid))
         mask = None
         if half:
-            w.write("half_dirs", np.zeros((light_grid[0] * light_grid[1], 3)))
+            w.write("half_dirs", half_grid(*light_grid))
             mask = half_cell_geometry(*view_grid, *light_grid, True).valid
         for lv in range(levels):
             r = res >> lv

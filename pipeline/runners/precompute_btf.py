@@ -220,15 +220,12 @@ def light_cells(p: "BtfParams"):
     """(the acquisition's light directions (L, 3), the fit's (M, 3)): the hemisphere grid of ``--lights`` twice; for
     half-vector cells, the cells' centre half vectors (h_z 0 off the unit disk: what ``half_dirs`` stores; the
     acquisition takes only their count) and the hemisphere grid of FIT_LIGHT_GRID."""
-    from stages.core.btf import hemisphere_grid
+    from stages.core.btf import half_grid, hemisphere_grid
 
     if p.light_coords != "half":
         grid = hemisphere_grid(*p.lights)
         return grid, grid
-    nx, ny = p.lights
-    hx, hy = np.meshgrid(-1.0 + 2.0 * (np.arange(nx) + 0.5) / nx, -1.0 + 2.0 * (np.arange(ny) + 0.5) / ny)
-    hz = np.sqrt(np.maximum(0.0, 1.0 - hx * hx - hy * hy))
-    return np.stack([hx, hy, hz], axis=-1).reshape(-1, 3), hemisphere_grid(*FIT_LIGHT_GRID)
+    return half_grid(*p.lights), hemisphere_grid(*FIT_LIGHT_GRID)
 
 
 def _btf_row_task(tiling, tiling_hash, store, e, k, iy, mof, mats, view_dirs, light_dirs, p: dict):

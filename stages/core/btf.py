@@ -85,6 +85,14 @@ def hemisphere_grid(n_theta: int, n_phi: int) -> np.ndarray:
     return d.reshape(-1, 3)
 
 
+def half_grid(nx: int, ny: int) -> np.ndarray:
+    """(nx ny, 3) the centre half vectors of the nx x ny half-vector cells (module doc; ``half_cell_direction`` at
+    (0.5, 0.5)), row-major in h_y; h_z 0 for a centre off the unit disk."""
+    hx, hy = np.meshgrid(-1.0 + 2.0 * (np.arange(nx) + 0.5) / nx, -1.0 + 2.0 * (np.arange(ny) + 0.5) / ny)
+    hz = np.sqrt(np.maximum(0.0, 1.0 - hx * hx - hy * hy))
+    return np.stack([hx, hy, hz], axis=-1).reshape(-1, 3)
+
+
 @njit(cache=True)
 def cell_direction(index, n_theta, n_phi, u0, u1):
     """(x, y, z): the direction at (u0, u1) in [0, 1)^2 of cell ``index`` of the hemisphere grid

@@ -15,6 +15,7 @@ from stages.core.btf import (
     cell_direction,
     half_cell_direction,
     half_cell_geometry,
+    half_grid,
     half_rgb,
     half_to_hemisphere,
     half_weights,
@@ -27,8 +28,9 @@ VIEW_GRID = (4, 6)
 
 def test_cell_centres_are_the_weights_grid_points():
     """Every valid cell's centre light, seen from a view, gets weight 1 on that cell (bilinear weights at a grid
-    point), and the light is a unit vector mirrored about the cell's centre half vector."""
+    point), and the light is a unit vector mirrored about the cell's centre half vector (``half_grid``)."""
     views = hemisphere_grid(*VIEW_GRID)
+    centres = half_grid(NX, NY)
     seen = 0
     for v in views:
         for j in range(NX * NY):
@@ -37,6 +39,8 @@ def test_cell_centres_are_the_weights_grid_points():
                 continue
             seen += 1
             assert math.isclose(lx * lx + ly * ly + lz * lz, 1.0, rel_tol=1e-12)
+            h = np.array([lx, ly, lz]) + v
+            assert np.allclose(h / np.linalg.norm(h), centres[j], atol=1e-12)
             idx = half_weights(NX, NY, lx, ly, lz, *v)
             w = dict()
             for i, wi in zip(idx[:4], idx[4:]):

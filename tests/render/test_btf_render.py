@@ -145,9 +145,9 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
                 fr[...] = frame(lv, r)
             w.write(f"level_{lv}/frame", each([fr] * E))
         if half is not None:
-            from stages.core.btf import half_cell_geometry
+            from stages.core.btf import half_cell_geometry, half_grid
 
-            w.write("half_dirs", np.zeros((half[0] * half[1], 3)))
+            w.write("half_dirs", half_grid(*half))
         if tabulated is not None:
             lights = hemisphere_grid(*LIGHT_GRID) if half is None else half_cell_geometry(*VIEW_GRID, *half, True).valid
             row = np.asarray(tabulated(views, lights), np.float32).reshape(1, -1)
