@@ -75,23 +75,14 @@ def read_exr(path: str | Path) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return rgb, ch
 
 
-def srgb_to_linear(c):
-    """sRGB-encoded values in [0, 1] -> linear (IEC 61966-2-1 decoding), float64."""
-    c = np.asarray(c, np.float64)
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(c):
-    """Linear values, clipped to [0, 1] -> sRGB-encoded (IEC 61966-2-1 encoding, the inverse of
-    ``srgb_to_linear``), float64. The same arithmetic as colour-science's ``cctf_encoding(..., "sRGB")``
-    (which the PNGs were encoded with before; their bytes are unchanged), without importing colour-science,
-    whose import takes 3-4 s (it loads its plotting and matplotlib.pyplot) in every command that writes a PNG."""
-    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
-    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
-
-
 def to_srgb8(rgb: np.ndarray, exposure: float = 0.0) -> np.ndarray:
-    """8-bit sRGB display values of linear RGB times 2^exposure (NaN as 0, +inf as 1, clipped to [0, 1])."""
+    """8-bit sRGB display values of linear RGB times 2^exposure (NaN as 0, +inf as 1, clipped to [0, 1]), by
+    ``pipeline.thread_colors.linear_to_srgb`` (IEC 61966-2-1): the same arithmetic as colour-science's
+    ``cctf_encoding(..., "sRGB")``, which encoded the previews before (their bytes are unchanged), without
+    importing colour-science, whose import takes 3-4 s (its plotting and matplotlib.pyplot) in every command
+    that writes a PNG."""
+    from .thread_colors import linear_to_srgb
+
     lin = np.clip(np.nan_to_num(rgb * (2.0 ** exposure), nan=0.0, posinf=1.0), 0.0, 1.0)
     return np.round(np.clip(linear_to_srgb(lin), 0, 1) * 255.0).astype(np.uint8)
 

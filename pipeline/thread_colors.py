@@ -17,17 +17,27 @@ type (which carries the scene's colour), so all methods agree (docs/wif-colours.
 records its exemplar yarns' draft colours the same way (``ex_yarn_color``, ``ex_yarn_color_source``).
 
 Colours in a WIF are display values (sRGB-encoded); loomlight renders linear RGB, so they are decoded
-with the sRGB transfer function (IEC 61966-2-1, ``pipeline.images``) when read, and encoded again only for display
+with the sRGB transfer function (IEC 61966-2-1) when read, and encoded again only for display
 (``srgb_hex``).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .images import linear_to_srgb
-
 COLOR_SOURCES = ("yarn type", "draft", "scene")
 FROM_TYPE, FROM_DRAFT, FROM_SCENE = 0, 1, 2
+
+
+def srgb_to_linear(c):
+    """sRGB-encoded values in [0, 1] -> linear (IEC 61966-2-1 decoding)."""
+    c = np.asarray(c, np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c):
+    """Linear values in [0, 1] -> sRGB-encoded (the inverse of ``srgb_to_linear``)."""
+    c = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1.0 / 2.4) - 0.055)
 
 
 def srgb_hex(linear) -> str:

@@ -181,10 +181,10 @@ def _thread_colors(r: _Reader, ends: int, picks: int):
     """(warp colours, weft colours): per end / pick a linear RGB tuple, or None (no colour in the draft).
 
     ``[COLOR PALETTE]`` Range = lo,hi maps a component v to (v - lo) / (hi - lo); the result is an
-    sRGB-encoded display value, decoded to linear (``pipeline.images.srgb_to_linear``). Form,
+    sRGB-encoded display value, decoded to linear (``pipeline.thread_colors.srgb_to_linear``). Form,
     when given, must be RGB. A component outside the range, a table entry that is not three numbers, a
     thread naming an index the table lacks: LoomError naming the section, line and key."""
-    from ..images import srgb_to_linear
+    from ..thread_colors import srgb_to_linear
 
     lo, hi = 0.0, 255.0
     v, ln = r.get("color palette", "range")

@@ -1,5 +1,5 @@
-"""sRGB previews (``pipeline.images``): the encoding against the reference implementation and the standard's
-numbers, and what writing one costs a command.
+"""sRGB previews (``pipeline.images.to_srgb8``, ``pipeline.thread_colors.linear_to_srgb``): the encoding
+against the reference implementation and the standard's numbers, and what writing one costs a command.
 
 - ``to_srgb8`` against colour-science's ``cctf_encoding(..., "sRGB")`` (the implementation the previews were
   encoded with before; exact equality of the 8-bit values on a dense sweep, float32 and float64, exposures,
@@ -14,7 +14,8 @@ import sys
 
 import numpy as np
 
-from pipeline.images import linear_to_srgb, srgb_to_linear, to_srgb8
+from pipeline.images import to_srgb8
+from pipeline.thread_colors import linear_to_srgb, srgb_to_linear
 from tests.helpers import ROOT
 
 
