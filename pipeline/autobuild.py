@@ -75,7 +75,7 @@ def digest(doc) -> str:
 
 def code_version() -> dict:
     from .artifacts import code_hash
-    from .runners.convergence import render_code_version
+    from .source_graph import render_code_version
 
     return {"code": code_hash(), "render_code": render_code_version()}
 

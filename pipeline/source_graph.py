@@ -1,10 +1,11 @@
 """loomlight's own import graph, read from the source (never by importing it).
 
-Three users: the house rules (``tests/test_layers.py``: floors, no import circles), the equal-error
-comparison's code version (``runners.convergence.render_code_version``), which keys a method's pictures
-by the files that method's renderer can reach, so work on one method does not make another method's
-converged reference stale, and ``code_version``, the same kind of key for a stage's step (``precompute
-btf``'s acquisition, which a refit or a new table reuses).
+Three users: the house rules (``tests/test_layers.py``: floors, no import circles); the code version of a
+method's pictures (``render_code_version``: the files that method's renderer can reach, with the presets and
+colour curves), which keys the equal-error comparison's references and renders and the sweeps' renders, so
+work on one method does not make another method's converged reference stale and a sweep renders again after
+a change to its renderer; and ``code_version``, the same kind of key for a stage's step (``precompute btf``'s
+acquisition, which a refit or a new table reuses).
 
 ``import_graph(root, tops)``: module -> the project modules its file imports, at its top or inside a
 function (a lazy import still ties the two modules together). ``from pkg import name`` counts
@@ -15,8 +16,11 @@ the packages above each module included (importing ``a.b.c`` runs ``a/__init__``
 from __future__ import annotations
 
 import ast
+import functools
+import hashlib
 from pathlib import Path
 
+ROOT = Path(__file__).resolve().parents[1]
 SCRIPT_TOPS = ("bench", "scripts")     # folders whose files import their neighbours by bare name
 
 
@@ -92,5 +96,53 @@ def code_version(root: Path, starts, data=()) -> str:
     h = hashlib.sha256()
     for f in files:
         h.update(str(f.relative_to(root)).encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+# ------------------------------------------------------------------------------------------------
+# what decides a picture: the key of a method's renders
+RENDER_CODE = ("stages", "pipeline/renderers", "pipeline/render_setup.py", "pipeline/fibre_cache.py",
+               "pipeline/presets.py", "pipeline/bcsdf_presets.py", "pipeline/dye.py", "pipeline/thread_colors.py",
+               "pipeline/scene.py", "pipeline/yarns.py", "pipeline/generators.py", "pipeline/io", "data/yarns",
+               "data/bcsdf")
+NOT_RENDER_CODE = ("stages/evaluate",)   # measures pictures, never makes them
+CODE_SUFFIXES = (".py", ".toml", ".json")   # sources, presets, the bundled colour curves
+
+
+@functools.lru_cache(maxsize=None)
+def _source_graph(root: Path) -> tuple[dict, dict]:
+    """The modules of ``pipeline`` and ``stages`` and their import graph, read once per process for every
+    method a comparison keys."""
+    return module_files(root, ("pipeline", "stages")), import_graph(root, ("pipeline", "stages"))
+
+
+def render_code_files(method: str | None = None, root: Path = ROOT) -> list[Path]:
+    """What decides a picture: the kernels (every stage but evaluate), the renderers' setup, the presets
+    and the colour curves (``RENDER_CODE``); the evaluation and report code are not part of it. With
+    ``method``, only the Python files of ``RENDER_CODE`` that method's renderer
+    (``pipeline/renderers/<method>.py``) imports, directly or through others (``source_graph``), and the
+    data folders: work on ``bysdf`` leaves ``fiberpath``'s converged references current. A method without
+    a module there (a test's stand-in) gets every file."""
+    reached = None
+    if method is not None and (root / "pipeline" / "renderers" / f"{method}.py").is_file():
+        modules, graph = _source_graph(root)
+        reached = {modules[m] for m in import_closure(graph, f"pipeline.renderers.{method}")}
+    out = []
+    for rel in RENDER_CODE:
+        p = root / rel
+        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix in CODE_SUFFIXES) if p.is_dir() else [p]
+        out += [f for f in files if not any(f.is_relative_to(root / x) for x in NOT_RENDER_CODE)
+                and (reached is None or f.suffix != ".py" or f in reached)]
+    return out
+
+
+@functools.lru_cache(maxsize=None)
+def render_code_version(method: str | None = None) -> str:
+    """sha256 (16 hex digits) of ``render_code_files(method)``, their paths and bytes. Hashed once per
+    process and method: every render's stamp and the reference's key ask for it."""
+    h = hashlib.sha256()
+    for f in render_code_files(method):
+        h.update(str(f.relative_to(ROOT)).encode())
         h.update(f.read_bytes())
     return h.hexdigest()[:16]

@@ -44,7 +44,6 @@ method, points measured with their uncertainty, floor dashed), ``DIR/equal_time.
 """
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import math
@@ -60,6 +59,7 @@ import numpy as np
 
 from ..errors import LoomError
 from ..memory import peak_rss_bytes
+from ..source_graph import render_code_version
 from ..toml_file import dumps_toml
 from .compare_file import CompareMethod, Comparison, derived_scene, load_comparison
 from .sweep import arg_hashes, cli_render, key_text, referenced_files, substitute
@@ -70,60 +70,11 @@ EQUAL_TIME_SEED = 500_000       # the equal-time strip's renders
 MEMORY_SEED = 700_000           # the peak-memory render in a process of its own
 DEPTH_CHECK_FACTOR = 4          # the depth check renders batch 0 again at this many times render.max_depth
 DEPTH_TOLERANCE = 0.002         # light a reference may lose to its path depth: the cloth mean's noise target
-RENDER_CODE = ("stages", "pipeline/renderers", "pipeline/render_setup.py", "pipeline/fibre_cache.py",
-               "pipeline/presets.py", "pipeline/bcsdf_presets.py", "pipeline/dye.py", "pipeline/thread_colors.py",
-               "pipeline/scene.py", "pipeline/yarns.py", "pipeline/generators.py", "pipeline/io", "data/yarns",
-               "data/bcsdf")
-NOT_RENDER_CODE = ("stages/evaluate",)   # measures pictures, never makes them
-CODE_SUFFIXES = (".py", ".toml", ".json")   # sources, presets, the bundled colour curves
-
 Renderer = Callable[[Path, str, Path, list], None]
 
 
 # ------------------------------------------------------------------------------------------------
 # keys
-@functools.lru_cache(maxsize=None)
-def _source_graph(root: Path) -> tuple[dict, dict]:
-    """The modules of ``pipeline`` and ``stages`` and their import graph, read once per process for every
-    method a comparison keys."""
-    from ..source_graph import import_graph, module_files
-
-    return module_files(root, ("pipeline", "stages")), import_graph(root, ("pipeline", "stages"))
-
-
-def render_code_files(method: str | None = None, root: Path = ROOT) -> list[Path]:
-    """What decides a picture: the kernels (every stage but evaluate), the renderers' setup, the presets
-    and the colour curves (``RENDER_CODE``); the evaluation and report code are not part of it. With
-    ``method``, only the Python files of ``RENDER_CODE`` that method's renderer
-    (``pipeline/renderers/<method>.py``) imports, directly or through others (``source_graph``), and the
-    data folders: work on ``bysdf`` leaves ``fiberpath``'s converged references current. A method without
-    a module there (a test's stand-in) gets every file."""
-    reached = None
-    if method is not None and (root / "pipeline" / "renderers" / f"{method}.py").is_file():
-        from ..source_graph import import_closure
-
-        modules, graph = _source_graph(root)
-        reached = {modules[m] for m in import_closure(graph, f"pipeline.renderers.{method}")}
-    out = []
-    for rel in RENDER_CODE:
-        p = root / rel
-        files = sorted(f for f in p.rglob("*") if f.is_file() and f.suffix in CODE_SUFFIXES) if p.is_dir() else [p]
-        out += [f for f in files if not any(f.is_relative_to(root / x) for x in NOT_RENDER_CODE)
-                and (reached is None or f.suffix != ".py" or f in reached)]
-    return out
-
-
-@functools.lru_cache(maxsize=None)
-def render_code_version(method: str | None = None) -> str:
-    """sha256 (16 hex digits) of ``render_code_files(method)``, their paths and bytes. Hashed once per
-    process and method: every render's stamp and the reference's key ask for it."""
-    h = hashlib.sha256()
-    for f in render_code_files(method):
-        h.update(str(f.relative_to(ROOT)).encode())
-        h.update(f.read_bytes())
-    return h.hexdigest()[:16]
-
-
 def expand(cmp: Comparison, out: Path, args: list) -> list[str]:
     return substitute(args, {"compare_dir": cmp.path.parent, "out": out})
 

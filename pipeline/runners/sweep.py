@@ -3,8 +3,9 @@
 ``run_sweep`` writes for every (configuration, method) a derived scene
 ``DIR/renders/<config>/<method>.scene.toml`` and renders it through ``loomlight render`` (in
 process) to ``DIR/renders/<config>/<method>.exr`` unless that image exists and its stamp
-``<method>.stamp.json`` records the same scene text, method, arguments, loomlight version and
-content hashes of the files the scene refers to. Times per image come from the render artifact
+``<method>.stamp.json`` records the same scene text, method, arguments, loomlight version, the code that
+decides the method's pictures (``pipeline.source_graph.render_code_version``: a change to its renderer
+renders again) and content hashes of the files the scene refers to. Times per image come from the render artifact
 beside the image (``<method>.zarr``), else from the wall time measured around the render call.
 Method ``args`` may use ``{sweep_dir}`` (the sweep file's folder) and ``{out}`` (the output folder);
 other relative paths are relative to the working directory. An argument naming an existing file or
@@ -30,6 +31,7 @@ import numpy as np
 
 from ..errors import LoomError
 from ..schemas import validate
+from ..source_graph import render_code_version
 from ..toml_file import dumps_toml
 from .sweep_file import Configuration, Method, Sweep, derived_scene, load_sweep
 from .sweep_report import SweepImages, summarize_methods, write_report
@@ -136,6 +138,7 @@ def _jobs(sweep: Sweep, out: Path) -> list[Job]:
                     f"configuration {c.name}, method {m.name}\n" + dumps_toml(raw))
             args = expand_args(sweep, out, m.args)
             key = hashlib.sha256(key_text({"scene": text, "method": m.method, "args": args, "version": __version__,
+                                            "code": render_code_version(m.method),
                                             "files": {**referenced_files(raw),
                                                       **arg_hashes(args)}}).encode()).hexdigest()
             d = out / "renders" / c.name

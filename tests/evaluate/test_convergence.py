@@ -386,7 +386,7 @@ def test_a_methods_code_version_covers_what_its_renderer_reaches():
     """The reference's code key is the method's own code: fiberpath's covers its integrator, the shell and
     BVH walks, the colour curves and their lookup, and none of bysdf, prt or btf, whose work must not make
     fiberpath's converged references stale; bysdf's covers its own model."""
-    from pipeline.runners.convergence import ROOT, render_code_files
+    from pipeline.source_graph import ROOT, render_code_files
 
     def rel(method):
         return {str(f.relative_to(ROOT)) for f in render_code_files(method)}

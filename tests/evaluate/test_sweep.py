@@ -200,7 +200,7 @@ def _small(text):
                                                                              "directional = false")
 
 
-def test_renders_reused_when_up_to_date(sweep_file, tmp_path):
+def test_renders_reused_when_up_to_date(sweep_file, tmp_path, monkeypatch):
     sweep_file.write_text(_small(SWEEP.format(fast_source="realized")))   # 3 configurations x 2 methods
     out = tmp_path / "out"
     calls = []
@@ -217,6 +217,10 @@ def test_renders_reused_when_up_to_date(sweep_file, tmp_path):
     calls.clear()
     sw.run_sweep(sweep_file, out, renderer=standin_render(calls), force=True)
     assert len(calls) == 6
+    calls.clear()       # the code that decides the method's pictures changed: every render again
+    monkeypatch.setattr(sw, "render_code_version", lambda method=None: "0123456789abcdef")
+    res = sw.run_sweep(sweep_file, out, renderer=standin_render(calls))
+    assert len(calls) == 6 and res.rendered == 6
 
 
 def test_cli_sweep_with_registered_standin(cli, sweep_file, tmp_path, monkeypatch):
