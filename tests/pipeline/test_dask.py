@@ -14,6 +14,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 import time
 from pathlib import Path
 
@@ -180,18 +181,29 @@ def test_lost_scheduler_fails_with_its_address_and_keeps_the_artifact(demo, tmp_
     script.write_text(textwrap.dedent(LOST_CLUSTER.format(env=_worker_env(LOOMLIGHT_TASK_SLEEP="2"))))
     host = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                             text=True, start_new_session=True)
+    err_lines: list[str] = []
     try:
         addr = host.stdout.readline().strip()
         assert addr.startswith("tcp://")
         p = subprocess.Popen(LOOMLIGHT + ["realize", str(demo / "yarns.zarr"), "-o", str(out), "--force",
-                                          "--scheduler", addr], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                          "--scheduler", addr], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                              text=True)
-        time.sleep(4)
-        assert p.poll() is None, p.communicate()
+        reader = threading.Thread(target=lambda: err_lines.extend(p.stderr), daemon=True)
+        reader.start()
+        # the scheduler goes only once the command has connected (its "scheduler:" line; a fixed wait lost
+        # the race on a loaded machine, where the command had not reached the scheduler yet: "cannot reach"),
+        # and a second later, while its tasks (2 s each) are in flight
+        deadline = time.time() + 120
+        while time.time() < deadline and p.poll() is None and not any(ln.startswith("scheduler:") for ln in err_lines):
+            time.sleep(0.05)
+        time.sleep(1.0)
+        assert p.poll() is None, "".join(err_lines)
     finally:
         os.killpg(host.pid, signal.SIGKILL)
         host.wait()
-    _, err = p.communicate(timeout=120)
+    p.wait(timeout=120)
+    reader.join(timeout=10)
+    err = "".join(err_lines)
     assert p.returncode == 2, err
     lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith("scheduler:")]
     assert len(lines) == 1 and addr in lines[0] and "lost the Dask scheduler" in lines[0], err
