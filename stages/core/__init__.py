@@ -11,6 +11,7 @@
 ``sh``        real spherical harmonics: evaluation, quadrature, projection, exact rotation matrices
 ``sg``        spherical Gaussians: mass, products, Fibonacci axes, their SH (zonal) expansion table
 ``rng``       counter-based random numbers (thread-count independent)
+``inline_copy`` numba's inliner copying an inlined function's IR with one scope copy (compile time only)
 
 Nothing here imports a stage package; stage packages import from here.
 """
