@@ -10,7 +10,7 @@ What is compared with what:
   processes, one with the patch and one without (``LOOMLIGHT_NUMBA_INLINE_COPY=0``): their LLVM IR equal once the
   per-process names are normalised (the hashes Python gives string constants, object addresses), and their
   results equal to the bit (measured over the 385 kernels that four render tests compile, btf, fiberpath,
-  volpath and bysdf: the same; CHANGES.md, 2026-12-06 night);
+  volpath and bysdf: the same; CHANGES.md, 2026-12-06 late night);
 - installation: ``import stages`` does not import numba; numba's inliner is patched once numba loads it,
   whichever of the two is imported first; ``LOOMLIGHT_NUMBA_INLINE_COPY=0`` leaves it alone.
 """
