@@ -9,16 +9,20 @@ the cost is (blocks x variables) per call site, twice (the worker keeps a second
 function that itself inlines others has many of both. Profiled on the btf render's first compilation, the copies
 took 30 % of it (numba/numba#8989, NVIDIA/numba-cuda#689 describe the same costs).
 
-What it changes. Inside ``InlineWorker.inline_ir`` only, a block is deep-copied with the copy of its scope made
+What it changes. Inside ``InlineWorker.inline_ir`` only: (1) a block is deep-copied with the copy of its scope made
 once for all the blocks of that IR that share the scope (the block's copy starts from that scope copy's memo, so
 its variables are the scope copy's variables). The IR the inliner receives is then shaped as numba's own front end
 shapes a function (one scope object shared by its blocks) instead of one equal scope per block; numba reads a
 function's scope once for all its blocks (``_get_all_scopes`` merges equal scopes), so the inlined code, its types
-and the machine code are the same. Nothing else in numba is touched, and numba's own ``copy`` stays the ``copy``
-module for everyone else.
+and the machine code are the same. (2) The second copy, of the first one, which ``inline_ir`` returns as the
+callee's unmutated original and which every numba caller discards (``_, _, _, new_blocks = ...``), shares the
+first copy's blocks instead. Nothing else in numba is touched, and numba's own ``copy`` stays the ``copy`` module
+for everyone else.
 
 Measured (2 cores, numba 0.68.1): the btf render's first compilation (``tests/render/test_btf_render.py``'s
-first test on an empty cache) 68.9 -> 55.7 s wall; ``make test`` from a clean clone in CHANGES.md.
+first test on an empty cache) 59.4 -> 46.7 s wall (52 s with (1) alone); the LLVM IR of the 385 kernels that four
+render tests compile (btf, fiberpath, volpath, bysdf) the same with and without, but for per-process names;
+``make test`` from a clean clone in CHANGES.md.
 
 ``install(module)`` patches ``numba.core.inline_closurecall`` (called by ``stages/__init__.py`` when numba imports
 it, before any kernel compiles); ``LOOMLIGHT_NUMBA_INLINE_COPY=0`` leaves numba as it is (to compare, or should a
@@ -37,23 +41,29 @@ _state = threading.local()       # the copy session of the inline_ir call runnin
 
 
 class _Session:
-    """The scope copies of one ``inline_ir`` call: id(scope) -> (scope, memo of its deep copy)."""
-    __slots__ = ("scopes", "copied")
+    """The scope copies of one ``inline_ir`` call: id(scope) -> (scope, memo of its deep copy); ``made``: the ids of
+    the scope copies themselves (alive in their memos while the session lives)."""
+    __slots__ = ("scopes", "copied", "made")
 
     def __init__(self):
         self.scopes: dict[int, tuple] = {}
         self.copied: set[int] = set()
+        self.made: set[int] = set()
 
     def block_copy(self, block):
         scope = block.scope
+        if id(scope) in self.made:
+            # a block of this session's own copy: the inliner's second copy, the "unmutated original" it returns
+            # and every numba caller discards (``_, _, _, new_blocks = ...inline_ir(...)``): not copied again
+            return block
         entry = self.scopes.get(id(scope))
         if entry is None or entry[0] is not scope or id(block) in self.copied:
             memo: dict = {}
-            copy.deepcopy(scope, memo)           # the scope, its variable map and variables, once
-            memo.pop(id(memo), None)             # deepcopy's keep-alive list is per memo
+            self.made.add(id(copy.deepcopy(scope, memo)))   # the scope, its variable map and variables, once
+            memo.pop(id(memo), None)                        # deepcopy's keep-alive list is per memo
             entry = (scope, memo)
             self.scopes[id(scope)] = entry
-            self.copied = set()                  # a block copied twice: a new copy of everything from here on
+            self.copied = set()        # a block copied twice: a new copy of everything from here on
         self.copied.add(id(block))
         return copy.deepcopy(block, dict(entry[1]))
 

@@ -4,11 +4,13 @@ faster.
 What is compared with what:
 - the block copies a session makes against ``copy.deepcopy`` of each block (numba's own copy): the same
   statements, variables and locations (IR equality), every block on one scope copy that is not the original,
-  whose variables are the blocks' variables;
+  whose variables are the blocks' variables; a copy of those copies (the inliner's discarded second copy) is
+  the first copy's blocks;
 - machine code: a kernel with nested ``inline="always"`` helpers over several call sites and branches, and a
   loomlight kernel with its inlined helpers (``stages.core.btf.half_rgb``), compiled on empty numba caches in two
   processes, one with the patch and one without (``LOOMLIGHT_NUMBA_INLINE_COPY=0``): their LLVM IR equal once the
-  per-process names are normalised (the hashes Python gives string constants, object addresses), and their
+  per-process names are normalised (the hashes Python gives string constants, object addresses, numba's
+  unique-id counters in mangled names), and their
   results equal to the bit (measured over the 385 kernels that four render tests compile, btf, fiberpath,
   volpath and bysdf: the same; CHANGES.md, 2026-12-06 late night);
 - installation: ``import stages`` does not import numba; numba's inliner is patched once numba loads it,
@@ -72,7 +74,8 @@ res = [probe_kernels.outer(xs), *half_rgb(rad, valid, 1, 15, 15, 0.3, 0.2, 0.9, 
 
 def llvm(dispatcher):
     text = "".join(cres.library.get_llvm_str() for cres in dispatcher.overloads.values())
-    return re.sub(r"0x[0-9a-f]+", "ADDR", re.sub(r"@\\.bytes\\.-?\\d+", "@.bytes.H", text))
+    text = re.sub(r"@\\.bytes\\.-?\\d+", "@.bytes.H", text)      # Python's hash of a string constant
+    return re.sub(r"B\\d+v\\d+B", "BvB", re.sub(r"0x[0-9a-f]+", "ADDR", text))   # addresses, unique-id counters
 
 
 print(json.dumps({"installed": installed(), "results": [float(r).hex() for r in res],
@@ -130,6 +133,7 @@ def test_block_copies_share_one_scope_and_equal_numbas_copies():
         assert [str(s) for s in c.body] == [str(s) for s in b.body]
         for v in (v for stmt in c.body for v in stmt.list_vars()):
             assert v.scope is scope and scope.get(v.name).name == v.name   # variables of the shared scope
+    assert all(session.block_copy(c) is c for c in copies)        # the inliner's second copy: the first's blocks
     again = session.block_copy(blocks[0])                          # copied twice: a fresh scope copy
     assert again.scope is not scope and again == plain[0]
 
