@@ -64,7 +64,6 @@ from ..toml_file import dumps_toml
 from .compare_file import CompareMethod, Comparison, derived_scene, load_comparison
 from .sweep import arg_hashes, cli_render, key_text, referenced_files, substitute
 
-ROOT = Path(__file__).resolve().parents[2]
 REFERENCE_SEED = 1_000_000      # batch k renders with seed REFERENCE_SEED + k; runs use seeds 1, 2, ...
 EQUAL_TIME_SEED = 500_000       # the equal-time strip's renders
 MEMORY_SEED = 700_000           # the peak-memory render in a process of its own
