@@ -61,36 +61,32 @@ def _jitter_without_standalone_compile(get_jit_decorator):
     return wrapper
 
 
-def _shape_is_known(template) -> bool:
-    """Whether numba's template is the one this was written for: it makes the implementation's dispatcher with
-    the jit decorator it gets from ``_get_jit_decorator``, then types through the dispatcher's call template,
-    which compiles only where the dispatcher's ``_can_compile`` says so."""
-    import inspect
-
-    from numba.core.dispatcher import Dispatcher
-
-    try:
-        build, generic = inspect.getsource(template._build_impl), inspect.getsource(template.generic)
-        call_template = inspect.getsource(Dispatcher.get_call_template)
-    except (AttributeError, OSError, TypeError):
-        return False
-    return ("self._get_jit_decorator()" in build and "get_call_template" in generic
-            and "if self._can_compile:" in call_template)
-
-
 def install() -> bool:
     """Patch numba's overload template class; True when patched (now or before)."""
     if os.environ.get(DISABLE_ENV, "1").strip() == "0":
         return False
+    import inspect
+
+    from numba.core.dispatcher import Dispatcher
     from numba.core.typing import templates
 
     template = getattr(templates, "_OverloadFunctionTemplate", None)
-    current = getattr(template, "_get_jit_decorator", None)
-    if getattr(current, "loomlight_overload_typing", False):
-        return True
-    if current is None or not _shape_is_known(template):
+    get_jit_decorator = getattr(template, "_get_jit_decorator", None)
+    if get_jit_decorator is None:
         return False
-    template._get_jit_decorator = _jitter_without_standalone_compile(current)
+    if getattr(get_jit_decorator, "loomlight_overload_typing", False):
+        return True
+    # the shape this was written for: the template makes the implementation's dispatcher with the jit decorator
+    # it gets here, then types through the dispatcher's call template, which compiles where ``_can_compile`` says
+    try:
+        build, generic = inspect.getsource(template._build_impl), inspect.getsource(template.generic)
+        call_template = inspect.getsource(Dispatcher.get_call_template)
+    except (OSError, TypeError):
+        return False
+    if ("self._get_jit_decorator()" not in build or "get_call_template" not in generic
+            or "if self._can_compile:" not in call_template):
+        return False
+    template._get_jit_decorator = _jitter_without_standalone_compile(get_jit_decorator)
     return True
 
 
