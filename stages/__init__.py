@@ -2,8 +2,7 @@
 
 Nothing under ``stages`` does I/O, reads configuration, draws progress or imports ``pipeline``.
 Importing it makes sure numba has a writable, project-local cache directory, and that numba's inliner,
-when numba loads it, copies inlined functions the faster way (``stages.core.inline_copy``) and types
-always-inlined overloads without compiling them on their own (``stages.core.overload_typing``); importing
+when numba loads it, copies inlined functions the faster way (``stages.core.inline_copy``); importing
 ``stages`` itself does not import numba.
 """
 import hashlib as _hashlib
@@ -48,8 +47,7 @@ _INLINER = "numba.core.inline_closurecall"
 
 
 class _PatchInliner:
-    """A finder that lets numba load its inliner as usual, then ``stages.core.inline_copy.install``s it (and
-    ``stages.core.overload_typing``: numba has loaded its overload templates by then, and types nothing yet)."""
+    """A finder that lets numba load its inliner as usual, then ``stages.core.inline_copy.install``s it."""
 
     def find_spec(self, name, path, target=None):
         if name != _INLINER:
@@ -64,20 +62,17 @@ class _PatchInliner:
 
         def exec_module(module):
             load(module)
-            _install_patches(module)
+            from .core.inline_copy import install
+
+            install(module)
 
         spec.loader.exec_module = exec_module
         return spec
 
 
-def _install_patches(inliner_module):
-    from .core import inline_copy, overload_typing
-
-    inline_copy.install(inliner_module)
-    overload_typing.install()
-
-
 if _INLINER in _sys.modules:
-    _install_patches(_sys.modules[_INLINER])
+    from .core.inline_copy import install as _install
+
+    _install(_sys.modules[_INLINER])
 elif not any(isinstance(f, _PatchInliner) for f in _sys.meta_path):
     _sys.meta_path.insert(0, _PatchInliner())
