@@ -87,10 +87,37 @@ def to_srgb8(rgb: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     return np.round(np.clip(linear_to_srgb(lin), 0, 1) * 255.0).astype(np.uint8)
 
 
-def write_png(path: str | Path, img8: np.ndarray, into: Path | None = None) -> Path:
-    import matplotlib.image as mpimg
+PNG_DPI = 100     # the resolution matplotlib's ``imsave`` records by default (its ``dpi=100``)
 
-    return _write_atomic(Path(path), lambda tmp: mpimg.imsave(str(tmp), img8, format="png"), into)
+
+def _png_software() -> str:
+    """The ``Software`` text chunk matplotlib's ``imsave`` writes, which the previews have always carried."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"Matplotlib version{version('matplotlib')}, https://matplotlib.org/"
+    except PackageNotFoundError:
+        return "loomlight"
+
+
+def write_png(path: str | Path, img8: np.ndarray, into: Path | None = None) -> Path:
+    """8-bit sRGB ``img8`` (H, W, 3) as a PNG, written by Pillow as matplotlib's ``imsave`` wrote the previews
+    before (RGBA with opaque alpha, ``PNG_DPI``, its ``Software`` text chunk): the same bytes
+    (``tests/pipeline/test_images.py``) without importing matplotlib, half a second of every command that
+    writes a render."""
+    from PIL import Image, PngImagePlugin
+
+    img8 = np.asarray(img8)
+    if img8.dtype != np.uint8 or img8.ndim != 3 or img8.shape[2] != 3:
+        raise ValueError(f"write_png takes (H, W, 3) uint8, got {img8.dtype} {img8.shape}")
+    rgba = np.empty(img8.shape[:2] + (4,), np.uint8)
+    rgba[..., :3] = img8
+    rgba[..., 3] = 255
+    info = PngImagePlugin.PngInfo()
+    info.add_text("Software", _png_software())
+    image = Image.frombuffer("RGBA", (rgba.shape[1], rgba.shape[0]), rgba, "raw", "RGBA", 0, 1)
+    return _write_atomic(Path(path), lambda tmp: image.save(str(tmp), format="png", dpi=(PNG_DPI, PNG_DPI),
+                                                             pnginfo=info), into)
 
 
 def write_render(exr_path: str | Path, rgb: np.ndarray, extra: dict | None = None, exposure: float = 0.0,
