@@ -3,6 +3,7 @@ hidden temporary beside it, then renamed), or into a temporary the caller publis
 render publishes its EXR, PNG and render artifact as one set, ``pipeline.artifacts``)."""
 from __future__ import annotations
 
+import functools
 import os
 from pathlib import Path
 from typing import Callable
@@ -90,14 +91,13 @@ def to_srgb8(rgb: np.ndarray, exposure: float = 0.0) -> np.ndarray:
 PNG_DPI = 100     # the resolution matplotlib's ``imsave`` records by default (its ``dpi=100``)
 
 
+@functools.cache
 def _png_software() -> str:
-    """The ``Software`` text chunk matplotlib's ``imsave`` writes, which the previews have always carried."""
-    from importlib.metadata import PackageNotFoundError, version
+    """The ``Software`` text chunk matplotlib's ``imsave`` writes, which the previews have always carried (its
+    version from the installed package's metadata, without importing it)."""
+    from importlib.metadata import version
 
-    try:
-        return f"Matplotlib version{version('matplotlib')}, https://matplotlib.org/"
-    except PackageNotFoundError:
-        return "loomlight"
+    return f"Matplotlib version{version('matplotlib')}, https://matplotlib.org/"
 
 
 def write_png(path: str | Path, img8: np.ndarray, into: Path | None = None) -> Path:
