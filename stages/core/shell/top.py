@@ -1,4 +1,4 @@
-"""The shell's top surface as a function of the cloth's (u, v) (seed 001 §5.2.1, §5.3.2).
+"""The shell's top and base surfaces as functions of the cloth's (u, v) (seed 001 §5.2.1, §5.3.2, §4.2).
 
 Seed 001 starts the global-visibility shadow ray of a fibre hit at x_, "the point on the top surface of
 the shell that is directly above x" (Fig. 5), and filters that visibility with a Gaussian in the flat
@@ -9,13 +9,19 @@ those offset vertices, and the point above (u, v) is their combination by the ba
 of (u, v) in the base triangle's uv triangle. Its normal is the same combination of the vertex
 normals (normalised): the shadow ray leaves the cloth only when the light is above that plane.
 
+Light from below the fabric (seed 001 §4.2, "Extension to bottom and side fabric surfaces": an IIRTF
+precomputed for light from both sides) leaves the cloth through its base: ``base_point`` is the base
+surface's point below (u, v), the same barycentric combination of the base triangle's own corners,
+with the same normal (a shadow ray from there leaves the cloth when the light is below that plane).
+
 ``build_top_surface(base_uv, base_triangles, base_vertices, base_normals, thickness)`` returns a
-``TopSurface``: per triangle its uv corners (T, 3, 2), top corners (T, 3, 3) and normals (T, 3, 3), and
+``TopSurface``: per triangle its uv corners (T, 3, 2), top corners (T, 3, 3), base corners (T, 3, 3) and
+normals (T, 3, 3), and
 a uniform grid over the uv domain (about one triangle per cell) listing the triangles whose uv box
 meets each cell (CSR ``cell_start`` / ``cell_tris``). ``top_point(ts, u, v)`` returns
-(found, x, y, z, nx, ny, nz): (u, v) is clamped into the uv domain's box; a point outside every
-triangle (a gap of the uv layout, or rounding at an edge) takes the triangle of its cell whose
-barycentric coordinates are least negative.
+(found, x, y, z, nx, ny, nz) (``base_point`` the same on the base): (u, v) is clamped into the uv
+domain's box; a point outside every triangle (a gap of the uv layout, or rounding at an edge) takes the
+triangle of its cell whose barycentric coordinates are least negative.
 """
 import math
 from collections import namedtuple
@@ -23,9 +29,10 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-TopSurface = namedtuple("TopSurface", ["uv", "top", "nrm", "lo", "inv", "n", "cell_start", "cell_tris"])
+TopSurface = namedtuple("TopSurface", ["uv", "top", "nrm", "lo", "inv", "n", "cell_start", "cell_tris", "base"])
 TopSurface.__doc__ = """The shell's top surface over (u, v) (module doc): uv (T, 3, 2), top (T, 3, 3), nrm (T, 3, 3)
-float64; grid lo (2,), inv (2,) cells per unit uv, n (2,) int64 cells; cell_start (G + 1,), cell_tris int64."""
+float64, base (T, 3, 3) the base surface's corners; grid lo (2,), inv (2,) cells per unit uv, n (2,) int64
+cells; cell_start (G + 1,), cell_tris int64."""
 
 
 def build_top_surface(base_uv, base_triangles, base_vertices, base_normals, thickness) -> TopSurface:
@@ -53,7 +60,7 @@ def build_top_surface(base_uv, base_triangles, base_vertices, base_normals, thic
     start[1:] = np.cumsum([len(c) for c in cells])
     tris = np.array([t for c in cells for t in c], np.int64)
     return TopSurface(np.ascontiguousarray(uv), np.ascontiguousarray(top), np.ascontiguousarray(nrm), lo,
-                      inv, n, start, tris)
+                      inv, n, start, tris, np.ascontiguousarray(V[F]))
 
 
 @njit(cache=True)
@@ -77,6 +84,18 @@ def _barycentric(uv, t, u, v):
 @njit(cache=True)
 def top_point(ts, u, v):
     """(found, x, y, z, nx, ny, nz): the top surface point above (u, v) and its unit normal (module doc)."""
+    return _surface_point(ts, ts.top, u, v)
+
+
+@njit(cache=True)
+def base_point(ts, u, v):
+    """(found, x, y, z, nx, ny, nz): the base surface point below (u, v) and its unit normal (module doc)."""
+    return _surface_point(ts, ts.base, u, v)
+
+
+@njit(cache=True)
+def _surface_point(ts, T, u, v):
+    """The point of the surface with triangle corners ``T`` (the top or the base) at (u, v), and its normal."""
     hi_u = ts.lo[0] + ts.n[0] / ts.inv[0]
     hi_v = ts.lo[1] + ts.n[1] / ts.inv[1]
     u = min(max(u, ts.lo[0]), hi_u)
@@ -107,7 +126,6 @@ def top_point(ts, u, v):
         b0 /= s
         b1 /= s
         b2 /= s
-    T = ts.top
     Nn = ts.nrm
     x = b0 * T[bt, 0, 0] + b1 * T[bt, 1, 0] + b2 * T[bt, 2, 0]
     y = b0 * T[bt, 0, 1] + b1 * T[bt, 1, 1] + b2 * T[bt, 2, 1]

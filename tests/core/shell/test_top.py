@@ -12,7 +12,7 @@ import math
 import numpy as np
 import pytest
 
-from stages.core.shell.top import build_top_surface, top_point
+from stages.core.shell.top import base_point, build_top_surface, top_point
 from stages.tile import base_surfaces as bs
 
 FLAT = """
@@ -97,7 +97,8 @@ def _brute_force(V, UV, F, N, T, u, v):
 def test_curved_top_is_barycentric_interpolation(kind):
     """Cylinder (r = 1, 120 degrees, 12 x 5 quads) and sphere drape (10 x 10 quads, folds): top_point
     against the brute force over all triangles, 1e-12 in position and normal, at random (u, v) and on
-    the grid lines (where two or six triangles meet and any of them gives the same point)."""
+    the grid lines (where two or six triangles meet and any of them gives the same point); base_point
+    against the same brute force at thickness 0 (the base surface itself), with the same normal."""
     V, UV, F, N = _mesh(kind)
     T = 0.05
     ts = build_top_surface(UV, F, V, N, T)
@@ -107,6 +108,11 @@ def test_curved_top_is_barycentric_interpolation(kind):
         q, m = _brute_force(V, UV, F, N, T, u, v)
         np.testing.assert_allclose(p, q, rtol=0, atol=1e-12)
         np.testing.assert_allclose(n, m, rtol=0, atol=1e-12)
+        found, *bn = base_point(ts, float(u), float(v))
+        q, m = _brute_force(V, UV, F, N, 0.0, u, v)
+        assert found
+        np.testing.assert_allclose(bn[:3], q, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(bn[3:], m, rtol=0, atol=1e-12)
 
 
 def test_cylinder_interior_vertices_at_radius_plus_thickness():
