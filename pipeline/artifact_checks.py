@@ -217,6 +217,9 @@ def _iirtf(a: _Arrays) -> None:
         for name, want in (("transfer", [N, 3, J, J]), ("transfer_se", [N, 3, J, J]), ("row_cell", [N]),
                            ("row_segments", [N]), ("cell_row", [Cc]), ("seg_row", [S])):
             a.shaped(g + name, want, keys)
+        if "layer_bins" in a.summary:   # IIRTFs made before 2026-12-07 have no layer transmittance
+            for name in ("layer_tau", "layer_tau_se"):
+                a.shaped(g + name, [2, a.value("layer_bins"), 3], "layer_bins (2 sides x bins x RGB)")
         stored += N
         cells += Cc
     for key, holds in (("stored_cells", stored), ("cells", cells)):

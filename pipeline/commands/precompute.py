@@ -98,6 +98,11 @@ def iirtf(
     cell_factor: float = typer.Option(1.0, "--cell-factor", help="Target cell side in mean free paths (§6.1: 1-2)."),
     paths: int = typer.Option(50000, "--paths", help="Monte Carlo paths per cell (§4.2: 50,000)."),
     mfp_paths: int = typer.Option(20000, "--mfp-paths", help="Paths traced to estimate the mean free path."),
+    layer_paths: int = typer.Option(4000, "--layer-paths",
+                                    help="Paths per angle and side for the exemplar's layer transmittance (how much "
+                                         "light crosses the cloth; prt's shadow rays through other folds)."),
+    layer_bins: int = typer.Option(8, "--layer-bins", help="Incidence angles (bins of cos theta) of the layer "
+                                                           "transmittance."),
     max_depth: int = _MAX_DEPTH,
     rr_depth: int = _RR_DEPTH,
     light_sampling: str = typer.Option("uniform", "--light-sampling", metavar="<uniform | mis>",
@@ -105,6 +110,12 @@ def iirtf(
                                             "uniform on the hemisphere) or mis (the same integral, a path "
                                             "tracer lit by the SH sky with multiple importance sampling; "
                                             "much less variance for sharp BCSDFs)."),
+    light_domain: str = typer.Option("hemisphere", "--light-domain", metavar="<hemisphere | sphere>",
+                                     help="Light directions the matrices hold: hemisphere (§4.2: light from "
+                                          "above) or sphere (§4.2's extension to the bottom surface: light "
+                                          "from below crosses the cloth too, e.g. a drape's hanging sides "
+                                          "under a low light; the renderer then lights the cloth from both "
+                                          "sides). Same paths per cell, spread over twice the directions."),
     theta_samples: int = typer.Option(512, "--theta-samples",
                                       help="theta_o values of the BCSDF table C_S (§4.3: 512)."),
     bcsdf: str = _BCSDF,
@@ -125,13 +136,14 @@ def iirtf(
     The exemplar cut into cells of about a mean free
     path, and per cell the SH matrix A_C taking light to the indirect incoming radiance at the cell's
     segments, estimated by path tracing the fibre BCSDF, with its standard error; plus the BCSDF's SH table
-    C_S (§4.3) of every material."""
+    C_S (§4.3) of every material and the exemplar's layer transmittance (the light that crosses it)."""
     from ..outputs import ARTIFACT, check_output
     from ..runners.precompute import IirtfParams, parse_material_options, run_iirtf
 
     check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
     p = IirtfParams(order=order, cell_factor=cell_factor, paths=paths, mfp_paths=mfp_paths, max_depth=max_depth,
-                    rr_depth=rr_depth, light_sampling=light_sampling, theta_samples=theta_samples, chunk=chunk,
+                    rr_depth=rr_depth, light_sampling=light_sampling, light_domain=light_domain,
+                    layer_paths=layer_paths, layer_bins=layer_bins, theta_samples=theta_samples, chunk=chunk,
                     seed=seed, material=parse_material_options(set_ or [], bcsdf))
     _run(run_iirtf, tiling, out, p, lambda res: f"{res['exemplars']} exemplars, {res['cells']:,} cells, mean free "
          f"path {', '.join(f'{m:.4g}' for m in res['mean_free_path'])}, {res['paths_per_s'] / 1e3:.1f} k paths/s",

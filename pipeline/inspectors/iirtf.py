@@ -7,8 +7,9 @@ c_T = a_C^T Y(w_d) per channel (seed 001 §5.3.1); the fluence  int T dw1 = sqrt
   top row   one panel per z layer of the exemplar's cell grid (top layer first, at most 6), RGB over the
             exemplar's x-y cells on one exposure (empty cells hatched grey), with the block grid;
   bottom    the mean fluence of each layer against its height (per channel, with its Monte Carlo standard
-            error), the cell grid and mean free path in the title, and the order-0 to
-            order-L energy of A_C (how directional the indirect light is).
+            error), the cell grid and mean free path in the title, the order-0 to
+            order-L energy of A_C (how directional the indirect light is) and, where the artifact has
+            it, the exemplar's layer transmittance against cos theta (light from above and from below).
 ``--exemplar K`` picks the exemplar (default: the first in the artifact).
 """
 from __future__ import annotations
@@ -42,6 +43,23 @@ def cell_fluence_se(se, order: int, w_d):
     Y = np.empty(J)
     sh_eval(order, float(w_d[0]), float(w_d[1]), float(w_d[2]), Y)
     return math.sqrt(4 * math.pi) * np.sqrt(np.einsum("chk,k->ch", se[:, :, :, 0].astype(np.float64) ** 2, Y * Y))
+
+
+def _layer_panel(ax, tau, se):
+    """The layer transmittance tau (2, NB, 3) against cos theta: from above solid, from below dashed."""
+    from stages.core.layer import FROM_ABOVE, FROM_BELOW, bin_centre
+
+    nb = tau.shape[1]
+    mu = np.array([bin_centre(i, nb) for i in range(nb)])
+    for side, style, what in ((FROM_ABOVE, "-", "from above"), (FROM_BELOW, "--", "from below")):
+        for ch, col in enumerate(("red", "green", "blue")):
+            ax.errorbar(mu, tau[side, :, ch], yerr=se[side, :, ch], color=col, ls=style, marker="o", ms=2, capsize=1,
+                        label=what if ch == 0 else None)
+    ax.set_xlabel("cos theta of the light")
+    ax.set_ylabel("share crossing the layer")
+    ax.set_title("layer transmittance")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
 
 
 def inspect(art, png, show=False, size=(1200, 900), exemplar=None, **_):
@@ -111,7 +129,10 @@ def _figure(plt, art, size, exemplar):
     ax.legend(fontsize=9)
     ax.set_title("mean fluence per layer (the top row shows it per cell)")
     ax.grid(alpha=0.3)
-    ax = fig.add_subplot(gs[1, ncol // 2 + 1:])
+    g = f"exemplar_{k}/"
+    has_tau = (g + "layer_tau") in art
+    right = gs[1, ncol // 2 + 1:].subgridspec(2 if has_tau else 1, 1)
+    ax = fig.add_subplot(right[0])
     energy = []
     for l in range(L + 1):
         sl = slice(l * l, (l + 1) * (l + 1))
@@ -121,6 +142,8 @@ def _figure(plt, art, size, exemplar):
     ax.set_xlabel("SH order l of the light direction (rows of A_C)")
     ax.set_ylabel("share of sum a^2")
     ax.set_title("energy of A_C by order")
+    if has_tau:
+        _layer_panel(fig.add_subplot(right[1]), art[g + "layer_tau"], art[g + "layer_tau_se"])
     fig.legend(handles=[Patch(facecolor=(0.5, 0.5, 0.5), label="empty cell (no fibre)"),
                         Patch(facecolor="white", edgecolor="0.3", label="white lines: block grid"),
                         Patch(facecolor=(1, 0.85, 0.6), label=f"cell RGB = fluence / {expo:.3g} (99th pct.), sRGB")],

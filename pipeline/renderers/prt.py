@@ -123,9 +123,15 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
         coeffs.append(svf[g + "ssdf_coeffs"])
         angles.append(svf[g + "sg_angle"])
         weights.append(svf[g + "sg_weights"])
+    layer_tau = None   # an IIRTF made before 2026-12-07 has none: the paper's opaque shell
     for e in ii.summary["exemplars"]:
         k = e["exemplar"]
         g = f"exemplar_{k}/"
+        if (g + "layer_tau") in ii:
+            tau = ii[g + "layer_tau"]
+            if layer_tau is None:
+                layer_tau = np.ones((K, *tau.shape))
+            layer_tau[k] = tau
         rows = ii[g + "seg_row"].astype(np.int64)
         f0, _f1 = int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])
         a = int(art["ex_offsets"][f0]) - f0
@@ -141,7 +147,9 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
                   sg_weights=np.ascontiguousarray(np.concatenate(weights)),
                   lam_svf=float(svf.summary["sg_sharpness"]), seg_row=seg_row,
                   transfer=np.ascontiguousarray(np.concatenate(transfer)), order=int(ii.summary["order"]),
-                  cs_table=np.ascontiguousarray(ii["bcsdf_sh"]), mat_cs=np.arange(len(mats), dtype=np.int64))
+                  cs_table=np.ascontiguousarray(ii["bcsdf_sh"]), mat_cs=np.arange(len(mats), dtype=np.int64),
+                  below=ii.summary.get("light_domain", "hemisphere") == "sphere",
+                  layer_tau=np.ascontiguousarray(layer_tau if layer_tau is not None else np.zeros((0, 2, 1, 3))))
     return sc, art, arrays
 
 
@@ -187,9 +195,11 @@ def film_setup(scene, options: dict):
                           arr["svf_coeffs"], arr["svf_res"], arr["sg_angle"], arr["sg_weights"], arr["lam_svf"],
                           arr["seg_row"], arr["transfer"], arr["order"], quarter_turn_x(arr["order"]),
                           arr["cs_table"], arr["mat_cs"],
-                          flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]))
+                          flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]), arr["below"],
+                          arr["layer_tau"])
     stats = {"load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"), "sh_window": window,
-             "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"])}
+             "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"]),
+             "light_from_below": arr["below"], "translucent_layers": bool(arr["layer_tau"].shape[0] > 0)}
     return FilmSetup("prt", integ, cam, VARIANCE_CHANNELS, stats)
 
 

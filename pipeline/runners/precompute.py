@@ -98,6 +98,9 @@ class IirtfParams:
     max_depth: int = FULL_TRANSPORT_DEPTH   # at 32 the damask's prt kept 0.74-0.94 of the fibres' light per channel
     rr_depth: int = 5
     light_sampling: str = "uniform"   # "uniform" (the paper's estimator) or "mis" (same integral, less variance)
+    light_domain: str = "hemisphere"  # "hemisphere" (the paper's: light from above) or "sphere" (both sides, §4.2)
+    layer_paths: int = 4000           # per cos theta bin and side of the layer transmittance (stages.precompute.layer)
+    layer_bins: int = 8
     theta_samples: int = 512
     chunk: int = 16
     seed: int = 0
@@ -109,6 +112,7 @@ class IirtfParams:
         if not (math.isfinite(self.cell_factor) and self.cell_factor > 0):
             raise LoomError(None, "--cell-factor", f"must be a positive number, got {self.cell_factor}")
         for name, v, lo in (("--paths", self.paths, 2), ("--mfp-paths", self.mfp_paths, 2),
+                            ("--layer-paths", self.layer_paths, 2), ("--layer-bins", self.layer_bins, 1),
                             ("--max-depth", self.max_depth, 1), ("--rr-depth", self.rr_depth, 1),
                             ("--theta-samples", self.theta_samples, 2), ("--chunk", self.chunk, 1)):
             if not v >= lo:
@@ -118,6 +122,9 @@ class IirtfParams:
         if self.light_sampling not in ("uniform", "mis"):
             raise LoomError(None, "--light-sampling",
                             f"unknown estimator {self.light_sampling!r} (known: mis, uniform)")
+        if self.light_domain not in ("hemisphere", "sphere"):
+            raise LoomError(None, "--light-domain",
+                            f"unknown light domain {self.light_domain!r} (known: hemisphere, sphere)")
 
 
 def parse_material_options(settings, bcsdf=None) -> dict:
@@ -444,7 +451,7 @@ def _iirtf_task(tiling, tiling_hash, store, k, r0, r1, targets, mof, mats, p: di
     t0 = time.perf_counter()
     res = iirtf_chunk(sc, cells, c0, c1, mof, mats, order=p["order"], n_paths=p["paths"],
                       seed=p["seed"], max_depth=p["max_depth"], rr_depth=p["rr_depth"],
-                      light_sampling=p["light_sampling"])
+                      light_sampling=p["light_sampling"], light_domain=p["light_domain"])
     pick = rows - (c0 - base)
     g = f"exemplar_{k}/"
     open_for_chunk(store, g + "transfer")[r0:r1] = res.a[pick].astype(np.float32)
@@ -460,7 +467,8 @@ def _nonempty(cells, k):
 
 
 def iirtf_work(p: IirtfParams, n_exemplars: int, stored_cells: int, threads: int):
-    """The least time of the mean free paths and the transfer matrices (``WorkEstimate``); before the
+    """The least time of the mean free paths, the layer transmittance and the transfer matrices (``WorkEstimate``);
+    before the
     cells are known, ``stored_cells`` = the exemplars (each stores at least one cell)."""
     from ..limits import WorkEstimate
 
@@ -469,6 +477,8 @@ def iirtf_work(p: IirtfParams, n_exemplars: int, stored_cells: int, threads: int
             f"{p.paths:,} paths per cell x {stored_cells:,} cells holding segments (--paths)")
     est.add("mean free paths", float(p.mfp_paths) * n_exemplars, PATHS_PER_THREAD_S,
             f"{p.mfp_paths:,} paths x {n_exemplars} exemplar(s) (--mfp-paths)")
+    est.add("layer transmittance", 2.0 * p.layer_bins * p.layer_paths * n_exemplars, PATHS_PER_THREAD_S,
+            f"{p.layer_paths:,} paths x {p.layer_bins} angles x 2 sides x {n_exemplars} exemplar(s) (--layer-paths)")
     return est
 
 
@@ -513,6 +523,7 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     from stages.core.shading.bcsdf_sh import bcsdf_sh_table
     from stages.core.shading.material import MAT_BCSDF
     from stages.precompute.iirtf import exemplar_slabs, mean_free_path
+    from stages.precompute.layer import layer_transmittance
 
     from ..artifacts import FILE, ArtifactWriter
     from ..chunks import ChunkTask, run_tasks, session
@@ -542,6 +553,8 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
     t0 = time.perf_counter()
     mean_free_path(sc, ks[0], slabs[ks[0], 0], slabs[ks[0], 1], periods[ks[0]], mof, mats, n_paths=2, seed=MFP_SEED,
                    max_depth=2)
+    layer_transmittance(sc, ks[0], slabs[ks[0], 0], slabs[ks[0], 1], periods[ks[0]], mof, mats, n_bins=1, n_paths=2,
+                        max_depth=2)
     compile_s = time.perf_counter() - t0
     mfp = {}
     t0 = time.perf_counter()
@@ -555,6 +568,16 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
             mfp[k] = (ell, se, n)
             advance()
     mfp_s = time.perf_counter() - t0
+    # the layer transmittance per exemplar (prt's shadow rays through other folds; its own fixed seed, as ell's)
+    t0 = time.perf_counter()
+    layer = {}
+    with progress(f"iirtf: layer transmittance ({p.layer_paths:,} paths per angle and side)", len(ks)) as advance:
+        for k in ks:
+            layer[k] = layer_transmittance(sc, k, slabs[k, 0], slabs[k, 1], periods[k], mof, mats, n_bins=p.layer_bins,
+                                           n_paths=p.layer_paths, seed=MFP_SEED, max_depth=p.max_depth,
+                                           rr_depth=p.rr_depth)
+            advance()
+    layer_s = time.perf_counter() - t0
     bs = art["block_size"]
     targets = np.array([p.cell_factor * mfp[k][0] if k in mfp else max(bs[0], bs[1]) for k in range(len(periods))])
     # every exemplar's cells are built (``_cells``), not only those of ks
@@ -588,6 +611,8 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
             w.write(g + "row_cell", rows[k].astype(np.int32))
             w.write(g + "row_segments", np.diff(cells.cell_offsets[base:base + C[k] + 1])[rows[k]].astype(np.int32))
             w.write(g + "seg_row", cell_row[cells.seg_cell[seg0:seg1] - base])
+            w.write(g + "layer_tau", layer[k][0])
+            w.write(g + "layer_tau_se", layer[k][1])
         w.write("mat_of_fiber", mof)
         w.write("materials", mats)
         tabs = np.zeros((len(mats), p.theta_samples, J, 3))
@@ -615,14 +640,16 @@ def run_iirtf(tiling, out, p: IirtfParams, scene=None, exemplars=None, force=Fal
                          "cell_grid": [int(v) for v in cells.ex_grid[k]],
                          "cell_size": [float(v) for v in cells.cell_size[k]],
                          "cells_per_block": [int(v) for v in cells.block_cells[k]],
-                         "segments": S_k, "slab": [float(v) for v in slabs[k]], "bytes": int(nbytes)})
+                         "segments": S_k, "slab": [float(v) for v in slabs[k]], "bytes": int(nbytes),
+                         "layer_transmittance_near_normal": [float(v) for v in layer[k][0][0, -1]]})
         total_s = time.perf_counter() - t_start
         w.summary.update(kind="iirtf", tiling=str(tiling), scene=str(scene_path), exemplars=info, order=p.order,
                          sh_coefficients=J, cell_factor=p.cell_factor, paths=p.paths, materials=int(len(mats)),
                          theta_samples=p.theta_samples, seed=p.seed, light_sampling=p.light_sampling,
+                         light_domain=p.light_domain, layer_bins=p.layer_bins, layer_paths=p.layer_paths,
                          cells=int(sum(C.values())), stored_cells=int(sum(N.values())), paths_total=int(paths),
                          paths_per_s=paths / max(task_s, 1e-9),
                          cells_per_s=sum(N.values()) / max(task_s, 1e-9), mean_free_path_s=mfp_s,
-                         bcsdf_sh_s=cs_s, time_s=total_s, compile_s=compile_s)
+                         bcsdf_sh_s=cs_s, layer_transmittance_s=layer_s, time_s=total_s, compile_s=compile_s)
     return {"skipped": False, "exemplars": len(ks), "cells": int(sum(C.values())),
             "mean_free_path": [mfp[k][0] for k in ks], "paths_per_s": paths / max(task_s, 1e-9)}

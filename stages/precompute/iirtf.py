@@ -6,9 +6,12 @@ T(w0, w1, x) is the radiance arriving at a point x of the fabric from direction 
 along -w1) due to a directional light of unit irradiance (on a plane perpendicular to it) arriving
 from direction w0 (travelling along -w0), counting only light paths with at least one scattering
 event on a fibre. It is computed on the flat fabric made of one exemplar repeated without end
-(``stages.precompute.periodic``), light from above only (w0 in the upper hemisphere; T = 0 for
-w0 below the horizon). Direct light is single scattering and is handled by the renderer (SVF): a
-ray from x along w1 that meets no fibre contributes nothing.
+(``stages.precompute.periodic``), light from above only (w0 in the upper hemisphere H+; T = 0 for
+w0 below the horizon: the paper's, ``light_domain`` "hemisphere") or from both sides (w0 on the whole
+sphere, ``light_domain`` "sphere": §4.2's "Extension to bottom and side fabric surfaces", light that
+reaches the fabric from below and crosses it, as on the hanging sides of a drape under a low light;
+below, read S^2 for H+ and 4pi for 2pi). Direct light is single scattering and is handled by the
+renderer (SVF): a ray from x along w1 that meets no fibre contributes nothing.
 
 Per cell C of an exemplar, T is averaged over the segments whose midpoints mu_k lie in C and
 expanded in real orthonormal spherical harmonics of order L (``stages.core.sh.sh_eval``, index
@@ -95,7 +98,8 @@ independent, may run in other processes, and concatenate to the whole)
     build_cells(points, offsets, ex_fibers, ex_period, ex_nblocks, block_size, slabs, target) -> Cells
     cell_box(cells, c) -> (k, lo (3,), hi (3,))
     iirtf_chunk(sc, cells, c0, c1, mat_of_fiber, mats, *, order=4, n_paths=50000, seed=0, max_depth=32,
-                rr_depth=5, light_sampling="uniform", max_dist=None) -> IIRTFChunk(a, se, rays)
+                rr_depth=5, light_sampling="uniform", max_dist=None, light_domain="hemisphere")
+                -> IIRTFChunk(a, se, rays)
     iirtf_reconstruct(a, w0, w1) -> (N, 3) float64
     transfer_projection(...)  the one-path estimator (njit), for kernels that need it
 """
@@ -241,13 +245,36 @@ def cell_box(cells: Cells, c: int):
 # ------------------------------------------------------------------------------------------------
 # the path tracer
 
-IirtfLight = namedtuple("IirtfLight", ["u", "Y", "T", "w0", "order", "mis"])
+IirtfLight = namedtuple("IirtfLight", ["u", "Y", "T", "w0", "order", "mis", "sphere"])
 IirtfLight.__doc__ = """What one IIRTF path records (``transfer_projection``; a tally of ``periodic_path``): the
 projection ``u`` (3, J) onto the SH basis of order ``order`` (``Y`` (J,) scratch for the basis), ``T`` (3,) the
 transfer towards the fixed light direction ``w0`` of the paper's estimator (``mis`` False), or, with ``mis``,
-a light direction drawn per vertex and the path's escapes, power heuristic."""
+a light direction drawn per vertex and the path's escapes, power heuristic; light from the whole sphere when
+``sphere``, else from the upper hemisphere."""
 
 P_LIGHT = 1.0 / TWO_PI   # the density of a light direction uniform on the upper hemisphere
+P_LIGHT_SPHERE = 1.0 / FOUR_PI   # ... uniform on the whole sphere (light_domain "sphere")
+LIGHT_DOMAINS = ("hemisphere", "sphere")
+
+
+@njit(cache=True)
+def light_density(sphere):
+    """The density of a light direction drawn by ``draw_light_direction``: 1/2pi or (``sphere``) 1/4pi."""
+    return P_LIGHT_SPHERE if sphere else P_LIGHT
+
+
+@njit(cache=True)
+def draw_light_direction(seed, key, dim, sphere, out):
+    """A light direction uniform on the upper hemisphere (or, ``sphere``, the whole sphere) into ``out`` from
+    the uniforms of dimensions ``dim`` (cos theta) and ``dim + 1`` (azimuth)."""
+    z = uniform(seed, key, dim)
+    if sphere:
+        z = 1.0 - 2.0 * z
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    ph = TWO_PI * uniform(seed, key, dim + 1)
+    out[0] = r * math.cos(ph)
+    out[1] = r * math.sin(ph)
+    out[2] = z
 
 
 @njit(cache=True)
@@ -264,15 +291,10 @@ def _add_projection(u, Y, order, w, dx, dy, dz, c0, c1, c2):
 @njit(cache=True)
 def _iirtf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     """``periodic.light_vertex`` for an IIRTF path: one light direction, ``w0`` or (``mis``) drawn uniform
-    on the upper hemisphere from dimensions base + DIRECTION_DIMS, + 1 (unit irradiance from there)."""
+    on the light's domain from dimensions base + DIRECTION_DIMS, + 1 (unit irradiance from there)."""
     wl = v.wl
     if tally.mis:
-        z = uniform(seed, key, base + DIRECTION_DIMS)
-        r = math.sqrt(max(0.0, 1.0 - z * z))
-        ph = TWO_PI * uniform(seed, key, base + DIRECTION_DIMS + 1)
-        wl[0] = r * math.cos(ph)
-        wl[1] = r * math.sin(ph)
-        wl[2] = z
+        draw_light_direction(seed, key, base + DIRECTION_DIMS, tally.sphere, wl)
     else:
         for k in range(3):
             wl[k] = tally.w0[k]
@@ -282,8 +304,9 @@ def _iirtf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     if light_reaches(paths, v, nf):
         tp0, tp1, tp2 = tp
         if tally.mis:
-            # the power heuristic over P_LIGHT, folded into one division: power_heuristic(P_LIGHT, pf) / P_LIGHT
-            w = P_LIGHT / (P_LIGHT * P_LIGHT + pf * pf)
+            # the power heuristic over the light's density, folded into one division: power_heuristic(pl, pf) / pl
+            pl = light_density(tally.sphere)
+            w = pl / (pl * pl + pf * pf)
             _add_projection(tally.u, tally.Y, tally.order, w, wl[0], wl[1], wl[2], tp0 * f0, tp1 * f1, tp2 * f2)
         else:
             T = tally.T
@@ -295,26 +318,27 @@ def _iirtf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
 
 @njit(cache=True)
 def _iirtf_escaped(tally, wo, tp, pdf):
-    """``periodic.path_escaped`` for an IIRTF path: with ``mis``, the sky above is the BCSDF-sampled light."""
-    if tally.mis and wo[2] > 0.0:
+    """``periodic.path_escaped`` for an IIRTF path: with ``mis``, the sky above (``sphere``: the sky all round)
+    is the BCSDF-sampled light."""
+    if tally.mis and (wo[2] > 0.0 or tally.sphere):
         tp0, tp1, tp2 = tp
-        _add_projection(tally.u, tally.Y, tally.order, power_heuristic(pdf, P_LIGHT), wo[0], wo[1], wo[2],
-                        tp0, tp1, tp2)
+        _add_projection(tally.u, tally.Y, tally.order, power_heuristic(pdf, light_density(tally.sphere)), wo[0],
+                        wo[1], wo[2], tp0, tp1, tp2)
 
 
 register_tally(IirtfLight, _iirtf_light_vertex, _iirtf_escaped)
 
 
 @njit(cache=True)
-def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, seed, key, dim0, Y, u):
-    """One path's estimate u[ch, j0] of int_{H+} T(w0', w1, x) Y_j0(w0') dw0' at x = (ox, oy, oz), the ray
-    from x along w1 skipping fibre ``ign0`` (module doc "Estimator"). ``mis`` False: the paper's, T(w0, w1, x)
-    Y_j0(w0) 2 pi with NEE along the path's w0; True: light directions drawn per vertex and BCSDF-sampled
-    escapes, power heuristic (``IirtfLight``; the path itself is ``periodic_path``'s). ``Y`` (J,) scratch,
-    ``u`` (3, J) output (zeroed here). Random numbers (seed, key, dim0 + 6 per vertex). Returns the number
-    of rays cast.
-    14 parameters: the path's start (point, skipped fibre, w0, w1), the basis order and estimator, the random
-    stream (seed, key, dim0) and two arrays; the fabric is one record (``PeriodicPaths``)."""
+def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, sphere, seed, key, dim0, Y, u):
+    """One path's estimate u[ch, j0] of int_{H+} T(w0', w1, x) Y_j0(w0') dw0' (``sphere``: over S^2) at
+    x = (ox, oy, oz), the ray from x along w1 skipping fibre ``ign0`` (module doc "Estimator"). ``mis`` False:
+    the paper's, T(w0, w1, x) Y_j0(w0) 2 pi (4 pi) with NEE along the path's w0; True: light directions drawn
+    per vertex and BCSDF-sampled escapes, power heuristic (``IirtfLight``; the path itself is
+    ``periodic_path``'s). ``Y`` (J,) scratch, ``u`` (3, J) output (zeroed here). Random numbers (seed, key,
+    dim0 + 6 per vertex). Returns the number of rays cast.
+    15 parameters: the path's start (point, skipped fibre, w0, w1), the basis order, estimator and light
+    domain, the random stream (seed, key, dim0) and two arrays; the fabric is one record (``PeriodicPaths``)."""
     J = (order + 1) * (order + 1)
     for ch in range(3):
         for j in range(J):
@@ -326,12 +350,13 @@ def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, seed, key, 
     for k in range(3):
         v.wi[k] = -w1[k]
     T = np.zeros(3)
-    rays = 1 + periodic_path(paths, IirtfLight(u, Y, T, w0, order, mis), v, h, seed, key, dim0,
+    rays = 1 + periodic_path(paths, IirtfLight(u, Y, T, w0, order, mis, sphere), v, h, seed, key, dim0,
                              DIRECTION_DIMS + 2)
     if not mis and (T[0] != 0.0 or T[1] != 0.0 or T[2] != 0.0):
         sh_eval(order, w0[0], w0[1], w0[2], Y)
+        solid_angle = FOUR_PI if sphere else TWO_PI   # 1 / light_density, without its rounding
         for j in range(J):
-            y = TWO_PI * Y[j]
+            y = solid_angle * Y[j]
             u[0, j] = T[0] * y
             u[1, j] = T[1] * y
             u[2, j] = T[2] * y
@@ -339,10 +364,10 @@ def transfer_projection(paths, ox, oy, oz, ign0, w0, w1, order, mis, seed, key, 
 
 
 @chunk_kernel
-def _iirtf_cells(paths, cell_offsets, cell_segments, seg_mid, seg_fibre, c0, c1, order, mis, n_paths, seed, a_out,
-                 se_out, rays_out, i0, i1):
+def _iirtf_cells(paths, cell_offsets, cell_segments, seg_mid, seg_fibre, c0, c1, order, mis, sphere, n_paths, seed,
+                 a_out, se_out, rays_out, i0, i1):
     """Cells c0 + i0 .. c0 + i1 - 1 into rows i0 .. i1 - 1 of the outputs (``for_chunks``).
-    16 parameters: a ``for_chunks`` chunk kernel: the cells' CSR and segments, the estimator's settings, three
+    17 parameters: a ``for_chunks`` chunk kernel: the cells' CSR and segments, the estimator's settings, three
     output arrays and the chunk's range."""
     J = (order + 1) * (order + 1)
     S = np.empty((3, J, J))   # per chunk, zeroed per cell (as numba's parallel loop hoisted them)
@@ -364,13 +389,8 @@ def _iirtf_cells(paths, cell_offsets, cell_segments, seg_mid, seg_fibre, c0, c1,
         for p in range(n_paths):
             key = (c << 32) + p
             s = cell_segments[s_beg + min(int(uniform(seed, key, 0) * ns), ns - 1)]
-            # w0 uniform on the upper hemisphere (the paper's estimator), w1 uniform on the sphere
-            z = uniform(seed, key, 1)
-            r = math.sqrt(max(0.0, 1.0 - z * z))
-            ph = TWO_PI * uniform(seed, key, 2)
-            w0[0] = r * math.cos(ph)
-            w0[1] = r * math.sin(ph)
-            w0[2] = z
+            # w0 uniform on the light's domain (the paper's estimator: the upper hemisphere), w1 uniform on the sphere
+            draw_light_direction(seed, key, 1, sphere, w0)
             z = 1.0 - 2.0 * uniform(seed, key, 3)
             r = math.sqrt(max(0.0, 1.0 - z * z))
             ph = TWO_PI * uniform(seed, key, 4)
@@ -378,7 +398,7 @@ def _iirtf_cells(paths, cell_offsets, cell_segments, seg_mid, seg_fibre, c0, c1,
             w1[1] = r * math.sin(ph)
             w1[2] = z
             rays += transfer_projection(paths, seg_mid[s, 0], seg_mid[s, 1], seg_mid[s, 2], seg_fibre[s], w0, w1,
-                                        order, mis, seed, key, 5, Y, u)
+                                        order, mis, sphere, seed, key, 5, Y, u)
             nz = False
             for ch in range(3):
                 for j in range(J):
@@ -412,12 +432,13 @@ def _max_dist(max_dist, period):
 
 def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order: int = 4, n_paths: int = 50_000,
                 seed: int = 0, max_depth: int = 32, rr_depth: int = 5, light_sampling: str = "uniform",
-                max_dist=None) -> IIRTFChunk:
+                max_dist=None, light_domain: str = "hemisphere") -> IIRTFChunk:
     """a_C and its standard error for global cells c0 <= c < c1 (module doc), cells on threads.
     ``sc`` the tiling's ShellScene, ``mat_of_fiber`` (F,) int32 material row per global fibre id, ``mats``
     (NM, MAT_SIZE); ``order`` L in 0..8 (J = (L+1)^2); ``max_dist`` caps every ray (default 32 periods:
     a flat section 64 periods across); ``light_sampling`` "uniform" (the paper's estimator) or "mis"
-    (module doc "Estimator"). Any split of [0, C) into chunks gives the same bytes; threads
+    (module doc "Estimator"); ``light_domain`` "hemisphere" (the paper's: light from above) or "sphere"
+    (from both sides). Any split of [0, C) into chunks gives the same bytes; threads
     take runs of cells (``CELL_CHUNKS_PER_THREAD`` per thread: cells cost from nothing to a full cell's paths)."""
     order = int(order)
     if not 0 <= order <= MAX_ORDER:
@@ -428,6 +449,8 @@ def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order
         raise ValueError("iirtf_chunk: n_paths, max_depth and rr_depth must be >= 1")
     if light_sampling not in ("uniform", "mis"):
         raise ValueError(f"iirtf_chunk: light_sampling {light_sampling!r} is neither 'uniform' nor 'mis'")
+    if light_domain not in LIGHT_DOMAINS:
+        raise ValueError(f"iirtf_chunk: light_domain {light_domain!r} is neither 'hemisphere' nor 'sphere'")
     J = (order + 1) ** 2
     a = np.zeros((c1 - c0, 3, J, J))
     se = np.zeros((c1 - c0, 3, J, J))
@@ -445,8 +468,8 @@ def iirtf_chunk(sc, cells: Cells, c0: int, c1: int, mat_of_fiber, mats, *, order
         paths = PeriodicPaths(periodic_scene(sc, k), z_lo, z_hi, W, H, mof, mats, int(max_depth), int(rr_depth),
                               _max_dist(max_dist, (W, H)), 1e-7 * max(W, H))
         for_chunks(_iirtf_cells, hi - lo, paths, cells.cell_offsets, cells.cell_segments, cells.seg_mid,
-                   cells.seg_fibre, lo, hi, order, light_sampling == "mis", int(n_paths), int(seed), a[sl], se[sl],
-                   rays[sl], chunks_per_thread=CELL_CHUNKS_PER_THREAD)
+                   cells.seg_fibre, lo, hi, order, light_sampling == "mis", light_domain == "sphere", int(n_paths),
+                   int(seed), a[sl], se[sl], rays[sl], chunks_per_thread=CELL_CHUNKS_PER_THREAD)
     return IIRTFChunk(a, se, rays)
 
 

@@ -17,7 +17,8 @@ from pipeline.runners import prt_study as ps
 from pipeline.scene import load_scene
 
 IIRTF_ARGS = ["--paths", "40", "--light-sampling", "mis", "--mfp-paths", "400", "--cell-factor", "3", "--chunk", "64",
-              "--scene", "data/scenes/draped_damask.toml", "--exemplar", "0"]
+              "--scene", "data/scenes/draped_damask.toml", "--exemplar", "0", "--layer-paths", "100",
+              "--layer-bins", "2"]
 
 
 @pytest.fixture(scope="module")

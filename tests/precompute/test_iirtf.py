@@ -242,11 +242,13 @@ def _reproducing_kernel(L, mu):
     return np.polynomial.legendre.legval(mu, [(2 * l + 1) / (4 * math.pi) for l in range(L + 1)])
 
 
-@pytest.fixture(scope="module")
-def independent(tiny):
+@pytest.fixture(scope="module", params=["hemisphere", "sphere"])
+def independent(tiny, request):
     """The reference samples of the busiest cell of exemplar 0: segments in turn (stratified), w0 from the
-    density (1 + cos theta) / (3 pi) on the upper hemisphere, w1 from normalised Gaussians, T traced
-    without Russian roulette, numpy random numbers. Returns (cell, w0, w1, T / (p0 p1), max_dist)."""
+    density (1 + cos theta) / (3 pi) on the upper hemisphere (light domain "hemisphere", the paper's) or
+    (2 + cos theta) / (8 pi) on the whole sphere ("sphere": light from below crosses the fabric), w1 from
+    normalised Gaussians, T traced without Russian roulette, numpy random numbers. Returns (cell, w0, w1,
+    T / (p0 p1), max_dist, light domain)."""
     sc, cells, slabs = tiny["sc"], tiny["cells"], tiny["slabs"]
     k, n = 0, 12000
     c = _busiest_cell(cells, k)
@@ -255,25 +257,30 @@ def independent(tiny):
     max_dist = 20.0 * tiny["art"]["ex_period"][k][0]
     rng = np.random.default_rng(2024)
     s = segs[np.arange(n) % len(segs)]
-    mu = -1.0 + np.sqrt(1.0 + 3.0 * rng.random(n))
+    if request.param == "hemisphere":
+        mu = -1.0 + np.sqrt(1.0 + 3.0 * rng.random(n))
+        p0 = (1.0 + mu) / (3 * math.pi)
+    else:
+        mu = -2.0 + np.sqrt(1.0 + 8.0 * rng.random(n))
+        p0 = (2.0 + mu) / (8 * math.pi)
     ph = 2 * math.pi * rng.random(n)
     st = np.sqrt(1 - mu * mu)
     w0 = np.stack([st * np.cos(ph), st * np.sin(ph), mu], 1)
-    p0 = (1.0 + mu) / (3 * math.pi)
     g = rng.normal(size=(n, 3))
     w1 = g / np.linalg.norm(g, axis=1, keepdims=True)
     p1 = 1.0 / (4 * math.pi)
     T = np.empty((n, 3))
     _independent_T(periodic_scene(sc, k), slabs[k, 0], slabs[k, 1], tiny["mof"], tiny["mats"],
                    cells.seg_mid[s], cells.seg_fibre[s], w0, w1, rng.random((n, MAX_DEPTH, 3)), max_dist, T)
-    return c, w0, w1, T / (p0 * p1)[:, None], max_dist
+    return c, w0, w1, T / (p0 * p1)[:, None], max_dist, request.param
 
 
 @pytest.mark.parametrize("light_sampling", ["uniform", "mis"])
 def test_transfer_matrix_agrees_with_an_independent_estimate(tiny, independent, light_sampling):
     """Reference: an independent Monte Carlo estimate of the same band-limited quantities (fixture
     ``independent``: other direction densities, stratified segments, no Russian roulette, numpy random
-    numbers), for both estimators of the light integral (the paper's uniform w0, and MIS).
+    numbers), for both estimators of the light integral (the paper's uniform w0, and MIS) and both light
+    domains (the paper's upper hemisphere, and the whole sphere).
     (1) Entries a[j0, j1] of orders l <= 1 (both arguments, all channels): z-scores against the stored
     standard error combined with the reference's (its i.i.d. formula, conservative under
     stratification), none beyond the Sidak limit of tests/chisquare.py's z_score_test. (2) The
@@ -281,10 +288,11 @@ def test_transfer_matrix_agrees_with_an_independent_estimate(tiny, independent, 
     times the reproducing kernels (Legendre form, no sh_eval) within 4 combined standard errors, the
     reconstruction's taken as sum |Y Y| se (an upper bound: the standard deviation of a sum is at
     most the sum of theirs)."""
-    c, w0, w1, wt, max_dist = independent
+    c, w0, w1, wt, max_dist, domain = independent
     L, n = 2, len(wt)
     res = iirtf_chunk(tiny["sc"], tiny["cells"], c, c + 1, tiny["mof"], tiny["mats"], order=L, n_paths=n, seed=5,
-                      max_depth=MAX_DEPTH, rr_depth=3, light_sampling=light_sampling, max_dist=max_dist)
+                      max_depth=MAX_DEPTH, rr_depth=3, light_sampling=light_sampling, max_dist=max_dist,
+                      light_domain=domain)
     a, se = res.a[0], res.se[0]
     assert res.rays[0] > n
 
@@ -304,7 +312,7 @@ def test_transfer_matrix_agrees_with_an_independent_estimate(tiny, independent, 
 
     # (2) reconstruction at direction pairs
     pairs = [((0, 0, 1), (0, 0, -1)), ((0.6, 0, 0.8), (-0.6, 0, 0.8)), ((0, 0.8, 0.6), (1, 0, 0)),
-             ((-0.28, -0.96, 0.0), (0, 0.6, -0.8))]
+             ((-0.28, -0.96, 0.0), (0, 0.6, -0.8)), ((0, -0.6, -0.8), (0.6, 0, 0.8))]
     for v0, v1 in pairs:
         v0, v1 = np.array(v0, float), np.array(v1, float)
         got = iirtf_reconstruct(a, v0, v1)[0]
@@ -364,6 +372,36 @@ def test_albedo_order_and_the_non_absorbing_bound(tiny):
     lam = iirtf_chunk(sc, cells, c, c + 1, tiny["mof"], white, order=2, n_paths=1500, seed=9, max_dist=20.0 * W)
     assert lam.a[0, 0, 0, 0] > 0 and np.all(lam.a[0, :, 0, 0] == lam.a[0, 0, 0, 0])
     assert lam.a[0, 0, 0, 0] <= 1.0 - e + 4.0 * math.hypot(lam.se[0, 0, 0, 0], se_e), (lam.a[0, :, 0, 0], e)
+
+
+def test_white_furnace_with_light_from_both_sides(tiny):
+    """Furnace (exact): under a sky of unit radiance all round, fibres of white Lambertian surfaces (albedo 1)
+    send radiance 1 towards every direction, all of it scattered light; so with the light domain "sphere"
+    the integral over w0 of T(w0, w1) is 1 where the ray from mu_k along w1 meets a fibre and 0 where it
+    escapes, and a_00 = 1 - (the cell's mean escape fraction), estimated as in the bound above. Paths run
+    to depth 256 (what roulette leaves of a non-absorbing path at depth 32 is not negligible). The
+    paper's hemisphere keeps strictly less (the light from below is missing)."""
+    sc, cells, slabs = tiny["sc"], tiny["cells"], tiny["slabs"]
+    k = 1
+    c = _busiest_cell(cells, k)
+    W = tiny["art"]["ex_period"][k][0]
+    white = pack_material_lambert([1.0, 1.0, 1.0])[None]
+    kw = dict(order=1, n_paths=1500, seed=9, max_dist=20.0 * W, max_depth=256)
+    both = iirtf_chunk(sc, cells, c, c + 1, tiny["mof"], white, light_domain="sphere", light_sampling="mis", **kw)
+    above = iirtf_chunk(sc, cells, c, c + 1, tiny["mof"], white, light_sampling="mis", **kw)
+    segs = cells.cell_segments[cells.cell_offsets[c]:cells.cell_offsets[c + 1]]
+    m = 4000
+    rng = np.random.default_rng(8)
+    g = rng.normal(size=(m, 3))
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    s = segs[np.arange(m) % len(segs)]
+    psc = periodic_scene(sc, k)
+    esc = np.array([math.isinf(periodic_hit(psc, slabs[k, 0], slabs[k, 1], *cells.seg_mid[q], *d,
+                                    int(cells.seg_fibre[q]), 20.0 * W).t) for q, d in zip(s, g)], float)
+    e, se_e = esc.mean(), esc.std(ddof=1) / math.sqrt(m)
+    a, se = both.a[0, 0, 0, 0], both.se[0, 0, 0, 0]
+    assert abs(a - (1.0 - e)) < 4.0 * math.hypot(se, se_e), (a, 1.0 - e, se, se_e)
+    assert above.a[0, 0, 0, 0] < a - 4.0 * math.hypot(se, above.se[0, 0, 0, 0]), (above.a[0, 0, 0, 0], a)
 
 
 def test_same_bytes_for_any_thread_count_and_chunking(tiny):

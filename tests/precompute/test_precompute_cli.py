@@ -12,7 +12,7 @@ from pipeline.artifacts import read_meta
 
 SVF_ARGS = ["--resolution", "16", "--components", "4", "--chunk", "200"]
 IIRTF_ARGS = ["--order", "2", "--paths", "40", "--light-sampling", "mis", "--mfp-paths", "400", "--cell-factor", "3",
-              "--chunk", "64", "--scene", "data/scenes/draped_damask.toml"]
+              "--chunk", "64", "--scene", "data/scenes/draped_damask.toml", "--layer-paths", "100", "--layer-bins", "2"]
 
 
 def _arrays(path):
@@ -86,6 +86,9 @@ BAD = [
     (("iirtf",), ["--cell-factor", "nan"], "--cell-factor"),
     (("iirtf",), ["--scene", "no/such/scene.toml"], "not found"),
     (("iirtf",), ["--light-sampling", "best"], "estimator"),
+    (("iirtf",), ["--light-domain", "below"], "light domain"),
+    (("iirtf",), ["--layer-paths", "1"], "--layer-paths"),
+    (("iirtf",), ["--layer-bins", "0"], "--layer-bins"),
     (("svf",), ["--threads", "0"], "--threads"),
     (("iirtf",), ["--threads", "-2"], "--threads"),
 ]

@@ -27,8 +27,13 @@ of §4.3 (x = the fibre tangent, the view in the xy-plane; applied to c_S instea
 BCSDF's SH table at theta_o (``stages.core.shading.bcsdf_sh``), and V~_glo the global visibility
 filtered by a 2D Gaussian of sigma_glo in the flat fabric's plane, estimated as the paper's CPU version
 does: one shadow ray from the top surface above a point x' drawn from the Gaussian around x.
-Lights from below the fabric's plane (in flat space) add no multiple scattering: the IIRTF was
-precomputed for light from above (§3).
+Light from below the fabric's plane (in flat space): an IIRTF precomputed for light from above (the
+paper's, §4.2) adds no multiple scattering for it, and V_glo is 0 for it (the shadow ray leaves through
+the top surface). An IIRTF precomputed for light from both sides (``precompute iirtf --light-domain
+sphere``, §4.2 "Extension to bottom and side fabric surfaces"; the field ``below``) adds its multiple
+scattering too, and V_glo for light from below the shell's base starts from the base surface's point
+below x (``stages.core.shell.top.base_point``): light that reaches the cloth from its underside and
+crosses it (the hanging sides of a drape under a low light).
 
 Directions: the SVF, the IIRTF and the SH tables live in exemplar (flat) space; a world direction v
 is taken there by the linear part of the hit tetrahedron's world -> flat map (normalised). The
@@ -38,7 +43,8 @@ Random numbers: ``uniform(seed, index, dim)``: dims 0-1 place the sample in its 
 light (2 light sample, 2 Gaussian offset, 2 lobe sample for the analytic SG's shadow).
 
 ``PrtIntegrator`` fields: see the namedtuple; ``terms`` bit 1 single, bit 2 multi (0: fibre hits stay
-black, which times the eye rays alone); ``sg_mode`` 0 mc, 1 analytic.
+black, which times the eye rays alone); ``sg_mode`` 0 mc, 1 analytic; ``below`` True when the IIRTF
+holds light from below (above).
 """
 import math
 from collections import namedtuple
@@ -49,13 +55,14 @@ from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.stack import stack_array, stack_vector3
+from stages.core.layer import FROM_ABOVE, FROM_BELOW, tau_at
 from stages.core.rng import uniform
 from stages.core.sg import sg_sh_coefficients, spherical_fibonacci_axes
 from stages.core.sh import sh_eval, sh_rotate_rows
 from stages.core.shading.bcsdf_sg import sg_single_scatter
 from stages.core.shading.bcsdf_sh import bcsdf_sh_lookup, omega_o_frame
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare
-from stages.core.shell.top import top_point
+from stages.core.shell.top import base_point, top_point
 from stages.core.shell.traversal import enter_shell, shell_intersect
 from stages.core.svf import ssdf_at
 from stages.render.ground import ground_intersect
@@ -66,7 +73,7 @@ PrtIntegrator = namedtuple("PrtIntegrator", [
     "scene", "top", "mat_of_fiber", "mats", "lights", "ground", "has_ground", "ground_mat",
     "svf_row", "svf_mean", "svf_basis", "svf_coeffs", "svf_res", "sg_angle", "sg_weights", "lam_svf",
     "seg_row", "transfer", "order", "quarter_turn", "cs_table", "mat_cs",
-    "flat_size", "sigma_glo", "terms", "sg_mode", "eps"])
+    "flat_size", "sigma_glo", "terms", "sg_mode", "eps", "below", "layer_tau"])
 
 SINGLE = 1
 MULTI = 2
@@ -92,25 +99,75 @@ def _flat_point(w2f, tet, p):
             w2f[tet, 1, 0] * p[0] + w2f[tet, 1, 1] * p[1] + w2f[tet, 1, 2] * p[2] + w2f[tet, 1, 3])
 
 
+MAX_LAYERS = 8   # cloth layers a shadow ray crosses before its light counts as spent
+
+
+@njit(cache=True)
+def _exemplar_at(sc, X, Y):
+    """The exemplar of the block holding the flat point (X, Y) (the block map wraps; -1: an empty block)."""
+    i = int(math.floor(X / sc.block_size[0]))
+    j = int(math.floor(Y / sc.block_size[1]))
+    return sc.block_map[i % sc.block_map.shape[0], j % sc.block_map.shape[1]]
+
+
+@njit(cache=True)
+def _layer_transmittance(it, f, t, ox, oy, oz, w):
+    """(r, g, b): the share of light that crosses the cloth layer a shadow ray from o along w enters through
+    boundary face f at distance t: tau of the block's exemplar (``stages.precompute.layer``), on the side the
+    light falls on (it travels along -w), interpolated in |cos theta| of w in the layer's flat space."""
+    sc = it.scene
+    tet = sc.btet[f]
+    p = stack_vector3()
+    p[0] = ox + t * w[0]
+    p[1] = oy + t * w[1]
+    p[2] = oz + t * w[2]
+    X, Y = _flat_point(sc.w2f, tet, p)
+    e = _exemplar_at(sc, X, Y)
+    if e < 0:
+        return 1.0, 1.0, 1.0
+    lf = stack_vector3()
+    _to_flat(sc.w2f, tet, w, lf)
+    return tau_at(it.layer_tau[e], FROM_ABOVE if lf[2] > 0.0 else FROM_BELOW, abs(lf[2]))
+
+
 @njit(cache=True)
 def global_visibility(it, u, v, w):
-    """V_glo: 1.0 when the shadow ray from the top-surface point above (u, v) towards w (world) leaves
-    the cloth (w above the top surface's tangent plane) and meets neither the shell again nor the
-    ground; else 0.0."""
+    """V_glo (r, g, b): the light that reaches the top-surface point above (u, v) from direction w (world).
+    0 unless w is above the top surface's tangent plane (with ``it.below``, light from below the plane is
+    seen from the base surface's point below (u, v) instead, the ray leaving downwards; module doc); the
+    shadow ray then crosses the other folds of the cloth, each layer passing the share of the light its
+    exemplar's transmittance gives (``it.layer_tau``; without one, the paper's opaque shell: any layer
+    blocks), and the ground blocks it."""
     ok, x, y, z, nx, ny, nz = top_point(it.top, u, v)
     if not ok:
-        return 1.0
+        return 1.0, 1.0, 1.0
+    side = 1.0
     if w[0] * nx + w[1] * ny + w[2] * nz <= 0.0:
-        return 0.0
-    ox = x + it.eps * nx
-    oy = y + it.eps * ny
-    oz = z + it.eps * nz
-    _t, f = enter_shell(it.scene, ox, oy, oz, w[0], w[1], w[2], it.eps, np.inf)
-    if f >= 0:
-        return 0.0
+        if not it.below:
+            return 0.0, 0.0, 0.0
+        ok, x, y, z, nx, ny, nz = base_point(it.top, u, v)
+        side = -1.0
+    ox = x + side * it.eps * nx
+    oy = y + side * it.eps * ny
+    oz = z + side * it.eps * nz
+    v0 = 1.0
+    v1 = 1.0
+    v2 = 1.0
+    tmin = it.eps
+    for layer in range(MAX_LAYERS + 1):
+        t, f = enter_shell(it.scene, ox, oy, oz, w[0], w[1], w[2], tmin, np.inf)
+        if f < 0:
+            break
+        if it.layer_tau.shape[0] == 0 or layer == MAX_LAYERS:
+            return 0.0, 0.0, 0.0
+        a0, a1, a2 = _layer_transmittance(it, f, t, ox, oy, oz, w)
+        v0 *= a0
+        v1 *= a1
+        v2 *= a2
+        tmin = t + it.eps
     if ground_intersect(it.ground, it.has_ground, oz, w[2], it.eps) < np.inf:
-        return 0.0
-    return 1.0
+        return 0.0, 0.0, 0.0
+    return v0, v1, v2
 
 
 MAX_SH_ORDER = 8                  # the IIRTF's largest SH order (precompute iirtf --order)
@@ -286,28 +343,30 @@ def prt_radiance(it, o, d, seed, key):
             # the lobe's global visibility: one shadow ray towards a direction sampled from it
             _lr, _lg, _lb, pl, _delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base + 4),
                                                           uniform(seed, key, base + 5), wl)
-            vglo = 0.0
+            vg0 = vg1 = vg2 = 0.0
             if it.terms & SINGLE and pl > 0.0:
                 rays += 1
-                vglo = global_visibility(it, u, v, wl)
-            if vglo > 0.0:
+                vg0, vg1, vg2 = global_visibility(it, u, v, wl)
+            if vg0 > 0.0 or vg1 > 0.0 or vg2 > 0.0:
                 _to_flat(w2f, h.tet, axes_w, lf)
                 g0, g1, g2 = _single_scatter_sg(it, e, srow, lf, mat, tf, vf, lam)
-                L0 += P0 * g0 * vglo
-                L1 += P1 * g1 * vglo
-                L2 += P2 * g2 * vglo
+                L0 += P0 * g0 * vg0
+                L1 += P1 * g1 * vg1
+                L2 += P2 * g2 * vg2
             if it.terms & MULTI:
                 _to_flat(w2f, h.tet, axes_w, lf)
-                vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl) if pl > 0.0 else 0.0
+                vt0 = vt1 = vt2 = 0.0
+                if pl > 0.0:
+                    vt0, vt1, vt2 = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
                 rays += 1
-                if vt > 0.0:
+                if vt0 > 0.0 or vt1 > 0.0 or vt2 > 0.0:
                     if not have_frame:
                         _hit_sh_frame(it, m, tf, vf, W)
                         have_frame = True
                     m0, m1, m2 = _multi_scatter(it, mrow, lf, lam, P0, P1, P2, W)
-                    L0 += m0 * vt
-                    L1 += m1 * vt
-                    L2 += m2 * vt
+                    L0 += m0 * vt0
+                    L1 += m1 * vt1
+                    L2 += m2 * vt2
             continue
         lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond, uniform(seed, key, base),
                                                   uniform(seed, key, base + 1), wl)
@@ -323,28 +382,28 @@ def prt_radiance(it, o, d, seed, key):
             if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
                 if ssdf_at(it.svf_mean[e], it.svf_basis[e], it.svf_coeffs[srow], R_res, C_res, lf) > 0.0:
                     rays += 1
-                    if global_visibility(it, u, v, wl) > 0.0:
-                        L0 += f0 * E0
-                        L1 += f1 * E1
-                        L2 += f2 * E2
-        if it.terms & MULTI and lf[2] > 0.0:
+                    vg0, vg1, vg2 = global_visibility(it, u, v, wl)
+                    L0 += f0 * E0 * vg0
+                    L1 += f1 * E1 * vg1
+                    L2 += f2 * E2 * vg2
+        if it.terms & MULTI and (lf[2] > 0.0 or it.below):
             rays += 1
-            vt = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
-            if vt > 0.0:
+            vt0, vt1, vt2 = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
+            if vt0 > 0.0 or vt1 > 0.0 or vt2 > 0.0:
                 if not have_frame:
                     _hit_sh_frame(it, m, tf, vf, W)
                     have_frame = True
                 m0, m1, m2 = _multi_scatter(it, mrow, lf, 0.0, E0, E1, E2, W)
-                L0 += m0 * vt
-                L1 += m1 * vt
-                L2 += m2 * vt
+                L0 += m0 * vt0
+                L1 += m1 * vt1
+                L2 += m2 * vt2
     return PathSample(L0, L1, L2, 1.0, h.t, 0, rays)
 
 
 @njit(cache=True)
 def _filtered_visibility(it, seed, key, dim, u, v, w):
-    """One-sample estimate of V~_glo (§5.3.2): V_glo at a point x' drawn from the Gaussian of sigma_glo
-    around (u, v) in the flat fabric's plane."""
+    """One-sample estimate of V~_glo (§5.3.2), (r, g, b): V_glo at a point x' drawn from the Gaussian of
+    sigma_glo around (u, v) in the flat fabric's plane."""
     if it.sigma_glo > 0.0:
         r = it.sigma_glo * math.sqrt(-2.0 * math.log(1.0 - uniform(seed, key, dim)))
         a = 2.0 * math.pi * uniform(seed, key, dim + 1)
