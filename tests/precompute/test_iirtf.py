@@ -335,6 +335,22 @@ def test_black_fibres_transfer_nothing(tiny):
     assert np.all(res.a == 0.0) and np.all(res.se == 0.0) and np.all(res.rays[full] > 0)
 
 
+def _escape_fraction(tiny, k, c, seed, m=4000):
+    """(mean, standard error) of the share of uniform rays from cell c's segment midpoints (in turn) that leave
+    the slab of exemplar k without meeting a fibre (rays run at most 20 periods)."""
+    sc, cells, slabs = tiny["sc"], tiny["cells"], tiny["slabs"]
+    W = tiny["art"]["ex_period"][k][0]
+    segs = cells.cell_segments[cells.cell_offsets[c]:cells.cell_offsets[c + 1]]
+    rng = np.random.default_rng(seed)
+    g = rng.normal(size=(m, 3))
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    s = segs[np.arange(m) % len(segs)]
+    psc = periodic_scene(sc, k)
+    esc = np.array([math.isinf(periodic_hit(psc, slabs[k, 0], slabs[k, 1], *cells.seg_mid[q], *d,
+                                    int(cells.seg_fibre[q]), 20.0 * W).t) for q, d in zip(s, g)], float)
+    return esc.mean(), esc.std(ddof=1) / math.sqrt(m)
+
+
 def test_albedo_order_and_the_non_absorbing_bound(tiny):
     """Exact order: with C_R equal and C_TT = (1, 0.6, 0.3) every path's transfer is ordered r >= g >= b
     (shared directions, monotone weights), so a_00 is too, cell by cell, for both estimators. Bound
@@ -344,7 +360,7 @@ def test_albedo_order_and_the_non_absorbing_bound(tiny):
     estimated here by casting uniform rays from the cell's midpoints; and a_00 > 0. The same bound
     holds for fibres of white Lambertian surfaces (albedo 1: the opaque-surface branch, rays leaving
     off the capsule)."""
-    sc, cells, slabs = tiny["sc"], tiny["cells"], tiny["slabs"]
+    sc, cells = tiny["sc"], tiny["cells"]
     k = 1
     c = _busiest_cell(cells, k)
     W = tiny["art"]["ex_period"][k][0]
@@ -357,16 +373,7 @@ def test_albedo_order_and_the_non_absorbing_bound(tiny):
     assert np.all(a00[:, 0] >= a00[:, 1]) and np.all(a00[:, 1] >= a00[:, 2])
     i = c - (c - 3)
     assert a00[i, 0] > 0
-    segs = cells.cell_segments[cells.cell_offsets[c]:cells.cell_offsets[c + 1]]
-    m = 4000
-    rng = np.random.default_rng(7)
-    g = rng.normal(size=(m, 3))
-    g /= np.linalg.norm(g, axis=1, keepdims=True)
-    s = segs[np.arange(m) % len(segs)]
-    psc = periodic_scene(sc, k)
-    esc = np.array([math.isinf(periodic_hit(psc, slabs[k, 0], slabs[k, 1], *cells.seg_mid[q], *d,
-                                    int(cells.seg_fibre[q]), 20.0 * W).t) for q, d in zip(s, g)], float)
-    e, se_e = esc.mean(), esc.std(ddof=1) / math.sqrt(m)
+    e, se_e = _escape_fraction(tiny, k, c, 7)
     assert a00[i, 0] <= 1.0 - e + 4.0 * math.hypot(res.se[i, 0, 0, 0], se_e), (a00[i], e)
     white = pack_material_lambert([1.0, 1.0, 1.0])[None]
     lam = iirtf_chunk(sc, cells, c, c + 1, tiny["mof"], white, order=2, n_paths=1500, seed=9, max_dist=20.0 * W)
@@ -381,7 +388,7 @@ def test_white_furnace_with_light_from_both_sides(tiny):
     escapes, and a_00 = 1 - (the cell's mean escape fraction), estimated as in the bound above. Paths run
     to depth 256 (what roulette leaves of a non-absorbing path at depth 32 is not negligible). The
     paper's hemisphere keeps strictly less (the light from below is missing)."""
-    sc, cells, slabs = tiny["sc"], tiny["cells"], tiny["slabs"]
+    sc, cells = tiny["sc"], tiny["cells"]
     k = 1
     c = _busiest_cell(cells, k)
     W = tiny["art"]["ex_period"][k][0]
@@ -389,16 +396,7 @@ def test_white_furnace_with_light_from_both_sides(tiny):
     kw = dict(order=1, n_paths=1500, seed=9, max_dist=20.0 * W, max_depth=256)
     both = iirtf_chunk(sc, cells, c, c + 1, tiny["mof"], white, light_domain="sphere", light_sampling="mis", **kw)
     above = iirtf_chunk(sc, cells, c, c + 1, tiny["mof"], white, light_sampling="mis", **kw)
-    segs = cells.cell_segments[cells.cell_offsets[c]:cells.cell_offsets[c + 1]]
-    m = 4000
-    rng = np.random.default_rng(8)
-    g = rng.normal(size=(m, 3))
-    g /= np.linalg.norm(g, axis=1, keepdims=True)
-    s = segs[np.arange(m) % len(segs)]
-    psc = periodic_scene(sc, k)
-    esc = np.array([math.isinf(periodic_hit(psc, slabs[k, 0], slabs[k, 1], *cells.seg_mid[q], *d,
-                                    int(cells.seg_fibre[q]), 20.0 * W).t) for q, d in zip(s, g)], float)
-    e, se_e = esc.mean(), esc.std(ddof=1) / math.sqrt(m)
+    e, se_e = _escape_fraction(tiny, k, c, 8)
     a, se = both.a[0, 0, 0, 0], both.se[0, 0, 0, 0]
     assert abs(a - (1.0 - e)) < 4.0 * math.hypot(se, se_e), (a, 1.0 - e, se, se_e)
     assert above.a[0, 0, 0, 0] < a - 4.0 * math.hypot(se, above.se[0, 0, 0, 0]), (above.a[0, 0, 0, 0], a)
