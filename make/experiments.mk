@@ -90,13 +90,16 @@ agreement: $(AGREEMENT_INPUTS) ## fiberpath vs volpath on the demo and twill swa
 
 # --- Khungurn et al. 2017: precomputed light transport against path tracing, and its parameter studies ---
 # make prt-sweep: the damask's two exemplars each alone on a flat patch (data/tilings/flat_satin41.toml,
-# flat_satin14.toml; the exemplar only) and the draped damask, precomputed with PRT_SVF_ARGS / PRT_IIRTF_ARGS; each swept over the demo sweep's 12 lights, prt against
+# flat_satin14.toml; the exemplar only) and the draped damask, precomputed with PRT_SVF_ARGS / PRT_IIRTF_ARGS (the damask:
+# PRT_DAMASK_IIRTF_ARGS); each swept over the demo sweep's 12 lights, prt against
 # fiberpath at 16 spp (data/sweeps/prt_*.toml), then split into single and multiple scattering
 # (loomlight study prt-terms). make prt-study: Khungurn et al. 2017 §6.1's cell-size and SH-order strips on one cheap
 # exemplar (data/studies/prt_params.toml). The sweep files name these paths (out/prt).
 PRT_SWEEPS := flat41 flat14 damask
 PRT_SVF_ARGS ?= --resolution 128 --components 48
 PRT_IIRTF_ARGS ?= --order 4 --cell-factor 1.5 --paths 200 --light-sampling mis
+# the draped damask also holds light from below (its hanging sides under the low light; docs/methods/prt.md)
+PRT_DAMASK_IIRTF_ARGS ?= $(PRT_IIRTF_ARGS) --light-domain sphere
 PRT_EXEMPLAR_41 := 0
 PRT_EXEMPLAR_14 := 1
 
@@ -116,7 +119,7 @@ $(PRT)/damask_svf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(wildcard
 	$(LL) precompute svf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_svf.zarr $(PRT_SVF_ARGS)
 
 $(PRT)/damask_iirtf.zarr/zarr.json: $(PRT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py
-	$(LL) precompute iirtf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_iirtf.zarr $(PRT_IIRTF_ARGS)
+	$(LL) precompute iirtf $(PRT)/damask_tiling.zarr -o $(PRT)/damask_iirtf.zarr $(PRT_DAMASK_IIRTF_ARGS)
 
 .PRECIOUS: $(PRT)/damask_%.zarr/zarr.json $(PRT)/flat%_tiling.zarr/zarr.json $(PRT)/flat%_svf.zarr/zarr.json $(PRT)/flat%_iirtf.zarr/zarr.json
 
