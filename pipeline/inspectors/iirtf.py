@@ -130,7 +130,7 @@ def _figure(plt, art, size, exemplar):
     ax.set_title("mean fluence per layer (the top row shows it per cell)")
     ax.grid(alpha=0.3)
     g = f"exemplar_{k}/"
-    has_tau = (g + "layer_tau") in art
+    has_tau = "layer_bins" in art.summary   # IIRTFs made before 2026-12-07 have no layer transmittance
     right = gs[1, ncol // 2 + 1:].subgridspec(2 if has_tau else 1, 1)
     ax = fig.add_subplot(right[0])
     energy = []

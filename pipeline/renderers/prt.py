@@ -127,7 +127,7 @@ def load_prt(scene, tiling_path, svf_path, iirtf_path, options):
     for e in ii.summary["exemplars"]:
         k = e["exemplar"]
         g = f"exemplar_{k}/"
-        if (g + "layer_tau") in ii:
+        if "layer_bins" in ii.summary:   # the shapes checked on reading (pipeline.artifact_checks)
             tau = ii[g + "layer_tau"]
             if layer_tau is None:
                 layer_tau = np.ones((K, *tau.shape))

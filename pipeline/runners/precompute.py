@@ -467,9 +467,9 @@ def _nonempty(cells, k):
 
 
 def iirtf_work(p: IirtfParams, n_exemplars: int, stored_cells: int, threads: int):
-    """The least time of the mean free paths, the layer transmittance and the transfer matrices (``WorkEstimate``);
-    before the
-    cells are known, ``stored_cells`` = the exemplars (each stores at least one cell)."""
+    """The least time of the mean free paths, the layer transmittance and the transfer matrices
+    (``WorkEstimate``); before the cells are known, ``stored_cells`` = the exemplars (each stores at least
+    one cell)."""
     from ..limits import WorkEstimate
 
     est = WorkEstimate("loomlight precompute iirtf", threads)

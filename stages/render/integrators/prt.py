@@ -9,7 +9,10 @@ Single scattering (§5.2), per light:
 - directional (§5.2.1): E S(w_d, w_o) cos(theta_d) V_loc V_glo, with V_loc the sign of segment k's
   PCA-reconstructed SSDF at w_d (``stages.core.svf.ssdf_at``, bilinear) and V_glo a shadow ray from
   x_, the top-surface point of the shell above x (``stages.core.shell.top``), against the shell's
-  boundary (the cloth as a macroscopic solid: other folds) and the ground;
+  boundary (the paper: the cloth as a macroscopic solid, other folds block) and the ground; here, where
+  the IIRTF carries its exemplars' layer transmittance (``stages.precompute.layer``), each fold the
+  shadow ray enters passes that share of the light, RGB, read at the ray's angle in the fold's flat
+  space (translucent folds: the shadowed side of a drape is lit through the fold in front);
 - SG, constant and environment lights, version (a) "mc" (§5.2.1 "Generalization"): the light is
   sampled into one direction w per light and camera sample (``light_sample``: an SG exactly) and
   shaded as a directional light of irradiance L(w) / p(w);
@@ -44,7 +47,8 @@ light (2 light sample, 2 Gaussian offset, 2 lobe sample for the analytic SG's sh
 
 ``PrtIntegrator`` fields: see the namedtuple; ``terms`` bit 1 single, bit 2 multi (0: fibre hits stay
 black, which times the eye rays alone); ``sg_mode`` 0 mc, 1 analytic; ``below`` True when the IIRTF
-holds light from below (above).
+holds light from below (see above); ``layer_tau`` (K, 2, NB, 3) the exemplars' layer transmittance
+(``stages.core.layer``), (0, 2, 1, 3) for an IIRTF without one.
 """
 import math
 from collections import namedtuple
