@@ -45,6 +45,7 @@ def sh_window(kind: str, order: int) -> np.ndarray:
         return np.sinc(x / np.pi)
     return np.ones_like(x)
 SG_MODES = {"mc": 0, "analytic": 1}
+MS_INCIDENCE = {"local": False, "filtered": True}
 
 
 def _check_precompute(art_path, kind, tiling_path, tiling_id):
@@ -196,10 +197,11 @@ def film_setup(scene, options: dict):
                           arr["seg_row"], arr["transfer"], arr["order"], quarter_turn_x(arr["order"]),
                           arr["cs_table"], arr["mat_cs"],
                           flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]), arr["below"],
-                          arr["layer_tau"])
+                          arr["layer_tau"], MS_INCIDENCE[extra.get("ms_incidence", "local")])
     stats = {"load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"), "sh_window": window,
              "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"]),
-             "light_from_below": arr["below"], "translucent_layers": bool(arr["layer_tau"].shape[0] > 0)}
+             "light_from_below": arr["below"], "ms_incidence": extra.get("ms_incidence", "local"),
+             "translucent_layers": bool(arr["layer_tau"].shape[0] > 0)}
     return FilmSetup("prt", integ, cam, VARIANCE_CHANNELS, stats)
 
 

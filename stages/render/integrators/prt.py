@@ -30,6 +30,11 @@ of §4.3 (x = the fibre tangent, the view in the xy-plane; applied to c_S instea
 BCSDF's SH table at theta_o (``stages.core.shading.bcsdf_sh``), and V~_glo the global visibility
 filtered by a 2D Gaussian of sigma_glo in the flat fabric's plane, estimated as the paper's CPU version
 does: one shadow ray from the top surface above a point x' drawn from the Gaussian around x.
+With ``ms_incidence`` (``--set ms_incidence=filtered``, not the paper's) the light's flat direction for
+multiple scattering is also taken at x' (``_incidence_at_offset``: tilted by the change of the top
+surface's normal from x to x'): a cell's transfer holds for light falling evenly around it, and where the
+incidence changes fast across the cloth (a curved drape's terminator) the fibres carry light sideways
+from where it falls steeply into where it grazes. On flat cloth it changes nothing.
 Light from below the fabric's plane (in flat space): an IIRTF precomputed for light from above (the
 paper's, §4.2) adds no multiple scattering for it, and V_glo is 0 for it (the shadow ray leaves through
 the top surface). An IIRTF precomputed for light from both sides (``precompute iirtf --light-domain
@@ -77,7 +82,7 @@ PrtIntegrator = namedtuple("PrtIntegrator", [
     "scene", "top", "mat_of_fiber", "mats", "lights", "ground", "has_ground", "ground_mat",
     "svf_row", "svf_mean", "svf_basis", "svf_coeffs", "svf_res", "sg_angle", "sg_weights", "lam_svf",
     "seg_row", "transfer", "order", "quarter_turn", "cs_table", "mat_cs",
-    "flat_size", "sigma_glo", "terms", "sg_mode", "eps", "below", "layer_tau"])
+    "flat_size", "sigma_glo", "terms", "sg_mode", "eps", "below", "layer_tau", "ms_incidence"])
 
 SINGLE = 1
 MULTI = 2
@@ -390,10 +395,12 @@ def prt_radiance(it, o, d, seed, key):
                     L0 += f0 * E0 * vg0
                     L1 += f1 * E1 * vg1
                     L2 += f2 * E2 * vg2
-        if it.terms & MULTI and (lf[2] > 0.0 or it.below):
+        if it.terms & MULTI and (lf[2] > 0.0 or it.below or it.ms_incidence):
             rays += 1
             vt0, vt1, vt2 = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
-            if vt0 > 0.0 or vt1 > 0.0 or vt2 > 0.0:
+            if it.ms_incidence:
+                _incidence_at_offset(it, seed, key, base + 2, u, v, wl, lf)
+            if (vt0 > 0.0 or vt1 > 0.0 or vt2 > 0.0) and (lf[2] > 0.0 or it.below):
                 if not have_frame:
                     _hit_sh_frame(it, m, tf, vf, W)
                     have_frame = True
@@ -414,6 +421,34 @@ def _filtered_visibility(it, seed, key, dim, u, v, w):
         u = u + r * math.cos(a) / it.flat_size[0]
         v = v + r * math.sin(a) / it.flat_size[1]
     return global_visibility(it, u, v, w)
+
+
+@njit(cache=True)
+def _incidence_at_offset(it, seed, key, dim, u, v, w, lf):
+    """``ms_incidence``: the light's flat direction ``lf`` tilted to the incidence it has at the Gaussian's point
+    x' (the same draw as ``_filtered_visibility``): its z moved by w . n(x') - w . n(x) of the top surface's
+    normals, its azimuth kept; multiple scattering then gathers the light falling around x, not at x alone."""
+    if it.sigma_glo <= 0.0:
+        return
+    r = it.sigma_glo * math.sqrt(-2.0 * math.log(1.0 - uniform(seed, key, dim)))
+    a = 2.0 * math.pi * uniform(seed, key, dim + 1)
+    ok0, _x, _y, _z, nx, ny, nz = top_point(it.top, u, v)
+    ok1, _x, _y, _z, mx, my, mz = top_point(it.top, u + r * math.cos(a) / it.flat_size[0],
+                                            v + r * math.sin(a) / it.flat_size[1])
+    if not (ok0 and ok1):
+        return
+    dz = (w[0] * mx + w[1] * my + w[2] * mz) - (w[0] * nx + w[1] * ny + w[2] * nz)
+    if dz == 0.0:
+        return
+    z = min(max(lf[2] + dz, -1.0), 1.0)
+    h = math.sqrt(lf[0] * lf[0] + lf[1] * lf[1])
+    s = math.sqrt(max(0.0, 1.0 - z * z))
+    if h > 0.0:
+        lf[0] *= s / h
+        lf[1] *= s / h
+    else:
+        lf[0] = s
+    lf[2] = z
 
 
 # stages.render.tiles.tile_kernel: prt_radiance takes no references, so the tile loop need not either
