@@ -15,6 +15,7 @@ import pytest
 from stages.core.layer import FROM_ABOVE, FROM_BELOW, tau_at
 from stages.core.shell.top import base_point, top_point
 from stages.render.integrators.prt import MAX_LAYERS, global_visibility
+from tests.render.test_prt import DIRECTIONAL, SCENE
 
 TILING = """
 seed = 5
@@ -40,38 +41,8 @@ length = 1.0
 resolution = [24, 4]
 """
 
-SCENE = """
-[scene]
-name = "prt-tube"
-[fabric]
-source = "generator"
-[fabric.generator]
-kind = "woven"
-pattern = "plain"
-ends = 2
-picks = 2
-spacing = 0.1
-yarn_radius = 0.045
-[yarns.warp]
-preset = "cotton1"
-color = [0.80, 0.76, 0.66]
-bcsdf = "cotton"
-[yarns.weft]
-preset = "cotton1"
-color = [0.16, 0.24, 0.52]
-bcsdf = "cotton"
-[camera]
-origin = [0.0, 3.0, 0.5]
-target = [0.0, 0.0, 0.5]
-up = [0.0, 0.0, 1.0]
-fov = 40.0
-width = 8
-height = 8
-[[lights]]
-type = "directional"
-direction = [0.0, -1.0, 0.0]
-irradiance = 1.0
-"""
+# the prt swatch's scene (yarn materials, a light); only its integrator is built here, so its camera does not matter
+TUBE_SCENE = SCENE.format(lights=DIRECTIONAL.format(d="0.0, -1.0, 0.0"), weft_bcsdf="cotton")
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +53,7 @@ def tube(tmp_path_factory):
 
     d = tmp_path_factory.mktemp("prt_tube")
     (d / "tiling.toml").write_text(TILING)
-    (d / "scene.toml").write_text(SCENE)
+    (d / "scene.toml").write_text(TUBE_SCENE)
     for args in (["tile", d / "tiling.toml", "-o", d / "tiling.zarr"],
                  ["precompute", "svf", d / "tiling.zarr", "-o", d / "svf.zarr", "--resolution", "8", "--components",
                   "2", "--threads", "2"],

@@ -416,11 +416,17 @@ def _filtered_visibility(it, seed, key, dim, u, v, w):
     """One-sample estimate of V~_glo (§5.3.2), (r, g, b): V_glo at a point x' drawn from the Gaussian of
     sigma_glo around (u, v) in the flat fabric's plane."""
     if it.sigma_glo > 0.0:
-        r = it.sigma_glo * math.sqrt(-2.0 * math.log(1.0 - uniform(seed, key, dim)))
-        a = 2.0 * math.pi * uniform(seed, key, dim + 1)
-        u = u + r * math.cos(a) / it.flat_size[0]
-        v = v + r * math.sin(a) / it.flat_size[1]
+        u, v = _gaussian_point(it, seed, key, dim, u, v)
     return global_visibility(it, u, v, w)
+
+
+@njit(cache=True)
+def _gaussian_point(it, seed, key, dim, u, v):
+    """(u', v'): x' drawn from the 2D Gaussian of sigma_glo around (u, v) in the flat fabric's plane (Box-Muller
+    from the uniforms of dimensions dim, dim + 1), for V~_glo and the filtered incidence alike."""
+    r = it.sigma_glo * math.sqrt(-2.0 * math.log(1.0 - uniform(seed, key, dim)))
+    a = 2.0 * math.pi * uniform(seed, key, dim + 1)
+    return u + r * math.cos(a) / it.flat_size[0], v + r * math.sin(a) / it.flat_size[1]
 
 
 @njit(cache=True)
@@ -430,11 +436,9 @@ def _incidence_at_offset(it, seed, key, dim, u, v, w, lf):
     normals, its azimuth kept; multiple scattering then gathers the light falling around x, not at x alone."""
     if it.sigma_glo <= 0.0:
         return
-    r = it.sigma_glo * math.sqrt(-2.0 * math.log(1.0 - uniform(seed, key, dim)))
-    a = 2.0 * math.pi * uniform(seed, key, dim + 1)
+    u1, v1 = _gaussian_point(it, seed, key, dim, u, v)
     ok0, _x, _y, _z, nx, ny, nz = top_point(it.top, u, v)
-    ok1, _x, _y, _z, mx, my, mz = top_point(it.top, u + r * math.cos(a) / it.flat_size[0],
-                                            v + r * math.sin(a) / it.flat_size[1])
+    ok1, _x, _y, _z, mx, my, mz = top_point(it.top, u1, v1)
     if not (ok0 and ok1):
         return
     dz = (w[0] * mx + w[1] * my + w[2] * mz) - (w[0] * nx + w[1] * ny + w[2] * nz)
