@@ -34,9 +34,10 @@ EVAL_SPP ?= 8
 # 64x64 (the paper: 128x128), 48 PCA components; IIRTF at cells of 3 mean free paths (the paper: 1-2),
 # 200 paths per cell (the paper: 50,000) with the MIS estimator, SH order 4. make prt-sweep uses the
 # paper's SVF and cells of 1.5 mean free paths (PRT_SVF_ARGS, PRT_IIRTF_ARGS): 3.5 points less error
-# against fiberpath than cells of 3 (README: Rendering with precomputed transport), 3x the paths.
+# against fiberpath than cells of 3 (README: Rendering with precomputed transport), 3x the paths. The IIRTF holds
+# light from below the cloth too (the paper's extension to bottom surfaces: the drape's hanging sides).
 SVF_ARGS ?= --resolution 64 --components 48
-IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis
+IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis --light-domain sphere
 
 # Daubert et al. 2001 in the demo: the damask's ground exemplar fitted as a cloth texture, reduced (the defaults: 32 x 32
 # texels, 8x8 views and lights, 16 rays) and dressed on the draped cloth
@@ -119,7 +120,7 @@ QUICK_OUT ?= out/quick
 demo-quick: ## the demo at small sizes and reduced precomputes, a first look (out/quick)
 	@$(MAKE) --no-print-directory demo OUT=$(QUICK_OUT) DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
 	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
-	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis" \
+	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis --light-domain sphere" \
 	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4 --model tabulated" \
 	    FIT_ARGS="--width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3"
 
@@ -319,13 +320,14 @@ $(COMPARE_IN)/twill_yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed $(AR
 $(COMPARE_IN)/twill_fibers.zarr/zarr.json: $(COMPARE_IN)/twill_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(COMPARE_IN)/twill_yarns.zarr -o $(COMPARE_IN)/twill_fibers.zarr
 
-# the draped damask's precompute at the prt sweep's settings (PRT_SVF_ARGS, PRT_IIRTF_ARGS: SVF 128, IIRTF cells of
-# 1.5 mean free paths) beside make demo's reduced one: data/compare/damask.toml compares both
+# the draped damask's precompute at the prt sweep's settings (PRT_SVF_ARGS, PRT_DAMASK_IIRTF_ARGS: SVF 128, IIRTF
+# cells of 1.5 mean free paths, light from both sides) beside make demo's reduced one: data/compare/damask.toml
+# compares both
 $(COMPARE_IN)/damask_svf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
 	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_svf_full.zarr $(PRT_SVF_ARGS)
 
 $(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py
-	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_iirtf_full.zarr $(PRT_IIRTF_ARGS)
+	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_iirtf_full.zarr $(PRT_DAMASK_IIRTF_ARGS)
 
 $(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/scenes/knit_swatch.toml $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile data/tilings/knit_swatch.toml -o $(COMPARE_IN)/knit_tiling.zarr

@@ -167,9 +167,9 @@ METHODS = {m.name: m for m in (
                                        "visibility, flat-fabric units (default: the exemplar thickness)"),
                   Setting("sh_window", "none (default), hann or lanczos: a window on the IIRTF's SH bands "
                                        "against ringing", ("none", "hann", "lanczos")),
-                  Setting("ms_incidence", "local (default): multiple scattering from the light's incidence at the "
-                                          "hit; filtered: at the Gaussian's point of sigma_glo (light gathered "
-                                          "around the hit, as on a curved cloth's terminator)",
+                  Setting("ms_incidence", "filtered (default): multiple scattering from the light's incidence at the "
+                                          "Gaussian's point of sigma_glo (light gathered around the hit, as on a "
+                                          "curved cloth's terminator); local: at the hit (the paper's)",
                           ("local", "filtered")),
                   Setting("tint", "yarn (default) or none, as fiberpath (must match the IIRTF's materials)",
                           ("yarn", "none")))),

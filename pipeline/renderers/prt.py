@@ -46,6 +46,7 @@ def sh_window(kind: str, order: int) -> np.ndarray:
     return np.ones_like(x)
 SG_MODES = {"mc": 0, "analytic": 1}
 MS_INCIDENCE = {"local": False, "filtered": True}
+MS_INCIDENCE_DEFAULT = "filtered"   # flat cloth renders the same bytes either way (tests/render/test_prt.py)
 
 
 def _check_precompute(art_path, kind, tiling_path, tiling_id):
@@ -182,6 +183,7 @@ def film_setup(scene, options: dict):
     terms = TERMS[extra.get("terms", "all")]
     sg_mode = SG_MODES[extra.get("sg", "mc")]
     window = extra.get("sh_window", "none")
+    incidence = extra.get("ms_incidence", MS_INCIDENCE_DEFAULT)
     w = sh_window(window, arr["order"])
     if window != "none":
         arr["transfer"] = np.ascontiguousarray(arr["transfer"]
@@ -197,10 +199,10 @@ def film_setup(scene, options: dict):
                           arr["seg_row"], arr["transfer"], arr["order"], quarter_turn_x(arr["order"]),
                           arr["cs_table"], arr["mat_cs"],
                           flat_size, sigma, terms, sg_mode, ray_eps(*art.summary["bounds"]), arr["below"],
-                          arr["layer_tau"], MS_INCIDENCE[extra.get("ms_incidence", "local")])
+                          arr["layer_tau"], MS_INCIDENCE[incidence])
     stats = {"load_s": load_s, "terms": extra.get("terms", "all"), "sg": extra.get("sg", "mc"), "sh_window": window,
              "sigma_glo": sigma, "sh_order": arr["order"], "exemplars": int(art.summary["exemplars"]),
-             "light_from_below": arr["below"], "ms_incidence": extra.get("ms_incidence", "local"),
+             "light_from_below": arr["below"], "ms_incidence": incidence,
              "translucent_layers": bool(arr["layer_tau"].shape[0] > 0)}
     return FilmSetup("prt", integ, cam, VARIANCE_CHANNELS, stats)
 

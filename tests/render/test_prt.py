@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from pipeline.artifacts import read_meta
+from pipeline.artifacts import Artifact, read_meta
 from pipeline.images import read_exr
 from pipeline.limits import FULL_TRANSPORT_DEPTH
 from stages.core.sg import sg_mass, spherical_fibonacci_axes
@@ -284,15 +284,18 @@ def test_light_from_below_with_a_two_sided_iirtf(swatch):
 
 
 def test_filtered_incidence_changes_nothing_on_flat_cloth(swatch):
-    """Contract: ``--set ms_incidence=filtered`` tilts the light's flat direction by the change of the top
-    surface's normal between the hit and the Gaussian's point; on a flat tiling the normals are all equal, so
-    the picture is the same bytes as with the local incidence (same random numbers: the tilt draws the same
-    point as the filtered visibility)."""
+    """Contract: multiple scattering from the filtered incidence (the default, ``ms_incidence=filtered``) tilts
+    the light's flat direction by the change of the top surface's normal between the hit and the Gaussian's
+    point; on a flat tiling the normals are all equal, so the picture is the same bytes as with the paper's
+    local incidence (``--set ms_incidence=local``; same random numbers: the tilt draws the same point as the
+    filtered visibility). The render records which it used."""
     scene = swatch.scene(DIRECTIONAL.format(d=LIGHT_2))
     args = [*swatch.prt_args(), "--spp", "4", "--width", "32", "--height", "24"]
-    local, _ = swatch.render(scene, *args)
-    filtered, _ = swatch.render(scene, *args, "--set", "ms_incidence=filtered")
-    assert local.max() > 0 and np.array_equal(local, filtered)
+    default, _ = swatch.render(scene, *args)
+    assert Artifact(swatch.d / f"r{swatch.n}.zarr").summary["method_stats"]["ms_incidence"] == "filtered"
+    local, _ = swatch.render(scene, *args, "--set", "ms_incidence=local")
+    assert Artifact(swatch.d / f"r{swatch.n}.zarr").summary["method_stats"]["ms_incidence"] == "local"
+    assert default.max() > 0 and np.array_equal(local, default)
 
 
 # ------------------------------------------------------------------------------------------------ sum of SGs

@@ -30,11 +30,11 @@ of §4.3 (x = the fibre tangent, the view in the xy-plane; applied to c_S instea
 BCSDF's SH table at theta_o (``stages.core.shading.bcsdf_sh``), and V~_glo the global visibility
 filtered by a 2D Gaussian of sigma_glo in the flat fabric's plane, estimated as the paper's CPU version
 does: one shadow ray from the top surface above a point x' drawn from the Gaussian around x.
-With ``ms_incidence`` (``--set ms_incidence=filtered``, not the paper's) the light's flat direction for
-multiple scattering is also taken at x' (``_incidence_at_offset``: tilted by the change of the top
-surface's normal from x to x'): a cell's transfer holds for light falling evenly around it, and where the
-incidence changes fast across the cloth (a curved drape's terminator) the fibres carry light sideways
-from where it falls steeply into where it grazes. On flat cloth it changes nothing.
+With ``ms_incidence`` (``ms_incidence=filtered``, the renderer's default; ``local`` is the paper's) the
+light's flat direction for multiple scattering is also taken at x' (``_incidence_at_offset``: tilted by the
+change of the top surface's normal from x to x'): a cell's transfer holds for light falling evenly around
+it, and where the incidence changes fast across the cloth (a curved drape's terminator) the fibres carry
+light sideways from where it falls steeply into where it grazes. On flat cloth it changes nothing.
 Light from below the fabric's plane (in flat space): an IIRTF precomputed for light from above (the
 paper's, §4.2) adds no multiple scattering for it, and V_glo is 0 for it (the shadow ray leaves through
 the top surface). An IIRTF precomputed for light from both sides (``precompute iirtf --light-domain
