@@ -15,22 +15,10 @@ import pytest
 from stages.core.layer import FROM_ABOVE, FROM_BELOW, tau_at
 from stages.core.shell.top import base_point, top_point
 from stages.render.integrators.prt import MAX_LAYERS, global_visibility
-from tests.render.test_prt import DIRECTIONAL, SCENE
+from tests.render.test_prt import DIRECTIONAL, SCENE, TILING as SWATCH_TILING
 
-TILING = """
-seed = 5
-[yarn]
-fibers_per_ply = 1
-[weave]
-spacing = [0.1, 0.1]
-[[exemplars]]
-name = "plain"
-pattern = "plain"
-[[exemplars]]
-name = "satin"
-pattern = "satin"
-n = 5
-[tiling]
+# the prt swatch's two exemplars, wrapped round the tube
+TILING = SWATCH_TILING[:SWATCH_TILING.index("[tiling]")].format(seed=5, fibers=1) + """[tiling]
 repeat = [6, 2]
 block_map = [[0, 1], [1, 0]]
 [surface]
