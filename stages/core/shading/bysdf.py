@@ -80,6 +80,22 @@ the interface twice and lost beta's complement of F).
   conservation the paper states as the reason for the mix. The reference weights the two by the
   normalised (cos_i + cos_o); here the weight is the constant LS_MIX, which keeps f reciprocal and the
   albedo in closed form. The cosine-weighted sampler about n has weight f cos / (cos_o / pi).
+- f_cone, the cone part of the body reflection (an extension, off by default: CONE_SHARE c = 0 is the paper's
+  model): the reflection side's body term is (1 - c) f_bR + c f_cone. Every lobe of a fibre's scattering
+  leaves on the cone theta_o = -theta_i about the fibre (Marschner et al. 2003; the BCSDF of the fibre
+  methods), so light scattered many times among parallel fibres keeps its propagation's component along
+  them and a bundle returns it around the cone u_o = -u_i (u = direction . t), not evenly. With phi_o the
+  azimuth of wo about t measured from n (t is orthogonal to n: cos_o = sqrt(1 - u_o^2) cos phi_o):
+      f_cone cos = A_bR(mu_i) g(u_o) cos(phi_o) / 2,
+  g the logistic density of scale CONE_WIDTH about -u_i, truncated to [-1, 1]; A_bR = ``body_reflect_albedo``.
+  Its albedo is A_bR(mu_i) exactly -- it moves the body reflection's light towards the cone and neither adds
+  nor loses any -- and it is sampled exactly (u_o by the truncated logistic's inverse CDF, sin phi_o
+  uniform), weight A_bR. Normalised per incident direction it is not reciprocal; the reciprocal form
+  f ~ g(u_i + u_o) returns light in proportion to cos theta_i and loses what arrives along the fibres.
+  Why (issue 53; docs/methods/bysdf.md, Limits): on the demo swatch at a fixed light elevation the fibres'
+  cloth is up to 2x brighter with the camera near the light's cone than away from it, which f_bR alone
+  cannot follow; fitted with c 0.6 and width 0.2 the swatch under its own lights comes within 10 % instead
+  of 15-19 % dark.
 - f_bT, body transmission at y (Eq. 5): Lambertian on the outside of the exit point,
   f cos = BODY_T / pi * max(0, wo.n_y), cosine-weighted sampling about n_y (it does not depend on d).
 - S (at x) and S_y (at y) are the ply-shadowing times fibre-shadowing values of §5 (the integrator's
@@ -116,7 +132,8 @@ the Fresnel term") -- and divides by it (or by 1 - P_R for the transmission side
 the GGX-sampled lobe or the cosine-sampled ones with probability proportional to their energy estimates:
     reflection side:   beta mean(KS) F(wi.n)   vs  beta mean(KS) r (1 - E) + (1-beta) m_r S mean(albedo of f_bR)
     transmission side: beta A KT E_T(d.n_y)    vs  beta A KT (1 - E_T(d.n_y)) + (1-beta)(1-m_r) A_d S_y mean(BODY_T)
-(A: the specular path's weight since x)
+(A: the specular path's weight since x; on the reflection side the second group's f_cone, a share
+c (1-beta) m_r S mean(albedo of f_bR) of its energy, is drawn by its own sampler with that probability)
 (positive for every lobe with nonzero energy); the returned pdf is the lobe mixture's and the weight
 is f cos / pdf of the side. A side whose lobes all carry zero energy returns zeros and pdf 0.
 
@@ -125,7 +142,7 @@ are 3-tuples, so nothing here allocates and the integrator may call it without r
 -------------------------------------------------------------------------
     reflect_probability(p, wi, n) -> P_R
     reflect_eval_pdf(p, t, n, wi, wo, shadow) -> BysdfValue(r, g, b, pdf)
-        beta f_sR + (1-beta) m_r shadow f_bR (f cos); pdf of reflect_sample
+        beta f_sR + (1-beta) m_r shadow ((1-c) f_bR + c f_cone) (f cos); pdf of reflect_sample
     reflect_sample(p, t, n, wi, shadow, u0, u1, u2) -> BysdfSample(wo, r, g, b, pdf)   weight f cos / pdf
     enter_sample(p, t, n, wi, u1, u2) -> EnterSample(d, weight, pdf)                    T_x, scalar weight
     enter_eval_pdf(p, t, n, wi, d) -> (value, pdf)                                      value = weight * pdf
@@ -138,6 +155,7 @@ and each lobe alone (value without beta, m_r, S, A; colours included):
     spec_reflect_eval_pdf(p, t, n, wi, wo) / spec_reflect_sample(p, t, n, wi, u1, u2)       KS f_sR
     spec_exit_eval_pdf(p, t_y, n_y, d, wo) / spec_exit_sample(p, t_y, n_y, d, u1, u2)      KT f_sT
     body_reflect_eval_pdf(p, n, wi, wo) / body_reflect_sample(p, n, wi, u1, u2)            f_bR
+    cone_reflect_eval_pdf(p, t, n, wi, wo) / cone_reflect_sample(p, t, n, wi, u1, u2)      f_cone
     body_exit_eval_pdf(p, n_y, wo) / body_exit_sample(p, n_y, u1, u2)                      f_bT
     ms_reflect_eval_pdf(p, t, n, wi, wo)                            KS f_ms (sampled by the side, cosine)
 and the energy tables: energy_tables(eta, alpha_exit), interface_albedos(alpha, eta, mu, n_quad),
@@ -158,6 +176,7 @@ Parameters, packed (float64[BYSDF_SIZE]: N_PARAMS named values, then the energy 
     BODY_R_R..B reflection-side body colour a' ((0.045, 0.015, 0))
     BODY_T_R..B transmission-side body colour (six times BODY_R)
     SIGMA_SPEC (5.5)   SIGMA_BODY (0.1)   LS_MIX Lommel-Seeliger weight of f_bR (0.5)
+    CONE_SHARE c, f_cone's share of the body reflection (0)   CONE_WIDTH its logistic scale in u (0.3)
 """
 import functools
 import math
@@ -190,7 +209,9 @@ BODY_T_R, BODY_T_G, BODY_T_B = 13, 14, 15
 SIGMA_SPEC = 16
 SIGMA_BODY = 17
 LS_MIX = 18
-N_PARAMS = 19             # the named parameters; the energy tables follow them in the packed row
+CONE_SHARE = 19           # the share of f_bR that leaves on the fibres' cone (f_cone; 0: the paper's model)
+CONE_WIDTH = 20           # f_cone's logistic scale in u = direction . t
+N_PARAMS = 21             # the named parameters; the energy tables follow them in the packed row
 
 # the rough dielectrics' single-scattering albedos (the energy compensation's inputs), packed after the
 # parameters by ``pack_bysdf`` (``energy_tables``): at x over (roughness, mu), at y over mu
@@ -210,6 +231,8 @@ ALPHA_MIN = 1e-4          # smallest GGX roughness (smaller values are clamped)
 LOSS_MIN = 1e-9           # an interface that loses less energy than this gets no compensation
 TANGENT_ALONG_NORMAL = 1e-9   # shading_frame: a tangent whose part normal to n is shorter is replaced
 MU_FLOOR = 1e-4           # the energy tables' grazing node is computed at this cosine
+ALONG_FIBRE = 1e-12       # f_cone: a direction with 1 - u^2 below this lies along t (no azimuth): density 0
+CDF_MIN = 1e-16           # f_cone's inverse CDF: the drawn probability kept in [CDF_MIN, 1 - CDF_MIN] (finite u)
 P_R_MIN, P_R_MAX = 0.05, 0.95
 INV_PI = 1.0 / math.pi
 
@@ -222,7 +245,7 @@ BODY_R_DEFAULT = (0.045, 0.015, 0.0)
 
 def pack_bysdf(*, spec_weight=0.5, reflect_weight=0.5, alpha_u=0.2, alpha_v=0.3, eta=1.5, ks=1.0,
                alpha_exit=0.9, kt_exit=0.1, body_r=BODY_R_DEFAULT, body_t=tuple(6.0 * c for c in BODY_R_DEFAULT),
-               sigma_spec=5.5, sigma_body=0.1, ls_mix=0.5):
+               sigma_spec=5.5, sigma_body=0.1, ls_mix=0.5, cone_share=0.0, cone_width=0.3):
     """float64[BYSDF_SIZE] from named values (colours: a scalar or three values), the energy tables of its
     eta and alpha_exit after them (``energy_tables``, computed once per pair). Raises ValueError
     naming the parameter for a value outside its range: weights and colours in [0, 1], roughness
@@ -252,6 +275,8 @@ def pack_bysdf(*, spec_weight=0.5, reflect_weight=0.5, alpha_u=0.2, alpha_v=0.3,
     p[SIGMA_SPEC] = scalar("sigma_spec", sigma_spec, 0.0, math.inf)
     p[SIGMA_BODY] = scalar("sigma_body", sigma_body, 0.0, math.inf)
     p[LS_MIX] = scalar("ls_mix", ls_mix, 0.0, 1.0)
+    p[CONE_SHARE] = scalar("cone_share", cone_share, 0.0, 1.0)
+    p[CONE_WIDTH] = scalar("cone_width", cone_width, 0.0, 1e3, lo_open=True)
     p[N_PARAMS:] = _cached_energy_tables(p[ETA], p[ALPHA_EXIT])
     return p
 
@@ -676,6 +701,69 @@ def ms_reflect_eval_pdf(p, t, n, wi, wo):
 
 
 # ------------------------------------------------------------------------------------------------
+# lobe: the body reflection's cone part (module doc, f_cone)
+@njit(cache=True)
+def _logistic_cdf(z):
+    return 0.5 * (1.0 + math.tanh(0.5 * z))
+
+
+@njit(cache=True)
+def _cone_pdf(s, ui, uo, co):
+    """Solid-angle density of f_cone's sampler at a local wo with u_o = uo and cos_o = co, for u_i = ui:
+    g(u_o) cos(phi_o) / 2, g the logistic density of scale s about -u_i truncated to [-1, 1], phi_o the azimuth
+    about t from n (cos(phi_o) = co / sqrt(1 - u_o^2))."""
+    r2 = 1.0 - uo * uo
+    if r2 <= ALONG_FIBRE or co <= COS_EPS:
+        return 0.0
+    m = -ui
+    mass = _logistic_cdf((1.0 - m) / s) - _logistic_cdf((-1.0 - m) / s)
+    ch = math.cosh(0.5 * (uo - m) / s)
+    return co / (8.0 * s * ch * ch * mass * math.sqrt(r2))
+
+
+@njit(cache=True)
+def _cone_direction(s, ui, u1, u2):
+    """Local (x, y, z) drawn by ``_cone_pdf``: u_o = x by the truncated logistic's inverse CDF, sin(phi_o) = y / r
+    uniform in [-1, 1] (density cos(phi) / 2), z = r cos(phi_o) >= 0, r = sqrt(1 - u_o^2)."""
+    m = -ui
+    lo = _logistic_cdf((-1.0 - m) / s)
+    hi = _logistic_cdf((1.0 - m) / s)
+    q = min(max(lo + u1 * (hi - lo), CDF_MIN), 1.0 - CDF_MIN)
+    u = min(1.0, max(-1.0, m + s * math.log(q / (1.0 - q))))
+    sp = 2.0 * u2 - 1.0
+    r = math.sqrt(max(0.0, 1.0 - u * u))
+    return u, r * sp, r * math.sqrt(max(0.0, 1.0 - sp * sp))
+
+
+@njit(cache=True)
+def cone_reflect_eval_pdf(p, t, n, wi, wo):
+    """f_cone cos (without CONE_SHARE): BysdfValue(A_bR(mu_i) pdf per channel, pdf), A_bR = body_reflect_albedo."""
+    fr = shading_frame(t, n)
+    ix, _, mu = to_local(fr, wi)
+    ox, _, co = to_local(fr, wo)
+    if mu <= COS_EPS:
+        return BysdfValue(0.0, 0.0, 0.0, 0.0)
+    pc = _cone_pdf(p[CONE_WIDTH], ix, ox, co)
+    return BysdfValue(body_reflect_albedo(p, 0, mu) * pc, body_reflect_albedo(p, 1, mu) * pc,
+                      body_reflect_albedo(p, 2, mu) * pc, pc)
+
+
+@njit(cache=True)
+def cone_reflect_sample(p, t, n, wi, u1, u2):
+    """f_cone's exact sampler: BysdfSample(wo, A_bR(mu_i) per channel, pdf)."""
+    fr = shading_frame(t, n)
+    ix, _, mu = to_local(fr, wi)
+    x, y, z = _cone_direction(p[CONE_WIDTH], ix, u1, u2)
+    wo = to_world(fr, x, y, z)
+    if mu <= COS_EPS:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    v = cone_reflect_eval_pdf(p, t, n, wi, wo)
+    if v.pdf <= 0.0:
+        return BysdfSample(wo, 0.0, 0.0, 0.0, 0.0)
+    return BysdfSample(wo, v.r / v.pdf, v.g / v.pdf, v.b / v.pdf, v.pdf)
+
+
+# ------------------------------------------------------------------------------------------------
 # the two sides
 @njit(cache=True)
 def reflect_probability(p, wi, n):
@@ -687,55 +775,72 @@ def reflect_probability(p, wi, n):
     return min(P_R_MAX, max(P_R_MIN, beta * F + (1.0 - beta) * p[REFLECT_WEIGHT]))
 
 
+ReflectWeights = namedtuple("ReflectWeights", ["spec", "body", "p_spec", "p_cone"])
+
+
 @njit(cache=True)
 def _reflect_lobe_weights(p, en, mu, shadow):
-    """(k_spec, k_body, P_spec): lobe factors of the reflection side and the probability of its
-    GGX-sampled lobe (single scattering f_sR) against its cosine-sampled lobes (f_ms and f_bR), from
-    energy estimates at mu = wi.n (``en``: interface_energy at wi); P_spec < 0 when no lobe carries energy."""
+    """ReflectWeights(spec, body, p_spec, p_cone) of the reflection side: the factors on KS (f_sR + f_ms) and
+    on f_bR, the probability of its GGX-sampled lobe (single scattering f_sR) against the others (f_ms, f_bR's
+    diffuse part and its cone part f_cone), and, among those others, the probability of f_cone's sampler
+    against the cosine-weighted one; from energy estimates at mu = wi.n (``en``: interface_energy at wi);
+    p_spec < 0 when no lobe carries energy."""
     beta = p[SPEC_WEIGHT]
     k_s = beta
     k_b = (1.0 - beta) * p[REFLECT_WEIGHT] * max(shadow, 0.0)
     ks = (p[KS_R] + p[KS_G] + p[KS_B]) / 3.0
     e_s = k_s * ks * fresnel_dielectric(mu, p[ETA])
-    e_b = k_s * ks * en.r * max(0.0, 1.0 - en.e) + k_b * (
+    e_body = k_b * (
         body_reflect_albedo(p, 0, mu) + body_reflect_albedo(p, 1, mu) + body_reflect_albedo(p, 2, mu)) / 3.0
+    e_b = k_s * ks * en.r * max(0.0, 1.0 - en.e) + e_body
     if e_s + e_b <= 0.0:
-        return k_s, k_b, -1.0
-    return k_s, k_b, e_s / (e_s + e_b)
+        return ReflectWeights(k_s, k_b, -1.0, 0.0)
+    return ReflectWeights(k_s, k_b, e_s / (e_s + e_b), p[CONE_SHARE] * e_body / e_b if e_b > 0.0 else 0.0)
 
 
 @njit(cache=True)
 def reflect_eval_pdf(p, t, n, wi, wo, shadow):
-    """The reflection side at x: BysdfValue of beta KS (f_sR + f_ms) + (1 - beta) m_r shadow f_bR (f cos)
-    and the pdf of reflect_sample."""
+    """The reflection side at x: BysdfValue of beta KS (f_sR + f_ms) + (1 - beta) m_r shadow ((1 - c) f_bR
+    + c f_cone) (f cos, c = CONE_SHARE) and the pdf of reflect_sample."""
     fr = shading_frame(t, n)
     ix, iy, mu = to_local(fr, wi)
     if mu <= COS_EPS:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
     ei = interface_energy(p, ix, iy, mu)
-    k_s, k_b, q = _reflect_lobe_weights(p, ei, mu, shadow)
+    k = _reflect_lobe_weights(p, ei, mu, shadow)
+    k_s, k_b, q, w_c = k.spec, k.body, k.p_spec, k.p_cone
     if q < 0.0:
         return BysdfValue(0.0, 0.0, 0.0, 0.0)
     s = spec_reflect_eval_pdf(p, t, n, wi, wo)
     ox, oy, co = to_local(fr, wo)
     m = _msrough_reflect(p, ei, ox, oy, co) if co > COS_EPS else BysdfValue(0.0, 0.0, 0.0, 0.0)
     b = body_reflect_eval_pdf(p, n, wi, wo)
-    return BysdfValue(k_s * (s.r + m.r) + k_b * b.r, k_s * (s.g + m.g) + k_b * b.g, k_s * (s.b + m.b) + k_b * b.b,
-                      q * s.pdf + (1.0 - q) * b.pdf)
+    c = p[CONE_SHARE]
+    pc = _cone_pdf(p[CONE_WIDTH], ix, ox, co) if c > 0.0 else 0.0
+    kc = k_b * c * pc
+    kd = k_b * (1.0 - c)
+    return BysdfValue(k_s * (s.r + m.r) + kd * b.r + kc * body_reflect_albedo(p, 0, mu),
+                      k_s * (s.g + m.g) + kd * b.g + kc * body_reflect_albedo(p, 1, mu),
+                      k_s * (s.b + m.b) + kd * b.b + kc * body_reflect_albedo(p, 2, mu),
+                      q * s.pdf + (1.0 - q) * ((1.0 - w_c) * b.pdf + w_c * pc))
 
 
 @njit(cache=True)
 def reflect_sample(p, t, n, wi, shadow, u0, u1, u2):
-    """The reflection side at x: u0 picks the GGX-sampled or the cosine-sampled lobes, (u1, u2) the direction;
+    """The reflection side at x: u0 picks the GGX-sampled lobe, the cone lobe or the cosine-sampled ones, (u1, u2)
+    the direction;
     BysdfSample(wo, f cos / pdf, pdf) with reflect_eval_pdf's value and mixture pdf."""
     ix, iy, mu = to_local(shading_frame(t, n), wi)
     if mu <= COS_EPS:
         return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
-    _, _, q = _reflect_lobe_weights(p, interface_energy(p, ix, iy, mu), mu, shadow)
+    k = _reflect_lobe_weights(p, interface_energy(p, ix, iy, mu), mu, shadow)
+    q = k.p_spec
     if q < 0.0:
         return BysdfSample(_unit_copy(n), 0.0, 0.0, 0.0, 0.0)
     if u0 < q:
         s = spec_reflect_sample(p, t, n, wi, u1, u2)
+    elif u0 - q < k.p_cone * (1.0 - q):        # the cone part of the body (p_cone = 0: never)
+        s = cone_reflect_sample(p, t, n, wi, u1, u2)
     else:
         s = body_reflect_sample(p, n, wi, u1, u2)
     if s.pdf <= 0.0:                           # the lobe's sample failed: so does the side's

@@ -27,6 +27,8 @@ from stages.core.shading.bysdf import (
     body_exit_sample,
     body_reflect_eval_pdf,
     body_reflect_sample,
+    cone_reflect_eval_pdf,
+    cone_reflect_sample,
     diffusion_reflectance,
     enter_eval_pdf,
     enter_sample,
@@ -46,7 +48,7 @@ from stages.core.shading.bysdf import (
 from stages.core.shading.microfacet import fresnel_dielectric, ggx_D, ggx_G1
 from tests.chisquare import bin_integrals, check_shading_model, shading_draw
 
-SPEC_R, ENTER, SPEC_T, BODY_R, BODY_T, SIDE_R, SIDE_T, WRONG_ETA, CHAIN, CHAIN_SPEC = range(10)
+SPEC_R, ENTER, SPEC_T, BODY_R, BODY_T, SIDE_R, SIDE_T, WRONG_ETA, CHAIN, CHAIN_SPEC, CONE_R = range(11)
 
 
 def _unit(v):
@@ -109,6 +111,8 @@ def _sample(p, fr, wi, u0, u1, u2):
         s = body_reflect_sample(p, n, wi, u1, u2)
     elif k == BODY_T:
         s = body_exit_sample(p, n, u1, u2)
+    elif k == CONE_R:
+        s = cone_reflect_sample(p, t, n, wi, u1, u2)
     elif k == SIDE_R:
         s = reflect_sample(p, t, n, wi, fr[6], u0, u1, u2)
     elif k == CHAIN or k == CHAIN_SPEC:
@@ -156,6 +160,8 @@ def _eval_pdf(p, fr, wi, wo):
         v = body_reflect_eval_pdf(p, n, wi, wo)
     elif k == BODY_T:
         v = body_exit_eval_pdf(p, n, wo)
+    elif k == CONE_R:
+        v = cone_reflect_eval_pdf(p, t, n, wi, wo)
     elif k == SIDE_R:
         v = reflect_eval_pdf(p, t, n, wi, wo, fr[6])
     else:                  # SIDE_T (the CHAIN routines are only drawn, for their weights)
@@ -193,7 +199,9 @@ CASES = [
     (SPEC_T, {}, T0, N0, (25.0, 60.0), 1.0, 1.0, 1.0),
     (BODY_R, ROUGH, T1, N1, (50.0, 10.0), 1.0, 1.0, 1.0),
     (BODY_T, ROUGH, T1, N1, (10.0, 0.0), 1.0, 1.0, 1.0),
+    (CONE_R, dict(ROUGH, cone_width=0.2), T1, N1, (50.0, 20.0), 1.0, 1.0, 1.0),
     (SIDE_R, ROUGH, T1, N1, (60.0, -45.0), 0.7, 1.0, 1.0),
+    (SIDE_R, dict(ROUGH, cone_share=0.6, cone_width=0.25), T1, N1, (50.0, 20.0), 0.7, 1.0, 1.0),   # the cone lobe
     (SIDE_T, ROUGH, T1, N1, (30.0, 200.0), 0.8, 0.6, 0.9),
 ]
 SLOW_CASES = [
@@ -206,13 +214,15 @@ SLOW_CASES = [
     (SPEC_T, dict(alpha_exit=1.5, eta=1.33), T0, N0, (0.0, 0.0), 1.0, 1.0, 1.0),
     (BODY_R, dict(ls_mix=1.0, body_r=(1.0, 0.3, 0.0)), T0, N0, (85.0, 0.0), 1.0, 1.0, 1.0),
     (BODY_T, {}, T0, N0, (70.0, 0.0), 1.0, 1.0, 1.0),
+    (CONE_R, dict(cone_width=1.5), T0, N0, (0.0, 0.0), 1.0, 1.0, 1.0),            # wide: nearly cos(phi) / 2
     (SIDE_R, {}, T0, N0, (20.0, 0.0), 0.5, 1.0, 1.0),     # the reference's example: the spec lobe dominates
     (SIDE_R, dict(alpha_u=0.1, alpha_v=0.15, spec_weight=0.3), T1, N1, (75.0, 90.0), 1.0, 1.0, 1.0),
+    (SIDE_R, dict(spec_weight=0.0, cone_share=1.0, cone_width=0.05), T0, N0, (80.0, 0.0), 1.0, 1.0, 1.0, FINE),
     (SIDE_T, {}, T0, N0, (0.0, 0.0), 1.0, 1.0, 1.0),
     (SIDE_T, dict(alpha_exit=0.2), T1, N1, (45.0, 0.0), 0.3, 1.0, 0.05),
 ]
 NAMES = {SPEC_R: "spec_reflect", ENTER: "enter", SPEC_T: "spec_exit", BODY_R: "body_reflect",
-         BODY_T: "body_exit", SIDE_R: "reflect_side", SIDE_T: "exit_side"}
+         BODY_T: "body_exit", CONE_R: "cone_reflect", SIDE_R: "reflect_side", SIDE_T: "exit_side"}
 
 
 def _run_case(case, n=200_000, seed=12):
@@ -228,8 +238,9 @@ def _run_case(case, n=200_000, seed=12):
 @pytest.mark.parametrize("case", CASES, ids=[NAMES[c[0]] for c in CASES])
 def test_sampling_chi_square(case):
     """Reference: the shared chi-square harness (tests/chisquare.py: check_shading_model): 200k samples of
-    each BYSDF sampler (the five lobes: visible-normal GGX reflection and refraction in and out, Heitz 2018 /
-    Walter 2007; cosine-weighted body lobes; and the two side-level lobe mixtures) against the routine's own
+    each BYSDF sampler (the six lobes: visible-normal GGX reflection and refraction in and out, Heitz 2018 /
+    Walter 2007; cosine-weighted body lobes; the cone lobe's truncated logistic about the fibres' cone; and
+    the two side-level lobe mixtures, the reflection side's with and without its cone part) against the routine's own
     pdf in (cos theta, phi) about n, after the sample contract at 5000 samples (|wo| = 1, pdf(wo) == returned
     pdf, weight == eval(wo) / pdf). Failed samples (total internal reflection, directions below the
     surface) count as attempts: the density integrates to the success fraction."""
@@ -377,12 +388,12 @@ def test_pack_defaults_and_ranges():
     expect = {Y.SPEC_WEIGHT: 0.5, Y.REFLECT_WEIGHT: 0.5, Y.ALPHA_U: 0.2, Y.ALPHA_V: 0.3, Y.ETA: 1.5, Y.KS_R: 1.0,
               Y.KS_G: 1.0, Y.KS_B: 1.0, Y.ALPHA_EXIT: 0.9, Y.KT_EXIT: 0.1, Y.BODY_R_R: 0.045, Y.BODY_R_G: 0.015,
               Y.BODY_R_B: 0.0, Y.BODY_T_R: 0.27, Y.BODY_T_G: 0.09, Y.BODY_T_B: 0.0, Y.SIGMA_SPEC: 5.5,
-              Y.SIGMA_BODY: 0.1, Y.LS_MIX: 0.5}
+              Y.SIGMA_BODY: 0.1, Y.LS_MIX: 0.5, Y.CONE_SHARE: 0.0, Y.CONE_WIDTH: 0.3}
     assert sorted(expect) == list(range(Y.N_PARAMS))
     for k, v in expect.items():
         assert p[k] == pytest.approx(v, rel=1e-15)
     for bad in (dict(eta=1.0), dict(alpha_u=0.0), dict(spec_weight=1.2), dict(body_r=(0.5, 1.1, 0.0)),
-                dict(sigma_body=-1.0), dict(ls_mix=float("nan"))):
+                dict(sigma_body=-1.0), dict(ls_mix=float("nan")), dict(cone_share=1.5), dict(cone_width=0.0)):
         with pytest.raises(ValueError, match=next(iter(bad))):
             pack_bysdf(**bad)
 
@@ -525,11 +536,36 @@ def test_body_reflection_albedo(ls_mix):
             assert lommel_seeliger_albedo(mu) == pytest.approx(quad, rel=1e-3 if mu < 0.05 else 1e-9)
 
 
+@pytest.mark.parametrize("share, width", [(1.0, 0.3), (0.6, 0.05)])
+def test_cone_lobe_energy_and_cone(share, width):
+    """Reference: the cone part of the body reflection redistributes the body's light, it neither adds nor
+    loses any: with cone_share s the body reflection's Monte Carlo albedo (the reflection side with no
+    specular share, so the body alone) is still the diffusion term's R_d(a') per channel within 4 sigma, at
+    incidence across the fibre (u_i = 0), along it (u_i = 0.94) and between; and the light leaves around the
+    fibres' cone u_o = -u_i (propagation along the fibre kept): f towards the cone's direction in the
+    plane of t and n is over five times f towards its mirror about the normal plane (u_o = +u_i, the
+    backscatter direction), which only the diffuse part (1 - s) reaches."""
+    a = (1.0, 0.5, 0.1)
+    p = pack_bysdf(spec_weight=0.0, reflect_weight=1.0, body_r=a, ls_mix=0.0, cone_share=share, cone_width=width)
+    for theta, phi in ((0.0, 0.0), (40.0, 90.0), (70.0, 0.0), (70.0, 45.0)):
+        wi = _dir(theta, phi, T1, N1)
+        m, sd = _albedo(p, T1, N1, wi, SIDE_R, 50_000, 31)
+        for c in range(3):
+            assert m[c] == pytest.approx(diffusion_reflectance(a[c], 1.5), abs=4.0 * sd[c] + 1e-12)
+    wi = _dir(50.0, 0.0, T1, N1)                       # u_i = sin 50 deg along t
+    on_cone = _dir(50.0, 180.0, T1, N1)                # u_o = -u_i
+    mirror = _dir(50.0, 0.0, T1, N1)                   # u_o = +u_i (the backscatter direction)
+    f_on = reflect_eval_pdf(p, T1, N1, wi, on_cone, 1.0)
+    f_off = reflect_eval_pdf(p, T1, N1, wi, mirror, 1.0)
+    assert f_on.r > 5.0 * f_off.r
+
+
 # ------------------------------------------------------------------------------------------------
 # reciprocity, degenerate input
 def test_reflection_side_reciprocity():
     """Reference: Helmholtz reciprocity of the reflection side's BRDF (Walter 2007's rough dielectric
-    reflection with separable Smith G2; the symmetric Lommel-Seeliger and constant diffusion terms):
+    reflection with separable Smith G2; the symmetric Lommel-Seeliger and constant diffusion terms; the
+    cone part, normalised per incident direction, is not reciprocal and is off here, as by default):
     f(wi, wo) = (f cos)(wi, wo) / |wo.n| equals (f cos)(wo, wi) / |wi.n| for 300 random pairs."""
     p = pack_bysdf(**ROUGH)
     rng = np.random.default_rng(8)
