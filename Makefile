@@ -72,7 +72,7 @@ COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(OUT
 	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo demo-quick test test-all lint bench compile-report references compare docs clean
+.PHONY: help setup demo demo-quick test test-all lint bench compile-report references compare docs clean FORCE
 
 ##@ Main targets
 
@@ -188,13 +188,30 @@ $(OUT)/tables.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/proc
 $(OUT)/fibers.zarr/zarr.json: $(OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/yarns.zarr -o $(OUT)/fibers.zarr
 
+# An artifact's arguments as its prerequisite ($(ARGS_DIR)/NAME.args, from ARGS_NAME): the recipe runs every
+# time but rewrites the file only when the arguments differ from those it holds, so a changed IIRTF_ARGS (on
+# the command line, or in a newer Makefile) rebuilds that artifact, and the same arguments rebuild nothing
+# (`make -n` cannot know without running it, and lists those artifacts as to be made)
+ARGS_DIR = $(OUT)/.args
+ARGS_damask_svf = $(SVF_ARGS)
+ARGS_damask_iirtf = $(IIRTF_ARGS)
+ARGS_damask_btf = $(BTF_ARGS)
+ARGS_bysdf_fit = $(FIT_ARGS)
+ARGS_damask_svf_full = $(PRT_SVF_ARGS)
+ARGS_damask_iirtf_full = $(PRT_DAMASK_IIRTF_ARGS)
+
+$(ARGS_DIR)/%.args: FORCE
+	@mkdir -p $(@D); printf '%s\n' '$(ARGS_$*)' | cmp -s - $@ || printf '%s\n' '$(ARGS_$*)' > $@
+
+FORCE:
+
 $(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile $(TILING) -o $(OUT)/damask_tiling.zarr
 
-$(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
+$(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py) $(ARGS_DIR)/damask_svf.args
 	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_svf.zarr $(SVF_ARGS)
 
-$(OUT)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py
+$(OUT)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py $(ARGS_DIR)/damask_iirtf.args
 	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_iirtf.zarr $(IIRTF_ARGS)
 
 # --- pictures of intermediate artifacts ---
@@ -232,7 +249,7 @@ $(OUT)/damask_prt.exr: $(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr
 	$(LL) render $(DAMASK_SCENE) --method prt --fibers $(OUT)/damask_tiling.zarr --set svf=$(OUT)/damask_svf.zarr \
 	    --set iirtf=$(OUT)/damask_iirtf.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
-$(OUT)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py
+$(OUT)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py $(ARGS_DIR)/damask_btf.args
 	$(LL) precompute btf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_btf_fit.zarr $(BTF_ARGS)
 
 $(OUT)/damask_btf_fit.png: $(OUT)/damask_btf_fit.zarr/zarr.json
@@ -246,7 +263,7 @@ $(OUT)/damask_btf_tabulated.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_S
 	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
 	    --set btf=$(OUT)/damask_btf_fit.zarr --set model=tabulated --spp $(SPP) $(DEMO_SIZE) -o $@
 
-$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
+$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py) $(ARGS_DIR)/bysdf_fit.args
 	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
@@ -255,7 +272,7 @@ $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FO
 $(OUT)/knit_fibers.zarr/zarr.json: $(OUT)/knit_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/knit_yarns.zarr -o $(OUT)/knit_fibers.zarr
 
-$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
+$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py) $(ARGS_DIR)/bysdf_fit.args
 	$(LL) fit-bysdf $(KNIT_SCENE) --yarns $(OUT)/knit_yarns.zarr --fibers $(OUT)/knit_fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_bysdf.exr: $(OUT)/knit_yarns.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml $(KNIT_SCENE)
@@ -323,10 +340,10 @@ $(COMPARE_IN)/twill_fibers.zarr/zarr.json: $(COMPARE_IN)/twill_yarns.zarr/zarr.j
 # the draped damask's precompute at the prt sweep's settings (PRT_SVF_ARGS, PRT_DAMASK_IIRTF_ARGS: SVF 128, IIRTF
 # cells of 1.5 mean free paths, light from both sides) beside make demo's reduced one: data/compare/damask.toml
 # compares both
-$(COMPARE_IN)/damask_svf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py)
+$(COMPARE_IN)/damask_svf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py) $(ARGS_DIR)/damask_svf_full.args
 	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_svf_full.zarr $(PRT_SVF_ARGS)
 
-$(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py
+$(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py $(ARGS_DIR)/damask_iirtf_full.args
 	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_iirtf_full.zarr $(PRT_DAMASK_IIRTF_ARGS)
 
 $(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/scenes/knit_swatch.toml $(VENV)/.installed $(ARTIFACT_FORMAT)

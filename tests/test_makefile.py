@@ -1,6 +1,7 @@
 """The Makefile's contract with a newcomer (issue 23 item 6), read from `make -n` (nothing runs):
 `make demo-quick` is the whole demo at small sizes and reduced precomputes in its own directory,
-`make demo` renders at the documented demo size, and pip's output goes to a log shown only on failure.
+`make demo` renders at the documented demo size, and pip's output goes to a log shown only on failure; and, with
+real make in a scratch directory, that a precompute made with other arguments is rebuilt.
 """
 from __future__ import annotations
 
@@ -72,3 +73,29 @@ def test_pip_output_goes_to_a_log_shown_on_failure():
     assert "> .venv/pip.log 2>&1" in pip
     assert "cat .venv/pip.log" in pip and "exit 1" in pip
     assert "--disable-pip-version-check" in pip
+
+
+def test_changed_precompute_arguments_rebuild_their_artifact_and_nothing_else(tmp_path):
+    """An artifact made with other arguments is rebuilt (an upgrade that changes IIRTF_ARGS must not leave the
+    old IIRTF in place), and the same arguments rebuild nothing: the rule's argument file is rewritten only
+    when the arguments differ. Real make, in a scratch OUT, with the command runner replaced by `true`."""
+    out = tmp_path / "demo"
+
+    def make(*args: str) -> str:
+        return subprocess.run(["make", "--no-print-directory", f"OUT={out}", "LL=true", *args], cwd=ROOT,
+                              capture_output=True, text=True, check=True).stdout
+
+    args = out / ".args" / "damask_iirtf.args"
+    make(str(args))
+    default = args.read_text()
+    assert "--light-domain sphere" in default
+    for name in ("damask_tiling", "damask_iirtf"):          # artifacts newer than everything they depend on
+        (out / f"{name}.zarr").mkdir(parents=True)
+        (out / f"{name}.zarr" / "zarr.json").write_text("{}")
+    target = str(out / "damask_iirtf.zarr" / "zarr.json")
+    stamp = args.stat().st_mtime_ns
+    assert "precompute iirtf" not in make(target)            # same arguments: nothing to do
+    assert args.stat().st_mtime_ns == stamp
+    rebuilt = make(target, "IIRTF_ARGS=--order 3")
+    assert "true precompute iirtf" in rebuilt and "--order 3" in rebuilt and "precompute svf" not in rebuilt
+    assert args.read_text() == "--order 3\n"
