@@ -94,8 +94,8 @@ the interface twice and lost beta's complement of F).
   f ~ g(u_i + u_o) returns light in proportion to cos theta_i and loses what arrives along the fibres.
   Why (issue 53; docs/methods/bysdf.md, Limits): on the demo swatch at a fixed light elevation the fibres'
   cloth is up to 2x brighter with the camera near the light's cone than away from it, which f_bR alone
-  cannot follow; fitted with c 0.6 and width 0.2 the swatch under its own lights comes within 10 % instead
-  of 15-19 % dark.
+  cannot follow; fitted with c 0.6 and width 0.2 the swatch under its own lights is 9.5-10.9 % dark instead
+  of 15-19 %, but its per-pixel error against the converged fibres rises (0.255 -> 0.280): off by default.
 - f_bT, body transmission at y (Eq. 5): Lambertian on the outside of the exit point,
   f cos = BODY_T / pi * max(0, wo.n_y), cosine-weighted sampling about n_y (it does not depend on d).
 - S (at x) and S_y (at y) are the ply-shadowing times fibre-shadowing values of §5 (the integrator's
