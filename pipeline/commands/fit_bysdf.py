@@ -34,6 +34,11 @@ def register(app: typer.Typer) -> None:
                                    help="Also render both methods with the front light turned by these angles "
                                         "(degrees, 0-89) towards the scene's key light, and report bysdf / "
                                         "fiberpath per angle (JSON, and a plot beside the parameters). Not fitted."),
+        azimuths: str = typer.Option("", "--azimuths", metavar="A,B,...",
+                                     help="Also render both methods with the front light turned by these azimuths "
+                                          "(degrees, 0 to under 360) about the camera's up axis, at the view's "
+                                          "elevation (the same irradiance on level cloth), and report bysdf / "
+                                          "fiberpath per azimuth (JSON, and a plot). Not fitted."),
     ):
         """Fit the BYSDF's energy split and per-channel body colours so bysdf matches fiberpath under front and back light."""  # noqa: E501 (command help: --help shows its line breaks)
         from ..errors import LoomError, unknown
@@ -47,11 +52,12 @@ def register(app: typer.Typer) -> None:
             if v <= 0:
                 raise LoomError(None, name, f"must be a positive integer, got {v}")
         turned = parse_angles(angles)
+        spun = parse_angles(azimuths, "--azimuths")
         check_output(out, "-o", suffixes=(".toml",), inputs=[scene, yarns, fibers])
         rep = run_fit(scene, yarns, fibers, out, width, height, spp, ref_spp, iterations,
                       max_depth=max_depth,
                       scene_lights=False if no_scene_lights else None, reflect=fit_reflection,
-                      angles=turned, progress=typer.echo)
+                      angles=turned, azimuths=spun, progress=typer.echo)
         typer.echo(f"wrote {out}: spec_weight {rep['spec_weight']:.4f}, reflect_weight {rep['reflect_weight']:.4f}, "
                    "body colour factors " + " ".join(f"{v:.3g}" for v in rep["body_r_scale"]) + " (reflection), "
                    + " ".join(f"{v:.3g}" for v in rep["body_t_scale"]) + " (transmission)"
@@ -66,12 +72,18 @@ def register(app: typer.Typer) -> None:
                        + " ".join(f"{1 + e:.3f}" for e in r["rel_error_rgb"]) + " (not fitted)")
         if rep["angle_check"]:
             typer.echo(f"  angle check plot: {out.with_suffix('.angles.png')}")
+        for r in rep["azimuth_check"]:
+            typer.echo(f"  light {r['azimuth_deg']:4g} deg round from the view: bysdf / fiberpath "
+                       + " ".join(f"{1 + e:.3f}" for e in r["rel_error_rgb"]) + " (not fitted)")
+        if rep["azimuth_check"]:
+            typer.echo(f"  azimuth check plot: {out.with_suffix('.azimuths.png')}")
 
 
-def parse_angles(text: str) -> tuple:
-    """``--angles`` "0,15,30" -> (0.0, 15.0, 30.0); each within [0, ANGLE_MAX] degrees, none twice."""
+def parse_angles(text: str, option: str = "--angles") -> tuple:
+    """``--angles`` "0,15,30" -> (0.0, 15.0, 30.0); each within [0, ANGLE_MAX] degrees (``--azimuths``: [0,
+    AZIMUTH_MAX)), none twice."""
     from ..errors import LoomError
-    from ..runners.fit_bysdf import ANGLE_MAX
+    from ..runners.fit_bysdf import ANGLE_MAX, AZIMUTH_MAX
 
     if not text.strip():
         return ()
@@ -80,10 +92,11 @@ def parse_angles(text: str) -> tuple:
         try:
             a = float(part)
         except ValueError:
-            raise LoomError(None, "--angles", f"{part.strip()!r} is not a number of degrees") from None
-        if not 0.0 <= a <= ANGLE_MAX:
-            raise LoomError(None, "--angles", f"{a:g} degrees is outside [0, {ANGLE_MAX:g}]")
+            raise LoomError(None, option, f"{part.strip()!r} is not a number of degrees") from None
+        top, closed = {"--angles": (ANGLE_MAX, True), "--azimuths": (AZIMUTH_MAX, False)}[option]
+        if not (0.0 <= a <= top if closed else 0.0 <= a < top):
+            raise LoomError(None, option, f"{a:g} degrees is outside [0, {top:g}{']' if closed else ')'}")
         if a in out:
-            raise LoomError(None, "--angles", f"{a:g} degrees is given twice")
+            raise LoomError(None, option, f"{a:g} degrees is given twice")
         out.append(a)
     return tuple(out)

@@ -24,7 +24,7 @@ def test_fit_moves_bysdf_towards_fiberpath(tmp_path, cli):
     run_realize(yarns, fibers)
     out = tmp_path / "fit" / "params.toml"
     rep = run_fit(scene.path, yarns, fibers, out, width=24, height=18, spp=8, ref_spp=16, iterations=3,
-                  angles=(0.0, 40.0), progress=lambda *_: None)
+                  angles=(0.0, 40.0), azimuths=(0.0, 180.0), progress=lambda *_: None)
     first = rep["history"][0]
     final = rep["setups"]
     assert rep["max_depth"] == FIT_MAX_DEPTH                  # the full transport, not the scene's depth
@@ -40,6 +40,12 @@ def test_fit_moves_bysdf_towards_fiberpath(tmp_path, cli):
     np.testing.assert_allclose(at0["reference_rgb"], final["front"]["reference_rgb"], rtol=1e-12)
     np.testing.assert_allclose(at0["bysdf_rgb"], final["front"]["bysdf_rgb"], rtol=1e-12)
     assert (tmp_path / "fit" / "params.angles.png").stat().st_size > 0
+    # the azimuth check: its 0 degrees is the front setup too
+    az0, az180 = rep["azimuth_check"]
+    assert az0["azimuth_deg"] == 0.0 and az180["azimuth_deg"] == 180.0
+    np.testing.assert_allclose(az0["bysdf_rgb"], final["front"]["bysdf_rgb"], rtol=1e-12)
+    np.testing.assert_allclose(az0["reference_rgb"], final["front"]["reference_rgb"], rtol=1e-12)
+    assert (tmp_path / "fit" / "params.azimuths.png").stat().st_size > 0
     got = tomllib.loads(out.read_text())["default"]
     assert 0.0 <= got["spec_weight"] <= 1.0 and 0.0 <= got["reflect_weight"] <= 1.0
     assert (tmp_path / "fit" / "params.json").exists()
@@ -101,12 +107,40 @@ def test_angle_check_lights_turn_from_the_view_towards_the_key(tmp_path):
         assert math.degrees(math.acos(np.clip(d @ key, -1, 1))) == pytest.approx(abs(between - a), abs=1e-9)
 
 
-@pytest.mark.parametrize("angles, says", [("0,abc", "'abc' is not a number"), ("95", "outside [0, 89]"),
-                                          ("10,10", "given twice")])
-def test_fit_bysdf_refuses_bad_angles(tmp_path, cli, angles, says):
+def test_azimuth_check_lights_keep_the_view_elevation(tmp_path):
+    """Reference: geometry. The azimuth check's light at A degrees is the front light (the view direction)
+    turned by A about the camera's up axis: the same angle to the up axis (so the same irradiance on level
+    cloth), its part across the up axis A degrees round from the view's, 0 the front light itself and 180 the
+    view mirrored about the up axis."""
+    from pipeline.runners.fit_bysdf import azimuth_lights, setup_lights
+
+    scene, _ = _make(tmp_path, "azimuths", _weave(2, L=0.2), origin=(0.05, -0.2, 0.3), w=8, h=6)
+    view = np.asarray(setup_lights(scene)["front"][0]["direction"])
+    up = np.asarray(scene.camera.get("up", (0.0, 0.0, 1.0)), float)
+    up /= np.linalg.norm(up)
+    spun = azimuth_lights(scene, (0.0, 45.0, 180.0, 300.0))
+    assert list(spun) == ["azimuth 0", "azimuth 45", "azimuth 180", "azimuth 300"]
+    flat = view - (view @ up) * up
+    for a, (lt,) in zip((0.0, 45.0, 180.0, 300.0), spun.values()):
+        d = np.asarray(lt["direction"])
+        assert lt["type"] == "directional" and lt["irradiance"] == 3.0
+        assert d @ up == pytest.approx(view @ up, abs=1e-12)
+        across = d - (d @ up) * up
+        turn = math.degrees(math.atan2(np.cross(flat, across) @ up, flat @ across)) % 360.0
+        assert turn == pytest.approx(a, abs=1e-9) or turn == pytest.approx(a + 360.0, abs=1e-9)
+    np.testing.assert_allclose(spun["azimuth 0"][0]["direction"], view, atol=1e-15)
+    np.testing.assert_allclose(spun["azimuth 180"][0]["direction"], 2.0 * (view @ up) * up - view, atol=1e-12)
+
+
+@pytest.mark.parametrize("option, angles, says", [("--angles", "0,abc", "'abc' is not a number"),
+                                                  ("--angles", "95", "outside [0, 89]"),
+                                                  ("--angles", "10,10", "given twice"),
+                                                  ("--azimuths", "360", "outside [0, 360)"),
+                                                  ("--azimuths", "-5", "outside [0, 360)")])
+def test_fit_bysdf_refuses_bad_angles(tmp_path, cli, option, angles, says):
     scene, yarns = _make(tmp_path, "bad", _weave(2, L=0.2), w=8, h=6)
     out = tmp_path / "p.toml"
     code, _, err = cli("fit-bysdf", str(scene.path), "--yarns", yarns, "--fibers", yarns, "-o", str(out),
-                       "--angles", angles)
-    assert code == 2 and "--angles" in err and says in err, err
+                       option, angles)
+    assert code == 2 and option in err and says in err, err
     assert not out.exists()
