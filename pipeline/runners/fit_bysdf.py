@@ -109,8 +109,9 @@ AZIMUTH_MAX = 360.0   # degrees (exclusive): the azimuth check's lights go once 
 def azimuth_lights(scene, azimuths) -> dict:
     """The azimuth check's setups {"azimuth A": [light]}: the front light turned by A degrees (``azimuths``) about
     the camera's up axis, so it keeps the view's elevation: on cloth facing up the irradiance stays the same and
-    only where the light stands changes (0 is the front setup, 180 the view mirrored about the up axis). What
-    found bysdf's missing cone (docs/methods/bysdf.md, Limits: the light's cone)."""
+    only where the light stands changes (0 is the front setup, 180 the view mirrored about the up axis): how
+    both methods depend on the light's direction apart from its irradiance (docs/methods/bysdf.md, Limits:
+    the light's cone)."""
     view = _view_direction(scene)
     up = np.asarray(scene.camera.get("up", (0.0, 0.0, 1.0)), float)
     up /= np.linalg.norm(up)
