@@ -366,7 +366,8 @@ def prt_radiance(it, o, d, seed, key):
                 _to_flat(w2f, h.tet, axes_w, lf)
                 vt0 = vt1 = vt2 = 0.0
                 if pl > 0.0:
-                    vt0, vt1, vt2 = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
+                    u1, v1 = _gaussian_point(it, seed, key, base + 2, u, v)
+                    vt0, vt1, vt2 = global_visibility(it, u1, v1, wl)
                 rays += 1
                 if vt0 > 0.0 or vt1 > 0.0 or vt2 > 0.0:
                     if not have_frame:
@@ -397,9 +398,10 @@ def prt_radiance(it, o, d, seed, key):
                     L2 += f2 * E2 * vg2
         if it.terms & MULTI and (lf[2] > 0.0 or it.below or it.ms_incidence):
             rays += 1
-            vt0, vt1, vt2 = _filtered_visibility(it, seed, key, base + 2, u, v, wl)
+            u1, v1 = _gaussian_point(it, seed, key, base + 2, u, v)    # x' for V~_glo and the filtered incidence
+            vt0, vt1, vt2 = global_visibility(it, u1, v1, wl)
             if it.ms_incidence:
-                _incidence_at_offset(it, seed, key, base + 2, u, v, wl, lf)
+                _incidence_at_offset(it, u, v, u1, v1, wl, lf)
             if (vt0 > 0.0 or vt1 > 0.0 or vt2 > 0.0) and (lf[2] > 0.0 or it.below):
                 if not have_frame:
                     _hit_sh_frame(it, m, tf, vf, W)
@@ -412,31 +414,25 @@ def prt_radiance(it, o, d, seed, key):
 
 
 @njit(cache=True)
-def _filtered_visibility(it, seed, key, dim, u, v, w):
-    """One-sample estimate of V~_glo (§5.3.2), (r, g, b): V_glo at a point x' drawn from the Gaussian of
-    sigma_glo around (u, v) in the flat fabric's plane."""
-    if it.sigma_glo > 0.0:
-        u, v = _gaussian_point(it, seed, key, dim, u, v)
-    return global_visibility(it, u, v, w)
-
-
-@njit(cache=True)
 def _gaussian_point(it, seed, key, dim, u, v):
     """(u', v'): x' drawn from the 2D Gaussian of sigma_glo around (u, v) in the flat fabric's plane (Box-Muller
-    from the uniforms of dimensions dim, dim + 1), for V~_glo and the filtered incidence alike."""
+    from the uniforms of dimensions dim, dim + 1; (u, v) itself when sigma_glo is 0). V_glo at x' is the
+    one-sample estimate of V~_glo (§5.3.2); with ``ms_incidence`` the light's incidence there too."""
+    if it.sigma_glo <= 0.0:
+        return u, v
     r = it.sigma_glo * math.sqrt(-2.0 * math.log(1.0 - uniform(seed, key, dim)))
     a = 2.0 * math.pi * uniform(seed, key, dim + 1)
     return u + r * math.cos(a) / it.flat_size[0], v + r * math.sin(a) / it.flat_size[1]
 
 
 @njit(cache=True)
-def _incidence_at_offset(it, seed, key, dim, u, v, w, lf):
+def _incidence_at_offset(it, u, v, u1, v1, w, lf):
     """``ms_incidence``: the light's flat direction ``lf`` tilted to the incidence it has at the Gaussian's point
-    x' (the same draw as ``_filtered_visibility``): its z moved by w . n(x') - w . n(x) of the top surface's
-    normals, its azimuth kept; multiple scattering then gathers the light falling around x, not at x alone."""
+    x' = (u1, v1) (``_gaussian_point``, the draw V~_glo is estimated at): its z moved by w . n(x') - w . n(x) of
+    the top surface's normals, its azimuth kept; multiple scattering then gathers the light falling around x,
+    not at x alone."""
     if it.sigma_glo <= 0.0:
         return
-    u1, v1 = _gaussian_point(it, seed, key, dim, u, v)
     ok0, _x, _y, _z, nx, ny, nz = top_point(it.top, u, v)
     ok1, _x, _y, _z, mx, my, mz = top_point(it.top, u1, v1)
     if not (ok0 and ok1):
