@@ -816,13 +816,18 @@ def reflect_eval_pdf(p, t, n, wi, wo, shadow):
     m = _msrough_reflect(p, ei, ox, oy, co) if co > COS_EPS else BysdfValue(0.0, 0.0, 0.0, 0.0)
     b = body_reflect_eval_pdf(p, n, wi, wo)
     c = p[CONE_SHARE]
-    pc = _cone_pdf(p[CONE_WIDTH], ix, ox, co) if c > 0.0 else 0.0
-    kc = k_b * c * pc
     kd = k_b * (1.0 - c)
-    return BysdfValue(k_s * (s.r + m.r) + kd * b.r + kc * body_reflect_albedo(p, 0, mu),
-                      k_s * (s.g + m.g) + kd * b.g + kc * body_reflect_albedo(p, 1, mu),
-                      k_s * (s.b + m.b) + kd * b.b + kc * body_reflect_albedo(p, 2, mu),
-                      q * s.pdf + (1.0 - q) * ((1.0 - w_c) * b.pdf + w_c * pc))
+    f0 = k_s * (s.r + m.r) + kd * b.r
+    f1 = k_s * (s.g + m.g) + kd * b.g
+    f2 = k_s * (s.b + m.b) + kd * b.b
+    pc = 0.0
+    if c > 0.0:                                # f_cone (the paper's model, c = 0, skips its albedos)
+        pc = _cone_pdf(p[CONE_WIDTH], ix, ox, co)
+        kc = k_b * c * pc
+        f0 += kc * body_reflect_albedo(p, 0, mu)
+        f1 += kc * body_reflect_albedo(p, 1, mu)
+        f2 += kc * body_reflect_albedo(p, 2, mu)
+    return BysdfValue(f0, f1, f2, q * s.pdf + (1.0 - q) * ((1.0 - w_c) * b.pdf + w_c * pc))
 
 
 @njit(cache=True)
