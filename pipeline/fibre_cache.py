@@ -74,6 +74,18 @@ def _medium(cv, tab, grid, cached, bvh, fibre_yarn, fibre_id):
                             bvh.seg_fiber, bvh.points, bvh.seg_a)
 
 
+def empty_cache(cv, tab, grid):
+    """A ``FibreCacheMedium`` that caches no brick: every lookup is the exact procedural one, through the
+    brick test (one array read). A render without a cache uses it rather than the bare ``ProceduralMedium``
+    so that the volpath integrator is compiled for one medium type whatever the budget (its compilation
+    takes about a minute on a cold cache); the pictures are the same bytes (``tests/render/test_fibre_cache``)."""
+    from stages.core.geometry.bvh import build_fiber_bvh
+
+    bvh, _ = build_fiber_bvh(np.empty((0, 3)), np.zeros(1, np.int64), np.empty(0), keep_binary=False)
+    cached = np.zeros(int(np.prod(grid.res)), np.uint8)
+    return _medium(cv, tab, grid, cached, bvh, np.zeros(0, np.int32), np.zeros(0, np.int64))
+
+
 def _vertices_per_length(tab, curve_length, spacing) -> np.ndarray:
     from stages.procedural.realize import yarn_counts
 
@@ -88,8 +100,8 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
                       fine_cell=None) -> CacheBuild:
     """The ``FibreCacheMedium`` of the procedural source ``(cv, tab)`` seen by ``cam`` at width x height,
     within ``budget_mib``; where nothing is cached (budget 0, too small for one brick, or tables of the
-    realization-free hair mode, whose hairs are never stored: ``info["cache_skipped"]`` says so) the bare
-    ``ProceduralMedium``, whose lookups skip the cache's indirection. A partial cache is kept however
+    realization-free hair mode, whose hairs are never stored: ``info["cache_skipped"]`` says so) a cache
+    of no bricks (``empty_cache``), whose every lookup is the procedural one. A partial cache is kept however
     little of the view it holds: every brick it holds answers faster than the lookups, and an uncached
     lookup through it costs what a bare one does (``bench_volpath``'s budget curve). ``fine_cell``: refine
     the majorant's cells inside cached bricks to about this size (``cached_majorant``; None: never)."""
@@ -117,12 +129,10 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
             "cache_brick_size": float(grid.size), "cache_spacing": float(spacing)}
 
     def bare(**why):
-        """Nothing cached: the bare procedural medium (its lookups skip the cache's indirection)."""
-        from stages.render.media.procedural_medium import ProceduralMedium
-
+        """Nothing cached: a cache of no bricks, every lookup procedural (``empty_cache``)."""
         info.update({"cache_bricks_cached": 0, "cache_fibres": 0, "cache_segments": 0, "cache_bytes": 0,
                      "cache_estimate_bytes": 0, **why, "cache_build_s": time.perf_counter() - t0})
-        return CacheBuild(ProceduralMedium(cv, tab), maj, info)
+        return CacheBuild(empty_cache(cv, tab, grid), maj, info)
 
     if budget <= 0 or Y == 0:
         return bare()

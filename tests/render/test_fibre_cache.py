@@ -176,7 +176,7 @@ def test_a_partial_cache_is_kept(swatch):
     full = build_fibre_cache(cv, tab, maj, cam, 64, 48, 512.0).info
     small_mib = 0.3 * full["cache_estimate_bytes"] / 2**20
     part = build_fibre_cache(cv, tab, maj, cam, 64, 48, small_mib)
-    assert not isinstance(part.medium, ProceduralMedium)
+    assert part.medium.cached.any()
     assert 0 < part.info["cache_bricks_cached"] < full["cache_bricks_cached"]
     assert 0.0 < part.info["cache_seen_share"] < 1.0
 
@@ -222,9 +222,18 @@ def test_refined_majorant_cells_bound_the_cached_fibres(swatch):
 
 
 def test_zero_budget_caches_nothing(swatch):
+    """Budget 0: a cache of no bricks (one medium type for the integrator whatever the budget), whose every
+    lookup is the bare procedural one, bit for bit, skipping a fibre or not."""
     fib, cv, tab = swatch
     built = build_fibre_cache(cv, tab, procedural_majorant(cv, tab), camera_array(CAMERA, 32, 24), 32, 24, 0.0)
-    assert built.info["cache_bricks_cached"] == 0 and isinstance(built.medium, ProceduralMedium)
+    med = built.medium
+    assert built.info["cache_bricks_cached"] == 0 and not med.cached.any() and len(med.fibre_id) == 0
+    assert type(med) is type(build_fibre_cache(cv, tab, procedural_majorant(cv, tab), camera_array(CAMERA, 32, 24),
+                                               32, 24, 512.0, spacing=SPACING).medium)
+    Q = _points(fib, 5000, 20000, seed=4)
+    got, proc = _lookups(med, Q), _lookups(ProceduralMedium(cv, tab), Q)
+    assert np.array_equal(got, proc) and (got[:, 0] > 0).sum() > 2000
+    assert np.array_equal(_lookups(med, Q, got[:, 2]), _lookups(ProceduralMedium(cv, tab), Q, proc[:, 2]))
 
 
 def test_free_hair_mode_tables_are_never_cached(swatch):
@@ -235,7 +244,7 @@ def test_free_hair_mode_tables_are_never_cached(swatch):
     cv, tab, _info, _, _ = build(fib.path.parent / "yarns.zarr", seed=3, hair_mode="free")   # the swatch's yarns
     assert tab.hair_mode[0] != 0 and tab.hair_count.sum() > 0 and len(tab.hair_ze) == 0
     built = build_fibre_cache(cv, tab, procedural_majorant(cv, tab), camera_array(CAMERA, 32, 24), 32, 24, 2048.0)
-    assert isinstance(built.medium, ProceduralMedium) and built.info["cache_bricks_cached"] == 0
+    assert not built.medium.cached.any() and built.info["cache_bricks_cached"] == 0
     assert "hair mode free" in built.info["cache_skipped"]
 
 
