@@ -7,6 +7,10 @@ VENV := .venv
 # the artifact format: an artifact made before a change to it is refused by its readers, so the first
 # artifact of every chain depends on it and the chain is rebuilt
 ARTIFACT_FORMAT := pipeline/artifacts.py pipeline/artifact_checks.py
+# the code a precompute's or a bysdf fit's output depends on (a change to it remakes them)
+PRECOMPUTE_DEPS = $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py
+FIT_DEPS = pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py \
+	stages/core/shading/bysdf.py stages/core/shading/microfacet.py)
 BIN := $(VENV)/bin
 LL := $(BIN)/loomlight
 # numba cache root; stages/__init__.py keys it by a hash of the kernel sources
@@ -17,37 +21,49 @@ OUT ?= out/demo
 SCENE ?= data/scenes/demo.toml
 TILING ?= data/tilings/damask.toml
 DAMASK_SCENE ?= data/scenes/draped_damask.toml
-# make demo stays short on an idle 2-core machine from a fresh clone (README: Status; docs/measurements.md), so
-# its pictures are 240x180 (the scenes' cameras say 320x240: DEMO_SIZE= renders those) and its
-# precomputes are reduced (below). Main pictures adaptive (a second pass gives a pixel up to MAX_SPP more
-# samples, as many as its neighbours' relative error asks for to reach render.target_error); the
-# evaluation set is smaller because procedural volpath without the fibre cache is slow.
-DEMO_SIZE ?= --width 240 --height 180
-SPP ?= 8
-FIBERPATH_SPP ?= 16
-MAX_SPP ?= 128
-EVAL_W ?= 64
-EVAL_H ?= 48
-EVAL_SPP ?= 8
+# make demo is a first look within minutes on an idle 2-core machine from a fresh clone (README: Two commands):
+# every stage and every method, pictures of 160x120 (the scenes' cameras say 320x240: DEMO_SIZE= renders those)
+# without refinement, precomputes and fits reduced further than make demo-full's (FULL_*, below). make demo-full
+# is the same at 240x180 with adaptive refinement (a second pass gives a pixel up to MAX_SPP more samples, as many
+# as its neighbours' relative error asks for to reach render.target_error) into out/demo-full: the README's
+# picture. The evaluation set is smaller because procedural volpath without the fibre cache is slow.
+DEMO_SIZE ?= --width 160 --height 120
+SPP ?= 4
+FIBERPATH_SPP ?= 8
+MAX_SPP ?= 0
+EVAL_W ?= 48
+EVAL_H ?= 36
+EVAL_SPP ?= 4
 
-# Khungurn et al. 2017 precompute of the damask's two exemplars (README: Precomputed light transport): SVF images of
-# 64x64 (the paper: 128x128), 48 PCA components; IIRTF at cells of 3 mean free paths (the paper: 1-2),
-# 200 paths per cell (the paper: 50,000) with the MIS estimator, SH order 4. make prt-sweep uses the
-# paper's SVF and cells of 1.5 mean free paths (PRT_SVF_ARGS, PRT_IIRTF_ARGS): 3.5 points less error
-# against fiberpath than cells of 3 (README: Rendering with precomputed transport), 3x the paths. The IIRTF holds
-# light from below the cloth too (the paper's extension to bottom surfaces: the drape's hanging sides).
-SVF_ARGS ?= --resolution 64 --components 48
-IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis --light-domain sphere
+# Khungurn et al. 2017 precompute of the damask's two exemplars (README: Precomputed light transport). make demo-full
+# and the comparisons (FULL_SVF_ARGS, FULL_IIRTF_ARGS): SVF images of 64x64 (the paper: 128x128), 48 PCA components;
+# IIRTF at cells of 3 mean free paths (the paper: 1-2), 200 paths per cell (the paper: 50,000) with the MIS
+# estimator, SH order 4; make demo: SVF 32x32, 16 components, IIRTF at cells of 4, 100 paths, SH order 3. make
+# prt-sweep uses the paper's SVF and cells of 1.5 mean free paths (PRT_SVF_ARGS, PRT_IIRTF_ARGS): 3.5 points less
+# error against fiberpath than cells of 3 (README: Rendering with precomputed transport), 3x the paths. The IIRTF
+# holds light from below the cloth too (the paper's extension to bottom surfaces: the drape's hanging sides).
+SVF_ARGS ?= --resolution 32 --components 16
+IIRTF_ARGS ?= --order 3 --cell-factor 4 --paths 100 --light-sampling mis --light-domain sphere
+FULL_SVF_ARGS ?= --resolution 64 --components 48
+FULL_IIRTF_ARGS ?= --order 4 --cell-factor 3 --paths 200 --light-sampling mis --light-domain sphere
 
 # Daubert et al. 2001 in the demo: the damask's ground exemplar fitted as a cloth texture, reduced (the defaults: 32 x 32
 # texels, 8x8 views and lights, 16 rays) and dressed on the draped cloth
-BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8 --model tabulated
+BTF_ARGS ?= --resolution 8 --views 4x8 --lights 4x8 --spp 4 --model tabulated
+FULL_BTF_ARGS ?= --resolution 16 --views 6x8 --lights 6x8 --spp 8 --model tabulated
 
 # the multi-scale yarn model in the demo: the yarn-level model fitted to fiberpath (front / back / both lights, small renders) on
 # the demo swatch and on the knitted swatch (data/scenes/knit.toml: its own yarn colour and fleece BCSDF), the
 # knit rendered with bysdf beside fiberpath on its realized fibres, and the woven swatch in the evaluation set
 KNIT_SCENE ?= data/scenes/knit.toml
-FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 6
+FIT_ARGS ?= --width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3
+FULL_FIT_ARGS ?= --width 64 --height 48 --spp 16 --ref-spp 32 --iterations 6
+
+# make demo-full: make demo with these
+FULL_OUT ?= out/demo-full
+FULL_VARS = OUT=$(FULL_OUT) DEMO_SIZE="--width 240 --height 180" SPP=8 FIBERPATH_SPP=16 MAX_SPP=128 EVAL_W=64 \
+	EVAL_H=48 EVAL_SPP=8 SVF_ARGS="$(FULL_SVF_ARGS)" IIRTF_ARGS="$(FULL_IIRTF_ARGS)" BTF_ARGS="$(FULL_BTF_ARGS)" \
+	FIT_ARGS="$(FULL_FIT_ARGS)"
 
 TWILL_SCENE ?= data/scenes/twill_swatch.toml
 # what the experiments (make/experiments.mk) and the comparisons share: the Khungurn et al. 2017 flat patches and damask
@@ -59,20 +75,22 @@ BTF_DIR := out/btf
 # time (loomlight evaluate --convergence; data/compare/*.toml; README: Choosing a method). make references
 # renders each comparison's reference until its noise is within the file's targets (kept under
 # $(COMPARE)/<name>/reference, reused while scene, settings and code are unchanged; never by make test);
-# make compare renders every method at its budgets and writes $(COMPARE)/<name>/report.html and the summary
+# make compare renders every method at its budgets and writes $(COMPARE)/<name>/report.html and the summary. Their
+# fibres, tables and tilings are make demo's (no settings); their precomputes and fits are their own, at make
+# demo-full's settings ($(COMPARE_IN))
 COMPARE := out/compare
 COMPARE_FILES ?= $(filter-out data/compare/demo_quick.toml,$(wildcard data/compare/*.toml))
 COMPARE_ARGS ?=
 COMPARE_IN := $(COMPARE)/inputs
-COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(OUT)/bysdf_fit.toml \
-	$(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr/zarr.json $(OUT)/damask_btf_fit.zarr/zarr.json \
-	$(OUT)/knit_fibers.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml \
+COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(COMPARE_IN)/bysdf_fit.toml \
+	$(COMPARE_IN)/damask_svf.zarr/zarr.json $(COMPARE_IN)/damask_iirtf.zarr/zarr.json \
+	$(COMPARE_IN)/damask_btf_fit.zarr/zarr.json $(OUT)/knit_fibers.zarr/zarr.json $(COMPARE_IN)/knit_bysdf_fit.toml \
 	$(COMPARE_IN)/twill_fibers.zarr/zarr.json $(COMPARE_IN)/knit_btf.zarr/zarr.json \
 	$(COMPARE_IN)/damask_svf_full.zarr/zarr.json $(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json \
 	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
 
 .DEFAULT_GOAL := help
-.PHONY: help setup demo demo-quick test test-all lint bench compile-report references compare docs clean FORCE
+.PHONY: help setup demo demo-full test test-all lint bench compile-report references compare docs clean FORCE
 
 ##@ Main targets
 
@@ -89,7 +107,7 @@ setup: $(VENV)/.installed ## create .venv and install loomlight with its test an
 # the tables and fibres first, so the longest chain (procedural volpath, the longest compilation on a
 # cold cache) starts at once beside the rest; the knit's fibres after the demo's (two realize commands at
 # once would both compile realize's kernels on a cold cache: make compile-report)
-demo: $(VENV)/.installed ## set up .venv if needed, run the demo scene end to end, print the output paths
+demo: $(VENV)/.installed ## set up .venv if needed, every stage and method on the bundled scenes (small, a first look), print the output paths
 	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=line $(OUT)/tables.zarr/zarr.json $(OUT)/fibers.zarr/zarr.json
 	@$(MAKE) --no-print-directory -j$(DEMO_JOBS) --output-sync=line demo-outputs
 	@$(MAKE) --no-print-directory $(OUT)/compare/report.md
@@ -115,14 +133,8 @@ demo: $(VENV)/.installed ## set up .venv if needed, run the demo scene end to en
 	@echo "  knit, bysdf vs fiberpath: $(OUT)/eval/knit/report.md ($(OUT)/eval/knit/report.html)"
 	@echo "  evaluation report    : $(OUT)/eval/report/report.md ($(OUT)/eval/report/report.html)"
 
-# the whole demo small: 160x120 pictures without refinement, SVF 32x32, IIRTF of 100 paths per cell
-QUICK_OUT ?= out/quick
-demo-quick: ## the demo at small sizes and reduced precomputes, a first look (out/quick)
-	@$(MAKE) --no-print-directory demo OUT=$(QUICK_OUT) DEMO_SIZE="--width 160 --height 120" SPP=4 FIBERPATH_SPP=8 \
-	    MAX_SPP=0 EVAL_W=48 EVAL_H=36 EVAL_SPP=4 SVF_ARGS="--resolution 32 --components 16" \
-	    IIRTF_ARGS="--order 3 --cell-factor 4 --paths 100 --light-sampling mis --light-domain sphere" \
-	    BTF_ARGS="--resolution 8 --views 4x8 --lights 4x8 --spp 4 --model tabulated" \
-	    FIT_ARGS="--width 48 --height 36 --spp 8 --ref-spp 16 --iterations 3"
+demo-full: ## the demo at 240x180 with adaptive refinement and larger precomputes (out/demo-full; the README's picture)
+	@$(MAKE) --no-print-directory demo $(FULL_VARS)
 
 # make test: everything but the tests marked slow; make test-all: all of them
 test: $(VENV)/.installed ## set up .venv if needed, run the test suite but the slow tests
@@ -135,8 +147,8 @@ test-all: $(VENV)/.installed ## the whole test suite, the slow tests too
 lint: $(VENV)/.installed ## ruff over the code, tests and benchmarks (pyflakes, pycodestyle, isort, bugbear)
 	$(BIN)/ruff check .
 
-# on empty numba caches of its own (the checkout's cache and out/ untouched); COMPILE_REPORT_ARGS="--demo quick"
-# measures the quick demo's commands instead, "--tests all" make test's whole suite
+# on empty numba caches of its own (the checkout's cache and out/ untouched); COMPILE_REPORT_ARGS="--demo full"
+# measures make demo-full's commands instead, "--tests all" make test's whole suite
 compile-report: $(VENV)/.installed ## what numba compiles on a cold cache for the demo and the heaviest tests -> bench/results/compile.json
 	$(BIN)/python bench/compile_report.py $(COMPILE_REPORT_ARGS)
 	$(LL) docs --only measurements --bench-results bench/results --compare-dir $(COMPARE)
@@ -199,6 +211,10 @@ ARGS_damask_btf = $(BTF_ARGS)
 ARGS_bysdf_fit = $(FIT_ARGS)
 ARGS_damask_svf_full = $(PRT_SVF_ARGS)
 ARGS_damask_iirtf_full = $(PRT_DAMASK_IIRTF_ARGS)
+ARGS_cmp_damask_svf = $(FULL_SVF_ARGS)
+ARGS_cmp_damask_iirtf = $(FULL_IIRTF_ARGS)
+ARGS_cmp_damask_btf = $(FULL_BTF_ARGS)
+ARGS_cmp_bysdf_fit = $(FULL_FIT_ARGS)
 
 $(ARGS_DIR)/%.args: FORCE
 	@mkdir -p $(@D); printf '%s\n' '$(ARGS_$*)' | cmp -s - $@ || printf '%s\n' '$(ARGS_$*)' > $@
@@ -208,10 +224,10 @@ FORCE:
 $(OUT)/damask_tiling.zarr/zarr.json: $(TILING) data/tilings/damask_motif.png $(DAMASK_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile $(TILING) -o $(OUT)/damask_tiling.zarr
 
-$(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py) $(ARGS_DIR)/damask_svf.args
+$(OUT)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) $(ARGS_DIR)/damask_svf.args
 	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_svf.zarr $(SVF_ARGS)
 
-$(OUT)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py $(ARGS_DIR)/damask_iirtf.args
+$(OUT)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(PRECOMPUTE_DEPS) pipeline/runners/precompute.py $(ARGS_DIR)/damask_iirtf.args
 	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_iirtf.zarr $(IIRTF_ARGS)
 
 # --- pictures of intermediate artifacts ---
@@ -249,7 +265,7 @@ $(OUT)/damask_prt.exr: $(OUT)/damask_svf.zarr/zarr.json $(OUT)/damask_iirtf.zarr
 	$(LL) render $(DAMASK_SCENE) --method prt --fibers $(OUT)/damask_tiling.zarr --set svf=$(OUT)/damask_svf.zarr \
 	    --set iirtf=$(OUT)/damask_iirtf.zarr --spp $(FIBERPATH_SPP) --max-spp $(MAX_SPP) $(DEMO_SIZE) -o $@
 
-$(OUT)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py $(ARGS_DIR)/damask_btf.args
+$(OUT)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py $(ARGS_DIR)/damask_btf.args
 	$(LL) precompute btf $(OUT)/damask_tiling.zarr -o $(OUT)/damask_btf_fit.zarr $(BTF_ARGS)
 
 $(OUT)/damask_btf_fit.png: $(OUT)/damask_btf_fit.zarr/zarr.json
@@ -263,7 +279,7 @@ $(OUT)/damask_btf_tabulated.exr: $(OUT)/damask_btf_fit.zarr/zarr.json $(DAMASK_S
 	$(LL) render $(DAMASK_SCENE) --method btf --source tiling --fibers $(OUT)/damask_tiling.zarr \
 	    --set btf=$(OUT)/damask_btf_fit.zarr --set model=tabulated --spp $(SPP) $(DEMO_SIZE) -o $@
 
-$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py) $(ARGS_DIR)/bysdf_fit.args
+$(OUT)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(FIT_DEPS) $(ARGS_DIR)/bysdf_fit.args
 	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FORMAT)
@@ -272,7 +288,7 @@ $(OUT)/knit_yarns.zarr/zarr.json: $(KNIT_SCENE) $(VENV)/.installed $(ARTIFACT_FO
 $(OUT)/knit_fibers.zarr/zarr.json: $(OUT)/knit_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(OUT)/knit_yarns.zarr -o $(OUT)/knit_fibers.zarr
 
-$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) pipeline/runners/fit_bysdf.py $(wildcard stages/render/*.py stages/render/*/*.py stages/core/yarn/*.py stages/core/shading/bysdf.py stages/core/shading/microfacet.py) $(ARGS_DIR)/bysdf_fit.args
+$(OUT)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) $(FIT_DEPS) $(ARGS_DIR)/bysdf_fit.args
 	$(LL) fit-bysdf $(KNIT_SCENE) --yarns $(OUT)/knit_yarns.zarr --fibers $(OUT)/knit_fibers.zarr -o $@ $(FIT_ARGS)
 
 $(OUT)/knit_bysdf.exr: $(OUT)/knit_yarns.zarr/zarr.json $(OUT)/knit_bysdf_fit.toml $(KNIT_SCENE)
@@ -313,8 +329,8 @@ $(OUT)/eval/report/report.md: $(OUT)/eval/volpath-procedural.exr $(OUT)/eval/vol
 	    --test $(OUT)/eval/fiberpath.exr --test $(OUT)/eval/bysdf.exr -o $(OUT)/eval/report
 
 # make demo's equal-error comparison, last and alone (its render times are measured on an idle machine; a reference
-# made by other code is rebuilt first): the demo
-# swatch at 64x48, fiberpath and bysdf at three budgets each against a 2,048-spp reference (data/compare/demo_quick.toml)
+# made by other code is rebuilt first): the demo swatch at 48x36, fiberpath and bysdf at three budgets each against
+# a reference of at least 512 spp (data/compare/demo_quick.toml)
 $(OUT)/compare/report.md: $(OUT)/fibers.zarr/zarr.json $(OUT)/bysdf_fit.toml data/compare/demo_quick.toml
 	$(LL) evaluate --convergence data/compare/demo_quick.toml -o $(OUT)/compare --reference-only
 	$(LL) evaluate --convergence data/compare/demo_quick.toml -o $(OUT)/compare
@@ -337,19 +353,36 @@ $(COMPARE_IN)/twill_yarns.zarr/zarr.json: $(TWILL_SCENE) $(VENV)/.installed $(AR
 $(COMPARE_IN)/twill_fibers.zarr/zarr.json: $(COMPARE_IN)/twill_yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
 	$(LL) realize $(COMPARE_IN)/twill_yarns.zarr -o $(COMPARE_IN)/twill_fibers.zarr
 
+# the comparisons' own precomputes and fits, at make demo-full's settings (data/compare/damask.toml, demo.toml,
+# demo_delta.toml, knit.toml)
+$(COMPARE_IN)/damask_svf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) $(ARGS_DIR)/cmp_damask_svf.args
+	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_svf.zarr $(FULL_SVF_ARGS)
+
+$(COMPARE_IN)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(PRECOMPUTE_DEPS) pipeline/runners/precompute.py $(ARGS_DIR)/cmp_damask_iirtf.args
+	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_iirtf.zarr $(FULL_IIRTF_ARGS)
+
+$(COMPARE_IN)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py $(ARGS_DIR)/cmp_damask_btf.args
+	$(LL) precompute btf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_btf_fit.zarr $(FULL_BTF_ARGS)
+
+$(COMPARE_IN)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(FIT_DEPS) $(ARGS_DIR)/cmp_bysdf_fit.args
+	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FULL_FIT_ARGS)
+
+$(COMPARE_IN)/knit_bysdf_fit.toml: $(OUT)/knit_fibers.zarr/zarr.json $(KNIT_SCENE) $(FIT_DEPS) $(ARGS_DIR)/cmp_bysdf_fit.args
+	$(LL) fit-bysdf $(KNIT_SCENE) --yarns $(OUT)/knit_yarns.zarr --fibers $(OUT)/knit_fibers.zarr -o $@ $(FULL_FIT_ARGS)
+
 # the draped damask's precompute at the prt sweep's settings (PRT_SVF_ARGS, PRT_DAMASK_IIRTF_ARGS: SVF 128, IIRTF
-# cells of 1.5 mean free paths, light from both sides) beside make demo's reduced one: data/compare/damask.toml
+# cells of 1.5 mean free paths, light from both sides) beside make demo-full's reduced one: data/compare/damask.toml
 # compares both
-$(COMPARE_IN)/damask_svf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py) $(ARGS_DIR)/damask_svf_full.args
+$(COMPARE_IN)/damask_svf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) $(ARGS_DIR)/damask_svf_full.args
 	$(LL) precompute svf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_svf_full.zarr $(PRT_SVF_ARGS)
 
-$(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute.py $(ARGS_DIR)/damask_iirtf_full.args
+$(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(PRECOMPUTE_DEPS) pipeline/runners/precompute.py $(ARGS_DIR)/damask_iirtf_full.args
 	$(LL) precompute iirtf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_iirtf_full.zarr $(PRT_DAMASK_IIRTF_ARGS)
 
 $(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/scenes/knit_swatch.toml $(VENV)/.installed $(ARTIFACT_FORMAT)
 	$(LL) tile data/tilings/knit_swatch.toml -o $(COMPARE_IN)/knit_tiling.zarr
 
-$(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(wildcard stages/precompute/*.py stages/precompute/*/*.py) pipeline/limits.py pipeline/runners/precompute_btf.py
+$(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py
 	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf.zarr --model tabulated
 
 .PRECIOUS: $(COMPARE_IN)/%.zarr/zarr.json

@@ -1,5 +1,5 @@
 """The precompute of Khungurn et al. 2017 (issue 17 item 6): SVF and IIRTF of the demo damask's two
-exemplars at the settings ``make demo`` uses, as the paper's Table 1 columns per exemplar (fibres,
+exemplars at settings near ``make demo-full``'s, as the paper's Table 1 columns per exemplar (fibres,
 segments, fibre radius, mean free path, target cell length, SH order, IIRTF size and time, SSDF size,
 sum-of-SGs size, visibility time), the throughputs (SVF rays/s and segments/s, IIRTF paths/s and
 cells/s) and the cost of the paper's defaults extrapolated from the measured rates (128 x 128 pixels;
@@ -7,7 +7,8 @@ cells of one mean free path, 50,000 paths each).
 
 Tiling: ``$LOOMLIGHT_BENCH_TILING`` or ``out/demo/damask_tiling.zarr`` (built from data/tilings/damask.toml
 into the results directory when missing). Settings: ``$LOOMLIGHT_BENCH_SVF`` / ``$LOOMLIGHT_BENCH_IIRTF``
-(CLI arguments), default the Makefile's SVF_ARGS / IIRTF_ARGS. Times exclude compilation (reported apart).
+(CLI arguments), default SVF 64 x 64 with 48 components (FULL_SVF_ARGS), IIRTF of order 4 at cells of 3 mean
+free paths with 500 paths each. Times exclude compilation (reported apart).
 """
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
 """The compile report: what numba compiles on a cold cache, for whom, and how long it takes.
 
-    python bench/compile_report.py [--demo full|quick|none] [--tests heavy|all|none|FILE ...]
+    python bench/compile_report.py [--demo demo|full|none] [--tests heavy|all|none|FILE ...]
                                    [--out bench/results/compile.json]
 
-(``make compile-report``.) Runs ``make demo``'s commands (``--demo full``, the default; ``quick`` runs
-``make demo-quick``'s, the same commands at smaller sizes) and then the test suite's heaviest files
+(``make compile-report``.) Runs ``make demo``'s commands (``--demo demo``, the default; ``full`` runs
+``make demo-full``'s, the same commands at larger sizes) and then the test suite's heaviest files
 (``--tests heavy``, the default; ``all`` is ``make test``'s whole suite), each on an empty numba cache of
 its own in a scratch directory, with ``LOOMLIGHT_COMPILE_LOG`` set: every compilation of every process
 appends a line to a log (``pipeline/compilation.py``: the kernel, the signature it was typed with, its
@@ -110,7 +110,7 @@ def summarize(parts: dict[str, dict]) -> dict:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--demo", choices=("full", "quick", "none"), default="full")
+    ap.add_argument("--demo", choices=("demo", "full", "none"), default="demo")
     ap.add_argument("--tests", nargs="*", default=["heavy"],
                     help="heavy (the default), all (make test's suite), none, or test files")
     ap.add_argument("--out", type=Path, default=HERE / "results" / "compile.json")
@@ -122,10 +122,10 @@ def main(argv=None) -> int:
     parts: dict[str, dict] = {}
     try:
         if a.demo != "none":
-            target = "demo" if a.demo == "full" else "demo-quick"
+            target = "demo" if a.demo == "demo" else "demo-full"
             out = work / "demo-out"
             shutil.rmtree(out, ignore_errors=True)
-            var = "OUT" if a.demo == "full" else "QUICK_OUT"
+            var = "OUT" if a.demo == "demo" else "FULL_OUT"
             parts["demo"] = _run_part("demo", ["make", "--no-print-directory", target, f"{var}={out}"], work)
         tests = a.tests
         if tests and tests != ["none"]:

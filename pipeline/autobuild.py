@@ -349,7 +349,7 @@ def iirtf_size(tiling: Path, p) -> str:
             f"{p.paths:,} paths per cell, {p.light_sampling} light sampling): {S:,} segments in {K} exemplar(s); "
             "the full quality of Khungurn et al. 2017 (its bar shows the time left once the cells are counted); "
             "pass --set iirtf=IIRTF.zarr from a cheaper precompute to skip it "
-            "(make demo's: --cell-factor 3 --paths 200 --light-sampling mis)")
+            "(make demo-full's: --cell-factor 3 --paths 200 --light-sampling mis)")
 
 
 def btf_size(tiling: Path, p) -> str:

@@ -1,12 +1,12 @@
-"""The README's picture, docs/img/methods.png, from ``make demo``'s own renders.
+"""The README's picture, docs/img/methods.png, from ``make demo-full``'s own renders.
 
-    .venv/bin/python scripts/readme_figure.py [--demo out/demo] [-o docs/img/methods.png]
+    .venv/bin/python scripts/readme_figure.py [--demo out/demo-full] [-o docs/img/methods.png]
 
 Two rows, because no one fabric takes all four methods: the demo swatch (``fiberpath``, procedural
 ``volpath``, ``bysdf`` with the demo's fit) and the draped damask (``fiberpath``, ``prt``, ``btf``), each
-tile the render's sRGB PNG, labelled. ``make demo`` renders all but the swatch's ``bysdf``, which this
+tile the render's sRGB PNG, labelled. ``make demo-full`` renders all but the swatch's ``bysdf``, which this
 script renders from the demo's yarns and fit (240x180, 16 spp) when it is missing. Exits 1 naming a missing
-render (run ``make demo`` first).
+render (run ``make demo-full`` first).
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def main() -> int:
     from PIL import Image, ImageDraw
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--demo", type=Path, default=ROOT / "out" / "demo")
+    ap.add_argument("--demo", type=Path, default=ROOT / "out" / "demo-full")
     ap.add_argument("-o", "--out", type=Path, default=ROOT / "docs" / "img" / "methods.png")
     args = ap.parse_args()
     if not (args.demo / "bysdf.png").exists() and (args.demo / "bysdf_fit.toml").exists():
@@ -37,7 +37,7 @@ def main() -> int:
                         "--height", "180", "-o", str(args.demo / "bysdf.exr")], check=True)
     missing = [str(args.demo / f) for _, row in ROWS for _, f in row if not (args.demo / f).exists()]
     if missing:
-        print(f"readme_figure: no {', '.join(missing)}; run make demo first", file=sys.stderr)
+        print(f"readme_figure: no {', '.join(missing)}; run make demo-full first", file=sys.stderr)
         return 1
     tiles = [[Image.open(args.demo / f).convert("RGB") for _, f in row] for _, row in ROWS]
     w, h = tiles[0][0].size

@@ -18,7 +18,7 @@ from tests.helpers import ROOT
 
 pytestmark = pytest.mark.skipif(shutil.which("make") is None, reason="make is not installed")
 MAKEFILES = [ROOT / "Makefile", *sorted((ROOT / "make").glob("*.mk"))]
-MAIN = {"help", "setup", "demo", "demo-quick", "test", "test-all", "bench", "references", "compare", "docs", "clean"}
+MAIN = {"help", "setup", "demo", "demo-full", "test", "test-all", "bench", "references", "compare", "docs", "clean"}
 EXPERIMENTS = {"table1", "sweep", "agreement", "prt-sweep", "prt-study", "btf-sweep"}
 # a number with a unit of time ("~4 min", "7 s", "10 minutes"): measured timings, never in comments or prose
 TIMING = re.compile(r"\b\d[\d,.]*\s*(?:ms|s|sec|seconds?|min|mins|minutes?|h|hours?)\b")

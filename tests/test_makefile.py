@@ -1,7 +1,8 @@
-"""The Makefile's contract with a newcomer (issue 23 item 6), read from `make -n` (nothing runs):
-`make demo-quick` is the whole demo at small sizes and reduced precomputes in its own directory,
-`make demo` renders at the documented demo size, and pip's output goes to a log shown only on failure; and, with
-real make in a scratch directory, that a precompute made with other arguments is rebuilt.
+"""The Makefile's contract with a newcomer (issue 23 item 6, issue 55 item 4), read from `make -n` (nothing
+runs): `make demo` is every stage at small sizes and reduced precomputes, `make demo-full` the same commands at
+the documented size in its own directory, the comparisons precompute their own inputs at demo-full's settings
+(so the demo's settings never change what `make compare` measures), and pip's output goes to a log shown only on
+failure; and, with real make in a scratch directory, that a precompute made with other arguments is rebuilt.
 """
 from __future__ import annotations
 
@@ -25,46 +26,63 @@ def _commands(lines: list[str], word: str) -> list[str]:
     return [line for line in lines if f"loomlight {word} " in line]
 
 
-def test_demo_quick_is_the_whole_demo_small_in_its_own_directory():
-    quick = _dry_run("-B", "demo-quick")
+def _precompute(lines: list[str], kind: str) -> str:
+    (cmd,) = [c for c in _commands(lines, "precompute") if f" {kind} " in c]
+    return cmd
+
+
+def test_demo_is_every_stage_small_and_demo_full_the_same_at_the_documented_size():
     demo = _dry_run("-B", "demo")
-    # every stage of the demo, no more and no fewer: the same loomlight subcommands in the same order
+    full = _dry_run("-B", "demo-full")
+
     def sub(lines):
         return [line.split("loomlight ", 1)[1].split()[0] for line in lines if "bin/loomlight " in line]
 
-    assert sub(quick) == sub(demo)
-    for line in quick:
+    # every stage of the demo, no more and no fewer: the same loomlight subcommands in the same order
+    assert sub(full) == sub(demo)
+    for line in full:
         if "bin/loomlight " in line:
-            assert "out/demo" not in line, line
-    renders = _commands(quick, "render")
-    assert len(renders) >= 6
-    main_renders = [r for r in renders if "/eval/" not in r]
-    assert main_renders and all("--width 160 --height 120" in r for r in main_renders)
-    assert all("--max-spp 0" in r for r in main_renders if "--max-spp" in r)
-    (svf,) = [c for c in _commands(quick, "precompute") if " svf " in c]
-    assert "--resolution 32" in svf
-    (iirtf,) = [c for c in _commands(quick, "precompute") if " iirtf " in c]
-    assert "--paths 100" in iirtf
-
-
-def test_demo_renders_at_the_documented_size_and_precompute():
-    demo = _dry_run("-B", "demo")
-    main_renders = [r for r in _commands(demo, "render") if "/eval/" not in r]
-    # volpath, fiberpath; damask: fiberpath, prt, btf's fit and table; knit: bysdf, fiberpath
-    assert len(main_renders) == 8
-    assert all("--width 240 --height 180" in r for r in main_renders)
-    # the main volpath picture: procedural lookups with the fibre cache (issue 21); the evaluation's
-    # procedural render: lookups only, against the realized source
-    (vol,) = [r for r in main_renders if "--method volpath" in r]
-    assert "--source procedural" in vol and "--cache" not in vol
-    (ev,) = [r for r in _commands(demo, "render") if "/eval/volpath-procedural" in r]
-    assert "--cache 0" in ev
-    (btf,) = [c for c in _commands(demo, "precompute") if " btf " in c]
-    assert "--exemplar" not in btf and "--resolution 16" in btf   # the damask's texture holds both satins
+            assert "out/demo/" not in line and "out/demo-full/" in line, line
+    for lines, size, refine in ((demo, "--width 160 --height 120", "--max-spp 0"),
+                                (full, "--width 240 --height 180", "--max-spp 128")):
+        main_renders = [r for r in _commands(lines, "render") if "/eval/" not in r]
+        # volpath, fiberpath; damask: fiberpath, prt, btf's fit and table; knit: bysdf, fiberpath
+        assert len(main_renders) == 8
+        assert all(size in r for r in main_renders)
+        assert all(refine in r for r in main_renders if "--max-spp" in r)
+        # the main volpath picture: procedural lookups with the fibre cache (issue 21); the evaluation's
+        # procedural render: lookups only, against the realized source
+        (vol,) = [r for r in main_renders if "--method volpath" in r]
+        assert "--source procedural" in vol and "--cache" not in vol
+        (ev,) = [r for r in _commands(lines, "render") if "/eval/volpath-procedural" in r]
+        assert "--cache 0" in ev
+        assert "--exemplar" not in _precompute(lines, "btf")   # the damask's texture holds both satins
+    assert "--resolution 32" in _precompute(demo, "svf") and "--paths 100" in _precompute(demo, "iirtf")
+    assert "--resolution 64" in _precompute(full, "svf") and "--paths 200" in _precompute(full, "iirtf")
+    assert "--resolution 16" in _precompute(full, "btf")
     readme = (ROOT / "README.md").read_text()
-    assert "240×180" in readme and "make demo-quick" in readme
-    (svf,) = [c for c in _commands(demo, "precompute") if " svf " in c]
-    assert "--resolution 64" in svf
+    assert "240×180" in readme and "make demo-full" in readme and "160×120" in readme
+
+
+def test_the_comparisons_precompute_their_own_inputs_at_demo_full_settings():
+    """make demo's reduced precomputes never reach make compare: the comparison files name the comparison's own
+    precomputes and fits (out/compare/inputs), made with demo-full's arguments; fibres, tables and tilings,
+    which take no settings, are the demo's."""
+    full = _dry_run("-B", "demo-full")
+    refs = _dry_run("-B", "references")
+    for kind, out in (("svf", "out/compare/inputs/damask_svf.zarr"), ("iirtf", "out/compare/inputs/damask_iirtf.zarr"),
+                      ("btf", "out/compare/inputs/damask_btf_fit.zarr")):
+        (cmd,) = [c for c in _commands(refs, "precompute") if f"-o {out} " in c]
+        assert cmd.split(f"-o {out} ", 1)[1] == _precompute(full, kind).split(" -o ", 1)[1].split(" ", 1)[1], kind
+    fits = [c for c in _commands(refs, "fit-bysdf") if "out/compare/inputs/" in c]
+    assert len(fits) == 2
+    full_fit = _commands(full, "fit-bysdf")[0].split(".toml ", 2)[-1]
+    assert all(c.endswith(full_fit) for c in fits)
+    demo_made = ("damask_svf.zarr", "damask_iirtf.zarr", "damask_btf_fit.zarr", "bysdf_fit.toml", "knit_bysdf_fit.toml")
+    for name in ("damask", "demo", "demo_delta", "knit"):
+        text = (ROOT / "data" / "compare" / f"{name}.toml").read_text()
+        assert not [f for f in demo_made if f"out/demo/{f}" in text], name
+    assert "params=out/compare/inputs/bysdf_fit.toml" in (ROOT / "data/compare/demo.toml").read_text()
 
 
 def test_pip_output_goes_to_a_log_shown_on_failure():
