@@ -31,17 +31,22 @@ Pca = namedtuple("Pca", ["mean", "basis", "eigenvalues", "variance"])
 Pca.__doc__ = """subspace_pca's result: mean (D,), basis (n, D) orthonormal rows, eigenvalues (n,) variance per unit
 weight along each row, variance (float) the total variance per unit weight; float64."""
 
-BLOCK = 32
+BLOCK = 32   # columns per block of acc_mean / acc_xtw: one thread sums a block's columns over the rows in order
+
+
+@njit(cache=True)
+def column_block(b, D):
+    """Columns [d0, d1) of block ``b`` of D columns cut into blocks of BLOCK."""
+    d0 = b * BLOCK
+    return d0, min(D, d0 + BLOCK)
 
 
 @njit(cache=True, parallel=True)
 def acc_mean(X, m, acc):
     """acc[d] += m[s] X[s, d], s ascending."""
     S, D = X.shape
-    nb = (D + BLOCK - 1) // BLOCK
-    for b in prange(nb):
-        d0 = b * BLOCK
-        d1 = min(D, d0 + BLOCK)
+    for b in prange((D + BLOCK - 1) // BLOCK):
+        d0, d1 = column_block(b, D)
         for s in range(S):
             for d in range(d0, d1):
                 acc[d] += m[s] * X[s, d]
@@ -67,10 +72,8 @@ def acc_xtw(X, m, mean, W, Y, sq):
     """Y[d, :] += m[s] (X[s, d] - mean[d]) W[s, :] and sq[d] += m[s] (X[s, d] - mean[d])^2, s ascending."""
     S, D = X.shape
     p = W.shape[1]
-    nb = (D + BLOCK - 1) // BLOCK
-    for b in prange(nb):
-        d0 = b * BLOCK
-        d1 = min(D, d0 + BLOCK)
+    for b in prange((D + BLOCK - 1) // BLOCK):
+        d0, d1 = column_block(b, D)
         for s in range(S):
             for d in range(d0, d1):
                 x = X[s, d] - mean[d]
