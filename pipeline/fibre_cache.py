@@ -79,11 +79,10 @@ def empty_cache(cv, tab, grid):
     brick test (one array read). A render without a cache uses it rather than the bare ``ProceduralMedium``
     so that the volpath integrator is compiled for one medium type whatever the budget (its compilation
     takes about a minute on a cold cache); the pictures are the same bytes (``tests/render/test_fibre_cache``)."""
-    from stages.core.geometry.bvh import build_fiber_bvh
+    from stages.core.geometry.bvh import empty_fiber_bvh
 
-    bvh, _ = build_fiber_bvh(np.empty((0, 3)), np.zeros(1, np.int64), np.empty(0), keep_binary=False)
     cached = np.zeros(int(np.prod(grid.res)), np.uint8)
-    return _medium(cv, tab, grid, cached, bvh, np.zeros(0, np.int32), np.zeros(0, np.int64))
+    return _medium(cv, tab, grid, cached, empty_fiber_bvh(), np.zeros(0, np.int32), np.zeros(0, np.int64))
 
 
 def _vertices_per_length(tab, curve_length, spacing) -> np.ndarray:

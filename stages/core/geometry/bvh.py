@@ -407,6 +407,16 @@ def collapse_wide(nlo, nhi, left, right, start, count, box, child, fill):
     return nw
 
 
+def empty_fiber_bvh() -> FiberBVH:
+    """The ``FiberBVH`` of no fibres, with ``build_fiber_bvh``'s array types (one compiled query for both), made
+    without running a kernel: what a fibre cache that holds nothing carries."""
+    f64, f32, i64, i32 = np.float64, np.float32, np.int64, np.int32
+    return FiberBVH(np.empty((0, 3), f64), np.empty(0, i64), np.empty(0, f64), np.empty(0, i32),
+                    np.empty((0, 3), f32), np.empty((0, 3), f32), np.empty(0, i32), np.empty(0, i32),
+                    np.empty(0, i64), np.empty(0, i64), np.empty(0, i64), np.zeros(1, i64), np.empty((0, 8), f64),
+                    np.empty((0, 24), f32), np.empty((0, 4), i64))
+
+
 def aligned_empty(shape, dtype):
     """An uninitialised C-contiguous array whose data starts on a 64-byte boundary."""
     dtype = np.dtype(dtype)
