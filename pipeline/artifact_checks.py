@@ -259,9 +259,11 @@ def _btf(a: _Arrays) -> None:
     if "tabulated/weights" in a.arrays:     # the tabulated model (precompute btf --model tabulated)
         C, K = a.value("table_clusters"), a.value("table_components")
         T = sum((res >> lv) ** 2 for lv in range(levels))
-        keys = "exemplars, resolution, levels, view_grid, light_grid, table_clusters and table_components"
-        for name, want in (("cluster", [E, T]), ("mean", [E, C, nt * nph, lt * lph, 3]),
-                           ("basis", [E, C, K, nt * nph, lt * lph, 3]), ("weights", [E, T, K]),
+        keys = ("exemplars, resolution, levels, view_grid, light_grid, light_domain, table_clusters and "
+                "table_components")
+        nl = lt * lph * (2 if a.summary.get("light_domain", "hemisphere") == "sphere" else 1)   # and mirrored below
+        for name, want in (("cluster", [E, T]), ("mean", [E, C, nt * nph, nl, 3]),
+                           ("basis", [E, C, K, nt * nph, nl, 3]), ("weights", [E, T, K]),
                            ("rel_rmse_by_components", [E, K + 1])):
             a.shaped(f"tabulated/{name}", want, keys)
 

@@ -170,6 +170,12 @@ def btf(
                                      help="hemisphere: light cells of equal solid angle (Daubert et al. 2001); half: "
                                           "cells of the half vector between light and view, where fibre glints stay "
                                           "put as the view moves (the tabulated model reads them sharper)."),
+    light_domain: str = typer.Option("hemisphere", "--light-domain", metavar="<hemisphere | sphere>",
+                                     help="hemisphere: lights above the fabric (Daubert et al. 2001: a reflectance); "
+                                          "sphere: the light grid and its mirror below the fabric too, so the "
+                                          "tabulated model lets light through the cloth (a sky below a knit, a "
+                                          "curtain against a window; twice the lights to acquire). The Lafortune "
+                                          "fit reads the lights above only."),
     spp: int = typer.Option(16, "--spp", help="Rays per texel and view (super-sampled alpha and radiance)."),
     lobes: int = typer.Option(2, "--lobes", help="Lafortune lobes per texel: 1 or 2."),
     threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "
@@ -212,7 +218,8 @@ def btf(
     check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
     grid = parse_grid(lights, "--lights") if lights is not None else DEFAULT_LIGHTS.get(light_coords, (8, 8))
     p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=grid, light_coords=light_coords,
-                  spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds, directions=directions,
+                  light_domain=light_domain, spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds,
+                  directions=directions,
                   model=model, clusters=clusters, components=components,
                   max_depth=max_depth,
                   rr_depth=rr_depth, seed=seed, material=parse_material_options(set_ or [], bcsdf))

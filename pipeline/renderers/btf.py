@@ -86,7 +86,7 @@ ONE_EXEMPLAR = Blocks(np.zeros((1, 1), np.int64), np.ones(2), np.zeros(2))   # a
 # ``levels``), with what else the renderer needs from the artifact
 BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "periods",
                                        "exemplars", "fit_bytes", "summary", "model", "radiance", "light_grid",
-                                       "half", "cells"])
+                                       "half", "cells", "lower"])
 SOURCES = ("mesh", "tiling")
 ON_OFF = {"on": True, "off": False}
 
@@ -97,7 +97,8 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     ``model`` tabulated, its compressed table decoded in the same row order (``radiance`` (N, V, L, 3) float32,
     negative values clamped to 0; else (1, 1, 1, 3) zeros). ``half``: the table's lights are half-vector cells
     (``precompute btf --light-coords half``), seen from each view cell as ``cells`` (``stages.core.btf.HalfCells``:
-    valid fractions and solid angles); else None."""
+    valid fractions and solid angles); else None. ``lower``: the decoded table answers light from below the fabric
+    (``precompute btf --light-domain sphere``; ``stages.core.btf`` SPHERE); the Lafortune fit never does."""
     from stages.core.btf import half_cell_geometry, hemisphere_grid
 
     from ..artifacts import Artifact
@@ -119,6 +120,10 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     if coords not in ("hemisphere", "half"):
         raise LoomError(path, "summary.light_coords", f"must be hemisphere or half, got {coords!r}")
     half = coords == "half"
+    domain = s.get("light_domain", "hemisphere")
+    if domain not in ("hemisphere", "sphere"):
+        raise LoomError(path, "summary.light_domain", f"must be hemisphere or sphere, got {domain!r}")
+    sphere_cells = 2 if domain == "sphere" else 1   # the table's light axis: the grid, and its mirror below
     ft, fph = (int(x) for x in s.get("fit_light_grid", [lt, lph]))
     if res & (res - 1) or not 1 <= levels <= res.bit_length():
         raise LoomError(path, "summary", f"resolution {res} with {levels} levels: the resolution must be a power "
@@ -164,7 +169,8 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     fit_bytes = sum(int(np.prod(have[k].shape)) * np.dtype(have[k].dtype).itemsize for k in names)
     radiance = np.zeros((1, 1, 1, 3), np.float32)
     if model == "tabulated":
-        radiance, fit_bytes = load_table(art, path, E, res, levels, nt * nph, lt * lph), int(s.get("table_bytes", 0))
+        radiance, fit_bytes = (load_table(art, path, E, res, levels, nt * nph, lt * lph * sphere_cells),
+                               int(s.get("table_bytes", 0)))
     cells = None
     if half:    # the cells seen from each view cell, as the acquisition saw them (cell averages or centres)
         cells = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
@@ -172,7 +178,8 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
                       np.ascontiguousarray(np.concatenate(tables), np.float32),
                       np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), periods,
-                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, cells)
+                      [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, cells,
+                      model == "tabulated" and sphere_cells == 2)
 
 
 def load_table(art, path, E, res, levels, V, L) -> np.ndarray:
@@ -347,18 +354,20 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
                          has_ground, pixel_angle,
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
                          int(bool(shadows)), MAX_LAYERS, eps, tabulated, tex.radiance, int(tex.light_grid[0]),
-                         int(tex.light_grid[1]), int(tex.half), tex.cells.valid if tex.half else np.ones((1, 1)))
+                         int(tex.light_grid[1]), int(tex.half), tex.cells.valid if tex.half else np.ones((1, 1)),
+                         bool(tex.lower))
 
 
 def sky_weights(tex: BtfTexture) -> np.ndarray:
-    """(V, L) the tabulated table's quadrature weights per view cell and light cell: 2 pi / L on the hemisphere grid
-    (every cell the same solid angle); a half-vector cell's solid angle over its valid fraction (its cell average
+    """(V, L) the tabulated table's quadrature weights per view cell and light cell: 2 pi / n on the hemisphere grid
+    of n cells (every cell the same solid angle; a sphere table's 2 n cells too: the sky below counts); a
+    half-vector cell's solid angle over its valid fraction (its cell average
     counts the invalid part as 0; ``stages.core.btf`` module doc), 0 where it has no light."""
     from stages.core.btf import MIN_VALID
 
-    V, L = tex.table.shape[1], tex.light_grid[0] * tex.light_grid[1]
+    V, n = tex.table.shape[1], tex.light_grid[0] * tex.light_grid[1]
     if not tex.half:
-        return np.full((V, L), 2.0 * np.pi / L)
+        return np.full((V, n * (2 if tex.lower else 1)), 2.0 * np.pi / n)
     valid, solid = tex.cells
     return np.where(valid >= MIN_VALID, solid / np.maximum(valid, MIN_VALID), 0.0)
 
@@ -400,6 +409,7 @@ def film_setup(scene, options: dict):
              "bvh_nodes": int(len(integ.mesh.nodes)), "btf_resolution": int(tex.levels[0, 0, 1]),
              "btf_levels": int(tex.levels.shape[1]), "btf_exemplars": int(tex.levels.shape[0]),
              "btf_lobes": int(tex.lobes), "btf_model": model,
+             "btf_light_domain": "sphere" if tex.lower else "hemisphere",
              "btf_views": int(tex.table.shape[1]), "btf_lights": int(len(tex.light_dirs)),
              "fit_bytes": int(tex.fit_bytes), "mip": "on" if mip else "off", "shadows": "on" if shadows else "off",
              "max_layers": int(integ.max_layers)}

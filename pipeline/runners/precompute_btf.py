@@ -30,6 +30,10 @@ table's (``FIT_PARAMS``), the inputs' identities and the acquisition code's vers
 output path has the key of a new run, its samples, alpha and frames are taken instead of tracing them again
 (said on the output; ``--force`` acquires anyway): a refit or an added table costs seconds, not minutes.
 
+With ``--light-domain sphere`` the samples' and the table's light axis is the hemisphere grid and then its mirror
+below the fabric (``stages.core.btf.SPHERE``: 2 L lights); the summary says ``light_domain = "sphere"``, ``light_dirs``
+is the hemisphere grid the fit reads (the Lafortune lobes are fitted to the lights above).
+
 With half-vector cells the summary says ``light_coords = "half"``, ``light_grid`` is the cells' (nx, ny) (the samples'
 and the table's light axis), ``fit_light_grid`` the fit's hemisphere grid, whose directions ``light_dirs`` holds;
 ``half_dirs`` (L, 3) the cells' centre half vectors; ``directions`` says whether the cells were averaged.
@@ -60,6 +64,7 @@ from ..memory import Estimate, budget as memory_budget
 
 DIRECTIONS = ("cell", "grid")
 LIGHT_COORDS = ("hemisphere", "half")   # the light grid: equal-area rings and azimuths, or half-vector cells
+LIGHT_DOMAINS = ("hemisphere", "sphere")   # lights above the fabric, or the grid and its mirror below it too
 DEFAULT_LIGHTS = {"hemisphere": (8, 8), "half": (15, 15)}   # --lights when not given (half: a cell at h = 0)
 FIT_LIGHT_GRID = (8, 8)   # half-vector acquisitions: the hemisphere grid the Lafortune fit (and the renderer's
                           # quadrature) reads them on (stages.core.btf.half_to_hemisphere)
@@ -91,6 +96,7 @@ class BtfParams:
     max_rounds: int = 10
     directions: str = "cell"         # cell: view and light uniform over each grid cell (averages); grid: the grid's
     light_coords: str = "hemisphere"  # half: light cells in half-vector coordinates (stages.core.btf)
+    light_domain: str = "hemisphere"  # sphere: the light grid's mirror below the fabric too (stages.core.btf SPHERE)
     max_depth: int = FULL_TRANSPORT_DEPTH   # at 16 the damask's ground-satin texture held 0.55 / 0.66 / 0.75 of
     rr_depth: int = 5                       # its red / green / blue light at 256 (64 x 48 render, 8 spp)
     seed: int = 0
@@ -124,6 +130,12 @@ class BtfParams:
         if self.light_coords not in LIGHT_COORDS:
             raise LoomError(None, "--light-coords", f"must be one of {', '.join(LIGHT_COORDS)}, got "
                                                     f"{self.light_coords!r}")
+        if self.light_domain not in LIGHT_DOMAINS:
+            raise LoomError(None, "--light-domain", f"must be one of {', '.join(LIGHT_DOMAINS)}, got "
+                                                    f"{self.light_domain!r}")
+        if self.light_domain == "sphere" and self.light_coords != "hemisphere":
+            raise LoomError(None, "--light-domain", "sphere mirrors the hemisphere grid below the fabric; it does not "
+                                                    "take --light-coords half")
         if self.model not in MODELS:
             raise LoomError(None, "--model", f"must be one of {', '.join(MODELS)}, got {self.model!r}")
         if self.model == "tabulated":
@@ -133,12 +145,16 @@ class BtfParams:
         if not (math.isfinite(self.threshold) and self.threshold > 0):
             raise LoomError(None, "--threshold", f"must be a positive number, got {self.threshold}")
 
+    def light_count(self) -> int:
+        """The acquisition's and the table's lights: the grid's cells, twice with ``light_domain`` sphere."""
+        return self.lights[0] * self.lights[1] * (2 if self.light_domain == "sphere" else 1)
+
     def check_table(self) -> None:
         """The tabulated model's counts: components within the table's rank bound, clusters within its texels."""
         from stages.precompute.btf_compress import rank_bound
 
         rows = texel_rows(self.resolution)
-        dims = self.views[0] * self.views[1] * self.lights[0] * self.lights[1] * 3
+        dims = self.views[0] * self.views[1] * self.light_count() * 3
         if not 1 <= self.components <= rank_bound(rows, dims):
             raise LoomError(None, "--components", f"must be from 1 to {rank_bound(rows, dims):,}, the rank bound of "
                             f"the table's {rows:,} texels (every mip level) x {dims:,} values; got {self.components}")
@@ -206,24 +222,27 @@ def direction_grids(p: dict) -> tuple:
     """(view_grid, light_grid, light_coords) for ``acquire_texels``: the grids with ``directions = "cell"`` (averages
     over each grid cell), (0, 0) each with "grid" (the grid directions themselves) -- but a half-vector light grid
     always, its cells being seen from each view (``stages.core.btf.half_cell_direction``)."""
-    from stages.core.btf import HALF, HEMISPHERE
+    from stages.core.btf import HALF, HEMISPHERE, SPHERE
 
     half = p.get("light_coords", "hemisphere") == "half"
     lights = tuple(int(x) for x in p["lights"])
-    coords = HALF if half else HEMISPHERE
+    coords = HALF if half else SPHERE if p.get("light_domain", "hemisphere") == "sphere" else HEMISPHERE
     if p.get("directions", "cell") == "grid":
         return (0, 0), lights if half else (0, 0), coords
     return tuple(int(x) for x in p["views"]), lights, coords
 
 
 def light_cells(p: "BtfParams"):
-    """(the acquisition's light directions (L, 3), the fit's (M, 3)): the hemisphere grid of ``--lights`` twice; for
-    half-vector cells, the cells' centre half vectors (h_z 0 off the unit disk: what ``half_dirs`` stores; the
-    acquisition takes only their count) and the hemisphere grid of FIT_LIGHT_GRID."""
+    """(the acquisition's light directions (L, 3), the fit's (M, 3)): the hemisphere grid of ``--lights`` twice (with
+    ``light_domain`` sphere the acquisition's followed by its mirror image below the fabric); for half-vector cells,
+    the cells' centre half vectors (h_z 0 off the unit disk: what ``half_dirs`` stores; the acquisition takes only
+    their count) and the hemisphere grid of FIT_LIGHT_GRID."""
     from stages.core.btf import half_grid, hemisphere_grid
 
     if p.light_coords != "half":
         grid = hemisphere_grid(*p.lights)
+        if p.light_domain == "sphere":
+            return np.concatenate([grid, grid * np.array([1.0, 1.0, -1.0])]), grid
         return grid, grid
     return half_grid(*p.lights), hemisphere_grid(*FIT_LIGHT_GRID)
 
@@ -370,7 +389,7 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     if not exemplars:
         ks = used_exemplars(art)
     E = len(ks)
-    V, L = p.views[0] * p.views[1], p.lights[0] * p.lights[1]
+    V, L = p.views[0] * p.views[1], p.light_count()
     work = btf_work(p.resolution, V, L, p, numba.get_num_threads(), E)
     work.check(None, largest_option(work, "--spp"), "lower it (or --resolution, --views, --lights, --exemplar)")
     scene_path, sc_obj = materials_scene(tiling, art, scene)
@@ -443,6 +462,9 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
             alpha = w.group["alpha"][e]
             t0 = time.perf_counter()
             fit_samples = samples
+            if p.light_domain == "sphere":   # the Lafortune lobes are a reflectance: the lights above only
+                fit_samples = samples[:, :, :, :len(fit_dirs)]
+            mean_e = float(np.mean(fit_samples))   # the radiance of the lights above (what the fit's RMSE is over)
             if half:   # the fit's lobes take the lights of a hemisphere grid: the table read there from each view
                 fit_samples = half_to_hemisphere(samples.reshape(res * res, V, L, 3), valid, p.lights[0], p.lights[1],
                                                  view_dirs, fit_dirs).reshape(res, res, V, len(fit_dirs), 3)
@@ -451,7 +473,6 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                                     max_rounds=p.max_rounds)
             fit_s += time.perf_counter() - t0
             fits.append(_fit_record(levels, res, V, p.lobes))
-            mean_e = float(np.mean(samples))
             per_exemplar.append({"exemplar": k, "name": names[e], "mean_radiance": mean_e,
                                  "fit_rmse": [_rms([f.rmse]) for f in levels], "alpha_mean": float(np.mean(alpha))})
             no_table.append([f.rmse_no_table for f in levels])
@@ -484,7 +505,7 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                          exemplar_names=names, periods=periods, per_exemplar=per_exemplar,
                          top=max(tops), bottom=min(bottoms), resolution=res,
                          levels=n_levels, lobes=p.lobes, view_grid=list(p.views), light_grid=list(p.lights),
-                         light_coords=p.light_coords, directions=p.directions,
+                         light_coords=p.light_coords, light_domain=p.light_domain, directions=p.directions,
                          fit_light_grid=list(FIT_LIGHT_GRID if half else p.lights),
                          spp=p.spp, fit_rmse=rmse, fit_rmse_no_table=rmse_nt, fit_bytes=int(fit_bytes),
                          mean_radiance=mean_r, relative_fit_rmse=[x / max(mean_r, 1e-12) for x in rmse],

@@ -51,6 +51,14 @@ r carries the light's foreshortening, so that read came out 7-8 % dark there on 
 foreshortening out of the cells and back in at the light came out 2-12 % bright on the satins (r of a layer of
 fibres is not proportional to l_z), though it was the best read of the knit (``make btf-sweep``, CHANGES
 2026-12-06).
+
+**Light from below** (``light_coords = SPHERE``; ``precompute btf --light-domain sphere``, the tabulated model). Seed
+002's texture is a reflectance: its lights lie above the fabric. Cloth lit from behind (a curtain against a window,
+a knit under a sky that is as bright below the swatch as above it) sends light through itself. A sphere table holds
+the hemisphere grid's L cells and then their mirror images below the fabric (cell L + k is cell k with l_z negated,
+``sphere_cell_direction``): its light axis is 2 L long, and a read with l_z < 0 reads the lower half at (l_x, l_y,
+-l_z) (``table_rgb``). r(l, v) there is the radiance towards v per unit irradiance of a light behind the fabric --
+what comes through the holes and the yarns, the fabric's own shadowing included.
 """
 import math
 from collections import namedtuple
@@ -61,7 +69,8 @@ from numba import njit, prange
 TWO_PI = 2.0 * math.pi
 LOBE_PARAMS = 4          # C_x, C_y, C_z, N
 HEMISPHERE = 0           # light coordinates: the hemisphere grid (the default) ...
-HALF = 1                 # ... or half-vector cells (module doc)
+HALF = 1                 # ... or half-vector cells (module doc) ...
+SPHERE = 2               # ... or the hemisphere grid and its mirror image below the fabric (module doc)
 MIN_VALID = 1e-6         # a view row of the half-vector table whose light weights' valid fraction is below this
                          # holds no light near the direction: it is left out of the view interpolation
 GEOMETRY_SUB = 8         # ``half_cell_geometry``: sub-samples per axis of a view cell and of a light cell
@@ -105,6 +114,17 @@ def cell_direction(index, n_theta, n_phi, u0, u1):
     st = math.sqrt(max(0.0, 1.0 - ct * ct))
     phi = 2.0 * math.pi * (j + u1) / n_phi
     return st * math.cos(phi), st * math.sin(phi), ct
+
+
+@njit(cache=True)
+def sphere_cell_direction(index, n_theta, n_phi, u0, u1):
+    """``cell_direction`` of a sphere table's light cell ``index`` (module doc, "Light from below"): cells 0 .. n - 1
+    (n = n_theta n_phi) the hemisphere grid's, cells n .. 2 n - 1 their mirror images below the fabric."""
+    n = n_theta * n_phi
+    if index < n:
+        return cell_direction(index, n_theta, n_phi, u0, u1)
+    x, y, z = cell_direction(index - n, n_theta, n_phi, u0, u1)
+    return x, y, -z
 
 
 @njit(cache=True)
@@ -349,12 +369,22 @@ def decode_texels(cluster, mean, basis, weights, out, clamp):
 def table_rgb(radiance, idx, lt, lph, lx, ly, lz, vt, vph, vx, vy, vz):
     """The tabulated texture's f_1(l, v) = r(l, v), three channels, of texel row idx: ``radiance`` (N, V, L, 3)
     bilinear on the view grid (vt x vph) and on the light grid (lt x lph) (``grid_weights``: exact at the grid's
-    directions); 0 for l_z <= 0. r holds the light's l_z as f_1 does (radiance per unit irradiance). A plain call,
-    not inlined: inlined at the btf tile loop's six call sites it added 20 s to its first compilation."""
+    directions). For l_z <= 0: 0 from a hemisphere table (L = lt lph), the lower half read at (l_x, l_y, -l_z) from a
+    sphere table (L = 2 lt lph; module doc, "Light from below"). r holds the light's |l_z| as f_1 does (radiance per
+    unit irradiance). A plain call, not inlined: inlined at the btf tile loop's six call sites it added 20 s to its
+    first compilation."""
+    below = 0
     if lz <= 0.0:
-        return 0.0, 0.0, 0.0
+        below = lt * lph
+        if radiance.shape[2] < 2 * below:
+            return 0.0, 0.0, 0.0
+        lz = -lz
     a0, a1, a2, a3, p0, p1, p2, p3 = grid_weights(vt, vph, vx, vy, vz)
     b0, b1, b2, b3, q0, q1, q2, q3 = grid_weights(lt, lph, lx, ly, lz)
+    b0 += below
+    b1 += below
+    b2 += below
+    b3 += below
     s0 = 0.0
     s1 = 0.0
     s2 = 0.0

@@ -43,6 +43,11 @@ the half-vector grid seen from the sample's view (``stages.core.btf.half_cell_di
 direction about a half vector uniform over the cell, with the same random dimensions; without the grids, about
 the cell's centre), and a cell whose light would lie below the fabric adds nothing (its shadow ray is not cast).
 
+Light from below (``light_coords`` SPHERE, ``precompute btf --light-domain sphere``): the light grid's cells and then
+their mirror images below the fabric (``stages.core.btf.sphere_cell_direction``, the same random dimensions as the
+hemisphere's 2 L lights); a light below is lit like one above, its shadow ray leaving through the slab's bottom
+(``periodic.light_reaches``), so r(l, v) there is the light the fabric lets through towards v.
+
 Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
 is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
 ``alpha`` = hits / spp. Per texel: the sum of the first hits' surface normals (the capsule's outward
@@ -57,7 +62,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
-from stages.core.btf import HALF, cell_direction, half_cell_direction
+from stages.core.btf import HALF, SPHERE, cell_direction, half_cell_direction, sphere_cell_direction
 from stages.core.dispatch import runtime_value
 from stages.core.geometry.capsule import capsule_normal
 from stages.core.geometry.stack import stack_array, stack_vector3
@@ -79,9 +84,11 @@ JOB_CHUNKS_PER_THREAD = 64  # (texel, view) jobs cost from a few rays (nothing h
                             # balance threads
 
 
-BtfLights = namedtuple("BtfLights", ["radiance", "lights"])
+BtfLights = namedtuple("BtfLights", ["radiance", "lights", "below"])
 BtfLights.__doc__ = """What one acquisition path records (a tally of ``periodic.periodic_path``): for every light
-direction of ``lights`` (L, 3) (unit irradiance), the radiance it sends along the path into ``radiance`` (L, 3)."""
+direction of ``lights`` (L, 3) (unit irradiance), the radiance it sends along the path into ``radiance`` (L, 3).
+``below``: lights below the fabric are lights (a sphere table's lower half, whose shadow rays leave through the
+bottom); else such a direction is a half-vector cell's "no light"."""
 
 
 @njit(cache=True)
@@ -93,7 +100,7 @@ def _btf_light_vertex(tally, paths, v, mat, nf, tp, seed, key, base):
     tp0, tp1, tp2 = tp
     rays = 0
     for k in range(lights.shape[0]):
-        if lights[k, 2] <= 0.0:   # a half-vector cell's light below the fabric (stages.core.btf): none
+        if lights[k, 2] <= 0.0 and not tally.below:   # a half-vector cell's light below the fabric: none
             continue
         wl[0] = lights[k, 0]
         wl[1] = lights[k, 1]
@@ -133,9 +140,10 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
     cell of light_grid (module doc, "Cell averages"; ``lights_now`` (L, 3) scratch), else v and
     ``light_dirs`` themselves. ``light_coords`` HALF: light k is half-vector cell k of light_grid seen from the
     sample's view (``stages.core.btf.half_cell_direction``: uniform over the cell with the grids, its centre
-    without), ``light_dirs`` then only gives the count. Compiled without reference counting (its vectors on the
-    machine stack): the two workers of ``acquire_texels`` would otherwise count references on the same arrays for
-    every ray.
+    without), ``light_dirs`` then only gives the count; SPHERE: lights L/2 .. L - 1 the mirror images below the
+    fabric of lights 0 .. L/2 - 1 (``light_grid`` the hemisphere's). Compiled without reference counting (its
+    vectors on the machine stack): the two workers of ``acquire_texels`` would otherwise count references on the
+    same arrays for every ray.
     17 parameters: one (texel, view) job (texel, view and its cell, spp, key), the light set, the grids and their
     light coordinates and four output or scratch arrays; the fabric is one record (``PeriodicPaths``)."""
     W = paths.W
@@ -148,6 +156,7 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
             lights_now[k, c] = light_dirs[k, c]
     jitter = view_grid[0] > 0
     half = light_coords == HALF
+    sphere = light_coords == SPHERE
     first_dims = FIRST_DIMS + (2 + 2 * L if jitter else 0)
     if half and not jitter:   # the cells' centres seen from v, the same for every sample
         for k in range(L):
@@ -159,7 +168,7 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
     ix = texel - iy * res
     v = PathScratch(stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(), stack_vector3(),
                     stack_vector3(), stack_array(CTX_SIZE, np.float64))
-    tally = BtfLights(radiance, lights_now)
+    tally = BtfLights(radiance, lights_now, sphere)
     hits = 0
     rays = 0
     for s in range(spp):
@@ -174,6 +183,8 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
                 u1 = uniform(seed, key, FIRST_DIMS + 3 + 2 * k)
                 if half:
                     lx, ly, lz = half_cell_direction(k, light_grid[0], light_grid[1], u0, u1, vx, vy, vz)
+                elif sphere:
+                    lx, ly, lz = sphere_cell_direction(k, light_grid[0], light_grid[1], u0, u1)
                 else:
                     lx, ly, lz = cell_direction(k, light_grid[0], light_grid[1], u0, u1)
                 lights_now[k, 0] = lx
@@ -198,8 +209,9 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
     """Texels t0..t1-1 (row-major ids of the res x res grid): (radiance (T, V, L, 3) float32 mean over the
     hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc. ``view_grid`` and
     ``light_grid`` (n_theta, n_phi) of the grids that ``view_dirs`` and ``light_dirs`` are: cell averages
-    (module doc); (0, 0): the directions themselves. ``light_coords``: ``stages.core.btf.HEMISPHERE``, or HALF
-    (``light_grid`` then the half-vector grid's (nx, ny), given also without cell averages). All three are always
+    (module doc); (0, 0): the directions themselves. ``light_coords``: ``stages.core.btf.HEMISPHERE``, HALF
+    (``light_grid`` then the half-vector grid's (nx, ny), given also without cell averages) or SPHERE
+    (``light_dirs`` the hemisphere grid of ``light_grid`` and its mirror image below). All three are always
     passed (no defaults), so every caller shares one compiled specialisation of the kernel. (texel, view) jobs on
     threads (``stages.core.threads``)."""
     T = t1 - t0

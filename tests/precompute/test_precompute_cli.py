@@ -124,6 +124,8 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
 @pytest.mark.parametrize("extra,needle", [(["--directions", "diagonal"], "--directions"),
                                           (["--light-coords", "polar"], "--light-coords"),
                                           (["--light-coords", "half", "--lights", "0x15"], "--lights"),
+                                          (["--light-domain", "cube"], "--light-domain"),
+                                          (["--light-domain", "sphere", "--light-coords", "half"], "--light-domain"),
                                           (["--lobes", "3"], "--lobes"),
                                           (["--threads", "-2"], "--threads"),   # was an internal error
                                           (["--model", "neural"], "--model"),
@@ -135,7 +137,8 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
                                           (["--model", "tabulated", "--components", "2", "--clusters", "6"],
                                            "--clusters")])
 def test_btf_bad_options_exit_2_nothing_written(built, cli, tmp_path, extra, needle):
-    """precompute btf: an unknown direction scheme, light coordinates, lobe count or model, an empty light grid, a
+    """precompute btf: an unknown direction scheme, light coordinates, light domain, lobe count or model, a light
+    domain of both sides on half-vector cells, an empty light grid, a
     thread count below 1, a component count below 1 or above the table's rank bound, a cluster count below 1 or
     above the texels, is refused before any work: exit 2, one line naming the option, no artifact."""
     tiling, _ = built
@@ -242,6 +245,58 @@ def test_btf_half_vector_cells_end_to_end(tiny_tiling, cli, tmp_path):
                        "-o", exr)
     assert code == 0, err
     png = tmp_path / "half.png"
+    code, _, err = cli("inspect", path, "--png", png)
+    assert code == 0, err
+    assert_legible_png(png)
+
+
+@pytest.mark.slow   # an acquisition, a fit, a table, a render and a picture: make test-all (make test's budget)
+def test_btf_light_from_below_end_to_end(tiny_tiling, cli, tmp_path):
+    """Contract (pipeline/runners/precompute_btf.py, stages/core/btf.py "Light from below"): ``--light-domain sphere``
+    acquires the light grid and its mirror below the fabric (the samples' light axis twice the grid, recorded as
+    ``light_domain``), fits the Lafortune lobes to the lights above alone (the same fit as a hemisphere acquisition
+    given those samples: checked against ``fit_levels`` on the upper half), lets light through the tiny open weave
+    (the lower half holds light), and its tabulated model renders a light from below that the fit leaves black;
+    ``loomlight inspect`` draws it."""
+    from pipeline.artifacts import Artifact
+    from pipeline.images import read_exr
+    from stages.core.btf import hemisphere_grid
+    from stages.precompute.btf_fit import fit_levels
+    from tests.inspector_checks import assert_legible_png
+
+    tiling = tiny_tiling[0]
+    path = tmp_path / "sphere.zarr"
+    code, out, err = cli("precompute", "btf", tiling, "-o", path, *BTF_ARGS, "--light-domain", "sphere", "--model",
+                         "tabulated", "--clusters", "1", "--components", "2", "--threads", "2")
+    assert code == 0, err
+    a = Artifact(path)
+    s = a.summary
+    assert s["light_domain"] == "sphere" and s["light_grid"] == [2, 4]
+    assert np.allclose(np.asarray(a["light_dirs"]), hemisphere_grid(2, 4))
+    samples = np.asarray(a["samples"], np.float32)          # (2 exemplars, 2, 2, 8 views, 16 lights, 3)
+    assert samples.shape == (2, 2, 2, 8, 16, 3)
+    assert np.any(samples[..., 8:, :] > 0)
+    frames = np.asarray(a["level_0/frame"], np.float64)
+    ref = fit_levels(samples[0, :, :, :, :8], np.asarray(a["alpha"])[0], frames[0], np.asarray(a["view_dirs"]),
+                     hemisphere_grid(2, 4), 2, 0.1, max_rounds=10)
+    assert np.allclose(ref[0].rho.reshape(2, 2, 3), np.asarray(a["level_0/rho"])[0], rtol=1e-6, atol=1e-7)
+    scene = tmp_path / "scene.toml"
+    text = Path("data/scenes/flat_satin.toml").read_text()   # its yarns; the tiny tiling's 0.2 x 0.2 patch in view,
+    scene.write_text(text.split("[camera]")[0] + "[camera]\norigin = [0.1, -0.1, 0.5]\ntarget = [0.1, 0.1, 0.0]\n"
+                     "fov = 30.0\n\n[[lights]]\ntype = \"directional\"\ndirection = [0.2, 0.3, 0.9]\n"  # from below
+                     "irradiance = 3.0\n\n[render]" + text.split("[render]")[1])
+    exr = tmp_path / "render.exr"
+    sums = {}
+    for model in ("tabulated", "lafortune"):
+        code, _, err = cli("render", scene, "--method", "btf", "--source", "tiling", "--fibers", tiling, "--set",
+                           f"btf={path}", "--set", f"model={model}", "--width", "24", "--height", "18", "--spp", "1",
+                           "-o", exr)
+        assert code == 0, err
+        rgb, ch = read_exr(exr)
+        assert (ch["A"] > 0).mean() > 0.5
+        sums[model] = float(rgb[ch["A"] > 0].sum())
+    assert sums["tabulated"] > 0.0 and sums["lafortune"] == 0.0, sums
+    png = tmp_path / "sphere.png"
     code, _, err = cli("inspect", path, "--png", png)
     assert code == 0, err
     assert_legible_png(png)

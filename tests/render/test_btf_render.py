@@ -100,7 +100,7 @@ def _cli(*args):
 
 def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, table=None, lobe_params=None,
               period=(0.5, 0.5), source_hash="none", source="none", frame=None, exemplars=(0,), tabulated=None,
-              half=None):
+              half=None, sphere=False):
     """A btf artifact of the tiling exemplars ``exemplars``. ``rho``: an rgb (every texel of every level) or a
     function (level, r) -> (r, r, 3), or a list of those, one per exemplar; ``alpha``: a number or a function
     (level, r, views) -> (r, r, V); ``table``: None (T = 1) or a function (level, r, views) -> (r, r, V, 3);
@@ -108,7 +108,8 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
     one [W, H] for every exemplar or a list of them; ``tabulated`` None or a function (views, lights) -> (V, L, 3):
     every texel's table r(l, v), compressed by ``compress_texels`` (1 cluster, 1 component) into ``tabulated/``;
     ``half`` None or (nx, ny): the table's lights are half-vector cells (``--light-coords half``), ``tabulated`` then
-    a function (views, valid fractions (V, L)) -> (V, L, 3)."""
+    a function (views, valid fractions (V, L)) -> (V, L, 3); ``sphere``: the table's lights are the light grid and its
+    mirror below the fabric (``--light-domain sphere``), ``tabulated`` then a function of those 2 L lights."""
     from pipeline.runners.precompute_btf import write_tables
     from stages.precompute.btf_compress import compress_texels
 
@@ -150,6 +151,8 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
             w.write("half_dirs", half_grid(*half))
         if tabulated is not None:
             lights = hemisphere_grid(*LIGHT_GRID) if half is None else half_cell_geometry(*VIEW_GRID, *half, True).valid
+            if sphere:
+                lights = np.concatenate([lights, lights * np.array([1.0, 1.0, -1.0])])
             row = np.asarray(tabulated(views, lights), np.float32).reshape(1, -1)
             rows = np.repeat(row, sum((res >> lv) ** 2 for lv in range(levels)), axis=0)
             write_tables(w, [compress_texels(rows, 1, 1)] * E, V, len(row[0]) // (3 * V))
@@ -157,6 +160,8 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
                          exemplar_names=[f"test {k}" if E > 1 else "test" for k in exemplars], periods=periods,
                          resolution=res, levels=levels, lobes=lobes, view_grid=list(VIEW_GRID),
                          light_grid=list(LIGHT_GRID if half is None else half))
+        if sphere:
+            w.summary.update(light_domain="sphere")
         if half is not None:
             w.summary.update(light_coords="half", fit_light_grid=list(LIGHT_GRID), directions="cell")
     return path
@@ -447,6 +452,43 @@ def test_tabulated_lambertian_quad_closed_form(bench):
     assert np.allclose(rgb[ch["A"] > 0], 0.7 * a, rtol=1e-6)
     rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), *args[:-2])
     assert np.all(rgb[ch["A"] > 0] == 0.0)                             # the Lafortune fit of the same artifact
+
+
+def test_tabulated_light_from_below_closed_form(bench):
+    """Reference: closed form. A sphere table (``precompute btf --light-domain sphere``) r(l, v) = |l_z| a / pi for the
+    lights above and |l_z| b / pi for their mirrors below (a Lambertian reflection and a Lambertian transmission) on
+    a flat quad seen from above: a directional light from below gives E b / pi |cos| in every pixel, shadows on or
+    off (the quad is lit through itself: the table holds its own shadow); a constant light L gives L (a + b) (the
+    sky below counts); the light mirrored above E a / pi cos (float32 EXR: 1e-6). The same table without its lower
+    half (a hemisphere table) and the artifact's Lafortune fit give 0 under the light from below."""
+    a = np.array([0.6, 0.4, 0.2])
+    b = np.array([0.1, 0.15, 0.3])
+
+    def two_sided(views, lights):
+        c = np.where(lights[:, 2:3] > 0, a[None, :], b[None, :])
+        return np.broadcast_to(np.abs(lights[None, :, 2, None]) * c[None] / math.pi, (len(views), len(lights), 3))
+    sphere = write_btf(bench.name("sphere").with_suffix(".zarr"), rho=(0.0, 0.0, 0.0), tabulated=two_sided,
+                       sphere=True)
+    upper = write_btf(bench.name("upper").with_suffix(".zarr"), rho=(0.0, 0.0, 0.0), tabulated=two_sided)
+    V, UV, F = quad()
+    mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+    d = np.array([-0.5, 0.3, 0.6])                                     # travelling up: the light is below
+    cos = d[2] / np.linalg.norm(d)
+    args = ("--set", f"mesh={mesh}", "--set", "repeat=3", "--set", "model=tabulated")
+    below = SUN.format(d="-0.5, 0.3, 0.6", e=2.0)
+    for shadows in ("off", "on"):
+        rgb, ch, _ = bench.render(bench.scene(below), "--set", f"btf={sphere}", *args, "--set", f"shadows={shadows}")
+        hit = ch["A"] > 0
+        assert hit.mean() > 0.5
+        assert np.allclose(rgb[hit], 2.0 * b / math.pi * cos, rtol=1e-6, atol=0)
+    rgb, ch, _ = bench.render(bench.scene(SUN.format(d="-0.5, 0.3, -0.6", e=2.0)), "--set", f"btf={sphere}", *args)
+    assert np.allclose(rgb[ch["A"] > 0], 2.0 * a / math.pi * cos, rtol=1e-6, atol=0)
+    rgb, ch, _ = bench.render(bench.scene(SKY.format(l=0.7)), "--set", f"btf={sphere}", *args)
+    assert np.allclose(rgb[ch["A"] > 0], 0.7 * (a + b), rtol=1e-6)
+    rgb, ch, _ = bench.render(bench.scene(below), "--set", f"btf={upper}", *args)
+    assert np.all(rgb[ch["A"] > 0] == 0.0)
+    rgb, ch, _ = bench.render(bench.scene(below), "--set", f"btf={sphere}", *args[:-2])
+    assert np.all(rgb[ch["A"] > 0] == 0.0)
 
 
 def test_tabulated_half_vector_constant_closed_form(bench):

@@ -31,7 +31,11 @@ four steps (§6):
 float32 once per render): step 3 reads the acquired table instead of the lobes, f_r(l, v) = r(l, v) bilinear on
 the view grid and on the light grid (``stages.core.btf.table_rgb``), T(v) = 1 and alpha as before. Everything
 else -- mip levels, alpha, lights, shadows, the sky table (``tabulated_sky_table``: the table's own light-grid
-sum) -- is the same.
+sum) -- is the same. A table acquired with light from below too (``precompute btf --light-domain sphere``:
+``lower``) lights the surface from its far side as well: a directional or SG light, or an environment map's
+direction, behind the surface reads the table's lower half (the light through the cloth), the shadow ray of a
+light behind leaving from the far side, and the sky table sums both halves; the Lafortune lobes stay a reflectance
+(light from above only).
 
 **Alpha** (§3, §6): the table's alpha at the view is the texel's coverage for that view, 0 at a hole
 in the weave. The ray goes on through the surface (the next hit along the same ray, up to
@@ -66,7 +70,9 @@ first exemplar's period over exemplar e's, which turns a pattern coordinate into
 then per lobe and channel C_x, C_y, C_z, N; ``table`` (N, V, 4) float32 T(v) rgb and alpha;
 ``n_theta``, ``n_phi`` the view grid, ``light_dirs`` (L, 3) the light grid (pattern space), ``l_theta``, ``l_phi``
 its shape; ``tabulated`` (bool) and ``radiance`` (N, V, L, 3) float32 the tabulated model's decoded table ((1, 1, 1, 3)
-unused for the Lafortune model); ``half`` (0 or 1): the table's lights are half-vector cells (``l_theta`` x
+unused for the Lafortune model); ``lower``: the table answers light from below the surface (a sphere table,
+``stages.core.btf`` "Light from below": directional, SG and environment light behind the cloth comes through it);
+``half`` (0 or 1): the table's lights are half-vector cells (``l_theta`` x
 ``l_phi`` = nx x ny, read by ``stages.core.btf.half_rgb``; ``light_dirs`` then the fit's hemisphere grid, the
 quadrature's) with ``half_valid`` (V, L) their valid fractions ((1, 1) unused otherwise);
 ``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional (the ground's
@@ -109,7 +115,7 @@ BtfIntegrator = namedtuple("BtfIntegrator", [
     "mesh", "shading", "texels", "table", "levels", "exemplar_scale", "block_map", "block_size", "flat_period",
     "n_theta", "n_phi", "light_dirs", "lights", "quad_lights", "env_lights", "sky", "sky_radiance", "has_sky",
     "ground", "has_ground", "pixel_angle", "forward", "mip", "shadows", "max_layers", "eps", "tabulated", "radiance",
-    "l_theta", "l_phi", "half", "half_valid"])
+    "l_theta", "l_phi", "half", "half_valid", "lower"])
 
 MAX_LAYERS = 4
 INV_PI = 1.0 / math.pi
@@ -363,17 +369,20 @@ def shadow_transmittance(it, px, py, pz, lx, ly, lz, l0, l1, fl):
 
 @njit(cache=True)
 def quadrature_f1(it, f, ia, ib, two, vx, vy, vz):
-    """sum_j (2 pi / L) L_light(l_j) f_1(l_j, v) over the light grid, the environment maps (constant lights:
-    ``sky_f1``; SG lights: ``sg_f1``), for texel rows ia and (when ``two``) ib: (a r, a g, a b, b r, b g, b b)."""
+    """sum_j (2 pi / L) L_light(l_j) f_1(l_j, v) over the light grid (and its mirror below the surface when the
+    table answers light from there: ``lower``), the environment maps (constant lights: ``sky_f1``; SG lights:
+    ``sg_f1``), for texel rows ia and (when ``two``) ib: (a r, a g, a b, b r, b g, b b)."""
     lights = it.lights.lights
     ld = it.light_dirs
-    dw = 2.0 * math.pi / ld.shape[0]   # each grid direction's solid angle
+    n = ld.shape[0]
+    dw = 2.0 * math.pi / n   # each grid direction's solid angle
     w = np.empty(3)
     s = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    for j in range(ld.shape[0]):
+    for jj in range(2 * n if it.lower else n):
+        j = jj % n
         lx = ld[j, 0]
         ly = ld[j, 1]
-        lz = ld[j, 2]
+        lz = ld[j, 2] if jj < n else -ld[j, 2]
         w[0] = lx * f.tx + ly * f.bx + lz * f.nx
         w[1] = lx * f.ty + ly * f.by + lz * f.ny
         w[2] = lx * f.tz + ly * f.bz + lz * f.nz
@@ -475,7 +484,7 @@ def sg_f1(it, f, k, ia, ib, two, vx, vy, vz):
             if pdf <= 0.0:
                 continue
             lx, ly, lz = to_local(f, w[0], w[1], w[2])
-            if lz <= 0.0:
+            if lz <= 0.0 and not it.lower:
                 continue
             e0 = r / (pdf * n)
             e1 = g / (pdf * n)
@@ -529,11 +538,15 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
             wy = lights[k, 5]
             wz = lights[k, 6]
             lx, ly, lz = to_local(f, wx, wy, wz)
-            if lz <= 0.0:
+            if lz <= 0.0 and not it.lower:
                 continue
             vis = 1.0
             if it.shadows:
-                vis, nr = shadow_transmittance(it, f.px, f.py, f.pz, wx, wy, wz, l0, l1, fl)
+                # a light behind the surface: the shadow ray leaves from its far side (the table holds the cloth's
+                # own shadow); in front, from the near side, as the hit point was moved
+                back = 2.0 * it.eps if lz < 0.0 else 0.0
+                vis, nr = shadow_transmittance(it, f.px - back * f.nx, f.py - back * f.ny, f.pz - back * f.nz,
+                                               wx, wy, wz, l0, l1, fl)
                 rays += nr
                 if vis <= 0.0:
                     continue
