@@ -11,7 +11,8 @@ each level's texels drawn at the size of level 0 (seed 002 §5.1), with the leve
 A texture with the tabulated model (``precompute btf --model tabulated``) shows, in each top row, the decoded
 table of level 0 beside the fit (the same view and light, the same scale) and both differences from the acquired
 data; and at the end of the bottom row, the compression's relative RMSE against the component count per
-exemplar (``tabulated/rel_rmse_by_components``: 0 components = the cluster means).
+exemplar (``tabulated/rel_rmse_by_components``: 0 components = the cluster means). A texture acquired with light
+from below too (``--light-domain sphere``) adds a row: the first pair's light mirrored below the fabric.
 """
 from __future__ import annotations
 
@@ -86,6 +87,9 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
     names = s.get("exemplar_names", [])
     E = int(lev0["rho"].shape[0])
     rows = [(0, pr) for pr in pairs] if E == 1 else [(e, pairs[0]) for e in range(min(E, MAX_EXEMPLAR_ROWS))]
+    if s.get("light_domain") == "sphere":   # the first pair's light mirrored below the fabric: light through it
+        vi, li, ldir = pairs[0]
+        rows.append((0, (vi, li + int(np.prod(s["light_grid"])), np.asarray(ldir) * np.array([1.0, 1.0, -1.0]))))
     res = int(s["resolution"])
     tabulated = "tabulated/weights" in art.arrays()
     tables = {}
@@ -128,6 +132,8 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
                 ax.set_yticks([])
             who = f"{names[e]}: " if E > 1 and e < len(names) else ""
             cell = f" (half-vector cell {li}'s centre)" if s.get("light_coords") == "half" else ""
+            if ldir[2] < 0.0:
+                cell = " (below the fabric: the light through it; the fit is a reflectance)"
             top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(ldir)}{cell}  (level 0, texels x → , y ↑"
                               + ("; differences / scale)" if tabulated else ")"))
         axes = np.atleast_1d(top[len(rows)].subplots(1, levels + (1 if tabulated else 0)))
