@@ -176,6 +176,10 @@ def btf(
                                           "tabulated model lets light through the cloth (a sky below a knit, a "
                                           "curtain against a window; twice the lights to acquire). The Lafortune "
                                           "fit reads the lights above only."),
+    plane: str = typer.Option("top", "--plane", metavar="<top | middle>",
+                              help="The texture's plane: top (Daubert et al. 2001: the repeat's top face) or middle "
+                                   "(the middle of its fibres' slab: what lies deep in a thick knit blurs half as "
+                                   "much between view directions)."),
     spp: int = typer.Option(16, "--spp", help="Rays per texel and view (super-sampled alpha and radiance)."),
     lobes: int = typer.Option(2, "--lobes", help="Lafortune lobes per texel: 1 or 2."),
     threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "
@@ -218,8 +222,8 @@ def btf(
     check_output(out, "-o", ARTIFACT, inputs=[tiling, scene])
     grid = parse_grid(lights, "--lights") if lights is not None else DEFAULT_LIGHTS.get(light_coords, (8, 8))
     p = BtfParams(resolution=resolution, views=parse_grid(views, "--views"), lights=grid, light_coords=light_coords,
-                  light_domain=light_domain, spp=spp, lobes=lobes, threshold=threshold, max_rounds=max_rounds,
-                  directions=directions,
+                  light_domain=light_domain, plane=plane, spp=spp, lobes=lobes, threshold=threshold,
+                  max_rounds=max_rounds, directions=directions,
                   model=model, clusters=clusters, components=components,
                   max_depth=max_depth,
                   rr_depth=rr_depth, seed=seed, material=parse_material_options(set_ or [], bcsdf))

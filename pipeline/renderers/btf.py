@@ -275,9 +275,9 @@ def load_tiling_surface(path, btf_path, tex: BtfTexture) -> DressedMesh:
     scale = flat / p0   # base uv in [0, 1] spans flat_size; one repeat (of the first exemplar) = its period
     N = np.asarray(art["base_normals"], np.float64)
     N = N / np.maximum(np.linalg.norm(N, axis=1), 1e-300)[:, None]
-    # the texture lives on the top face of the repeat's box (seed 002 §4): the base surface moved out
-    # along its normals to the top of the exemplar's fibres (the shell's flat z is world length there)
-    V = np.asarray(art["base_vertices"], np.float64) + float(s.get("top", 0.0)) * N
+    # the texture lives on its plane (seed 002 §4: the top face of the repeat's box; ``precompute btf --plane``):
+    # the base surface moved out along its normals to that height (the shell's flat z is world length there)
+    V = np.asarray(art["base_vertices"], np.float64) + float(s.get("plane_z", s.get("top", 0.0))) * N
     F = np.asarray(art["base_triangles"], np.int64)
     return DressedMesh(V, F, N, np.asarray(art["base_uv"], np.float64) * scale[None, :], blocks,
                        f"{Path(path).name} base surface ({len(F)} triangles, {len(used)} exemplar(s))")

@@ -30,6 +30,10 @@ table's (``FIT_PARAMS``), the inputs' identities and the acquisition code's vers
 output path has the key of a new run, its samples, alpha and frames are taken instead of tracing them again
 (said on the output; ``--force`` acquires anyway): a refit or an added table costs seconds, not minutes.
 
+``--plane middle`` puts the texture on the middle plane of the exemplars' slab (``stages.precompute.btf``, "The
+texture's plane"; default ``top``, the paper's top face); the summary's ``plane_z`` is its height, where the renderer
+puts a tiling's surface.
+
 With ``--light-domain sphere`` the samples' and the table's light axis is the hemisphere grid and then its mirror
 below the fabric (``stages.core.btf.SPHERE``: 2 L lights); the summary says ``light_domain = "sphere"``, ``light_dirs``
 is the hemisphere grid the fit reads (the Lafortune lobes are fitted to the lights above).
@@ -65,6 +69,7 @@ from ..memory import Estimate, budget as memory_budget
 DIRECTIONS = ("cell", "grid")
 LIGHT_COORDS = ("hemisphere", "half")   # the light grid: equal-area rings and azimuths, or half-vector cells
 LIGHT_DOMAINS = ("hemisphere", "sphere")   # lights above the fabric, or the grid and its mirror below it too
+PLANES = ("top", "middle")   # the texture's plane: the exemplars' top face (the paper's) or their slab's middle
 DEFAULT_LIGHTS = {"hemisphere": (8, 8), "half": (15, 15)}   # --lights when not given (half: a cell at h = 0)
 FIT_LIGHT_GRID = (8, 8)   # half-vector acquisitions: the hemisphere grid the Lafortune fit (and the renderer's
                           # quadrature) reads them on (stages.core.btf.half_to_hemisphere)
@@ -97,6 +102,7 @@ class BtfParams:
     directions: str = "cell"         # cell: view and light uniform over each grid cell (averages); grid: the grid's
     light_coords: str = "hemisphere"  # half: light cells in half-vector coordinates (stages.core.btf)
     light_domain: str = "hemisphere"  # sphere: the light grid's mirror below the fabric too (stages.core.btf SPHERE)
+    plane: str = "top"               # middle: the texture on the slab's middle plane (stages.precompute.btf)
     max_depth: int = FULL_TRANSPORT_DEPTH   # at 16 the damask's ground-satin texture held 0.55 / 0.66 / 0.75 of
     rr_depth: int = 5                       # its red / green / blue light at 256 (64 x 48 render, 8 spp)
     seed: int = 0
@@ -136,6 +142,8 @@ class BtfParams:
         if self.light_domain == "sphere" and self.light_coords != "hemisphere":
             raise LoomError(None, "--light-domain", "sphere mirrors the hemisphere grid below the fabric; it does not "
                                                     "take --light-coords half")
+        if self.plane not in PLANES:
+            raise LoomError(None, "--plane", f"must be one of {', '.join(PLANES)}, got {self.plane!r}")
         if self.model not in MODELS:
             raise LoomError(None, "--model", f"must be one of {', '.join(MODELS)}, got {self.model!r}")
         if self.model == "tabulated":
@@ -247,9 +255,9 @@ def light_cells(p: "BtfParams"):
     return half_grid(*p.lights), hemisphere_grid(*FIT_LIGHT_GRID)
 
 
-def _btf_row_task(tiling, tiling_hash, store, e, k, iy, mof, mats, view_dirs, light_dirs, p: dict):
+def _btf_row_task(tiling, tiling_hash, store, e, k, iy, mof, mats, view_dirs, light_dirs, p: dict, z_plane=None):
     """Chunk task: texel row iy of exemplar k (the artifact's exemplar e) -- samples and alpha into the artifact;
-    returns normal sums and timings."""
+    returns normal sums and timings. ``z_plane``: the texture's plane (None: the exemplar's top face)."""
     from stages.precompute.btf import acquire_texels
     from stages.precompute.iirtf import exemplar_slabs
     from stages.precompute.periodic import periodic_scene
@@ -265,7 +273,7 @@ def _btf_row_task(tiling, tiling_hash, store, e, k, iy, mof, mats, view_dirs, li
     rad, alpha, nsum, rays = acquire_texels(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats,
                                             res, iy * res, (iy + 1) * res, view_dirs, light_dirs, p["spp"], p["seed"],
                                             p["max_depth"], p["rr_depth"], _max_dist(W, H, slab), _eps(W, H, slab),
-                                            *direction_grids(p))
+                                            *direction_grids(p), z_plane)
     open_for_chunk(store, "samples")[e, iy] = rad.astype(np.float16)
     open_for_chunk(store, "alpha")[e, iy] = alpha
     return {"normal": nsum, "rays": int(rays.sum()), "s": time.perf_counter() - t0}
@@ -413,6 +421,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     periods = [[float(v) for v in art["ex_period"][k]] for k in ks]
     k0, (W, H) = ks[0], periods[0]
     slab = slabs[k0]
+    top, bottom = max(float(slabs[k][1]) for k in ks), min(float(slabs[k][0]) for k in ks)
+    z_plane = None if p.plane == "top" else 0.5 * (top + bottom)   # top: each exemplar's own top face
     acq_key = acquisition_key(w, p)
     reused = None if force else reusable_acquisition(out, acq_key)
     compile_s = 0.0
@@ -438,7 +448,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                      dimension_names=("exemplar", "y", "x", "view"))
             t0 = time.perf_counter()
             tasks = [ChunkTask(_btf_row_task, (tiling_abs, tiling_hash, str(store), e, k, iy, mof, mats, view_dirs,
-                                               light_dirs, pdict)) for e, k in enumerate(ks) for iy in range(res)]
+                                               light_dirs, pdict, z_plane)) for e, k in enumerate(ks)
+                     for iy in range(res)]
             parts = run_tasks(tasks, f"btf: acquisition, {E} exemplar(s) x {res}x{res} texels x {V} views x "
                                      f"{L} lights")
             acquire_s = time.perf_counter() - t0
@@ -500,10 +511,10 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
         rmse = [_rms([f[lev]["rmse"] for f in fits]) for lev in range(n_levels)]
         rmse_nt = [_rms([x[lev] for x in no_table]) for lev in range(n_levels)]
         mean_r = float(np.mean([x["mean_radiance"] for x in per_exemplar]))   # the exemplars hold as many samples each
-        tops, bottoms = [float(slabs[k][1]) for k in ks], [float(slabs[k][0]) for k in ks]
         w.summary.update(kind="btf", source=str(tiling), source_hash=tiling_hash, scene=str(scene_path), exemplars=ks,
                          exemplar_names=names, periods=periods, per_exemplar=per_exemplar,
-                         top=max(tops), bottom=min(bottoms), resolution=res,
+                         top=top, bottom=bottom, plane=p.plane, plane_z=top if z_plane is None else z_plane,
+                         resolution=res,
                          levels=n_levels, lobes=p.lobes, view_grid=list(p.views), light_grid=list(p.lights),
                          light_coords=p.light_coords, light_domain=p.light_domain, directions=p.directions,
                          fit_light_grid=list(FIT_LIGHT_GRID if half else p.lights),

@@ -10,8 +10,9 @@ lighting, with the repeat's copies all around it (``stages.precompute.periodic``
 without end, so parallax and light from the neighbours are exact):
 
 For texel (iy, ix) of the exemplar's W x H box, view v (the grids of ``stages.core.btf``) and sample
-s = 0..spp-1: the point p = ((ix + u0) W / res, (iy + u1) H / res, z_hi) on the top face (u jittered
-per sample, the super-sampling of the texel's footprint), the ray from p along -v into the fabric.
+s = 0..spp-1: the point p = ((ix + u0) W / res, (iy + u1) H / res, z_plane) on the texture's plane (u jittered
+per sample, the super-sampling of the texel's footprint), the ray through p along -v into the fabric (from where
+it enters the slab's top). The paper's plane is the top face (z_plane = z_hi); see "The texture's plane".
 It misses (leaves through the bottom): a hole for this sample. It hits: a path from there, the fibre
 materials of the renderer (``material_eval_pdf`` / ``material_sample``), and at *every* vertex
 next-event estimation towards *every* light direction of the light grid (a shadow ray that must leave
@@ -48,6 +49,14 @@ their mirror images below the fabric (``stages.core.btf.sphere_cell_direction``,
 hemisphere's 2 L lights); a light below is lit like one above, its shadow ray leaving through the slab's bottom
 (``periodic.light_reaches``), so r(l, v) there is the light the fabric lets through towards v.
 
+The texture's plane (``precompute btf --plane``). A texel holds what the rays through its point of the plane see,
+and the renderer puts the texture on that plane. A fibre at depth d below the plane is seen through the texel
+(d tan theta) away from it, in the view's azimuth: views a grid cell apart see it through texels that far apart,
+and the renderer interpolates four views and each sample averages its view's cell, which blurs every feature by
+its distance from the plane times the cells' angular width. The top face puts the whole slab's thickness below
+the plane (on the knit tiling 0.12 of a 0.25 x 0.2 stitch: a third of a stitch at 35 degrees); its middle
+(``--plane middle``) halves the largest distance.
+
 Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
 is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
 ``alpha`` = hits / spp. Per texel: the sum of the first hits' surface normals (the capsule's outward
@@ -77,6 +86,7 @@ from stages.precompute.periodic import (
     periodic_hit,
     periodic_path,
     register_tally,
+    wrap_into_period,
 )
 
 FIRST_DIMS = 2           # the point's jitter (then, for cell averages, the view's and every light's cell jitter)
@@ -133,7 +143,7 @@ def _first_normal(sc, h, out):
 
 @njit(cache=True, _nrt=False)
 def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key0, radiance, normal, view_cell,
-                       view_grid, light_grid, light_coords, lights_now):
+                       view_grid, light_grid, light_coords, lights_now, z_plane):
     """Radiance sums (L, 3) of texel ``texel`` seen from v over ``spp`` samples into ``radiance`` (zeroed
     here) and the first-hit normals into ``normal`` (added); returns (hits, rays). With view_grid[0] > 0
     each sample's view is uniform in grid cell ``view_cell`` and each light's direction uniform in its
@@ -143,9 +153,11 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
     without), ``light_dirs`` then only gives the count; SPHERE: lights L/2 .. L - 1 the mirror images below the
     fabric of lights 0 .. L/2 - 1 (``light_grid`` the hemisphere's). Compiled without reference counting (its
     vectors on the machine stack): the two workers of ``acquire_texels`` would otherwise count references on the
-    same arrays for every ray.
-    17 parameters: one (texel, view) job (texel, view and its cell, spp, key), the light set, the grids and their
-    light coordinates and four output or scratch arrays; the fabric is one record (``PeriodicPaths``)."""
+    same arrays for every ray. The samples' points lie on the plane at height ``z_plane`` (module doc, "The
+    texture's plane").
+    18 parameters: one (texel, view) job (texel, view and its cell, spp, key), the light set, the grids and their
+    light coordinates, four output or scratch arrays and the texture's plane; the fabric is one record
+    (``PeriodicPaths``)."""
     W = paths.W
     H = paths.H
     L = light_dirs.shape[0]
@@ -191,7 +203,11 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
                 lights_now[k, 1] = ly
                 lights_now[k, 2] = lz
         rays += 1
-        h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, px, py, paths.z_hi, -vx, -vy, -vz, runtime_value(-1),
+        ox, oy = px, py
+        if z_plane != paths.z_hi:   # back along v from the plane to the slab's top, kept within one period
+            up = (paths.z_hi - z_plane) / vz
+            ox, oy = wrap_into_period(px + up * vx, py + up * vy, W, H)
+        h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, ox, oy, paths.z_hi, -vx, -vy, -vz, runtime_value(-1),
                          paths.max_dist)
         if math.isinf(h.t):
             continue
@@ -205,15 +221,16 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
 
 
 def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_dirs, light_dirs, spp, seed,
-                   max_depth, rr_depth, max_dist, eps, view_grid, light_grid, light_coords):
+                   max_depth, rr_depth, max_dist, eps, view_grid, light_grid, light_coords, z_plane=None):
     """Texels t0..t1-1 (row-major ids of the res x res grid): (radiance (T, V, L, 3) float32 mean over the
     hits, alpha (T, V) float32, normal sums (T, 3), rays cast (T,)) -- module doc. ``view_grid`` and
     ``light_grid`` (n_theta, n_phi) of the grids that ``view_dirs`` and ``light_dirs`` are: cell averages
     (module doc); (0, 0): the directions themselves. ``light_coords``: ``stages.core.btf.HEMISPHERE``, HALF
     (``light_grid`` then the half-vector grid's (nx, ny), given also without cell averages) or SPHERE
     (``light_dirs`` the hemisphere grid of ``light_grid`` and its mirror image below). All three are always
-    passed (no defaults), so every caller shares one compiled specialisation of the kernel. (texel, view) jobs on
-    threads (``stages.core.threads``)."""
+    passed (no defaults), so every caller shares one compiled specialisation of the kernel. ``z_plane``: the
+    texture's plane (module doc; None: the top face z_hi, the paper's). (texel, view) jobs on threads
+    (``stages.core.threads``)."""
     T = t1 - t0
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
@@ -223,7 +240,8 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
     rays = np.zeros((T, V), np.int64)
     paths = PeriodicPaths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps)
     for_chunks(_texel_view_jobs, T * V, paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid,
-               light_coords, radiance, alpha, normal, rays, chunks_per_thread=JOB_CHUNKS_PER_THREAD)
+               light_coords, float(z_hi if z_plane is None else z_plane), radiance, alpha, normal, rays,
+               chunks_per_thread=JOB_CHUNKS_PER_THREAD)
     return (radiance, alpha) + _view_sums(normal, rays)
 
 
@@ -233,10 +251,10 @@ def _view_sums(normal, rays):
 
 
 @chunk_kernel
-def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, light_coords, radiance,
-                     alpha, normal, rays, j0, j1):
+def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, light_coords, z_plane,
+                     radiance, alpha, normal, rays, j0, j1):
     """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v).
-    16 parameters: a ``for_chunks`` chunk kernel: the jobs' inputs, the four output arrays and the chunk's range."""
+    17 parameters: a ``for_chunks`` chunk kernel: the jobs' inputs, the four output arrays and the chunk's range."""
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
     acc = np.empty((L, 3))   # per chunk (as numba's parallel loop hoisted them); texel_view_samples fills them
@@ -248,7 +266,7 @@ def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid
         key0 = (texel * V + v) * spp
         hits, r = texel_view_samples(paths, res, texel, view_dirs[v, 0], view_dirs[v, 1], view_dirs[v, 2],
                                      light_dirs, spp, seed, key0, acc, normal[i, v], v, view_grid, light_grid,
-                                     light_coords, now)
+                                     light_coords, now, z_plane)
         rays[i, v] = r
         alpha[i, v] = hits / spp
         if hits > 0:

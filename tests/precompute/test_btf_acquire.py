@@ -10,8 +10,10 @@ not assumed. Determinism: the same bytes at 1 and 2 threads.
 import numba
 import numpy as np
 import pytest
+from numba import njit
 
 from stages.core.btf import HEMISPHERE
+from stages.core.geometry.capsule import capsule_intersect
 from stages.core.rng import uniform
 from stages.precompute.btf import acquire_texels, texel_frames
 from stages.precompute.iirtf import exemplar_slabs
@@ -249,3 +251,53 @@ def test_white_furnace_with_light_from_below(acquired):
     below = both - above                                                # paired: the light through the cloth
     assert np.all(below.mean(axis=0) > 4.0 * below.std(axis=0, ddof=1) / np.sqrt(len(below))), below.mean(axis=0)
     assert np.allclose(both.mean(axis=0), both.mean(axis=0)[0]) and np.all(r[:, n:] >= 0.0)
+
+
+@njit
+def _ray_hits(ox, oy, oz, dx, dy, dz, tmax, P, R, O, f0, f1, W, H, scale):
+    """Does the ray o + t d, 0 < t < tmax, meet a capsule of fibres f0..f1-1 (radius the larger end's, times
+    ``scale``) or of their periodic copies within 3 periods? Brute force over every segment and copy."""
+    for sx in range(-3, 4):
+        for sy in range(-3, 4):
+            for f in range(f0, f1):
+                for i in range(O[f], O[f + 1] - 1):
+                    r = max(R[i], R[i + 1]) * scale
+                    t = capsule_intersect(ox, oy, oz, dx, dy, dz, P[i, 0] + sx * W, P[i, 1] + sy * H, P[i, 2],
+                                          P[i + 1, 0] + sx * W, P[i + 1, 1] + sy * H, P[i + 1, 2], r, 0.0)
+                    if t < tmax:
+                        return True
+    return False
+
+
+def test_samples_pass_through_the_texture_plane(acquired):
+    """Reference: brute force. With the texture on the slab's middle plane (``z_plane``), sample s of texel (iy, ix)
+    seen from the oblique view v is the ray through ((ix + u0) W / res, (iy + u1) H / res, z_plane) along -v: its
+    alpha is the fraction of those rays that meet a fibre capsule (every segment and periodic copy, ray-capsule
+    intersection), up to rims (capsules 1e-6 thinner and thicker bound it); seen straight down the plane changes no
+    byte; at the top face (the default) the same bytes as without the argument."""
+    art, k, W, H, args = acquired
+    z_lo, z_hi = args[1], args[2]
+    z_mid = 0.5 * (z_lo + z_hi)
+    rad_top, alpha_top, *_ = acquire_texels(*args)
+    rad, alpha, *_ = acquire_texels(*args, z_mid)
+    assert np.array_equal(alpha[:, 0], alpha_top[:, 0]) and np.array_equal(rad[:, 0], rad_top[:, 0])
+    same = acquire_texels(*args, z_hi)
+    assert np.array_equal(same[0], rad_top) and np.array_equal(same[1], alpha_top)
+    P, R, O = (np.asarray(art[n]) for n in ("ex_points", "ex_radius", "ex_offsets"))
+    f0, f1 = int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])
+    v = args[10][1]
+    seed = args[13]
+    moved = 0
+    for texel in range(RES * RES):
+        iy, ix = divmod(texel, RES)
+        lo = hi = 0
+        for s in range(SPP):
+            key = (texel * 2 + 1) * SPP + s
+            x = (ix + uniform(seed, key, 0)) * W / RES + (z_hi - z_mid) / v[2] * v[0]
+            y = (iy + uniform(seed, key, 1)) * H / RES + (z_hi - z_mid) / v[2] * v[1]
+            tmax = (z_hi - z_lo) / v[2]
+            lo += _ray_hits(x, y, z_hi, -v[0], -v[1], -v[2], tmax, P, R, O, f0, f1, W, H, 1.0 - 1e-6)
+            hi += _ray_hits(x, y, z_hi, -v[0], -v[1], -v[2], tmax, P, R, O, f0, f1, W, H, 1.0 + 1e-6)
+        assert lo / SPP - 1e-12 <= alpha[texel, 1] <= hi / SPP + 1e-12, texel
+        moved += not np.array_equal(rad[texel, 1], rad_top[texel, 1])
+    assert moved > RES * RES // 2, "the middle plane sees the tiny weave through other points than the top face"
