@@ -86,6 +86,7 @@ COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(COM
 	$(COMPARE_IN)/damask_svf.zarr/zarr.json $(COMPARE_IN)/damask_iirtf.zarr/zarr.json \
 	$(COMPARE_IN)/damask_btf_fit.zarr/zarr.json $(OUT)/knit_fibers.zarr/zarr.json $(COMPARE_IN)/knit_bysdf_fit.toml \
 	$(COMPARE_IN)/twill_fibers.zarr/zarr.json $(COMPARE_IN)/knit_btf.zarr/zarr.json \
+	$(COMPARE_IN)/knit_btf_through.zarr/zarr.json \
 	$(COMPARE_IN)/damask_svf_full.zarr/zarr.json $(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json \
 	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
 
@@ -384,6 +385,11 @@ $(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/sce
 
 $(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py
 	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf.zarr --model tabulated
+
+# the same stitch lit from below too, on its slab's middle plane (knit_btf.toml's btf_through)
+$(COMPARE_IN)/knit_btf_through.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py
+	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf_through.zarr --model tabulated \
+	    --light-domain sphere --plane middle
 
 .PRECIOUS: $(COMPARE_IN)/%.zarr/zarr.json
 

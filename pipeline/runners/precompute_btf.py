@@ -30,8 +30,9 @@ table's (``FIT_PARAMS``), the inputs' identities and the acquisition code's vers
 output path has the key of a new run, its samples, alpha and frames are taken instead of tracing them again
 (said on the output; ``--force`` acquires anyway): a refit or an added table costs seconds, not minutes.
 
-``--plane middle`` puts the texture on the middle plane of the exemplars' slab (``stages.precompute.btf``, "The
-texture's plane"; default ``top``, the paper's top face); the summary's ``plane_z`` is its height, where the renderer
+``--plane middle`` puts the texture on the middle plane of the exemplars' slab, ``--plane surface`` at the median
+height of what the grid's views see of them (``surface_plane``; ``stages.precompute.btf``, "The texture's plane";
+default ``top``, the paper's top face); the summary's ``plane_z`` is its height, where the renderer
 puts a tiling's surface.
 
 With ``--light-domain sphere`` the samples' and the table's light axis is the hemisphere grid and then its mirror
@@ -69,7 +70,9 @@ from ..memory import Estimate, budget as memory_budget
 DIRECTIONS = ("cell", "grid")
 LIGHT_COORDS = ("hemisphere", "half")   # the light grid: equal-area rings and azimuths, or half-vector cells
 LIGHT_DOMAINS = ("hemisphere", "sphere")   # lights above the fabric, or the grid and its mirror below it too
-PLANES = ("top", "middle")   # the texture's plane: the exemplars' top face (the paper's) or their slab's middle
+PLANES = ("top", "middle", "surface")   # the texture's plane: the exemplars' top face (the paper's), their slab's
+                                        # middle, or the median height of what the views see (stages.precompute.btf)
+SURFACE_RAYS = 256   # --plane surface: rays per grid view and exemplar whose first hits' median height is the plane
 DEFAULT_LIGHTS = {"hemisphere": (8, 8), "half": (15, 15)}   # --lights when not given (half: a cell at h = 0)
 FIT_LIGHT_GRID = (8, 8)   # half-vector acquisitions: the hemisphere grid the Lafortune fit (and the renderer's
                           # quadrature) reads them on (stages.core.btf.half_to_hemisphere)
@@ -288,6 +291,23 @@ def _eps(W, H, slab) -> float:
     return 1e-7 * (max(W, H) + abs(float(slab[0])) + abs(float(slab[1])))
 
 
+def surface_plane(sc, ks, slabs, periods, mof, mats, view_dirs, seed) -> float:
+    """``--plane surface``: the median height of the first fibre hits of SURFACE_RAYS rays per grid view into every
+    exemplar of ``ks`` (``stages.precompute.btf.hit_heights``), pooled."""
+    from stages.precompute.btf import hit_heights
+    from stages.precompute.periodic import PeriodicPaths, periodic_scene
+
+    z = []
+    for k, (W, H) in zip(ks, periods):
+        slab = slabs[k]
+        paths = PeriodicPaths(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, 1, 1,
+                              _max_dist(W, H, slab), _eps(W, H, slab))
+        z.append(hit_heights(paths, view_dirs, SURFACE_RAYS, seed))
+    z = np.concatenate(z)
+    z = z[np.isfinite(z)]
+    return float(np.median(z)) if len(z) else 0.5 * (float(slabs[ks[0]][0]) + float(slabs[ks[0]][1]))
+
+
 def used_exemplars(art) -> list[int]:
     """The exemplars a tiling's block map places somewhere (all of them when the map is empty)."""
     used = sorted(int(k) for k in np.unique(np.asarray(art["block_map"])) if k >= 0)
@@ -422,7 +442,9 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     k0, (W, H) = ks[0], periods[0]
     slab = slabs[k0]
     top, bottom = max(float(slabs[k][1]) for k in ks), min(float(slabs[k][0]) for k in ks)
-    z_plane = None if p.plane == "top" else 0.5 * (top + bottom)   # top: each exemplar's own top face
+    z_plane = {"top": None, "middle": 0.5 * (top + bottom)}.get(p.plane)   # top: each exemplar's own top face
+    if p.plane == "surface":
+        z_plane = surface_plane(sc, ks, slabs, periods, mof, mats, hemisphere_grid(*p.views), p.seed)
     acq_key = acquisition_key(w, p)
     reused = None if force else reusable_acquisition(out, acq_key)
     compile_s = 0.0

@@ -55,7 +55,9 @@ and the renderer puts the texture on that plane. A fibre at depth d below the pl
 and the renderer interpolates four views and each sample averages its view's cell, which blurs every feature by
 its distance from the plane times the cells' angular width. The top face puts the whole slab's thickness below
 the plane (on the knit tiling 0.12 of a 0.25 x 0.2 stitch: a third of a stitch at 35 degrees); its middle
-(``--plane middle``) halves the largest distance.
+(``--plane middle``) halves the largest distance; ``--plane surface`` takes the median height of what the views
+see (``hit_heights``: the first hits of rays from every grid view), which minimises the mean distance of the seen
+fibres from the plane.
 
 Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
 is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
@@ -218,6 +220,25 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
         v.wi[2] = vz
         rays += periodic_path(paths, tally, v, h, seed, key, first_dims, DIRECTION_DIMS)
     return hits, rays
+
+
+@njit(cache=True)
+def hit_heights(paths, view_dirs, rays_per_view, seed):
+    """(V rays_per_view,) the heights z of the first fibre hits of ``rays_per_view`` rays per view of ``view_dirs``
+    (V, 3) into the periodic fabric, each entering the slab's top at a uniform point of the period (counter-based
+    numbers: key = view x rays_per_view + ray, dimensions 0-1); NaN where a ray passes through. Their median is
+    ``precompute btf --plane surface``'s plane (module doc, "The texture's plane")."""
+    V = view_dirs.shape[0]
+    out = np.full(V * rays_per_view, np.nan)
+    for v in range(V):
+        for s in range(rays_per_view):
+            key = v * rays_per_view + s
+            h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, uniform(seed, key, 0) * paths.W,
+                             uniform(seed, key, 1) * paths.H, paths.z_hi, -view_dirs[v, 0], -view_dirs[v, 1],
+                             -view_dirs[v, 2], runtime_value(-1), paths.max_dist)
+            if not math.isinf(h.t):
+                out[key] = h.z
+    return out
 
 
 def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_dirs, light_dirs, spp, seed,

@@ -15,7 +15,7 @@ from numba import njit
 from stages.core.btf import HEMISPHERE
 from stages.core.geometry.capsule import capsule_intersect
 from stages.core.rng import uniform
-from stages.precompute.btf import acquire_texels, texel_frames
+from stages.precompute.btf import acquire_texels, hit_heights, texel_frames
 from stages.precompute.iirtf import exemplar_slabs
 from stages.precompute.periodic import periodic_scene
 
@@ -301,3 +301,27 @@ def test_samples_pass_through_the_texture_plane(acquired):
         assert lo / SPP - 1e-12 <= alpha[texel, 1] <= hi / SPP + 1e-12, texel
         moved += not np.array_equal(rad[texel, 1], rad_top[texel, 1])
     assert moved > RES * RES // 2, "the middle plane sees the tiny weave through other points than the top face"
+
+
+def test_surface_plane_is_where_the_views_meet_the_fibres(acquired):
+    """Contract (``hit_heights``, ``precompute btf --plane surface``): every first hit of the views' rays lies in the
+    slab; straight down, the share of rays that hit is the brute-force coverage of the same points (the vertical
+    line test of ``_covered``), and the surface plane, their median, lies strictly inside the slab."""
+    from stages.precompute.periodic import PeriodicPaths
+
+    art, k, W, H, args = acquired
+    sc, z_lo, z_hi = args[0], args[1], args[2]
+    paths = PeriodicPaths(sc, z_lo, z_hi, W, H, args[5], args[6], 1, 1, args[16], args[17])
+    views = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
+    n = 64
+    z = hit_heights(paths, views, n, 3)
+    hit = np.isfinite(z)
+    assert np.all((z[hit] >= z_lo - 1e-9) & (z[hit] <= z_hi + 1e-9))
+    a, b, r = _segments_2d(art, k)
+    lo = hi = 0
+    for s in range(n):
+        m = _covered(uniform(3, s, 0) * W, uniform(3, s, 1) * H, a, b, r, W, H)
+        lo += m < -1e-9 * W
+        hi += m < 1e-9 * W
+    assert lo <= hit[:n].sum() <= hi
+    assert z_lo < np.median(z[hit]) < z_hi
