@@ -23,7 +23,7 @@ HUGE_BUDGET ?= $(shell awk '/MemAvailable/ {print int($$2 / 1024 * 0.95)}' /proc
 AGREE ?= out/agreement
 AGREE_ARGS ?= --width 128 --height 96 --spp 64
 
-.PHONY: table1 sweep agreement prt-sweep prt-study btf-sweep btf-azimuth albedo-curves gallery
+.PHONY: table1 sweep agreement prt-sweep prt-study btf-sweep btf-through btf-azimuth albedo-curves gallery
 
 # --- Luan et al. 2017, Table 1 ---
 # woven_large keeps one stored rotation-minimising-frame sample per spline segment (ingest's default is 4):
@@ -165,6 +165,10 @@ $(BTF_DIR)/knit_btf_half.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.jso
 btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json $(BTF_DIR)/flat$(s)_btf_half.zarr/zarr.json) $(COMPARE_IN)/knit_btf.zarr/zarr.json $(BTF_DIR)/knit_btf_half.zarr/zarr.json ## Daubert et al. 2001: fitted textures of the damask's two satins and a knit against fiberpath, 12 lights, hemisphere and half-vector light cells (out/btf)
 	@for s in flat41 flat14 knit; do $(LL) evaluate --sweep data/sweeps/btf_$$s.toml -o $(BTF_DIR)/$$s || exit 1; done
 	@for s in flat41 flat14 knit; do echo "report: $(BTF_DIR)/$$s/report.md"; done
+
+btf-through: ## after make compare: the knit tiling's tabulated btf, lit from above on the top face and lit from below too on the middle plane, beside the fibres (docs/img/btf_knit_through.png)
+	$(BIN)/python scripts/btf_knit_through.py $(COMPARE)/knit_btf -o $(BTF_DIR) --method btf_tabulated "hemisphere, top face" \
+	    --method btf_through "sphere, middle plane" --docs
 
 btf-azimuth: $(PRT)/flat14_tiling.zarr/zarr.json ## what a btf light grid misses: the flat 1/4 satin's mean against the light's azimuth, fiberpath, the 8x8 table and the 15x15 half-vector cells (out/btf/azimuth, docs/img/btf_light_azimuth.png)
 	$(BIN)/python scripts/btf_light_azimuth.py -o $(BTF_DIR)/azimuth --docs
