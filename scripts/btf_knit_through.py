@@ -64,7 +64,7 @@ def main(argv=None) -> int:
         ax.set_title(f"{title}\n{sub}", fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.suptitle("knit tiling (data/compare/knit_btf.toml): btf's tabulated model against the fibres", fontsize=10)
+    fig.suptitle(f"comparison {a.compare_dir.name}: btf against the fibres (each at its largest budget)", fontsize=10)
     a.out.mkdir(parents=True, exist_ok=True)
     png = a.out / "btf_knit_through.png"
     fig.savefig(png, dpi=80)

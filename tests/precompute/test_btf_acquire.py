@@ -5,7 +5,10 @@ distance in the xy plane from the line to the segment's projection is at most it
 fibre segment of the exemplar and its 3 x 3 periodic copies, at the very points the acquisition casts
 (the same counter-based random numbers): alpha is that fraction exactly, and a texel whose rays all miss
 (a hole of the loose tiny weave) returns alpha 0 and zero radiance; the light grid's own reciprocity is
-not assumed. Determinism: the same bytes at 1 and 2 threads.
+not assumed. Determinism: the same bytes at 1 and 2 threads. Light from below (a sphere table): a white furnace
+(white Lambertian fibres under a unit sky return 1 over both halves). The texture's plane: alpha on the middle
+plane against brute-force ray-capsule intersection of the rays through its points; the surface plane's heights
+against the slab and the vertical coverage.
 """
 import numba
 import numpy as np
