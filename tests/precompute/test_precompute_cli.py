@@ -126,6 +126,7 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
                                           (["--light-coords", "half", "--lights", "0x15"], "--lights"),
                                           (["--light-domain", "cube"], "--light-domain"),
                                           (["--light-domain", "sphere", "--light-coords", "half"], "--light-domain"),
+                                          (["--plane", "bottom"], "--plane"),
                                           (["--lobes", "3"], "--lobes"),
                                           (["--threads", "-2"], "--threads"),   # was an internal error
                                           (["--model", "neural"], "--model"),
@@ -137,7 +138,7 @@ def test_wrong_kind_of_input(built, cli, tmp_path):
                                           (["--model", "tabulated", "--components", "2", "--clusters", "6"],
                                            "--clusters")])
 def test_btf_bad_options_exit_2_nothing_written(built, cli, tmp_path, extra, needle):
-    """precompute btf: an unknown direction scheme, light coordinates, light domain, lobe count or model, a light
+    """precompute btf: an unknown direction scheme, light coordinates, light domain, plane, lobe count or model, a light
     domain of both sides on half-vector cells, an empty light grid, a
     thread count below 1, a component count below 1 or above the table's rank bound, a cluster count below 1 or
     above the texels, is refused before any work: exit 2, one line naming the option, no artifact."""
