@@ -86,7 +86,7 @@ COMPARE_INPUTS = $(OUT)/fibers.zarr/zarr.json $(OUT)/tables.zarr/zarr.json $(COM
 	$(COMPARE_IN)/damask_svf.zarr/zarr.json $(COMPARE_IN)/damask_iirtf.zarr/zarr.json \
 	$(COMPARE_IN)/damask_btf_fit.zarr/zarr.json $(OUT)/knit_fibers.zarr/zarr.json $(COMPARE_IN)/knit_bysdf_fit.toml \
 	$(COMPARE_IN)/twill_fibers.zarr/zarr.json $(COMPARE_IN)/knit_btf.zarr/zarr.json \
-	$(COMPARE_IN)/knit_btf_through.zarr/zarr.json \
+	$(COMPARE_IN)/knit_btf_through.zarr/zarr.json $(COMPARE_IN)/damask_btf_surface.zarr/zarr.json \
 	$(COMPARE_IN)/damask_svf_full.zarr/zarr.json $(COMPARE_IN)/damask_iirtf_full.zarr/zarr.json \
 	$(PRT)/flat41_svf.zarr/zarr.json $(PRT)/flat41_iirtf.zarr/zarr.json $(BTF_DIR)/flat41_btf.zarr/zarr.json
 
@@ -364,6 +364,10 @@ $(COMPARE_IN)/damask_iirtf.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $
 
 $(COMPARE_IN)/damask_btf_fit.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py $(ARGS_DIR)/cmp_damask_btf.args
 	$(LL) precompute btf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_btf_fit.zarr $(FULL_BTF_ARGS)
+
+# the same texture sampled where its views meet the fibres (damask.toml's btf_surface)
+$(COMPARE_IN)/damask_btf_surface.zarr/zarr.json: $(OUT)/damask_tiling.zarr/zarr.json $(DAMASK_SCENE) $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py $(ARGS_DIR)/cmp_damask_btf.args
+	$(LL) precompute btf $(OUT)/damask_tiling.zarr -o $(COMPARE_IN)/damask_btf_surface.zarr $(FULL_BTF_ARGS) --plane surface
 
 $(COMPARE_IN)/bysdf_fit.toml: $(OUT)/fibers.zarr/zarr.json $(SCENE) $(FIT_DEPS) $(ARGS_DIR)/cmp_bysdf_fit.args
 	$(LL) fit-bysdf $(SCENE) --yarns $(OUT)/yarns.zarr --fibers $(OUT)/fibers.zarr -o $@ $(FULL_FIT_ARGS)

@@ -1,13 +1,14 @@
-"""The knit tiling's btf pictures beside the fibres' (``make btf-through``, after ``make compare``'s knit_btf).
+"""A comparison's btf pictures beside the fibres' (``make btf-through``, after ``make compare``).
 
 Reads a convergence comparison's directory (``loomlight evaluate --convergence data/compare/knit_btf.toml``): its
 converged reference and each named method's render at its largest budget, and draws them side by side on the
 reference's exposure (sRGB), each titled with its mean per channel over the cloth pixels (the reference's alpha
 > 0.5) as a fraction of the reference's and its per-pixel error (``stages.evaluate.convergence.relative_error``,
-the reference's noise not subtracted). Writes ``OUT/btf_knit_through.png``; ``--docs`` copies it to docs/img/.
+the reference's noise not subtracted). Writes ``OUT/NAME`` (``--png``, default btf_knit_through.png); ``--docs``
+copies it to docs/img/.
 
-    .venv/bin/python scripts/btf_knit_through.py out/compare/knit_btf -o out/btf \\
-        --method btf_tabulated "hemisphere, top face" --method btf_through "sphere, middle plane" [--docs]
+    .venv/bin/python scripts/btf_planes.py out/compare/knit_btf -o out/btf \\
+        --method btf_tabulated "hemisphere, top face" --method btf_through "sphere, surface plane" [--docs]
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ def main(argv=None) -> int:
     ap.add_argument("compare_dir", type=Path)
     ap.add_argument("-o", "--out", type=Path, required=True)
     ap.add_argument("--method", nargs=2, action="append", metavar=("NAME", "LABEL"), required=True)
+    ap.add_argument("--png", default="btf_knit_through.png")
     ap.add_argument("--docs", action="store_true")
     a = ap.parse_args(argv)
     import matplotlib
@@ -66,7 +68,7 @@ def main(argv=None) -> int:
         ax.set_yticks([])
     fig.suptitle(f"comparison {a.compare_dir.name}: btf against the fibres (each at its largest budget)", fontsize=10)
     a.out.mkdir(parents=True, exist_ok=True)
-    png = a.out / "btf_knit_through.png"
+    png = a.out / a.png
     fig.savefig(png, dpi=80)
     print(png)
     if a.docs:
