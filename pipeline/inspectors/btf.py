@@ -94,9 +94,9 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
     tabulated = "tabulated/weights" in art.arrays()
     tables = {}
     if tabulated:       # the renderer's decoded table (pipeline.renderers.btf.load_table): exemplar e's level 0
-        from ..renderers.btf import load_table
+        from ..renderers.btf import load_table, table_lights
 
-        V, L = len(views), int(np.prod(s["light_grid"])) * (2 if s.get("light_domain") == "sphere" else 1)
+        V, L = len(views), table_lights(s)
         table = load_table(art, art.path, E, res, levels, V, L)
         per = len(table) // E
         tables = {e: table[e * per:e * per + res * res].reshape(res, res, V, L, 3) for e, _ in rows}

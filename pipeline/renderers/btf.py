@@ -123,7 +123,6 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     domain = s.get("light_domain", "hemisphere")
     if domain not in ("hemisphere", "sphere"):
         raise LoomError(path, "summary.light_domain", f"must be hemisphere or sphere, got {domain!r}")
-    sphere_cells = 2 if domain == "sphere" else 1   # the table's light axis: the grid, and its mirror below
     ft, fph = (int(x) for x in s.get("fit_light_grid", [lt, lph]))
     if res & (res - 1) or not 1 <= levels <= res.bit_length():
         raise LoomError(path, "summary", f"resolution {res} with {levels} levels: the resolution must be a power "
@@ -169,8 +168,8 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     fit_bytes = sum(int(np.prod(have[k].shape)) * np.dtype(have[k].dtype).itemsize for k in names)
     radiance = np.zeros((1, 1, 1, 3), np.float32)
     if model == "tabulated":
-        radiance, fit_bytes = (load_table(art, path, E, res, levels, nt * nph, lt * lph * sphere_cells),
-                               int(s.get("table_bytes", 0)))
+        radiance = load_table(art, path, E, res, levels, nt * nph, table_lights(s))
+        fit_bytes = int(s.get("table_bytes", 0))
     cells = None
     if half:    # the cells seen from each view cell, as the acquisition saw them (cell averages or centres)
         cells = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
@@ -179,7 +178,13 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
                       np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), periods,
                       [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, cells,
-                      model == "tabulated" and sphere_cells == 2)
+                      model == "tabulated" and domain == "sphere")
+
+
+def table_lights(summary) -> int:
+    """The tabulated table's light cells: the light grid's, twice for a table with light from below
+    (``light_domain`` sphere: the grid and its mirror below the fabric)."""
+    return int(np.prod(summary["light_grid"])) * (2 if summary.get("light_domain") == "sphere" else 1)
 
 
 def load_table(art, path, E, res, levels, V, L) -> np.ndarray:

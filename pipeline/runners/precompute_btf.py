@@ -248,13 +248,11 @@ def light_cells(p: "BtfParams"):
     ``light_domain`` sphere the acquisition's followed by its mirror image below the fabric); for half-vector cells,
     the cells' centre half vectors (h_z 0 off the unit disk: what ``half_dirs`` stores; the acquisition takes only
     their count) and the hemisphere grid of FIT_LIGHT_GRID."""
-    from stages.core.btf import half_grid, hemisphere_grid
+    from stages.core.btf import half_grid, hemisphere_grid, sphere_grid
 
     if p.light_coords != "half":
         grid = hemisphere_grid(*p.lights)
-        if p.light_domain == "sphere":
-            return np.concatenate([grid, grid * np.array([1.0, 1.0, -1.0])]), grid
-        return grid, grid
+        return (sphere_grid(*p.lights) if p.light_domain == "sphere" else grid), grid
     return half_grid(*p.lights), hemisphere_grid(*FIT_LIGHT_GRID)
 
 

@@ -94,6 +94,13 @@ def hemisphere_grid(n_theta: int, n_phi: int) -> np.ndarray:
     return d.reshape(-1, 3)
 
 
+def sphere_grid(n_theta: int, n_phi: int) -> np.ndarray:
+    """(2 n_theta n_phi, 3) a sphere table's light cells (module doc, "Light from below"): the hemisphere grid, then
+    its mirror image below the fabric (``sphere_cell_direction`` at the cells' centres)."""
+    grid = hemisphere_grid(n_theta, n_phi)
+    return np.concatenate([grid, grid * np.array([1.0, 1.0, -1.0])])
+
+
 def half_grid(nx: int, ny: int) -> np.ndarray:
     """(nx ny, 3) the centre half vectors of the nx x ny half-vector cells (module doc; ``half_cell_direction`` at
     (0.5, 0.5)), row-major in h_y; h_z 0 for a centre off the unit disk."""
