@@ -256,6 +256,8 @@ def _btf(a: _Arrays) -> None:
     a.shaped("light_dirs", [ft * fph, 3], fkey)
     if half:
         a.shaped("half_dirs", [lt * lph, 3], "light_grid")
+    if a.summary.get("plane") == "relief":     # a plane per texel (precompute btf --plane relief)
+        a.shaped("heights", [E, res, res], "exemplars, resolution and plane")
     if "tabulated/weights" in a.arrays:     # the tabulated model (precompute btf --model tabulated)
         C, K = a.value("table_clusters"), a.value("table_components")
         T = sum((res >> lv) ** 2 for lv in range(levels))

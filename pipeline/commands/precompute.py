@@ -176,11 +176,12 @@ def btf(
                                           "tabulated model lets light through the cloth (a sky below a knit, a "
                                           "curtain against a window; twice the lights to acquire). The Lafortune "
                                           "fit reads the lights above only."),
-    plane: str = typer.Option("top", "--plane", metavar="<top | middle | surface>",
+    plane: str = typer.Option("top", "--plane", metavar="<top | middle | surface | relief>",
                               help="The texture's plane: top (Daubert et al. 2001: the repeat's top face), middle "
                                    "(the middle of its fibres' slab: what lies deep in a thick knit blurs half as "
-                                   "much between view directions) or surface (the median height of what the "
-                                   "views see)."),
+                                   "much between view directions), surface (the median height of what the "
+                                   "views see) or relief (a plane per texel, the height of what it shows from "
+                                   "above, holes down to the bottom; the renderer marches that height field)."),
     spp: int = typer.Option(16, "--spp", help="Rays per texel and view (super-sampled alpha and radiance)."),
     lobes: int = typer.Option(2, "--lobes", help="Lafortune lobes per texel: 1 or 2."),
     threshold: float = typer.Option(0.1, "--threshold", help="Stop alternating lobes and table when the table's "

@@ -33,7 +33,10 @@ output path has the key of a new run, its samples, alpha and frames are taken in
 ``--plane middle`` puts the texture on the middle plane of the exemplars' slab, ``--plane surface`` at the median
 height of what the grid's views see of them (``surface_plane``; ``stages.precompute.btf``, "The texture's plane";
 default ``top``, the paper's top face); the summary's ``plane_z`` is its height, where the renderer
-puts a tiling's surface.
+puts a tiling's surface. ``--plane relief`` gives each texel its own plane (``relief_heights``: the median height of
+what RELIEF_RAYS rays straight down through it meet; the slab's bottom where most pass through), written as
+``heights`` (exemplars, res, res) in the exemplar's coordinates; ``plane_z`` is then the surface plane, where the
+renderer puts the surface it marches the height field from (the field's heights are read relative to it).
 
 With ``--light-domain sphere`` the samples' and the table's light axis is the hemisphere grid and then its mirror
 below the fabric (``stages.core.btf.SPHERE``: 2 L lights); the summary says ``light_domain = "sphere"``, ``light_dirs``
@@ -70,9 +73,12 @@ from ..memory import Estimate, budget as memory_budget
 DIRECTIONS = ("cell", "grid")
 LIGHT_COORDS = ("hemisphere", "half")   # the light grid: equal-area rings and azimuths, or half-vector cells
 LIGHT_DOMAINS = ("hemisphere", "sphere")   # lights above the fabric, or the grid and its mirror below it too
-PLANES = ("top", "middle", "surface")   # the texture's plane: the exemplars' top face (the paper's), their slab's
-                                        # middle, or the median height of what the views see (stages.precompute.btf)
+# the texture's plane: the exemplars' top face (the paper's), their slab's middle, the median height of what the views
+# see, or one per texel (stages.precompute.btf)
+PLANES = ("top", "middle", "surface", "relief")
 SURFACE_RAYS = 256   # --plane surface: rays per grid view and exemplar whose first hits' median height is the plane
+RELIEF_RAYS = 64     # --plane relief: rays straight down per texel whose first hits' median height is its plane
+RELIEF_COVERED = 0.5  # --plane relief: a texel where fewer of them hit is a pit to the slab's bottom (a hole)
 DEFAULT_LIGHTS = {"hemisphere": (8, 8), "half": (15, 15)}   # --lights when not given (half: a cell at h = 0)
 FIT_LIGHT_GRID = (8, 8)   # half-vector acquisitions: the hemisphere grid the Lafortune fit (and the renderer's
                           # quadrature) reads them on (stages.core.btf.half_to_hemisphere)
@@ -258,7 +264,8 @@ def light_cells(p: "BtfParams"):
 
 def _btf_row_task(tiling, tiling_hash, store, e, k, iy, mof, mats, view_dirs, light_dirs, p: dict, z_plane=None):
     """Chunk task: texel row iy of exemplar k (the artifact's exemplar e) -- samples and alpha into the artifact;
-    returns normal sums and timings. ``z_plane``: the texture's plane (None: the exemplar's top face)."""
+    returns normal sums and timings. ``z_plane``: the texture's plane (None: the exemplar's top face; an array
+    (res^2,): each texel's own, ``--plane relief``)."""
     from stages.precompute.btf import acquire_texels
     from stages.precompute.iirtf import exemplar_slabs
     from stages.precompute.periodic import periodic_scene
@@ -300,10 +307,33 @@ def surface_plane(sc, ks, slabs, periods, mof, mats, view_dirs, seed) -> float:
         slab = slabs[k]
         paths = PeriodicPaths(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, 1, 1,
                               _max_dist(W, H, slab), _eps(W, H, slab))
-        z.append(hit_heights(paths, view_dirs, SURFACE_RAYS, seed))
+        z.append(hit_heights(paths, view_dirs, SURFACE_RAYS, seed).ravel())
     z = np.concatenate(z)
     z = z[np.isfinite(z)]
     return float(np.median(z)) if len(z) else 0.5 * (float(slabs[ks[0]][0]) + float(slabs[ks[0]][1]))
+
+
+def relief_heights(sc, ks, slabs, periods, mof, mats, res, seed) -> np.ndarray:
+    """``--plane relief``: (exemplars, res, res) float32 each texel's plane, the median height of the first fibre hits
+    of RELIEF_RAYS rays straight down through its footprint (``stages.precompute.btf.hit_heights`` on the texel
+    grid); the slab's bottom where fewer than RELIEF_COVERED of them hit (a hole is a pit: a ray into it meets the
+    yarns around it, or what lies deeper, where they are)."""
+    from stages.precompute.btf import hit_heights
+    from stages.precompute.periodic import PeriodicPaths, periodic_scene
+
+    down = np.array([[0.0, 0.0, 1.0]])
+    out = []
+    for k, (W, H) in zip(ks, periods):
+        slab = slabs[k]
+        paths = PeriodicPaths(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, 1, 1,
+                              _max_dist(W, H, slab), _eps(W, H, slab))
+        z = hit_heights(paths, down, RELIEF_RAYS, seed, res)[0]
+        hit = np.isfinite(z)
+        covered = hit.mean(axis=1) >= RELIEF_COVERED
+        med = np.full(len(z), float(slab[0]))
+        med[covered] = np.nanmedian(z[covered], axis=1)
+        out.append(med.reshape(res, res))
+    return np.stack(out).astype(np.float32)
 
 
 def used_exemplars(art) -> list[int]:
@@ -441,8 +471,12 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
     slab = slabs[k0]
     top, bottom = max(float(slabs[k][1]) for k in ks), min(float(slabs[k][0]) for k in ks)
     z_plane = {"top": None, "middle": 0.5 * (top + bottom)}.get(p.plane)   # top: each exemplar's own top face
-    if p.plane == "surface":
+    heights = None
+    if p.plane in ("surface", "relief"):
         z_plane = surface_plane(sc, ks, slabs, periods, mof, mats, hemisphere_grid(*p.views), p.seed)
+    if p.plane == "relief":
+        with status(f"btf: the relief's heights ({res}x{res} texels x {RELIEF_RAYS} rays)"):
+            heights = relief_heights(sc, ks, slabs, periods, mof, mats, res, p.seed)
     acq_key = acquisition_key(w, p)
     reused = None if force else reusable_acquisition(out, acq_key)
     compile_s = 0.0
@@ -468,7 +502,9 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                      dimension_names=("exemplar", "y", "x", "view"))
             t0 = time.perf_counter()
             tasks = [ChunkTask(_btf_row_task, (tiling_abs, tiling_hash, str(store), e, k, iy, mof, mats, view_dirs,
-                                               light_dirs, pdict, z_plane)) for e, k in enumerate(ks)
+                                               light_dirs, pdict,
+                                               z_plane if heights is None else heights[e].astype(np.float64).ravel()))
+                     for e, k in enumerate(ks)
                      for iy in range(res)]
             parts = run_tasks(tasks, f"btf: acquisition, {E} exemplar(s) x {res}x{res} texels x {V} views x "
                                      f"{L} lights")
@@ -528,6 +564,8 @@ def run_btf(tiling, out, p: BtfParams, scene=None, exemplars=None, force=False, 
                 if name != "rmse":
                     fit_bytes += a.nbytes
         table_bytes = write_tables(w, tables, V, L) if tables else 0
+        if heights is not None:
+            w.write("heights", heights, dimension_names=("exemplar", "y", "x"))
         rmse = [_rms([f[lev]["rmse"] for f in fits]) for lev in range(n_levels)]
         rmse_nt = [_rms([x[lev] for x in no_table]) for lev in range(n_levels)]
         mean_r = float(np.mean([x["mean_radiance"] for x in per_exemplar]))   # the exemplars hold as many samples each

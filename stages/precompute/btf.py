@@ -57,7 +57,13 @@ its distance from the plane times the cells' angular width. The top face puts th
 the plane (on the knit tiling 0.12 of a 0.25 x 0.2 stitch: a third of a stitch at 35 degrees); its middle
 (``--plane middle``) halves the largest distance; ``--plane surface`` takes the median height of what the views
 see (``hit_heights``: the first hits of rays from every grid view), which minimises the mean distance of the seen
-fibres from the plane.
+fibres from the plane. One plane cannot be near every fibre of an open knit: its yarns' tops and the loops below
+them lie a slab's depth apart. ``--plane relief`` gives every texel its own plane, the median height of the first
+hits of rays straight down through its footprint (``hit_heights`` on the texel grid; where most of them pass through
+the fabric, the slab's bottom: a hole is a pit, and a ray into it meets the yarns around it or below it where their
+own texels stand), so the rays of every view through the texel meet the fibres it shows where they cross; the
+renderer finds the texel a pixel's ray meets by walking the height field (relief mapping, Policarpo, Oliveira and
+Comba 2005; ``stages.render.integrators.btf``).
 
 Per (texel, view): ``radiance`` = the mean over the samples that hit (the texture's colour where it
 is opaque: the renderer blends it with what lies behind by alpha, so the hole is not counted twice),
@@ -223,21 +229,27 @@ def texel_view_samples(paths, res, texel, vx, vy, vz, light_dirs, spp, seed, key
 
 
 @njit(cache=True)
-def hit_heights(paths, view_dirs, rays_per_view, seed):
-    """(V rays_per_view,) the heights z of the first fibre hits of ``rays_per_view`` rays per view of ``view_dirs``
-    (V, 3) into the periodic fabric, each entering the slab's top at a uniform point of the period (counter-based
-    numbers: key = view x rays_per_view + ray, dimensions 0-1); NaN where a ray passes through. Their median is
-    ``precompute btf --plane surface``'s plane (module doc, "The texture's plane")."""
+def hit_heights(paths, view_dirs, rays_per_view, seed, cells=1):
+    """(V, cells^2, rays_per_view) the heights z of the first fibre hits of ``rays_per_view`` rays per view of
+    ``view_dirs`` (V, 3) and cell of a cells x cells grid over the period into the periodic fabric, each entering the
+    slab's top at a uniform point of its cell (counter-based numbers: key = (view x cells^2 + cell) x rays_per_view +
+    ray, dimensions 0-1; cell row-major as the texels); NaN where a ray passes through. ``precompute btf --plane
+    surface``: one cell, the median of every view's hits is the plane; ``--plane relief``: the texel grid seen
+    straight down, each texel's median its own plane (module doc, "The texture's plane")."""
     V = view_dirs.shape[0]
-    out = np.full(V * rays_per_view, np.nan)
+    C = cells * cells
+    out = np.full((V, C, rays_per_view), np.nan)
     for v in range(V):
-        for s in range(rays_per_view):
-            key = v * rays_per_view + s
-            h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, uniform(seed, key, 0) * paths.W,
-                             uniform(seed, key, 1) * paths.H, paths.z_hi, -view_dirs[v, 0], -view_dirs[v, 1],
-                             -view_dirs[v, 2], runtime_value(-1), paths.max_dist)
-            if not math.isinf(h.t):
-                out[key] = h.z
+        for cell in range(C):
+            iy = cell // cells
+            ix = cell - iy * cells
+            for s in range(rays_per_view):
+                key = (v * C + cell) * rays_per_view + s
+                h = periodic_hit(paths.scene, paths.z_lo, paths.z_hi, (ix + uniform(seed, key, 0)) * paths.W / cells,
+                                 (iy + uniform(seed, key, 1)) * paths.H / cells, paths.z_hi, -view_dirs[v, 0],
+                                 -view_dirs[v, 1], -view_dirs[v, 2], runtime_value(-1), paths.max_dist)
+                if not math.isinf(h.t):
+                    out[v, cell, s] = h.z
     return out
 
 
@@ -250,8 +262,8 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
     (``light_grid`` then the half-vector grid's (nx, ny), given also without cell averages) or SPHERE
     (``light_dirs`` the hemisphere grid of ``light_grid`` and its mirror image below). All three are always
     passed (no defaults), so every caller shares one compiled specialisation of the kernel. ``z_plane``: the
-    texture's plane (module doc; None: the top face z_hi, the paper's). (texel, view) jobs on threads
-    (``stages.core.threads``)."""
+    texture's plane (module doc; None: the top face z_hi, the paper's; a number: one plane; an array (res^2,): each
+    texel's own plane, ``--plane relief``). (texel, view) jobs on threads (``stages.core.threads``)."""
     T = t1 - t0
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
@@ -260,8 +272,10 @@ def acquire_texels(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, res, t0, t1, view_d
     normal = np.zeros((T, V, 3))
     rays = np.zeros((T, V), np.int64)
     paths = PeriodicPaths(sc, z_lo, z_hi, W, H, mat_of_fiber, mats, max_depth, rr_depth, max_dist, eps)
+    planes = np.empty(res * res)
+    planes[:] = z_hi if z_plane is None else z_plane
     for_chunks(_texel_view_jobs, T * V, paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid,
-               light_coords, float(z_hi if z_plane is None else z_plane), radiance, alpha, normal, rays,
+               light_coords, planes, radiance, alpha, normal, rays,
                chunks_per_thread=JOB_CHUNKS_PER_THREAD)
     return (radiance, alpha) + _view_sums(normal, rays)
 
@@ -272,9 +286,10 @@ def _view_sums(normal, rays):
 
 
 @chunk_kernel
-def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, light_coords, z_plane,
+def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid, light_grid, light_coords, planes,
                      radiance, alpha, normal, rays, j0, j1):
-    """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v).
+    """``acquire_texels``' jobs j0 .. j1 - 1 (job = texel row i, view v: i V + v); ``planes`` (res^2,) each texel's
+    plane.
     17 parameters: a ``for_chunks`` chunk kernel: the jobs' inputs, the four output arrays and the chunk's range."""
     V = view_dirs.shape[0]
     L = light_dirs.shape[0]
@@ -287,7 +302,7 @@ def _texel_view_jobs(paths, res, t0, view_dirs, light_dirs, spp, seed, view_grid
         key0 = (texel * V + v) * spp
         hits, r = texel_view_samples(paths, res, texel, view_dirs[v, 0], view_dirs[v, 1], view_dirs[v, 2],
                                      light_dirs, spp, seed, key0, acc, normal[i, v], v, view_grid, light_grid,
-                                     light_coords, now, z_plane)
+                                     light_coords, now, planes[texel])
         rays[i, v] = r
         alpha[i, v] = hits / spp
         if hits > 0:

@@ -7,8 +7,9 @@ fibre segment of the exemplar and its 3 x 3 periodic copies, at the very points 
 (a hole of the loose tiny weave) returns alpha 0 and zero radiance; the light grid's own reciprocity is
 not assumed. Determinism: the same bytes at 1 and 2 threads. Light from below (a sphere table): a white furnace
 (white Lambertian fibres under a unit sky return 1 over both halves). The texture's plane: alpha on the middle
-plane against brute-force ray-capsule intersection of the rays through its points; the surface plane's heights
-against the slab and the vertical coverage.
+plane and on a plane per texel against brute-force ray-capsule intersection of the rays through their points; the
+surface plane's heights against the slab and the vertical coverage; the relief's heights against brute-force first
+hits of vertical rays.
 """
 import numba
 import numpy as np
@@ -317,7 +318,7 @@ def test_surface_plane_is_where_the_views_meet_the_fibres(acquired):
     paths = PeriodicPaths(sc, z_lo, z_hi, W, H, args[5], args[6], 1, 1, args[16], args[17])
     views = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8]])
     n = 64
-    z = hit_heights(paths, views, n, 3)
+    z = hit_heights(paths, views, n, 3).reshape(-1)
     hit = np.isfinite(z)
     assert np.all((z[hit] >= z_lo - 1e-9) & (z[hit] <= z_hi + 1e-9))
     a, b, r = _segments_2d(art, k)
@@ -328,3 +329,83 @@ def test_surface_plane_is_where_the_views_meet_the_fibres(acquired):
         hi += m < 1e-9 * W
     assert lo <= hit[:n].sum() <= hi
     assert z_lo < np.median(z[hit]) < z_hi
+
+
+@njit
+def _first_hit_z(x, y, z_top, P, R, O, f0, f1, W, H):
+    """Height of the first capsule (of fibres f0..f1-1 and their copies within 3 periods) that the ray from (x, y,
+    z_top) straight down meets; NaN if none. Brute force over every segment and copy."""
+    best = np.inf
+    for sx in range(-3, 4):
+        for sy in range(-3, 4):
+            for f in range(f0, f1):
+                for i in range(O[f], O[f + 1] - 1):
+                    t = capsule_intersect(x, y, z_top, 0.0, 0.0, -1.0, P[i, 0] + sx * W, P[i, 1] + sy * H, P[i, 2],
+                                          P[i + 1, 0] + sx * W, P[i + 1, 1] + sy * H, P[i + 1, 2],
+                                          max(R[i], R[i + 1]), 0.0)
+                    best = min(best, t)
+    return z_top - best if best < np.inf else np.nan
+
+
+def test_relief_heights_are_the_first_hits_straight_down(acquired, tiny_tiling):
+    """Reference: brute force (``--plane relief``). ``hit_heights`` on a cells x cells grid straight down: ray s of
+    cell (iy, ix) enters at ((ix + u0) W / cells, (iy + u1) H / cells) with key cell n + s; its height is the first
+    capsule it meets (every segment and periodic copy), NaN where it passes through -- up to the BVH's capsule
+    tolerance. ``relief_heights`` is each texel's median where at least half of them hit, the slab's bottom
+    elsewhere."""
+    from pipeline.runners.precompute_btf import RELIEF_RAYS, relief_heights
+    from stages.precompute.periodic import PeriodicPaths
+
+    art, k, W, H, args = acquired
+    sc, z_lo, z_hi = args[0], args[1], args[2]
+    paths = PeriodicPaths(sc, z_lo, z_hi, W, H, args[5], args[6], 1, 1, args[16], args[17])
+    cells, n, seed = 4, 8, 3
+    z = hit_heights(paths, np.array([[0.0, 0.0, 1.0]]), n, seed, cells)[0]
+    P, R, O = (np.asarray(art[a]) for a in ("ex_points", "ex_radius", "ex_offsets"))
+    f0, f1 = int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])
+    for cell in range(cells * cells):
+        iy, ix = divmod(cell, cells)
+        for s in range(n):
+            key = cell * n + s
+            ref = _first_hit_z((ix + uniform(seed, key, 0)) * W / cells, (iy + uniform(seed, key, 1)) * H / cells,
+                               z_hi, P, R, O, f0, f1, W, H)
+            assert np.isnan(ref) == np.isnan(z[cell, s]), (cell, s)
+            assert np.isnan(ref) or abs(ref - z[cell, s]) < 1e-6 * W, (cell, s, ref, z[cell, s])
+    slabs = {k: (z_lo, z_hi)}
+    h = relief_heights(tiny_tiling[1], [k], slabs, [(W, H)], args[5], args[6], RES, seed)
+    z = hit_heights(paths, np.array([[0.0, 0.0, 1.0]]), RELIEF_RAYS, seed, RES)[0]
+    covered = np.isfinite(z).mean(axis=1) >= 0.5
+    assert covered.any() and (~covered).any(), "the tiny weave has texels over yarn and over holes"
+    want = np.where(covered, np.nanmedian(np.where(covered[:, None], z, 0.0), axis=1), z_lo)
+    assert np.allclose(h[0].ravel(), want.astype(np.float32))
+
+
+def test_samples_pass_through_each_texels_plane(acquired):
+    """Reference: brute force (``--plane relief``). With a plane per texel (random heights in the slab), sample s of
+    texel (iy, ix) seen from the oblique view v is the ray through ((ix + u0) W / res, (iy + u1) H / res, z_texel)
+    along -v: alpha is the fraction of those rays that meet a fibre capsule, up to rims; planes all at one height
+    give the bytes of that one plane."""
+    art, k, W, H, args = acquired
+    z_lo, z_hi = args[1], args[2]
+    z_mid = 0.5 * (z_lo + z_hi)
+    same = acquire_texels(*args, np.full(RES * RES, z_mid))
+    one = acquire_texels(*args, z_mid)
+    assert all(np.array_equal(a, b) for a, b in zip(same, one))
+    planes = z_lo + (z_hi - z_lo) * np.random.default_rng(7).random(RES * RES)
+    _rad, alpha, *_ = acquire_texels(*args, planes)
+    P, R, O = (np.asarray(art[n]) for n in ("ex_points", "ex_radius", "ex_offsets"))
+    f0, f1 = int(art["ex_fibers"][k]), int(art["ex_fibers"][k + 1])
+    v = args[10][1]
+    seed = args[13]
+    for texel in range(RES * RES):
+        iy, ix = divmod(texel, RES)
+        up = (z_hi - planes[texel]) / v[2]
+        lo = hi = 0
+        for s in range(SPP):
+            key = (texel * 2 + 1) * SPP + s
+            x = (ix + uniform(seed, key, 0)) * W / RES + up * v[0]
+            y = (iy + uniform(seed, key, 1)) * H / RES + up * v[1]
+            tmax = (z_hi - z_lo) / v[2]
+            lo += _ray_hits(x, y, z_hi, -v[0], -v[1], -v[2], tmax, P, R, O, f0, f1, W, H, 1.0 - 1e-6)
+            hi += _ray_hits(x, y, z_hi, -v[0], -v[1], -v[2], tmax, P, R, O, f0, f1, W, H, 1.0 + 1e-6)
+        assert lo / SPP - 1e-12 <= alpha[texel, 1] <= hi / SPP + 1e-12, texel
