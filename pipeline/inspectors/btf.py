@@ -12,7 +12,8 @@ A texture with the tabulated model (``precompute btf --model tabulated``) shows,
 table of level 0 beside the fit (the same view and light, the same scale) and both differences from the acquired
 data; and at the end of the bottom row, the compression's relative RMSE against the component count per
 exemplar (``tabulated/rel_rmse_by_components``: 0 components = the cluster means). A texture acquired with light
-from below too (``--light-domain sphere``) adds a row: the first pair's light mirrored below the fabric.
+from below too (``--light-domain sphere``) adds a row: the first pair's light mirrored below the fabric. A relief
+texture (``--plane relief``) ends the bottom row with the first exemplar's heights over its surface plane.
 """
 from __future__ import annotations
 
@@ -136,7 +137,18 @@ def inspect(art, png, show=False, size=(1200, 900), **_):
                 cell = " (below the fabric: the light through it; the fit is a reflectance)"
             top[row].suptitle(f"{who}view {_angles(views[vi])}, light {_angles(ldir)}{cell}  (level 0, texels x → , y ↑"
                               + ("; differences / scale)" if tabulated else ")"))
-        axes = np.atleast_1d(top[len(rows)].subplots(1, levels + (1 if tabulated else 0)))
+        relief = "heights" in art.arrays()
+        axes = np.atleast_1d(top[len(rows)].subplots(1, levels + (1 if tabulated else 0) + (1 if relief else 0)))
+        if relief:      # each texel's plane (the renderer's height field) over the surface plane
+            ax = axes[-1]
+            h = np.asarray(art["heights"][0], np.float64) - float(s["plane_z"])
+            lim = max(float(np.abs(h).max()), 1e-9)
+            im = ax.imshow(h, origin="lower", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest")
+            ax.set_title("relief: height over the\nsurface plane")
+            ax.set_xticks([])
+            ax.set_yticks([])
+            fig.colorbar(im, ax=ax, shrink=0.8)
+            axes = axes[:-1]
         if tabulated:
             ax = axes[-1]
             curves = np.asarray(art["tabulated/rel_rmse_by_components"])

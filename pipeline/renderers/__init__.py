@@ -190,6 +190,9 @@ METHODS = {m.name: m for m in (
                                  "off: level 0 everywhere", ("on", "off")),
                   Setting("shadows", "off (default) or on: shadow rays towards directional lights through the "
                                      "mesh's alpha", ("off", "on")),
+                  Setting("relief", "on (default): a relief texture (precompute btf --plane relief) is read where "
+                                    "the ray meets its height field; off: where the ray crosses the surface",
+                          ("on", "off")),
                   Setting("model", "lafortune (default): seed 002's fitted lobes x view table; tabulated: the "
                                    "acquired table, compressed (precompute btf --model tabulated)",
                           ("lafortune", "tabulated"))),

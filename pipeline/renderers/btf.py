@@ -39,6 +39,9 @@ Settings (``--set KEY=VALUE``):
   Within a level the nearest texel is read (no bilinear filter).
 - ``shadows`` = off (default) | on: shadow rays from each hit towards the directional lights, through
   the mesh's surfaces with their alpha (holes let light through) and blocked by the ground.
+- ``relief`` = on (default) | off: a texture acquired with a plane per texel (``precompute btf --plane relief``) is
+  read where the pixel's ray meets its height field (relief mapping); off reads it where the ray crosses the
+  surface, as a texture on one plane (what the relief changes). No effect on other textures.
 - ``model`` = lafortune (default) | tabulated: seed 002's fit, or the acquired table itself -- r(l, v) per texel
   over the view and light grids, compressed by local PCA (``precompute btf --model tabulated``,
   ``stages.precompute.btf_compress``), decoded once per render and read bilinearly on both grids. The
@@ -86,7 +89,7 @@ ONE_EXEMPLAR = Blocks(np.zeros((1, 1), np.int64), np.ones(2), np.zeros(2))   # a
 # ``levels``), with what else the renderer needs from the artifact
 BtfTexture = namedtuple("BtfTexture", ["texels", "table", "levels", "lobes", "view_grid", "light_dirs", "periods",
                                        "exemplars", "fit_bytes", "summary", "model", "radiance", "light_grid",
-                                       "half", "cells", "lower"])
+                                       "half", "cells", "lower", "heights", "relief_span"])
 SOURCES = ("mesh", "tiling")
 ON_OFF = {"on": True, "off": False}
 
@@ -98,7 +101,10 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     negative values clamped to 0; else (1, 1, 1, 3) zeros). ``half``: the table's lights are half-vector cells
     (``precompute btf --light-coords half``), seen from each view cell as ``cells`` (``stages.core.btf.HalfCells``:
     valid fractions and solid angles); else None. ``lower``: the decoded table answers light from below the fabric
-    (``precompute btf --light-domain sphere``; ``stages.core.btf`` SPHERE); the Lafortune fit never does."""
+    (``precompute btf --light-domain sphere``; ``stages.core.btf`` SPHERE); the Lafortune fit never does.
+    ``heights``: a relief texture's (``precompute btf --plane relief``) height per texel row over the surface plane
+    ``plane_z`` (level 0 the artifact's ``heights``, each coarser level its texels' means), ``relief_span`` (highest,
+    lowest); None for one plane."""
     from stages.core.btf import half_cell_geometry, hemisphere_grid
 
     from ..artifacts import Artifact
@@ -170,6 +176,7 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
     if model == "tabulated":
         radiance = load_table(art, path, E, res, levels, nt * nph, table_lights(s))
         fit_bytes = int(s.get("table_bytes", 0))
+    heights = relief_heights(art, path, E, res, levels) if s.get("plane") == "relief" else None
     cells = None
     if half:    # the cells seen from each view cell, as the acquisition saw them (cell averages or centres)
         cells = half_cell_geometry(nt, nph, lt, lph, s.get("directions", "cell") == "cell")
@@ -178,7 +185,30 @@ def load_btf(path, model: str = "lafortune") -> BtfTexture:
                       np.asarray(levels_rows, np.int64).reshape(E, levels, 2), K, (nt, nph),
                       np.ascontiguousarray(art["light_dirs"], np.float64), periods,
                       [int(k) for k in s["exemplars"]], fit_bytes, s, model, radiance, (lt, lph), half, cells,
-                      model == "tabulated" and domain == "sphere")
+                      model == "tabulated" and domain == "sphere", heights,
+                      None if heights is None else (float(heights.max()), float(heights.min())))
+
+
+def relief_heights(art, path, E, res, levels) -> np.ndarray:
+    """A relief texture's heights over its surface plane per texel row, in ``load_btf``'s row order (exemplar,
+    level, texel): level 0 the artifact's ``heights`` less ``plane_z``, each coarser level the mean of its 2 x 2
+    texels below."""
+    if "heights" not in art.arrays():
+        raise LoomError(path, "array heights", "missing: summary.plane is relief, whose texels each have a height "
+                        "(precompute btf --plane relief writes it)")
+    h = np.asarray(art["heights"], np.float64)
+    if h.shape != (E, res, res) or not np.all(np.isfinite(h)):
+        raise LoomError(path, "array heights", f"has shape {list(h.shape)} or holds nan/inf, expected finite "
+                        f"heights of shape {[E, res, res]}")
+    h = h - float(art.summary["plane_z"])
+    rows = []
+    for e in range(E):
+        lv = h[e]
+        for _ in range(levels):
+            rows.append(lv.ravel())
+            if lv.shape[0] > 1:
+                lv = 0.25 * (lv[0::2, 0::2] + lv[1::2, 0::2] + lv[0::2, 1::2] + lv[1::2, 1::2])
+    return np.ascontiguousarray(np.concatenate(rows))
 
 
 def table_lights(summary) -> int:
@@ -360,7 +390,16 @@ def pack_integrator(geom: DressedMesh, tex: BtfTexture, lights, ground, has_grou
                          np.ascontiguousarray(cam[CAM_FORWARD:CAM_FORWARD + 3], np.float64), bool(mip),
                          int(bool(shadows)), MAX_LAYERS, eps, tabulated, tex.radiance, int(tex.light_grid[0]),
                          int(tex.light_grid[1]), int(tex.half), tex.cells.valid if tex.half else np.ones((1, 1)),
-                         bool(tex.lower))
+                         bool(tex.lower), *relief_fields(tex))
+
+
+def relief_fields(tex: BtfTexture):
+    """The integrator's ``heights``, ``relief``, ``relief_span`` and ``inv_period`` (``stages.render.integrators.btf``
+    "Relief")."""
+    if tex.heights is None:
+        return np.zeros(1), False, np.zeros(2), np.zeros(2)
+    return (tex.heights, True, np.asarray(tex.relief_span, np.float64),
+            np.ascontiguousarray(1.0 / tex.periods[0], np.float64))
 
 
 def sky_weights(tex: BtfTexture) -> np.ndarray:
@@ -406,6 +445,8 @@ def film_setup(scene, options: dict):
         geom = load_tiling_surface(options["fibers"], btf_path, tex)
     mip = ON_OFF[extra.get("mip", "on")]
     shadows = ON_OFF[extra.get("shadows", "off")]
+    if not ON_OFF[extra.get("relief", "on")]:
+        tex = tex._replace(heights=None, relief_span=None)
     ground, has_ground = ground_array(scene.render)
     cam = camera_array(scene.camera, options["width"], options["height"])
     integ = pack_integrator(geom, tex, lights, ground, has_ground, cam, mip, shadows)
@@ -417,7 +458,7 @@ def film_setup(scene, options: dict):
              "btf_light_domain": "sphere" if tex.lower else "hemisphere",
              "btf_views": int(tex.table.shape[1]), "btf_lights": int(len(tex.light_dirs)),
              "fit_bytes": int(tex.fit_bytes), "mip": "on" if mip else "off", "shadows": "on" if shadows else "off",
-             "max_layers": int(integ.max_layers)}
+             "relief": "on" if integ.relief else "off", "max_layers": int(integ.max_layers)}
     return FilmSetup("btf", integ, cam, VARIANCE_CHANNELS, stats)
 
 

@@ -345,3 +345,44 @@ def test_btf_tabulated_reuses_the_acquisition(tiny_tiling, cli, tmp_path):
     code, _, err = cli("inspect", path, "--png", png)
     assert code == 0, err
     assert_legible_png(png)
+
+
+@pytest.mark.slow   # an acquisition, a fit, a render and a picture: make test-all (make test's budget)
+def test_btf_relief_end_to_end(tiny_tiling, cli, tmp_path):
+    """Contract (pipeline/runners/precompute_btf.py ``relief_heights``, stages/render/integrators/btf.py "Relief"):
+    ``--plane relief`` writes a height per texel and exemplar (``heights``, within the exemplars' slab; the surface
+    plane as ``plane_z``), the btf renderer reads it by relief mapping (the picture differs from the same texture
+    read on its surface plane, ``--set relief=off``), and ``loomlight inspect`` draws the heights."""
+    from pipeline.artifacts import Artifact
+    from pipeline.images import read_exr
+    from tests.inspector_checks import assert_legible_png
+
+    tiling = tiny_tiling[0]
+    path = tmp_path / "texture.zarr"
+    code, out, err = cli("precompute", "btf", tiling, "-o", path, *BTF_ARGS, "--plane", "relief", "--threads", "2")
+    assert code == 0, err
+    a = Artifact(path)
+    s = a.summary
+    h = np.asarray(a["heights"], np.float64)
+    assert s["plane"] == "relief" and h.shape == (2, 2, 2)
+    assert np.all((h >= s["bottom"] - 1e-6) & (h <= s["top"] + 1e-6)) and s["bottom"] < s["plane_z"] < s["top"]
+    scene = tmp_path / "scene.toml"
+    text = Path("data/scenes/flat_satin.toml").read_text()
+    scene.write_text(text.split("[camera]")[0] + "[camera]\norigin = [0.1, -0.1, 0.5]\ntarget = [0.1, 0.1, 0.0]\n"
+                     "fov = 30.0\n\n[[lights]]\ntype = \"directional\"\ndirection = [-0.2, 0.3, -0.9]\n"
+                     "irradiance = 3.0\n\n[render]" + text.split("[render]")[1])
+    pictures = []
+    for name in ("on", "off"):      # off: the same texture read where the ray crosses the surface (one plane)
+        exr = tmp_path / f"relief_{name}.exr"
+        code, _, err = cli("render", scene, "--method", "btf", "--source", "tiling", "--fibers", tiling, "--set",
+                           f"btf={path}", "--set", f"relief={name}", "--width", "24", "--height", "18", "--spp", "1",
+                           "-o", exr)
+        assert code == 0, err
+        rgb, ch = read_exr(exr)
+        assert (ch["A"] > 0).mean() > 0.5
+        pictures.append(rgb)
+    assert not np.array_equal(pictures[0], pictures[1])
+    png = tmp_path / "relief.png"
+    code, _, err = cli("inspect", path, "--png", png)
+    assert code == 0, err
+    assert_legible_png(png)

@@ -16,11 +16,15 @@ What is compared with what (each test names its reference):
 - the texture's repeat: uv shifted by one period gives the same bytes (by half a period, not);
 - a tiling's base surface equals the same surface written as an OBJ with repeat = flat size / period; on a
   tiling of two exemplars each pixel is the one or the other exemplar's render where the block map says;
+- relief (``--plane relief``): a height field of one height h renders as the plain texture on the surface moved h
+  along its normal; on a random field the texel walk meets the ray's first crossing, against a brute-force march
+  of 20,000 steps;
 - the same bytes at 1 and 2 threads; bad settings and a texture of another repeat: exit 2, nothing
   written.
 """
 import math
 import shutil
+from collections import namedtuple
 
 import numpy as np
 import pytest
@@ -100,7 +104,7 @@ def _cli(*args):
 
 def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, table=None, lobe_params=None,
               period=(0.5, 0.5), source_hash="none", source="none", frame=None, exemplars=(0,), tabulated=None,
-              half=None, sphere=False):
+              half=None, sphere=False, heights=None):
     """A btf artifact of the tiling exemplars ``exemplars``. ``rho``: an rgb (every texel of every level) or a
     function (level, r) -> (r, r, 3), or a list of those, one per exemplar; ``alpha``: a number or a function
     (level, r, views) -> (r, r, V); ``table``: None (T = 1) or a function (level, r, views) -> (r, r, V, 3);
@@ -109,7 +113,8 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
     every texel's table r(l, v), compressed by ``compress_texels`` (1 cluster, 1 component) into ``tabulated/``;
     ``half`` None or (nx, ny): the table's lights are half-vector cells (``--light-coords half``), ``tabulated`` then
     a function (views, valid fractions (V, L)) -> (V, L, 3); ``sphere``: the table's lights are the light grid and its
-    mirror below the fabric (``--light-domain sphere``), ``tabulated`` then a function of those 2 L lights."""
+    mirror below the fabric (``--light-domain sphere``), ``tabulated`` then a function of those 2 L lights;
+    ``heights`` None or (res, res) level 0's heights over the surface plane (``--plane relief``, plane_z 0)."""
     from pipeline.runners.precompute_btf import write_tables
     from stages.precompute.btf_compress import compress_texels
 
@@ -162,6 +167,9 @@ def write_btf(path, res=4, levels=3, lobes=1, rho=(0.5, 0.5, 0.5), alpha=1.0, ta
                          light_grid=list(LIGHT_GRID if half is None else half))
         if sphere:
             w.summary.update(light_domain="sphere")
+        if heights is not None:
+            w.write("heights", each([np.asarray(heights, np.float32)] * E))
+            w.summary.update(plane="relief", plane_z=0.0)
         if half is not None:
             w.summary.update(light_coords="half", fit_light_grid=list(LIGHT_GRID), directions="cell")
     return path
@@ -799,6 +807,7 @@ def test_tiling_of_two_exemplars_reads_each_texture_where_the_block_map_places_i
     ("no btf", "--set btf"),
     ("no mesh", "--set mesh"),
     ("btf is not a btf", "expected a 'btf' artifact"),
+    ("relief of another shape", "array heights"),
 ])
 def test_bad_settings_exit_2(bench, case, needle):
     """Reference: the contract for bad input: exit code 2, one line naming the place, nothing written."""
@@ -818,6 +827,9 @@ def test_bad_settings_exit_2(bench, case, needle):
         code, _, err = _cli("render", scene, "-o", bench.d / "lam.exr", "--method", "btf", *args, "--spp", "1")
         assert code == 0, err
         args = ["--set", f"btf={bench.d / 'lam.zarr'}", "--set", f"mesh={mesh}"]
+    elif case == "relief of another shape":     # heights (1, 5, 5) for a texture of 4 x 4 texels
+        btf = write_btf(bench.name("relief").with_suffix(".zarr"), rho=np.full(3, 0.1), heights=np.zeros((5, 5)))
+        args = ["--set", f"btf={btf}", "--set", f"mesh={mesh}"]
     else:
         args += ["--set", case]
     out = bench.name("bad").with_suffix(".exr")
@@ -827,3 +839,59 @@ def test_bad_settings_exit_2(bench, case, needle):
     assert len(err.strip().splitlines()) == 1, err
     assert not out.exists() and not out.with_suffix(".zarr").exists()
     assert read_meta(btf)["kind"] == "btf"
+
+
+def test_relief_of_one_height_is_the_surface_moved_there(bench):
+    """Reference: the plain texture on a moved surface. A relief texture (``--plane relief``) whose every texel is at
+    height h over the surface renders as the same texture without relief on the quad moved h along its normal (mip
+    off: the footprint changes with the distance); but for texels whose edge a ray meets within rounding (at most
+    1 % of the pixels), the same values. Without the relief the pictures differ (the test can fail)."""
+    h = 0.15
+    scene = bench.scene(SUN.format(d="-0.3, 0.2, -0.8", e=2.0), origin=(1.2, -1.6, 2.0), width=48, height=36)
+    relief = write_btf(bench.name("relief").with_suffix(".zarr"), res=8, levels=4, rho=_checker,
+                       heights=np.full((8, 8), h))
+    plain = write_btf(bench.name("plain").with_suffix(".zarr"), res=8, levels=4, rho=_checker)
+    out = []
+    for btf, z in ((relief, 0.0), (plain, h), (plain, 0.0)):
+        V, UV, F = quad(size=20.0, z=z)     # filling the frame: no silhouette moves with it
+        mesh = write_obj(bench.name("quad").with_suffix(".obj"), V, UV, F)
+        out.append(bench.render(scene, "--set", f"btf={btf}", "--set", f"mesh={mesh}", "--set", "repeat=40",
+                                "--set", "mip=off")[0])
+    same = np.all(out[0] == out[1], axis=-1)
+    assert same.mean() >= 0.99, same.mean()
+    assert np.all(out[0] == out[1], axis=-1).sum() > np.all(out[0] == out[2], axis=-1).sum() + out[0].size // 30
+
+
+RandomField = namedtuple("RandomField", ["heights", "levels", "block_map", "block_size", "flat_period",
+                                         "exemplar_scale", "relief_span", "inv_period"])
+
+
+def test_relief_march_meets_the_first_crossing():
+    """Reference: brute force. On a random 8 x 8 height field (one exemplar, period 0.5 x 0.4, heights in [-0.2,
+    0.1]) and random rays (views down to 80 degrees from the normal, from anywhere on the surface), ``relief_point``
+    returns the point of the ray at the first crossing that a march of 20,000 steps finds (the height d of the
+    ray's first point at or below the field), to that march's step."""
+    from stages.render.integrators.btf import relief_height, relief_point
+
+    rng = np.random.default_rng(11)
+    res, period = 8, np.array([0.5, 0.4])
+    field = RandomField(rng.uniform(-0.2, 0.1, res * res), np.array([[[0, res]]], np.int64), np.zeros((1, 1), np.int64),
+                        np.ones(2), np.zeros(2), np.ones((1, 2)), np.array([0.1, -0.2]), 1.0 / period)
+    top, bottom = field.relief_span
+    n_bf = 20000
+    for _ in range(300):
+        pu, pv = rng.uniform(-2.0, 2.0, 2)
+        ct = rng.uniform(math.cos(math.radians(80.0)), 1.0)
+        ph = rng.uniform(0.0, 2.0 * math.pi)
+        v = (math.sqrt(1.0 - ct * ct) * math.cos(ph), math.sqrt(1.0 - ct * ct) * math.sin(ph), ct)
+        su, sv = v[0] / v[2] / period[0], v[1] / v[2] / period[1]
+        qu, qv = relief_point(field, pu, pv, *v)
+        d = (qu - pu) / su if abs(su) > abs(sv) else (qv - pv) / sv
+        assert abs(pu + d * su - qu) < 1e-9 and abs(pv + d * sv - qv) < 1e-9   # on the ray
+        d_bf = bottom
+        for i in range(n_bf + 1):
+            x = top + (bottom - top) * i / n_bf
+            if x <= relief_height(field, pu + x * su, pv + x * sv):
+                d_bf = x
+                break
+        assert abs(d - d_bf) <= (top - bottom) / n_bf + 1e-9, (d, d_bf)

@@ -37,6 +37,13 @@ direction, behind the surface reads the table's lower half (the light through th
 light behind leaving from the far side, and the sky table sums both halves; the Lafortune lobes stay a reflectance
 (light from above only).
 
+**Relief** (``relief``; ``precompute btf --plane relief``). A texture acquired with a plane per texel (the height of
+what the texel shows from above, ``heights``) is read where the pixel's ray meets that height field, not where it
+crosses the surface: ``relief_point`` walks the ray texel by texel through the field (relief mapping, Policarpo et al.
+2005) and steps 2-3 read the texel there -- every view of a texel then shows the same fibres, where a single plane
+shifts what lies above or below it between the views the lookup interpolates. Front faces only (the field is the
+top's); shadow rays read alpha on the surface itself.
+
 **Alpha** (§3, §6): the table's alpha at the view is the texel's coverage for that view, 0 at a hole
 in the weave. The ray goes on through the surface (the next hit along the same ray, up to
 ``max_layers`` surfaces; further ones are not seen) and the pixel is alpha C_front + (1 - alpha)
@@ -75,6 +82,9 @@ unused for the Lafortune model); ``lower``: the table answers light from below t
 ``half`` (0 or 1): the table's lights are half-vector cells (``l_theta`` x
 ``l_phi`` = nx x ny, read by ``stages.core.btf.half_rgb``; ``light_dirs`` then the fit's hemisphere grid, the
 quadrature's) with ``half_valid`` (V, L) their valid fractions ((1, 1) unused otherwise);
+``heights`` (N,) each texel row's relief height over the surface (scene units; only level 0's are read),
+``relief`` (bool) whether to march them, ``relief_span`` (2) the field's highest and lowest height and ``inv_period``
+(2) one over the first exemplar's period (a relief's scene units into pattern units; (1,), False, zeros otherwise);
 ``lights`` (``LightTable``), ``quad_lights`` how many lights are not directional (the ground's
 quadrature), ``env_lights`` how many are environment maps (the surface's quadrature), ``sky`` (N, V, 3)
 the ``sky_table`` when ``has_sky`` (a constant light is there; else (1, 1, 3) unused) and ``sky_radiance``
@@ -115,9 +125,12 @@ BtfIntegrator = namedtuple("BtfIntegrator", [
     "mesh", "shading", "texels", "table", "levels", "exemplar_scale", "block_map", "block_size", "flat_period",
     "n_theta", "n_phi", "light_dirs", "lights", "quad_lights", "env_lights", "sky", "sky_radiance", "has_sky",
     "ground", "has_ground", "pixel_angle", "forward", "mip", "shadows", "max_layers", "eps", "tabulated", "radiance",
-    "l_theta", "l_phi", "half", "half_valid", "lower"])
+    "l_theta", "l_phi", "half", "half_valid", "lower", "heights", "relief", "relief_span", "inv_period"])
 
 MAX_LAYERS = 4
+RELIEF_MAX_CELLS = 1024  # relief mapping: at most this many texels walked along one ray (grazing views)
+RELIEF_INSIDE = 1e-6     # relief mapping: a wall's hit moved this fraction of its texel's stretch into the texel
+RELIEF_MIN_COS = 0.05    # relief mapping: views nearer the surface march as if at this cos theta (a finite offset)
 INV_PI = 1.0 / math.pi
 # ``shading`` columns per triangle
 S_NORMALS = 0        # corner normals n0, n1, n2 (9)
@@ -235,6 +248,70 @@ def texel_index(levels, e, level, pu, pv):
     ix = min(int((pu - math.floor(pu)) * r), r - 1)
     iy = min(int((pv - math.floor(pv)) * r), r - 1)
     return levels[e, level, 0] + iy * r + ix
+
+
+@njit(cache=True, inline="always")
+def relief_height(it, pu, pv):
+    """The height field's height (over the surface, scene units) at pattern coordinate (pu, pv): the level-0 texel's
+    (``heights``); the span's bottom where the block map places no cloth."""
+    e, qu, qv = texel_exemplar(it, pu, pv)
+    if e < 0:
+        return it.relief_span[1]
+    return it.heights[texel_index(it.levels, e, 0, qu, qv)]
+
+
+@njit(cache=True)
+def relief_point(it, pu, pv, vx, vy, vz):
+    """Relief mapping (Policarpo, Oliveira and Comba 2005, "Real-time relief mapping on arbitrary polygonal
+    surfaces", §3), exact for a field that is constant over each texel: the pattern coordinate where the ray towards
+    -v (local frame) through the surface's point (pu, pv) first meets the texture's height field (``precompute btf
+    --plane relief``: each texel acquired through its own plane). The ray's point at height d over the surface lies
+    at (pu, pv) + d (v_x, v_y) / v_z in scene units, over the first exemplar's period in pattern units
+    (``inv_period``). From the span's top (``relief_span``) down, the ray is walked texel by texel over the first
+    exemplar's level-0 grid (Amanatides and Woo 1987): over texel c it descends from d_in to d_out; it meets c's wall
+    if h_c >= d_in, c's top (at d = h_c) if h_c >= d_out; else it goes on to the next texel. The heights scale with
+    the texture: on a mesh of another size the relief scales with its repeat."""
+    sz = max(vz, RELIEF_MIN_COS)
+    res = it.levels[0, 0, 1]
+    su = vx / sz * it.inv_period[0]
+    sv = vy / sz * it.inv_period[1]
+    top = it.relief_span[0]
+    span = top - it.relief_span[1]
+    # texel coordinates along the walk: x(t) = x0 + t gx, t = top - d from 0 to span
+    x0 = (pu + top * su) * res
+    y0 = (pv + top * sv) * res
+    gx = -su * res
+    gy = -sv * res
+    cx = math.floor(x0)
+    cy = math.floor(y0)
+    step_x = 1.0 if gx > 0.0 else -1.0
+    step_y = 1.0 if gy > 0.0 else -1.0
+    dt_x = 1.0 / abs(gx) if gx != 0.0 else math.inf      # t between two x boundaries
+    dt_y = 1.0 / abs(gy) if gy != 0.0 else math.inf
+    next_x = ((cx + 1.0 - x0) if gx > 0.0 else (x0 - cx)) * dt_x if gx != 0.0 else math.inf
+    next_y = ((cy + 1.0 - y0) if gy > 0.0 else (y0 - cy)) * dt_y if gy != 0.0 else math.inf
+    t_in = 0.0
+    t = span
+    for _ in range(RELIEF_MAX_CELLS):
+        t_out = min(next_x, next_y, span)
+        h = relief_height(it, (cx + 0.5) / res, (cy + 0.5) / res)
+        if h >= top - t_in:             # the texel's wall (or, at the start, its top at the span's top)
+            t = t_in + RELIEF_INSIDE * (t_out - t_in)
+            break
+        if h >= top - t_out:            # the texel's top
+            t = top - h
+            break
+        if t_out >= span:
+            break
+        t_in = t_out
+        if next_x < next_y:
+            cx += step_x
+            next_x += dt_x
+        else:
+            cy += step_y
+            next_y += dt_y
+    d = top - t
+    return pu + d * su, pv + d * sv
 
 
 @njit(cache=True, inline="always")
@@ -499,10 +576,14 @@ def shade_surface(it, f, tri, t, dx, dy, dz):
     towards -d and the coverage, both blended over the mip levels (module doc)."""
     lights = it.lights.lights
     table = it.table
-    e, pu, pv = texel_exemplar(it, f.pu, f.pv)
+    vx, vy, vz = to_local(f, -dx, -dy, -dz)
+    pu, pv = f.pu, f.pv
+    if it.relief and (it.shading[tri, S_GEOMETRIC] * dx + it.shading[tri, S_GEOMETRIC + 1] * dy
+                      + it.shading[tri, S_GEOMETRIC + 2] * dz) < 0.0:   # the front: the texel the ray meets first
+        pu, pv = relief_point(it, pu, pv, vx, vy, vz)
+    e, pu, pv = texel_exemplar(it, pu, pv)
     if e < 0:       # no exemplar in this block of the tiling: no cloth here
         return 0.0, 0.0, 0.0, 0.0, 0
-    vx, vy, vz = to_local(f, -dx, -dy, -dz)
     i0, i1, i2, i3, w0, w1, w2, w3 = grid_weights(it.n_theta, it.n_phi, vx, vy, vz)
     texel_width = it.shading[tri, S_TEXEL_WIDTH] / math.sqrt(it.exemplar_scale[e, 0] * it.exemplar_scale[e, 1])
     l0, l1, fl = mip_blend(it, footprint(it, t, f.cos_i, dx, dy, dz), texel_width)
