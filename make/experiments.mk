@@ -166,9 +166,9 @@ btf-sweep: $(foreach s,41 14,$(BTF_DIR)/flat$(s)_btf.zarr/zarr.json $(BTF_DIR)/f
 	@for s in flat41 flat14 knit; do $(LL) evaluate --sweep data/sweeps/btf_$$s.toml -o $(BTF_DIR)/$$s || exit 1; done
 	@for s in flat41 flat14 knit; do echo "report: $(BTF_DIR)/$$s/report.md"; done
 
-btf-through: ## after make compare: the knit tiling's tabulated btf, lit from above on the top face and lit from below too on the surface plane, beside the fibres (docs/img/btf_knit_through.png)
+btf-through: ## after make compare: the knit tiling's tabulated btf, lit from above on the top face and lit from below too with a plane per texel (relief), beside the fibres (docs/img/btf_knit_through.png)
 	$(BIN)/python scripts/btf_planes.py $(COMPARE)/knit_btf -o $(BTF_DIR) --method btf_tabulated "hemisphere, top face" \
-	    --method btf_through "sphere, surface plane" --docs
+	    --method btf_through "sphere, relief" --docs
 
 btf-azimuth: $(PRT)/flat14_tiling.zarr/zarr.json ## what a btf light grid misses: the flat 1/4 satin's mean against the light's azimuth, fiberpath, the 8x8 table and the 15x15 half-vector cells (out/btf/azimuth, docs/img/btf_light_azimuth.png)
 	$(BIN)/python scripts/btf_light_azimuth.py -o $(BTF_DIR)/azimuth --docs

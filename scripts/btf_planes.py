@@ -8,7 +8,7 @@ the reference's noise not subtracted). Writes ``OUT/NAME`` (``--png``, default b
 copies it to docs/img/.
 
     .venv/bin/python scripts/btf_planes.py out/compare/knit_btf -o out/btf \\
-        --method btf_tabulated "hemisphere, top face" --method btf_through "sphere, surface plane" [--docs]
+        --method btf_tabulated "hemisphere, top face" --method btf_through "sphere, relief" [--docs]
 """
 from __future__ import annotations
 
