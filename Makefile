@@ -390,11 +390,11 @@ $(COMPARE_IN)/knit_tiling.zarr/zarr.json: data/tilings/knit_swatch.toml data/sce
 $(COMPARE_IN)/knit_btf.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py
 	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf.zarr --model tabulated
 
-# the same stitch lit from below too, each texel on its own plane, read by relief mapping (knit_btf.toml's
-# btf_through)
+# the same stitch lit from below too, each texel on its own plane, read by relief mapping, 32 rays a texel and view
+# (knit_btf.toml's btf_through)
 $(COMPARE_IN)/knit_btf_through.zarr/zarr.json: $(COMPARE_IN)/knit_tiling.zarr/zarr.json $(PRECOMPUTE_DEPS) pipeline/runners/precompute_btf.py
 	$(LL) precompute btf $(COMPARE_IN)/knit_tiling.zarr -o $(COMPARE_IN)/knit_btf_through.zarr --model tabulated \
-	    --light-domain sphere --plane relief
+	    --light-domain sphere --plane relief --spp 32
 
 .PRECIOUS: $(COMPARE_IN)/%.zarr/zarr.json
 
