@@ -296,18 +296,21 @@ def _eps(W, H, slab) -> float:
     return 1e-7 * (max(W, H) + abs(float(slab[0])) + abs(float(slab[1])))
 
 
+def _probe_paths(sc, k, slab, W, H, mof, mats):
+    """Exemplar k's periodic fabric for first-hit probes (``hit_heights``: no path past the first hit)."""
+    from stages.precompute.periodic import PeriodicPaths, periodic_scene
+
+    return PeriodicPaths(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, 1, 1,
+                         _max_dist(W, H, slab), _eps(W, H, slab))
+
+
 def surface_plane(sc, ks, slabs, periods, mof, mats, view_dirs, seed) -> float:
     """``--plane surface``: the median height of the first fibre hits of SURFACE_RAYS rays per grid view into every
     exemplar of ``ks`` (``stages.precompute.btf.hit_heights``), pooled."""
     from stages.precompute.btf import hit_heights
-    from stages.precompute.periodic import PeriodicPaths, periodic_scene
 
-    z = []
-    for k, (W, H) in zip(ks, periods):
-        slab = slabs[k]
-        paths = PeriodicPaths(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, 1, 1,
-                              _max_dist(W, H, slab), _eps(W, H, slab))
-        z.append(hit_heights(paths, view_dirs, SURFACE_RAYS, seed).ravel())
+    z = [hit_heights(_probe_paths(sc, k, slabs[k], W, H, mof, mats), view_dirs, SURFACE_RAYS, seed).ravel()
+         for k, (W, H) in zip(ks, periods)]
     z = np.concatenate(z)
     z = z[np.isfinite(z)]
     return float(np.median(z)) if len(z) else 0.5 * (float(slabs[ks[0]][0]) + float(slabs[ks[0]][1]))
@@ -319,15 +322,12 @@ def relief_heights(sc, ks, slabs, periods, mof, mats, res, seed) -> np.ndarray:
     grid); the slab's bottom where fewer than RELIEF_COVERED of them hit (a hole is a pit: a ray into it meets the
     yarns around it, or what lies deeper, where they are)."""
     from stages.precompute.btf import hit_heights
-    from stages.precompute.periodic import PeriodicPaths, periodic_scene
 
     down = np.array([[0.0, 0.0, 1.0]])
     out = []
     for k, (W, H) in zip(ks, periods):
         slab = slabs[k]
-        paths = PeriodicPaths(periodic_scene(sc, k), float(slab[0]), float(slab[1]), W, H, mof, mats, 1, 1,
-                              _max_dist(W, H, slab), _eps(W, H, slab))
-        z = hit_heights(paths, down, RELIEF_RAYS, seed, res)[0]
+        z = hit_heights(_probe_paths(sc, k, slab, W, H, mof, mats), down, RELIEF_RAYS, seed, res)[0]
         hit = np.isfinite(z)
         covered = hit.mean(axis=1) >= RELIEF_COVERED
         med = np.full(len(z), float(slab[0]))
