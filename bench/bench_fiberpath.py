@@ -69,6 +69,7 @@ def run(out_dir) -> dict:
     from stages.core.shading.material import pack_material_bcsdf, pack_material_lambert
     from stages.render.film import F_HIT, finalize, new_film, tile_grid
     from stages.render.integrators.fiberpath import FiberpathIntegrator
+    from stages.render.meshes import no_meshes
     from stages.render.tiles import render_tiles
 
     src = Path(os.environ.get("LOOMLIGHT_BENCH_FIBERS", ROOT / "out" / "demo" / "fibers.zarr"))
@@ -108,7 +109,7 @@ def run(out_dir) -> dict:
     extent = float(np.linalg.norm(pts.max(0) - pts.min(0)))
 
     integ = FiberpathIntegrator(bvh, mof, mats, pack_material_lambert(ground[1:4]), lights.table(), ground, has_ground,
-                                int(scene.render["max_depth"]), int(scene.render["rr_depth"]), 1 << 40,
+                                no_meshes(), int(scene.render["max_depth"]), int(scene.render["rr_depth"]), 1 << 40,
                                 1e-7 * extent)
 
     def render(spp_):

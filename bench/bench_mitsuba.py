@@ -175,6 +175,7 @@ class FiberpathRenderer:
         from stages.core.shading.material import pack_material_lambert
         from stages.render.film import new_film, tile_grid
         from stages.render.integrators.fiberpath import FiberpathIntegrator
+        from stages.render.meshes import no_meshes
         from stages.render.tiles import render_tiles
 
         numba.set_num_threads(THREADS)
@@ -198,7 +199,7 @@ class FiberpathRenderer:
         mof = np.zeros(len(f.fiber_offsets) - 1, np.int32)
         extent = float(np.linalg.norm(f.points.max(0) - f.points.min(0)))
         self.integ = FiberpathIntegrator(bvh, mof, mats, pack_material_lambert(np.zeros(3)), lights.table(),
-                                         np.zeros(4), False, max_depth, rr_depth, 1 << 40,
+                                         np.zeros(4), False, no_meshes(), max_depth, rr_depth, 1 << 40,
                                          1e-7 * extent if eps is None else
                                          mitsuba_offset(f.points) if eps == "mitsuba" else eps)
         self.tiles = tile_grid(W, H, 16)

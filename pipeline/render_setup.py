@@ -7,6 +7,9 @@
 - ``recorded_input(art, name, kind)`` -> the input an artifact records (its yarns), refused naming the
   artifact and ``inputs.<name>`` when the recorded path is gone or unreadable.
 - ``ground_array(scene)`` -> (float64[4] height + albedo, enabled).
+- ``load_scene_meshes(scene)`` -> (``stages.render.meshes.SceneMeshes`` of the scene's ``[[meshes]]``, their
+  bounds (lo, hi) or None, stats): each OBJ read (``pipeline.io.obj_mesh``, without uv) and placed by its
+  transform.
 """
 from __future__ import annotations
 
@@ -209,6 +212,34 @@ def ground_array(render: dict) -> tuple[np.ndarray, bool]:
     out[0] = float(g.get("height", 0.0))
     out[1:4] = g.get("albedo", [0.5, 0.5, 0.5])
     return out, True
+
+
+def load_scene_meshes(scene):
+    """(SceneMeshes, bounds, stats) of the scene's meshes (module doc); bounds None without meshes."""
+    import time
+
+    from stages.core.shading.material import pack_material_lambert
+    from stages.render.meshes import no_meshes, scene_meshes
+
+    from .io.obj_mesh import read_obj_mesh
+
+    if not scene.meshes:
+        return no_meshes(), None, {}
+    t0 = time.perf_counter()
+    Vs, Fs, rows, mat_of_tri, n = [], [], [], [], 0
+    for i, m in enumerate(scene.meshes):
+        obj = read_obj_mesh(m["file"], scene.path, uv_for=None, place=f"meshes[{i}].file",
+                            faces_for="a scene's mesh needs triangles or polygons (f lines)")
+        M = m["matrix"]
+        Vs.append(obj.V @ M[:, :3].T + M[:, 3])
+        Fs.append(obj.F + n)
+        n += len(obj.V)
+        rows.append(pack_material_lambert(m["albedo"]))
+        mat_of_tri.append(np.full(len(obj.F), i, np.int32))
+    V, F = np.concatenate(Vs), np.concatenate(Fs)
+    sm = scene_meshes(V, F, np.concatenate(mat_of_tri), np.stack(rows))
+    stats = {"meshes": len(scene.meshes), "mesh_triangles": int(len(F)), "mesh_build_s": time.perf_counter() - t0}
+    return sm, (V.min(axis=0), V.max(axis=0)), stats
 
 
 # ------------------------------------------------------------------------------------------------

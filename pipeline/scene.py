@@ -9,6 +9,12 @@ against its schema), ``lights[i].type``, ``render.method`` (the renderer registr
 ``render.source`` (a source of that method). Relative paths are resolved against the scene file's
 directory. ``load_scene`` returns a :class:`Scene` whose sections are plain dicts with
 defaults filled in; ``camera_array`` packs the camera for the render kernels.
+
+``[[meshes]]`` (surfaces besides the cloth): each an OBJ file (checked to exist when the scene is read;
+its lines when a renderer reads it, ``pipeline.scene_meshes``), a material (``lambert`` with an albedo)
+and a placement (``transform``: translate, a rotation by axis and degrees or a 3 x 3 matrix checked to be
+one, a uniform scale), read into ``Scene.meshes`` as dicts with ``name``, ``file`` (absolute), ``albedo``
+(rgb) and ``matrix`` (3 x 4: the scaled rotation, then the translation; ``placement``).
 """
 from __future__ import annotations
 
@@ -42,6 +48,7 @@ class Scene:
     camera: dict | None = None
     lights: list = field(default_factory=list)
     render: dict = field(default_factory=dict)
+    meshes: list = field(default_factory=list)
 
     def yarn_type(self, group: str) -> dict:
         """The yarn type of a yarn group ('warp', 'weft', 'knit', 'other'), falling back to 'default'."""
@@ -114,6 +121,51 @@ def check_names(raw: dict, path: Path) -> None:
         _named(render, "source", all_sources(), path, "render.source", "render source")
 
 
+ROTATION_TOL = 1e-6     # a 'matrix' is a rotation when R R^T and det R are within this of I and 1
+
+
+def placement(tbl: dict | None, path: Path, place: str) -> np.ndarray:
+    """The 3 x 4 matrix [s R | t] of a ``transform`` table (schema ``$defs/transform``): x -> t + s R x.
+    A zero rotation axis, both 'rotate' and 'matrix', or a 'matrix' that is not a rotation (a reflection,
+    shear or scale) are errors at ``place``."""
+    tbl = tbl or {}
+    R = np.eye(3)
+    if "rotate" in tbl and "matrix" in tbl:
+        raise LoomError(path, place, "give 'rotate' or 'matrix', not both")
+    if "rotate" in tbl:
+        axis = np.asarray(tbl["rotate"]["axis"], float)
+        n = np.linalg.norm(axis)
+        if n == 0:
+            raise LoomError(path, f"{place}.rotate.axis", "zero-length rotation axis")
+        x, y, z = axis / n
+        a = np.radians(float(tbl["rotate"]["degrees"]))
+        K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+        R = np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * (K @ K)     # Rodrigues
+    if "matrix" in tbl:
+        R = np.asarray(tbl["matrix"], float)
+        if np.abs(R @ R.T - np.eye(3)).max() > ROTATION_TOL or abs(np.linalg.det(R) - 1.0) > ROTATION_TOL:
+            raise LoomError(path, f"{place}.matrix", "not a rotation (rows orthonormal, determinant +1): a reflection, "
+                            "shear or scale is refused (a uniform scale is 'scale')")
+    M = np.zeros((3, 4))
+    M[:, :3] = float(tbl.get("scale", 1.0)) * R
+    M[:, 3] = np.asarray(tbl.get("translate", [0.0, 0.0, 0.0]), float)
+    return M
+
+
+def _meshes(raw: dict, path: Path) -> list[dict]:
+    out = []
+    for i, m in enumerate(raw.get("meshes", [])):
+        file = Path(m["file"])
+        file = file if file.is_absolute() else (path.parent / file).resolve()
+        if not file.is_file():
+            raise LoomError(path, f"meshes[{i}].file", f"OBJ file {file} not found" if not file.exists()
+                            else f"{file} is not a file")
+        mat = m.get("material", {})
+        out.append({"name": m.get("name", file.stem), "file": str(file), "albedo": _rgb(mat.get("albedo", 0.5)),
+                    "matrix": placement(m.get("transform"), path, f"meshes[{i}].transform")})
+    return out
+
+
 def load_scene(path: str | Path) -> Scene:
     path = Path(path)
     raw = read_toml(path, what="scene file")
@@ -167,7 +219,8 @@ def load_scene(path: str | Path) -> Scene:
         render["ground"] = {"height": 0.0, "albedo": [0.5, 0.5, 0.5], **render["ground"]}
         render["ground"]["albedo"] = _rgb(render["ground"]["albedo"])
     return Scene(path=path, raw=raw, name=scene_tbl.get("name", path.stem), seed=int(scene_tbl.get("seed", 0)),
-                 fabric=fabric, yarns=copy.deepcopy(raw.get("yarns", {})), camera=camera, lights=lights, render=render)
+                 fabric=fabric, yarns=copy.deepcopy(raw.get("yarns", {})), camera=camera, lights=lights, render=render,
+                 meshes=_meshes(raw, path))
 
 
 def ingest_identity(scene: Scene) -> dict:

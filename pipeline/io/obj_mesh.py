@@ -1,11 +1,15 @@
-"""OBJ triangle meshes with texture coordinates: the base surface of a tiling (``[surface] kind = "obj"``).
+"""OBJ triangle meshes: the base surface of a tiling (``[surface] kind = "obj"``, with texture coordinates)
+and a scene's ``[[meshes]]`` (walls, floor, furniture: positions and faces only).
 
 ``read_obj_mesh(path, file)`` reads ``v``, ``vt`` and ``f`` lines (faces as ``v/vt`` or ``v/vt/vn``
 corners, polygons fanned into triangles, negative indices counted from the end) and returns an
 ``ObjMesh`` (V, UV, F, and with ``normals=True`` the OBJ's own vertex normals N from its ``vn`` lines)
-with a vertex per distinct (v, vt) pair, so vertices split where uv differ. A missing
-file is named against ``file`` (the tiling configuration's ``surface.path``); bad lines by number.
-The curve reader of ``.obj`` polylines is ``obj.py``.
+with a vertex per distinct (v, vt) pair, so vertices split where uv differ. With ``uv_for=None`` texture
+coordinates are not needed: corners may be ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``, ``vt`` is ignored,
+F indexes the file's own vertices and UV is None. A missing file is named against ``file`` at ``place``
+(the tiling configuration's ``surface.path``, a scene's ``meshes[i].file``); bad lines by number (a
+vertex with fewer than three coordinates or a non-finite one, an index out of range, a face of fewer than
+three corners), a file without faces as a whole. The curve reader of ``.obj`` polylines is ``obj.py``.
 """
 from __future__ import annotations
 
@@ -17,18 +21,23 @@ import numpy as np
 from ..errors import LoomError
 
 ObjMesh = namedtuple("ObjMesh", ["V", "UV", "F", "N"])
-ObjMesh.__doc__ = """read_obj_mesh's mesh: positions V (n, 3), texture coordinates UV (n, 2), triangles F (m, 3) int64,
+ObjMesh.__doc__ = """read_obj_mesh's mesh: positions V (n, 3), texture coordinates UV (n, 2) (None when not asked for),
+triangles F (m, 3) int64,
 and, when asked for, the OBJ's own unit normal per vertex N (n, 3) (None when a face corner names none)."""
 
 
-def read_obj_mesh(path, file, normals: bool = False, uv_for: str = "shell mapping needs uv") -> ObjMesh:
-    """The triangle/polygon OBJ mesh with vt at ``path`` (module doc); vertices split where uv differ.
+def read_obj_mesh(path, file, normals: bool = False, uv_for: str | None = "shell mapping needs uv",
+                  place: str = "surface.path", faces_for: str = "shell mapping needs a triangle mesh") -> ObjMesh:
+    """The triangle/polygon OBJ mesh at ``path`` (module doc); vertices split where uv differ.
     ``normals``: also the mean of the normals (``vn``) each vertex's corners name, normalised (None when a
     corner names no normal or a mean vanishes; an unreadable ``vn`` line or normal index is refused).
-    ``uv_for`` ends the message that refuses a mesh without texture coordinates (who needs them)."""
+    ``uv_for`` ends the message that refuses a mesh without texture coordinates (who needs them); None:
+    uv not needed (module doc). ``place`` is the key of ``file`` that names the OBJ, ``faces_for`` ends the
+    message that refuses a file without faces."""
     p = Path(path)
-    if not p.exists():
-        raise LoomError(file, "surface.path", f"OBJ file not found: {p}")
+    if not p.is_file():
+        raise LoomError(file, place, f"OBJ file not found: {p}" if not p.exists() else f"{p} is not a file")
+    uv = uv_for is not None
     v, vt, vn, faces = [], [], [], []
     has_normals = normals
     for ln, line in enumerate(p.read_text(errors="replace").splitlines(), 1):
@@ -37,8 +46,8 @@ def read_obj_mesh(path, file, normals: bool = False, uv_for: str = "shell mappin
             continue
         try:
             if parts[0] == "v":
-                v.append([float(x) for x in parts[1:4]])
-            elif parts[0] == "vt":
+                v.append(_vertex(parts, p, ln))
+            elif parts[0] == "vt" and uv:
                 vt.append([float(x) for x in parts[1:3]])
             elif parts[0] == "vn" and normals:
                 vn.append(_normal(parts, p, ln))
@@ -46,12 +55,15 @@ def read_obj_mesh(path, file, normals: bool = False, uv_for: str = "shell mappin
                 corners = []
                 for c in parts[1:]:
                     ids = c.split("/")
-                    if len(ids) < 2 or ids[1] == "":
+                    if uv and (len(ids) < 2 or ids[1] == ""):
                         raise LoomError(p, f"line {ln}", f"face corner without a texture coordinate (v/vt): {uv_for}")
-                    vi, ti = int(ids[0]), int(ids[1])
+                    vi = int(ids[0])
                     vi = vi - 1 if vi > 0 else len(v) + vi
-                    ti = ti - 1 if ti > 0 else len(vt) + ti
-                    if not (0 <= vi < len(v)) or not (0 <= ti < len(vt)):
+                    ti = -1
+                    if uv:
+                        ti = int(ids[1])
+                        ti = ti - 1 if ti > 0 else len(vt) + ti
+                    if not (0 <= vi < len(v)) or (uv and not 0 <= ti < len(vt)):
                         raise LoomError(p, f"line {ln}", "face index out of range")
                     ni = -1
                     if has_normals:
@@ -67,8 +79,8 @@ def read_obj_mesh(path, file, normals: bool = False, uv_for: str = "shell mappin
         except ValueError as e:
             raise LoomError(p, f"line {ln}", f"unreadable number: {e}") from None
     if not faces:
-        raise LoomError(p, None, "no faces: shell mapping needs a triangle mesh")
-    if not vt:
+        raise LoomError(p, None, f"no faces: {faces_for}")
+    if uv and not vt:
         raise LoomError(p, None, f"no texture coordinates (vt): {uv_for}")
     key, corner_normals = {}, {}
     F = np.empty((len(faces), 3), np.int64)
@@ -78,7 +90,15 @@ def read_obj_mesh(path, file, normals: bool = False, uv_for: str = "shell mappin
             corner_normals.setdefault(c[:2], []).append(c[2])
     pairs = np.array(list(key.keys()), np.int64)
     N = _vertex_normals(vn, corner_normals.values()) if has_normals else None
-    return ObjMesh(np.asarray(v, float)[pairs[:, 0]], np.asarray(vt, float)[pairs[:, 1]], F, N)
+    UV = np.asarray(vt, float)[pairs[:, 1]] if uv else None
+    return ObjMesh(np.asarray(v, float).reshape(-1, 3)[pairs[:, 0]], UV, F, N)
+
+
+def _vertex(parts, p, ln):
+    xyz = [float(x) for x in parts[1:4]]
+    if len(xyz) != 3 or not np.all(np.isfinite(xyz)):
+        raise LoomError(p, f"line {ln}", "a vertex needs three finite coordinates (v x y z)")
+    return xyz
 
 
 def _normal(parts, p, ln):

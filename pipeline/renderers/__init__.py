@@ -3,7 +3,8 @@
 A method (``RenderMethod``) names the module that sets it up (``pipeline/renderers/<module>.py``,
 defining ``render(scene, options) -> RenderResult``), its geometry sources (``Source``: a name for
 ``--source`` and the artifacts it reads, ``ArtifactInput``), its method-specific settings
-(``Setting``: ``--set KEY=VALUE`` pairs) and whether it takes ``--material`` / ``--bcsdf``.
+(``Setting``: ``--set KEY=VALUE`` pairs), whether it takes ``--material`` / ``--bcsdf`` and whether it
+renders a scene's ``[[meshes]]`` (``meshes``; a method that does not refuses such a scene, naming the key).
 Everything else derives from this table: ``loomlight render --help`` (method, source and setting
 lists), the ``[render]`` table of the scene schema (``render_schema``), which inputs a render
 artifact records as provenance, and the messages for unknown methods, sources and settings.
@@ -77,6 +78,7 @@ class RenderMethod:
     settings: tuple[Setting, ...] = ()
     materials: tuple[str, ...] = ()
     defaults: tuple[tuple[str, int], ...] = ()   # this method's own defaults of COMMON_DEFAULTS settings
+    meshes: bool = False                         # renders the scene's [[meshes]] (walls, floor, furniture)
 
     def default(self, key: str):
         return dict(self.defaults).get(key, COMMON_DEFAULTS[key])
@@ -92,7 +94,15 @@ class RenderMethod:
     def source_names(self) -> tuple[str, ...]:
         return tuple(s.name for s in self.sources)
 
+    def check_scene(self, scene) -> None:
+        """Refuse a scene this method cannot render whole: one with ``[[meshes]]`` when it does not render them."""
+        if getattr(scene, "meshes", None) and not self.meshes:
+            raise LoomError(scene.path, "meshes", f"the {self.name} method does not render a scene's meshes yet "
+                            f"(methods that do: {', '.join(mesh_methods())}); remove the [[meshes]] tables or "
+                            "render with one of those")
+
     def run(self, scene, options) -> RenderResult:
+        self.check_scene(scene)
         return importlib.import_module(f"{__name__}.{self.module}").render(scene, options)
 
 
@@ -144,11 +154,11 @@ METHODS = {m.name: m for m in (
     RenderMethod(
         "fiberpath", "explicit fibres path traced with the fibre BCSDF (Khungurn et al. 2015)", "fiberpath",
         sources=_FIBERPATH_SOURCES, default_source="realized", settings=_FIBERPATH_SETTINGS,
-        materials=("bcsdf", "lambert")),
+        materials=("bcsdf", "lambert"), meshes=True),
     RenderMethod(
         "fiberpath_shell", "fiberpath on a tiling artifact (the same as fiberpath --fibers TILING.zarr)",
         "fiberpath", sources=(Source("realized", (TILING,), "a tiling artifact's exemplars under its shell map"),),
-        default_source="realized", settings=_FIBERPATH_SETTINGS, materials=("bcsdf", "lambert")),
+        default_source="realized", settings=_FIBERPATH_SETTINGS, materials=("bcsdf", "lambert"), meshes=True),
     RenderMethod(
         "prt", "precomputed light transport on a shell-mapped tiling: SVF single + IIRTF multiple scattering "
                "(Khungurn et al. 2017)", "prt",
@@ -231,6 +241,11 @@ def input_kinds() -> dict[str, tuple[str, ...]]:
                 have = kinds.get(inp.option, ())
                 kinds[inp.option] = have + tuple(k for k in inp.kinds if k not in have)
     return kinds
+
+
+def mesh_methods() -> list[str]:
+    """The methods that render a scene's ``[[meshes]]``."""
+    return [m.name for m in METHODS.values() if m.meshes]
 
 
 def known_methods() -> list[str]:

@@ -19,7 +19,9 @@ tabulated and ignores the colour. A preset given as a ``.toml`` path in the scen
 is resolved against the scene file.
 On a tiling, each yarn's albedo is the scene's ``yarns.<group>.color``, else its WIF exemplar's draft
 colour, else the yarn preset's (``tiling_fibers``; docs/wif-colours.md).
-Lights, camera and the optional ground plane come from the scene.
+Lights, camera, the optional ground plane and the scene's meshes (``[[meshes]]``: OBJ files with a
+Lambertian material, placed by a transform; ``pipeline.render_setup.load_scene_meshes``) come from the
+scene; with meshes, the rays' offset is set by the fibres' and the meshes' bounds together.
 """
 from __future__ import annotations
 
@@ -30,7 +32,16 @@ import numpy as np
 from ..bcsdf_presets import load_bcsdf_preset
 from ..dye import Dyer
 from ..errors import LoomError, unknown
-from ..render_setup import GROUP_NAMES, SELF_WINDOW, Fibers, ground_array, load_fibers, pack_lights, ray_eps
+from ..render_setup import (
+    GROUP_NAMES,
+    SELF_WINDOW,
+    Fibers,
+    ground_array,
+    load_fibers,
+    load_scene_meshes,
+    pack_lights,
+    ray_eps,
+)
 from ..scene import camera_array
 from . import RenderResult
 
@@ -245,11 +256,14 @@ def film_setup(scene, options: dict):
         geometry, fibers, eps, label, stats, keep = _realized_scene(path, accel)
     mat_of_fiber, mats = fiber_materials(scene, fibers, options)
     ground, has_ground = ground_array(scene.render)
+    meshes, mesh_bounds, mesh_stats = load_scene_meshes(scene)
+    if mesh_bounds is not None:   # the offset of the whole scene's size (ray_eps: its diagonal and largest coordinate)
+        eps = max(eps, ray_eps(*mesh_bounds))
     max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
     cam = camera_array(scene.camera, options["width"], options["height"])
     integ = FiberpathIntegrator(geometry, mat_of_fiber, mats, pack_material_lambert(ground[1:4]), lights.table(),
-                                ground, has_ground, max_depth, rr_depth, SELF_WINDOW, eps)
-    stats = {**stats, "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
+                                ground, has_ground, meshes, max_depth, rr_depth, SELF_WINDOW, eps)
+    stats = {**stats, **mesh_stats, "max_depth": max_depth, "rr_depth": rr_depth, "materials": int(len(mats))}
     return FilmSetup(label, integ, cam, VARIANCE_CHANNELS, stats, keep)
 
 

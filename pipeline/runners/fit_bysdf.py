@@ -138,6 +138,7 @@ class _Renderer:
 
         sc = dataclasses.replace(scene, lights=next(iter(setup_lights(scene).values())))
         m = method(method_name)
+        m.check_scene(sc)
         self.scene = sc
         self.opts = resolve_options(sc, m, RenderRequest(
             width=options["width"], height=options["height"], spp=options["spp"], seed=options["seed"],

@@ -73,3 +73,21 @@ def test_missing_uv_is_refused_naming_who_needs_it(tmp_path):
     p = _write(tmp_path, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "nouv.obj")
     with pytest.raises(LoomError, match="shell mapping needs uv"):
         read_obj_mesh(p, "cfg.toml")
+
+
+def test_without_uv_faces_index_the_files_vertices(tmp_path):
+    """``uv_for=None`` (a scene's meshes): corners ``v``, ``v/vt``, ``v//vn`` and negative indices all name the
+    file's own vertices (no split where uv differ: the quad above keeps 4 vertices), UV is None, a polygon is
+    fanned; a vertex line short of a coordinate or not finite is refused by its line, a missing file by the key."""
+    m = read_obj_mesh(_write(tmp_path, QUAD), "cfg.toml", uv_for=None)
+    assert m.UV is None and len(m.V) == 4 and len(m.F) == 3
+    np.testing.assert_array_equal(m.V[m.F[0]], [[0, 0, 0], [1, 0, 0], [1, 1, 0]])
+    text = "v 0 0 0\nv 2 0 0\nv 2 2 0\nv 0 2 0\nf 1//1 2 -2/7 -1\n"
+    m = read_obj_mesh(_write(tmp_path, text), "cfg.toml", uv_for=None)
+    np.testing.assert_array_equal(m.V[m.F], [[[0, 0, 0], [2, 0, 0], [2, 2, 0]], [[0, 0, 0], [2, 2, 0], [0, 2, 0]]])
+    for bad, line in (("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n", "line 2"), ("v 0 0 0\nv 1 0 nan\nf 1 2 1\n", "line 2")):
+        with pytest.raises(LoomError, match=line):
+            read_obj_mesh(_write(tmp_path, bad), "cfg.toml", uv_for=None)
+    with pytest.raises(LoomError) as e:
+        read_obj_mesh(tmp_path / "none.obj", "scene.toml", uv_for=None, place="meshes[2].file")
+    assert e.value.file == "scene.toml" and e.value.place == "meshes[2].file"

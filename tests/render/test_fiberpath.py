@@ -17,6 +17,7 @@ from stages.render.camera import pack_camera
 from stages.render.film import VARIANCE_CHANNELS, finalize, new_film, tile_grid
 from stages.render.integrators.fiberpath import FiberpathIntegrator
 from stages.render.lights import LightTable, envmap_tables, pack_light
+from stages.render.meshes import no_meshes
 from stages.render.tiles import render_tiles
 
 WHOLE_FIBRE = 1 << 40
@@ -37,8 +38,8 @@ def _render_on(bvh, mats, mat_of_fiber, light_rows, cam, spp, seed, max_depth, r
     W, H = int(cam[13]), int(cam[14])
     g = np.zeros(4) if ground is None else np.asarray(ground, float)
     integ = FiberpathIntegrator(bvh, np.asarray(mat_of_fiber, np.int32), np.asarray(mats, np.float64),
-                                pack_material_lambert(g[1:4]), lights, g, ground is not None, max_depth, rr_depth,
-                                WHOLE_FIBRE, 1e-7)
+                                pack_material_lambert(g[1:4]), lights, g, ground is not None, no_meshes(), max_depth,
+                                rr_depth, WHOLE_FIBRE, 1e-7)
     film = render_tiles(integ, cam, seed, spp, 0, spp, tile_grid(W, H, tile), new_film(W, H))
     img = finalize(film, spp, VARIANCE_CHANNELS)
     return img.rgb.astype(np.float64), img.variance.astype(np.float64), img.alpha.astype(np.float64), img.rays

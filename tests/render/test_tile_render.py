@@ -11,6 +11,7 @@ from stages.core.shading.material import pack_material_lambert
 from stages.render.camera import pack_camera
 from stages.render.film import finalize, new_film, tile_grid
 from stages.render.integrators.fiberpath import FiberpathIntegrator
+from stages.render.meshes import no_meshes
 from stages.render.tiles import render_tiles
 
 CFG = """
@@ -36,7 +37,7 @@ def _render(scene, mat_of_fiber, cam, lights, W, H, spp):
     mats = np.stack([pack_material_lambert(np.array([0.7, 0.5, 0.3]))])
     # up to 3 scattering events: rays also start inside the shell
     integ = FiberpathIntegrator(scene, mat_of_fiber, mats, pack_material_lambert(np.zeros(3)), lights.table(),
-                                np.zeros(4), False, 3, 2, 0, 1e-9)
+                                np.zeros(4), False, no_meshes(), 3, 2, 0, 1e-9)
     img = finalize(render_tiles(integ, cam, 3, spp, 0, spp, tile_grid(W, H, 8), new_film(W, H)), spp)
     return img.rgb, img.alpha * spp, img.rays
 

@@ -165,6 +165,7 @@ def test_fiberpath_white_furnace_in_dense_cloth(cotton_cloth):
     from stages.render.film import VARIANCE_CHANNELS, finalize, new_film, tile_grid
     from stages.render.integrators.fiberpath import FiberpathIntegrator
     from stages.render.lights import LightTable, envmap_tables, pack_light
+    from stages.render.meshes import no_meshes
     from stages.render.tiles import render_tiles
 
     p = load_bcsdf_preset("cotton")
@@ -175,7 +176,7 @@ def test_fiberpath_white_furnace_in_dense_cloth(cotton_cloth):
     lights = LightTable(np.asarray([pack_light("constant", [1.0, 1.0, 1.0])], np.float64), *envmap_tables(None))
     F = len(cotton_cloth.fiber_seg_offsets) - 1
     integ = FiberpathIntegrator(cotton_cloth, np.zeros(F, np.int32), mat[None, :], pack_material_lambert(np.zeros(3)),
-                                lights, np.zeros(4), False, 100_000, 5, SELF_WINDOW, 1e-6)
+                                lights, np.zeros(4), False, no_meshes(), 100_000, 5, SELF_WINDOW, 1e-6)
     img = finalize(render_tiles(integ, cam, 2, spp, 0, spp, tile_grid(W, H, 8), new_film(W, H)), spp,
                    VARIANCE_CHANNELS)
     cloth = img.alpha >= 0.999

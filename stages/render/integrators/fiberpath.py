@@ -3,13 +3,15 @@
 Geometry: a surface scene (``stages.core.geometry.surface``): realized fibres as chains of capsules
 traced by Embree 4 (``EmbreeFibers``, the renderer's default) or in loomlight's SAH BVH (``FiberBVH``),
 or tiled exemplars under a shell map (``ShellScene``); the same estimator runs on all three. Optional
-ground plane (``stages.render.ground``). Materials: packed rows (``stages.core.shading.material``: the
-BCSDF of Khungurn et al. 2015 or a Lambertian surface), one per fibre through ``mat_of_fiber``, and a
-Lambertian row for the ground. Lights: ``stages.render.lights`` (all distant).
+ground plane (``stages.render.ground``) and the scene's meshes (``stages.render.meshes``: walls, floor,
+furniture). Materials: packed rows (``stages.core.shading.material``: the
+BCSDF of Khungurn et al. 2015 or a Lambertian surface), one per fibre through ``mat_of_fiber``, a
+Lambertian row for the ground and one per mesh. Lights: ``stages.render.lights`` (all distant).
 
 ``FiberpathIntegrator`` fields: ``scene`` (EmbreeFibers | FiberBVH | ShellScene), ``mat_of_fiber`` (F,) int32 row of
 each fibre, ``mats`` (NM, MAT_SIZE), ``ground_mat`` (MAT_SIZE,) the ground's Lambertian row,
 ``lights`` (``LightTable``), ``ground`` float64[4] and ``has_ground`` (``stages.render.ground``),
+``meshes`` (``SceneMeshes``; ``no_meshes()`` for a scene without),
 ``max_depth``, ``rr_depth``, ``ign_window``, ``eps`` (ray offset, scene units).
 
 Estimator
@@ -25,9 +27,9 @@ min(0.95, max channel of the throughput).
 BCSDF vertices (curve materials): the scattered and shadow rays start on the fibre surface and skip
 the segments of the same fibre within ``ign_window`` along the chain (a curve BCSDF does not
 self-shadow; see ``stages.core.shading.bcsdf`` "Measure"); the renderer passes a window wider than
-any fibre, i.e. the whole fibre is skipped. Lambertian and ground vertices: rays start offset along
-the normal and test everything. Rays leaving a fibre of a shell scene start in the tetrahedron of
-the hit.
+any fibre, i.e. the whole fibre is skipped. Lambertian, ground and mesh vertices: rays start offset
+along the normal (towards the side the ray came from) and test everything. Rays leaving a fibre of a
+shell scene start in the tetrahedron of the hit.
 
 Random numbers: ``uniform(seed, index, dim)`` for camera sample ``index`` (``stages.render.tiles``):
 dimensions 0-1 place the sample in its pixel, then 4 + 2 NL per scattering event (lobe, direction,
@@ -63,10 +65,15 @@ from stages.core.shading.material import (
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import add_escaped_radiance, light_sample_into
+from stages.render.meshes import facing_normal_into, meshes_hit, meshes_occluded
 
 FiberpathIntegrator = namedtuple("FiberpathIntegrator", [
-    "scene", "mat_of_fiber", "mats", "ground_mat", "lights", "ground", "has_ground",
+    "scene", "mat_of_fiber", "mats", "ground_mat", "lights", "ground", "has_ground", "meshes",
     "max_depth", "rr_depth", "ign_window", "eps"])
+
+ON_FIBRE = 0     # what a path vertex lies on
+ON_GROUND = 1
+ON_MESH = 2
 
 
 @njit(cache=True, inline="always")
@@ -108,12 +115,16 @@ def _trace(it, o, d, seed, key):
                         Skip(ign_f, ign_s, it.ign_window))
         t_hit = h.t
         rays += 1
-        on_ground = False
+        on = ON_FIBRE
         tg = ground_intersect(it.ground, it.has_ground, o[2], d[2], eps)
         if tg < t_hit:
             t_hit = tg
-            on_ground = True
-        if h.prim < 0 and not on_ground:  # escaped: environment radiance, MIS-weighted against the previous NEE
+            on = ON_GROUND
+        mh = meshes_hit(it.meshes, o[0], o[1], o[2], d[0], d[1], d[2], eps, t_hit)
+        if mh.tri >= 0:
+            t_hit = mh.t
+            on = ON_MESH
+        if h.prim < 0 and on == ON_FIBRE:  # escaped: environment radiance, MIS-weighted against the previous NEE
             L0, L1, L2 = add_escaped_radiance(it.lights, d, depth > 0, pdf_prev, tp0, tp1, tp2, L0, L1, L2)
             break
         if depth == 0:
@@ -124,7 +135,7 @@ def _trace(it, o, d, seed, key):
             p[k] = o[k] + t_hit * d[k]
             wi[k] = -d[k]
         # the vertex: its material, shading frame and where continuation rays start
-        if not on_ground:
+        if on == ON_FIBRE:
             mat = it.mats[it.mat_of_fiber[h.fiber]]
             t_tan[0] = h.tx
             t_tan[1] = h.ty
@@ -144,11 +155,15 @@ def _trace(it, o, d, seed, key):
                 for k in range(3):
                     so[k] = p[k] + off * n[k]
             next_cell = h.cell
-        else:
-            mat = it.ground_mat
-            n[0] = 0.0
-            n[1] = 0.0
-            n[2] = 1.0 if d[2] < 0.0 else -1.0
+        else:   # the ground or a mesh: an opaque two-sided surface
+            if on == ON_GROUND:
+                mat = it.ground_mat
+                n[0] = 0.0
+                n[1] = 0.0
+                n[2] = 1.0 if d[2] < 0.0 else -1.0
+            else:
+                mat = it.meshes.mats[it.meshes.mat_of_tri[mh.tri]]
+                facing_normal_into(it.meshes, mh.tri, d[0], d[1], d[2], n)
             nf = -1
             ns = -1
             for k in range(3):
@@ -171,6 +186,8 @@ def _trace(it, o, d, seed, key):
                                 Skip(nf, ns, it.ign_window)):
                 continue
             if ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < np.inf:
+                continue
+            if meshes_occluded(it.meshes, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, np.inf):
                 continue
             if delta:
                 w = 1.0

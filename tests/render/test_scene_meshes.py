@@ -1,0 +1,208 @@
+"""A scene's ``[[meshes]]`` (walls, floor, furniture; stages/render/meshes.py, pipeline/render_setup.py,
+pipeline/scene.py) rendered by fiberpath, against closed forms: a Lambertian plane under a directional light
+(rho E cos / pi, exactly) and under a constant sky (rho L), a roof that leaves everything under it black
+(light blocked, exactly 0), the placement against scipy's rotations; bad meshes exit 2 naming file and key."""
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from pipeline.errors import LoomError
+from pipeline.images import read_exr
+from pipeline.scene import load_scene, placement
+from tests.render.test_fiberpath import _fibers_artifact
+
+DATA_SCENES = Path(__file__).resolve().parents[2] / "data" / "scenes"
+QUAD = "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3 4\n"
+
+SCENE = """
+[fabric]
+source = "generator"
+[fabric.generator]
+kind = "woven"
+pattern = "plain"
+[yarns.default]
+bcsdf = "cotton"
+[camera]
+origin = {origin}
+target = {target}
+up = {up}
+fov = 30.0
+width = 16
+height = 12
+{lights}
+[render]
+spp = {spp}
+max_depth = {depth}
+{meshes}
+"""
+
+SKY = '[[lights]]\ntype = "constant"\nradiance = 0.5\n'
+SUN = '[[lights]]\ntype = "directional"\ndirection = [0.3, 0.2, -1.0]\nirradiance = 2.0\n'
+OVERHEAD_SUN = '[[lights]]\ntype = "directional"\ndirection = [0.0, 0.0, -1.0]\nirradiance = 2.0\n'
+ALBEDO = (0.2, 0.5, 0.8)
+
+
+def _mesh(translate=(0.0, 0.0, 0.0), scale=10.0, albedo=ALBEDO, file="quad.obj", extra=""):
+    return (f'[[meshes]]\nfile = "{file}"\nmaterial = {{ type = "lambert", albedo = {list(albedo)} }}\n'
+            f'transform = {{ translate = {list(translate)}, scale = {scale} {extra}}}\n')
+
+
+def _scene(tmp_path, lights, meshes="", origin=(0.0, 0.0, 5.0), target=(0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0),
+           spp=8, depth=8, name="s.toml"):
+    (tmp_path / "quad.obj").write_text(QUAD)
+    p = tmp_path / name
+    p.write_text(SCENE.format(origin=list(origin), target=list(target), up=list(up), lights=lights, spp=spp,
+                              depth=depth, meshes=meshes))
+    return p
+
+
+def _render(cli, tmp_path, scene, name, *args):
+    fib = tmp_path / "fibers.zarr"
+    if not fib.exists():
+        _fibers_artifact(fib)
+    out = tmp_path / f"{name}.exr"
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", out, *args)
+    assert code == 0, err
+    return read_exr(out)
+
+
+def test_lambertian_plane_under_a_directional_light_is_rho_e_cos_over_pi(cli, tmp_path):
+    """Direct light only (max_depth 1): every pixel of a plane far from the fibres (20 units off) is
+    rho E cos(theta) / pi, to float rounding: the camera ray, the shadow ray and the Lambertian row all exact."""
+    scene = _scene(tmp_path, SUN, _mesh(translate=(30.0, 0.0, 0.0)), origin=(30.0, 0.0, 5.0),
+                   target=(30.0, 0.0, 0.0), depth=1)
+    rgb, ch = _render(cli, tmp_path, scene, "sun")
+    cos = 1.0 / math.sqrt(0.3 ** 2 + 0.2 ** 2 + 1.0)
+    expect = np.asarray(ALBEDO) * 2.0 * cos / math.pi
+    np.testing.assert_allclose(rgb.reshape(-1, 3), np.broadcast_to(expect, (16 * 12, 3)), rtol=1e-6)
+    assert np.all(ch["A"] == 1.0)
+    np.testing.assert_allclose(ch["depth"], 5.0 / np.cos(np.radians(15.0)), rtol=0.2)   # within the fov's spread
+
+
+def test_lambertian_plane_under_a_constant_sky_is_rho_l(cli, tmp_path):
+    """A plane above the fibres (which it hides) under a constant sky of radiance 0.5: its top sees only sky,
+    so every pixel is rho 0.5, to the estimator's Monte Carlo error (MIS of sky and cosine sampling, 64 spp).
+    Every path's light is one number times rho, so each pixel is s rho; s is 0.5 within 4.5 standard errors
+    of the pixel's own variance channel (the channels' variances averaged: var(s) mean(rho^2)) and the image's
+    mean of s within 0.5 %."""
+    scene = _scene(tmp_path, SKY, _mesh(translate=(0.0, 0.0, 2.0)), spp=64)
+    rgb, ch = _render(cli, tmp_path, scene, "sky")
+    rho = np.asarray(ALBEDO)
+    s = rgb / rho
+    np.testing.assert_allclose(s, np.broadcast_to(s[..., :1], s.shape), rtol=1e-5)
+    s = s[..., 0]
+    assert abs(s.mean() - 0.5) < 2.5e-3
+    se = np.sqrt(ch["variance"] / np.mean(rho ** 2))
+    assert se.max() > 0 and np.all(np.abs(s - 0.5) <= 4.5 * se)
+
+
+def test_a_roof_blocks_the_light_and_nothing_passes_through_it(cli, tmp_path):
+    """The fibres under a roof (a plane at z = 2, 20 units wide) lit only from straight above, seen from the
+    side: with the roof every pixel is exactly 0 (the light blocked, the roof's underside unlit, the sky
+    black); without it the fibres are lit. The same bytes with 1 and 2 threads."""
+    view = dict(origin=(3.0, -3.0, 0.4), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0))
+    open_sky = _scene(tmp_path, OVERHEAD_SUN, "", name="open.toml", **view)
+    roofed = _scene(tmp_path, OVERHEAD_SUN, _mesh(translate=(0.0, 0.0, 2.0)), name="roof.toml", **view)
+    lit, _ = _render(cli, tmp_path, open_sky, "open")
+    dark, ch = _render(cli, tmp_path, roofed, "roof", "--threads", "1")
+    assert lit.max() > 0.01
+    assert ch["A"].max() == 1.0 and np.all(dark == 0.0)
+    two, _ = _render(cli, tmp_path, roofed, "roof2", "--threads", "2")
+    assert np.array_equal(two, dark)
+
+
+def test_placement_against_scipy_rotations(tmp_path):
+    """``placement``: x -> t + s R x with R from Rodrigues' formula equal to scipy's rotation (1e-12); a matrix
+    that is a rotation is taken as it is; a reflection, a shear, a zero axis, rotate and matrix together exit
+    as errors naming the key."""
+    from scipy.spatial.transform import Rotation
+
+    path = tmp_path / "s.toml"
+    axis = np.array([0.3, -1.0, 0.5])
+    M = placement({"rotate": {"axis": axis.tolist(), "degrees": 70.0}, "scale": 2.5, "translate": [1, 2, 3]},
+                  path, "meshes[0].transform")
+    R = Rotation.from_rotvec(np.radians(70.0) * axis / np.linalg.norm(axis)).as_matrix()
+    np.testing.assert_allclose(M[:, :3], 2.5 * R, atol=1e-12)
+    np.testing.assert_array_equal(M[:, 3], [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(placement({"matrix": R.tolist()}, path, "t")[:, :3], R, atol=0)
+    np.testing.assert_array_equal(placement(None, path, "t"), np.hstack([np.eye(3), np.zeros((3, 1))]))
+    for bad, key in (({"matrix": np.diag([1.0, 1.0, -1.0]).tolist()}, "t.matrix"),
+                     ({"matrix": [[1.0, 0.5, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]}, "t.matrix"),
+                     ({"matrix": (2.0 * np.eye(3)).tolist()}, "t.matrix"),
+                     ({"rotate": {"axis": [0, 0, 0], "degrees": 10.0}}, "t.rotate.axis"),
+                     ({"rotate": {"axis": [0, 0, 1], "degrees": 10.0}, "matrix": np.eye(3).tolist()}, "t")):
+        with pytest.raises(LoomError) as e:
+            placement(bad, path, "t")
+        assert e.value.place == key
+
+
+def test_meshes_read_and_placed(tmp_path):
+    """A scene's meshes: the OBJ resolved against the scene, polygons fanned (a quad: 2 triangles), vertices
+    placed by the transform (scaled, then moved), the default name the file's stem and albedo 0.5."""
+    from pipeline.render_setup import load_scene_meshes
+
+    scene = _scene(tmp_path, SKY, _mesh(translate=(0.0, 0.0, 2.0), scale=3.0) + '[[meshes]]\nfile = "quad.obj"\n')
+    sc = load_scene(scene)
+    assert [m["name"] for m in sc.meshes] == ["quad", "quad"] and sc.meshes[1]["albedo"] == [0.5, 0.5, 0.5]
+    sm, (lo, hi), stats = load_scene_meshes(sc)
+    assert stats["mesh_triangles"] == 4 and sm.enabled and list(sm.mat_of_tri) == [0, 0, 1, 1]
+    np.testing.assert_array_equal(lo, [-3.0, -3.0, 0.0])
+    np.testing.assert_array_equal(hi, [3.0, 3.0, 2.0])
+    np.testing.assert_array_equal(sm.mats[:, 11:14], [ALBEDO, [0.5, 0.5, 0.5]])
+
+
+@pytest.mark.parametrize("case", ["missing", "no faces", "bad vertex", "bad index", "not a rotation", "zero axis",
+                                  "unknown key", "other method"])
+def test_bad_meshes_exit_2_naming_file_and_key(cli, tmp_path, case):
+    """A missing OBJ, one without faces, an unreadable vertex or an index out of range (the OBJ and its
+    line), a transform that is not a rotation or a zero axis, an unknown key (the scene and the key), a
+    method that does not render meshes yet (the scene, ``meshes``): exit 2, one line, nothing written."""
+    meshes, method, expect = _mesh(), "fiberpath", None
+    if case == "missing":
+        meshes, expect = _mesh(file="nowhere.obj"), ("meshes[0].file", "not found")
+    elif case == "no faces":
+        (tmp_path / "pts.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n")
+        meshes, expect = _mesh(file="pts.obj"), ("pts.obj", "no faces")
+    elif case == "bad vertex":
+        (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n")
+        meshes, expect = _mesh(file="bad.obj"), ("bad.obj", "line 2")
+    elif case == "bad index":
+        (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n")
+        meshes, expect = _mesh(file="bad.obj"), ("bad.obj", "line 4")
+    elif case == "not a rotation":
+        meshes = _mesh(extra=', matrix = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]] ')
+        expect = ("meshes[0].transform.matrix", "rotation")
+    elif case == "zero axis":
+        meshes = _mesh(extra=", rotate = { axis = [0.0, 0.0, 0.0], degrees = 30.0 } ")
+        expect = ("meshes[0].transform.rotate.axis", "zero")
+    elif case == "unknown key":
+        meshes, expect = _mesh() + 'colour = "red"\n', ("colour", "")
+    else:
+        method, expect = "bysdf", ("meshes", "fiberpath")
+    scene = _scene(tmp_path, SKY, meshes)
+    fib = _fibers_artifact(tmp_path / "fibers.zarr")
+    out = tmp_path / "o.exr"
+    code, _, err = cli("render", scene, "--method", method, "--fibers", fib, "-o", out)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert all(s in err for s in expect), err
+    assert not out.exists() and not out.with_suffix(".zarr").exists()
+
+
+@pytest.mark.slow
+def test_bundled_swatch_on_table_renders(cli, tmp_path):
+    """data/scenes/swatch_on_table.toml end to end (the render builds its yarns and fibres itself): its meshes
+    are read and placed (the stats count 3 meshes, 26 triangles), every pixel is covered (cloth, table, wall,
+    block or sky beyond the wall's edge: alpha counts the meshes too) and the picture is lit."""
+    from pipeline.artifacts import Artifact
+
+    scene = DATA_SCENES / "swatch_on_table.toml"
+    out = tmp_path / "table.exr"
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--width", "32", "--height", "24", "--spp", "2",
+                       "-o", out)
+    assert code == 0, err
+    stats = Artifact(out.with_suffix(".zarr"), kind="render").summary["method_stats"]
+    assert stats["meshes"] == 3 and stats["mesh_triangles"] == 12 + 12 + 2
+    rgb, ch = read_exr(out)
+    assert ch["A"].mean() > 0.8 and rgb.mean() > 0.05
