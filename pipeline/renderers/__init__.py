@@ -227,7 +227,7 @@ METHODS = {m.name: m for m in (
                   Setting("falloff", "multiscale aggregation weights exp(-falloff |dx| / R) (default 40)"),
                   Setting("fibre_threshold", "fibre shadowing floor: s (1 - thr) + thr (default 0.5; 1: off)"),
                   Setting("ply_threshold", "ply shadowing floor (default 0.6; 1: off)")),
-        defaults=(("max_depth", 4),)),
+        defaults=(("max_depth", 4),), meshes=True),
 )}
 
 

@@ -373,13 +373,16 @@ class BuiltIntegrator(NamedTuple):
 
 
 def make_integrator(cv, tparams, yarn_type, params, lights, ground, has_ground, pixel_angle, max_depth, rr_depth,
-                    model: YarnModel) -> BuiltIntegrator:
+                    model: YarnModel, meshes=None, mesh_bounds=None) -> BuiltIntegrator:
     """The ``BysdfIntegrator`` of yarns ``cv`` (``Curves``) of packed types ``tparams`` (T, P), ``yarn_type``
-    (Y,), BYSDF rows ``params`` (Y, BYSDF_SIZE), a ``LightTable`` and a ground (``render_setup.ground_array``)."""
+    (Y,), BYSDF rows ``params`` (Y, BYSDF_SIZE), a ``LightTable``, a ground (``render_setup.ground_array``) and
+    the scene's meshes with their bounds (``render_setup.load_scene_meshes``; None: none). The rays' offset is
+    set by the tubes' bounds, and the meshes' with them."""
     from stages.core.geometry.bvh import build_fiber_bvh
     from stages.core.yarn.tubes import tube_pieces
     from stages.procedural.tables import yarn_key
     from stages.render.integrators.bysdf import BysdfIntegrator
+    from stages.render.meshes import no_meshes
 
     from ..render_setup import ray_eps
 
@@ -395,11 +398,13 @@ def make_integrator(cv, tparams, yarn_type, params, lights, ground, has_ground, 
     window = (int(min(1 << 20, math.ceil(4.0 * radius.max() / max(float(seg_len.min()), 1e-30)) + 1))
               if len(seg_len) else 1)
     keys = np.array([yarn_key(FIBRE_SEED, y) for y in range(len(yarn_type))], np.int64)
+    eps = ray_eps(pieces.points.min(axis=0), pieces.points.max(axis=0))
+    if mesh_bounds is not None:
+        eps = max(eps, ray_eps(*mesh_bounds))
     integ = BysdfIntegrator(bvh, cv, pieces, padded_types(types), yarn_type, keys,
                             np.ascontiguousarray(params, np.float64), lights, ground, has_ground,
-                            np.ascontiguousarray(ground[1:4]), model.mode, model.K, model.falloff, pixel_angle,
-                            max_depth, rr_depth, window,
-                            ray_eps(pieces.points.min(axis=0), pieces.points.max(axis=0)), 64)
+                            np.ascontiguousarray(ground[1:4]), no_meshes() if meshes is None else meshes, model.mode,
+                            model.K, model.falloff, pixel_angle, max_depth, rr_depth, window, eps, 64)
     return BuiltIntegrator(integ, pieces, bvh, types, tables_s)
 
 
@@ -408,7 +413,7 @@ def film_setup(scene, options: dict):
     from stages.render.camera import CAM_TAN_HALF_FOV
     from stages.render.film import VARIANCE_CHANNELS
 
-    from ..render_setup import ground_array, pack_lights
+    from ..render_setup import ground_array, load_scene_meshes, pack_lights
     from ..scene import camera_array
     from .film import FilmSetup
 
@@ -437,8 +442,10 @@ def film_setup(scene, options: dict):
     W, H = options["width"], options["height"]
     cam = camera_array(scene.camera, W, H)
     max_depth = int(options["max_depth"])
+    meshes, mesh_bounds, mesh_stats = load_scene_meshes(scene)
     built = make_integrator(cv, ytypes.tparams, ytypes.yarn_type, params, lights.table(), ground, has_ground,
-                            2.0 * float(cam[CAM_TAN_HALF_FOV]) / W, max_depth, int(options["rr_depth"]), model)
+                            2.0 * float(cam[CAM_TAN_HALF_FOV]) / W, max_depth, int(options["rr_depth"]), model,
+                            meshes, mesh_bounds)
     integ, pieces, bvh, types = built.integ, built.pieces, built.bvh, built.types
     geometry_bytes = int(sum(a.nbytes for a in (pieces.points, pieces.offsets, pieces.piece_seg, pieces.piece_t0,
                                                  pieces.piece_t1, pieces.piece_curve, pieces.radius))
@@ -447,7 +454,7 @@ def film_setup(scene, options: dict):
     stats = {"setup_s": time.perf_counter() - t0, "tables_s": built.tables_s, "yarns": len(groups),
              "yarn_types": len(types), "tube_pieces": len(bvh.seg_a), "geometry_bytes": geometry_bytes,
              "mode": mode, "k": model.K, "ply_search": model.search, "max_depth": max_depth,
-             "envelope_radius": [t.radius for t in types]}
+             "envelope_radius": [t.radius for t in types], **mesh_stats}
     return FilmSetup(f"bysdf ({mode})", integ, cam, VARIANCE_CHANNELS, stats)
 
 

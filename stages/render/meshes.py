@@ -14,7 +14,7 @@ mesh-free render runs the code it ran before meshes existed). ``no_meshes()`` is
 
 Queries (inlined into the integrator's loop): ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a
 miss), ``meshes_occluded`` (shadow rays), ``facing_normal_into`` (the unit normal of triangle ``tri``
-facing against the ray direction d).
+facing against the ray direction d), ``mesh_albedo_into`` (the Lambertian albedo of triangle ``tri``'s mesh).
 """
 import math
 from collections import namedtuple
@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from stages.core.geometry.triangles import TriangleHit, build_triangle_mesh, mesh_intersect, mesh_occluded
-from stages.core.shading.material import MAT_SIZE
+from stages.core.shading.material import MAT_SIZE, material_lambert_albedo
 
 SceneMeshes = namedtuple("SceneMeshes", ["mesh", "mat_of_tri", "mats", "enabled"])
 
@@ -80,3 +80,11 @@ def facing_normal_into(sm, tri, dx, dy, dz, n):
     n[0] = nx / length
     n[1] = ny / length
     n[2] = nz / length
+
+
+@njit(cache=True, inline="always")
+def mesh_albedo_into(sm, tri, out):
+    """Write into out the Lambertian albedo (rgb) of the mesh triangle ``tri`` belongs to."""
+    a = material_lambert_albedo(sm.mats[sm.mat_of_tri[tri]])
+    for k in range(3):
+        out[k] = a[k]

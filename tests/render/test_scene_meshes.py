@@ -1,5 +1,5 @@
 """A scene's ``[[meshes]]`` (walls, floor, furniture; stages/render/meshes.py, pipeline/render_setup.py,
-pipeline/scene.py) rendered by fiberpath, against closed forms: a Lambertian plane under a directional light
+pipeline/scene.py) rendered by fiberpath and bysdf, against closed forms: a Lambertian plane under a directional light
 (rho E cos / pi, exactly) and under a constant sky (rho L), a roof that leaves everything under it black
 (light blocked, exactly 0), the placement against scipy's rotations; bad meshes exit 2 naming file and key."""
 import math
@@ -58,22 +58,35 @@ def _scene(tmp_path, lights, meshes="", origin=(0.0, 0.0, 5.0), target=(0.0, 0.0
     return p
 
 
-def _render(cli, tmp_path, scene, name, *args):
-    fib = tmp_path / "fibers.zarr"
-    if not fib.exists():
-        _fibers_artifact(fib)
+def _render(cli, tmp_path, scene, name, *args, method="fiberpath"):
+    """Render ``scene`` with fiberpath (a random fibre cloud about the origin) or bysdf (the scene's woven yarns,
+    ingested once)."""
+    if method == "fiberpath":
+        fib = tmp_path / "fibers.zarr"
+        if not fib.exists():
+            _fibers_artifact(fib)
+        inputs = ["--fibers", fib]
+    else:
+        yarns = tmp_path / "yarns.zarr"
+        if not yarns.exists():
+            assert cli("ingest", scene, "-o", yarns)[0] == 0
+        inputs = ["--set", f"yarns={yarns}"]
     out = tmp_path / f"{name}.exr"
-    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", out, *args)
+    code, _, err = cli("render", scene, "--method", method, *inputs, "-o", out, *args)
     assert code == 0, err
     return read_exr(out)
 
 
-def test_lambertian_plane_under_a_directional_light_is_rho_e_cos_over_pi(cli, tmp_path):
-    """Direct light only (max_depth 1): every pixel of a plane far from the fibres (20 units off) is
+METHODS = ["fiberpath", "bysdf"]
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_lambertian_plane_under_a_directional_light_is_rho_e_cos_over_pi(cli, tmp_path, method):
+    """Direct light only (max_depth 1): every pixel of a plane far from the cloth (20 units off) is
     rho E cos(theta) / pi, to float rounding: the camera ray, the shadow ray and the Lambertian row all exact."""
     scene = _scene(tmp_path, SUN, _mesh(translate=(30.0, 0.0, 0.0)), origin=(30.0, 0.0, 5.0),
                    target=(30.0, 0.0, 0.0), depth=1)
-    rgb, ch = _render(cli, tmp_path, scene, "sun")
+    rgb, ch = _render(cli, tmp_path, scene, "sun", method=method)
     cos = 1.0 / math.sqrt(0.3 ** 2 + 0.2 ** 2 + 1.0)
     expect = np.asarray(ALBEDO) * 2.0 * cos / math.pi
     np.testing.assert_allclose(rgb.reshape(-1, 3), np.broadcast_to(expect, (16 * 12, 3)), rtol=1e-6)
@@ -81,14 +94,15 @@ def test_lambertian_plane_under_a_directional_light_is_rho_e_cos_over_pi(cli, tm
     np.testing.assert_allclose(ch["depth"], 5.0 / np.cos(np.radians(15.0)), rtol=0.2)   # within the fov's spread
 
 
-def test_lambertian_plane_under_a_constant_sky_is_rho_l(cli, tmp_path):
+@pytest.mark.parametrize("method", METHODS)
+def test_lambertian_plane_under_a_constant_sky_is_rho_l(cli, tmp_path, method):
     """A plane above the fibres (which it hides) under a constant sky of radiance 0.5: its top sees only sky,
     so every pixel is rho 0.5, to the estimator's Monte Carlo error (MIS of sky and cosine sampling, 64 spp).
     Every path's light is one number times rho, so each pixel is s rho; s is 0.5 within 4.5 standard errors
     of the pixel's own variance channel (the channels' variances averaged: var(s) mean(rho^2)) and the image's
     mean of s within 0.5 %."""
     scene = _scene(tmp_path, SKY, _mesh(translate=(0.0, 0.0, 2.0)), spp=64)
-    rgb, ch = _render(cli, tmp_path, scene, "sky")
+    rgb, ch = _render(cli, tmp_path, scene, "sky", method=method)
     rho = np.asarray(ALBEDO)
     s = rgb / rho
     np.testing.assert_allclose(s, np.broadcast_to(s[..., :1], s.shape), rtol=1e-5)
@@ -98,18 +112,19 @@ def test_lambertian_plane_under_a_constant_sky_is_rho_l(cli, tmp_path):
     assert se.max() > 0 and np.all(np.abs(s - 0.5) <= 4.5 * se)
 
 
-def test_a_roof_blocks_the_light_and_nothing_passes_through_it(cli, tmp_path):
-    """The fibres under a roof (a plane at z = 2, 20 units wide) lit only from straight above, seen from the
+@pytest.mark.parametrize("method", METHODS)
+def test_a_roof_blocks_the_light_and_nothing_passes_through_it(cli, tmp_path, method):
+    """The cloth under a roof (a plane at z = 2, 20 units wide) lit only from straight above, seen from the
     side: with the roof every pixel is exactly 0 (the light blocked, the roof's underside unlit, the sky
-    black); without it the fibres are lit. The same bytes with 1 and 2 threads."""
+    black); without it the cloth is lit. The same bytes with 1 and 2 threads."""
     view = dict(origin=(3.0, -3.0, 0.4), target=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0))
     open_sky = _scene(tmp_path, OVERHEAD_SUN, "", name="open.toml", **view)
     roofed = _scene(tmp_path, OVERHEAD_SUN, _mesh(translate=(0.0, 0.0, 2.0)), name="roof.toml", **view)
-    lit, _ = _render(cli, tmp_path, open_sky, "open")
-    dark, ch = _render(cli, tmp_path, roofed, "roof", "--threads", "1")
+    lit, _ = _render(cli, tmp_path, open_sky, "open", method=method)
+    dark, ch = _render(cli, tmp_path, roofed, "roof", "--threads", "1", method=method)
     assert lit.max() > 0.01
     assert ch["A"].max() == 1.0 and np.all(dark == 0.0)
-    two, _ = _render(cli, tmp_path, roofed, "roof2", "--threads", "2")
+    two, _ = _render(cli, tmp_path, roofed, "roof2", "--threads", "2", method=method)
     assert np.array_equal(two, dark)
 
 
@@ -180,7 +195,7 @@ def test_bad_meshes_exit_2_naming_file_and_key(cli, tmp_path, case):
     elif case == "unknown key":
         meshes, expect = _mesh() + 'colour = "red"\n', ("colour", "")
     else:
-        method, expect = "bysdf", ("meshes", "fiberpath")
+        method, expect = "volpath", ("meshes", "fiberpath", "bysdf")
     scene = _scene(tmp_path, SKY, meshes)
     fib = _fibers_artifact(tmp_path / "fibers.zarr")
     out = tmp_path / "o.exr"

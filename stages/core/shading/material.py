@@ -51,6 +51,12 @@ def pack_material_lambert(albedo):
 
 
 @njit(cache=True, inline="always")
+def material_lambert_albedo(mat):
+    """The albedo (rgb view) of a MAT_LAMBERT row."""
+    return mat[11:14]
+
+
+@njit(cache=True, inline="always")
 def material_is_curve(mat):
     return int(mat[0]) == MAT_BCSDF
 

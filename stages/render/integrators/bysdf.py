@@ -12,7 +12,8 @@ entries by the setup so that a scene's count of types does not make numba compil
 ``pipeline.renderers.bysdf.padded_types``), ``yarn_type`` (Y,) int32, ``yarn_key`` (Y,) int64 random key of
 each yarn (fibre-table switching), ``params`` (Y,
 BYSDF_SIZE) the BYSDF of each yarn, ``lights`` (``LightTable``), ``ground`` float64[4] and
-``has_ground`` (``stages.render.ground``), ``ground_albedo`` (3,), ``mode`` (MODE_NEAR, MODE_FAR,
+``has_ground`` (``stages.render.ground``), ``ground_albedo`` (3,), ``meshes`` (``stages.render.meshes``:
+the scene's Lambertian meshes, two-sided like the ground; ``no_meshes()`` for none), ``mode`` (MODE_NEAR, MODE_FAR,
 MODE_MULTISCALE), ``K`` offsets per far / multiscale vertex, ``falloff`` (multiscale weights),
 ``pixel_angle`` (radians per pixel: the camera ray cone), ``max_depth``, ``rr_depth``, ``window``
 (tube pieces skipped around the one a ray leaves), ``eps``, ``max_passes`` (yarns a ray may pass
@@ -86,6 +87,7 @@ from stages.core.yarn.tubes import (
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import add_escaped_radiance, light_sample_into
+from stages.render.meshes import facing_normal_into, mesh_albedo_into, meshes_hit, meshes_occluded
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
 MODES = ("near", "far", "multiscale")
@@ -97,7 +99,8 @@ D_SIDE, D_PICK, D_LOBE, D_DIR1, D_DIR2, D_RR, D_ENTER1, D_ENTER2, D_PASS, D_JITT
 
 BysdfIntegrator = namedtuple("BysdfIntegrator", [
     "bvh", "cv", "pieces", "types", "yarn_type", "yarn_key", "params", "lights", "ground", "has_ground",
-    "ground_albedo", "mode", "K", "falloff", "pixel_angle", "max_depth", "rr_depth", "window", "eps", "max_passes"])
+    "ground_albedo", "meshes", "mode", "K", "falloff", "pixel_angle", "max_depth", "rr_depth", "window", "eps",
+    "max_passes"])
 
 
 @njit(cache=True, _nrt=False)
@@ -129,11 +132,13 @@ def yarn_dir(fr, w, out):
 @njit(cache=True, _nrt=False)
 def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
     """(visible, rays): True when the ray reaches infinity: every yarn tube on its way is passed
-    through (its plies missed) and the ground is not in the way."""
+    through (its plies missed) and neither the ground nor a mesh is in the way."""
     o = stack_vector3()
     d = stack_vector3()
     rays = 0
     if ground_intersect(it.ground, it.has_ground, oz, dz, it.eps) < np.inf:
+        return False, rays
+    if meshes_occluded(it.meshes, ox, oy, oz, dx, dy, dz, it.eps, np.inf):
         return False, rays
     for _ in range(it.max_passes):
         h = surface_hit(it.bvh, -1, Ray(ox, oy, oz, dx, dy, dz), it.eps, np.inf, Skip(ign_y, ign_s, it.window))
@@ -250,9 +255,8 @@ def trace_path(it, o, d, seed, key):
     wi = stack_vector3()
     wow = stack_vector3()
     wlk = stack_vector3()
-    gn = stack_vector3()
-    gn[0] = 0.0
-    gn[1] = 0.0
+    gn = stack_vector3()      # the normal and albedo of an opaque surface vertex (the ground or a mesh)
+    alb = stack_vector3()
     oy = stack_vector3()
     dy = stack_vector3()
     no_exit = (0.0, 0.0, 0.0)   # the exit-point arguments of the reflection side (unused there)
@@ -261,12 +265,16 @@ def trace_path(it, o, d, seed, key):
                         Skip(ign_y, ign_s, it.window))
         rays += 1
         t_hit = h.t
-        on_ground = False
+        on_surface = False    # on an opaque surface: the ground or a mesh
         tg = ground_intersect(it.ground, it.has_ground, o[2], d[2], it.eps)
         if tg < t_hit:
             t_hit = tg
-            on_ground = True
-        if h.prim < 0 and not on_ground:  # escaped: environment, MIS-weighted against the last NEE
+            on_surface = True
+        mh = meshes_hit(it.meshes, o[0], o[1], o[2], d[0], d[1], d[2], it.eps, t_hit)
+        if mh.tri >= 0:
+            t_hit = mh.t
+            on_surface = True
+        if h.prim < 0 and not on_surface:  # escaped: environment, MIS-weighted against the last NEE
             L[0], L[1], L[2] = add_escaped_radiance(it.lights, d, depth > 0, pdf_prev, tp[0], tp[1], tp[2],
                                                     L[0], L[1], L[2])
             break
@@ -275,17 +283,25 @@ def trace_path(it, o, d, seed, key):
         path_len += t_hit
         base = 2 + event * D
         event += 1
-        if on_ground:
+        if on_surface:
             if depth >= it.max_depth:
                 break
             px = o[0] + t_hit * d[0]
             py = o[1] + t_hit * d[1]
             pz = o[2] + t_hit * d[2]
-            gn[2] = 1.0 if d[2] < 0.0 else -1.0
+            if mh.tri >= 0:
+                facing_normal_into(it.meshes, mh.tri, d[0], d[1], d[2], gn)
+                mesh_albedo_into(it.meshes, mh.tri, alb)
+            else:
+                gn[0] = 0.0
+                gn[1] = 0.0
+                gn[2] = 1.0 if d[2] < 0.0 else -1.0
+                for k in range(3):
+                    alb[k] = it.ground_albedo[k]
             for k in range(3):
                 wi[k] = -d[k]
-            sx = px
-            sy = py
+            sx = px + it.eps * gn[0]
+            sy = py + it.eps * gn[1]
             sz = pz + it.eps * gn[2]
             for k in range(nl):
                 lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
@@ -293,10 +309,10 @@ def trace_path(it, o, d, seed, key):
                                                           uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
                 if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                     continue
-                f0, f1, f2 = lambert_eval(it.ground_albedo, gn, wi, wlk)
+                f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)
                 if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                     continue
-                pf = lambert_pdf(it.ground_albedo, gn, wi, wlk)
+                pf = lambert_pdf(alb, gn, wi, wlk)
                 # nothing to skip, typed as a yarn hit's (yarn, segment) so visible compiles once
                 vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1))
                 rays += nr
@@ -306,7 +322,7 @@ def trace_path(it, o, d, seed, key):
                 L[0] += tp[0] * f0 * lr * w
                 L[1] += tp[1] * f1 * lg * w
                 L[2] += tp[2] * f2 * lb * w
-            w0, w1, w2, pf = lambert_sample_into(it.ground_albedo, gn, wi, uniform(seed, key, base + D_DIR1),
+            w0, w1, w2, pf = lambert_sample_into(alb, gn, wi, uniform(seed, key, base + D_DIR1),
                                                  uniform(seed, key, base + D_DIR2), wow)
             if pf <= 0.0:
                 break
@@ -481,7 +497,7 @@ def trace_path(it, o, d, seed, key):
             tp[0] /= qv
             tp[1] /= qv
             tp[2] /= qv
-        if on_ground:
+        if on_surface:
             pdf_prev = pf
     return PathSample(L[0], L[1], L[2], 1.0 if first_t > 0.0 else 0.0, first_t, 0, rays)
 
