@@ -9,7 +9,9 @@
 - ``ground_array(scene)`` -> (float64[4] height + albedo, enabled).
 - ``load_scene_meshes(scene)`` -> (``stages.render.meshes.SceneMeshes`` of the scene's ``[[meshes]]``, their
   bounds (lo, hi) or None, stats): each OBJ read (``pipeline.io.obj_mesh``, without uv) and placed by its
-  transform.
+  transform; meshes with an ``emission`` are the scene's area lights.
+- ``has_light(scene)``: the scene has a light (a ``[[lights]]`` entry or an emitting mesh), else the
+  renderers refuse it (the image would be black).
 """
 from __future__ import annotations
 
@@ -214,6 +216,11 @@ def ground_array(render: dict) -> tuple[np.ndarray, bool]:
     return out, True
 
 
+def has_light(scene) -> bool:
+    """A light in ``[[lights]]`` or a mesh that emits (module doc)."""
+    return bool(scene.lights) or any(max(m["emission"]) > 0.0 for m in scene.meshes)
+
+
 def load_scene_meshes(scene):
     """(SceneMeshes, bounds, stats) of the scene's meshes (module doc); bounds None without meshes."""
     import time
@@ -237,8 +244,9 @@ def load_scene_meshes(scene):
         rows.append(pack_material_lambert(m["albedo"]))
         mat_of_tri.append(np.full(len(obj.F), i, np.int32))
     V, F = np.concatenate(Vs), np.concatenate(Fs)
-    sm = scene_meshes(V, F, np.concatenate(mat_of_tri), np.stack(rows))
-    stats = {"meshes": len(scene.meshes), "mesh_triangles": int(len(F)), "mesh_build_s": time.perf_counter() - t0}
+    sm = scene_meshes(V, F, np.concatenate(mat_of_tri), np.stack(rows), [m["emission"] for m in scene.meshes])
+    stats = {"meshes": len(scene.meshes), "mesh_triangles": int(len(F)), "mesh_build_s": time.perf_counter() - t0,
+             "area_light_triangles": int(len(sm.emitters))}
     return sm, (V.min(axis=0), V.max(axis=0)), stats
 
 

@@ -11,10 +11,11 @@ directory. ``load_scene`` returns a :class:`Scene` whose sections are plain dict
 defaults filled in; ``camera_array`` packs the camera for the render kernels.
 
 ``[[meshes]]`` (surfaces besides the cloth): each an OBJ file (checked to exist when the scene is read;
-its lines when a renderer reads it, ``pipeline.scene_meshes``), a material (``lambert`` with an albedo)
+its lines when a renderer reads it, ``pipeline.render_setup.load_scene_meshes``), a material (``lambert`` with an
+albedo, and an ``emission``: a mesh that emits is an area light)
 and a placement (``transform``: translate, a rotation by axis and degrees or a 3 x 3 matrix checked to be
 one, a uniform scale), read into ``Scene.meshes`` as dicts with ``name``, ``file`` (absolute), ``albedo``
-(rgb) and ``matrix`` (3 x 4: the scaled rotation, then the translation; ``placement``).
+and ``emission`` (rgb) and ``matrix`` (3 x 4: the scaled rotation, then the translation; ``placement``).
 """
 from __future__ import annotations
 
@@ -162,6 +163,7 @@ def _meshes(raw: dict, path: Path) -> list[dict]:
                             else f"{file} is not a file")
         mat = m.get("material", {})
         out.append({"name": m.get("name", file.stem), "file": str(file), "albedo": _rgb(mat.get("albedo", 0.5)),
+                    "emission": _rgb(mat.get("emission", 0.0)),
                     "matrix": placement(m.get("transform"), path, f"meshes[{i}].transform")})
     return out
 

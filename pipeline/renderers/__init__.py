@@ -150,7 +150,7 @@ METHODS = {m.name: m for m in (
                                     "dyed BCSDF's mean albedo; color: the yarn's colour itself",
                           ("bcsdf", "color")),
                   Setting("tables", "the tables artifact (same as --tables)"),
-                  Setting("grid", "the grid artifact (same as --grid)"))),
+                  Setting("grid", "the grid artifact (same as --grid)")), meshes=True),
     RenderMethod(
         "fiberpath", "explicit fibres path traced with the fibre BCSDF (Khungurn et al. 2015)", "fiberpath",
         sources=_FIBERPATH_SOURCES, default_source="realized", settings=_FIBERPATH_SETTINGS,

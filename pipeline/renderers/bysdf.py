@@ -413,7 +413,7 @@ def film_setup(scene, options: dict):
     from stages.render.camera import CAM_TAN_HALF_FOV
     from stages.render.film import VARIANCE_CHANNELS
 
-    from ..render_setup import ground_array, load_scene_meshes, pack_lights
+    from ..render_setup import ground_array, has_light, load_scene_meshes, pack_lights
     from ..scene import camera_array
     from .film import FilmSetup
 
@@ -427,8 +427,8 @@ def film_setup(scene, options: dict):
     model = yarn_model(extra)
     mode = MODES[model.mode]
     lights = pack_lights(scene.lights, scene.path)
-    if len(lights.lights) == 0:
-        raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
+    if not has_light(scene):
+        raise LoomError(scene.path, "lights", "the scene has no lights and no mesh emits (the image would be black)")
     t0 = time.perf_counter()
     _, cv, ytypes, groups = yarn_setup(path)
     from stages.core.yarn.implicit_plies import PLY_MAX

@@ -37,6 +37,7 @@ from ..render_setup import (
     SELF_WINDOW,
     Fibers,
     ground_array,
+    has_light,
     load_fibers,
     load_scene_meshes,
     pack_lights,
@@ -244,8 +245,8 @@ def film_setup(scene, options: dict):
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
     lights = pack_lights(scene.lights, scene.path)
-    if len(lights.lights) == 0:
-        raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
+    if not has_light(scene):
+        raise LoomError(scene.path, "lights", "the scene has no lights and no mesh emits (the image would be black)")
     accel = (options.get("extra") or {}).get("accel", "embree")
     if accel not in ACCELS:
         raise LoomError(None, "--set accel", unknown("accel", accel, ACCELS))

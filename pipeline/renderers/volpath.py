@@ -35,7 +35,15 @@ import numpy as np
 
 from ..errors import LoomError, unknown
 from ..progress import progress, warn
-from ..render_setup import ground_array, input_yarn_groups, load_fibers, pack_lights, recorded_input
+from ..render_setup import (
+    ground_array,
+    has_light,
+    input_yarn_groups,
+    load_fibers,
+    load_scene_meshes,
+    pack_lights,
+    recorded_input,
+)
 from ..scene import camera_array
 from . import RenderResult
 
@@ -349,8 +357,8 @@ def film_setup(scene, options: dict):
     if scene.camera is None:
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
     lights = pack_lights(scene.lights, scene.path)
-    if len(lights.lights) == 0:
-        raise LoomError(scene.path, "lights", "the scene has no lights (the image would be black)")
+    if not has_light(scene):
+        raise LoomError(scene.path, "lights", "the scene has no lights and no mesh emits (the image would be black)")
     W, H = options["width"], options["height"]
     max_depth, rr_depth = int(options["max_depth"]), int(options["rr_depth"])
     ground, has_ground = ground_array(scene.render)
@@ -367,11 +375,12 @@ def film_setup(scene, options: dict):
     build_s = time.perf_counter() - t0
     if not _sees_fabric(maj, cam, W, H):
         warn(f"the camera of {scene.path} sees no fabric (source {source}); rendering anyway")
-    integ = VolpathIntegrator(med, maj, lights.table(), ground, bool(has_ground), max_depth, rr_depth,
+    meshes, _, mesh_stats = load_scene_meshes(scene)
+    integ = VolpathIntegrator(med, maj, lights.table(), ground, bool(has_ground), meshes, max_depth, rr_depth,
                               np.ascontiguousarray(mats, np.float64))
     stats = {"source": source, "source_build_s": build_s, "majorant_cells": [int(x) for x in maj.res],
              "majorant_occupied": float(np.mean(maj.mu > 0)), "max_depth": max_depth, "rr_depth": rr_depth,
-             "fibre_phase_yarns": int(np.sum(mats[:, 0] >= 0)), **info}
+             "fibre_phase_yarns": int(np.sum(mats[:, 0] >= 0)), **info, **mesh_stats}
     return FilmSetup(f"volpath ({source})", integ, cam, VARIANCE_LUMINANCE, stats)
 
 

@@ -294,6 +294,7 @@ def run_render(scene_path, out, request: RenderRequest = RenderRequest(), method
     if not method:
         raise LoomError(scene.path, "render.method", "no render method: pass --method")
     m = registered(method)
+    m.check_scene(scene)      # a scene this method cannot render whole: refused before anything is built
     options = resolve_options(scene, m, replace(request, extra=parse_settings(settings, m)))
     from .. import compilation
 

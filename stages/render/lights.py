@@ -108,7 +108,7 @@ def env_uv(w):
 
 
 @njit(cache=True)
-def _find(cdf, x):
+def cdf_find(cdf, x):
     """Largest i with cdf[i] <= x, clamped to [0, len(cdf) - 2]."""
     lo = 0
     hi = cdf.shape[0] - 1
@@ -219,10 +219,10 @@ def light_sample_into(lights, k, env, marg, cond, u1, u2, w):
     # envmap: row from the marginal, column from that row's conditional, uniform inside the pixel
     H = env.shape[0]
     W = env.shape[1]
-    i = _find(marg, u1)
+    i = cdf_find(marg, u1)
     pm = marg[i + 1] - marg[i]
     fv = (u1 - marg[i]) / pm if pm > 0.0 else 0.5
-    j = _find(cond[i], u2)
+    j = cdf_find(cond[i], u2)
     pc = cond[i, j + 1] - cond[i, j]
     fu = (u2 - cond[i, j]) / pc if pc > 0.0 else 0.5
     fv = min(max(fv, 1e-9), 1.0 - 1e-9)

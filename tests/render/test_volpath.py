@@ -24,6 +24,7 @@ from stages.render.lights import LightTable, envmap_tables, pack_light
 from stages.render.media.grid_medium import GridMedium, grid_lookup
 from stages.render.media.medium import HomogeneousMedium, extinction
 from stages.render.media.tracking import majorants_from_voxels, make_majorant_grid, track
+from stages.render.meshes import no_meshes
 from stages.render.tiles import render_tiles
 from tests.helpers import compiled_typings
 
@@ -175,7 +176,8 @@ def _render(med, maj, lt, cam, spp, max_depth=1000, rr_depth=5, ground=None, see
     """(H, W, 6): mean R, G, B, alpha, (unused), variance of the mean luminance -- from the shared film."""
     W, H = int(cam[13]), int(cam[14])
     g = np.zeros(4) if ground is None else np.asarray(ground, float)
-    integ = VolpathIntegrator(med, maj, lt, g, ground is not None, max_depth, rr_depth, np.zeros((0, MAT_SIZE)))
+    integ = VolpathIntegrator(med, maj, lt, g, ground is not None, no_meshes(), max_depth, rr_depth,
+                              np.zeros((0, MAT_SIZE)))
     film = render_tiles(integ, cam, seed, spp, 0, spp, tile_grid(W, H, tile), new_film(W, H))
     img = finalize(film, spp, VARIANCE_LUMINANCE)
     out = np.zeros((H, W, 6))

@@ -87,7 +87,15 @@ from stages.core.yarn.tubes import (
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import add_escaped_radiance, light_sample_into
-from stages.render.meshes import facing_normal_into, mesh_albedo_into, meshes_hit, meshes_occluded
+from stages.render.meshes import (
+    area_light_pdf,
+    area_light_sample_into,
+    emitted_radiance,
+    facing_normal_into,
+    mesh_albedo_into,
+    meshes_hit,
+    meshes_occluded,
+)
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
 MODES = ("near", "far", "multiscale")
@@ -130,18 +138,27 @@ def yarn_dir(fr, w, out):
 
 
 @njit(cache=True, _nrt=False)
-def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s):
-    """(visible, rays): True when the ray reaches infinity: every yarn tube on its way is passed
-    through (its plies missed) and neither the ground nor a mesh is in the way."""
+def visible(it, ox, oy, oz, dx, dy, dz, ign_y, ign_s, reach):
+    """(visible, rays): True when the ray (d a unit vector) reaches distance ``reach`` (inf: a distant light; an
+    area light's distance, less the offset, for a point on it): every yarn tube on its way is passed through
+    (its plies missed) and neither the ground nor a mesh is in the way."""
     o = stack_vector3()
     d = stack_vector3()
     rays = 0
-    if ground_intersect(it.ground, it.has_ground, oz, dz, it.eps) < np.inf:
+    if ground_intersect(it.ground, it.has_ground, oz, dz, it.eps) < reach:
         return False, rays
-    if meshes_occluded(it.meshes, ox, oy, oz, dx, dy, dz, it.eps, np.inf):
+    if meshes_occluded(it.meshes, ox, oy, oz, dx, dy, dz, it.eps, reach):
         return False, rays
+    x0 = ox
+    y0 = oy
+    z0 = oz
     for _ in range(it.max_passes):
-        h = surface_hit(it.bvh, -1, Ray(ox, oy, oz, dx, dy, dz), it.eps, np.inf, Skip(ign_y, ign_s, it.window))
+        tmax = reach
+        if reach < np.inf:   # what is left of the way after the yarns passed through
+            tmax = reach - ((ox - x0) * dx + (oy - y0) * dy + (oz - z0) * dz)
+            if tmax <= it.eps:
+                return True, rays
+        h = surface_hit(it.bvh, -1, Ray(ox, oy, oz, dx, dy, dz), it.eps, tmax, Skip(ign_y, ign_s, it.window))
         rays += 1
         if h.prim < 0:
             return True, rays
@@ -183,8 +200,8 @@ def side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din,
 @njit(cache=True, _nrt=False)
 def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w, prow, reflect, wi, m, slot_t, slot_n,
                slot_s, ty, ny, din, att_s, att_d, s_y):
-    """Next-event estimation at a yarn vertex from (sx, sy, sz): one sample of each light, MIS-weighted
-    against the side's sampling, added to L; returns the rays traced.
+    """Next-event estimation at a yarn vertex from (sx, sy, sz): one sample of each light (and one point on the
+    area lights), MIS-weighted against the side's sampling, added to L; returns the rays traced.
     26 parameters: the vertex's random stream, point and skip, the throughput and radiance, and the side's whole
     shading state (``side_eval_pdf``'s) as ``trace_path`` holds it in its own scratch arrays."""
     lights = it.lights.lights
@@ -204,7 +221,7 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
         f0, f1, f2, pf = side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y)
         if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
             continue
-        vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], ign_y, ign_s)
+        vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], ign_y, ign_s, np.inf)
         rays += nr
         if not vis:
             continue
@@ -214,6 +231,22 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
         L[0] += tp[0] * f0 * lr * w
         L[1] += tp[1] * f1 * lg * w
         L[2] += tp[2] * f2 * lb * w
+    if it.meshes.has_emitters:
+        a = base + EVENT_DIMS + 2 * lights.shape[0]
+        lr, lg, lb, pl, dist = area_light_sample_into(it.meshes, sx, sy, sz, uniform(seed, key, a),
+                                                      uniform(seed, key, a + 1), uniform(seed, key, a + 2), wlk)
+        if pl > 0.0 and (lr > 0.0 or lg > 0.0 or lb > 0.0):
+            yarn_dir(fr, wlk, wl)
+            f0, f1, f2, pf = side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d,
+                                           s_y)
+            if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
+                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], ign_y, ign_s, dist - it.eps)
+                rays += nr
+                if vis:
+                    w = side_w * power_heuristic(pl, pf) / pl
+                    L[0] += tp[0] * f0 * lr * w
+                    L[1] += tp[1] * f1 * lg * w
+                    L[2] += tp[2] * f2 * lb * w
     return rays
 
 
@@ -225,7 +258,9 @@ def trace_path(it, o, d, seed, key):
     marg = it.lights.marginal
     cond = it.lights.conditional
     nl = lights.shape[0]
-    D = EVENT_DIMS + 2 * nl
+    sm = it.meshes
+    area_dim = EVENT_DIMS + 2 * nl     # the area lights' three dimensions follow the distant lights' pairs
+    D = area_dim + 3 if sm.has_emitters else area_dim
     K = it.K
     tp = stack_vector3()
     L = stack_vector3()
@@ -259,6 +294,7 @@ def trace_path(it, o, d, seed, key):
     alb = stack_vector3()
     oy = stack_vector3()
     dy = stack_vector3()
+    v = stack_vector3()      # the last scattering vertex (where the lights were sampled)
     no_exit = (0.0, 0.0, 0.0)   # the exit-point arguments of the reflection side (unused there)
     while True:
         h = surface_hit(it.bvh, -1, Ray(o[0], o[1], o[2], d[0], d[1], d[2]), it.eps, np.inf,
@@ -280,6 +316,17 @@ def trace_path(it, o, d, seed, key):
             break
         if depth == 0 and first_t == 0.0:
             first_t = path_len + t_hit
+        if mh.tri >= 0 and sm.has_emitters:   # an area light: its radiance, MIS-weighted against its NEE
+            er, eg, eb = emitted_radiance(sm, mh.tri)
+            if er > 0.0 or eg > 0.0 or eb > 0.0:
+                w = 1.0
+                if depth > 0:   # the light's density at its distance from the vertex that sampled it
+                    dist = math.sqrt((o[0] + t_hit * d[0] - v[0]) ** 2 + (o[1] + t_hit * d[1] - v[1]) ** 2
+                                     + (o[2] + t_hit * d[2] - v[2]) ** 2)
+                    w = power_heuristic(pdf_prev, area_light_pdf(sm, mh.tri, dist, d[0], d[1], d[2]))
+                L[0] += tp[0] * er * w
+                L[1] += tp[1] * eg * w
+                L[2] += tp[2] * eb * w
         path_len += t_hit
         base = 2 + event * D
         event += 1
@@ -314,7 +361,7 @@ def trace_path(it, o, d, seed, key):
                     continue
                 pf = lambert_pdf(alb, gn, wi, wlk)
                 # nothing to skip, typed as a yarn hit's (yarn, segment) so visible compiles once
-                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1))
+                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1), np.inf)
                 rays += nr
                 if not vis:
                     continue
@@ -322,6 +369,20 @@ def trace_path(it, o, d, seed, key):
                 L[0] += tp[0] * f0 * lr * w
                 L[1] += tp[1] * f1 * lg * w
                 L[2] += tp[2] * f2 * lb * w
+            if sm.has_emitters:   # one point on the area lights
+                lr, lg, lb, pl, dist = area_light_sample_into(sm, sx, sy, sz, uniform(seed, key, base + area_dim),
+                                                              uniform(seed, key, base + area_dim + 1),
+                                                              uniform(seed, key, base + area_dim + 2), wlk)
+                f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)
+                if pl > 0.0 and (lr * f0 > 0.0 or lg * f1 > 0.0 or lb * f2 > 0.0):
+                    vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1),
+                                      dist - it.eps)
+                    rays += nr
+                    if vis:
+                        w = power_heuristic(pl, lambert_pdf(alb, gn, wi, wlk)) / pl
+                        L[0] += tp[0] * f0 * lr * w
+                        L[1] += tp[1] * f1 * lg * w
+                        L[2] += tp[2] * f2 * lb * w
             w0, w1, w2, pf = lambert_sample_into(alb, gn, wi, uniform(seed, key, base + D_DIR1),
                                                  uniform(seed, key, base + D_DIR2), wow)
             if pf <= 0.0:
@@ -488,6 +549,8 @@ def trace_path(it, o, d, seed, key):
             ign_y = c
             ign_s = h.prim
             pdf_prev = pf
+        for q in range(3):
+            v[q] = o[q]
         depth += 1
         passes = 0
         if depth >= it.rr_depth:

@@ -6,7 +6,8 @@ or tiled exemplars under a shell map (``ShellScene``); the same estimator runs o
 ground plane (``stages.render.ground``) and the scene's meshes (``stages.render.meshes``: walls, floor,
 furniture). Materials: packed rows (``stages.core.shading.material``: the
 BCSDF of Khungurn et al. 2015 or a Lambertian surface), one per fibre through ``mat_of_fiber``, a
-Lambertian row for the ground and one per mesh. Lights: ``stages.render.lights`` (all distant).
+Lambertian row for the ground and one per mesh. Lights: ``stages.render.lights`` (distant) and the meshes
+that emit (area lights, ``stages.render.meshes``).
 
 ``FiberpathIntegrator`` fields: ``scene`` (EmbreeFibers | FiberBVH | ShellScene), ``mat_of_fiber`` (F,) int32 row of
 each fibre, ``mats`` (NM, MAT_SIZE), ``ground_mat`` (MAT_SIZE,) the ground's Lambertian row,
@@ -16,13 +17,15 @@ each fibre, ``mats`` (NM, MAT_SIZE), ``ground_mat`` (MAT_SIZE,) the ground's Lam
 
 Estimator
 ---------
-At every scattering vertex, next-event estimation takes one sample of *each* light and combines it
-with BSDF sampling by the power heuristic (per light: w_light = p_l^2 / (p_l^2 + p_f^2); when a
-BSDF-sampled ray escapes, light k's radiance gets p_f^2 / (p_f^2 + p_k^2)); directional lights are
-delta lights, sampled only by NEE. Camera rays that escape see the environment (all non-delta
-lights) unweighted. ``max_depth`` is the largest number of scattering events on a path (1 = direct
-lighting only); Russian roulette from scattering event ``rr_depth`` on, survival probability
-min(0.95, max channel of the throughput).
+At every scattering vertex, next-event estimation takes one sample of *each* light and combines it with
+BSDF sampling by the power heuristic (per light: w_light = p_l^2 / (p_l^2 + p_f^2); when a BSDF-sampled
+ray escapes, light k's radiance gets p_f^2 / (p_f^2 + p_k^2)); directional lights are delta lights,
+sampled only by NEE. Area lights (emissive meshes) are one more light: NEE takes one point on them
+(picked by area), its shadow ray stops short of it, and a BSDF-sampled ray that hits one gets its
+radiance weighted against that sampling's density; a camera ray that hits one sees it unweighted. Camera
+rays that escape see the environment (all non-delta lights) unweighted. ``max_depth`` is the largest
+number of scattering events on a path (1 = direct lighting only); Russian roulette from scattering event
+``rr_depth`` on, survival probability min(0.95, max channel of the throughput).
 
 BCSDF vertices (curve materials): the scattered and shadow rays start on the fibre surface and skip
 the segments of the same fibre within ``ign_window`` along the chain (a curve BCSDF does not
@@ -33,7 +36,8 @@ shell scene start in the tetrahedron of the hit.
 
 Random numbers: ``uniform(seed, index, dim)`` for camera sample ``index`` (``stages.render.tiles``):
 dimensions 0-1 place the sample in its pixel, then 4 + 2 NL per scattering event (lobe, direction,
-roulette, one pair per light), so the image is identical for any thread count and tile order.
+roulette, one pair per light), and 3 more when meshes emit (the area lights' point), so the image is
+identical for any thread count and tile order.
 
 Speed: the estimator is compiled without numba's reference counting (``trace_path``, and the tile
 loop with it: ``stages.render.tiles.tile_kernel``). The path's vectors live on the machine stack and
@@ -65,7 +69,14 @@ from stages.core.shading.material import (
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import add_escaped_radiance, light_sample_into
-from stages.render.meshes import facing_normal_into, meshes_hit, meshes_occluded
+from stages.render.meshes import (
+    area_light_pdf,
+    area_light_sample_into,
+    emitted_radiance,
+    facing_normal_into,
+    meshes_hit,
+    meshes_occluded,
+)
 
 FiberpathIntegrator = namedtuple("FiberpathIntegrator", [
     "scene", "mat_of_fiber", "mats", "ground_mat", "lights", "ground", "has_ground", "meshes",
@@ -85,7 +96,9 @@ def _trace(it, o, d, seed, key):
     cond = it.lights.conditional
     eps = it.eps
     nl = lights.shape[0]
-    dims_per_bounce = 4 + 2 * nl
+    sm = it.meshes
+    area_dim = 4 + 2 * nl            # the area lights' three dimensions follow the distant lights' pairs
+    dims_per_bounce = area_dim + 3 if sm.has_emitters else area_dim
     tp0 = 1.0
     tp1 = 1.0
     tp2 = 1.0
@@ -129,6 +142,15 @@ def _trace(it, o, d, seed, key):
             break
         if depth == 0:
             first_t = t_hit
+        if on == ON_MESH and sm.has_emitters:   # an area light: its radiance, MIS-weighted against its NEE
+            er, eg, eb = emitted_radiance(sm, mh.tri)
+            if er > 0.0 or eg > 0.0 or eb > 0.0:
+                w = 1.0
+                if depth > 0:
+                    w = power_heuristic(pdf_prev, area_light_pdf(sm, mh.tri, t_hit, d[0], d[1], d[2]))
+                L0 += tp0 * er * w
+                L1 += tp1 * eg * w
+                L2 += tp2 * eb * w
         if depth >= it.max_depth:
             break
         for k in range(3):
@@ -196,6 +218,25 @@ def _trace(it, o, d, seed, key):
             L0 += tp0 * f0 * lr * w
             L1 += tp1 * f1 * lg * w
             L2 += tp2 * f2 * lb * w
+        if sm.has_emitters:   # next-event estimation: one point on the area lights
+            lr, lg, lb, pl, dist = area_light_sample_into(sm, so[0], so[1], so[2], uniform(seed, key, base + area_dim),
+                                                          uniform(seed, key, base + area_dim + 1),
+                                                          uniform(seed, key, base + area_dim + 2), wl)
+            if pl > 0.0 and (lr > 0.0 or lg > 0.0 or lb > 0.0):
+                f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
+                if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
+                    rays += 1
+                    reach = dist - eps     # the shadow ray stops short of the light's own surface
+                    shadowed = surface_occluded(it.scene, next_cell, Ray(so[0], so[1], so[2], wl[0], wl[1], wl[2]),
+                                                eps, reach, Skip(nf, ns, it.ign_window))
+                    if not shadowed:
+                        shadowed = (ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < reach
+                                    or meshes_occluded(sm, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, reach))
+                    if not shadowed:
+                        w = power_heuristic(pl, pf) / pl
+                        L0 += tp0 * f0 * lr * w
+                        L1 += tp1 * f1 * lg * w
+                        L2 += tp2 * f2 * lb * w
         # scatter: the next direction, the throughput, Russian roulette from event rr_depth on
         step = continue_path(mat, ctx, t_tan, n, wi, depth + 1 >= it.rr_depth, seed, key, base, (tp0, tp1, tp2), wo)
         if not step.alive:

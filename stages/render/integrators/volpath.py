@@ -8,7 +8,11 @@ transmittance, multiple importance sampling (power heuristic) between light samp
 BSDF sampling for lights that a ray can hit (environment: constant, SG, envmap), Russian roulette
 after ``rr_depth`` interactions, and at most ``max_depth`` path segments (Mitsuba's convention:
 max_depth = 1 shows only directly visible emitters). An optional diffuse ground plane z = height
-(Lambertian, RGB albedo) catches shadows.
+(Lambertian, RGB albedo) catches shadows, and the scene's meshes (``stages.render.meshes``: Lambertian,
+two-sided, opaque) bound the free flights, scatter and block shadow rays as the ground does. Meshes that
+emit are area lights: one more light for next-event estimation to pick (the fraction of the pick's random
+number left over picks the triangle), with a shadow ray that stops short of the point, and a ray that hits
+one gets its radiance MIS-weighted as an escaping ray gets the environment's.
 
 Fibre phase function. A volume that stands for explicit fibres (realized or procedural: the source
 knows the yarn of the covering fibre) can scatter as those fibres do: with ``mats`` holding a
@@ -29,8 +33,9 @@ seed 000 App. A.
 
 ``VolpathIntegrator`` fields: ``medium`` (a density source, ``stages.render.media.medium``), ``majorant``
 (its ``MajorantGrid``), ``lights`` (``LightTable``, ``stages.render.lights``), ``ground`` float64[4]
-and ``has_ground`` (``stages.render.ground``), ``max_depth``, ``rr_depth``, ``mats`` (Y, MAT_SIZE)
-material rows per yarn (0 rows: micro-flakes everywhere). Its ``radiance``
+and ``has_ground`` (``stages.render.ground``), ``meshes`` (``SceneMeshes``; ``no_meshes()`` for none),
+``max_depth``, ``rr_depth``, ``mats`` (Y, MAT_SIZE) material rows per yarn (0 rows: micro-flakes
+everywhere). Its ``radiance``
 (``stages.render.integrator``) reports the medium lookups and rays (free-flight and shadow queries)
 of each path; the tile loop is ``stages.render.tiles``.
 Speed: ``trace_path``, the free-flight tracking and the density sources' lookups (procedural, cached,
@@ -59,21 +64,34 @@ from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import environment_radiance, light_eval, light_pdf, light_sample_into
 from stages.render.media.tracking import track
+from stages.render.meshes import (
+    area_light_pdf,
+    area_light_sample_into,
+    emitted_radiance,
+    facing_normal_into,
+    mesh_albedo_into,
+    meshes_hit,
+    meshes_occluded,
+)
 
 VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
-                                                     "max_depth", "rr_depth", "mats"])
+                                                     "meshes", "max_depth", "rr_depth", "mats"])
+
+SURFACE_OFFSET = 1e-7   # rays leave the ground or a mesh this far off it, relative to 1 + |the point|'s largest
+AREA_SHADOW_SHORT = 1e-6   # a shadow ray to a point on an area light stops this fraction of its length short
 
 
 @njit(cache=True, _nrt=False)
-def _transmittance(med, maj, ground, ground_on, px, py, pz, wx, wy, wz, seed, index, dim, skip_fibre):
-    """Ratio-tracked transmittance toward direction w (an infinitely far light), not counting fibre
-    ``skip_fibre``; the ground occludes.
-    14 parameters: the medium, majorant and ground, the point and the light's direction as scalars, the random
-    stream (seed, index, dim) and the skipped fibre."""
-    if ground_intersect(ground, ground_on, pz, wz, 0.0) < np.inf:
+def _transmittance(it, px, py, pz, wx, wy, wz, reach, seed, index, dim, skip_fibre):
+    """Ratio-tracked transmittance through the integrator's medium toward direction w up to distance ``reach``
+    (inf: a distant light; short of a point on an area light), not counting fibre ``skip_fibre``; the ground
+    and the meshes occlude."""
+    if ground_intersect(it.ground, it.has_ground, pz, wz, 0.0) < reach:
         return 0.0, dim, 0
-    fl = track(med, maj, px, py, pz, wx, wy, wz, np.inf, seed, index, runtime_value(dim), runtime_value(True),
-               runtime_value(skip_fibre))
+    if meshes_occluded(it.meshes, px, py, pz, wx, wy, wz, 0.0, reach):
+        return 0.0, dim, 0
+    fl = track(it.medium, it.majorant, px, py, pz, wx, wy, wz, reach, seed, index, runtime_value(dim),
+               runtime_value(True), runtime_value(skip_fibre))
     return fl.transmittance, fl.dim, fl.lookups
 
 
@@ -104,16 +122,16 @@ def _escaped(lt, n, prev_pdf, dx, dy, dz):
 
 
 @njit(cache=True, _nrt=False)
-def _add_light(it, px, py, pz, lw, seed, index, dim, skip_fibre, lpdf, ldelta, pdf_scatter, scale, a0, a1, a2,
-               Lr, Lg, Lb):
+def _add_light(it, px, py, pz, lw, reach, seed, index, dim, skip_fibre, lpdf, ldelta, pdf_scatter, scale, a0, a1,
+               a2, Lr, Lg, Lb):
     """(Lr, Lg, Lb, dim, lookups) after next-event estimation toward the light sample lw from p: L += a c with
-    c = scale x the transmittance (``_transmittance``, not counting fibre ``skip_fibre``) x the MIS weight
-    against scattering's pdf (1 for a delta light) / the light's pdf; L unchanged where the light is shadowed.
-    19 parameters: the integrator, the point and light direction, the random stream (seed, index, dim), the
-    skipped fibre, the two pdfs and whether the light is a delta, the scale, the path's unshadowed
+    c = scale x the transmittance (``_transmittance`` up to ``reach``, not counting fibre ``skip_fibre``) x the
+    MIS weight against scattering's pdf (1 for a delta light) / the light's pdf; L unchanged where the light is
+    shadowed.
+    20 parameters: the integrator, the point, light direction and distance, the random stream (seed, index,
+    dim), the skipped fibre, the two pdfs and whether the light is a delta, the scale, the path's unshadowed
     contribution per channel and the radiance so far, all scalars kept in registers."""
-    tr, dim, lk = _transmittance(it.medium, it.majorant, it.ground, it.has_ground, px, py, pz, lw[0], lw[1], lw[2],
-                                 seed, index, dim, skip_fibre)
+    tr, dim, lk = _transmittance(it, px, py, pz, lw[0], lw[1], lw[2], reach, seed, index, dim, skip_fibre)
     if tr > 0.0:
         c = scale * tr * (1.0 if ldelta else power_heuristic(lpdf, pdf_scatter)) / lpdf
         Lr += a0 * c
@@ -154,6 +172,8 @@ def trace_path(it, o, d, seed, index):
     dz = d[2]
     lights, env, marg, cond = lt
     nl = lights.shape[0]
+    sm = it.meshes
+    n_pick = nl + 1 if sm.has_emitters else nl   # next-event estimation picks one light; the area lights are one
     Lr = 0.0
     Lg = 0.0
     Lb = 0.0
@@ -178,12 +198,12 @@ def trace_path(it, o, d, seed, index):
     for k in range(3):
         nrm[k] = 0.0
         lw[k] = 0.0
-    alb[0] = ground[1]
-    alb[1] = ground[2]
-    alb[2] = ground[3]
     skip = np.int64(-1)  # the fibre the ray leaves after a fibre-phase collision (not met again)
     while True:
-        tg = ground_intersect(ground, ground_on, oz, dz, 1e-9)
+        tg = ground_intersect(ground, ground_on, oz, dz, 1e-9)   # the nearest opaque surface: the ground ...
+        mh = meshes_hit(it.meshes, ox, oy, oz, dx, dy, dz, 0.0, tg)   # ... or a mesh
+        if mh.tri >= 0:
+            tg = mh.t
         fl = track(med, maj, ox, oy, oz, dx, dy, dz, tg, seed, index, runtime_value(dim), runtime_value(False),
                    runtime_value(skip))
         rays += 1
@@ -200,6 +220,15 @@ def trace_path(it, o, d, seed, index):
         if n == 0:
             hit = 1.0
             first_t = t if collided else tg
+        if not collided and mh.tri >= 0 and sm.has_emitters:   # an area light, MIS-weighted against its NEE
+            er, eg, eb = emitted_radiance(sm, mh.tri)
+            if er > 0.0 or eg > 0.0 or eb > 0.0:
+                w = 1.0
+                if n > 0:
+                    w = power_heuristic(prev_pdf, area_light_pdf(sm, mh.tri, tg, dx, dy, dz) / n_pick)
+                Lr += br * er * w
+                Lg += bg * eg * w
+                Lb += bb * eb * w
         n += 1
         if n >= max_depth:
             break
@@ -210,18 +239,47 @@ def trace_path(it, o, d, seed, index):
         u5 = uniform(seed, index, dim + 4)
         dim += 5
         next_skip = np.int64(-1)
-        if nl > 0:
-            k = min(int(u3 * nl), nl - 1)
-            ler, leg, leb, lpdf, ldelta = light_sample_into(lights, k, env, marg, cond, u1, u2, lw)
-            lpdf /= nl
+        # the vertex p: the collision, or the surface's point just off it towards the arriving ray
+        if collided:
+            px = ox + t * dx
+            py = oy + t * dy
+            pz = oz + t * dz
+        else:
+            # a Lambertian surface (the ground or a mesh), shading normal toward the arriving ray
+            px = ox + tg * dx
+            py = oy + tg * dy
+            if mh.tri >= 0:
+                facing_normal_into(it.meshes, mh.tri, dx, dy, dz, nrm)
+                mesh_albedo_into(it.meshes, mh.tri, alb)
+                pz = oz + tg * dz
+                off = SURFACE_OFFSET * (1.0 + max(abs(px), abs(py), abs(pz)))
+                px += off * nrm[0]
+                py += off * nrm[1]
+                pz += off * nrm[2]
+            else:
+                nrm[0] = 0.0
+                nrm[1] = 0.0
+                nrm[2] = 1.0 if dz < 0.0 else -1.0
+                for q in range(3):
+                    alb[q] = ground[1 + q]
+                pz = ground[0] + nrm[2] * SURFACE_OFFSET * (1.0 + abs(ground[0]))
+        # next-event estimation picks one light
+        reach = np.inf
+        if n_pick > 0:
+            k = min(int(u3 * n_pick), n_pick - 1)
+            if k < nl:
+                ler, leg, leb, lpdf, ldelta = light_sample_into(lights, k, env, marg, cond, u1, u2, lw)
+            else:   # the area lights, seen from p; the pick's leftover fraction picks the triangle
+                ler, leg, leb, lpdf, dist = area_light_sample_into(sm, px, py, pz, min(u3 * n_pick - k, 1.0), u1, u2,
+                                                                   lw)
+                ldelta = False
+                reach = dist * (1.0 - AREA_SHADOW_SHORT)
+            lpdf /= n_pick
         else:
             ler = leg = leb = lpdf = 0.0
             ldelta = False
         if collided and fibre_phase(fl.point.yarn, mats):
             # the fibre's own scattering function: fiberpath's vertex (module doc, "Fibre phase function")
-            px = ox + t * dx
-            py = oy + t * dy
-            pz = oz + t * dz
             m = fl.point
             mat = mats[m.yarn]
             tan[0] = m.tx
@@ -234,8 +292,9 @@ def trace_path(it, o, d, seed, index):
             if lpdf > 0.0:
                 f0, f1, f2, pf = material_eval_pdf(mat, ctx, tan, tan, wi, lw)
                 if f0 > 0.0 or f1 > 0.0 or f2 > 0.0:
-                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, seed, index, dim, m.fibre, lpdf, ldelta, pf,
-                                                     1.0, br * ler * f0, bg * leg * f1, bb * leb * f2, Lr, Lg, Lb)
+                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, reach, seed, index, dim, m.fibre, lpdf,
+                                                     ldelta, pf, 1.0, br * ler * f0, bg * leg * f1, bb * leb * f2,
+                                                     Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
             u6 = uniform(seed, index, dim)
@@ -247,9 +306,6 @@ def trace_path(it, o, d, seed, index):
             prev_pdf = pdf
             next_skip = m.fibre
         elif collided:
-            px = ox + t * dx
-            py = oy + t * dy
-            pz = oz + t * dz
             m = fl.point
             br *= m.albedo_r
             bg *= m.albedo_g
@@ -258,30 +314,25 @@ def trace_path(it, o, d, seed, index):
             if lpdf > 0.0:
                 f = phase_eval(S, -dx, -dy, -dz, lw[0], lw[1], lw[2])
                 if f > 0.0:
-                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, seed, index, dim, runtime_value(-1), lpdf,
-                                                     ldelta, f, f, br * ler, bg * leg, bb * leb, Lr, Lg, Lb)
+                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, reach, seed, index, dim,
+                                                     runtime_value(-1), lpdf, ldelta, f, f, br * ler, bg * leg,
+                                                     bb * leb, Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
             wx, wy, wz, pdf = phase_sample(S, -dx, -dy, -dz, u4, u5)
             if pdf <= 0.0:
                 break
             prev_pdf = pdf
-        else:
-            # Lambertian ground, shading normal toward the arriving ray
-            nrm[0] = 0.0
-            nrm[1] = 0.0
-            nrm[2] = 1.0 if dz < 0.0 else -1.0
+        else:   # the surface (p, its normal and albedo set above)
             wi[0] = -dx
             wi[1] = -dy
             wi[2] = -dz
-            px = ox + tg * dx
-            py = oy + tg * dy
-            pz = ground[0] + nrm[2] * 1e-7 * (1.0 + abs(ground[0]))
             if lpdf > 0.0:
                 fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
                 if fr > 0.0 or fg > 0.0 or fb > 0.0:
-                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, seed, index, dim, runtime_value(-1), lpdf,
-                                                     ldelta, lambert_pdf(alb, nrm, wi, lw), 1.0,
+                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, reach, seed, index, dim,
+                                                     runtime_value(-1), lpdf, ldelta, lambert_pdf(alb, nrm, wi, lw),
+                                                     1.0,
                                                      br * ler * fr, bg * leg * fg, bb * leb * fb, Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
