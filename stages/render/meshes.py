@@ -22,8 +22,10 @@ light); a ray that hits an emitter by chance receives its radiance (``emitted_ra
 power heuristic against ``area_light_pdf`` (the same density), or fully when no vertex sampled the
 lights before it (a camera ray).
 
-Queries (inlined into the integrator's loop): ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a
-miss), ``meshes_occluded`` (shadow rays), ``facing_normal_into`` (the unit normal of triangle ``tri``
+Queries: ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a miss) and ``meshes_occluded`` (shadow rays),
+inlined into the integrator's loop so that a scene without meshes pays no call; the rest are plain calls,
+compiled once for every integrator (inlined, they cost each integrator's compile time and bought nothing
+measurable):  ``facing_normal_into`` (the unit normal of triangle ``tri``
 facing against the ray direction d), ``mesh_albedo_into`` (the Lambertian albedo of triangle ``tri``'s mesh).
 """
 import math
@@ -84,7 +86,7 @@ def meshes_occluded(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return sm.enabled and mesh_occluded(sm.mesh, ox, oy, oz, dx, dy, dz, tmin, tmax)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _unit_normal(sm, tri):
     """The unit geometric normal (e1 x e2 normalised) of triangle ``tri`` (an index into the mesh's F)."""
     V = sm.mesh.vertices
@@ -105,7 +107,7 @@ def _unit_normal(sm, tri):
     return nx / length, ny / length, nz / length
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def facing_normal_into(sm, tri, dx, dy, dz, n):
     """Write into n the unit geometric normal of triangle ``tri`` (an index into the mesh's F) on the side
     a ray of direction d arrives from (n . d <= 0)."""
@@ -119,7 +121,7 @@ def facing_normal_into(sm, tri, dx, dy, dz, n):
     n[2] = nz
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def mesh_albedo_into(sm, tri, out):
     """Write into out the Lambertian albedo (rgb) of the mesh triangle ``tri`` belongs to."""
     a = material_lambert_albedo(sm.mats[sm.mat_of_tri[tri]])
@@ -127,14 +129,14 @@ def mesh_albedo_into(sm, tri, out):
         out[k] = a[k]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def emitted_radiance(sm, tri):
     """(r, g, b): the radiance triangle ``tri``'s mesh emits (0 for a mesh that is not a light)."""
     row = sm.mat_of_tri[tri]
     return sm.emission[row, 0], sm.emission[row, 1], sm.emission[row, 2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def area_light_pdf(sm, tri, t, dx, dy, dz):
     """The solid-angle density with which ``area_light_sample_into`` picks the point at distance t along the
     unit direction d on emissive triangle ``tri``: t^2 / (|cos| A), A the emissive area."""
@@ -145,7 +147,7 @@ def area_light_pdf(sm, tri, t, dx, dy, dz):
     return t * t / (c * sm.emit_area)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def area_light_sample_into(sm, px, py, pz, u0, u1, u2, w):
     """A point on the emissive triangles seen from p: an emitter picked by area (u0), a point uniform on it
     (u1, u2); the unit direction towards it into w. Returns (r, g, b, pdf, dist): the radiance it emits

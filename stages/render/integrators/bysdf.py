@@ -211,17 +211,27 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
     wl = stack_vector3()
     wlk = stack_vector3()
     rays = 0
-    for k in range(lights.shape[0]):
-        lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
-                                                  uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                  uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
+    nl = lights.shape[0]
+    n_nee = nl + 1 if it.meshes.has_emitters else nl    # the area lights are one more light (light nl)
+    a = base + EVENT_DIMS + 2 * nl
+    for k in range(n_nee):
+        reach = np.inf
+        if k < nl:
+            lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
+                                                      uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                      uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
+        else:
+            lr, lg, lb, pl, dist = area_light_sample_into(it.meshes, sx, sy, sz, uniform(seed, key, a),
+                                                          uniform(seed, key, a + 1), uniform(seed, key, a + 2), wlk)
+            delta = False
+            reach = dist - it.eps     # the shadow ray stops short of the light's own surface
         if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
             continue
         yarn_dir(fr, wlk, wl)
         f0, f1, f2, pf = side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d, s_y)
         if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
             continue
-        vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], ign_y, ign_s, np.inf)
+        vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], ign_y, ign_s, reach)
         rays += nr
         if not vis:
             continue
@@ -231,22 +241,6 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
         L[0] += tp[0] * f0 * lr * w
         L[1] += tp[1] * f1 * lg * w
         L[2] += tp[2] * f2 * lb * w
-    if it.meshes.has_emitters:
-        a = base + EVENT_DIMS + 2 * lights.shape[0]
-        lr, lg, lb, pl, dist = area_light_sample_into(it.meshes, sx, sy, sz, uniform(seed, key, a),
-                                                      uniform(seed, key, a + 1), uniform(seed, key, a + 2), wlk)
-        if pl > 0.0 and (lr > 0.0 or lg > 0.0 or lb > 0.0):
-            yarn_dir(fr, wlk, wl)
-            f0, f1, f2, pf = side_eval_pdf(prow, reflect, wi, wl, m, slot_t, slot_n, slot_s, ty, ny, din, att_s, att_d,
-                                           s_y)
-            if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
-                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], ign_y, ign_s, dist - it.eps)
-                rays += nr
-                if vis:
-                    w = side_w * power_heuristic(pl, pf) / pl
-                    L[0] += tp[0] * f0 * lr * w
-                    L[1] += tp[1] * f1 * lg * w
-                    L[2] += tp[2] * f2 * lb * w
     return rays
 
 
@@ -261,6 +255,7 @@ def trace_path(it, o, d, seed, key):
     sm = it.meshes
     area_dim = EVENT_DIMS + 2 * nl     # the area lights' three dimensions follow the distant lights' pairs
     D = area_dim + 3 if sm.has_emitters else area_dim
+    n_nee = nl + 1 if sm.has_emitters else nl       # the area lights are one more light
     K = it.K
     tp = stack_vector3()
     L = stack_vector3()
@@ -350,10 +345,18 @@ def trace_path(it, o, d, seed, key):
             sx = px + it.eps * gn[0]
             sy = py + it.eps * gn[1]
             sz = pz + it.eps * gn[2]
-            for k in range(nl):
-                lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
-                                                          uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                          uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
+            for k in range(n_nee):   # one sample per light, one point on the area lights (light nl)
+                reach = np.inf
+                if k < nl:
+                    lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
+                                                              uniform(seed, key, base + EVENT_DIMS + 2 * k),
+                                                              uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
+                else:
+                    lr, lg, lb, pl, dist = area_light_sample_into(sm, sx, sy, sz, uniform(seed, key, base + area_dim),
+                                                                  uniform(seed, key, base + area_dim + 1),
+                                                                  uniform(seed, key, base + area_dim + 2), wlk)
+                    delta = False
+                    reach = dist - it.eps
                 if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                     continue
                 f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)
@@ -361,7 +364,7 @@ def trace_path(it, o, d, seed, key):
                     continue
                 pf = lambert_pdf(alb, gn, wi, wlk)
                 # nothing to skip, typed as a yarn hit's (yarn, segment) so visible compiles once
-                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1), np.inf)
+                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1), reach)
                 rays += nr
                 if not vis:
                     continue
@@ -369,20 +372,6 @@ def trace_path(it, o, d, seed, key):
                 L[0] += tp[0] * f0 * lr * w
                 L[1] += tp[1] * f1 * lg * w
                 L[2] += tp[2] * f2 * lb * w
-            if sm.has_emitters:   # one point on the area lights
-                lr, lg, lb, pl, dist = area_light_sample_into(sm, sx, sy, sz, uniform(seed, key, base + area_dim),
-                                                              uniform(seed, key, base + area_dim + 1),
-                                                              uniform(seed, key, base + area_dim + 2), wlk)
-                f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)
-                if pl > 0.0 and (lr * f0 > 0.0 or lg * f1 > 0.0 or lb * f2 > 0.0):
-                    vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1),
-                                      dist - it.eps)
-                    rays += nr
-                    if vis:
-                        w = power_heuristic(pl, lambert_pdf(alb, gn, wi, wlk)) / pl
-                        L[0] += tp[0] * f0 * lr * w
-                        L[1] += tp[1] * f1 * lg * w
-                        L[2] += tp[2] * f2 * lb * w
             w0, w1, w2, pf = lambert_sample_into(alb, gn, wi, uniform(seed, key, base + D_DIR1),
                                                  uniform(seed, key, base + D_DIR2), wow)
             if pf <= 0.0:

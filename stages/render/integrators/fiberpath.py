@@ -99,6 +99,7 @@ def _trace(it, o, d, seed, key):
     sm = it.meshes
     area_dim = 4 + 2 * nl            # the area lights' three dimensions follow the distant lights' pairs
     dims_per_bounce = area_dim + 3 if sm.has_emitters else area_dim
+    n_nee = nl + 1 if sm.has_emitters else nl   # the area lights are one more light
     tp0 = 1.0
     tp1 = 1.0
     tp2 = 1.0
@@ -193,23 +194,32 @@ def _trace(it, o, d, seed, key):
             next_cell = -1
         material_prepare(mat, t_tan, n, wi, ctx)
         base = 2 + depth * dims_per_bounce
-        # next-event estimation: one sample per light
-        for k in range(nl):
-            lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
-                                                      uniform(seed, key, base + 4 + 2 * k),
-                                                      uniform(seed, key, base + 5 + 2 * k), wl)
+        # next-event estimation: one sample per light, and one point on the area lights (light nl)
+        for k in range(n_nee):
+            reach = np.inf
+            if k < nl:
+                lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
+                                                          uniform(seed, key, base + 4 + 2 * k),
+                                                          uniform(seed, key, base + 5 + 2 * k), wl)
+            else:
+                lr, lg, lb, pl, dist = area_light_sample_into(sm, so[0], so[1], so[2],
+                                                              uniform(seed, key, base + area_dim),
+                                                              uniform(seed, key, base + area_dim + 1),
+                                                              uniform(seed, key, base + area_dim + 2), wl)
+                delta = False
+                reach = dist - eps     # the shadow ray stops short of the light's own surface
             if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                 continue
             f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
             if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                 continue
             rays += 1
-            if surface_occluded(it.scene, next_cell, Ray(so[0], so[1], so[2], wl[0], wl[1], wl[2]), eps, np.inf,
+            if surface_occluded(it.scene, next_cell, Ray(so[0], so[1], so[2], wl[0], wl[1], wl[2]), eps, reach,
                                 Skip(nf, ns, it.ign_window)):
                 continue
-            if ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < np.inf:
+            if ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < reach:
                 continue
-            if meshes_occluded(it.meshes, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, np.inf):
+            if meshes_occluded(it.meshes, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, reach):
                 continue
             if delta:
                 w = 1.0
@@ -218,25 +228,6 @@ def _trace(it, o, d, seed, key):
             L0 += tp0 * f0 * lr * w
             L1 += tp1 * f1 * lg * w
             L2 += tp2 * f2 * lb * w
-        if sm.has_emitters:   # next-event estimation: one point on the area lights
-            lr, lg, lb, pl, dist = area_light_sample_into(sm, so[0], so[1], so[2], uniform(seed, key, base + area_dim),
-                                                          uniform(seed, key, base + area_dim + 1),
-                                                          uniform(seed, key, base + area_dim + 2), wl)
-            if pl > 0.0 and (lr > 0.0 or lg > 0.0 or lb > 0.0):
-                f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
-                if f0 != 0.0 or f1 != 0.0 or f2 != 0.0:
-                    rays += 1
-                    reach = dist - eps     # the shadow ray stops short of the light's own surface
-                    shadowed = surface_occluded(it.scene, next_cell, Ray(so[0], so[1], so[2], wl[0], wl[1], wl[2]),
-                                                eps, reach, Skip(nf, ns, it.ign_window))
-                    if not shadowed:
-                        shadowed = (ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < reach
-                                    or meshes_occluded(sm, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, reach))
-                    if not shadowed:
-                        w = power_heuristic(pl, pf) / pl
-                        L0 += tp0 * f0 * lr * w
-                        L1 += tp1 * f1 * lg * w
-                        L2 += tp2 * f2 * lb * w
         # scatter: the next direction, the throughput, Russian roulette from event rr_depth on
         step = continue_path(mat, ctx, t_tan, n, wi, depth + 1 >= it.rr_depth, seed, key, base, (tp0, tp1, tp2), wo)
         if not step.alive:
