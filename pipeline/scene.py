@@ -10,12 +10,12 @@ against its schema), ``lights[i].type``, ``render.method`` (the renderer registr
 directory. ``load_scene`` returns a :class:`Scene` whose sections are plain dicts with
 defaults filled in; ``camera_array`` packs the camera for the render kernels.
 
-``[[meshes]]`` (surfaces besides the cloth): each an OBJ file (checked to exist when the scene is read;
-its lines when a renderer reads it, ``pipeline.render_setup.load_scene_meshes``), a material (``lambert`` with an
-albedo, and an ``emission``: a mesh that emits is an area light)
-and a placement (``transform``: translate, a rotation by axis and degrees or a 3 x 3 matrix checked to be
-one, a uniform scale), read into ``Scene.meshes`` as dicts with ``name``, ``file`` (absolute), ``albedo``
-and ``emission`` (rgb) and ``matrix`` (3 x 4: the scaled rotation, then the translation; ``placement``).
+``[[meshes]]`` (surfaces besides the cloth): each an OBJ file (checked to exist when the scene is read; its
+lines when a renderer reads it, ``pipeline.render_setup.load_scene_meshes``), a material (``lambert`` with an
+albedo, and an ``emission``: a mesh that emits is an area light) and a placement (``transform``: translate, a
+rotation by axis and degrees or a 3 x 3 matrix checked to be one, a uniform scale), read into ``Scene.meshes``
+as dicts with ``name``, ``file`` (absolute), ``albedo`` and ``emission`` (rgb) and ``matrix`` (3 x 4: the
+scaled rotation, then the translation; ``placement``).
 """
 from __future__ import annotations
 

@@ -23,10 +23,10 @@ power heuristic against ``area_light_pdf`` (the same density), or fully when no 
 lights before it (a camera ray).
 
 Queries: ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a miss) and ``meshes_occluded`` (shadow rays),
-inlined into the integrator's loop so that a scene without meshes pays no call; the rest are plain calls,
-compiled once for every integrator (inlined, they cost each integrator's compile time and bought nothing
-measurable):  ``facing_normal_into`` (the unit normal of triangle ``tri``
-facing against the ray direction d), ``mesh_albedo_into`` (the Lambertian albedo of triangle ``tri``'s mesh).
+inlined into the integrator's loop so that a scene without meshes pays no call; ``facing_normal_into`` (the
+unit normal of triangle ``tri`` facing against the ray direction d), ``mesh_albedo_into`` (the Lambertian
+albedo of the mesh ``tri`` belongs to) and the area lights' kernels are plain calls, compiled once for every
+integrator (inlined, they cost each integrator's compile time and bought nothing measurable).
 """
 import math
 from collections import namedtuple
