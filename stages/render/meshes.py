@@ -8,12 +8,14 @@ the side the ray came from, so a wall lit from behind is dark on the camera's si
 pass through it.
 
 ``SceneMeshes`` fields: ``mesh`` (TriangleMesh), ``mat_of_tri`` (T,) int32, ``mats`` (NM, MAT_SIZE),
-``enabled`` (False for a scene without meshes: the queries answer "nothing" without a call, so a
-mesh-free render runs the code it ran before meshes existed), and the area lights: ``emission`` (NM, 3)
-the radiance each mesh emits (from both sides, the same in every direction; 0: not a light),
-``emitters`` (E,) int64 the emissive triangles (indices into F), ``emit_cdf`` (E + 1,) their cumulative
-share of the emissive area, ``emit_area`` that area, ``has_emitters``. ``no_meshes()`` is the empty value
-(the same numba type as a scene's, so an integrator compiles once).
+``enabled`` (True), and the area lights: ``emission`` (NM, 3) the radiance each mesh emits (from both
+sides, the same in every direction; 0: not a light), ``emitters`` (E,) int64 the emissive triangles
+(indices into F), ``emit_cdf`` (E + 1,) their cumulative share of the emissive area, ``emit_area`` that
+area, ``has_emitters``. A scene without meshes passes ``no_meshes()``, a ``NoMeshes`` (``enabled`` and
+``has_emitters`` False, one unused material row, so that ``mats[mat_of_tri[tri]]`` types for both): every
+query below is a stub answered per class (``stages.core.dispatch``), and for
+``NoMeshes`` it is a constant, so an integrator of a mesh-free scene compiles no mesh code at all and runs
+what it ran before meshes existed; a scene with meshes compiles the integrator once more, for ``SceneMeshes``.
 
 Area lights (emissive meshes; Pharr, Jakob, Humphreys, *PBR* 4th ed. §12.2 and §13.4): next-event estimation
 picks an emissive triangle by area and a point uniformly on it (``area_light_sample_into``: radiance,
@@ -22,24 +24,26 @@ light); a ray that hits an emitter by chance receives its radiance (``emitted_ra
 power heuristic against ``area_light_pdf`` (the same density), or fully when no vertex sampled the
 lights before it (a camera ray).
 
-Queries: ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a miss) and ``meshes_occluded`` (shadow rays),
-inlined into the integrator's loop so that a scene without meshes pays no call; ``facing_normal_into`` (the
-unit normal of triangle ``tri`` facing against the ray direction d), ``mesh_albedo_into`` (the Lambertian
-albedo of the mesh ``tri`` belongs to) and the area lights' kernels are plain calls, compiled once for every
-integrator (inlined, they cost each integrator's compile time and bought nothing measurable).
+Queries: ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a miss), ``meshes_occluded`` (shadow rays),
+``facing_normal_into`` (the unit normal of triangle ``tri`` facing against the ray direction d),
+``mesh_albedo_into`` (the Lambertian albedo of the mesh ``tri`` belongs to) and the area lights' kernels;
+for ``SceneMeshes`` each is a plain call, compiled once for every integrator.
 """
 import math
 from collections import namedtuple
 
 import numpy as np
 from numba import njit
+from numba.extending import overload
 
+from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.triangles import TriangleHit, build_triangle_mesh, mesh_intersect, mesh_occluded
 from stages.core.shading.material import MAT_SIZE, material_lambert_albedo
 from stages.render.lights import cdf_find
 
 SceneMeshes = namedtuple("SceneMeshes", ["mesh", "mat_of_tri", "mats", "enabled", "emission", "emitters",
                                          "emit_cdf", "emit_area", "has_emitters"])
+NoMeshes = namedtuple("NoMeshes", ["enabled", "has_emitters", "mats", "mat_of_tri"])
 
 
 def triangle_areas(V, F) -> np.ndarray:
@@ -67,23 +71,63 @@ def scene_meshes(V, F, mat_of_tri, mats, emission=None) -> SceneMeshes:
                        emitters.astype(np.int64), cdf, total, total > 0.0)
 
 
-def no_meshes() -> SceneMeshes:
+def no_meshes() -> NoMeshes:
     """A scene without meshes (module doc)."""
-    return scene_meshes(np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.int32), np.zeros((1, MAT_SIZE)))
+    return NoMeshes(False, False, np.zeros((1, MAT_SIZE)), np.zeros(1, np.int32))
 
 
-@njit(cache=True, inline="always")
+NUMBA_ONLY = "only callable from numba-compiled code"
+
+
+# the queries every integrator calls (module doc): stubs, each answered below for SceneMeshes and NoMeshes
 def meshes_hit(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """The nearest triangle along the ray in (tmin, tmax) (``TriangleHit``; tri -1 on a miss)."""
-    if not sm.enabled:
-        return TriangleHit(np.inf, -1, 0.0, 0.0)
+    """The nearest triangle along the ray in (tmin, tmax) (``TriangleHit``; t inf, tri -1 on a miss)."""
+    raise TypeError(NUMBA_ONLY)
+
+
+def meshes_occluded(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    """True when a triangle lies along the ray in (tmin, tmax)."""
+    raise TypeError(NUMBA_ONLY)
+
+
+def facing_normal_into(sm, tri, dx, dy, dz, n):
+    """Write into n the unit geometric normal of triangle ``tri`` (an index into the mesh's F) on the side
+    a ray of direction d arrives from (n . d <= 0)."""
+    raise TypeError(NUMBA_ONLY)
+
+
+def mesh_albedo_into(sm, tri, out):
+    """Write into out the Lambertian albedo (rgb) of the mesh triangle ``tri`` belongs to."""
+    raise TypeError(NUMBA_ONLY)
+
+
+def emitted_radiance(sm, tri):
+    """(r, g, b): the radiance triangle ``tri``'s mesh emits (0 for a mesh that is not a light)."""
+    raise TypeError(NUMBA_ONLY)
+
+
+def area_light_pdf(sm, tri, t, dx, dy, dz):
+    """The solid-angle density with which ``area_light_sample_into`` picks the point at distance t along the
+    unit direction d on emissive triangle ``tri``: t^2 / (|cos| A), A the emissive area."""
+    raise TypeError(NUMBA_ONLY)
+
+
+def area_light_sample_into(sm, px, py, pz, u0, u1, u2, w):
+    """A point on the emissive triangles seen from p: an emitter picked by area (u0), a point uniform on it
+    (u1, u2); the unit direction towards it into w. Returns (r, g, b, pdf, dist): the radiance it emits
+    towards p, the solid-angle pdf (0 when the point cannot be used) and its distance."""
+    raise TypeError(NUMBA_ONLY)
+
+
+# ---- the kernels of SceneMeshes (their docs: the stubs above) --------------------------------------------
+@njit(cache=True)
+def _meshes_hit(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
     return mesh_intersect(sm.mesh, ox, oy, oz, dx, dy, dz, tmin, tmax)
 
 
-@njit(cache=True, inline="always")
-def meshes_occluded(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
-    """True when a triangle lies along the ray in (tmin, tmax)."""
-    return sm.enabled and mesh_occluded(sm.mesh, ox, oy, oz, dx, dy, dz, tmin, tmax)
+@njit(cache=True)
+def _meshes_occluded(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    return mesh_occluded(sm.mesh, ox, oy, oz, dx, dy, dz, tmin, tmax)
 
 
 @njit(cache=True)
@@ -108,9 +152,7 @@ def _unit_normal(sm, tri):
 
 
 @njit(cache=True)
-def facing_normal_into(sm, tri, dx, dy, dz, n):
-    """Write into n the unit geometric normal of triangle ``tri`` (an index into the mesh's F) on the side
-    a ray of direction d arrives from (n . d <= 0)."""
+def _facing_normal_into(sm, tri, dx, dy, dz, n):
     nx, ny, nz = _unit_normal(sm, tri)
     if nx * dx + ny * dy + nz * dz > 0.0:
         nx = -nx
@@ -122,24 +164,20 @@ def facing_normal_into(sm, tri, dx, dy, dz, n):
 
 
 @njit(cache=True)
-def mesh_albedo_into(sm, tri, out):
-    """Write into out the Lambertian albedo (rgb) of the mesh triangle ``tri`` belongs to."""
+def _mesh_albedo_into(sm, tri, out):
     a = material_lambert_albedo(sm.mats[sm.mat_of_tri[tri]])
     for k in range(3):
         out[k] = a[k]
 
 
 @njit(cache=True)
-def emitted_radiance(sm, tri):
-    """(r, g, b): the radiance triangle ``tri``'s mesh emits (0 for a mesh that is not a light)."""
+def _emitted_radiance(sm, tri):
     row = sm.mat_of_tri[tri]
     return sm.emission[row, 0], sm.emission[row, 1], sm.emission[row, 2]
 
 
 @njit(cache=True)
-def area_light_pdf(sm, tri, t, dx, dy, dz):
-    """The solid-angle density with which ``area_light_sample_into`` picks the point at distance t along the
-    unit direction d on emissive triangle ``tri``: t^2 / (|cos| A), A the emissive area."""
+def _area_light_pdf(sm, tri, t, dx, dy, dz):
     nx, ny, nz = _unit_normal(sm, tri)
     c = abs(nx * dx + ny * dy + nz * dz)
     if c <= 0.0:
@@ -148,10 +186,7 @@ def area_light_pdf(sm, tri, t, dx, dy, dz):
 
 
 @njit(cache=True)
-def area_light_sample_into(sm, px, py, pz, u0, u1, u2, w):
-    """A point on the emissive triangles seen from p: an emitter picked by area (u0), a point uniform on it
-    (u1, u2); the unit direction towards it into w. Returns (r, g, b, pdf, dist): the radiance it emits
-    towards p, the solid-angle pdf (0 when the point cannot be used) and its distance."""
+def _area_light_sample_into(sm, px, py, pz, u0, u1, u2, w):
     j = cdf_find(sm.emit_cdf, u0)
     tri = sm.emitters[j]
     V = sm.mesh.vertices
@@ -175,8 +210,66 @@ def area_light_sample_into(sm, px, py, pz, u0, u1, u2, w):
     w[0] = dx / dist
     w[1] = dy / dist
     w[2] = dz / dist
-    pdf = area_light_pdf(sm, tri, dist, w[0], w[1], w[2])
+    pdf = _area_light_pdf(sm, tri, dist, w[0], w[1], w[2])
     if pdf <= 0.0:
         return 0.0, 0.0, 0.0, 0.0, 0.0
-    r, g, bl = emitted_radiance(sm, tri)
+    r, g, bl = _emitted_radiance(sm, tri)
     return r, g, bl, pdf, dist
+
+
+# ---- the stubs' answers: the kernels above for SceneMeshes, constants for NoMeshes ----------------------
+@overload(meshes_hit, inline="always")
+def _ov_meshes_hit(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, ox, oy, oz, dx, dy, dz, tmin, tmax: _meshes_hit(sm, ox, oy, oz, dx, dy, dz, tmin, tmax)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, ox, oy, oz, dx, dy, dz, tmin, tmax: TriangleHit(np.inf, -1, 0.0, 0.0)
+
+
+@overload(meshes_occluded, inline="always")
+def _ov_meshes_occluded(sm, ox, oy, oz, dx, dy, dz, tmin, tmax):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, ox, oy, oz, dx, dy, dz, tmin, tmax: _meshes_occluded(sm, ox, oy, oz, dx, dy, dz, tmin,
+                                                                               tmax)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, ox, oy, oz, dx, dy, dz, tmin, tmax: False
+
+
+@overload(facing_normal_into, inline="always")
+def _ov_facing_normal_into(sm, tri, dx, dy, dz, n):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, tri, dx, dy, dz, n: _facing_normal_into(sm, tri, dx, dy, dz, n)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, tri, dx, dy, dz, n: None
+
+
+@overload(mesh_albedo_into, inline="always")
+def _ov_mesh_albedo_into(sm, tri, out):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, tri, out: _mesh_albedo_into(sm, tri, out)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, tri, out: None
+
+
+@overload(emitted_radiance, inline="always")
+def _ov_emitted_radiance(sm, tri):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, tri: _emitted_radiance(sm, tri)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, tri: (0.0, 0.0, 0.0)
+
+
+@overload(area_light_pdf, inline="always")
+def _ov_area_light_pdf(sm, tri, t, dx, dy, dz):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, tri, t, dx, dy, dz: _area_light_pdf(sm, tri, t, dx, dy, dz)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, tri, t, dx, dy, dz: 0.0
+
+
+@overload(area_light_sample_into, inline="always")
+def _ov_area_light_sample_into(sm, px, py, pz, u0, u1, u2, w):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, px, py, pz, u0, u1, u2, w: _area_light_sample_into(sm, px, py, pz, u0, u1, u2, w)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, px, py, pz, u0, u1, u2, w: (0.0, 0.0, 0.0, 0.0, 0.0)
