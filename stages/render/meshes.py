@@ -27,7 +27,8 @@ lights before it (a camera ray).
 Queries: ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a miss), ``meshes_occluded`` (shadow rays),
 ``facing_normal_into`` (the unit normal of triangle ``tri`` facing against the ray direction d),
 ``mesh_albedo_into`` (the Lambertian albedo of the mesh ``tri`` belongs to) and the area lights' kernels;
-for ``SceneMeshes`` each is a plain call, compiled once for every integrator.
+for ``SceneMeshes`` each is a plain call, compiled once for every integrator. ``nee_light_sample_into``: light k
+of next-event estimation, a distant light or (k = NL) the area lights, for the integrators that sample each light.
 """
 import math
 from collections import namedtuple
@@ -38,12 +39,14 @@ from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.triangles import TriangleHit, build_triangle_mesh, mesh_intersect, mesh_occluded
+from stages.core.rng import uniform
 from stages.core.shading.material import MAT_SIZE, material_lambert_albedo
-from stages.render.lights import cdf_find
+from stages.render.lights import cdf_find, light_sample_into
 
 SceneMeshes = namedtuple("SceneMeshes", ["mesh", "mat_of_tri", "mats", "enabled", "emission", "emitters",
                                          "emit_cdf", "emit_area", "has_emitters"])
 NoMeshes = namedtuple("NoMeshes", ["enabled", "has_emitters", "mats", "mat_of_tri"])
+LightSample = namedtuple("LightSample", ["r", "g", "b", "pdf", "delta", "dist"])
 
 
 def triangle_areas(V, F) -> np.ndarray:
@@ -215,6 +218,22 @@ def _area_light_sample_into(sm, px, py, pz, u0, u1, u2, w):
         return 0.0, 0.0, 0.0, 0.0, 0.0
     r, g, bl = _emitted_radiance(sm, tri)
     return r, g, bl, pdf, dist
+
+
+@njit(cache=True, inline="always")
+def nee_light_sample_into(table, sm, k, px, py, pz, seed, key, dim, w):
+    """Light k's sample for next-event estimation from p, its direction into w (``LightSample``: radiance, pdf,
+    delta, distance): k below the number NL of distant lights of ``table`` (a ``LightTable``), that light, its two
+    random numbers at dimensions dim and dim + 1; k = NL, a point on the area lights, at dim .. dim + 2. With
+    dim = first + 2 k, the area lights' three dimensions follow the distant lights' pairs. A distant light's
+    distance is inf."""
+    if k < table.lights.shape[0]:
+        r, g, b, pdf, delta = light_sample_into(table.lights, k, table.env, table.marginal, table.conditional,
+                                                uniform(seed, key, dim), uniform(seed, key, dim + 1), w)
+        return LightSample(r, g, b, pdf, delta, np.inf)
+    r, g, b, pdf, dist = area_light_sample_into(sm, px, py, pz, uniform(seed, key, dim), uniform(seed, key, dim + 1),
+                                                uniform(seed, key, dim + 2), w)
+    return LightSample(r, g, b, pdf, False, dist)
 
 
 # ---- the stubs' answers: the kernels above for SceneMeshes, constants for NoMeshes ----------------------

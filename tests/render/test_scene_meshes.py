@@ -88,7 +88,9 @@ def _render(cli, tmp_path, scene, name, *args, method="fiberpath"):
     return read_exr(out)
 
 
-METHODS = ["fiberpath", "bysdf", "volpath"]
+# fiberpath in make test; bysdf and volpath compile their integrators once more for a scene with meshes (about
+# 45 s each on a cold cache), so their cases run in make test-all
+METHODS = ["fiberpath", pytest.param("bysdf", marks=pytest.mark.slow), pytest.param("volpath", marks=pytest.mark.slow)]
 DIRECT = {"fiberpath": 1, "bysdf": 1, "volpath": 2}   # max_depth of direct light only (volpath counts segments)
 
 

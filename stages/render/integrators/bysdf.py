@@ -86,15 +86,15 @@ from stages.core.yarn.tubes import (
 )
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import add_escaped_radiance, light_sample_into
+from stages.render.lights import add_escaped_radiance
 from stages.render.meshes import (
     area_light_pdf,
-    area_light_sample_into,
     emitted_radiance,
     facing_normal_into,
     mesh_albedo_into,
     meshes_hit,
     meshes_occluded,
+    nee_light_sample_into,
 )
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
@@ -205,26 +205,15 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
     26 parameters: the vertex's random stream, point and skip, the throughput and radiance, and the side's whole
     shading state (``side_eval_pdf``'s) as ``trace_path`` holds it in its own scratch arrays."""
     lights = it.lights.lights
-    env = it.lights.env
-    marg = it.lights.marginal
-    cond = it.lights.conditional
     wl = stack_vector3()
     wlk = stack_vector3()
     rays = 0
     nl = lights.shape[0]
     n_nee = nl + 1 if it.meshes.has_emitters else nl    # the area lights are one more light (light nl)
-    a = base + EVENT_DIMS + 2 * nl
     for k in range(n_nee):
-        reach = np.inf
-        if k < nl:
-            lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
-                                                      uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                      uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
-        else:
-            lr, lg, lb, pl, dist = area_light_sample_into(it.meshes, sx, sy, sz, uniform(seed, key, a),
-                                                          uniform(seed, key, a + 1), uniform(seed, key, a + 2), wlk)
-            delta = False
-            reach = dist - it.eps     # the shadow ray stops short of the light's own surface
+        lr, lg, lb, pl, delta, dist = nee_light_sample_into(it.lights, it.meshes, k, sx, sy, sz, seed, key,
+                                                            base + EVENT_DIMS + 2 * k, wlk)
+        reach = dist - it.eps     # a shadow ray to an area light stops short of its surface (inf: distant)
         if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
             continue
         yarn_dir(fr, wlk, wl)
@@ -248,9 +237,6 @@ def next_event(it, fr, seed, key, base, sx, sy, sz, ign_y, ign_s, tp, L, side_w,
 def trace_path(it, o, d, seed, key):
     """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
     lights = it.lights.lights
-    env = it.lights.env
-    marg = it.lights.marginal
-    cond = it.lights.conditional
     nl = lights.shape[0]
     sm = it.meshes
     area_dim = EVENT_DIMS + 2 * nl     # the area lights' three dimensions follow the distant lights' pairs
@@ -346,17 +332,9 @@ def trace_path(it, o, d, seed, key):
             sy = py + it.eps * gn[1]
             sz = pz + it.eps * gn[2]
             for k in range(n_nee):   # one sample per light, one point on the area lights (light nl)
-                reach = np.inf
-                if k < nl:
-                    lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
-                                                              uniform(seed, key, base + EVENT_DIMS + 2 * k),
-                                                              uniform(seed, key, base + EVENT_DIMS + 1 + 2 * k), wlk)
-                else:
-                    lr, lg, lb, pl, dist = area_light_sample_into(sm, sx, sy, sz, uniform(seed, key, base + area_dim),
-                                                                  uniform(seed, key, base + area_dim + 1),
-                                                                  uniform(seed, key, base + area_dim + 2), wlk)
-                    delta = False
-                    reach = dist - it.eps
+                lr, lg, lb, pl, delta, dist = nee_light_sample_into(it.lights, sm, k, sx, sy, sz, seed, key,
+                                                                    base + EVENT_DIMS + 2 * k, wlk)
+                reach = dist - it.eps
                 if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                     continue
                 f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)

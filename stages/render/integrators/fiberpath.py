@@ -58,7 +58,6 @@ from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import Skip, surface_hit, surface_occluded
 from stages.core.geometry.wide_walk import Ray
-from stages.core.rng import uniform
 from stages.core.sampling import continue_path, power_heuristic
 from stages.core.shading.material import (
     CTX_SIZE,
@@ -68,14 +67,14 @@ from stages.core.shading.material import (
 )
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
-from stages.render.lights import add_escaped_radiance, light_sample_into
+from stages.render.lights import add_escaped_radiance
 from stages.render.meshes import (
     area_light_pdf,
-    area_light_sample_into,
     emitted_radiance,
     facing_normal_into,
     meshes_hit,
     meshes_occluded,
+    nee_light_sample_into,
 )
 
 FiberpathIntegrator = namedtuple("FiberpathIntegrator", [
@@ -91,9 +90,6 @@ ON_MESH = 2
 def _trace(it, o, d, seed, key):
     """``PathSample`` of the camera ray (o, d) of camera sample ``key`` (see the module doc)."""
     lights = it.lights.lights
-    env = it.lights.env
-    marg = it.lights.marginal
-    cond = it.lights.conditional
     eps = it.eps
     nl = lights.shape[0]
     sm = it.meshes
@@ -196,18 +192,9 @@ def _trace(it, o, d, seed, key):
         base = 2 + depth * dims_per_bounce
         # next-event estimation: one sample per light, and one point on the area lights (light nl)
         for k in range(n_nee):
-            reach = np.inf
-            if k < nl:
-                lr, lg, lb, pl, delta = light_sample_into(lights, k, env, marg, cond,
-                                                          uniform(seed, key, base + 4 + 2 * k),
-                                                          uniform(seed, key, base + 5 + 2 * k), wl)
-            else:
-                lr, lg, lb, pl, dist = area_light_sample_into(sm, so[0], so[1], so[2],
-                                                              uniform(seed, key, base + area_dim),
-                                                              uniform(seed, key, base + area_dim + 1),
-                                                              uniform(seed, key, base + area_dim + 2), wl)
-                delta = False
-                reach = dist - eps     # the shadow ray stops short of the light's own surface
+            lr, lg, lb, pl, delta, dist = nee_light_sample_into(it.lights, sm, k, so[0], so[1], so[2], seed, key,
+                                                                base + 4 + 2 * k, wl)
+            reach = dist - eps     # a shadow ray to an area light stops short of its surface (inf: distant)
             if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                 continue
             f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
