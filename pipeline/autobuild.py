@@ -95,12 +95,12 @@ def _file_sha(path) -> str:
 def yarns_identity(scene) -> dict:
     """What ingest makes of the scene: its ``ingest_identity`` (less the scene's name) and the fabric table
     (a fabric file by its bytes, not its path)."""
-    from .scene import ingest_identity
+    from .scene import ingest_identity, without_file_names
 
     ident = ingest_identity(scene)
-    fabric = {k: v for k, v in scene.fabric.items() if k != "path"}
-    ident["fabric"] = {k: v for k, v in ident["fabric"].items() if k != "file"}
-    return {"fabric_table": fabric, "fabric": ident["fabric"], "yarns": ident["yarns"]}
+    tables = [{k: v for k, v in p.fabric.items() if k != "path"} for p in scene.parts]
+    fabric = tables[0] if scene.parts[0].key == "fabric" else tables
+    return {"fabric_table": fabric, "fabric": without_file_names(ident["fabric"]), "yarns": ident["yarns"]}
 
 
 def tiling_files(cfg: dict) -> dict:

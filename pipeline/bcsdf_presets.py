@@ -46,9 +46,10 @@ def load_bcsdf_preset(name: str) -> np.ndarray:
 
 
 def check_bcsdf_names(scene, options) -> None:
-    """Every BCSDF preset the scene names (``yarns.<group>.bcsdf``, a ``.toml`` path resolved against the
+    """Every BCSDF preset the scene names (``yarns.<group>.bcsdf`` of each fabric, a ``.toml`` path resolved against the
     scene) and ``--bcsdf`` exists and is valid, whether or not a yarn of the fabric uses it."""
-    named = [(f"yarns.{g}.bcsdf", t["bcsdf"]) for g, t in sorted(scene.yarns.items()) if t.get("bcsdf")]
+    named = [(f"{part.yarns_key}.{g}.bcsdf", t["bcsdf"]) for part in scene.parts
+             for g, t in sorted(part.yarns.items()) if t.get("bcsdf")]
     for place, name in named:
         try:
             read_bcsdf_preset(str(scene.resolve(name)) if name.endswith(".toml") else name)

@@ -306,16 +306,20 @@ class Dyer:
         self.unreachable: dict = {}
 
     def geometry(self, group: str) -> dict:
-        """The resolved yarn preset of ``group`` (``yarns.<group>``, else ``default``; a group the scene does
-        not describe takes the scene's one described group when there is one)."""
+        """The resolved yarn preset of ``group``, a yarn type's label (``pipeline.scene``: ``yarns.<group>``,
+        else ``default``; a group its fabric does not describe takes the fabric's one described group when
+        there is one)."""
         if group not in self._geometry:
             from .presets import resolve_yarn_types
+            from .scene import merged_yarn_type
 
-            yarns = getattr(self.scene, "yarns", None) or {}
-            t = self.scene.yarn_type(group) if self.scene is not None else {}
-            described = [g for g in yarns if g != "default"]
-            if group not in yarns and "default" not in yarns and len(described) == 1:
-                t = self.scene.yarn_type(described[0])
+            t = {}
+            if self.scene is not None:
+                yarns, g = self.scene.yarns_of(group)
+                t = merged_yarn_type(yarns, g)
+                described = [k for k in yarns if k != "default"]
+                if g not in yarns and "default" not in yarns and len(described) == 1:
+                    t = merged_yarn_type(yarns, described[0])
             t = {k: v for k, v in t.items() if k not in ("color", "bcsdf")}
             self._geometry[group] = resolve_yarn_types([t], [0.0], file=getattr(self.scene, "path", None))[0]
         return self._geometry[group]
@@ -339,5 +343,6 @@ class Dyer:
         from .progress import warn
 
         for (name, group), floor in sorted(self.unreachable.items()):
-            warn(f"yarns.{group}: a colour below {floor:.3f} in some channel is darker than the {name or 'BCSDF'} "
+            where = self.scene.type_place(group) if self.scene is not None else f"yarns.{group}"
+            warn(f"{where}: a colour below {floor:.3f} in some channel is darker than the {name or 'BCSDF'} "
                  f"fibres' uncoloured surface reflection lets a yarn be; rendered at that floor")

@@ -23,6 +23,7 @@ import numpy as np
 from .errors import LoomError
 
 GROUP_NAMES = ("warp", "weft", "knit", "other")
+OTHER = GROUP_NAMES.index("other")   # the yarn type of yarns of unknown type (the first fabric's 'other')
 
 # Rays leaving a BCSDF vertex skip the whole fibre they leave (a window of segments wider than any
 # fibre): the curve BCSDF already integrates over the fibre's cross-section, and a ray that travels
@@ -102,7 +103,7 @@ class Fibers:
     fiber_offsets: np.ndarray  # (F + 1,) int64
     fiber_yarn: np.ndarray     # (F,) int32
     yarn_albedo: np.ndarray    # (Y, 3) float64
-    yarn_group: np.ndarray | None  # (Y,) group index per yarn (0 warp, 1 weft, 2 knit, 3 other) when known
+    yarn_type: np.ndarray | None  # (Y,) yarn type per yarn (pipeline.scene: fabric * 4 + group) when known
 
     @property
     def n_fibers(self) -> int:
@@ -110,7 +111,7 @@ class Fibers:
 
 
 def fibers_from_arrays(points, point_radius, fiber_offsets, fiber_yarn=None, yarn_albedo=None,
-                       yarn_group=None, path: str | Path = "<arrays>") -> Fibers:
+                       yarn_type=None, path: str | Path = "<arrays>") -> Fibers:
     """Check fibre arrays (as in a ``fibers`` artifact) and return them as ``Fibers``."""
     path = Path(path)
     points = np.asarray(points, np.float64).reshape(-1, 3)
@@ -140,7 +141,7 @@ def fibers_from_arrays(points, point_radius, fiber_offsets, fiber_yarn=None, yar
         raise LoomError(path, "fiber_yarn", "yarn indices must be in [0, number of yarns)")
     if np.any(yarn_albedo < 0) or np.any(yarn_albedo > 1):
         raise LoomError(path, "yarn_albedo", "albedo outside [0, 1]")
-    return Fibers(path, points, point_radius, off, fiber_yarn, yarn_albedo, yarn_group)
+    return Fibers(path, points, point_radius, off, fiber_yarn, yarn_albedo, yarn_type)
 
 
 # The command that builds each kind of artifact from its recorded inputs (what to run again).
@@ -175,22 +176,26 @@ def recorded_input(art, name: str, kind: str | None = None):
                         "artifact") from None
 
 
-def input_yarn_groups(art) -> np.ndarray | None:
-    """The yarn group of every yarn (0 warp, 1 weft, 2 knit, 3 other) from the yarns artifact an
-    artifact was built from (its ``inputs.yarns``: refused, naming ``art``, when that is gone or
-    unreadable, ``recorded_input``); None when it records none (arrays written by other means)."""
+def input_yarn_types(art) -> np.ndarray | None:
+    """The yarn type of every yarn (``pipeline.scene``: fabric * 4 + group, the group's index -- 0 warp,
+    1 weft, 2 knit, 3 other -- for one fabric) from the yarns artifact an artifact was built from (its
+    ``inputs.yarns``: refused, naming ``art``, when that is gone or unreadable, ``recorded_input``); None
+    when it records none (arrays written by other means)."""
     from .artifacts import Artifact
 
     yarns = recorded_input(art, "yarns", "yarns")
-    if yarns is not None:
-        return np.asarray(yarns["group"], np.int64) if "group" in yarns else None
-    for inp in art.meta.get("inputs", {}).values():
-        try:
-            src = Artifact(inp["path"])
-        except LoomError:
-            continue
-        if src.kind == "yarns" and "group" in src:
-            return np.asarray(src["group"], np.int64)
+    if yarns is None:
+        for inp in art.meta.get("inputs", {}).values():
+            try:
+                src = Artifact(inp["path"])
+            except LoomError:
+                continue
+            if src.kind == "yarns":
+                yarns = src
+                break
+    for name in ("yarn_type", "group"):
+        if yarns is not None and name in yarns:
+            return np.asarray(yarns[name], np.int64)
     return None
 
 
@@ -200,10 +205,10 @@ def load_fibers(path: str | Path) -> Fibers:
 
     path = Path(path)
     art = Artifact(path, kind="fibers")
-    group = input_yarn_groups(art)
+    types = input_yarn_types(art)
     albedo = art["yarn_albedo"] if "yarn_albedo" in art else None
     yarn = art["fiber_yarn"] if "fiber_yarn" in art else None
-    return fibers_from_arrays(art["points"], art["point_radius"], art["fiber_offsets"], yarn, albedo, group, path)
+    return fibers_from_arrays(art["points"], art["point_radius"], art["fiber_offsets"], yarn, albedo, types, path)
 
 
 def ground_array(render: dict) -> tuple[np.ndarray, bool]:
@@ -252,6 +257,8 @@ def load_scene_meshes(scene):
 
 # ------------------------------------------------------------------------------------------------
 def _describe_fabric(f: dict) -> str:
+    if "fabrics" in f:
+        return "; ".join(f"{x.get('name')}: {_describe_fabric(x)}" for x in f["fabrics"])
     if f.get("source") == "generator":
         g = f.get("generator") or {}
         return "generator " + ", ".join(f"{k} = {g[k]}" for k in sorted(g))
@@ -273,7 +280,7 @@ def check_scene_matches(scene, path, option: str) -> None:
     those groups (a scene that states none leaves it open). An artifact that records no identity
     (made from arrays by hand, a tiling, whose exemplars come from its tile config) is not compared."""
     from .artifacts import Artifact, jsonable
-    from .scene import ingest_identity
+    from .scene import ingest_identity, without_file_names
 
     art = Artifact(path)
     rec = art.summary.get("ingest_identity")
@@ -283,16 +290,22 @@ def check_scene_matches(scene, path, option: str) -> None:
     made = f"{Path(path).name} (--{option}, made from {rec.get('scene') or rec['fabric'].get('file')})"
     rerun = {"fibers": " and realize", "tables": " and tables"}.get(art.kind, "")
     fix = "render the scene it was made from, or re-run ingest" + rerun + " on this scene"
-    strip = lambda f: {k: v for k, v in f.items() if k != "file"}  # noqa: E731  (a renamed copy is the same file)
-    if strip(mine["fabric"]) != strip(rec["fabric"]):
-        raise LoomError(scene.path, "fabric", f"the scene's fabric ({_describe_fabric(mine['fabric'])}) is not the one "
+    def place(label):
+        try:
+            return scene.type_place(label)
+        except KeyError:    # a label of another scene's fabric
+            return f"yarns.{label}"
+
+    if without_file_names(mine["fabric"]) != without_file_names(rec["fabric"]):
+        key = scene.parts[0].key.partition("[")[0]    # 'fabric' or 'fabrics'
+        raise LoomError(scene.path, key, f"the scene's fabric ({_describe_fabric(mine['fabric'])}) is not the one "
                         f"{made} is made of ({_describe_fabric(rec['fabric'])}); {fix}")
     groups = rec.get("groups") or list(GROUP_NAMES)
     for g in groups:
         a, b = mine["yarns"].get(g, {}), (rec.get("yarns") or {}).get(g, {})
         for key in sorted(set(a) | set(b)):
             if a.get(key) != b.get(key):
-                raise LoomError(scene.path, f"yarns.{g}.{key}", f"the scene's {g} yarns have {key} = "
+                raise LoomError(scene.path, f"{place(g)}.{key}", f"the scene's {g} yarns have {key} = "
                                 f"{a.get(key, '(unset)')}, but {made} has {key} = {b.get(key, '(unset)')}; {fix}")
     for key in ("preset", "radius"):
         override = art.params.get(key)
@@ -301,5 +314,5 @@ def check_scene_matches(scene, path, option: str) -> None:
         for g in groups:
             stated = mine["yarns"].get(g, {}).get(key)
             if stated is not None and stated != override:
-                raise LoomError(scene.path, f"yarns.{g}.{key}", f"the scene's {g} yarns have {key} = {stated}, but "
+                raise LoomError(scene.path, f"{place(g)}.{key}", f"the scene's {g} yarns have {key} = {stated}, but "
                                 f"{made} was made with --{key} {override}; {fix}")

@@ -16,6 +16,14 @@ albedo, and an ``emission``: a mesh that emits is an area light) and a placement
 rotation by axis and degrees or a 3 x 3 matrix checked to be one, a uniform scale), read into ``Scene.meshes``
 as dicts with ``name``, ``file`` (absolute), ``albedo`` and ``emission`` (rgb) and ``matrix`` (3 x 4: the
 scaled rotation, then the translation; ``placement``).
+
+``[[fabrics]]`` (several fabrics in one scene, instead of ``[fabric]`` + ``[yarns]``): each a ``name``, a
+``fabric`` table and a ``yarns`` table as a one-fabric scene's, and a rigid ``transform``. Both forms are read
+into ``Scene.parts``, one ``FabricPart`` per fabric (``[fabric]`` is one part with no placement). A yarn type
+is a (fabric, group) pair: type ``t`` is part ``t // 4``'s group ``YARN_GROUPS[t % 4]`` -- the index ingest
+writes per yarn (``yarn_type``), the same as the group's index for one fabric -- and its **label** is the
+group (``warp``) for one fabric and ``<name>.<group>`` (``rug.warp``) for several: ``Scene.type_labels``,
+``Scene.yarn_type(label)``, ``Scene.type_place(label)`` (the key an error names).
 """
 from __future__ import annotations
 
@@ -38,24 +46,75 @@ RENDER_ONLY_YARN_KEYS = ("bcsdf",)  # yarn-type keys only the renderer reads (no
 FABRIC_SHAPE_KEYS = ("scale", "crimp", "repeat", "max_threads")  # fabric keys that change a source file's curves
 
 
+def merged_yarn_type(yarns: dict, group: str) -> dict:
+    """The yarn type of ``group`` in a yarns table, ``default`` merged under it."""
+    t = dict(yarns.get("default", {}))
+    t.update(yarns.get(group, {}))
+    return t
+
+
+@dataclass
+class FabricPart:
+    """One fabric of a scene (module doc): its source table (paths absolute), yarns table, placement."""
+    name: str                   # '' for a [fabric] scene's one fabric
+    fabric: dict
+    yarns: dict
+    matrix: np.ndarray | None   # (3, 4) rigid placement [R | t]; None: where its source puts it
+    key: str                    # its key in the scene file: 'fabric' or 'fabrics[i].fabric'
+    yarns_key: str              # 'yarns' or 'fabrics[i].yarns'
+
+
 @dataclass
 class Scene:
     path: Path
     raw: dict
     name: str
     seed: int
-    fabric: dict
-    yarns: dict = field(default_factory=dict)
+    fabric: dict                # the first (for a [fabric] scene: the one) fabric's source table
+    yarns: dict = field(default_factory=dict)      # the first fabric's yarns table
     camera: dict | None = None
     lights: list = field(default_factory=list)
     render: dict = field(default_factory=dict)
     meshes: list = field(default_factory=list)
+    parts: list = field(default_factory=list)      # FabricPart per fabric
 
-    def yarn_type(self, group: str) -> dict:
-        """The yarn type of a yarn group ('warp', 'weft', 'knit', 'other'), falling back to 'default'."""
-        t = dict(self.yarns.get("default", {}))
-        t.update(self.yarns.get(group, {}))
-        return t
+    def __post_init__(self):
+        if not self.parts:      # a Scene made by hand (tests): its one fabric
+            self.parts = [FabricPart("", self.fabric, self.yarns, None, "fabric", "yarns")]
+
+    @property
+    def several(self) -> bool:
+        """True for a [[fabrics]] scene of more than one fabric (labels name the fabric)."""
+        return len(self.parts) > 1
+
+    def type_labels(self) -> list[str]:
+        """The label of every yarn type, by type index (module doc)."""
+        if not self.several:
+            return list(YARN_GROUPS)
+        return [f"{p.name}.{g}" for p in self.parts for g in YARN_GROUPS]
+
+    def _part(self, label: str) -> tuple[FabricPart, str]:
+        name, _, group = label.rpartition(".")
+        if not name:
+            return self.parts[0], group
+        for p in self.parts:
+            if p.name == name:
+                return p, group
+        raise KeyError(label)
+
+    def yarn_type(self, label: str) -> dict:
+        """The yarn type of a label ('warp', 'rug.weft', ...; module doc), falling back to its 'default'."""
+        return merged_yarn_type(*self.yarns_of(label))
+
+    def type_place(self, label: str) -> str:
+        """The scene key of a label's yarn type: 'yarns.warp', 'fabrics[1].yarns.warp'."""
+        part, group = self._part(label)
+        return f"{part.yarns_key}.{group}"
+
+    def yarns_of(self, label: str) -> tuple[dict, str]:
+        """(the yarns table of the label's fabric, the label's group)."""
+        part, group = self._part(label)
+        return part.yarns, group
 
     def resolve(self, rel: str) -> Path:
         p = Path(rel)
@@ -96,20 +155,24 @@ def check_names(raw: dict, path: Path) -> None:
     from .renderers import METHODS, all_sources, known_methods
 
     schema = load_schema("scene")
-    fab = raw.get("fabric")
-    _named(fab, "source", schema["properties"]["fabric"]["properties"]["source"]["enum"], path, "fabric.source",
-           "fabric source")
-    gen = fab.get("generator") if isinstance(fab, dict) else None
+    fabrics = raw.get("fabrics")
+    tables = [(raw.get("fabric"), "fabric", raw.get("yarns"), "yarns")]
+    if isinstance(fabrics, list):
+        tables += [(f.get("fabric"), f"fabrics[{i}].fabric", f.get("yarns"), f"fabrics[{i}].yarns")
+                   for i, f in enumerate(fabrics) if isinstance(f, dict)]
     patterns = {"woven": WOVEN, "knit": KNIT}
-    kind = _named(gen, "kind", patterns, path, "fabric.generator.kind", "generator kind")
-    if kind:
-        _named(gen, "pattern", patterns[kind], path, "fabric.generator.pattern", f"{kind} pattern")
-    yarns = raw.get("yarns")
-    for group, t in (yarns.items() if isinstance(yarns, dict) else ()):
-        if isinstance(t, dict) and isinstance(t.get("preset"), str):
-            check_preset_name(t["preset"], path, f"yarns.{group}.preset")
-        if isinstance(t, dict) and isinstance(t.get("bcsdf"), str):
-            _check_bcsdf(t["bcsdf"], path, f"yarns.{group}.bcsdf")
+    for fab, fkey, yarns, ykey in tables:
+        _named(fab, "source", schema["$defs"]["fabric"]["properties"]["source"]["enum"], path, f"{fkey}.source",
+               "fabric source")
+        gen = fab.get("generator") if isinstance(fab, dict) else None
+        kind = _named(gen, "kind", patterns, path, f"{fkey}.generator.kind", "generator kind")
+        if kind:
+            _named(gen, "pattern", patterns[kind], path, f"{fkey}.generator.pattern", f"{kind} pattern")
+        for group, t in (yarns.items() if isinstance(yarns, dict) else ()):
+            if isinstance(t, dict) and isinstance(t.get("preset"), str):
+                check_preset_name(t["preset"], path, f"{ykey}.{group}.preset")
+            if isinstance(t, dict) and isinstance(t.get("bcsdf"), str):
+                _check_bcsdf(t["bcsdf"], path, f"{ykey}.{group}.bcsdf")
     lights = raw.get("lights")
     for i, light in enumerate(lights if isinstance(lights, list) else ()):
         _named(light, "type", schema["$defs"]["light"]["properties"]["type"]["enum"], path, f"lights[{i}].type",
@@ -168,25 +231,59 @@ def _meshes(raw: dict, path: Path) -> list[dict]:
     return out
 
 
-def load_scene(path: str | Path) -> Scene:
-    path = Path(path)
-    raw = read_toml(path, what="scene file")
-    check_names(raw, path)
-    validate(raw, "scene", path)
-    fabric = copy.deepcopy(raw["fabric"])
+def _fabric_table(fab: dict, path: Path, key: str) -> dict:
+    """A fabric source table, its path resolved and checked (``key``: where it is in the scene file)."""
+    fabric = copy.deepcopy(fab)
     src = fabric["source"]
     if src in ("file", "wif") and "path" not in fabric:
-        raise LoomError(path, "fabric.path", f"source = {src!r} needs a 'path'")
+        raise LoomError(path, f"{key}.path", f"source = {src!r} needs a 'path'")
     if src == "generator" and "generator" not in fabric:
-        raise LoomError(path, "fabric.generator", "source = 'generator' needs a [fabric.generator] table")
+        raise LoomError(path, f"{key}.generator", f"source = 'generator' needs a [{key}.generator] table")
     if "path" in fabric:
         if not Path(fabric["path"]).is_absolute():
             fabric["path"] = str((path.parent / fabric["path"]).resolve())
         what = "WIF draft" if src == "wif" else "curve file"
         if Path(fabric["path"]).is_dir():
-            raise LoomError(path, "fabric.path", f"{fabric['path']} is a directory, not a {what}")
+            raise LoomError(path, f"{key}.path", f"{fabric['path']} is a directory, not a {what}")
         if not Path(fabric["path"]).is_file():
-            raise LoomError(path, "fabric.path", f"{what} {fabric['path']} not found")
+            raise LoomError(path, f"{key}.path", f"{what} {fabric['path']} not found")
+    return fabric
+
+
+def _fabric_parts(raw: dict, path: Path) -> list[FabricPart]:
+    """The scene's fabrics (module doc): its [fabric] + [yarns], or its [[fabrics]] (names unique, placements
+    rigid)."""
+    if "fabric" in raw and "fabrics" in raw:
+        raise LoomError(path, "fabrics", "a scene has one [fabric] or several [[fabrics]], not both")
+    if "fabrics" not in raw:
+        if "fabric" not in raw:
+            raise LoomError(path, "fabric", "missing: a scene needs a [fabric] table (or [[fabrics]])")
+        return [FabricPart("", _fabric_table(raw["fabric"], path, "fabric"), copy.deepcopy(raw.get("yarns", {})),
+                           None, "fabric", "yarns")]
+    if "yarns" in raw:
+        raise LoomError(path, "yarns", "with [[fabrics]], each fabric has its own yarn types (fabrics[i].yarns)")
+    parts, seen = [], set()
+    for i, f in enumerate(raw["fabrics"]):
+        if f["name"] in seen:
+            raise LoomError(path, f"fabrics[{i}].name", f"a second fabric named {f['name']!r} (names are unique)")
+        seen.add(f["name"])
+        tf = f.get("transform")
+        if tf and tf.get("scale", 1.0) != 1.0:
+            raise LoomError(path, f"fabrics[{i}].transform.scale", "a fabric's placement is rigid: scale its source "
+                            "(fabric.scale, or the generator's spacing and yarn radius) instead")
+        parts.append(FabricPart(f["name"], _fabric_table(f["fabric"], path, f"fabrics[{i}].fabric"),
+                                copy.deepcopy(f.get("yarns", {})),
+                                placement(tf, path, f"fabrics[{i}].transform") if tf else None,
+                                f"fabrics[{i}].fabric", f"fabrics[{i}].yarns"))
+    return parts
+
+
+def load_scene(path: str | Path) -> Scene:
+    path = Path(path)
+    raw = read_toml(path, what="scene file")
+    check_names(raw, path)
+    validate(raw, "scene", path)
+    parts = _fabric_parts(raw, path)
     scene_tbl = raw.get("scene", {})
     camera = None
     if "camera" in raw:
@@ -221,20 +318,51 @@ def load_scene(path: str | Path) -> Scene:
         render["ground"] = {"height": 0.0, "albedo": [0.5, 0.5, 0.5], **render["ground"]}
         render["ground"]["albedo"] = _rgb(render["ground"]["albedo"])
     return Scene(path=path, raw=raw, name=scene_tbl.get("name", path.stem), seed=int(scene_tbl.get("seed", 0)),
-                 fabric=fabric, yarns=copy.deepcopy(raw.get("yarns", {})), camera=camera, lights=lights, render=render,
-                 meshes=_meshes(raw, path))
+                 fabric=parts[0].fabric, yarns=parts[0].yarns, camera=camera, lights=lights, render=render,
+                 meshes=_meshes(raw, path), parts=parts)
+
+
+def one_fabric(scene: Scene, file, key: str) -> Scene:
+    """``scene``, refused (at ``file``'s ``key``) when it has several fabrics: a tiling's exemplars and the
+    precomputes made from it take one fabric's yarn types."""
+    if scene.several:
+        raise LoomError(file, key, f"{scene.path.name} has several [[fabrics]]; a tiling and its precomputes take "
+                        "the yarn types of a scene of one fabric")
+    return scene
 
 
 def ingest_identity(scene: Scene) -> dict:
     """What of a scene its ``yarns`` artifact (and the tables and fibres made from that) is made of:
-    ``fabric`` -- the source, the source file by its sha256 (its name kept for messages) and the
-    keys that reshape its curves, or the generator table -- and ``yarns`` -- every group's yarn type
+    ``fabric`` -- ``fabric_identity`` of its source (of a [[fabrics]] scene: ``{"fabrics": [...]}``, each
+    fabric's name, source and placement) -- and ``yarns`` -- every yarn type by its label
     (``yarns.default`` merged in) without the keys only the renderer reads (``bcsdf``). Recorded by
     ingest in the artifact's summary, carried by tables and realize, compared by render
     (``pipeline.render_setup.check_scene_matches``)."""
+    if scene.parts[0].key == "fabric":
+        fabric = fabric_identity(scene.fabric)
+    else:       # [[fabrics]]: each by its name, source and placement
+        fabric = {"fabrics": [{"name": p.name, **fabric_identity(p.fabric),
+                               "placement": None if p.matrix is None else p.matrix.tolist()} for p in scene.parts]}
+    yarns = {}
+    for label in scene.type_labels():
+        t = {k: v for k, v in scene.yarn_type(label).items() if k not in RENDER_ONLY_YARN_KEYS}
+        if t:
+            yarns[label] = t
+    return {"scene": scene.path.name, "fabric": fabric, "yarns": yarns}
+
+
+def without_file_names(ident: dict) -> dict:
+    """An ``ingest_identity``'s fabric less its files' names (a renamed copy is the same file: its sha256)."""
+    if "fabrics" in ident:
+        return {"fabrics": [without_file_names(x) for x in ident["fabrics"]]}
+    return {k: v for k, v in ident.items() if k != "file"}
+
+
+def fabric_identity(fab: dict) -> dict:
+    """What of a fabric source table shapes its curves: the generator table, or the file by its sha256 (its
+    name kept for messages) and the keys that reshape it."""
     from .artifacts import sha256_file
 
-    fab = scene.fabric
     fabric = {"source": fab["source"]}
     if fab["source"] == "generator":
         fabric["generator"] = copy.deepcopy(fab["generator"])
@@ -242,12 +370,7 @@ def ingest_identity(scene: Scene) -> dict:
         p = Path(fab["path"])
         fabric.update(file=p.name, sha256=sha256_file(p) if p.is_file() else None)
         fabric.update({k: fab[k] for k in FABRIC_SHAPE_KEYS if k in fab})
-    yarns = {}
-    for g in YARN_GROUPS:
-        t = {k: v for k, v in scene.yarn_type(g).items() if k not in RENDER_ONLY_YARN_KEYS}
-        if t:
-            yarns[g] = t
-    return {"scene": scene.path.name, "fabric": fabric, "yarns": yarns}
+    return fabric
 
 
 def file_identity(path: str | Path, scale: float | None = None) -> dict:

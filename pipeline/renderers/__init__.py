@@ -79,6 +79,7 @@ class RenderMethod:
     materials: tuple[str, ...] = ()
     defaults: tuple[tuple[str, int], ...] = ()   # this method's own defaults of COMMON_DEFAULTS settings
     meshes: bool = False                         # renders the scene's [[meshes]] (walls, floor, furniture)
+    fabrics: bool = False                        # renders a scene of several [[fabrics]] (yarn types per fabric)
 
     def default(self, key: str):
         return dict(self.defaults).get(key, COMMON_DEFAULTS[key])
@@ -95,11 +96,15 @@ class RenderMethod:
         return tuple(s.name for s in self.sources)
 
     def check_scene(self, scene) -> None:
-        """Refuse a scene this method cannot render whole: one with ``[[meshes]]`` when it does not render them."""
+        """Refuse a scene this method cannot render whole: one with ``[[meshes]]`` when it does not render them,
+        one of several ``[[fabrics]]`` when it renders one fabric."""
         if getattr(scene, "meshes", None) and not self.meshes:
             raise LoomError(scene.path, "meshes", f"the {self.name} method does not render a scene's meshes yet "
                             f"(methods that do: {', '.join(mesh_methods())}); remove the [[meshes]] tables or "
                             "render with one of those")
+        if getattr(scene, "several", False) and not self.fabrics:
+            raise LoomError(scene.path, "fabrics", f"the {self.name} method renders one fabric (its tiling's); "
+                            f"a scene of several [[fabrics]] renders with {', '.join(fabric_methods())}")
 
     def run(self, scene, options) -> RenderResult:
         self.check_scene(scene)
@@ -150,11 +155,11 @@ METHODS = {m.name: m for m in (
                                     "dyed BCSDF's mean albedo; color: the yarn's colour itself",
                           ("bcsdf", "color")),
                   Setting("tables", "the tables artifact (same as --tables)"),
-                  Setting("grid", "the grid artifact (same as --grid)")), meshes=True),
+                  Setting("grid", "the grid artifact (same as --grid)")), meshes=True, fabrics=True),
     RenderMethod(
         "fiberpath", "explicit fibres path traced with the fibre BCSDF (Khungurn et al. 2015)", "fiberpath",
         sources=_FIBERPATH_SOURCES, default_source="realized", settings=_FIBERPATH_SETTINGS,
-        materials=("bcsdf", "lambert"), meshes=True),
+        materials=("bcsdf", "lambert"), meshes=True, fabrics=True),
     RenderMethod(
         "fiberpath_shell", "fiberpath on a tiling artifact (the same as fiberpath --fibers TILING.zarr)",
         "fiberpath", sources=(Source("realized", (TILING,), "a tiling artifact's exemplars under its shell map"),),
@@ -227,7 +232,7 @@ METHODS = {m.name: m for m in (
                   Setting("falloff", "multiscale aggregation weights exp(-falloff |dx| / R) (default 40)"),
                   Setting("fibre_threshold", "fibre shadowing floor: s (1 - thr) + thr (default 0.5; 1: off)"),
                   Setting("ply_threshold", "ply shadowing floor (default 0.6; 1: off)")),
-        defaults=(("max_depth", 4),), meshes=True),
+        defaults=(("max_depth", 4),), meshes=True, fabrics=True),
 )}
 
 
@@ -246,6 +251,11 @@ def input_kinds() -> dict[str, tuple[str, ...]]:
 def mesh_methods() -> list[str]:
     """The methods that render a scene's ``[[meshes]]``."""
     return [m.name for m in METHODS.values() if m.meshes]
+
+
+def fabric_methods() -> list[str]:
+    """The methods that render a scene of several ``[[fabrics]]``."""
+    return [m.name for m in METHODS.values() if m.fabrics]
 
 
 def known_methods() -> list[str]:

@@ -17,7 +17,8 @@ Settings (``--set KEY=VALUE``):
 - ``mode`` = near (default) | far | multiscale: seed 004 §4.2 (``stages.render.integrators.bysdf`` module doc).
 - ``k``: offsets per far / multiscale vertex (default 16; 1 to 256).
 - ``params``: a TOML file of BYSDF parameters per yarn group (``[warp]``, ``[weft]``, ``[knit]``,
-  ``[other]``, ``[default]`` tables; ``loomlight fit-bysdf`` writes one), applied over the scene's.
+  ``[other]``, ``[default]`` tables, and ``[<fabric>.<group>]`` ones for a scene of several ``[[fabrics]]``;
+  ``loomlight fit-bysdf`` writes one), applied over the scene's.
 - ``ply_search`` = march (default) | iteration: how the implicit ply entries are found
   (``stages.core.yarn.implicit_plies``, "Search"): the certified march alone, or the paper's ellipse-plane
   iteration (seed 004 §3.3) followed by the march that certifies it. Both give the same entries (the march
@@ -108,8 +109,9 @@ def read_params_file(path) -> dict:
 
     d = read_toml(path)
     for g, tab in d.items():
-        if g not in GROUPS + ("default",) or not isinstance(tab, dict):
-            raise LoomError(path, g, f"expected a table per yarn group ({', '.join(GROUPS + ('default',))})")
+        if g.rpartition(".")[2] not in GROUPS + ("default",) or not isinstance(tab, dict):
+            raise LoomError(path, g, f"expected a table per yarn group ({', '.join(GROUPS + ('default',))}, or "
+                            "<fabric>.<group> for a scene of [[fabrics]])")
     return d
 
 
@@ -155,13 +157,15 @@ def yarn_model(extra: dict) -> YarnModel:
                      number_setting(extra, "ply_threshold", 0.6, float, 0.0, 1.0), search)
 
 
-def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
-    """(Y, BYSDF_SIZE) packed BYSDF of every yarn: the yarn group's declared material (``MATERIAL_DEFAULTS``
-    and the scene's ``[yarns.<group>.bysdf]``), its body colour from the yarn's colour by the colour curve
-    (``colour_curve``: the convention of ``pipeline.dye``), then ``--set params=`` (or ``fitted``, the same
-    {group: {name: value}} as that file). ``body_r_scale`` / ``body_t_scale`` (three factors, or one)
-    multiply the body colour per channel (clipped to 1): the per-channel freedom ``fit-bysdf`` fits. A
-    ``body_r`` / ``body_t`` given explicitly replaces the colour-derived one."""
+def bysdf_rows(scene, types, albedo, options, fitted=None) -> np.ndarray:
+    """(Y, BYSDF_SIZE) packed BYSDF of every yarn: its yarn type's declared material (``MATERIAL_DEFAULTS``
+    and the scene's ``[yarns.<group>.bysdf]``; ``types``: per yarn its type, ``pipeline.scene``), its body colour
+    from the yarn's colour by the colour curve (``colour_curve``: the convention of ``pipeline.dye``), then
+    ``--set params=`` (or ``fitted``, the same {group: {name: value}} as that file; with [[fabrics]] a table
+    '<fabric>.<group>' applies to that fabric's group after the group's own). ``body_r_scale`` /
+    ``body_t_scale`` (three factors, or one) multiply the body colour per channel (clipped to 1): the
+    per-channel freedom ``fit-bysdf`` fits. A ``body_r`` / ``body_t`` given explicitly replaces the
+    colour-derived one."""
     from stages.core.shading.bysdf import pack_bysdf
 
     from ..dye import Dyer
@@ -175,14 +179,15 @@ def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
     brighter: dict = {}
     rows = []
     cache = {}
-    for y in range(len(groups)):
-        g = GROUPS[int(groups[y])]
+    labels = scene.type_labels()
+    for y in range(len(types)):
+        g = labels[min(int(types[y]), len(labels) - 1)]
         key = (g, tuple(np.round(albedo[y], 12)))
         if key not in cache:
-            place = f"yarns.{g}.bysdf"
+            place = f"{scene.type_place(g)}.bysdf"
             declared = {**MATERIAL_DEFAULTS, **(scene.yarn_type(g).get("bysdf") or {})}
             kw = dict(declared)
-            for tab_name in ("default", g):
+            for tab_name in dict.fromkeys(("default", g.rpartition(".")[2], g)):   # the group's, then the label's
                 kw.update(fitted.get(tab_name, {}))
             scale = {k: _colour_scale(kw.pop(k), where, f"{place}.{k}") if k in kw else np.ones(3)
                      for k in COLOUR_SCALES}
@@ -211,8 +216,8 @@ def bysdf_rows(scene, groups, albedo, options, fitted=None) -> np.ndarray:
     from ..progress import warn
 
     for g, top in sorted(brighter.items()):
-        warn(f"yarns.{g}: a colour above {top:.3f} in some channel is brighter than the bysdf material of "
-             f"yarns.{g}.bysdf lets a yarn be; rendered at that ceiling")
+        warn(f"{scene.type_place(g)}: a colour above {top:.3f} in some channel is brighter than the bysdf material "
+             f"of {scene.type_place(g)}.bysdf lets a yarn be; rendered at that ceiling")
     return np.ascontiguousarray(np.stack(rows))
 
 
@@ -323,8 +328,9 @@ def cloth_albedo(material: dict, geometry: dict, model: YarnModel, body, spp: in
 
 
 def yarn_setup(yarns_path):
-    """(artifact, Curves, YarnTypes, yarn groups (Y,)) of a yarns artifact."""
+    """(artifact, Curves, YarnTypes, yarn type per yarn (Y,); ``pipeline.scene``) of a yarns artifact."""
     from ..artifacts import Artifact
+    from ..render_setup import OTHER
     from ..runners.yarn_types import yarn_types_of
     from ..yarns import load_curves
 
@@ -332,8 +338,8 @@ def yarn_setup(yarns_path):
     cv = load_curves(art)
     types = yarn_types_of(art, None, None)
     Y = len(cv.offsets) - 1
-    groups = np.clip(np.asarray(art["group"], np.int64), 0, 3) if "group" in art else np.full(Y, 3)
-    return art, cv, types, groups
+    kinds = np.asarray(art["yarn_type"], np.int64) if "yarn_type" in art else np.full(Y, OTHER)
+    return art, cv, types, kinds
 
 
 def build_types(tparams, tol, max_iter, fibre_threshold=0.5, ply_threshold=0.6, search="march"):
@@ -430,14 +436,14 @@ def film_setup(scene, options: dict):
     if not has_light(scene):
         raise LoomError(scene.path, "lights", "the scene has no lights and no mesh emits (the image would be black)")
     t0 = time.perf_counter()
-    _, cv, ytypes, groups = yarn_setup(path)
+    _, cv, ytypes, kinds = yarn_setup(path)
     from stages.core.yarn.implicit_plies import PLY_MAX
 
     for t, d in enumerate(ytypes.dicts):   # the ply search keeps its per-ply scratch on the machine stack
         if int(d["ply_num"]) > PLY_MAX:
             raise LoomError(path, f"yarn type {t} ({d.get('name', '?')}).ply_num",
                             f"{int(d['ply_num'])} plies; bysdf's implicit plies handle at most {PLY_MAX}")
-    params = bysdf_rows(scene, groups, ytypes.albedo, options)
+    params = bysdf_rows(scene, kinds, ytypes.albedo, options)
     ground, has_ground = ground_array(scene.render)
     W, H = options["width"], options["height"]
     cam = camera_array(scene.camera, W, H)
@@ -451,7 +457,7 @@ def film_setup(scene, options: dict):
                                                  pieces.piece_t1, pieces.piece_curve, pieces.radius))
                          + sum(a.nbytes for a in bvh if isinstance(a, np.ndarray))
                          + sum(a.nbytes for a in cv if isinstance(a, np.ndarray)))
-    stats = {"setup_s": time.perf_counter() - t0, "tables_s": built.tables_s, "yarns": len(groups),
+    stats = {"setup_s": time.perf_counter() - t0, "tables_s": built.tables_s, "yarns": len(kinds),
              "yarn_types": len(types), "tube_pieces": len(bvh.seg_a), "geometry_bytes": geometry_bytes,
              "mode": mode, "k": model.K, "ply_search": model.search, "max_depth": max_depth,
              "envelope_radius": [t.radius for t in types], **mesh_stats}

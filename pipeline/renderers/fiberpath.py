@@ -8,8 +8,9 @@ tetrahedra; ``--method fiberpath_shell`` and ``--set tiling=PATH`` are the same)
 realized`` is accepted and means the same; it is the only fibre source this method has, so the
 scene's ``render.source``, which selects volpath's density source, is ignored. The estimator is one
 (``stages.render.integrators.fiberpath``) for both geometries. Materials: ``--material bcsdf``
-(default) gives every fibre the BCSDF preset of its yarn group -- scene key ``yarns.<group>.bcsdf``
-(falling back to ``yarns.default.bcsdf``), else ``--bcsdf NAME``; ``--material lambert`` gives every
+(default) gives every fibre the BCSDF preset of its yarn type -- scene key ``yarns.<group>.bcsdf``
+(falling back to ``yarns.default.bcsdf``; a scene of several ``[[fabrics]]``: its own fabric's, a yarn type
+being a (fabric, group) pair, ``pipeline.scene``), else ``--bcsdf NAME``; ``--material lambert`` gives every
 fibre a Lambertian surface with its yarn's albedo (for comparisons with other renderers).
 Each yarn's colour (the scene's ``yarns.<group>.color``, else a WIF draft's thread colour, else the
 preset's albedo, as realized into the fibers artifact) is what the yarn shows under white diffuse light
@@ -34,6 +35,7 @@ from ..dye import Dyer
 from ..errors import LoomError, unknown
 from ..render_setup import (
     GROUP_NAMES,
+    OTHER,
     SELF_WINDOW,
     Fibers,
     ground_array,
@@ -48,48 +50,50 @@ from . import RenderResult
 
 
 def bcsdf_names(scene, options) -> dict:
-    """Yarn group index -> BCSDF preset name: the scene's ``yarns.<group>.bcsdf`` (a ``.toml`` path is
-    resolved against the scene file), else ``--bcsdf``."""
+    """Yarn type index -> BCSDF preset name: the scene's ``yarns.<group>.bcsdf`` (of each fabric, for
+    ``[[fabrics]]``; a ``.toml`` path is resolved against the scene file), else ``--bcsdf``."""
     names = {}
-    for g, gname in enumerate(GROUP_NAMES):
-        name = scene.yarn_type(gname).get("bcsdf")
+    for t, label in enumerate(scene.type_labels()):
+        name = scene.yarn_type(label).get("bcsdf")
         if name and name.endswith(".toml"):
             name = str(scene.resolve(name))
         name = name or options.get("bcsdf")
         if name:
-            names[g] = name
+            names[t] = name
     return names
 
 
-def yarn_groups(yarn_group, n_yarns, names) -> np.ndarray:
-    """The group of every yarn (0 warp, 1 weft, 2 knit, 3 other); unknown groups (no yarns artifact among
-    the inputs) count as 'other', which takes the one preset the scene names when it names one."""
-    if yarn_group is not None:
-        g = np.clip(np.asarray(yarn_group, np.int64), 0, 3)
-        if len(g) < n_yarns:
-            g = np.concatenate([g, np.full(n_yarns - len(g), 3)])
-        return g
+def yarn_types(yarn_type, n_yarns, names, n_types) -> np.ndarray:
+    """The yarn type of every yarn (``pipeline.scene``: the group's index for one fabric -- 0 warp, 1 weft,
+    2 knit, 3 other); unknown types (no yarns artifact among the inputs) count as 'other' (of the first
+    fabric), which takes the one preset the scene names when it names one."""
+    if yarn_type is not None:
+        t = np.clip(np.asarray(yarn_type, np.int64), 0, n_types - 1)
+        if len(t) < n_yarns:
+            t = np.concatenate([t, np.full(n_yarns - len(t), OTHER)])
+        return t
     named = sorted(set(names.values()))
-    if 3 not in names and len(named) == 1:
-        names[3] = named[0]
-    return np.full(n_yarns, 3)
+    if OTHER not in names and len(named) == 1:
+        names[OTHER] = named[0]
+    return np.full(n_yarns, OTHER)
 
 
-def yarn_bcsdfs(scene, yarn_group, n_yarns, used_yarns, options, required=True) -> list:
-    """The packed (undyed) BCSDF of every yarn, None where its group names none and not ``required``;
-    a used yarn whose group names none is an error when ``required``."""
+def yarn_bcsdfs(scene, yarn_type, n_yarns, used_yarns, options, required=True) -> list:
+    """The packed (undyed) BCSDF of every yarn, None where its yarn type names none and not ``required``;
+    a used yarn whose type names none is an error when ``required``."""
     names = bcsdf_names(scene, options)
-    groups = yarn_groups(yarn_group, n_yarns, names)
+    labels = scene.type_labels()
+    types = yarn_types(yarn_type, n_yarns, names, len(labels))
     loaded = {}
     out = [None] * n_yarns
-    for g in sorted(set(int(g) for g in groups[used_yarns])):
-        if g not in names and required:
-            known = ", ".join(f"{GROUP_NAMES[k]}={v}" for k, v in sorted(names.items())) or "none"
-            raise LoomError(scene.path, f"yarns.{GROUP_NAMES[g]}.bcsdf",
-                            f"no BCSDF preset for the fibres of yarn group {GROUP_NAMES[g]!r} (scene names: {known}); "
+    for t in sorted(set(int(t) for t in types[used_yarns])):
+        if t not in names and required:
+            known = ", ".join(f"{labels[k]}={v}" for k, v in sorted(names.items())) or "none"
+            raise LoomError(scene.path, f"{scene.type_place(labels[t])}.bcsdf",
+                            f"no BCSDF preset for the fibres of yarn group {labels[t]!r} (scene names: {known}); "
                             "set it (or yarns.default.bcsdf) in the scene or pass --bcsdf NAME")
     for y in range(n_yarns):
-        name = names.get(int(groups[y]))
+        name = names.get(int(types[y]))
         if name:
             if name not in loaded:
                 loaded[name] = load_bcsdf_preset(name)
@@ -97,13 +101,14 @@ def yarn_bcsdfs(scene, yarn_group, n_yarns, used_yarns, options, required=True) 
     return out
 
 
-def dyed_bcsdfs(scene, options, colours, yarn_group, params) -> list:
-    """Per yarn its BCSDF ``params[y]`` dyed to show colour ``colours[y]`` (``pipeline.dye``) on its group's
-    yarn geometry; None where ``params[y]`` is None. Warns once per group whose colour is out of reach."""
+def dyed_bcsdfs(scene, options, colours, yarn_type, params) -> list:
+    """Per yarn its BCSDF ``params[y]`` dyed to show colour ``colours[y]`` (``pipeline.dye``) on its type's
+    yarn geometry; None where ``params[y]`` is None. Warns once per type whose colour is out of reach."""
     names = bcsdf_names(scene, options)
-    groups = yarn_groups(yarn_group, len(params), names)
+    labels = scene.type_labels()
+    types = yarn_types(yarn_type, len(params), names, len(labels))
     dyer = Dyer(scene)
-    rows = [None if p is None else dyer.row(p, colours[y], GROUP_NAMES[groups[y]], names.get(int(groups[y]), ""))
+    rows = [None if p is None else dyer.row(p, colours[y], labels[types[y]], names.get(int(types[y]), ""))
             for y, p in enumerate(params)]
     dyer.report()
     return rows
@@ -127,9 +132,9 @@ def fiber_materials(scene, fibers, options):
     if tint not in ("yarn", "none"):
         raise LoomError(None, "--set tint", unknown("tint", tint, ("yarn", "none")))
     Y = len(fibers.yarn_albedo)
-    params = yarn_bcsdfs(scene, fibers.yarn_group, Y, np.unique(fibers.fiber_yarn), options)
+    params = yarn_bcsdfs(scene, fibers.yarn_type, Y, np.unique(fibers.fiber_yarn), options)
     if tint == "yarn":
-        rows = dyed_bcsdfs(scene, options, fibers.yarn_albedo, fibers.yarn_group, params)
+        rows = dyed_bcsdfs(scene, options, fibers.yarn_albedo, fibers.yarn_type, params)
         mats = [pack_material_bcsdf(q) if q is not None else pack_material_lambert(fibers.yarn_albedo[y])
                 for y, q in enumerate(rows)]
         return fibers.fiber_yarn.astype(np.int32), np.stack(mats)

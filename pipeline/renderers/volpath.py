@@ -36,9 +36,10 @@ import numpy as np
 from ..errors import LoomError, unknown
 from ..progress import progress, warn
 from ..render_setup import (
+    OTHER,
     ground_array,
     has_light,
-    input_yarn_groups,
+    input_yarn_types,
     load_fibers,
     load_scene_meshes,
     pack_lights,
@@ -110,9 +111,9 @@ def _procedural_source(tables_path, cell, optics, view, advance):
     from ..runners.tables import load_tables
 
     t0 = time.perf_counter()
-    # the yarn groups come from the tables' recorded yarns input: one that is gone is refused before the
+    # the yarn types come from the tables' recorded yarns input: one that is gone is refused before the
     # tables are loaded (loading derives the lookup structures, and compiles their kernels on a cold cache)
-    groups = None if optics is None else input_yarn_groups(_artifact(tables_path, "tables", "--tables"))
+    types = None if optics is None else input_yarn_types(_artifact(tables_path, "tables", "--tables"))
     cv, tab, art = load_tables(tables_path)
     advance()
     t1 = time.perf_counter()
@@ -120,12 +121,12 @@ def _procedural_source(tables_path, cell, optics, view, advance):
         mats = np.zeros((len(tab.yarn_type), MAT_SIZE))
         mats[:, 0] = -1.0  # micro-flakes
     else:
-        mats, has = optics.rows(tab.yarn_albedo, groups)
+        mats, has = optics.rows(tab.yarn_albedo, types)
         tparams = tab.tparams.copy()
         for t in range(len(tparams)):  # fibre phase function: the extinction of thin cylinders (roughness 0)
             if np.any(tab.yarn_type == t) and np.all(has[tab.yarn_type == t]):
                 tparams[t, ROUGHNESS] = 0.0
-        tab = tab._replace(yarn_albedo=np.ascontiguousarray(optics.albedo(tab.yarn_albedo, groups)), tparams=tparams)
+        tab = tab._replace(yarn_albedo=np.ascontiguousarray(optics.albedo(tab.yarn_albedo, types)), tparams=tparams)
     maj = procedural_majorant(cv, tab, cell)
     advance()
     # tables_load_s: reading the artifact and deriving the lookup structures (accel.derive_lookup_accel)
@@ -196,8 +197,8 @@ def realized_source(fibers_path, cell, optics):
     tp = tparams[ytype]
     colour = np.zeros((Y, 3))
     colour[: min(Y, len(fibers.yarn_albedo))] = fibers.yarn_albedo[:Y]
-    mats, has = optics.rows(colour, fibers.yarn_group)
-    albedo = optics.albedo(colour, fibers.yarn_group)
+    mats, has = optics.rows(colour, fibers.yarn_type)
+    albedo = optics.albedo(colour, fibers.yarn_type)
     roughness = np.where(has, 0.0, tp[:, ROUGHNESS])  # fibre phase function: thin cylinders' extinction
     extent = float(np.mean([extent_bound(t) for t in tp]))
     t0 = time.perf_counter()
@@ -235,12 +236,12 @@ def grid_source(grid_path, cell, optics):
 class FibreOptics:
     """How the volume scatters, from the fibres it stands for (``--set phase`` and ``--set albedo``).
 
-    ``rows(colours, groups)`` -> (mats (Y, MAT_SIZE), has (Y,) bool): per yarn its group's BCSDF dyed to
+    ``rows(colours, types)`` -> (mats (Y, MAT_SIZE), has (Y,) bool): per yarn its yarn type's BCSDF dyed to
     its colour (``pipeline.dye``, as fiberpath), the fibre phase function of
-    ``stages.render.integrators.volpath``; model -1 (micro-flakes) where the scene names no BCSDF for the group or
-    with ``phase=microflake``. ``albedo(colours, groups)``: the micro-flake albedo, the dyed BCSDF's
+    ``stages.render.integrators.volpath``; model -1 (micro-flakes) where the scene names no BCSDF for the type or
+    with ``phase=microflake``. ``albedo(colours, types)``: the micro-flake albedo, the dyed BCSDF's
     mean albedo (``bcsdf_mean_albedo`` of the dyed BCSDF) unless ``albedo=color`` or no BCSDF (then the colour itself).
-    ``groups`` None: the yarns are unknown (voxels): the scene's one BCSDF applies, if it names one."""
+    ``types`` None: the yarns are unknown (voxels): the scene's one BCSDF applies, if it names one."""
 
     def __init__(self, scene, options):
         extra = options.get("extra") or {}
@@ -252,27 +253,27 @@ class FibreOptics:
         if self.albedo_mode not in ("bcsdf", "color"):
             raise LoomError(None, "--set albedo", f"unknown albedo {self.albedo_mode!r} (known: bcsdf, color)")
 
-    def _params(self, n, groups):
+    def _params(self, n, types):
         from .fiberpath import yarn_bcsdfs
 
-        return yarn_bcsdfs(self.scene, groups, n, np.arange(n), self.options, required=False)
+        return yarn_bcsdfs(self.scene, types, n, np.arange(n), self.options, required=False)
 
-    def _dyed(self, colours, groups):
-        """Per yarn its group's BCSDF dyed to the yarn's colour (``fiberpath.dyed_bcsdfs``), None where the
-        group names no BCSDF; ``groups`` None: every yarn 'other' (the scene's one BCSDF, if it names one)."""
+    def _dyed(self, colours, types):
+        """Per yarn its type's BCSDF dyed to the yarn's colour (``fiberpath.dyed_bcsdfs``), None where the
+        type names no BCSDF; ``types`` None: every yarn 'other' (the scene's one BCSDF, if it names one)."""
         from .fiberpath import dyed_bcsdfs
 
         n = len(colours)
-        return dyed_bcsdfs(self.scene, self.options, colours, groups, self._params(n, groups))
+        return dyed_bcsdfs(self.scene, self.options, colours, types, self._params(n, types))
 
-    def albedo(self, colours, groups):
+    def albedo(self, colours, types):
         from stages.core.shading.bcsdf import bcsdf_mean_albedo
 
         colours = np.asarray(colours, np.float64)
         if self.albedo_mode == "color":
             return colours
         flat = colours.reshape(-1, 3)
-        if groups is None:      # voxels: one BCSDF for all, dyed at once
+        if types is None:      # voxels: one BCSDF for all, dyed at once
             from ..dye import Dyer
             from .fiberpath import bcsdf_names
 
@@ -281,22 +282,22 @@ class FibreOptics:
                 return colours
             names = bcsdf_names(self.scene, self.options)
             named = sorted(set(names.values()))
-            name = names.get(3) or (named[0] if len(named) == 1 else "")   # the one yarn_bcsdfs took
+            name = names.get(OTHER) or (named[0] if len(named) == 1 else "")   # the one yarn_bcsdfs took
             dyer = Dyer(self.scene)
             q = dyer.row(p, flat, "other", name)
             dyer.report()
             return bcsdf_mean_albedo(q).reshape(colours.shape)
-        rows = self._dyed(flat, groups)
+        rows = self._dyed(flat, types)
         return np.stack([c if q is None else bcsdf_mean_albedo(q) for c, q in zip(flat, rows)]).reshape(colours.shape)
 
-    def rows(self, colours, groups):
+    def rows(self, colours, types):
         from stages.core.shading.material import MAT_SIZE, pack_material_bcsdf
 
         n = len(colours)
         mats = np.zeros((n, MAT_SIZE))
         mats[:, 0] = -1.0  # micro-flakes
-        if self.phase == "bcsdf" and groups is not None:
-            for y, q in enumerate(self._dyed(np.asarray(colours, np.float64), groups)):
+        if self.phase == "bcsdf" and types is not None:
+            for y, q in enumerate(self._dyed(np.asarray(colours, np.float64), types)):
                 if q is not None:
                     mats[y] = pack_material_bcsdf(q)
         return mats, mats[:, 0] >= 0.0

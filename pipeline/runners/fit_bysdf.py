@@ -280,10 +280,10 @@ def bysdf_means(by: _Renderer, yarns, lights: dict, masks=None):
     ``masks[setup]``'s pixels where given, else the whole image)."""
     from ..renderers.bysdf import bysdf_rows, yarn_setup
 
-    _, _, ytypes, groups = yarn_setup(str(yarns))
+    _, _, ytypes, kinds = yarn_setup(str(yarns))
 
     def rows(state):
-        return bysdf_rows(by.scene, groups, ytypes.albedo, by.opts, {"default": state.table()})
+        return bysdf_rows(by.scene, kinds, ytypes.albedo, by.opts, {"default": state.table()})
 
     def render_means(state, names):
         params = rows(state)

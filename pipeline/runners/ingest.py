@@ -29,36 +29,85 @@ DEFAULT_COLORS = {"warp": (0.80, 0.78, 0.72), "weft": (0.25, 0.35, 0.60), "knit"
                   "other": (0.6, 0.6, 0.6)}
 
 
+def part_curves(part, radius: float | None, scale: float | None) -> tuple[CurveSet, Path | None]:
+    """(CurveSet, its source file or None) of one fabric of a scene (``pipeline.scene.FabricPart``), where its
+    source puts it (``placed`` moves it)."""
+    from ..scene import merged_yarn_type
+
+    fab = part.fabric
+    if fab["source"] == "generator":
+        from ..generators import generate
+
+        gen = fab["generator"]
+        r = gen.get("yarn_radius") or merged_yarn_type(part.yarns, "warp").get("radius") or radius
+        return generate(gen, r), None
+    src = Path(fab["path"])
+    if fab["source"] == "wif":
+        from ..generators import from_wif
+
+        return from_wif(src, scale=fab.get("scale", scale or 1.0), crimp=fab.get("crimp", 1.0),
+                        max_threads=fab.get("max_threads"), repeat=fab.get("repeat")), src
+    from ..io import read_curves
+
+    return _scaled(read_curves(src), fab.get("scale", scale), src), src
+
+
+def placed(cs: CurveSet, M: np.ndarray, file: Path, key: str) -> CurveSet:
+    """The curves moved by the rigid placement ``M`` (3 x 4, ``pipeline.scene.placement``), refusing a point
+    moved beyond the coordinate limits (``key``: the transform's key)."""
+    R, t = M[:, :3], M[:, 3]
+    out = []
+    for c, p in enumerate(cs.points):
+        q = np.asarray(p, np.float64) @ R.T + t
+        k = first_bad_row(q)
+        if k >= 0:
+            raise LoomError(file, key, f"moves curve {c}, point {k} to {q[k].tolist()}, beyond +-{MAX_COORD:g} "
+                            "scene units")
+        out.append(q)
+    cs.points = out
+    return cs
+
+
+def scene_curves(scene, radius: float | None, scale: float | None) -> tuple[CurveSet, np.ndarray, dict]:
+    """(CurveSet of every fabric of the scene, placed and in order; (C,) the fabric of each curve; the source
+    files by their scene key)."""
+    sets, files = [], {}
+    for part in scene.parts:
+        cs, src = part_curves(part, radius, scale)
+        if src is not None:
+            files[part.key] = src
+        if part.matrix is not None:
+            cs = placed(cs, part.matrix, scene.path, part.key.replace(".fabric", ".transform"))
+        sets.append(cs)
+    if len(sets) == 1:
+        return sets[0], np.zeros(len(sets[0].points), np.int64), files
+    radii = [cs.point_radius if cs.point_radius is not None else [None] * len(cs.points) for cs in sets]
+    no_radii = all(cs.point_radius is None for cs in sets)
+    merged = CurveSet(points=[p for cs in sets for p in cs.points], closed=[c for cs in sets for c in cs.closed],
+                      group=[g for cs in sets for g in cs.group],
+                      point_radius=None if no_radii else [r for rs in radii for r in rs],
+                      color=[c for cs in sets for c in cs.color],
+                      source_format="+".join(dict.fromkeys(cs.source_format for cs in sets)))
+    part_of = np.concatenate([np.full(len(cs.points), i) for i, cs in enumerate(sets)])
+    return merged, part_of, files
+
+
 def curves_from_input(path: Path, radius: float | None, scale: float | None):
-    """(CurveSet, scene or None, extra input files) for any INPUT the ingest command takes."""
+    """(CurveSet, the fabric of each curve (index into the scene's parts; 0 without a scene), scene or None,
+    extra input files by name) for any INPUT the ingest command takes."""
     if path.suffix.lower() == ".toml":
         scene = load_scene(path)
-        fab = scene.fabric
-        if fab["source"] == "generator":
-            from ..generators import generate
-
-            gen = fab["generator"]
-            r = gen.get("yarn_radius") or scene.yarn_type("warp").get("radius") or radius
-            cs = generate(gen, r)
-            return cs, scene, {}
-        src = Path(fab["path"])
-        if fab["source"] == "wif":
-            from ..generators import from_wif
-
-            cs = from_wif(src, scale=fab.get("scale", scale or 1.0), crimp=fab.get("crimp", 1.0),
-                          max_threads=fab.get("max_threads"), repeat=fab.get("repeat"))
-        else:
-            from ..io import read_curves
-
-            cs = _scaled(read_curves(src), fab.get("scale", scale), src)
-        return cs, scene, {"fabric": src}
+        cs, part_of, files = scene_curves(scene, radius, scale)
+        return cs, part_of, scene, files
     if path.suffix.lower() == ".wif":
         from ..generators import from_wif
 
-        return from_wif(path, scale=scale or 1.0, crimp=1.0, max_threads=None, repeat=None), None, {}
-    from ..io import read_curves
+        cs = from_wif(path, scale=scale or 1.0, crimp=1.0, max_threads=None, repeat=None)
+    else:
+        from ..io import read_curves
 
-    return _scaled(read_curves(path), scale, path), None, {}
+        cs = _scaled(read_curves(path), scale, path)
+    return cs, np.zeros(len(cs.points), np.int64), None, {}
 
 
 def _scaled(cs: CurveSet, s: float | None, file: Path) -> CurveSet:
@@ -89,7 +138,8 @@ def validate_curves(cs: CurveSet, file: Path, merge_duplicates: bool) -> CurveSe
         if k >= 0:
             raise LoomError(file, f"curve {c}, point {k}", coordinate_problem(np.asarray(pts, np.float64)[k].tolist()))
         pts = np.asarray(pts, dtype=np.float32)
-        rad = None if cs.point_radius is None else np.asarray(cs.point_radius[c], dtype=np.float32)
+        rad = None if cs.point_radius is None or cs.point_radius[c] is None \
+            else np.asarray(cs.point_radius[c], dtype=np.float32)
         if rad is not None and (~np.isfinite(rad) | (rad <= 0) | (rad > MAX_LENGTH)).any():
             k = int(np.argmax(~np.isfinite(rad) | (rad <= 0) | (rad > MAX_LENGTH)))
             raise LoomError(file, f"curve {c}, point {k}", f"radius must be positive and at most {MAX_LENGTH:g}, "
@@ -221,7 +271,14 @@ def input_estimate(path: Path, frame_samples: int) -> Estimate:
         return wif_estimate(path, frame_samples)
     if path.suffix.lower() != ".toml":
         return Estimate("loomlight ingest").add("reading", FILE_BYTES * path.stat().st_size, path.name)
-    fab = load_scene(path).fabric
+    est = Estimate("loomlight ingest")
+    for part in load_scene(path).parts:
+        est.extend(fabric_estimate(part.fabric, frame_samples))
+    return est
+
+
+def fabric_estimate(fab: dict, frame_samples: int) -> Estimate:
+    """``input_estimate`` of one fabric source table of a scene."""
     if fab["source"] == "wif":
         return wif_estimate(Path(fab["path"]), frame_samples, fab.get("repeat"), fab.get("max_threads"))
     if fab["source"] != "generator":
@@ -246,8 +303,10 @@ def _identity(scene, input_path: Path, scale) -> dict:
     if scene is None:
         return file_identity(input_path, scale)
     ident = ingest_identity(scene)
-    if scale and scene.fabric["source"] != "generator" and "scale" not in scene.fabric:
-        ident["fabric"]["scale"] = scale  # --scale applies where the scene states none
+    fabrics = ident["fabric"].get("fabrics", [ident["fabric"]])
+    for part, fab in zip(scene.parts, fabrics):
+        if scale and part.fabric["source"] != "generator" and "scale" not in part.fabric:
+            fab["scale"] = scale  # --scale applies where the scene states none
     return ident
 
 
@@ -265,7 +324,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         raise LoomError(input_path, None, "input file not found")
     limit = budget or memory_budget()
     input_estimate(input_path, frame_samples).check(limit, input_path)
-    cs, scene, extra_inputs = curves_from_input(input_path, radius, scale)
+    cs, part_of, scene, extra_inputs = curves_from_input(input_path, radius, scale)
     params = {"input": str(input_path), "radius": radius, "scale": scale, "merge_duplicates": merge_duplicates,
               "frame_samples": frame_samples}
     writer = ArtifactWriter(out, kind="yarns", stage="ingest", params=params,
@@ -286,28 +345,26 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         write_curves(write, cs)
         info(f"wrote {write}")
 
-    # yarn types per group (scene), radii, colours
+    # yarn types per (fabric, group) (scene; pipeline.scene: type = fabric * 4 + group), radii, colours
     ncurve = len(cs.points)
     group_idx = np.array([GROUPS.index(g) for g in cs.group], dtype=np.int8)
-    types, type_of_group = [], {}
-    for g in GROUPS:
-        t = scene.yarn_type(g) if scene is not None else {}
-        type_of_group[g] = len(types)
-        types.append({"group": g, **t})
-    yarn_type = np.array([type_of_group[g] for g in cs.group], dtype=np.int16)
+    labels = scene.type_labels() if scene is not None else list(GROUPS)
+    types = [{"group": GROUPS[k % len(GROUPS)], **(scene.yarn_type(label) if scene is not None else {})}
+             for k, label in enumerate(labels)]
+    yarn_type = (part_of * len(GROUPS) + group_idx).astype(np.int16)
     rad = np.empty(ncurve)
-    fallback = radius or (scene.fabric.get("radius") if scene is not None else None)
+    fabrics = [p.fabric for p in scene.parts] if scene is not None else [{}]
     estimated = False
     for c in range(ncurve):
+        fab = fabrics[part_of[c]]
         if cs.point_radius is not None and cs.point_radius[c] is not None:
             rad[c] = float(np.mean(cs.point_radius[c]))
         elif types[yarn_type[c]].get("radius"):
             rad[c] = types[yarn_type[c]]["radius"]
-        elif (scene is not None and scene.fabric["source"] == "generator"
-              and scene.fabric["generator"].get("yarn_radius")):
-            rad[c] = scene.fabric["generator"]["yarn_radius"]
-        elif fallback:
-            rad[c] = fallback
+        elif fab.get("source") == "generator" and fab["generator"].get("yarn_radius"):
+            rad[c] = fab["generator"]["yarn_radius"]
+        elif radius or fab.get("radius"):
+            rad[c] = radius or fab.get("radius")
         else:
             estimated = True
             rad[c] = np.nan
@@ -321,7 +378,12 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
     points = np.concatenate(cs.points).astype(np.float32)
     offsets = np.concatenate([[0], np.cumsum([len(p) for p in cs.points])]).astype(np.int64)
     closed = np.array(cs.closed, dtype=bool)
-    proc = process_curves(points.astype(np.float64), offsets, closed, rad, frame_samples=frame_samples)
+    # a placed fabric's frames start from its own up axis (the rotated z), so that they turn with it
+    axes = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    rot = [axes if p.matrix is None else axes @ p.matrix[:, :3].T for p in scene.parts] if scene is not None \
+        else [axes]
+    proc = process_curves(points.astype(np.float64), offsets, closed, rad, frame_samples=frame_samples,
+                          frame_axes=np.stack([rot[k] for k in part_of]))
 
     with writer as w:
         w.write("points", points, dimension_names=("point", "xyz"))
@@ -341,16 +403,16 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         w.summary.update({
             "kind": "yarns", "curves": int(ncurve), "closed_curves": int(closed.sum()),
             "control_points": int(len(points)), "bounds": [lo.tolist(), hi.tolist()],
-            "groups": [GROUPS[g] for g in sorted(set(group_idx.tolist()))],
+            "groups": [labels[k] for k in sorted(set(yarn_type.tolist()))],
             "yarn_types": types, "total_length": float(proc["curve_length"].sum()),
             "source_format": cs.source_format, "curve_type": cs.curve_type,
             "radius_range": [float(rad.min()), float(rad.max())],
-            "thread_colors": describe_colors(GROUPS, group_idx, color, color_source),
+            "thread_colors": describe_colors(labels, yarn_type, color, color_source),
             "delta_max": float(proc["delta"].max()),
             "grid": {"dims": proc["grid_dims"].tolist(), "cell": float(proc["grid_cell"][0]),
                      "items": int(len(proc["grid_items"]))},
             "scene": str(input_path) if scene is not None else None,
             "ingest_identity": {**_identity(scene, input_path, scale),
-                                "groups": [GROUPS[g] for g in sorted(set(group_idx.tolist()))]},
+                                "groups": [labels[k] for k in sorted(set(yarn_type.tolist()))]},
         })
     return {"skipped": False, "curves": ncurve}

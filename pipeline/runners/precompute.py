@@ -399,14 +399,14 @@ def run_svf(tiling, out, p: SvfParams, exemplars=None, force=False, budget=None,
 
 # ------------------------------------------------------------------------------------------------ iirtf
 def materials_scene(tiling: Path, art, scene):
-    from ..scene import load_scene
+    from ..scene import load_scene, one_fabric
 
     path = scene or art.summary.get("scene")
     if not path:
         raise LoomError(tiling, "scene", "the tiling names no scene for the yarn materials; pass --scene SCENE.toml")
     if not Path(path).exists():
         raise LoomError(None, "--scene" if scene else f"{tiling}: scene", f"file not found: {path}")
-    return Path(path), load_scene(path)
+    return Path(path), one_fabric(load_scene(path), None if scene else tiling, "--scene" if scene else "scene")
 
 
 def tiling_materials(scene, art, material: dict):

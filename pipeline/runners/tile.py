@@ -78,9 +78,9 @@ def load_config(path) -> dict:
     if "scene" in cfg:
         cfg["scene"] = res(cfg["scene"])
         if Path(cfg["scene"]).is_file():  # a missing scene: run_tile says "file not found" at key scene
-            from ..scene import load_scene
+            from ..scene import load_scene, one_fabric
 
-            load_scene(cfg["scene"])
+            one_fabric(load_scene(cfg["scene"]), path, "scene")
     for ex in cfg["exemplars"]:
         if "path" in ex:
             ex["path"] = res(ex["path"])

@@ -5,7 +5,8 @@ From control points to everything ``stages.core.curves`` queries:
   at the ends of open curves), so the cubic Hermite spline interpolates the points and is C1;
 - ``arc_lengths``: per-segment lengths (Gauss-Legendre) and cumulative arc length;
 - ``rotation_minimising_frames``: normals sampled along each curve by the double reflection method,
-  starting from the component of +z (fabric up) normal to the first tangent; closed curves record
+  starting from the component of +z (fabric up; a placed fabric's rotated up) normal to the first
+  tangent; closed curves record
   their holonomy (``frame_twist``) so queries can spread it evenly;
 - ``yarn_delta``: δ_i, the smallest radius such that spheres of radius δ_i around the control points
   cover the curve, from each segment's Bezier box contained in the two end spheres (§5.2, Fig. 9);
@@ -27,6 +28,8 @@ from stages.core.curves.spline import (
     segment_coeffs,
     segment_deriv,
 )
+
+UP_PARALLEL = 0.99   # |up . tangent| above which a curve's first normal starts from the second axis instead
 
 
 @njit(cache=True)
@@ -93,8 +96,10 @@ def arc_lengths(cv):
 
 
 @njit(cache=True)
-def rotation_minimising_frames(cv, samples_per_segment):
-    """(frame_s, frame_offsets, frame_normal, frame_twist) by double reflection along each curve."""
+def rotation_minimising_frames(cv, samples_per_segment, frame_axes):
+    """(frame_s, frame_offsets, frame_normal, frame_twist) by double reflection along each curve; curve c's
+    first normal is its up axis ``frame_axes[c, 0]`` made normal to the tangent (``frame_axes[c, 1]`` where the
+    tangent is within ``UP_PARALLEL`` of the up axis)."""
     C = cv.offsets.shape[0] - 1
     counts = np.zeros(C + 1, np.int64)
     for c in range(C):
@@ -108,9 +113,9 @@ def rotation_minimising_frames(cv, samples_per_segment):
         k = counts[c]
         x_prev = cv.points[lo].copy()
         t_prev = normalize3(segment_deriv(cv, lo, 0.0))
-        up = np.array([0.0, 0.0, 1.0])
-        if abs(t_prev[2]) > 0.99:
-            up = np.array([1.0, 0.0, 0.0])
+        up = frame_axes[c, 0].copy()
+        if abs(np.dot(up, t_prev)) > UP_PARALLEL:
+            up = frame_axes[c, 1].copy()
         n0 = normalize3(up - np.dot(up, t_prev) * t_prev)
         r = n0.copy()
         frame_s[k] = 0.0
@@ -247,8 +252,10 @@ def build_grid(cv, pad, max_cells=1 << 21):
     return lo, float(cell), dims, start.astype(np.int64), items
 
 
-def process_curves(points, offsets, closed, radius, frame_samples=4, grid_pad=None):
-    """Everything ``Curves`` holds, from control points. Returns a dict of arrays (artifact layout)."""
+def process_curves(points, offsets, closed, radius, frame_samples=4, grid_pad=None, frame_axes=None):
+    """Everything ``Curves`` holds, from control points. Returns a dict of arrays (artifact layout).
+    ``frame_axes`` (C, 2, 3): per curve the up axis its frames start from and the one used where the curve
+    starts along it (``rotation_minimising_frames``); default z and x (a placed fabric's are rotated)."""
     points = np.ascontiguousarray(points, dtype=np.float64)
     offsets = np.ascontiguousarray(offsets, dtype=np.int64)
     closed = np.ascontiguousarray(closed, dtype=np.bool_)
@@ -257,7 +264,10 @@ def process_curves(points, offsets, closed, radius, frame_samples=4, grid_pad=No
     cv = partial_curves(points, tangents, offsets, closed)
     seg_length, seg_arclen, curve_length = arc_lengths(cv)
     cv = cv._replace(seg_length=seg_length, seg_arclen=seg_arclen, curve_length=curve_length)
-    frame_s, frame_offsets, frame_normal, twist = rotation_minimising_frames(cv, frame_samples)
+    if frame_axes is None:
+        frame_axes = np.broadcast_to(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]), (len(offsets) - 1, 2, 3))
+    frame_axes = np.ascontiguousarray(frame_axes, dtype=np.float64)
+    frame_s, frame_offsets, frame_normal, twist = rotation_minimising_frames(cv, frame_samples, frame_axes)
     delta = yarn_delta(cv)
     pad = radius + delta if grid_pad is None else np.broadcast_to(np.asarray(grid_pad, float), radius.shape).copy()
     glo, gcell, gdims, gstart, gitems = build_grid(cv, pad)
