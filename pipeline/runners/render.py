@@ -53,15 +53,20 @@ def render_work(options: dict, sched, method: str):
     return est
 
 
-def render_estimate(options: dict, inputs: dict) -> Estimate:
+def render_estimate(options: dict, inputs: dict, scene=None) -> Estimate:
     """A render's peak from its size and the artifacts it reads: the film, realized fibres (or a tiling's
-    exemplars) with their BVH, procedural tables with what loading them derives, a voxel grid."""
+    exemplars) with their BVH, procedural tables with what loading them derives, a voxel grid, the scene's
+    meshes (``render_setup.meshes_estimate``: their OBJ files' vertex and triangle counts)."""
     from ..artifacts import Artifact
     from .tables import accel_estimate
 
     est = Estimate("loomlight render")
     W, H = options["width"], options["height"]
     est.add("film", float(PIXEL_BYTES) * W * H, f"{W} x {H} pixels")
+    if scene is not None and scene.meshes:
+        from ..render_setup import meshes_estimate
+
+        est.add("meshes and their BVH", *meshes_estimate(scene))
     for key, (path, _) in inputs.items():
         if key == "scene":
             continue
@@ -319,7 +324,7 @@ def run_render(scene_path, out, request: RenderRequest = RenderRequest(), method
     art_path = out.with_suffix(".zarr")
     writer = ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs,
                             companions=(out, out.with_suffix(".png")), started=t_start)
-    render_estimate(options, inputs).check(budget or memory_budget(), scene.path)
+    render_estimate(options, inputs, scene).check(budget or memory_budget(), scene.path)
     work = render_work(options, sched, method)
     if work is not None:
         top = max(work.parts, key=lambda part: part[1])[2]

@@ -292,3 +292,36 @@ def test_bundled_swatch_on_table_renders(cli, tmp_path):
     assert stats["meshes"] == 4 and stats["mesh_triangles"] == 12 + 12 + 2 + 2 and stats["area_light_triangles"] == 2
     rgb, ch = read_exr(out)
     assert ch["A"].mean() > 0.8 and rgb.mean() > 0.05
+
+
+def test_mesh_counts_and_the_render_estimate(cli, tmp_path, monkeypatch):
+    """The estimate's counts equal what the reader makes of the file (a quad fanned into 2 triangles, a pentagon
+    into 3; comments and normals not counted), and a render whose meshes' estimate passes the memory budget is
+    refused before anything is built (exit 2, naming the meshes and their counts); under a budget that holds
+    it, the same render runs."""
+    from pipeline.io.obj_mesh import read_obj_mesh
+    from pipeline.render_setup import MESH_TRIANGLE_BYTES, obj_counts
+
+    obj = tmp_path / "poly.obj"
+    obj.write_text("# a comment\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 1.5 0\nvn 0 0 1\n"
+                   "f 1 2 3 4\nf 1//1 2//1 3//1 4//1 5//1\n")
+    m = read_obj_mesh(obj, None, uv_for=None, place="file")
+    assert obj_counts(obj) == (len(m.V), len(m.F)) == (5, 5)
+    n = 60    # a 60 x 60 grid of quads: 7,200 triangles, 3,721 vertices
+    lines = [f"v {i / n} {j / n} 0" for j in range(n + 1) for i in range(n + 1)]
+    lines += [f"f {j * (n + 1) + i + 1} {j * (n + 1) + i + 2} {(j + 1) * (n + 1) + i + 2} {(j + 1) * (n + 1) + i + 1}"
+              for j in range(n) for i in range(n)]
+    (tmp_path / "grid.obj").write_text("\n".join(lines) + "\n")
+    scene = _scene(tmp_path, SUN, _mesh(file="grid.obj", translate=(0.0, 0.0, -1.0)), spp=1, depth=1)
+    budget_mib = 0.9 * MESH_TRIANGLE_BYTES * 2 * n * n / 2**20 + 1.0   # under the meshes' share alone
+    monkeypatch.setenv("LOOMLIGHT_MEMORY_BUDGET", f"{budget_mib:.3f}")
+    fib = tmp_path / "fibers.zarr"
+    from tests.render.test_fiberpath import _fibers_artifact
+
+    _fibers_artifact(fib)
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "m.exr")
+    assert code == 2 and "meshes and their BVH" in err and "7,200 triangles" in err, err
+    assert not (tmp_path / "m.exr").exists()
+    monkeypatch.setenv("LOOMLIGHT_MEMORY_BUDGET", "4096")
+    code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "m.exr")
+    assert code == 0, err
