@@ -12,6 +12,8 @@
   ``samples_per_cell`` control points per stitch (default 16). One open curve per course
   (group knit), see stages/ingest/knit.py.
 
+Either kind folds into ``pleats = { count, depth }`` across x when the table says so (``pleated``).
+
 The yarn radius is ``gen["yarn_radius"]``, else the ``yarn_radius`` argument (the scene's yarn
 type), else a spacing-based default (woven: spacing / 4; knit: see knit.py). Every curve
 carries that radius as its per-point radius.
@@ -62,7 +64,32 @@ def _interlacement(pattern, gen, ends, picks):
     return weave.basket(int(gen.get("n", 2)), ends, picks)
 
 
+def pleated(cs: CurveSet, pleats: dict | None) -> CurveSet:
+    """The curves folded into ``pleats['count']`` pleats across x, ``pleats['depth']`` deep (peak to trough):
+    z += depth / 2 sin(2 pi count (x - x0) / width) over the curves' x extent. A fold of the flat fabric, not a
+    simulated drape: yarns along x follow the wave, yarns along y are lifted whole."""
+    if not pleats:
+        return cs
+    x0 = min(float(np.min(p[:, 0])) for p in cs.points)
+    width = max(float(np.max(p[:, 0])) for p in cs.points) - x0
+    if not width > 0:
+        return cs
+    k, half = 2.0 * np.pi * int(pleats["count"]) / width, 0.5 * float(pleats["depth"])
+    out = []
+    for p in cs.points:
+        q = np.array(p, np.float64)
+        q[:, 2] += half * np.sin(k * (q[:, 0] - x0))
+        out.append(q)
+    cs.points = out
+    return cs
+
+
 def generate(gen: dict, yarn_radius: float | None = None) -> CurveSet:
+    """The CurveSet of a generator table (module doc), pleated when it says so (``pleated``)."""
+    return pleated(_generate(gen, yarn_radius), gen.get("pleats"))
+
+
+def _generate(gen: dict, yarn_radius: float | None = None) -> CurveSet:
     kind, pattern = gen.get("kind"), gen.get("pattern")
     place = "fabric.generator"
     allowed = {"woven": WOVEN, "knit": KNIT}.get(kind)

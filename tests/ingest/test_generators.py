@@ -165,3 +165,16 @@ def test_generator_errors(gen, words):
     with pytest.raises(LoomError) as e:
         generate(gen, yarn_radius=0.01)
     assert str(e.value).startswith("fabric.generator: ") and words in str(e.value)
+
+
+@pytest.mark.parametrize("kind,pattern", [("woven", "twill"), ("knit", "stockinette")])
+def test_pleats_fold_the_flat_fabric_by_their_sine(kind, pattern):
+    """``pleats = {count, depth}``: every control point is the flat fabric's, lifted by depth/2 sin(2 pi count
+    (x - x0) / width) over the curves' x extent (x and y unchanged); the lift spans the depth."""
+    gen = {"kind": kind, "pattern": pattern, "ends": 8, "picks": 6, "spacing": 0.2}
+    flat, folded = generate(dict(gen)), generate({**gen, "pleats": {"count": 3, "depth": 0.5}})
+    P, Q = np.concatenate(flat.points), np.concatenate(folded.points)
+    x0, width = P[:, 0].min(), P[:, 0].max() - P[:, 0].min()
+    lift = 0.25 * np.sin(2.0 * np.pi * 3 * (P[:, 0] - x0) / width)
+    assert np.array_equal(Q[:, :2], P[:, :2]) and np.allclose(Q[:, 2], P[:, 2] + lift, atol=1e-12)
+    assert lift.max() - lift.min() > 0.49
