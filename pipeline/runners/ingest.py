@@ -68,14 +68,18 @@ def placed(cs: CurveSet, M: np.ndarray, file: Path, key: str) -> CurveSet:
     return cs
 
 
-def scene_curves(scene, radius: float | None, scale: float | None) -> tuple[CurveSet, np.ndarray, dict]:
+def scene_curves(scene, radius: float | None, scale: float | None,
+                 merge_duplicates: bool = True) -> tuple[CurveSet, np.ndarray, dict]:
     """(CurveSet of every fabric of the scene, placed and in order; (C,) the fabric of each curve; the source
-    files by their scene key)."""
+    files by their scene key). Of several fabrics, each is validated before it is placed and merged, so that a
+    bad curve is named by its own file (or the scene, for a generator) and its index there."""
     sets, files = [], {}
     for part in scene.parts:
         cs, src = part_curves(part, radius, scale)
         if src is not None:
             files[part.key] = src
+        if scene.several:
+            cs = validate_curves(cs, src or scene.path, merge_duplicates and part.fabric.get("merge_duplicates", True))
         if part.matrix is not None:
             cs = placed(cs, part.matrix, scene.path, part.key.replace(".fabric", ".transform"))
         sets.append(cs)
@@ -92,12 +96,12 @@ def scene_curves(scene, radius: float | None, scale: float | None) -> tuple[Curv
     return merged, part_of, files
 
 
-def curves_from_input(path: Path, radius: float | None, scale: float | None):
+def curves_from_input(path: Path, radius: float | None, scale: float | None, merge_duplicates: bool = True):
     """(CurveSet, the fabric of each curve (index into the scene's parts; 0 without a scene), scene or None,
     extra input files by name) for any INPUT the ingest command takes."""
     if path.suffix.lower() == ".toml":
         scene = load_scene(path)
-        cs, part_of, files = scene_curves(scene, radius, scale)
+        cs, part_of, files = scene_curves(scene, radius, scale, merge_duplicates)
         return cs, part_of, scene, files
     if path.suffix.lower() == ".wif":
         from ..generators import from_wif
@@ -324,7 +328,7 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         raise LoomError(input_path, None, "input file not found")
     limit = budget or memory_budget()
     input_estimate(input_path, frame_samples).check(limit, input_path)
-    cs, part_of, scene, extra_inputs = curves_from_input(input_path, radius, scale)
+    cs, part_of, scene, extra_inputs = curves_from_input(input_path, radius, scale, merge_duplicates)
     params = {"input": str(input_path), "radius": radius, "scale": scale, "merge_duplicates": merge_duplicates,
               "frame_samples": frame_samples}
     writer = ArtifactWriter(out, kind="yarns", stage="ingest", params=params,
@@ -336,7 +340,9 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         return {"skipped": True}
     src_file = extra_inputs.get("fabric", input_path)
     curves_estimate(sum(len(p) for p in cs.points), frame_samples).check(limit, src_file)
-    cs = validate_curves(cs, src_file, merge_duplicates)
+    # the scene's fabric.merge_duplicates = false refuses repeats as --refuse-duplicates does
+    merge = merge_duplicates and (scene is None or scene.fabric.get("merge_duplicates", True))
+    cs = validate_curves(cs, src_file, merge)
     if write is not None:
         from ..io import write_curves
         from ..outputs import check_not_input

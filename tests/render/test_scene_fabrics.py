@@ -246,3 +246,19 @@ def test_a_tiling_refuses_a_scene_of_several_fabrics(cli, tmp_path):
     code, _, err = cli("tile", cfg, "-o", tmp_path / "tiling.zarr")
     assert code == 2 and "t.toml: scene: both.toml has several [[fabrics]]" in err and "Traceback" not in err, err
     assert not (tmp_path / "tiling.zarr").exists()
+
+
+def test_a_bad_curve_of_a_second_fabric_is_named_in_its_own_file(cli, tmp_path):
+    """A repeated control point in the second fabric's curve file, with that fabric's merge_duplicates = false:
+    exit 2 naming the curve file and the curve's index there (not its index among all the scene's curves)."""
+    (tmp_path / "strands.txt").write_text("0 0 0 0.02\n1 0 0 0.02\n\n0 1 0 0.02\n0.5 1 0 0.02\n0.5 1 0 0.02\n"
+                                          "1 1 0 0.02\n")
+    part = ('[[fabrics]]\nname = "strands"\n[fabrics.fabric]\nsource = "file"\npath = "strands.txt"\n'
+            'merge_duplicates = false\n[fabrics.yarns.default]\nbcsdf = "cotton"\n')
+    scene = write_scene(tmp_path / "s.toml", [fabric("a"), part], SKY, 4)
+    code, _, err = cli("ingest", scene, "-o", tmp_path / "y.zarr")
+    assert code == 2 and "strands.txt: curve 1, point 2: repeated consecutive control point" in err, err
+    assert not (tmp_path / "y.zarr").exists()
+    scene.write_text(scene.read_text().replace("merge_duplicates = false\n", ""))    # merged with a warning
+    code, _, err = cli("ingest", scene, "-o", tmp_path / "y.zarr")
+    assert code == 0 and "merged 1 repeated" in err, err
