@@ -259,7 +259,7 @@ def load_scene_meshes(scene):
     """(SceneMeshes, bounds, stats) of the scene's meshes (module doc); bounds None without meshes."""
     import time
 
-    from stages.core.shading.material import pack_material_lambert
+    from stages.core.shading.material import pack_material_dielectric, pack_material_lambert
     from stages.render.meshes import no_meshes, scene_meshes
 
     from .io.obj_mesh import read_obj_mesh
@@ -275,7 +275,8 @@ def load_scene_meshes(scene):
         Vs.append(obj.V @ M[:, :3].T + M[:, 3])
         Fs.append(obj.F + n)
         n += len(obj.V)
-        rows.append(pack_material_lambert(m["albedo"]))
+        rows.append(pack_material_dielectric(m["eta"], m["roughness"]) if m.get("type") == "dielectric"
+                    else pack_material_lambert(m["albedo"]))
         mat_of_tri.append(np.full(len(obj.F), i, np.int32))
     V, F = np.concatenate(Vs), np.concatenate(Fs)
     sm = scene_meshes(V, F, np.concatenate(mat_of_tri), np.stack(rows), [m["emission"] for m in scene.meshes])

@@ -12,10 +12,11 @@ defaults filled in; ``camera_array`` packs the camera for the render kernels.
 
 ``[[meshes]]`` (surfaces besides the cloth): each an OBJ file (checked to exist when the scene is read; its
 lines when a renderer reads it, ``pipeline.render_setup.load_scene_meshes``), a material (``lambert`` with an
-albedo, and an ``emission``: a mesh that emits is an area light) and a placement (``transform``: translate, a
-rotation by axis and degrees or a 3 x 3 matrix checked to be one, a uniform scale), read into ``Scene.meshes``
-as dicts with ``name``, ``file`` (absolute), ``albedo`` and ``emission`` (rgb) and ``matrix`` (3 x 4: the
-scaled rotation, then the translation; ``placement``).
+albedo, or ``dielectric`` with an ``eta`` and a ``roughness``; and an ``emission``: a mesh that emits is an
+area light) and a placement (``transform``: translate, a rotation by axis and degrees or a 3 x 3 matrix
+checked to be one, a uniform scale), read into ``Scene.meshes`` as dicts with ``name``, ``file`` (absolute),
+``type``, ``albedo``, ``eta``, ``roughness``, ``emission`` (rgb) and ``matrix`` (3 x 4: the scaled rotation,
+then the translation; ``placement``).
 
 ``[[fabrics]]`` (several fabrics in one scene, instead of ``[fabric]`` + ``[yarns]``): each a ``name``, a
 ``fabric`` table and a ``yarns`` table as a one-fabric scene's, and a rigid ``transform``. Both forms are read
@@ -225,8 +226,13 @@ def _meshes(raw: dict, path: Path) -> list[dict]:
             raise LoomError(path, f"meshes[{i}].file", f"OBJ file {file} not found" if not file.exists()
                             else f"{file} is not a file")
         mat = m.get("material", {})
-        out.append({"name": m.get("name", file.stem), "file": str(file), "albedo": _rgb(mat.get("albedo", 0.5)),
-                    "emission": _rgb(mat.get("emission", 0.0)),
+        kind = mat.get("type", "lambert")
+        for key in ("albedo",) if kind == "dielectric" else ("eta", "roughness"):
+            if key in mat:
+                raise LoomError(path, f"meshes[{i}].material.{key}", f"a {kind} material has no {key}")
+        out.append({"name": m.get("name", file.stem), "file": str(file), "type": kind,
+                    "albedo": _rgb(mat.get("albedo", 0.5)), "eta": float(mat.get("eta", 1.5)),
+                    "roughness": float(mat.get("roughness", 0.1)), "emission": _rgb(mat.get("emission", 0.0)),
                     "matrix": placement(m.get("transform"), path, f"meshes[{i}].transform")})
     return out
 

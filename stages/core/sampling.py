@@ -11,7 +11,8 @@
   a vertex of material ``mat`` (``stages.core.shading.material``): the next direction sampled into ``wo``
   from the uniforms of dimensions ``base`` .. ``base + 2``, the throughput ``tp`` weighted by f cos / pdf and,
   when ``roulette``, Russian roulette decided by the uniform of dimension ``base + 3``; returns a
-  ``PathStep`` (alive, pdf, the new throughput).
+  ``PathStep`` (alive, pdf, the new throughput); ``path_step(s0, s1, s2, pf, roulette, seed, key, base, tp)``
+  is its second half, for a vertex whose sample comes from elsewhere (a mesh's material).
 - ``NO_HIT``: the distance a query answers when it found nothing (no surface, no fibre within the
   window); finite, so that comparisons and products with zero stay ordinary numbers.
 
@@ -59,6 +60,13 @@ def continue_path(mat, ctx, t, n, wi, roulette, seed, key, base, tp, wo):
     sample has no density or the roulette ends it."""
     s0, s1, s2, pf = material_sample(mat, ctx, t, n, wi, uniform(seed, key, base), uniform(seed, key, base + 1),
                                      uniform(seed, key, base + 2), wo)
+    return path_step(s0, s1, s2, pf, roulette, seed, key, base, tp)
+
+
+@njit(cache=True, inline="always")
+def path_step(s0, s1, s2, pf, roulette, seed, key, base, tp):
+    """``continue_path`` after its sample (weight s, density pf): the throughput times the weight, then, if
+    ``roulette``, Russian roulette with the uniform (seed, key, base + 3)."""
     tp0 = tp[0]
     tp1 = tp[1]
     tp2 = tp[2]

@@ -1,11 +1,16 @@
 """A scene's meshes (``[[meshes]]``: walls, floor, furniture, area lights) as an integrator sees them.
 
 Every mesh's triangles in scene coordinates make one ``TriangleMesh`` (``stages.core.geometry.triangles``:
-a SAH BVH, nearest hit and any hit), each mesh has one material row (``stages.core.shading.material``;
-a Lambertian surface), ``mat_of_tri`` gives each triangle's row. Surfaces are two-sided, as the ground
-plane (``stages.render.ground``): the shading normal is the triangle's geometric normal turned towards
-the side the ray came from, so a wall lit from behind is dark on the camera's side and light does not
-pass through it.
+a SAH BVH, nearest hit and any hit), each mesh has one material row (``stages.core.shading.material``:
+a Lambertian surface or a rough dielectric), ``mat_of_tri`` gives each triangle's row. The shading normal is
+the triangle's geometric normal turned towards the side the ray came from. A Lambertian surface is two-sided,
+as the ground plane (``stages.render.ground``): a wall lit from behind is dark on the camera's side and light
+does not pass through it. A dielectric (glass, water; ``stages.core.shading.microfacet``: GGX after Walter et
+al. 2007) reflects on the arriving side and refracts through to the other, its relative index eta inside
+over outside, the outside being where the triangle's counter-clockwise normal points (a closed mesh's
+triangles wound outward); its rays leave from the side they go to. ``surface_eval`` and ``surface_sample``
+shade either material; shadow rays stop at a dielectric as at any mesh (light through glass arrives by the
+sampled paths only, as in Mitsuba 3 and pbrt).
 
 ``SceneMeshes`` fields: ``mesh`` (TriangleMesh), ``mat_of_tri`` (T,) int32, ``mats`` (NM, MAT_SIZE),
 ``enabled`` (True), and the area lights: ``emission`` (NM, 3) the radiance each mesh emits (from both
@@ -26,7 +31,8 @@ lights before it (a camera ray).
 
 Queries: ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a miss), ``meshes_occluded`` (shadow rays),
 ``facing_normal_into`` (the unit normal of triangle ``tri`` facing against the ray direction d),
-``mesh_albedo_into`` (the Lambertian albedo of the mesh ``tri`` belongs to) and the area lights' kernels;
+``surface_eval`` / ``surface_sample`` (the material of the mesh ``tri`` belongs to) and the area lights'
+kernels;
 for ``SceneMeshes`` each is a plain call, compiled once for every integrator. ``nee_light_sample_into``: light k
 of next-event estimation, a distant light or (k = NL) the area lights, for the integrators that sample each light.
 """
@@ -38,9 +44,12 @@ from numba import njit
 from numba.extending import overload
 
 from stages.core.dispatch import is_tuple_class
+from stages.core.geometry.frames import orthonormal_basis
 from stages.core.geometry.triangles import TriangleHit, build_triangle_mesh, mesh_intersect, mesh_occluded
 from stages.core.rng import uniform
-from stages.core.shading.material import MAT_SIZE, material_lambert_albedo
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
+from stages.core.shading.material import MAT_DIELECTRIC, MAT_SIZE
+from stages.core.shading.microfacet import rough_dielectric_eval, rough_dielectric_sample
 from stages.render.lights import cdf_find, light_sample_into
 
 SceneMeshes = namedtuple("SceneMeshes", ["mesh", "mat_of_tri", "mats", "enabled", "emission", "emitters",
@@ -99,8 +108,17 @@ def facing_normal_into(sm, tri, dx, dy, dz, n):
     raise TypeError(NUMBA_ONLY)
 
 
-def mesh_albedo_into(sm, tri, out):
-    """Write into out the Lambertian albedo (rgb) of the mesh triangle ``tri`` belongs to."""
+def surface_eval(sm, tri, n, wi, wo):
+    """(f |cos| r, g, b, pdf of ``surface_sample``) of the material of triangle ``tri``'s mesh at a vertex whose
+    normal n faces the arriving ray (towards wi): Lambertian (light on n's side only) or the rough dielectric
+    (reflection on n's side, refraction from the other; module doc)."""
+    raise TypeError(NUMBA_ONLY)
+
+
+def surface_sample(sm, tri, n, wi, u0, u1, u2, wo):
+    """A direction of the material of triangle ``tri``'s mesh into wo (n facing wi, as ``surface_eval``):
+    (weight r, g, b, pdf), pdf 0 on failure. A Lambertian surface draws with (u1, u2) as
+    ``lambert_sample_into``; the dielectric picks its lobe with u0 too."""
     raise TypeError(NUMBA_ONLY)
 
 
@@ -167,10 +185,43 @@ def _facing_normal_into(sm, tri, dx, dy, dz, n):
 
 
 @njit(cache=True)
-def _mesh_albedo_into(sm, tri, out):
-    a = material_lambert_albedo(sm.mats[sm.mat_of_tri[tri]])
+def _dielectric_side(sm, tri, n, row):
+    """(eta across the surface from n's side, alpha, the frame (t, b) about n) of a dielectric row: eta the
+    row's where n is the triangle's outward side (counter-clockwise winding), its inverse where n faces in."""
+    gx, gy, gz = _unit_normal(sm, tri)
+    eta = row[1] if gx * n[0] + gy * n[1] + gz * n[2] > 0.0 else 1.0 / row[1]
+    t, b = orthonormal_basis(n[0], n[1], n[2])
+    return eta, row[2], t, b
+
+
+@njit(cache=True)
+def _surface_eval(sm, tri, n, wi, wo):
+    row = sm.mats[sm.mat_of_tri[tri]]
+    if int(row[0]) != MAT_DIELECTRIC:
+        f0, f1, f2 = lambert_eval(row[11:14], n, wi, wo)
+        return f0, f1, f2, lambert_pdf(row[11:14], n, wi, wo)
+    eta, alpha, t, b = _dielectric_side(sm, tri, n, row)
+    value, pdf = rough_dielectric_eval(
+        wi[0] * t[0] + wi[1] * t[1] + wi[2] * t[2], wi[0] * b[0] + wi[1] * b[1] + wi[2] * b[2],
+        wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], wo[0] * t[0] + wo[1] * t[1] + wo[2] * t[2],
+        wo[0] * b[0] + wo[1] * b[1] + wo[2] * b[2], wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2], alpha, eta)
+    return value, value, value, pdf
+
+
+@njit(cache=True)
+def _surface_sample(sm, tri, n, wi, u0, u1, u2, wo):
+    row = sm.mats[sm.mat_of_tri[tri]]
+    if int(row[0]) != MAT_DIELECTRIC:
+        return lambert_sample_into(row[11:14], n, wi, u1, u2, wo)
+    eta, alpha, t, b = _dielectric_side(sm, tri, n, row)
+    ok, x, y, z, weight, pdf = rough_dielectric_sample(
+        wi[0] * t[0] + wi[1] * t[1] + wi[2] * t[2], wi[0] * b[0] + wi[1] * b[1] + wi[2] * b[2],
+        wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2], alpha, eta, u0, u1, u2)
+    if not ok:
+        return 0.0, 0.0, 0.0, 0.0
     for k in range(3):
-        out[k] = a[k]
+        wo[k] = x * t[k] + y * b[k] + z * n[k]
+    return weight, weight, weight, pdf
 
 
 @njit(cache=True)
@@ -262,12 +313,20 @@ def _ov_facing_normal_into(sm, tri, dx, dy, dz, n):
         return lambda sm, tri, dx, dy, dz, n: None
 
 
-@overload(mesh_albedo_into, inline="always")
-def _ov_mesh_albedo_into(sm, tri, out):
+@overload(surface_eval, inline="always")
+def _ov_surface_eval(sm, tri, n, wi, wo):
     if is_tuple_class(sm, SceneMeshes):
-        return lambda sm, tri, out: _mesh_albedo_into(sm, tri, out)
+        return lambda sm, tri, n, wi, wo: _surface_eval(sm, tri, n, wi, wo)
     if is_tuple_class(sm, NoMeshes):
-        return lambda sm, tri, out: None
+        return lambda sm, tri, n, wi, wo: (0.0, 0.0, 0.0, 0.0)
+
+
+@overload(surface_sample, inline="always")
+def _ov_surface_sample(sm, tri, n, wi, u0, u1, u2, wo):
+    if is_tuple_class(sm, SceneMeshes):
+        return lambda sm, tri, n, wi, u0, u1, u2, wo: _surface_sample(sm, tri, n, wi, u0, u1, u2, wo)
+    if is_tuple_class(sm, NoMeshes):
+        return lambda sm, tri, n, wi, u0, u1, u2, wo: (0.0, 0.0, 0.0, 0.0)
 
 
 @overload(emitted_radiance, inline="always")

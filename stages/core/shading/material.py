@@ -2,9 +2,13 @@
 
 An integrator that shades fibres (or the ground) holds a table of rows, float64[MAT_SIZE] each:
 
-    0       model: MAT_BCSDF (the fibre BCSDF of Khungurn et al. 2015, ``stages.core.shading.bcsdf``)
-            or MAT_LAMBERT (an opaque Lambertian surface, ``stages.core.shading.lambert``)
+    0       model: MAT_BCSDF (the fibre BCSDF of Khungurn et al. 2015, ``stages.core.shading.bcsdf``),
+            MAT_LAMBERT (an opaque Lambertian surface, ``stages.core.shading.lambert``) or MAT_DIELECTRIC
+            (a rough dielectric interface, ``stages.core.shading.microfacet``: meshes' rows only, shaded
+            by ``stages.render.meshes``, which knows the triangle's outward side; the four functions
+            below take BCSDF and Lambert rows)
     1:11    packed BCSDF (BCSDF_SIZE values)          -- MAT_BCSDF
+    1, 2    eta (inside over outside), roughness      -- MAT_DIELECTRIC
     11:14   albedo (rgb)                              -- MAT_LAMBERT
 
 ``pack_material_bcsdf(bcsdf_params)`` / ``pack_material_lambert(albedo)`` build rows. The integrator
@@ -33,6 +37,7 @@ from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sampl
 MAT_SIZE = 14
 MAT_BCSDF = 0
 MAT_LAMBERT = 1
+MAT_DIELECTRIC = 2
 CTX_SIZE = B.CTX_SIZE
 
 
@@ -50,10 +55,14 @@ def pack_material_lambert(albedo):
     return row
 
 
-@njit(cache=True, inline="always")
-def material_lambert_albedo(mat):
-    """The albedo (rgb view) of a MAT_LAMBERT row."""
-    return mat[11:14]
+def pack_material_dielectric(eta, roughness):
+    """A rough dielectric row: the index of the mesh's inside relative to its outside (the side its triangles'
+    normals, counter-clockwise, point to) and the GGX roughness alpha."""
+    row = np.zeros(MAT_SIZE)
+    row[0] = MAT_DIELECTRIC
+    row[1] = eta
+    row[2] = roughness
+    return row
 
 
 @njit(cache=True, inline="always")

@@ -14,8 +14,17 @@ y along alpha_v, z the macro normal).
   refraction i -> o across the interface (flux form: value = (1 - F) G1(o) pdf), pdf the density of
   sampling them through ``ggx_sample_visible``.
 
+- ``rough_dielectric_eval(i, o, alpha, eta)`` and ``rough_dielectric_sample(i, alpha, eta, u0, u1, u2)``: a
+  rough dielectric surface (a glass or water interface) of isotropic roughness alpha, i on the z > 0 side:
+  f |o_z| of reflection or refraction (the side of o decides) in radiance form -- refraction scaled by
+  1 / eta^2, the radiance of a beam narrowed by the denser side (Veach 1997 §5.2), so that a path that
+  enters and leaves a closed object carries its radiance unchanged -- and its density when the micro-normal
+  is sampled from the visible normals and the lobe by its Fresnel weight (u0 < F: reflect); the sample's
+  weight is value / pdf = G1(o) (refraction: G1(o) / eta^2).
+
 Directions are unit vectors pointing away from the surface point; ``COS_EPS`` is the grazing cosine at
-or below which nothing scatters. Users: the BYSDF of seed 004 (``stages.core.shading.bysdf``).
+or below which nothing scatters. Users: the BYSDF of seed 004 (``stages.core.shading.bysdf``), the meshes'
+dielectric material (``stages.render.meshes``).
 """
 import math
 
@@ -164,3 +173,44 @@ def rough_transmit(ix, iy, iz, ox, oy, oz, au, av, eta):
     pdf = ggx_G1(ix, iy, iz, au, av) * ih * D / iz * jac
     F = fresnel_dielectric(ih, eta)
     return (1.0 - F) * ggx_G1(ox, oy, oz, au, av) * pdf, pdf
+
+
+@njit(cache=True)
+def rough_dielectric_eval(ix, iy, iz, ox, oy, oz, alpha, eta):
+    """(f |o_z|, pdf) of the rough dielectric surface (module doc) from i (z > 0) to o on either side, eta =
+    n(z < 0 side) / n(z > 0 side); pdf = the visible-normal density times the chosen lobe's Fresnel weight,
+    which is the lobe's flux-form value over G1(o)."""
+    if oz > 0.0:
+        value, _ = rough_reflect(ix, iy, iz, ox, oy, oz, alpha, alpha, eta)
+        scale = 1.0
+    else:
+        value, _ = rough_transmit(ix, iy, iz, ox, oy, oz, alpha, alpha, eta)
+        scale = 1.0 / (eta * eta)
+    if value <= 0.0:
+        return 0.0, 0.0
+    return value * scale, value / ggx_G1(ox, oy, oz, alpha, alpha)
+
+
+@njit(cache=True)
+def rough_dielectric_sample(ix, iy, iz, alpha, eta, u0, u1, u2):
+    """(ok, ox, oy, oz, weight, pdf): a direction of the rough dielectric surface from i (z > 0): a visible
+    micro-normal from (u1, u2), reflection about it when u0 < F(i.h) (always under total internal
+    reflection), else refraction through it; weight = value / pdf of ``rough_dielectric_eval``."""
+    if iz <= COS_EPS:
+        return False, 0.0, 0.0, 1.0, 0.0, 0.0
+    hx, hy, hz = ggx_sample_visible(ix, iy, iz, alpha, alpha, u1, u2)
+    ih = ix * hx + iy * hy + iz * hz
+    if ih <= 0.0:
+        return False, 0.0, 0.0, 1.0, 0.0, 0.0
+    if u0 < fresnel_dielectric(ih, eta):
+        ox, oy, oz = 2.0 * ih * hx - ix, 2.0 * ih * hy - iy, 2.0 * ih * hz - iz
+        if oz <= 0.0:       # reflected below the surface: no sample (the evaluation would read a refraction)
+            return False, 0.0, 0.0, 1.0, 0.0, 0.0
+    else:
+        ok, ox, oy, oz = refract(ix, iy, iz, hx, hy, hz, eta)
+        if not ok or oz >= 0.0:
+            return False, 0.0, 0.0, 1.0, 0.0, 0.0
+    value, pdf = rough_dielectric_eval(ix, iy, iz, ox, oy, oz, alpha, eta)
+    if pdf <= 0.0:
+        return False, 0.0, 0.0, 1.0, 0.0, 0.0
+    return True, ox, oy, oz, value / pdf, pdf

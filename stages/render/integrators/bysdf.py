@@ -91,10 +91,11 @@ from stages.render.meshes import (
     area_light_pdf,
     emitted_radiance,
     facing_normal_into,
-    mesh_albedo_into,
     meshes_hit,
     meshes_occluded,
     nee_light_sample_into,
+    surface_eval,
+    surface_sample,
 )
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
@@ -317,9 +318,8 @@ def trace_path(it, o, d, seed, key):
             px = o[0] + t_hit * d[0]
             py = o[1] + t_hit * d[1]
             pz = o[2] + t_hit * d[2]
-            if mh.tri >= 0:
+            if mh.tri >= 0:   # its material: surface_eval / surface_sample
                 facing_normal_into(it.meshes, mh.tri, d[0], d[1], d[2], gn)
-                mesh_albedo_into(it.meshes, mh.tri, alb)
             else:
                 gn[0] = 0.0
                 gn[1] = 0.0
@@ -337,12 +337,20 @@ def trace_path(it, o, d, seed, key):
                 reach = dist - it.eps
                 if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                     continue
-                f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)
+                if mh.tri >= 0:
+                    f0, f1, f2, pf = surface_eval(it.meshes, mh.tri, gn, wi, wlk)
+                else:
+                    f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)
+                    pf = lambert_pdf(alb, gn, wi, wlk)
                 if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                     continue
-                pf = lambert_pdf(alb, gn, wi, wlk)
-                # nothing to skip, typed as a yarn hit's (yarn, segment) so visible compiles once
-                vis, nr = visible(it, sx, sy, sz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1), reach)
+                # from the light's side of the surface (a dielectric's refraction: the far side); nothing to
+                # skip, typed as a yarn hit's (yarn, segment) so visible compiles once
+                flip = wlk[0] * gn[0] + wlk[1] * gn[1] + wlk[2] * gn[2] < 0.0
+                lx = px - it.eps * gn[0] if flip else sx
+                ly = py - it.eps * gn[1] if flip else sy
+                lz = pz - it.eps * gn[2] if flip else sz
+                vis, nr = visible(it, lx, ly, lz, wlk[0], wlk[1], wlk[2], np.int32(-1), np.int64(-1), reach)
                 rays += nr
                 if not vis:
                     continue
@@ -350,13 +358,22 @@ def trace_path(it, o, d, seed, key):
                 L[0] += tp[0] * f0 * lr * w
                 L[1] += tp[1] * f1 * lg * w
                 L[2] += tp[2] * f2 * lb * w
-            w0, w1, w2, pf = lambert_sample_into(alb, gn, wi, uniform(seed, key, base + D_DIR1),
-                                                 uniform(seed, key, base + D_DIR2), wow)
+            if mh.tri >= 0:
+                w0, w1, w2, pf = surface_sample(it.meshes, mh.tri, gn, wi, uniform(seed, key, base + D_LOBE),
+                                                uniform(seed, key, base + D_DIR1), uniform(seed, key, base + D_DIR2),
+                                                wow)
+            else:
+                w0, w1, w2, pf = lambert_sample_into(alb, gn, wi, uniform(seed, key, base + D_DIR1),
+                                                     uniform(seed, key, base + D_DIR2), wow)
             if pf <= 0.0:
                 break
             tp[0] *= w0
             tp[1] *= w1
             tp[2] *= w2
+            if wow[0] * gn[0] + wow[1] * gn[1] + wow[2] * gn[2] < 0.0:   # refracted: it leaves from the far side
+                sx = px - it.eps * gn[0]
+                sy = py - it.eps * gn[1]
+                sz = pz - it.eps * gn[2]
             o[0] = sx
             o[1] = sy
             o[2] = sz

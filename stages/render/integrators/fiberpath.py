@@ -6,8 +6,9 @@ or tiled exemplars under a shell map (``ShellScene``); the same estimator runs o
 ground plane (``stages.render.ground``) and the scene's meshes (``stages.render.meshes``: walls, floor,
 furniture). Materials: packed rows (``stages.core.shading.material``: the
 BCSDF of Khungurn et al. 2015 or a Lambertian surface), one per fibre through ``mat_of_fiber``, a
-Lambertian row for the ground and one per mesh. Lights: ``stages.render.lights`` (distant) and the meshes
-that emit (area lights, ``stages.render.meshes``).
+Lambertian row for the ground and one per mesh (a mesh's Lambertian or rough dielectric row, shaded through
+``stages.render.meshes``: ``surface_eval``, ``surface_sample``). Lights: ``stages.render.lights``
+(distant) and the meshes that emit (area lights, ``stages.render.meshes``).
 
 ``FiberpathIntegrator`` fields: ``scene`` (EmbreeFibers | FiberBVH | ShellScene), ``mat_of_fiber`` (F,) int32 row of
 each fibre, ``mats`` (NM, MAT_SIZE), ``ground_mat`` (MAT_SIZE,) the ground's Lambertian row,
@@ -31,7 +32,8 @@ BCSDF vertices (curve materials): the scattered and shadow rays start on the fib
 the segments of the same fibre within ``ign_window`` along the chain (a curve BCSDF does not
 self-shadow; see ``stages.core.shading.bcsdf`` "Measure"); the renderer passes a window wider than
 any fibre, i.e. the whole fibre is skipped. Lambertian, ground and mesh vertices: rays start offset
-along the normal (towards the side the ray came from) and test everything. Rays leaving a fibre of a
+along the normal towards the side they leave into (the side the ray came from, but for a dielectric's
+refraction) and test everything. Rays leaving a fibre of a
 shell scene start in the tetrahedron of the hit.
 
 Random numbers: ``uniform(seed, index, dim)`` for camera sample ``index`` (``stages.render.tiles``):
@@ -58,7 +60,8 @@ from stages.core.dispatch import is_tuple_class
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.geometry.surface import Skip, surface_hit, surface_occluded
 from stages.core.geometry.wide_walk import Ray
-from stages.core.sampling import continue_path, power_heuristic
+from stages.core.rng import uniform
+from stages.core.sampling import continue_path, path_step, power_heuristic
 from stages.core.shading.material import (
     CTX_SIZE,
     material_eval_pdf,
@@ -75,6 +78,8 @@ from stages.render.meshes import (
     meshes_hit,
     meshes_occluded,
     nee_light_sample_into,
+    surface_eval,
+    surface_sample,
 )
 
 FiberpathIntegrator = namedtuple("FiberpathIntegrator", [
@@ -197,16 +202,24 @@ def _trace(it, o, d, seed, key):
             reach = dist - eps     # a shadow ray to an area light stops short of its surface (inf: distant)
             if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                 continue
-            f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
+            if on == ON_MESH:
+                f0, f1, f2, pf = surface_eval(it.meshes, mh.tri, n, wi, wl)
+            else:
+                f0, f1, f2, pf = material_eval_pdf(mat, ctx, t_tan, n, wi, wl)
             if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                 continue
             rays += 1
-            if surface_occluded(it.scene, next_cell, Ray(so[0], so[1], so[2], wl[0], wl[1], wl[2]), eps, reach,
+            # the shadow ray leaves from the light's side of the surface (a dielectric's refraction: the far side)
+            side = eps if on == ON_FIBRE or wl[0] * n[0] + wl[1] * n[1] + wl[2] * n[2] >= 0.0 else -eps
+            sx = so[0] if side > 0.0 else p[0] + side * n[0]
+            sy = so[1] if side > 0.0 else p[1] + side * n[1]
+            sz = so[2] if side > 0.0 else p[2] + side * n[2]
+            if surface_occluded(it.scene, next_cell, Ray(sx, sy, sz, wl[0], wl[1], wl[2]), eps, reach,
                                 Skip(nf, ns, it.ign_window)):
                 continue
-            if ground_intersect(it.ground, it.has_ground, so[2], wl[2], eps) < reach:
+            if ground_intersect(it.ground, it.has_ground, sz, wl[2], eps) < reach:
                 continue
-            if meshes_occluded(it.meshes, so[0], so[1], so[2], wl[0], wl[1], wl[2], eps, reach):
+            if meshes_occluded(it.meshes, sx, sy, sz, wl[0], wl[1], wl[2], eps, reach):
                 continue
             if delta:
                 w = 1.0
@@ -216,7 +229,16 @@ def _trace(it, o, d, seed, key):
             L1 += tp1 * f1 * lg * w
             L2 += tp2 * f2 * lb * w
         # scatter: the next direction, the throughput, Russian roulette from event rr_depth on
-        step = continue_path(mat, ctx, t_tan, n, wi, depth + 1 >= it.rr_depth, seed, key, base, (tp0, tp1, tp2), wo)
+        roulette = depth + 1 >= it.rr_depth
+        if on == ON_MESH:
+            s0, s1, s2, pf = surface_sample(it.meshes, mh.tri, n, wi, uniform(seed, key, base),
+                                            uniform(seed, key, base + 1), uniform(seed, key, base + 2), wo)
+            step = path_step(s0, s1, s2, pf, roulette, seed, key, base, (tp0, tp1, tp2))
+            if wo[0] * n[0] + wo[1] * n[1] + wo[2] * n[2] < 0.0:   # refracted: it leaves from the far side
+                for k in range(3):
+                    so[k] = p[k] - eps * n[k]
+        else:
+            step = continue_path(mat, ctx, t_tan, n, wi, roulette, seed, key, base, (tp0, tp1, tp2), wo)
         if not step.alive:
             break
         tp0, tp1, tp2 = step.tp

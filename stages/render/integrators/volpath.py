@@ -69,9 +69,10 @@ from stages.render.meshes import (
     area_light_sample_into,
     emitted_radiance,
     facing_normal_into,
-    mesh_albedo_into,
     meshes_hit,
     meshes_occluded,
+    surface_eval,
+    surface_sample,
 )
 
 VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
@@ -248,21 +249,21 @@ def trace_path(it, o, d, seed, index):
             # a Lambertian surface (the ground or a mesh), shading normal toward the arriving ray
             px = ox + tg * dx
             py = oy + tg * dy
-            if mh.tri >= 0:
+            if mh.tri >= 0:   # its material: surface_eval / surface_sample
                 facing_normal_into(it.meshes, mh.tri, dx, dy, dz, nrm)
-                mesh_albedo_into(it.meshes, mh.tri, alb)
                 pz = oz + tg * dz
-                off = SURFACE_OFFSET * (1.0 + max(abs(px), abs(py), abs(pz)))
-                px += off * nrm[0]
-                py += off * nrm[1]
-                pz += off * nrm[2]
+                soff = SURFACE_OFFSET * (1.0 + max(abs(px), abs(py), abs(pz)))
+                px += soff * nrm[0]
+                py += soff * nrm[1]
+                pz += soff * nrm[2]
             else:
                 nrm[0] = 0.0
                 nrm[1] = 0.0
                 nrm[2] = 1.0 if dz < 0.0 else -1.0
                 for q in range(3):
                     alb[q] = ground[1 + q]
-                pz = ground[0] + nrm[2] * SURFACE_OFFSET * (1.0 + abs(ground[0]))
+                soff = SURFACE_OFFSET * (1.0 + abs(ground[0]))
+                pz = ground[0] + nrm[2] * soff
         # next-event estimation picks one light
         reach = np.inf
         if n_pick > 0:
@@ -323,24 +324,39 @@ def trace_path(it, o, d, seed, index):
             if pdf <= 0.0:
                 break
             prev_pdf = pdf
-        else:   # the surface (p, its normal and albedo set above)
+        else:   # the surface (p just off it towards the arriving ray, its normal; the ground's albedo)
             wi[0] = -dx
             wi[1] = -dy
             wi[2] = -dz
             if lpdf > 0.0:
-                fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
+                if mh.tri >= 0:
+                    fr, fg, fb, pf = surface_eval(it.meshes, mh.tri, nrm, wi, lw)
+                else:
+                    fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
+                    pf = lambert_pdf(alb, nrm, wi, lw)
                 if fr > 0.0 or fg > 0.0 or fb > 0.0:
-                    Lr, Lg, Lb, dim, lk = _add_light(it, px, py, pz, lw, reach, seed, index, dim,
-                                                     runtime_value(-1), lpdf, ldelta, lambert_pdf(alb, nrm, wi, lw),
-                                                     1.0,
-                                                     br * ler * fr, bg * leg * fg, bb * leb * fb, Lr, Lg, Lb)
+                    # the shadow ray leaves from the light's side (a dielectric's refraction: the far side)
+                    back = 2.0 * soff if lw[0] * nrm[0] + lw[1] * nrm[1] + lw[2] * nrm[2] < 0.0 else 0.0
+                    Lr, Lg, Lb, dim, lk = _add_light(it, px - back * nrm[0], py - back * nrm[1], pz - back * nrm[2],
+                                                     lw, reach, seed, index, dim, runtime_value(-1), lpdf, ldelta,
+                                                     pf, 1.0, br * ler * fr, bg * leg * fg, bb * leb * fb,
+                                                     Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
-            wr, wg, wb, pdf = lambert_sample_into(alb, nrm, wi, u4, u5, wsc)
+            if mh.tri >= 0:
+                # a dielectric picks its lobe with u3, the number that picked the light: next-event estimation
+                # and the continuation are separate terms of the estimate, each unbiased over u3
+                wr, wg, wb, pdf = surface_sample(it.meshes, mh.tri, nrm, wi, u3, u4, u5, wsc)
+            else:
+                wr, wg, wb, pdf = lambert_sample_into(alb, nrm, wi, u4, u5, wsc)
             if pdf <= 0.0:
                 break
             br, bg, bb, wx, wy, wz = _scattered(br, bg, bb, wr, wg, wb, wsc)
             prev_pdf = pdf
+            if wx * nrm[0] + wy * nrm[1] + wz * nrm[2] < 0.0:   # refracted: it leaves from the far side
+                px -= 2.0 * soff * nrm[0]
+                py -= 2.0 * soff * nrm[1]
+                pz -= 2.0 * soff * nrm[2]
         ox = px
         oy = py
         oz = pz
