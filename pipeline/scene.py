@@ -19,7 +19,8 @@ checked to be one, a uniform scale), read into ``Scene.meshes`` as dicts with ``
 then the translation; ``placement``).
 
 ``[[fabrics]]`` (several fabrics in one scene, instead of ``[fabric]`` + ``[yarns]``): each a ``name``, a
-``fabric`` table and a ``yarns`` table as a one-fabric scene's, and a rigid ``transform``. Both forms are read
+``fabric`` table and a ``yarns`` table as a one-fabric scene's, optionally a ``drape`` (laid over a cylinder or
+a ball, ``stages.tile.base_surfaces.drape``) and a rigid ``transform``. Both forms are read
 into ``Scene.parts``, one ``FabricPart`` per fabric (``[fabric]`` is one part with no placement). A yarn type
 is a (fabric, group) pair: type ``t`` is part ``t // 4``'s group ``YARN_GROUPS[t % 4]`` -- the index ingest
 writes per yarn (``yarn_type``), the same as the group's index for one fabric -- and its **label** is the
@@ -63,6 +64,7 @@ class FabricPart:
     matrix: np.ndarray | None   # (3, 4) rigid placement [R | t]; None: where its source puts it
     key: str                    # its key in the scene file: 'fabric' or 'fabrics[i].fabric'
     yarns_key: str              # 'yarns' or 'fabrics[i].yarns'
+    drape: dict | None = None   # the surface it is laid on before its placement (schema $defs/placed_fabric)
 
 
 @dataclass
@@ -277,10 +279,11 @@ def _fabric_parts(raw: dict, path: Path) -> list[FabricPart]:
         if tf and tf.get("scale", 1.0) != 1.0:
             raise LoomError(path, f"fabrics[{i}].transform.scale", "a fabric's placement is rigid: scale its source "
                             "(fabric.scale, or the generator's spacing and yarn radius) instead")
+        drape = {"folds": 6, "fold_amplitude": 0.15, **f["drape"]} if "drape" in f else None
         parts.append(FabricPart(f["name"], _fabric_table(f["fabric"], path, f"fabrics[{i}].fabric"),
                                 copy.deepcopy(f.get("yarns", {})),
                                 placement(tf, path, f"fabrics[{i}].transform") if tf else None,
-                                f"fabrics[{i}].fabric", f"fabrics[{i}].yarns"))
+                                f"fabrics[{i}].fabric", f"fabrics[{i}].yarns", drape))
     return parts
 
 
@@ -347,7 +350,7 @@ def ingest_identity(scene: Scene) -> dict:
     if scene.parts[0].key == "fabric":
         fabric = fabric_identity(scene.fabric)
     else:       # [[fabrics]]: each by its name, source and placement
-        fabric = {"fabrics": [{"name": p.name, **fabric_identity(p.fabric),
+        fabric = {"fabrics": [{"name": p.name, **fabric_identity(p.fabric), "drape": p.drape,
                                "placement": None if p.matrix is None else p.matrix.tolist()} for p in scene.parts]}
     yarns = {}
     for label in scene.type_labels():

@@ -68,6 +68,33 @@ def placed(cs: CurveSet, M: np.ndarray, file: Path, key: str) -> CurveSet:
     return cs
 
 
+def draped(cs: CurveSet, spec: dict, file: Path, key: str) -> CurveSet:
+    """The curves laid on the surface of a ``drape`` table (``stages.tile.base_surfaces.drape``): their (x, y)
+    about the centre of their box along a cylinder or over a ball, their z along its normal; a point moved
+    beyond the coordinate limits is refused at ``key``."""
+    from stages.tile import base_surfaces as bs
+
+    lo = np.min([np.min(p, axis=0) for p in cs.points], axis=0)
+    hi = np.max([np.max(p, axis=0) for p in cs.points], axis=0)
+    size = float(max(hi[0] - lo[0], hi[1] - lo[1], 1e-12))
+    centre = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.0])
+    R = float(spec["radius"])
+    if spec["surface"] == "cylinder":
+        def surface(x, y):
+            return bs.cylinder_points(x, y, R)
+    else:
+        def surface(x, y):
+            return bs.sphere_drape_points(x, y, size, R, int(spec["folds"]), float(spec["fold_amplitude"]))
+    n = [len(p) for p in cs.points]
+    moved = bs.drape(np.concatenate([np.asarray(p, np.float64) for p in cs.points]) - centre, surface, size)
+    k = first_bad_row(moved)
+    if k >= 0:
+        raise LoomError(file, key, f"moves control point {k} to {moved[k].tolist()}, beyond +-{MAX_COORD:g} "
+                        "scene units")
+    cs.points = list(np.split(moved, np.cumsum(n)[:-1]))
+    return cs
+
+
 def scene_curves(scene, radius: float | None, scale: float | None,
                  merge_duplicates: bool = True) -> tuple[CurveSet, np.ndarray, dict]:
     """(CurveSet of every fabric of the scene, placed and in order; (C,) the fabric of each curve; the source
@@ -80,6 +107,8 @@ def scene_curves(scene, radius: float | None, scale: float | None,
             files[part.key] = src
         if scene.several:
             cs = validate_curves(cs, src or scene.path, merge_duplicates and part.fabric.get("merge_duplicates", True))
+        if part.drape is not None:
+            cs = draped(cs, part.drape, scene.path, part.key.replace(".fabric", ".drape"))
         if part.matrix is not None:
             cs = placed(cs, part.matrix, scene.path, part.key.replace(".fabric", ".transform"))
         sets.append(cs)

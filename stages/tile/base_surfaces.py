@@ -16,6 +16,10 @@ triangles counter-clockwise in (u, v) and their geometric normals on the side th
   fold_amplitude h^2 / cloth_size sin^2(folds phi) at hanging length h (0 at the equator, so the
   surface stays C1 there). Lengths are kept along every radial line of the cloth.
 
+``sphere_drape_points`` and ``cylinder_points`` are those maps at any cloth points (lengths kept: a cylinder's
+angle is the cloth's width over its radius), and ``drape`` lays a fabric's curves on such a map with their
+thickness along its normal (a scene's ``[[fabrics]]`` ``drape``: pipeline/runners/ingest.py).
+
 ``vertex_normals``: smoothed (angle-weighted) vertex normals. ``triangle_checks`` finds degenerate
 triangles (3-D area or uv area <= ``rel_eps`` x the mean) and flipped triangles (uv orientation
 against the majority, or geometric normal against the smoothed vertex normals).
@@ -54,16 +58,45 @@ def cylinder(radius, length, angle_deg=180.0, nu=24, nv=8):
 
 def sphere_drape(cloth_size, sphere_radius, nu=32, nv=32, folds=6, fold_amplitude=0.15):
     uv = _grid_uv(nu, nv)
-    x = (uv[:, 0] - 0.5) * cloth_size
-    y = (uv[:, 1] - 0.5) * cloth_size
+    V = sphere_drape_points((uv[:, 0] - 0.5) * cloth_size, (uv[:, 1] - 0.5) * cloth_size, cloth_size, sphere_radius,
+                            folds, fold_amplitude)
+    return V, uv, _grid_triangles(nu, nv)
+
+
+def sphere_drape_points(x, y, cloth_size, sphere_radius, folds=6, fold_amplitude=0.15):
+    """``sphere_drape``'s map at cloth points (x, y) measured from the cloth's centre: (n, 3) points."""
     r = np.hypot(x, y)
     phi = np.arctan2(y, x)
     R = sphere_radius
     theta = np.minimum(r / R, 0.5 * np.pi)
     hang = np.maximum(r - 0.5 * np.pi * R, 0.0)
     rad = R * np.sin(theta) + fold_amplitude * hang * (hang / cloth_size) * np.sin(folds * phi) ** 2
-    V = np.stack([rad * np.cos(phi), rad * np.sin(phi), R * np.cos(theta) - hang], 1)
-    return V, uv, _grid_triangles(nu, nv)
+    return np.stack([rad * np.cos(phi), rad * np.sin(phi), R * np.cos(theta) - hang], 1)
+
+
+def cylinder_points(x, y, radius):
+    """A cloth laid over a cylinder of axis y (through the origin), lengths kept: cloth point (x, y), x measured
+    from the cloth's centre line, goes to polar angle phi = x / radius from +z: (r sin phi, y, r cos phi)."""
+    phi = np.asarray(x, np.float64) / radius
+    return np.stack([radius * np.sin(phi), np.asarray(y, np.float64), radius * np.cos(phi)], 1)
+
+
+DRAPE_STEP = 1e-5   # the central differences of ``drape``'s normals, in units of the cloth's size
+
+
+def drape(points, surface_map, size):
+    """Points of a flat fabric (x, y in the cloth, z its height above it) draped by ``surface_map`` ((x, y) ->
+    (n, 3) surface points, e.g. ``cylinder_points``): each goes to the surface point of its (x, y) plus z times
+    the surface's unit normal there (from central differences of the map, ``DRAPE_STEP`` of ``size`` apart), so
+    the fabric's thickness stays along the surface's normal and its lengths along the surface are the map's."""
+    P = np.asarray(points, np.float64)
+    h = DRAPE_STEP * size
+    x, y = P[:, 0], P[:, 1]
+    du = (surface_map(x + h, y) - surface_map(x - h, y)) / (2.0 * h)
+    dv = (surface_map(x, y + h) - surface_map(x, y - h)) / (2.0 * h)
+    n = np.cross(du, dv)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    return surface_map(x, y) + P[:, 2:3] * n
 
 
 def face_normals(V, F):

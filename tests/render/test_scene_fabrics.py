@@ -209,6 +209,9 @@ BAD = {
                        "fabrics[1].fabric.path"),
     "an unknown pattern": (fabric("b").replace('pattern = "plain"', 'pattern = "plane"'),
                            "fabrics[1].fabric.generator.pattern"),
+    "a flat drape": (fabric("b").replace('name = "b"\n',
+                                         'name = "b"\ndrape = { surface = "cylinder", radius = 0.0 }\n'),
+                     "fabrics[1].drape.radius"),
 }
 
 
@@ -262,3 +265,41 @@ def test_a_bad_curve_of_a_second_fabric_is_named_in_its_own_file(cli, tmp_path):
     scene.write_text(scene.read_text().replace("merge_duplicates = false\n", ""))    # merged with a warning
     code, _, err = cli("ingest", scene, "-o", tmp_path / "y.zarr")
     assert code == 0 and "merged 1 repeated" in err, err
+
+
+# ------------------------------------------------------------------------------------------------ drape
+def _flat_and_draped(spec, knit=False):
+    from pipeline.generators import generate
+    from pipeline.runners.ingest import draped
+
+    gen = {"kind": "knit", "pattern": "stockinette", "ends": 3, "picks": 4, "spacing": 0.25} if knit else \
+        {"kind": "woven", "pattern": "plain", "ends": 6, "picks": 5, "spacing": 0.1, "yarn_radius": 0.02}
+    flat = np.concatenate(generate(dict(gen)).points)
+    lo, hi = flat.min(axis=0), flat.max(axis=0)
+    centre = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.0])
+    return flat - centre, np.concatenate(draped(generate(dict(gen)), spec, Path("s.toml"), "drape").points)
+
+
+@pytest.mark.parametrize("knit", [False, True])
+def test_a_cylinder_drape_keeps_lengths_and_thickness(knit):
+    """Over a cylinder of radius R (axis y): every control point at distance R + z from the axis, at polar angle
+    x / R from +z (the cloth's lengths kept along the surface), y unchanged -- to 1e-9 (the normal's central
+    differences)."""
+    R = 0.3
+    q, p = _flat_and_draped({"surface": "cylinder", "radius": R}, knit)
+    assert np.allclose(np.hypot(p[:, 0], p[:, 2]), R + q[:, 2], atol=1e-9)
+    assert np.allclose(np.arctan2(p[:, 0], p[:, 2]), q[:, 0] / R, atol=1e-9) and np.allclose(p[:, 1], q[:, 1])
+
+
+def test_a_sphere_drape_lays_the_middle_on_the_ball():
+    """Over a ball of radius R: a control point whose cloth distance r from the centre is within the dome
+    (r < pi R / 2) lies at distance R + z from the ball's centre, at polar angle r / R; beyond, the cloth hangs
+    below the equator."""
+    R = 0.15
+    q, p = _flat_and_draped({"surface": "sphere", "radius": R, "folds": 6, "fold_amplitude": 0.15})
+    r = np.hypot(q[:, 0], q[:, 1])
+    dome = r < 0.5 * np.pi * R - 1e-3
+    assert dome.sum() > 100 and (~dome).sum() > 50
+    assert np.allclose(np.linalg.norm(p[dome], axis=1), R + q[dome, 2], atol=1e-9)
+    assert np.allclose(np.arccos(p[dome, 2] / np.linalg.norm(p[dome], axis=1)), r[dome] / R, atol=1e-6)
+    assert np.all(p[~dome, 2] < 0.05)
