@@ -309,6 +309,10 @@ def run_fit(scene_path, yarns, fibers, out: Path, width=96, height=72, spp=16, r
         raise LoomError(scene.path, "camera", "the scene has no [camera] table")
     Artifact(fibers, kind="fibers")
     Artifact(yarns, kind="yarns")
+    from ..render_setup import check_scene_matches
+
+    check_scene_matches(scene, fibers, "fibers")    # both made from this scene's fabrics and yarn types
+    check_scene_matches(scene, yarns, "yarns")
     lights = setup_lights(scene)
     if reflect not in REFLECT_SETUPS:
         raise LoomError(None, "--fit-reflection", f"unknown setup {reflect!r} (known: {', '.join(REFLECT_SETUPS)})")

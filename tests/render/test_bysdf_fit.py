@@ -144,3 +144,20 @@ def test_fit_bysdf_refuses_bad_angles(tmp_path, cli, option, angles, says):
                        option, angles)
     assert code == 2 and option in err and says in err, err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_fit_bysdf_refuses_artifacts_of_another_scene(tmp_path, cli):
+    """--yarns or --fibers made from another scene's fabric: exit 2 naming the scene's fabric and the artifact,
+    before anything renders (as render does: pipeline.render_setup.check_scene_matches). Slow: it realizes."""
+    scene, mine = _make(tmp_path, "a", _weave(2, L=0.2), w=8, h=6)
+    _, other = _make(tmp_path, "b", _weave(3, L=0.3), w=8, h=6)
+    fibers = {}
+    for name, yarns in (("mine", mine), ("other", other)):
+        fibers[name] = str(tmp_path / f"{name}.fibers.zarr")
+        assert cli("realize", yarns, "-o", fibers[name])[0] == 0
+    out = tmp_path / "p.toml"
+    for yarns, fib, named in ((other, fibers["mine"], "yarns.zarr"), (mine, fibers["other"], "other.fibers.zarr")):
+        code, _, err = cli("fit-bysdf", str(scene.path), "--yarns", yarns, "--fibers", fib, "-o", str(out))
+        assert code == 2 and "scene.toml: fabric: the scene's fabric" in err and named in err, err
+        assert not out.exists()
