@@ -12,12 +12,12 @@ triangles wound outward); its rays leave from the side they go to. ``surface_eva
 shade either material; shadow rays stop at a dielectric as at any mesh (light through glass arrives by the
 sampled paths only, as in Mitsuba 3 and pbrt).
 
-``SceneMeshes`` fields: ``mesh`` (TriangleMesh), ``mat_of_tri`` (T,) int32, ``mats`` (NM, MAT_SIZE),
-``enabled`` (True), and the area lights: ``emission`` (NM, 3) the radiance each mesh emits (from both
+``SceneMeshes`` fields: ``mesh`` (TriangleMesh), ``mat_of_tri`` (T,) int32, ``mats`` (NM, MAT_SIZE), and
+the area lights: ``emission`` (NM, 3) the radiance each mesh emits (from both
 sides, the same in every direction; 0: not a light), ``emitters`` (E,) int64 the emissive triangles
 (indices into F), ``emit_cdf`` (E + 1,) their cumulative share of the emissive area, ``emit_area`` that
-area, ``has_emitters``. A scene without meshes passes ``no_meshes()``, a ``NoMeshes`` (``enabled`` and
-``has_emitters`` False, one unused material row, so that ``mats[mat_of_tri[tri]]`` types for both): every
+area, ``has_emitters``. A scene without meshes passes ``no_meshes()``, a ``NoMeshes`` (``has_emitters``
+False, one unused material row, so that ``mats[mat_of_tri[tri]]`` types for both): every
 query below is a stub answered per class (``stages.core.dispatch``), and for
 ``NoMeshes`` it is a constant, so an integrator of a mesh-free scene compiles no mesh code at all and runs
 what it ran before meshes existed; a scene with meshes compiles the integrator once more, for ``SceneMeshes``.
@@ -52,9 +52,9 @@ from stages.core.shading.material import MAT_DIELECTRIC, MAT_SIZE
 from stages.core.shading.microfacet import rough_dielectric_eval, rough_dielectric_sample
 from stages.render.lights import cdf_find, light_sample_into
 
-SceneMeshes = namedtuple("SceneMeshes", ["mesh", "mat_of_tri", "mats", "enabled", "emission", "emitters",
+SceneMeshes = namedtuple("SceneMeshes", ["mesh", "mat_of_tri", "mats", "emission", "emitters",
                                          "emit_cdf", "emit_area", "has_emitters"])
-NoMeshes = namedtuple("NoMeshes", ["enabled", "has_emitters", "mats", "mat_of_tri"])
+NoMeshes = namedtuple("NoMeshes", ["has_emitters", "mats", "mat_of_tri"])
 LightSample = namedtuple("LightSample", ["r", "g", "b", "pdf", "delta", "dist"])
 
 
@@ -79,13 +79,13 @@ def scene_meshes(V, F, mat_of_tri, mats, emission=None) -> SceneMeshes:
     cdf = np.concatenate([[0.0], np.cumsum(area[emitters])])
     total = float(cdf[-1])
     cdf = cdf / total if total > 0.0 else cdf
-    return SceneMeshes(build_triangle_mesh(V, F), mat_of_tri, mats, len(F) > 0, emission,
+    return SceneMeshes(build_triangle_mesh(V, F), mat_of_tri, mats, emission,
                        emitters.astype(np.int64), cdf, total, total > 0.0)
 
 
 def no_meshes() -> NoMeshes:
     """A scene without meshes (module doc)."""
-    return NoMeshes(False, False, np.zeros((1, MAT_SIZE)), np.zeros(1, np.int32))
+    return NoMeshes(False, np.zeros((1, MAT_SIZE)), np.zeros(1, np.int32))
 
 
 NUMBA_ONLY = "only callable from numba-compiled code"

@@ -232,7 +232,7 @@ def test_meshes_read_and_placed(tmp_path):
     sc = load_scene(scene)
     assert [m["name"] for m in sc.meshes] == ["quad", "quad"] and sc.meshes[1]["albedo"] == [0.5, 0.5, 0.5]
     sm, (lo, hi), stats = load_scene_meshes(sc)
-    assert stats["mesh_triangles"] == 4 and sm.enabled and list(sm.mat_of_tri) == [0, 0, 1, 1]
+    assert stats["mesh_triangles"] == 4 and len(sm.mesh.triangles) == 4 and list(sm.mat_of_tri) == [0, 0, 1, 1]
     np.testing.assert_array_equal(lo, [-3.0, -3.0, 0.0])
     np.testing.assert_array_equal(hi, [3.0, 3.0, 2.0])
     np.testing.assert_array_equal(sm.mats[:, 11:14], [ALBEDO, [0.5, 0.5, 0.5]])
