@@ -31,8 +31,8 @@ lights before it (a camera ray).
 
 Queries: ``meshes_hit`` -> ``TriangleHit`` (t inf, tri -1 on a miss), ``meshes_occluded`` (shadow rays),
 ``facing_normal_into`` (the unit normal of triangle ``tri`` facing against the ray direction d),
-``surface_eval`` / ``surface_sample`` (the material of the mesh ``tri`` belongs to; ``vertex_eval`` /
-``vertex_sample``: that or the ground's Lambertian, one call) and the area lights' kernels;
+``surface_eval`` / ``surface_sample`` (the material of the mesh ``tri`` belongs to) and the area lights'
+kernels;
 for ``SceneMeshes`` each is a plain call, compiled once for every integrator. ``nee_light_sample_into``: light k
 of next-event estimation, a distant light or (k = NL) the area lights, for the integrators that sample each light.
 """
@@ -119,18 +119,6 @@ def surface_sample(sm, tri, n, wi, u0, u1, u2, wo):
     """A direction of the material of triangle ``tri``'s mesh into wo (n facing wi, as ``surface_eval``):
     (weight r, g, b, pdf), pdf 0 on failure. A Lambertian surface draws with (u1, u2) as
     ``lambert_sample_into``; the dielectric picks its lobe with u0 too."""
-    raise TypeError(NUMBA_ONLY)
-
-
-def vertex_eval(sm, tri, alb, n, wi, wo):
-    """``surface_eval`` of mesh triangle ``tri`` where tri >= 0, else of a Lambertian of albedo ``alb`` (the
-    ground): one call for an integrator's opaque-surface vertex, which for ``NoMeshes`` is the Lambertian alone."""
-    raise TypeError(NUMBA_ONLY)
-
-
-def vertex_sample(sm, tri, alb, n, wi, u0, u1, u2, wo):
-    """``surface_sample`` of mesh triangle ``tri`` where tri >= 0, else of a Lambertian of albedo ``alb``
-    (``lambert_sample_into`` with u1, u2), as ``vertex_eval``."""
     raise TypeError(NUMBA_ONLY)
 
 
@@ -339,36 +327,6 @@ def _ov_surface_sample(sm, tri, n, wi, u0, u1, u2, wo):
         return lambda sm, tri, n, wi, u0, u1, u2, wo: _surface_sample(sm, tri, n, wi, u0, u1, u2, wo)
     if is_tuple_class(sm, NoMeshes):
         return lambda sm, tri, n, wi, u0, u1, u2, wo: (0.0, 0.0, 0.0, 0.0)
-
-
-@njit(cache=True, inline="always")
-def _lambert_eval_pdf(alb, n, wi, wo):
-    f0, f1, f2 = lambert_eval(alb, n, wi, wo)
-    return f0, f1, f2, lambert_pdf(alb, n, wi, wo)
-
-
-@overload(vertex_eval, inline="always")
-def _ov_vertex_eval(sm, tri, alb, n, wi, wo):
-    if is_tuple_class(sm, SceneMeshes):
-        def impl(sm, tri, alb, n, wi, wo):
-            if tri >= 0:
-                return _surface_eval(sm, tri, n, wi, wo)
-            return _lambert_eval_pdf(alb, n, wi, wo)
-        return impl
-    if is_tuple_class(sm, NoMeshes):
-        return lambda sm, tri, alb, n, wi, wo: _lambert_eval_pdf(alb, n, wi, wo)
-
-
-@overload(vertex_sample, inline="always")
-def _ov_vertex_sample(sm, tri, alb, n, wi, u0, u1, u2, wo):
-    if is_tuple_class(sm, SceneMeshes):
-        def impl(sm, tri, alb, n, wi, u0, u1, u2, wo):
-            if tri >= 0:
-                return _surface_sample(sm, tri, n, wi, u0, u1, u2, wo)
-            return lambert_sample_into(alb, n, wi, u1, u2, wo)
-        return impl
-    if is_tuple_class(sm, NoMeshes):
-        return lambda sm, tri, alb, n, wi, u0, u1, u2, wo: lambert_sample_into(alb, n, wi, u1, u2, wo)
 
 
 @overload(emitted_radiance, inline="always")

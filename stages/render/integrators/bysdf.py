@@ -73,6 +73,7 @@ from stages.core.rng import uniform
 from stages.core.sampling import power_heuristic, roulette_survival
 from stages.core.shading import bysdf as B
 from stages.core.shading.bysdf import BYSDF_SIZE
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 from stages.core.yarn.implicit_plies import plies_crossed, ply_blocks
 from stages.core.yarn.implicit_tables import ply_shadow_lookup
 from stages.core.yarn.shading_points import aggregate, near_point, offset_of, offset_points
@@ -93,8 +94,8 @@ from stages.render.meshes import (
     meshes_hit,
     meshes_occluded,
     nee_light_sample_into,
-    vertex_eval,
-    vertex_sample,
+    surface_eval,
+    surface_sample,
 )
 
 MODE_NEAR, MODE_FAR, MODE_MULTISCALE = 0, 1, 2
@@ -317,7 +318,7 @@ def trace_path(it, o, d, seed, key):
             px = o[0] + t_hit * d[0]
             py = o[1] + t_hit * d[1]
             pz = o[2] + t_hit * d[2]
-            if mh.tri >= 0:   # its material: vertex_eval / vertex_sample
+            if mh.tri >= 0:   # its material: surface_eval / surface_sample
                 facing_normal_into(it.meshes, mh.tri, d[0], d[1], d[2], gn)
             else:
                 gn[0] = 0.0
@@ -336,7 +337,11 @@ def trace_path(it, o, d, seed, key):
                 reach = dist - it.eps
                 if pl <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                     continue
-                f0, f1, f2, pf = vertex_eval(it.meshes, mh.tri, alb, gn, wi, wlk)
+                if mh.tri >= 0:
+                    f0, f1, f2, pf = surface_eval(it.meshes, mh.tri, gn, wi, wlk)
+                else:
+                    f0, f1, f2 = lambert_eval(alb, gn, wi, wlk)
+                    pf = lambert_pdf(alb, gn, wi, wlk)
                 if f0 == 0.0 and f1 == 0.0 and f2 == 0.0:
                     continue
                 # from the light's side of the surface (a dielectric's refraction: the far side); nothing to
@@ -353,8 +358,13 @@ def trace_path(it, o, d, seed, key):
                 L[0] += tp[0] * f0 * lr * w
                 L[1] += tp[1] * f1 * lg * w
                 L[2] += tp[2] * f2 * lb * w
-            w0, w1, w2, pf = vertex_sample(it.meshes, mh.tri, alb, gn, wi, uniform(seed, key, base + D_LOBE),
-                                           uniform(seed, key, base + D_DIR1), uniform(seed, key, base + D_DIR2), wow)
+            if mh.tri >= 0:
+                w0, w1, w2, pf = surface_sample(it.meshes, mh.tri, gn, wi, uniform(seed, key, base + D_LOBE),
+                                                uniform(seed, key, base + D_DIR1), uniform(seed, key, base + D_DIR2),
+                                                wow)
+            else:
+                w0, w1, w2, pf = lambert_sample_into(alb, gn, wi, uniform(seed, key, base + D_DIR1),
+                                                     uniform(seed, key, base + D_DIR2), wow)
             if pf <= 0.0:
                 break
             tp[0] *= w0

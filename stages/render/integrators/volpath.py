@@ -57,6 +57,7 @@ from stages.core.dispatch import is_tuple_class, runtime_value
 from stages.core.geometry.stack import stack_array, stack_vector3
 from stages.core.rng import uniform
 from stages.core.sampling import power_heuristic, roulette_survival
+from stages.core.shading.lambert import lambert_eval, lambert_pdf, lambert_sample_into
 from stages.core.shading.material import CTX_SIZE, material_eval_pdf, material_prepare, material_sample
 from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample
 from stages.render.ground import ground_intersect
@@ -70,8 +71,8 @@ from stages.render.meshes import (
     facing_normal_into,
     meshes_hit,
     meshes_occluded,
-    vertex_eval,
-    vertex_sample,
+    surface_eval,
+    surface_sample,
 )
 
 VolpathIntegrator = namedtuple("VolpathIntegrator", ["medium", "majorant", "lights", "ground", "has_ground",
@@ -248,7 +249,7 @@ def trace_path(it, o, d, seed, index):
             # a Lambertian surface (the ground or a mesh), shading normal toward the arriving ray
             px = ox + tg * dx
             py = oy + tg * dy
-            if mh.tri >= 0:   # its material: vertex_eval / vertex_sample
+            if mh.tri >= 0:   # its material: surface_eval / surface_sample
                 facing_normal_into(it.meshes, mh.tri, dx, dy, dz, nrm)
                 pz = oz + tg * dz
                 soff = SURFACE_OFFSET * (1.0 + max(abs(px), abs(py), abs(pz)))
@@ -328,7 +329,11 @@ def trace_path(it, o, d, seed, index):
             wi[1] = -dy
             wi[2] = -dz
             if lpdf > 0.0:
-                fr, fg, fb, pf = vertex_eval(it.meshes, mh.tri, alb, nrm, wi, lw)
+                if mh.tri >= 0:
+                    fr, fg, fb, pf = surface_eval(it.meshes, mh.tri, nrm, wi, lw)
+                else:
+                    fr, fg, fb = lambert_eval(alb, nrm, wi, lw)
+                    pf = lambert_pdf(alb, nrm, wi, lw)
                 if fr > 0.0 or fg > 0.0 or fb > 0.0:
                     # the shadow ray leaves from the light's side (a dielectric's refraction: the far side)
                     back = 2.0 * soff if lw[0] * nrm[0] + lw[1] * nrm[1] + lw[2] * nrm[2] < 0.0 else 0.0
@@ -338,9 +343,12 @@ def trace_path(it, o, d, seed, index):
                                                      Lr, Lg, Lb)
                     lookups += lk
                     rays += 1
-            # a dielectric picks its lobe with u3, the number that picked the light: next-event estimation and the
-            # continuation are separate terms of the estimate, each unbiased over u3
-            wr, wg, wb, pdf = vertex_sample(it.meshes, mh.tri, alb, nrm, wi, u3, u4, u5, wsc)
+            if mh.tri >= 0:
+                # a dielectric picks its lobe with u3, the number that picked the light: next-event estimation
+                # and the continuation are separate terms of the estimate, each unbiased over u3
+                wr, wg, wb, pdf = surface_sample(it.meshes, mh.tri, nrm, wi, u3, u4, u5, wsc)
+            else:
+                wr, wg, wb, pdf = lambert_sample_into(alb, nrm, wi, u4, u5, wsc)
             if pdf <= 0.0:
                 break
             br, bg, bb, wx, wy, wz = _scattered(br, bg, bb, wr, wg, wb, wsc)
