@@ -369,7 +369,8 @@ def run_ingest(input_path: Path, out: Path, radius: float | None = None, scale: 
         return {"skipped": True}
     src_file = extra_inputs.get("fabric", input_path)
     curves_estimate(sum(len(p) for p in cs.points), frame_samples).check(limit, src_file)
-    # the scene's fabric.merge_duplicates = false refuses repeats as --refuse-duplicates does
+    # the scene's fabric.merge_duplicates = false refuses repeats as --refuse-duplicates does; several fabrics were
+    # validated each in its own file, and are again here: placing them can round neighbouring points together
     merge = merge_duplicates and (scene is None or scene.fabric.get("merge_duplicates", True))
     cs = validate_curves(cs, src_file, merge)
     if write is not None:
