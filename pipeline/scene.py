@@ -258,6 +258,30 @@ def _fabric_table(fab: dict, path: Path, key: str) -> dict:
     return fabric
 
 
+DRAPE_KEYS = {"cylinder": ("radius",), "sphere": ("radius", "folds", "fold_amplitude"),
+              "obj": ("file", "uv_size", "scale")}
+
+
+def _drape(spec: dict, path: Path, key: str) -> dict:
+    """A fabric's ``drape`` table with its defaults (schema $defs/placed_fabric); a key its surface does not
+    read is refused, an OBJ's file resolved against the scene and checked."""
+    surface = spec["surface"]
+    for k in spec:
+        if k != "surface" and k not in DRAPE_KEYS[surface]:
+            raise LoomError(path, f"{key}.{k}", f"a drape on surface {surface!r} has no {k} (it reads "
+                            f"{', '.join(DRAPE_KEYS[surface])})")
+    if surface == "sphere":
+        return {"folds": 6, "fold_amplitude": 0.15, **spec}
+    if surface != "obj":
+        return dict(spec)
+    file = Path(spec["file"])
+    file = file if file.is_absolute() else (path.parent / file).resolve()
+    if not file.is_file():
+        raise LoomError(path, f"{key}.file", f"OBJ file {file} not found" if not file.exists()
+                        else f"{file} is not a file")
+    return {"scale": 1.0, **spec, "file": str(file)}
+
+
 def _fabric_parts(raw: dict, path: Path) -> list[FabricPart]:
     """The scene's fabrics (module doc): its [fabric] + [yarns], or its [[fabrics]] (names unique, placements
     rigid)."""
@@ -279,7 +303,7 @@ def _fabric_parts(raw: dict, path: Path) -> list[FabricPart]:
         if tf and tf.get("scale", 1.0) != 1.0:
             raise LoomError(path, f"fabrics[{i}].transform.scale", "a fabric's placement is rigid: scale its source "
                             "(fabric.scale, or the generator's spacing and yarn radius) instead")
-        drape = {"folds": 6, "fold_amplitude": 0.15, **f["drape"]} if "drape" in f else None
+        drape = _drape(f["drape"], path, f"fabrics[{i}].drape") if "drape" in f else None
         parts.append(FabricPart(f["name"], _fabric_table(f["fabric"], path, f"fabrics[{i}].fabric"),
                                 copy.deepcopy(f.get("yarns", {})),
                                 placement(tf, path, f"fabrics[{i}].transform") if tf else None,
@@ -350,7 +374,7 @@ def ingest_identity(scene: Scene) -> dict:
     if scene.parts[0].key == "fabric":
         fabric = fabric_identity(scene.fabric)
     else:       # [[fabrics]]: each by its name, source and placement
-        fabric = {"fabrics": [{"name": p.name, **fabric_identity(p.fabric), "drape": p.drape,
+        fabric = {"fabrics": [{"name": p.name, **fabric_identity(p.fabric), "drape": drape_identity(p.drape),
                                "placement": None if p.matrix is None else p.matrix.tolist()} for p in scene.parts]}
     yarns = {}
     for label in scene.type_labels():
@@ -364,7 +388,10 @@ def without_file_names(ident: dict) -> dict:
     """An ``ingest_identity``'s fabric less its files' names (a renamed copy is the same file: its sha256)."""
     if "fabrics" in ident:
         return {"fabrics": [without_file_names(x) for x in ident["fabrics"]]}
-    return {k: v for k, v in ident.items() if k != "file"}
+    out = {k: v for k, v in ident.items() if k != "file"}
+    if isinstance(out.get("drape"), dict):
+        out["drape"] = {k: v for k, v in out["drape"].items() if k != "file"}
+    return out
 
 
 def fabric_identity(fab: dict) -> dict:
@@ -380,6 +407,16 @@ def fabric_identity(fab: dict) -> dict:
         fabric.update(file=p.name, sha256=sha256_file(p) if p.is_file() else None)
         fabric.update({k: fab[k] for k in FABRIC_SHAPE_KEYS if k in fab})
     return fabric
+
+
+def drape_identity(drape: dict | None) -> dict | None:
+    """A ``drape`` table as its fabric's identity holds it: an OBJ by its name and sha256 (as a fabric file)."""
+    if drape is None or "file" not in drape:
+        return drape
+    from .artifacts import sha256_file
+
+    p = Path(drape["file"])
+    return {**drape, "file": p.name, "sha256": sha256_file(p)}
 
 
 def file_identity(path: str | Path, scale: float | None = None) -> dict:

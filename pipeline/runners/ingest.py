@@ -69,30 +69,57 @@ def placed(cs: CurveSet, M: np.ndarray, file: Path, key: str) -> CurveSet:
 
 
 def draped(cs: CurveSet, spec: dict, file: Path, key: str) -> CurveSet:
-    """The curves laid on the surface of a ``drape`` table (``stages.tile.base_surfaces.drape``): their (x, y)
-    about the centre of their box along a cylinder or over a ball, their z along its normal; a point moved
-    beyond the coordinate limits is refused at ``key``."""
+    """The curves laid on the surface of a ``drape`` table (``key``), its z along the surface's normal: their
+    (x, y) about the centre of their box along a cylinder or over a ball (``stages.tile.base_surfaces.drape``),
+    or from their box's corner through an OBJ mesh's uv chart (``stages.tile.base_surfaces.chart_points``). A
+    point moved beyond the coordinate limits, or outside the OBJ's uv chart, is refused at ``key``."""
     from stages.tile import base_surfaces as bs
 
     lo = np.min([np.min(p, axis=0) for p in cs.points], axis=0)
     hi = np.max([np.max(p, axis=0) for p in cs.points], axis=0)
     size = float(max(hi[0] - lo[0], hi[1] - lo[1], 1e-12))
-    centre = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.0])
-    R = float(spec["radius"])
-    if spec["surface"] == "cylinder":
-        def surface(x, y):
-            return bs.cylinder_points(x, y, R)
-    else:
-        def surface(x, y):
-            return bs.sphere_drape_points(x, y, size, R, int(spec["folds"]), float(spec["fold_amplitude"]))
     n = [len(p) for p in cs.points]
-    moved = bs.drape(np.concatenate([np.asarray(p, np.float64) for p in cs.points]) - centre, surface, size)
+    flat = np.concatenate([np.asarray(p, np.float64) for p in cs.points])
+    if spec["surface"] == "obj":
+        moved = _on_obj(flat, lo, hi, spec, file, key)
+    else:
+        R = float(spec["radius"])
+        if spec["surface"] == "cylinder":
+            def surface(x, y):
+                return bs.cylinder_points(x, y, R)
+        else:
+            def surface(x, y):
+                return bs.sphere_drape_points(x, y, size, R, int(spec["folds"]), float(spec["fold_amplitude"]))
+        centre = np.array([0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.0])
+        moved = bs.drape(flat - centre, surface, size)
     k = first_bad_row(moved)
     if k >= 0:
         raise LoomError(file, key, f"moves control point {k} to {moved[k].tolist()}, beyond +-{MAX_COORD:g} "
                         "scene units")
     cs.points = list(np.split(moved, np.cumsum(n)[:-1]))
     return cs
+
+
+def _on_obj(flat: np.ndarray, lo: np.ndarray, hi: np.ndarray, spec: dict, file: Path, key: str) -> np.ndarray:
+    """``draped``'s OBJ surface: u = (x - lo_x) / uv_size[0], v = (y - lo_y) / uv_size[1] (default uv_size: the
+    box), the point on the scaled mesh there lifted z along its normal."""
+    from stages.tile import base_surfaces as bs
+
+    from ..io.obj_mesh import read_obj_mesh
+
+    mesh = read_obj_mesh(spec["file"], file, uv_for="a drape reads the fabric's place from them",
+                         place=f"{key}.file", faces_for="a drape needs a surface")
+    uv_size = np.asarray(spec.get("uv_size", np.maximum(hi[:2] - lo[:2], 1e-12)), np.float64)
+    chart = bs.uv_chart(mesh.V * float(spec.get("scale", 1.0)), mesh.UV, mesh.F)
+    u, v = (flat[:, 0] - lo[0]) / uv_size[0], (flat[:, 1] - lo[1]) / uv_size[1]
+    moved, outside = bs.chart_points(chart, u, v, flat[:, 2])
+    if outside.any():
+        k = int(np.argmax(outside))
+        raise LoomError(file, key, f"control point {k} falls at uv ({u[k]:.4g}, {v[k]:.4g}), on no triangle of "
+                        f"{Path(spec['file']).name} (its uv chart spans {chart.lo.round(4).tolist()} to "
+                        f"{(chart.lo + chart.G / chart.inv).round(4).tolist()}; {int(outside.sum())} points "
+                        "outside): give a larger uv_size, or a mesh whose uv covers the fabric")
+    return moved
 
 
 def scene_curves(scene, radius: float | None, scale: float | None,

@@ -306,3 +306,105 @@ def test_a_sphere_drape_lays_the_middle_on_the_ball():
     assert np.allclose(np.linalg.norm(p[dome], axis=1), R + q[dome, 2], atol=1e-9)
     assert np.allclose(np.arccos(p[dome, 2] / np.linalg.norm(p[dome], axis=1)), r[dome] / R, atol=1e-6)
     assert np.all(p[~dome, 2] < 0.05)
+
+
+# ------------------------------------------------------------------------------------------------ drape on an OBJ
+def _write_obj(path: Path, V, UV, F, uv=True) -> Path:
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in V]
+    if uv:
+        lines += [f"vt {float(u)!r} {float(v)!r}" for u, v in UV]
+        lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in F]
+    else:
+        lines += [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in F]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _flat_and_on_obj(tmp_path, V, UV, F, **spec):
+    from pipeline.generators import generate
+    from pipeline.runners.ingest import draped
+
+    gen = {"kind": "woven", "pattern": "plain", "ends": 6, "picks": 5, "spacing": 0.1, "yarn_radius": 0.02}
+    flat = np.concatenate(generate(dict(gen)).points)
+    obj = _write_obj(tmp_path / "surface.obj", V, UV, F)
+    on = draped(generate(dict(gen)), {"surface": "obj", "file": str(obj), **spec}, Path("s.toml"), "drape")
+    return flat - np.array([*flat.min(axis=0)[:2], 0.0]), np.concatenate(on.points)
+
+
+def test_an_obj_drape_through_a_flat_chart_is_a_translation(tmp_path):
+    """A flat rectangle of the fabric's own size with uv over [0, 1]^2, its triangles listed clockwise in uv half
+    of them: the fabric lands on it moved to the rectangle's corner, every control point to 1e-12."""
+    from pipeline.generators import generate
+    from stages.tile.base_surfaces import flat_rectangle
+
+    pts = np.concatenate(generate({"kind": "woven", "pattern": "plain", "ends": 6, "picks": 5, "spacing": 0.1,
+                                   "yarn_radius": 0.02}).points)
+    w, h = pts.max(axis=0)[:2] - pts.min(axis=0)[:2]
+    V, UV, F = flat_rectangle(w, h, 5, 3)
+    F[::2] = F[::2][:, [0, 2, 1]]
+    q, p = _flat_and_on_obj(tmp_path, V, UV, F)
+    assert np.allclose(p, q, atol=1e-12, rtol=0)
+
+
+def test_an_obj_drape_follows_a_cylinder_to_its_chords(tmp_path):
+    """An OBJ cylinder (radius R, 64 facets over 90 degrees, u along the angle) with uv_size making its uv map keep
+    lengths: every control point at distance R + z from the axis within the facets' sag R (1 - cos(dphi / 2)), at
+    the angle its arc length from the fabric's edge gives (within dphi^2), y kept to 1e-12."""
+    from stages.tile.base_surfaces import cylinder
+
+    R, L, A, nu = 0.5, 1.0, 90.0, 64
+    V, UV, F = cylinder(R, L, A, nu, 4)
+    a, dphi = np.radians(A), np.radians(A) / nu
+    q, p = _flat_and_on_obj(tmp_path, V, UV, F, uv_size=[R * a, L])
+    sag = R * (1.0 - np.cos(0.5 * dphi))
+    assert np.all(np.abs(np.hypot(p[:, 0], p[:, 2]) - (R + q[:, 2])) <= sag + 1e-12)
+    assert np.allclose(np.arctan2(p[:, 0], p[:, 2]), q[:, 0] / R - 0.5 * a, atol=dphi ** 2, rtol=0)
+    assert np.allclose(p[:, 1], q[:, 1], atol=1e-12, rtol=0)
+
+
+def test_the_bundled_cushion_takes_a_fabric_on_its_top():
+    """The bundled cushion (a 32 x 32 height field with uv): a fabric's uv at height 0 lands on the surface --
+    within the facets' linear-interpolation error of its analytic height f = 0.2 (1 - x^4)(1 - y^4),
+    h^2 / 8 (|f_XX| + 2 |f_XY| + |f_YY|) = 5.5e-3 at h = 1/32 (measured 2.5e-3) --
+    and at height z exactly z from there along a unit normal that points up."""
+    from pipeline.io.obj_mesh import read_obj_mesh
+    from stages.tile.base_surfaces import chart_points, uv_chart
+
+    m = read_obj_mesh(Path(__file__).resolve().parents[2] / "data" / "meshes" / "cushion.obj", None)
+    chart = uv_chart(m.V, m.UV, m.F)
+    u, v = np.random.default_rng(3).random((2, 2000))
+    z = np.full(2000, 0.03)
+    base, out0 = chart_points(chart, u, v, np.zeros(2000))
+    lifted, out1 = chart_points(chart, u, v, z)
+    assert not out0.any() and not out1.any() and len(m.F) == 2 * 32 * 32
+    x, y = 2.0 * u - 1.0, 2.0 * v - 1.0
+    assert np.allclose(base[:, :2], np.c_[u - 0.5, v - 0.5], atol=1e-6)
+    assert np.all(np.abs(base[:, 2] - 0.2 * (1.0 - x ** 4) * (1.0 - y ** 4)) <= (9.6 + 2.0 * 12.8 + 9.6) / 32 ** 2 / 8)
+    step = lifted - base
+    assert np.allclose(np.linalg.norm(step, axis=1), z) and np.all(step[:, 2] > 0.0)
+
+
+OBJ_DRAPE = 'drape = {{ surface = "obj", file = "{file}"{more} }}\n'
+
+
+@pytest.mark.parametrize("case", ["missing", "radius", "no uv", "outside"])
+def test_a_bad_obj_drape_exits_2_naming_the_key(cli, tmp_path, case):
+    """A missing OBJ (read), a radius on an OBJ drape (read), an OBJ without texture coordinates (ingest), a fabric
+    beyond the mesh's uv chart (ingest): exit 2, one line naming the scene and the drape's key, nothing written."""
+    from stages.tile.base_surfaces import flat_rectangle
+
+    V, UV, F = flat_rectangle(1.0, 1.0, 2, 2)
+    _write_obj(tmp_path / "plain.obj", V, UV, F, uv=case != "no uv")
+    file, more, key = {"missing": ("none.obj", "", "fabrics[1].drape.file"),
+                       "radius": ("plain.obj", ", radius = 1.0", "fabrics[1].drape.radius"),
+                       "no uv": ("plain.obj", "", "fabrics[1].drape.file"),
+                       "outside": ("plain.obj", ", uv_size = [0.1, 0.1]", "fabrics[1].drape")}[case]
+    extra = fabric("b").replace('name = "b"\n', 'name = "b"\n' + OBJ_DRAPE.format(file=file, more=more))
+    scene = tmp_path / "bad.toml"
+    scene.write_text(fabric("a") + extra + TAIL.format(origin=_vec(ORIGIN), target=_vec(TARGET), up=_vec(UP),
+                                                       lights=SKY, depth=4))
+    code, _, err = cli("ingest", scene, "-o", tmp_path / "y.zarr")
+    where = "plain.obj" if case == "no uv" else "bad.toml"
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert f"{where}: " in err and (key in err or case == "no uv"), err
+    assert not (tmp_path / "y.zarr").exists()
