@@ -122,7 +122,9 @@ def build_fibre_cache(cv, tab, maj, cam, width, height, budget_mib, spacing=DEFA
 
     t0 = time.perf_counter()
     Y = len(tab.yarn_type)
-    grid = brick_grid(maj.lo, maj.hi, float(np.max(tab.yarn_extent)) if Y else 1.0)
+    # a capped majorant grid (a large cloth, fine_cell given) has its box from the yarns' extent tubes: centred
+    # bricks split the cloth at its middle
+    grid = brick_grid(maj.lo, maj.hi, float(np.max(tab.yarn_extent)) if Y else 1.0, centred=fine_cell is not None)
     budget = float(budget_mib) * 2**20
     info = {"cache_budget_mib": float(budget_mib), "cache_bricks": [int(v) for v in grid.res],
             "cache_brick_size": float(grid.size), "cache_spacing": float(spacing)}

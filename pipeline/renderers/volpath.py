@@ -75,13 +75,22 @@ def _box_of_capsules(a, b, r):
 
 
 def _majorant_res(lo, hi, cell):
-    """Cells of about ``cell`` over the box, at most MAX_MAJORANT_CELLS in all (a flat cloth 50 cm
-    wide and 0.24 cm thick gets cells of 0.066 cm, 760 x 760 x 4, not a single layer of 128 x 128)."""
+    """Cells of about ``cell`` over the box, at most MAX_MAJORANT_CELLS in all: where that caps them, the most
+    divided axes are coarsened first, so a flat cloth 50 cm wide and 0.2 cm thick keeps layers of the asked cell
+    across its thickness (424 x 424 x 11 at cell 0.0195; cubic cells gave 3 or 4 layers of 0.067, and render
+    speed hung on where they fell: volpath.md, Limits)."""
     ext = np.maximum(hi - lo, 1e-12)
-    cell = max(float(cell), float(ext.max()) / MAX_CELLS_PER_AXIS_HARD)
-    while np.prod(np.ceil(ext / cell)) > MAX_MAJORANT_CELLS:
-        cell *= 1.05
-    return np.maximum(1, np.ceil(ext / cell)).astype(np.int64)
+    cells = np.full(3, max(float(cell), float(ext.max()) / MAX_CELLS_PER_AXIS_HARD))
+    while np.prod(np.ceil(ext / cells)) > MAX_MAJORANT_CELLS:
+        n = np.ceil(ext / cells)
+        cells[n >= n.max() / 1.05] *= 1.05    # coarsen the most divided axes first: a flat cloth keeps its layers
+    return np.maximum(1, np.ceil(ext / cells)).astype(np.int64)
+
+
+def _capped(lo, hi, cell) -> bool:
+    """Whether a grid of ``cell`` over the box would pass MAX_MAJORANT_CELLS (``_majorant_res`` coarsens it)."""
+    ext = np.maximum(np.asarray(hi, float) - np.asarray(lo, float), 1e-12)
+    return float(np.prod(np.ceil(ext / float(cell)))) > MAX_MAJORANT_CELLS
 
 
 def procedural_majorant_bytes(lo, hi, mean_extent, workers) -> float:
@@ -145,16 +154,21 @@ def _procedural_source(tables_path, cell, optics, view, advance):
 
 def procedural_majorant(cv, tab, cell=None):
     """The ``MajorantGrid`` of procedural tables: the largest density of the capsules that hold every
-    fibre surface (``stages.render.media.procedural_medium.capsule_majorants``, walked twice: their box,
-    then the grid; never listed) per cell of ``cell`` (default a quarter of the mean yarn extent
-    bound, at most MAX_MAJORANT_CELLS cells)."""
+    fibre surface (``stages.render.media.procedural_medium.capsule_majorants``, walked, never listed) per cell of
+    ``cell`` (default a quarter of the mean yarn extent bound). Its box: the capsules' own (a second walk,
+    ``capsule_box``) where the cells are as asked; where MAX_MAJORANT_CELLS coarsens them (a large cloth) the box
+    of the yarns' extent tubes (``tube_box``, the axes alone: the loops and hairs are walked once, not twice),
+    whose cells ``_majorant_res`` coarsens along the cloth, not across it."""
     import numba
 
-    from stages.render.media.procedural_medium import capsule_box, capsule_majorants
+    from stages.render.media.procedural_medium import capsule_box, capsule_majorants, tube_box
     from stages.render.media.tracking import make_majorant_grid
 
-    lo, hi = capsule_box(cv, tab, MAJORANT_STEP)
-    res = _majorant_res(lo, hi, cell or CELL_FRACTION * float(np.mean(tab.yarn_extent)))
+    cell = cell or CELL_FRACTION * float(np.mean(tab.yarn_extent))
+    lo, hi = tube_box(cv, tab, MAJORANT_STEP)
+    if not _capped(lo, hi, cell):    # cells as asked: the capsules' own box, as fine as the cells
+        lo, hi = capsule_box(cv, tab, MAJORANT_STEP)
+    res = _majorant_res(lo, hi, cell)
     return make_majorant_grid(lo, hi, res, capsule_majorants(cv, tab, MAJORANT_STEP, lo, hi, res,
                                                                    numba.get_num_threads()))
 

@@ -399,16 +399,21 @@ def test_z_score_harness_rejects_biased_blocks():
     assert not z_score_test(z, alpha=1e-3).passed
 
 
-def test_procedural_majorant_covers_every_fibre(small):
+@pytest.mark.parametrize("cell", [None, 0.002])
+def test_procedural_majorant_covers_every_fibre(small, cell):
     """Delta tracking is unbiased only where the majorant bounds the density: at 60,000 points next
     to the realized fibre vertices (jittered by 1.5 fibre radii) every point the procedural lookup
     puts inside a fibre lies in a majorant cell of at least that density; and the fibre-aware
-    capsules (core tube, loops, hairs) occupy fewer cells than the full extent tube would."""
+    capsules (core tube, loops, hairs) occupy fewer cells than the full extent tube would. With the
+    default cell and with one so small that the grid is capped (a large cloth's case: the extent tubes'
+    box, cells coarsened along the cloth)."""
     from pipeline.artifacts import Artifact
-    from pipeline.renderers.volpath import procedural_source
+    from pipeline.renderers.volpath import MAX_MAJORANT_CELLS, _capped, procedural_source
     from stages.core.yarn.lookup import lookup_points
 
-    med, maj, _, _ = procedural_source(str(small / "t.zarr"))
+    med, maj, _, _ = procedural_source(str(small / "t.zarr"), cell)
+    if cell is not None:
+        assert _capped(maj.lo, maj.hi, cell) and np.prod(maj.res) <= MAX_MAJORANT_CELLS
     fib = Artifact(small / "f.zarr", kind="fibers")
     pts = np.asarray(fib["points"], np.float64)
     rf = float(np.max(fib["point_radius"]))
@@ -440,13 +445,42 @@ def test_procedural_majorant_does_not_depend_on_workers(small):
 
 
 def test_majorant_cells_follow_a_flat_cloth():
-    """A 50 cm cloth 0.2 cm thick gets cells near the asked size in all three axes within the cell
-    budget (not one layer of 128 x 128); a small box keeps the asked cell exactly."""
-    from pipeline.renderers.volpath import MAX_MAJORANT_CELLS, _majorant_res
+    """A 50 cm cloth 0.2 cm thick keeps the asked cell across its thickness (10 layers of 0.02) within the cell
+    budget, coarser along it (not one layer of 128 x 128, nor 3 or 4 cubic layers); a small box keeps the asked
+    cell exactly."""
+    from pipeline.renderers.volpath import MAX_MAJORANT_CELLS, _capped, _majorant_res
 
-    res = _majorant_res(np.array([-25.0, -25.0, -0.1]), np.array([25.0, 25.0, 0.1]), 0.02)
-    assert np.prod(res) <= MAX_MAJORANT_CELLS and res[2] >= 3 and res[0] == res[1] > 128
+    lo, hi = np.array([-25.0, -25.0, -0.1]), np.array([25.0, 25.0, 0.1])
+    res = _majorant_res(lo, hi, 0.02)
+    assert np.prod(res) <= MAX_MAJORANT_CELLS and res[2] == 10 and res[0] == res[1] > 128 and _capped(lo, hi, 0.02)
     assert list(_majorant_res(np.zeros(3), np.array([0.8, 0.8, 0.1]), 0.01)) == [80, 80, 10]
+    assert not _capped(np.zeros(3), np.array([0.8, 0.8, 0.1]), 0.01)
+
+
+def test_the_extent_tubes_hold_every_fibre(small):
+    """tube_box (a large cloth's majorant box, from the yarns' axes and extents alone) holds every realized fibre
+    vertex grown by its radius -- nothing the grid must bound falls outside it -- and is looser than they are by
+    less than two yarn extents a side."""
+    from pipeline.artifacts import Artifact
+    from pipeline.renderers.volpath import MAJORANT_STEP
+    from pipeline.runners.tables import load_tables
+    from stages.render.media.procedural_medium import tube_box
+
+    cv, tab, _ = load_tables(small / "t.zarr")
+    lo, hi = tube_box(cv, tab, MAJORANT_STEP)
+    fib = Artifact(small / "f.zarr", kind="fibers")
+    pts, r = np.asarray(fib["points"], np.float64), np.asarray(fib["point_radius"], np.float64)[:, None]
+    assert np.all(pts - r >= lo) and np.all(pts + r <= hi)
+    assert np.all(hi - lo < (pts + r).max(axis=0) - (pts - r).min(axis=0) + 4.0 * float(tab.yarn_extent.max()))
+
+
+def test_centred_bricks_split_a_flat_cloth_at_its_middle():
+    """A capped grid's bricks are centred on the box: a cloth two bricks thick is split at z = its middle."""
+    from stages.render.media.fibre_cache import brick_grid
+
+    g = brick_grid(np.array([-25.0, -25.0, -0.1]), np.array([25.0, 25.0, 0.1]), 0.098, centred=True)
+    assert g.res[2] == 2 and abs(g.lo[2] + g.size) < 1e-12
+    assert np.allclose(brick_grid(np.zeros(3), np.ones(3), 0.1).lo, 0.0)
 
 
 def test_render_cli_outputs_and_statistics(small, tmp_path):

@@ -69,12 +69,18 @@ YarnSamples.__doc__ = """Arc-length samples of the yarns: yarn (n,) int64, [s0, 
 and the radius of the ball that holds every segment with an end in the sample (n,)."""
 
 
-def brick_grid(lo, hi, max_extent) -> BrickGrid:
-    """Bricks at least 2 x the largest yarn extent wide, at most MAX_BRICKS_PER_AXIS along an axis."""
+def brick_grid(lo, hi, max_extent, centred=False) -> BrickGrid:
+    """Bricks at least 2 x the largest yarn extent wide, at most MAX_BRICKS_PER_AXIS along an axis, from the
+    box's corner, or ``centred`` on the box (a flat cloth two bricks thick is then split at its middle, not in a
+    sliver of crowns that no brick's occupancy sees)."""
     lo = np.asarray(lo, np.float64)
-    ext = np.maximum(np.asarray(hi, np.float64) - lo, 1e-12)
+    hi = np.asarray(hi, np.float64)
+    ext = np.maximum(hi - lo, 1e-12)
     size = max(2.0 * float(max_extent), float(ext.max()) / MAX_BRICKS_PER_AXIS)
-    return BrickGrid(lo, size, np.maximum(1, np.ceil(ext / size)).astype(np.int64))
+    res = np.maximum(1, np.ceil(ext / size)).astype(np.int64)
+    if centred:
+        lo = 0.5 * (lo + hi) - 0.5 * size * res
+    return BrickGrid(lo, size, res)
 
 
 @njit(cache=True, inline="always")

@@ -7,9 +7,11 @@ albedo; the yarn type gives the SGGX roughness. Nothing is realized.
 ProceduralMedium fields: ``cv`` (``stages.core.curves.spline.Curves`` of the yarns artifact) and ``tab``
 (``stages.core.yarn.tables.Tables``).
 
-Majorants: ``capsule_box(cv, tab, step_frac)`` and ``capsule_majorants(cv, tab, step_frac, lo, hi,
-res)`` walk capsules that hold every fibre surface, each carrying its yarn's density, without
-storing them (a 1,000-yarn fabric has some 10^8), and give their box and the majorant grid (a cell
+Majorants: ``tube_box(cv, tab, step_frac)`` gives a box holding every fibre from the yarns' extent tubes
+(``yarn_extent``, hairs included) walked along their axes only (a large cloth's box: pipeline.renderers.volpath);
+``capsule_box(cv, tab, step_frac)`` and ``capsule_majorants(cv, tab, step_frac, lo, hi, res)`` walk capsules
+that hold every fibre surface, each carrying its yarn's density, without storing them (a 1,000-yarn fabric has
+some 10^8), and give their box and the majorant grid (a cell
 takes the largest bound of the capsules that reach it; zero elsewhere): the *core* tube of the
 regular fibres (radius ply_radius + rho_max R_max max(e_short, e_long) + the fibre radius, far inside
 the hair extent) as capsules between axis points spaced step_frac x that radius apart (radius + half
@@ -160,6 +162,41 @@ def _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, mode, box,
                     _emit(mode, box, mu, glo, cs, half_diag, res, px, py, pz, qx, qy, qz,
                           rf + 0.5 * speed * dt + 2.0 * eps, den)
                     px, py, pz = qx, qy, qz
+
+
+@njit(cache=True)
+def _axis_box(cv, tab, c, step_frac, box):
+    """Grow box (min x, y, z, max x, y, z) by yarn c's extent tube (``yarn_extent``, hairs included): capsules of
+    radius yarn_extent + half the step + eps_c between axis points step_frac x the extent apart."""
+    r = tab.yarn_extent[c]
+    L = cv.curve_length[c]
+    nt = max(1, int(np.ceil(L / max(step_frac * r, 1e-12))))
+    h = L / nt
+    rr = r + 0.5 * h + tab.yarn_eps[c]
+    for q in range(nt + 1):
+        p = curve_point_at(cv, c, min(q * h, L))
+        for a in range(3):
+            box[a] = min(box[a], p[a] - rr)
+            box[3 + a] = max(box[3 + a], p[a] + rr)
+
+
+def tube_box(cv, tab, step_frac):
+    """(lo (3,), hi (3,)): the box of the yarns' extent tubes, which hold every fibre: looser than
+    ``capsule_box``'s but from the axes alone (no loop or hair is walked), for a grid too coarse to feel the
+    difference (yarns on threads)."""
+    Y = cv.curve_length.shape[0]
+    boxes = np.empty((Y, 6))
+    boxes[:, :3] = np.inf
+    boxes[:, 3:] = -np.inf
+    for_chunks(_tube_boxes, Y, cv, tab, float(step_frac), boxes)
+    return boxes[:, :3].min(axis=0), boxes[:, 3:].max(axis=0)
+
+
+@chunk_kernel
+def _tube_boxes(cv, tab, step_frac, boxes, c0, c1):
+    """``tube_box``'s per-yarn boxes of yarns c0 .. c1 - 1."""
+    for c in range(c0, c1):
+        _axis_box(cv, tab, c, step_frac, boxes[c])
 
 
 def capsule_box(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
