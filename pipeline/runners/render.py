@@ -21,7 +21,7 @@ from pathlib import Path
 from ..bcsdf_presets import check_bcsdf_names
 from ..errors import LoomError
 from ..limits import check_depth
-from ..memory import Estimate, budget as memory_budget, peak_rss_bytes
+from ..memory import BUDGET_ENV, Estimate, budget as memory_budget, peak_rss_bytes
 
 PIXEL_BYTES = 256          # the film's per-pixel sums, the image and its channels, the EXR and PNG encodings
 VERTEX_BYTES = 300         # a realized fibre vertex: the fibres read, capsule segments and their BVH
@@ -324,7 +324,9 @@ def run_render(scene_path, out, request: RenderRequest = RenderRequest(), method
     art_path = out.with_suffix(".zarr")
     writer = ArtifactWriter(art_path, kind="render", stage="render", params=params, inputs=inputs,
                             companions=(out, out.with_suffix(".png")), started=t_start)
-    render_estimate(options, inputs, scene).check(budget or memory_budget(), scene.path)
+    # render has no --budget option: its budget is $LOOMLIGHT_MEMORY_BUDGET's (or a share of what is free)
+    render_estimate(options, inputs, scene).check(budget or memory_budget(), scene.path,
+                                                  remedy=f"set {BUDGET_ENV} (MiB) higher or make the input smaller")
     work = render_work(options, sched, method)
     if work is not None:
         top = max(work.parts, key=lambda part: part[1])[2]

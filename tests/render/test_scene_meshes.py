@@ -363,6 +363,7 @@ def test_mesh_counts_and_the_render_estimate(cli, tmp_path, monkeypatch):
     _fibers_artifact(fib)
     code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "m.exr")
     assert code == 2 and "meshes and their BVH" in err and "7,200 triangles" in err, err
+    assert "set LOOMLIGHT_MEMORY_BUDGET (MiB) higher" in err, err    # render has no --budget to name
     assert not (tmp_path / "m.exr").exists()
     monkeypatch.setenv("LOOMLIGHT_MEMORY_BUDGET", "4096")
     code, _, err = cli("render", scene, "--method", "fiberpath", "--fibers", fib, "-o", tmp_path / "m.exr")
