@@ -99,6 +99,9 @@ def _loop_bin_ranges(yarn_ply_off, yarn_type, type_fib_off, N, lz_off, lz_start,
     return lz_rr
 
 
+FRINGE_STEP_REACHES = 2.0   # fringe walk: loops and hairs sampled every this many fringe reaches of yarn-space arc
+
+
 @njit(cache=True)
 def _mark_ball(bits, base, nb, h, rw, x, y, z, r, w0):
     """Set every fringe cell (z-bin, shell, sector) that meets the yarn-space ball of radius r at
@@ -128,8 +131,10 @@ def fringe_occupancy(tab, fo_off, fo_geom):
     """Fringe occupancy bits of every yarn, one set for loops and one for hairs: cell (z-bin, shell,
     sector) of yarn c is set when a loop (its fibre's trajectory over the loop's cycle grown by the
     largest z window, fringe_window) or a stored hair (hybrid mode) comes within fringe_reach of
-    the cell in yarn space. Each curve is sampled at steps of at most fringe_reach of yarn-space
-    arc (its speed bound), and every sample marks the cells within fringe_reach plus half a step.
+    the cell in yarn space. Each curve is sampled at steps of at most FRINGE_STEP_REACHES fringe reaches of
+    yarn-space arc (its speed bound), and every sample marks the cells within fringe_reach plus half a step
+    (2 reaches: half the walk of 1, a few more cells set, the lookups' answers the same: a set cell only
+    costs a scan that finds nothing).
     A lookup point in no set loop cell needs no loop scan, one in no set hair cell no hair test;
     one in neither, farther than type_rcore from the axis, is covered by no fibre of the yarn.
     Yarns on threads (each writes only its own rows; ``stages.core.threads``)."""
@@ -162,7 +167,7 @@ def _fringe_yarns(tab, fo_off, fo_geom, bits, c0, c1):
                 j, fi, z0, z1 = loop_fibre(tab, tp, c, k, e)
                 z0 = max(0.0, z0 - win)
                 z1 = min(L, z1 + win)
-                n = max(1, int(math.ceil((z1 - z0) * v / r)))
+                n = max(1, int(math.ceil((z1 - z0) * v / (FRINGE_STEP_REACHES * r))))
                 dz = (z1 - z0) / n
                 for q in range(n + 1):
                     z = min(z0 + q * dz, z1)
@@ -173,7 +178,7 @@ def _fringe_yarns(tab, fo_off, fo_geom, bits, c0, c1):
             for hh in range(tab.hair_off[g], tab.hair_off[g] + tab.hair_count[g]):
                 hs = stored_hair(tab, hh)
                 speed = hair_speed_bound(tp, hs.r0, hs.r1, hs.pe, hs.ze)
-                n = max(1, int(math.ceil(speed / r)))
+                n = max(1, int(math.ceil(speed / (FRINGE_STEP_REACHES * r))))
                 for q in range(n + 1):
                     x, y, z = hair_point(tp, k, hs.r0, hs.r1, hs.th1, hs.pe, hs.z1, hs.ze, q / n)
                     _mark_ball(bits, base, nb, h, rw, x, y, z, r + 0.5 * speed / n, FO_WORDS)
