@@ -219,14 +219,20 @@ def placement(tbl: dict | None, path: Path, place: str) -> np.ndarray:
     return M
 
 
+def _obj_file(name: str, path: Path, key: str) -> Path:
+    """An OBJ file named at ``key`` of the scene ``path``, resolved against the scene's folder; a missing one, or
+    a folder, is refused at ``key``."""
+    file = Path(name)
+    file = file if file.is_absolute() else (path.parent / file).resolve()
+    if not file.is_file():
+        raise LoomError(path, key, f"OBJ file {file} not found" if not file.exists() else f"{file} is not a file")
+    return file
+
+
 def _meshes(raw: dict, path: Path) -> list[dict]:
     out = []
     for i, m in enumerate(raw.get("meshes", [])):
-        file = Path(m["file"])
-        file = file if file.is_absolute() else (path.parent / file).resolve()
-        if not file.is_file():
-            raise LoomError(path, f"meshes[{i}].file", f"OBJ file {file} not found" if not file.exists()
-                            else f"{file} is not a file")
+        file = _obj_file(m["file"], path, f"meshes[{i}].file")
         mat = m.get("material", {})
         kind = mat.get("type", "lambert")
         for key in ("albedo",) if kind == "dielectric" else ("eta", "roughness"):
@@ -274,12 +280,7 @@ def _drape(spec: dict, path: Path, key: str) -> dict:
         return {"folds": 6, "fold_amplitude": 0.15, **spec}
     if surface != "obj":
         return dict(spec)
-    file = Path(spec["file"])
-    file = file if file.is_absolute() else (path.parent / file).resolve()
-    if not file.is_file():
-        raise LoomError(path, f"{key}.file", f"OBJ file {file} not found" if not file.exists()
-                        else f"{file} is not a file")
-    return {"scale": 1.0, **spec, "file": str(file)}
+    return {"scale": 1.0, **spec, "file": str(_obj_file(spec["file"], path, f"{key}.file"))}
 
 
 def _fabric_parts(raw: dict, path: Path) -> list[FabricPart]:
