@@ -105,7 +105,7 @@ def run(out_dir) -> dict:
     from stages.core.geometry.triangles import area_weighted_normals
     from stages.render.film import F_HIT, new_film, tile_grid
     from stages.render.integrators.btf import sky_table  # (importing it registers the integrator's radiance)
-    from stages.render.tiles import render_tiles, tile_kernel
+    from stages.render.tiles import load_tile_kernel, render_tiles
     from stages.tile.base_surfaces import sphere_drape
 
     out = Path(out_dir)
@@ -128,7 +128,7 @@ def run(out_dir) -> dict:
         """(frames per second, coverage, CPU seconds per frame) of the shared tile loop."""
         tiles = tile_grid(W, H, tile)
         numba.set_num_threads(threads)
-        tile_kernel(integ)(integ, cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)   # compile or load
+        load_tile_kernel(integ, cam)
         render_tiles(integ, cam, 0, 1, 0, counts, tiles, new_film(W, H), threads)   # warm caches
         times, cpu = [], []
         film = None
@@ -146,7 +146,7 @@ def run(out_dir) -> dict:
     integ = pack_integrator(geom, tex, lights, ground, has_ground, cam, mip=True, shadows=False)
     setup_s = time.perf_counter() - t0
     t0 = time.perf_counter()
-    tile_kernel(integ)(integ, cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)
+    load_tile_kernel(integ, cam)
     compile_s = time.perf_counter() - t0
     threads = min(2, numba.config.NUMBA_NUM_THREADS)
     load = os.getloadavg()[0]

@@ -73,7 +73,7 @@ def axis_projection(tab, pts):
             best, bq, bt = 1e300, -1, 0.0
             while q < tab.fg_start[g + 1] and tab.fg_yarn[q] == c:
                 for ch in range(tab.fg_a[q], tab.fg_b[q]):
-                    lb, t = chord_lower_bound(tab.fs_frame, tab.kn_idx, tab.kn_sag, ch, px, py, pz)
+                    lb, t = chord_lower_bound(tab.kn_pos, tab.kn_sag, ch, px, py, pz)
                     if lb < best:
                         best, bq, bt = lb, ch, t
                 q += 1
@@ -83,10 +83,11 @@ def axis_projection(tab, pts):
             if best >= tab.yarn_extent[c] + 2.0 * eps or (best > 0.0 and
                                                           best * best >= gate * gate + (rf + 2.0 * eps) ** 2):
                 continue
-            ia = tab.kn_idx[bq]
-            fa = tab.kn_idx[max(bq - 1, tab.kn_off[c])]
-            fb = tab.kn_idx[min(bq + 2, tab.kn_off[c + 1] - 1)]
-            s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
+            base = tab.fs_at[c]
+            ia = base + tab.kn_idx[bq]
+            fa = base + tab.kn_idx[max(bq - 1, tab.kn_off[c])]
+            fb = base + tab.kn_idx[min(bq + 2, tab.kn_off[c + 1] - 1)]
+            s0 = tab.kn_s[bq] + bt * (tab.kn_s[bq + 1] - tab.kn_s[bq])
             s, i, d2 = foot_point(tab.fs_s, tab.fs_frame, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz,
                                   FOOT_TOL * rf)
             n[j] += 1 if d2 >= 0.0 else 0

@@ -28,6 +28,11 @@ band of ``tile_size`` image rows: a worker rebuilds the integrator and camera on
 renders its band's tiles into a band of the film and writes it to a scratch zarr array beside the
 output (removed afterwards); the driver reads the film back and finishes it as above. Every pixel
 depends only on its own random numbers, so the image is the same bytes as a local render.
+
+Paged procedural tables (``pager``: ``stages.core.yarn.frame_pool``): a pixel whose lookups needed a yarn's
+frame samples before they were resident takes its samples again once they are (``stages.render.tiles``); a
+local render first runs a pilot pass, one sample in every PILOT_STRIDE^2 pixels, thrown away, that pages in
+the yarns the view's paths reach in a few rounds over the whole image. Its time is part of the render's.
 """
 from __future__ import annotations
 
@@ -40,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..progress import progress
+from ..progress import progress, status
 
 
 @dataclass(frozen=True)
@@ -105,6 +110,10 @@ class FilmSetup:
     variance: str
     stats: dict = field(default_factory=dict)
     keep: tuple = ()   # what the integrator's handles point into (an Embree scene): alive while rendering
+    pager: object = None  # a FramePool whose tables the integrator holds (stages.core.yarn.frame_pool), or None
+
+
+PILOT_STRIDE = 4  # paged frame samples: the pilot pass takes one sample in every PILOT_STRIDE^2 pixels
 
 
 @dataclass(frozen=True)
@@ -119,16 +128,14 @@ class RemoteFilm:
     def build(self):
         import importlib
 
-        from stages.render.film import new_film
-        from stages.render.tiles import tile_kernel
+        from stages.render.tiles import load_tile_kernel
 
         from ..scene import load_scene
 
         t0 = time.perf_counter()
         s = importlib.import_module(self.module).film_setup(load_scene(self.scene_path), self.options)
         t1 = time.perf_counter()
-        counts = np.zeros((1, 1), np.int64)
-        tile_kernel(s.integ)(s.integ, s.cam, 0, 1, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
+        load_tile_kernel(s.integ, s.cam)
         return s, t1 - t0, time.perf_counter() - t1
 
     def key(self) -> str:
@@ -165,7 +172,7 @@ def _band_task(remote: RemoteFilm, seed, stride, first, counts, r0, tile_size, w
     tiles = tiles[[counts[t[0] - r0:t[2] - r0, t[1]:t[3]].any() for t in tiles]]
     band = new_film(width, rows)
     t0 = time.perf_counter()
-    render_tiles(s.integ, s.cam, seed, stride, first, counts, tiles, band, None, r0)
+    render_tiles(s.integ, s.cam, seed, stride, first, counts, tiles, band, None, r0, s.pager)
     render_s = time.perf_counter() - t0
     open_for_chunk(store, name)[r0:r0 + rows] = band
     return {"render_s": render_s, "setup_s": setup_s if built else 0.0, "compile_s": compile_s if built else 0.0}
@@ -194,14 +201,17 @@ def _distributed_pass(label, remote, seed, stride, first, counts, tile_size, fil
     return {k: sum(r[k] for r in res) for k in ("setup_s", "compile_s")}
 
 
-def _pass(label, integ, cam, seed, stride, first, counts, tiles, film, threads):
+def _pass(label, integ, cam, seed, stride, first, counts, tiles, film, threads, pager=None):
     from stages.render.tiles import render_tiles
 
     batch = max(1, 4 * (os.cpu_count() or 1))
     with progress(label, len(tiles)) as advance:
+        if pager is not None:   # paged: the rounds that render pixels again run over the whole pass at once
+            render_tiles(integ, cam, seed, stride, first, counts, tiles, film, threads, pager=pager, advance=advance)
+            return
         for b0 in range(0, len(tiles), batch):
             b1 = min(b0 + batch, len(tiles))
-            render_tiles(integ, cam, seed, stride, first, counts, tiles[b0:b1], film, threads)
+            render_tiles(integ, cam, seed, stride, first, counts, tiles[b0:b1], film, threads, pager=pager)
             advance(b1 - b0)
 
 
@@ -242,11 +252,13 @@ def add_pass(film, counts, film2, more):
 
 
 def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile_size, variance,
-                threads=None, remote: RemoteFilm | None = None) -> FilmRun:
+                threads=None, remote: RemoteFilm | None = None, pager=None) -> FilmRun:
     """Render the image in one or two passes (module doc): here on ``threads`` threads, or as band
     tasks on the open Dask session when ``remote`` says how a worker rebuilds the integrator. On Dask,
     render_s is the passes' wall time less the workers' setup and compile seconds (summed over the
-    workers, divided by their number) and compile_s the workers' compile seconds."""
+    workers, divided by their number) and compile_s the workers' compile seconds. ``pager``: the
+    ``FramePool`` of paged procedural tables the integrator holds (``stages.render.tiles.render_tiles``;
+    a Dask worker pages into its own)."""
     import shutil
 
     from stages.render.film import finalize, new_film, tile_grid
@@ -271,16 +283,16 @@ def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile
         def cleanup():
             shutil.rmtree(scratch, ignore_errors=True)
     else:
-        from stages.render.tiles import tile_kernel
+        from stages.render.tiles import load_tile_kernel
 
         tiles = tile_grid(width, height, int(tile_size))
         t0 = time.perf_counter()
-        tile_kernel(integ)(integ, cam, int(seed), stride, 0, counts, 0, 0, 0, 0, new_film(1, 1), 0)  # compile or load
+        load_tile_kernel(integ, cam, seed, stride)
         spent["compile_s"] = time.perf_counter() - t0
 
         def run_pass(text, first, cnt, film, name):
             busy = np.array([cnt[r0:r1, c0:c1].any() for r0, c0, r1, c1 in tiles], bool)
-            _pass(text, integ, cam, seed, stride, first, cnt, tiles[busy], film, threads)
+            _pass(text, integ, cam, seed, stride, first, cnt, tiles[busy], film, threads, pager)
 
         def cleanup():
             pass
@@ -289,6 +301,16 @@ def render_film(label, integ, cam, width, height, sampling: Sampling, seed, tile
     samples = int(counts.sum())
     try:
         t0 = time.perf_counter()
+        if pager is not None and not (remote is not None and chunks.distributed()):
+            # paged frame samples: a pilot of one sample every PILOT_STRIDE pixels each way pages in the yarns
+            # the view's paths reach, so the passes' tiles seldom render again (its film is thrown away)
+            from stages.render.tiles import render_tiles
+
+            pilot = np.zeros_like(counts)
+            pilot[PILOT_STRIDE // 2::PILOT_STRIDE, PILOT_STRIDE // 2::PILOT_STRIDE] = 1
+            with status(f"{label}: paging in frame samples"):   # all tiles at once: rounds over them all
+                render_tiles(integ, cam, seed, stride, 0, pilot, tiles, new_film(width, height), threads, pager=pager)
+            pager.pilot_rounds, pager.pilot_pixels_again = pager.rounds, pager.pixels_again
         run_pass(f"{label} {width}x{height} @ {spp} spp", 0, counts, film, "pass0")
         if sampling.adaptive:
             more = refine_counts(film, spp, sampling)
@@ -316,7 +338,7 @@ def render_with_film(module: str, scene, options: dict):
     s = importlib.import_module(module).film_setup(scene, options)
     run = render_film(s.label, s.integ, s.cam, options["width"], options["height"], sampling_of(options),
                       options["seed"], options["tile_size"], s.variance, options.get("threads"),
-                      remote_film(module, scene, options))
+                      remote_film(module, scene, options), s.pager)
     return s, run
 
 

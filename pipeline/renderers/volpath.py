@@ -56,6 +56,9 @@ CELL_FRACTION = 0.25  # default majorant cell: this fraction of the mean yarn ex
 # of the mean extent bound (a quarter of the default cell: 8 bytes a sub-cell, only where the camera looks)
 FINE_CELL_FRACTION = 0.0625
 MAJORANT_STEP = 0.25  # procedural majorant: core-tube capsules spaced this fraction of the tube radius apart
+# tables whose frame samples would take more than this are paged: a yarn's samples are made when a ray first
+# needs them (stages.core.yarn.frame_pool); below it every yarn's are made at load (no rounds of tiles)
+PAGE_FRAME_BYTES = 256 * 2**20
 
 
 # ------------------------------------------------------------------------------------------------
@@ -100,8 +103,8 @@ def procedural_majorant_bytes(lo, hi, mean_extent, workers) -> float:
 
 
 def procedural_source(tables_path, cell=None, optics=None, view=None):
-    """(ProceduralMedium, MajorantGrid, info, mats) from a tables artifact, scattering as ``optics``;
-    without optics (voxelize) the tables' own colours and micro-flake roughness, no fibre phase.
+    """The ``Source`` (ProceduralMedium, MajorantGrid, info, mats, pager) of a tables artifact, scattering as
+    ``optics``; without optics (voxelize) the tables' own colours and micro-flake roughness, no fibre phase.
     ``view`` (``CacheView``): a render's camera and fibre cache budget; then the medium is the
     ``FibreCacheMedium`` of that view (``pipeline.fibre_cache``; budget 0: every lookup procedural).
     A progress bar (on a terminal) counts its three steps; info records their times."""
@@ -123,7 +126,14 @@ def _procedural_source(tables_path, cell, optics, view, advance):
     # the yarn types come from the tables' recorded yarns input: one that is gone is refused before the
     # tables are loaded (loading derives the lookup structures, and compiles their kernels on a cold cache)
     types = None if optics is None else input_yarn_types(_artifact(tables_path, "tables", "--tables"))
-    cv, tab, art = load_tables(tables_path)
+    paged = view is not None and frame_sample_bytes(_artifact(tables_path, "tables", "--tables")) > PAGE_FRAME_BYTES
+    cv, tab, art = load_tables(tables_path, paged=paged)
+    pool = None
+    if paged:
+        from stages.core.yarn.frame_pool import FramePool
+
+        pool = FramePool(cv, tab)
+        tab = pool.tables
     advance()
     t1 = time.perf_counter()
     if optics is None:
@@ -139,9 +149,10 @@ def _procedural_source(tables_path, cell, optics, view, advance):
     maj = procedural_majorant(cv, tab, cell)
     advance()
     # tables_load_s: reading the artifact and deriving the lookup structures (accel.derive_lookup_accel)
-    info = {"yarns": int(len(tab.yarn_type)), "tables_load_s": t1 - t0, "majorant_s": time.perf_counter() - t1}
+    info = {"yarns": int(len(tab.yarn_type)), "tables_load_s": t1 - t0, "majorant_s": time.perf_counter() - t1,
+            "frame_samples_paged": paged}
     if view is None:
-        return ProceduralMedium(cv, tab), maj, info, mats
+        return Source(ProceduralMedium(cv, tab), maj, info, mats, pool)
     from ..fibre_cache import build_fibre_cache
 
     asked = cell or CELL_FRACTION * float(np.mean(tab.yarn_extent))
@@ -149,7 +160,19 @@ def _procedural_source(tables_path, cell, optics, view, advance):
     built = build_fibre_cache(cv, tab, maj, view.camera, view.width, view.height, view.budget_mib,
                               fine_cell=FINE_CELL_FRACTION * float(np.mean(tab.yarn_extent)) if capped else None)
     advance()
-    return built.medium, built.majorant, {**info, **built.info}, mats
+    return Source(built.medium, built.majorant, {**info, **built.info}, mats, pool)
+
+
+def frame_sample_bytes(art) -> float:
+    """Bytes of every yarn's frame samples at their first-guess steps (``runners.tables.accel_estimate``'s
+    count): what decides whether a render pages them (PAGE_FRAME_BYTES)."""
+    from stages.core.yarn.frame_samples import FRAME_COLS
+
+    from ..runners.tables import first_guess_frame_samples
+
+    if not len(art["yarn_type"]):
+        return 0.0
+    return 8.0 * (FRAME_COLS + 1) * first_guess_frame_samples(art)[0]
 
 
 def procedural_majorant(cv, tab, cell=None):
@@ -158,19 +181,41 @@ def procedural_majorant(cv, tab, cell=None):
     ``cell`` (default a quarter of the mean yarn extent bound). Its box: the capsules' own (a second walk,
     ``capsule_box``) where the cells are as asked; where MAX_MAJORANT_CELLS coarsens them (a large cloth) the box
     of the yarns' extent tubes (``tube_box``, the axes alone: the loops and hairs are walked once, not twice),
-    whose cells ``_majorant_res`` coarsens along the cloth, not across it."""
+    whose cells ``_majorant_res`` coarsens along the cloth, not across it. Paged tables (``frame_pool``) are
+    walked chunk by chunk of yarns, each chunk's frame samples made for the walk and dropped after it."""
     import numba
 
+    from stages.core.yarn.frame_pool import is_paged
     from stages.render.media.procedural_medium import capsule_box, capsule_majorants, tube_box
     from stages.render.media.tracking import make_majorant_grid
 
     cell = cell or CELL_FRACTION * float(np.mean(tab.yarn_extent))
     lo, hi = tube_box(cv, tab, MAJORANT_STEP)
+    paged = is_paged(tab)
+
+    def walks():  # paged tables: every chunk's frame samples made for each walk (PAGE_CHUNK_SAMPLES at a time)
+        return _resident_chunks(cv, tab) if paged else [(tab, None)]
+
     if not _capped(lo, hi, cell):    # cells as asked: the capsules' own box, as fine as the cells
-        lo, hi = capsule_box(cv, tab, MAJORANT_STEP)
+        boxes = [capsule_box(cv, t, MAJORANT_STEP, yarns=ys, grown=False) for t, ys in walks()]
+        rmax = max(b[2] for b in boxes)
+        lo = np.min([b[0] for b in boxes], axis=0) - rmax
+        hi = np.max([b[1] for b in boxes], axis=0) + rmax
     res = _majorant_res(lo, hi, cell)
-    return make_majorant_grid(lo, hi, res, capsule_majorants(cv, tab, MAJORANT_STEP, lo, hi, res,
-                                                                   numba.get_num_threads()))
+    mu = None
+    for t, ys in walks():
+        mu = capsule_majorants(cv, t, MAJORANT_STEP, lo, hi, res, numba.get_num_threads(), yarns=ys, into=mu)
+    return make_majorant_grid(lo, hi, res, mu)
+
+
+def _resident_chunks(cv, tab):
+    """(tables with a chunk's frame samples resident, the chunk's yarns) for every chunk of paged tables
+    (``accel.yarn_chunks``), made one at a time as the loop asks."""
+    from stages.core.yarn.accel import PAGE_CHUNK_SAMPLES, yarn_chunks
+    from stages.core.yarn.frame_pool import resident
+
+    for ys in yarn_chunks(cv, tab.fs_step, PAGE_CHUNK_SAMPLES):
+        yield resident(cv, tab, ys), ys
 
 
 def _fibre_numbers(fart) -> np.ndarray:
@@ -224,7 +269,7 @@ def realized_source(fibers_path, cell, optics):
     res = _majorant_res(lo, hi, cell or CELL_FRACTION * extent)
     mu = majorants_from_capsules(a, b, r, bound, lo, hi, res)
     info = {"fibers": fibers.n_fibers, "segments": int(len(bvh.seg_a)), "bvh_build_s": time.perf_counter() - t0}
-    return med, make_majorant_grid(lo, hi, res, mu), info, mats
+    return Source(med, make_majorant_grid(lo, hi, res, mu), info, mats)
 
 
 def grid_source(grid_path, cell, optics):
@@ -243,8 +288,8 @@ def grid_source(grid_path, cell, optics):
     vox = (hi - lo) / np.array(den.shape[::-1])
     res = _majorant_res(lo, hi, cell or 4.0 * float(vox.max()))
     mu = majorants_from_voxels(den, lo, hi, res)
-    return (med, make_majorant_grid(lo, hi, res, mu), {"voxels": list(den.shape[::-1])},
-            optics.rows(np.zeros((0, 3)), None)[0])
+    return Source(med, make_majorant_grid(lo, hi, res, mu), {"voxels": list(den.shape[::-1])},
+                  optics.rows(np.zeros((0, 3)), None)[0])
 
 
 class FibreOptics:
@@ -317,6 +362,16 @@ class FibreOptics:
         return mats, mats[:, 0] >= 0.0
 
 
+class Source(NamedTuple):
+    """What a volpath source opens to: the medium, its majorant grid, its statistics, the per-yarn material
+    rows (``FibreOptics.rows``), and the ``FramePool`` of paged procedural tables (None otherwise)."""
+    medium: object
+    majorant: object
+    info: dict
+    mats: np.ndarray
+    pager: object = None
+
+
 class CacheView(NamedTuple):
     """What the procedural source's fibre cache is built for: the render's camera array and size, the
     budget in MiB (``--cache``)."""
@@ -386,7 +441,7 @@ def film_setup(scene, options: dict):
 
         budget = options.get("cache")
         view = CacheView(cam, W, H, default_cache_mib() if budget is None else float(budget))
-    med, maj, info, mats = open_source(source, options, FibreOptics(scene, options), view)
+    med, maj, info, mats, pool = open_source(source, options, FibreOptics(scene, options), view)
     build_s = time.perf_counter() - t0
     if not _sees_fabric(maj, cam, W, H):
         warn(f"the camera of {scene.path} sees no fabric (source {source}); rendering anyway")
@@ -396,7 +451,7 @@ def film_setup(scene, options: dict):
     stats = {"source": source, "source_build_s": build_s, "majorant_cells": [int(x) for x in maj.res],
              "majorant_occupied": float(np.mean(maj.mu > 0)), "max_depth": max_depth, "rr_depth": rr_depth,
              "fibre_phase_yarns": int(np.sum(mats[:, 0] >= 0)), **info, **mesh_stats}
-    return FilmSetup(f"volpath ({source})", integ, cam, VARIANCE_LUMINANCE, stats)
+    return FilmSetup(f"volpath ({source})", integ, cam, VARIANCE_LUMINANCE, stats, pager=pool)
 
 
 def render(scene, options: dict) -> RenderResult:
@@ -405,5 +460,5 @@ def render(scene, options: dict) -> RenderResult:
     s, run = render_with_film(__name__, scene, options)
     lookups, render_s = run.image.lookups, run.render_s
     stats = {**run.stats(), "medium_lookups": lookups, "medium_lookups_per_s": lookups / max(render_s, 1e-12),
-             **s.stats}
+             **s.stats, **(s.pager.info() if s.pager is not None else {})}
     return RenderResult(run.rgb, run.extra, stats)

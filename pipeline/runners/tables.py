@@ -159,26 +159,25 @@ def accel_estimate(art: Artifact, what: str) -> Estimate:
     derive_lookup_accel builds (``stages.core.yarn.accel``), counted from the artifact's curve and
     per-yarn arrays without loading the tables: the frame samples of every yarn at its first-guess
     step between its breakpoints (``frame_sample_count``, +10 % for a refinement round), the coarse
-    knots, the chord grid's cells and runs (cells as derive_lookup_accel sizes them, runs per yarn
-    length / cell x (2 r / cell + 1.2)^2 for r its extent), the fringe bits and the per-hair, per-fibre
-    and per-loop-bin bounds. Within 10-25 % of the measured peak on the 1,000-yarn cloth (README,
-    "Scale")."""
-    from stages.core.yarn import model as M
-    from stages.core.yarn.accel import chord_grid_cell, frame_steps
+    knots (index, arc length, position, sag, gate), the chord grid's cells and runs (cells as
+    derive_lookup_accel sizes them, runs per yarn length / cell x (2 r / cell + 1.2)^2 for r its extent),
+    the fringe bits and the per-hair, per-fibre and per-loop-bin bounds. Within 10-25 % of the measured
+    peak on the 1,000-yarn cloth (README, "Scale")."""
+    from stages.core.yarn.accel import chord_grid_cell
     from stages.core.yarn.frame_samples import FRAME_COLS
     from stages.core.yarn.tables import FO_WORDS, FO_ZBIN_EXTENTS
 
     est = Estimate(what)
     est.add("stored tables", art.nbytes(), art.path.name)
-    tp, ytype = art["tparams"], art["yarn_type"]
-    length, ext, kap = (np.asarray(art[k], np.float64) for k in ("yarn_length", "yarn_extent", "yarn_kappa"))
+    ytype = art["yarn_type"]
+    length, ext = (np.asarray(art[k], np.float64) for k in ("yarn_length", "yarn_extent"))
     Y = len(ytype)
     if Y == 0:
         return est
-    radius = np.asarray(art["curves/radius"][:Y], np.float64)
-    step = frame_steps(kap, ext, radius, tp[ytype, M.FIBER_RADIUS])
-    samples = 1.1 * frame_sample_count(art, step)
-    est.add("frame samples", (8 + 8 * FRAME_COLS) * samples, f"{int(samples):,} samples")
+    first, step = first_guess_frame_samples(art)
+    samples = 1.1 * first
+    est.add("frame samples", (8 + 8 * FRAME_COLS) * samples,
+            f"{int(samples):,} samples (at most: a paged volpath render holds the yarns its rays reach)")
     stride = max(1, int(0.5 * float(ext.min()) / float(np.mean(step))))
     knots = samples / stride + 2 * Y
     pts = np.asarray(art["curves/points"])
@@ -186,11 +185,25 @@ def accel_estimate(art: Artifact, what: str) -> Estimate:
     cell = chord_grid_cell(box, float(ext.max()))
     cells = float(np.prod(np.ceil(box / cell)))
     runs = float(np.sum((length / cell + 1) * (2 * ext / cell + 1.2) ** 2))
-    est.add("chord grid", 28 * cells + 12 * runs + 24 * knots, f"{int(cells):,} cells, ~{int(runs):,} runs")
+    est.add("chord grid", 28 * cells + 12 * runs + 56 * knots, f"{int(cells):,} cells, ~{int(runs):,} runs")
     zbins = float(np.sum(np.ceil(length / (FO_ZBIN_EXTENTS * ext)) + 1))
     est.add("fringe and bounds", 8 * (2 * FO_WORDS + 3) * zbins + 16 * len(art["hair_z1"]) + 8 * len(art["fib_R"])
             + 16 * len(art["lz_start"]), f"{int(zbins):,} fringe z-bins")
     return est
+
+
+def first_guess_frame_samples(art: Artifact):
+    """(frame samples of every yarn at its first-guess step, those steps (Y,)): ``accel.frame_steps`` from the
+    artifact's per-yarn arrays, counted by ``frame_sample_count`` (loading the tables refines the steps: about
+    10 % more)."""
+    from stages.core.yarn import model as M
+    from stages.core.yarn.accel import frame_steps
+
+    tp, ytype = art["tparams"], art["yarn_type"]
+    ext, kap = (np.asarray(art[k], np.float64) for k in ("yarn_extent", "yarn_kappa"))
+    radius = np.asarray(art["curves/radius"][:len(ytype)], np.float64)
+    step = frame_steps(kap, ext, radius, tp[ytype, M.FIBER_RADIUS])
+    return frame_sample_count(art, step), step
 
 
 def frame_sample_count(art: Artifact, step: np.ndarray) -> float:
@@ -305,8 +318,9 @@ def _cv_field(name):
     return "offsets" if name == "curve_offsets" else name
 
 
-def load_tables(path):
-    """(Curves, Tables, Artifact) of a tables artifact (self-contained: curves from its copy)."""
+def load_tables(path, paged: bool = False):
+    """(Curves, Tables, Artifact) of a tables artifact (self-contained: curves from its copy). ``paged``: keep
+    no frame samples (``stages.core.yarn.frame_pool``: a render pages them in as its rays reach each yarn)."""
     from stages.core.yarn.accel import derive_lookup_accel
     from stages.core.yarn.tables import STORED_FIELDS, Tables, empty_accel
 
@@ -319,4 +333,4 @@ def load_tables(path):
     tab = Tables(**stored, **dict(zip([f for f in Tables._fields if f not in stored],
                                       empty_accel(len(stored["yarn_type"])))))
     cv = curves_from_group(lambda n: art[f"curves/{n}"])
-    return cv, derive_lookup_accel(cv, tab), art
+    return cv, derive_lookup_accel(cv, tab, paged=paged), art

@@ -102,7 +102,7 @@ def run_voxelize(tables, out, res, supersample=2, export_npy=None, force=False, 
     tables_hash = tables_art.meta["content_hash"]
     tables_abs = str(Path(tables).resolve())  # chunk tasks may run in another directory
     with session(scheduler), w:
-        med, maj, _, _ = procedural_source(tables)
+        med, maj = procedural_source(tables)[:2]
         worker_cache(("voxelize", tables_abs, tables_hash), lambda: med)  # local tasks take it
         lo, hi = maj.lo, maj.hi
         chunks = (min(nz, SLAB), min(ny, 64), min(nx, 64))

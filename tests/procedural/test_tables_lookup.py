@@ -190,7 +190,7 @@ def test_fringe_occupancy_covers_loops_and_hairs(built):
             # and inside the gate of every chord whose lookup bracket holds pz (chord_gates)
             k0, k1 = tab.kn_off[c], tab.kn_off[c + 1]
             for q in range(k0, k1 - 1):
-                if tab.fs_s[tab.kn_idx[max(q - 1, k0)]] <= pz <= tab.fs_s[tab.kn_idx[min(q + 2, k1 - 1)]]:
+                if tab.kn_s[max(q - 1, k0)] <= pz <= tab.kn_s[min(q + 2, k1 - 1)]:
                     assert math.hypot(px, py) < tab.kn_rgate[q], (c, q, kind)
             checked[kind] += 1
 
@@ -347,3 +347,66 @@ def test_lookups_compile_once_for_every_caller(built):
         assert procedural_lookup(med, x, y, z).den == r.density[i]
         assert procedural_lookup(med, x, y, z, -1).den == r.density[i]
     assert len(compiled_typings(lookup_point)) == 1, compiled_typings(lookup_point)
+
+
+def test_paged_tables_derive_the_same_numbers(built):
+    """Paged frame samples (stages.core.yarn.frame_pool): tables derived paged, in chunks of a few yarns'
+    samples, hold every derived array the resident derive makes, to the bit, but the resident samples
+    themselves (none); samples made again for any yarns (``resident``) equal the resident derive's."""
+    from stages.core.yarn.accel import derive_lookup_accel
+    from stages.core.yarn.frame_pool import is_paged, resident
+
+    cv, tab, _ = load_tables(built / "tables.zarr")
+    paged = derive_lookup_accel(cv, tab, paged=True, chunk_samples=50)
+    assert is_paged(paged) and not is_paged(tab)
+    assert len(paged.fs_s) == 0 and (paged.fs_at == -1).all()
+    for f in layout.DERIVED_FIELDS:
+        if f not in ("fs_at", "fs_s", "fs_frame"):
+            assert np.array_equal(getattr(paged, f), getattr(tab, f)), f
+    Y = len(tab.yarn_type)
+    for ys in ([Y - 1], list(range(Y))):
+        some = resident(cv, paged, ys)
+        for c in ys:
+            a, b = some.fs_at[c], tab.fs_at[c]
+            n = tab.fs_n[c]
+            assert np.array_equal(some.fs_frame[a:a + n], tab.fs_frame[b:b + n])
+            assert np.array_equal(some.fs_s[a:a + n], tab.fs_s[b:b + n])
+        assert (np.delete(some.fs_at, ys) == -1).all()
+
+
+def test_frame_pool_pages_in_the_yarns_lookups_reach(built):
+    """Lookups on paged tables ask for the yarns whose samples they need (fs_want, fs_miss) and leave them
+    out; after ``FramePool.page_in`` rounds until nothing misses, every answer equals the resident
+    tables' exactly, and only yarns whose chord-grid capsules reach a point were paged in. A round that
+    wants nothing new is refused."""
+    from stages.core.yarn.accel import derive_lookup_accel
+    from stages.core.yarn.frame_pool import FramePool
+
+    cv, tab, _ = load_tables(built / "tables.zarr")
+    pool = FramePool(cv, derive_lookup_accel(cv, tab, paged=True))
+    # points about the middle of yarn 0's axis, within its extent
+    c = 0
+    mid = tab.kn_off[c] + (tab.kn_off[c + 1] - tab.kn_off[c]) // 2
+    rng = np.random.default_rng(4)
+    pts = tab.kn_pos[mid] + rng.uniform(-1.0, 1.0, (400, 3)) * tab.yarn_extent[c]
+    want = lookup_points(cv, tab, pts)
+    for _ in range(len(tab.yarn_type) + 1):
+        pool.tables.fs_miss[0] = 0
+        got = lookup_points(cv, pool.tables, pts)
+        if pool.tables.fs_miss[0] == 0:
+            break
+        pool.page_in()
+    assert pool.tables.fs_miss[0] == 0 and pool.rounds >= 1
+    assert want.inside.any()
+    for f in ("inside", "yarn", "kind", "direction", "density", "albedo"):
+        assert np.array_equal(getattr(got, f), getattr(want, f)), f
+    # paged in: yarn 0 and yarns whose coarse chords come within extent + eps + sag of a point
+    paged_in = np.flatnonzero(pool.tables.fs_at >= 0)
+    assert c in paged_in and pool.yarns_in == len(paged_in)
+    for y in paged_in:
+        k0, k1 = tab.kn_off[y], tab.kn_off[y + 1]
+        reach = tab.yarn_extent[y] + 2.0 * tab.yarn_eps[y] + tab.kn_sag[k0:k1].max()
+        d = np.linalg.norm(pts[:, None, :] - tab.kn_pos[None, k0:k1], axis=2).min()
+        assert d <= reach + np.max(np.linalg.norm(np.diff(tab.kn_pos[k0:k1], axis=0), axis=1)), y
+    with pytest.raises(RuntimeError, match="no yarn was wanted"):
+        pool.page_in()

@@ -387,6 +387,29 @@ def test_procedural_and_realized_sources_agree(small):
     assert not np.array_equal(yp, yr)
 
 
+@pytest.mark.slow  # compiles the procedural volpath integrator (~3.3 min of one core on a cold cache): make test-all
+def test_paged_frame_samples_render_the_same_bytes(small, monkeypatch):
+    """Frame samples paged in as rays reach each yarn (stages.core.yarn.frame_pool): pixels whose lookups
+    missed a yarn are rendered again after it is paged in, so the picture is the resident tables', byte for
+    byte, on one thread or two (fibre cache off: every lookup procedural)."""
+    import pipeline.renderers.volpath as V
+    from pipeline.scene import load_scene
+
+    scene = load_scene(small / "s.toml")
+    base = {"width": 8, "height": 8, "spp": 4, "max_depth": 4, "rr_depth": 3, "tile_size": 4, "extra": {}, "seed": 3,
+            "source": "procedural", "tables": str(small / "t.zarr"), "cache": 0.0}
+    monkeypatch.setattr(V, "PAGE_FRAME_BYTES", float("inf"))
+    whole = V.render(scene, base)
+    assert not whole.stats["frame_samples_paged"]
+    monkeypatch.setattr(V, "PAGE_FRAME_BYTES", 0.0)
+    for threads in (1, 2):
+        paged = V.render(scene, {**base, "threads": threads})
+        st = paged.stats
+        assert st["frame_samples_paged"] and st["frame_pool_rounds"] >= 1 and st["frame_pool_pixels_again"] >= 1
+        assert 0 < st["frame_pool_yarns"] <= st["frame_pool_of_yarns"]
+        assert np.array_equal(paged.rgb, whole.rgb) and np.array_equal(paged.extra["variance"], whole.extra["variance"])
+
+
 def test_z_score_harness_rejects_biased_blocks():
     """The z-score test above must be able to fail: 16 standard normal scores pass (seeded), the same scores
     shifted by 1.5 standard errors fail the sum of squares, and one block 5 errors off fails the maximum."""
@@ -411,7 +434,7 @@ def test_procedural_majorant_covers_every_fibre(small, cell):
     from pipeline.renderers.volpath import MAX_MAJORANT_CELLS, _capped, procedural_source
     from stages.core.yarn.lookup import lookup_points
 
-    med, maj, _, _ = procedural_source(str(small / "t.zarr"), cell)
+    med, maj = procedural_source(str(small / "t.zarr"), cell)[:2]
     if cell is not None:
         assert _capped(maj.lo, maj.hi, cell) and np.prod(maj.res) <= MAX_MAJORANT_CELLS
     fib = Artifact(small / "f.zarr", kind="fibers")
@@ -437,7 +460,7 @@ def test_procedural_majorant_does_not_depend_on_workers(small):
     from pipeline.renderers.volpath import MAJORANT_STEP, procedural_source
     from stages.render.media.procedural_medium import _walk_yarn, capsule_majorants
 
-    med, maj, _, _ = procedural_source(str(small / "t.zarr"))
+    med, maj = procedural_source(str(small / "t.zarr"))[:2]
     for workers in (1, 3):
         mu = capsule_majorants(med.cv, med.tab, MAJORANT_STEP, maj.lo, maj.hi, maj.res, workers)
         assert np.array_equal(mu, maj.mu)

@@ -7,7 +7,9 @@ per-hair z/radius boxes, the fringe occupancy (``fringe_occupancy``): per yarn, 
 radial shell, azimuth sector) of yarn space marking where a loop or a stored hair can come close
 enough to cover a point, so that lookups far from every loop and hair skip those tests, and lookups
 beyond the core skip the yarn) and the chord gates (``chord_gates``). Everything here is a
-deterministic function of the curves and the stored tables.
+deterministic function of the curves and the stored tables. Paged (``derive_lookup_accel(paged=True)``),
+every field but the frame samples themselves is derived, chunk by chunk of yarns, to the same numbers;
+``frame_pool`` makes a yarn's samples when a lookup asks for them.
 """
 import math
 
@@ -18,7 +20,7 @@ from stages.core.geometry.bvh import round_down32, round_up32
 from stages.core.threads import chunk_kernel, for_chunks
 
 from .fibre_tests import stored_hair
-from .frame_samples import chord_grid, coarse_knots, sample_all
+from .frame_samples import FRAME_COLS, chord_grid, coarse_knots, sample_all, sample_counts
 from .model import (
     E_LONG,
     E_SHORT,
@@ -251,8 +253,8 @@ def _gates(tab, top):
         h = tab.fo_geom[c, 0]
         rw = tab.fo_geom[c, 1]
         for q in range(k0, k1 - 1):
-            sa = tab.fs_s[tab.kn_idx[max(q - 1, k0)]]
-            sb = tab.fs_s[tab.kn_idx[min(q + 2, k1 - 1)]]
+            sa = tab.kn_s[max(q - 1, k0)]
+            sb = tab.kn_s[min(q + 2, k1 - 1)]
             b0 = min(max(int(math.floor(sa / h)), 0), nb - 1)
             b1 = min(max(int(math.floor(sb / h)), 0), nb - 1)
             sh = top[base + b0:base + b1 + 1].max()
@@ -285,6 +287,7 @@ def frame_steps(kappa, extent, radius, fiber_radius, tolerance: float = FRAME_TO
 
 
 CHORD_GRID_MAX_CELLS = 1 << 23  # derive_lookup_accel's chord grid grows its cell to stay under this
+PAGE_CHUNK_SAMPLES = 1 << 20    # paged frame samples are made in chunks of yarns of about this many (~140 MB)
 
 
 def chord_grid_cell(box, max_extent: float, max_cells: int = CHORD_GRID_MAX_CELLS) -> float:
@@ -297,12 +300,16 @@ def chord_grid_cell(box, max_extent: float, max_cells: int = CHORD_GRID_MAX_CELL
 
 
 def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE,
-                        max_cells: int = CHORD_GRID_MAX_CELLS) -> Tables:
+                        max_cells: int = CHORD_GRID_MAX_CELLS, paged: bool = False,
+                        chunk_samples: int = PAGE_CHUNK_SAMPLES) -> Tables:
     """Tables with the derived fields filled (frame_samples.py): frame samples whose error bound
     eps_c stays near ``tolerance`` fibre radii (steps from the curvature bound, rescaled on the
     measured error, <= 3 rounds; the error is fourth order in the step), coarse knots about half
     an extent apart, and the chord grid (cells half the largest extent, grown to stay under
-    max_cells). Deterministic: depends on the curves and the stored tables only."""
+    max_cells). ``paged``: no frame samples kept (``fs_at`` -1: a render pages them in per yarn,
+    ``frame_pool.FramePool``); they are made in chunks of yarns of about ``chunk_samples`` samples, once
+    for the steps and once more for the coarse knots, so memory holds one chunk's, never every yarn's.
+    Deterministic: depends on the curves and the stored tables only; paged or not, the same numbers."""
     Y = len(tab.yarn_type)
     if Y == 0:
         return tab
@@ -311,30 +318,95 @@ def derive_lookup_accel(cv, tab: Tables, tolerance: float = FRAME_TOLERANCE,
     rf_y = tab.tparams[tab.yarn_type, FIBER_RADIUS]
     target = tolerance * rf_y
     radius = np.asarray(cv.radius[:Y], np.float64)
-    rmin = 1e-3 * radius
     deltas = frame_steps(kap, ext, radius, rf_y, tolerance)
-    for attempt in range(3):
-        fs_off, fs_s, fs_fr, err = sample_all(cv, deltas, ext)
-        scale = np.array([float(np.abs(fs_fr[fs_off[c]:fs_off[c + 1], :3]).max()) for c in range(Y)]) + ext
-        yeps = 2.0 * err + 1e-12 * scale
-        over = (yeps > target) & (deltas > rmin)
-        if not over.any():
-            break
-        deltas = np.where(over, np.maximum(0.9 * deltas * (target / np.maximum(yeps, 1e-300)) ** 0.25, rmin), deltas)
-        if attempt < 2:  # resampled next: let this round's samples go first (they are GB on a large fabric)
-            del fs_off, fs_s, fs_fr, err
-    mean_step = float(np.mean(deltas))
+    chunks = yarn_chunks(cv, deltas, chunk_samples) if paged else [np.arange(Y, dtype=np.int64)]
+    step = np.empty(Y)      # the step each yarn's samples are made at
+    final = np.empty(Y)     # the step after the last rescale (the coarse knots' stride takes their mean)
+    yeps = np.empty(Y)
+    count = np.empty(Y, np.int64)
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for ys in chunks:
+        off, fs_s, fs_fr, ye, step[ys], final[ys] = _refined_samples(cv, ys, deltas, ext, target, 1e-3 * radius)
+        yeps[ys] = ye
+        count[ys] = np.diff(off)
+        lo = np.minimum(lo, fs_fr[:, :3].min(0))
+        hi = np.maximum(hi, fs_fr[:, :3].max(0))
+        if paged:
+            del off, fs_s, fs_fr
+    mean_step = float(np.mean(final))
     stride = max(1, int(0.5 * float(ext.min()) / mean_step))
-    kn_off, kn_idx, kn_sag = coarse_knots(fs_s, fs_fr, fs_off, stride)
-    lo, hi = fs_fr[:, :3].min(0) - ext.max(), fs_fr[:, :3].max(0) + ext.max()
+    if paged:
+        kn = _paged_knots(cv, chunks, step, ext, stride, Y)
+        fs_at = np.full(Y, -1, np.int64)
+        fs_s = np.zeros(0)
+        fs_fr = np.zeros((0, FRAME_COLS))
+    else:
+        kn = coarse_knots(fs_s, fs_fr, off, stride)
+        fs_at = off[:-1].copy()
+    kn_off, kn_idx, kn_s, kn_pos, kn_sag = kn
+    lo, hi = lo - ext.max(), hi + ext.max()
     cell = chord_grid_cell(hi - lo, float(ext.max()), max_cells)
-    glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(fs_fr, kn_off, kn_idx, kn_sag, ext + yeps, cell)
+    glo, gcell, gdims, gstart, gyarn, ga, gb = chord_grid(kn_pos, kn_off, kn_sag, ext + yeps, cell)
     ply_rr, fib_v, lz_rr = scan_bounds(tab)
     hair_box = hair_boxes(tab.hair_z1, tab.hair_ze, tab.hair_r0, tab.hair_r1)
     tab = tab._replace(ply_rr=ply_rr, fib_v=fib_v, hair_box=hair_box, lz_rr=lz_rr,
-                       fs_off=fs_off, fs_s=fs_s, fs_frame=fs_fr, yarn_eps=yeps, kn_off=kn_off, kn_idx=kn_idx,
-                       kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]), fg_dims=gdims, fg_start=gstart,
-                       fg_yarn=gyarn, fg_a=ga, fg_b=gb)
+                       fs_at=fs_at, fs_n=count, fs_step=step, fs_s=fs_s, fs_frame=fs_fr,
+                       fs_want=np.zeros(Y, np.uint8), fs_miss=np.zeros(1, np.int64), yarn_eps=yeps, kn_off=kn_off,
+                       kn_idx=kn_idx, kn_s=kn_s, kn_pos=kn_pos, kn_sag=kn_sag, fg_lo=glo, fg_cell=np.array([gcell]),
+                       fg_dims=gdims, fg_start=gstart, fg_yarn=gyarn, fg_a=ga, fg_b=gb)
     rcore, fo_off, fo_geom, fo_bits = fringe_tables(tab)
     tab = tab._replace(type_rcore=rcore, fo_off=fo_off, fo_geom=fo_geom, fo_bits=fo_bits)
     return tab._replace(kn_rgate=chord_gates(tab))
+
+
+def _refined_samples(cv, ys, deltas, ext, target, rmin):
+    """Frame samples of yarns ``ys`` whose error bound eps_c is near ``target`` (derive_lookup_accel): steps
+    rescaled on the measured error, <= 3 rounds, each yarn on its own (its numbers do not depend on the
+    others listed with it). (offsets, s, frames, eps_c, the steps sampled, the steps after the last rescale)."""
+    d = np.array(deltas[ys], np.float64)
+    full = np.array(deltas, np.float64)
+    for attempt in range(3):
+        full[ys] = d
+        off, fs_s, fs_fr, err = sample_all(cv, full, ext, ys)
+        scale = np.array([float(np.abs(fs_fr[off[k]:off[k + 1], :3]).max()) for k in range(len(ys))]) + ext[ys]
+        yeps = 2.0 * err + 1e-12 * scale
+        sampled = d
+        over = (yeps > target[ys]) & (d > rmin[ys])
+        if not over.any():
+            break
+        d = np.where(over, np.maximum(0.9 * d * (target[ys] / np.maximum(yeps, 1e-300)) ** 0.25, rmin[ys]), d)
+        if attempt < 2:  # resampled next: let this round's samples go first (they are GB on a large fabric)
+            del off, fs_s, fs_fr, err
+    return off, fs_s, fs_fr, yeps, sampled, d
+
+
+def _paged_knots(cv, chunks, step, ext, stride, Y):
+    """coarse_knots of every yarn, its frame samples made again chunk by chunk (derive_lookup_accel, paged)."""
+    parts = [None] * len(chunks)
+    for i, ys in enumerate(chunks):
+        off, fs_s, fs_fr, _ = sample_all(cv, step, ext, ys, errors=False)
+        parts[i] = coarse_knots(fs_s, fs_fr, off, stride)
+        del off, fs_s, fs_fr
+    order = np.concatenate(chunks)
+    if not np.array_equal(order, np.arange(Y)):
+        raise ValueError("paged frame samples: chunks must list the yarns in order")
+    koff = np.zeros(Y + 1, np.int64)
+    koff[1:] = np.cumsum(np.concatenate([np.diff(p[0]) for p in parts]))
+    return (koff, np.concatenate([p[1] for p in parts]), np.concatenate([p[2] for p in parts]),
+            np.concatenate([p[3] for p in parts]), np.concatenate([p[4] for p in parts]))
+
+
+def yarn_chunks(cv, deltas, chunk_samples: int) -> list:
+    """Runs of consecutive yarns whose frame samples at ``deltas`` (their first-guess count, ``sample_counts``)
+    stay near ``chunk_samples`` (a yarn with more is a run of its own)."""
+    counts = sample_counts(cv.offsets, cv.closed, cv.seg_arclen, cv.frame_offsets, cv.frame_s, cv.curve_length,
+                           np.ascontiguousarray(deltas, np.float64))
+    out, start, acc = [], 0, 0
+    for c, n in enumerate(counts):
+        if acc and acc + n > chunk_samples:
+            out.append(np.arange(start, c, dtype=np.int64))
+            start, acc = c, 0
+        acc += int(n)
+    out.append(np.arange(start, len(counts), dtype=np.int64))
+    return out

@@ -30,7 +30,7 @@ chord bounds its distance to the axis from below (chord distance - sag) and seed
 Newton iteration for the foot point on the Hermite curve.
 
 Kernels:
-  sample_all(cv, deltas, rho)              per-yarn samples (offsets, s, frames (M, FRAME_COLS)), errors
+  sample_all(cv, deltas, rho, yarns)       per-yarn samples (offsets, s, frames (M, FRAME_COLS)), errors
   frame_at(s_arr, fr, lo, hi, i, z)        (step, 12 scalars) interpolated frame at z (hint step i)
   chord_grid(...)                          the uniform grid of coarse-chord runs
   foot_point(...)                          p's foot point on yarn c near a coarse chord
@@ -262,47 +262,66 @@ def sample_error(cv, c, s_arr, fr, rho, lo, hi):
     return worst
 
 
-def sample_all(cv, deltas, rho):
-    """Frame samples of every yarn (yarns on threads: ``stages.core.threads``): (offsets (Y+1,), s (M,),
-    frames (M, 12), measured errors (Y,))."""
-    Y = deltas.shape[0]
-    counts = np.zeros(Y, np.int64)
-    for_chunks(_count_samples, Y, cv, deltas, counts)
-    off = np.zeros(Y + 1, np.int64)
+def sample_all(cv, deltas, rho, yarns=None, errors=True, into=None):
+    """Frame samples of the yarns ``yarns`` (default every yarn; yarns on threads: ``stages.core.threads``) at
+    steps ``deltas`` and error radii ``rho`` (both indexed by yarn): (offsets (n+1,), s (M,), frames
+    (M, FRAME_COLS), measured errors (n,)), the k-th listed yarn's samples at offsets[k]:offsets[k+1].
+    ``errors`` False: the errors are not measured (zeros; measuring takes the exact frames at every step).
+    ``into`` (s, frames, base): written into those arrays from row ``base`` on instead (offsets then count
+    from base; nothing else allocated: a frame pool's page-in)."""
+    yarns = np.arange(deltas.shape[0], dtype=np.int64) if yarns is None else np.asarray(yarns, np.int64)
+    n = yarns.shape[0]
+    counts = np.zeros(n, np.int64)
+    for_chunks(_count_samples, n, cv, yarns, deltas, counts)
+    off = np.zeros(n + 1, np.int64)
     off[1:] = np.cumsum(counts)
-    s_all = np.empty(off[Y])
-    fr_all = np.empty((off[Y], FRAME_COLS))
-    err = np.zeros(Y)
-    for_chunks(_sample_yarns, Y, cv, deltas, np.asarray(rho, np.float64), off, s_all, fr_all, err)
+    if into is None:
+        s_all = np.empty(off[n])
+        fr_all = np.empty((off[n], FRAME_COLS))
+    else:
+        s_all, fr_all, base = into
+        off += int(base)
+        if off[n] > s_all.shape[0]:
+            raise ValueError("sample_all: the samples do not fit the arrays given")
+    err = np.zeros(n)
+    for_chunks(_sample_yarns, n, cv, yarns, deltas, np.asarray(rho, np.float64), off, s_all, fr_all, err,
+               bool(errors))
     return off, s_all, fr_all, err
 
 
 @chunk_kernel
-def _count_samples(cv, deltas, counts, c0, c1):
-    for c in range(c0, c1):
-        counts[c] = _n_samples(_breakpoints(cv, c), deltas[c])
+def _count_samples(cv, yarns, deltas, counts, k0, k1):
+    for k in range(k0, k1):
+        c = yarns[k]
+        counts[k] = _n_samples(_breakpoints(cv, c), deltas[c])
 
 
 @chunk_kernel
-def _sample_yarns(cv, deltas, rho, off, s_all, fr_all, err, c0, c1):
-    for c in range(c0, c1):
-        sample_yarn(cv, c, deltas[c], s_all[off[c]:off[c + 1]], fr_all[off[c]:off[c + 1]])
-        err[c] = sample_error(cv, c, s_all, fr_all, rho[c], off[c], off[c + 1])
+def _sample_yarns(cv, yarns, deltas, rho, off, s_all, fr_all, err, errors, k0, k1):
+    for k in range(k0, k1):
+        c = yarns[k]
+        sample_yarn(cv, c, deltas[c], s_all[off[k]:off[k + 1]], fr_all[off[k]:off[k + 1]])
+        if errors:
+            err[k] = sample_error(cv, c, s_all, fr_all, rho[c], off[k], off[k + 1])
 
 
 # ------------------------------------------------------------------------------------------------
 # coarse chords and their grid
 @njit(cache=True)
 def coarse_knots(s_arr, fr, fs_off, stride):
-    """(knot offsets (Y+1,), knot sample index (K,), sag (K,) of the chord starting at each knot; the
-    last knot of a yarn has sag 0). A chord's sag bounds the distance of the Hermite curve between
-    its knots from the chord: largest distance of the fine samples from it + the largest fine sag."""
+    """The coarse knots of the yarns whose samples are s_arr / fr[fs_off[k]:fs_off[k+1]]: (knot offsets
+    (n+1,), each knot's index among its yarn's samples (K,), its arc length (K,), its position (K, 3), the
+    sag (K,) of the chord starting at it; the last knot of a yarn has sag 0). A chord's sag bounds the
+    distance of the Hermite curve between its knots from the chord: largest distance of the fine samples
+    from it + the largest fine sag."""
     Y = fs_off.shape[0] - 1
     koff = np.zeros(Y + 1, np.int64)
     for c in range(Y):
         n = fs_off[c + 1] - fs_off[c]
         koff[c + 1] = koff[c] + (n - 1 + stride - 1) // stride + 1
     kidx = np.empty(koff[Y], np.int64)
+    ks = np.empty(koff[Y])
+    kpos = np.empty((koff[Y], 3))
     sag = np.zeros(koff[Y])
     for c in range(Y):
         lo = fs_off[c]
@@ -310,14 +329,18 @@ def coarse_knots(s_arr, fr, fs_off, stride):
         q = koff[c]
         i = lo
         while True:
-            kidx[q] = i
+            kidx[q] = i - lo
+            ks[q] = s_arr[i]
+            kpos[q, 0] = fr[i, 0]
+            kpos[q, 1] = fr[i, 1]
+            kpos[q, 2] = fr[i, 2]
             q += 1
             if i == hi - 1:
                 break
             i = min(i + stride, hi - 1)
         for q in range(koff[c], koff[c + 1] - 1):
-            a = kidx[q]
-            b = kidx[q + 1]
+            a = lo + kidx[q]
+            b = lo + kidx[q + 1]
             ax, ay, az = fr[a, 0], fr[a, 1], fr[a, 2]
             ux, uy, uz = fr[b, 0] - ax, fr[b, 1] - ay, fr[b, 2] - az
             uu = ux * ux + uy * uy + uz * uz
@@ -336,7 +359,7 @@ def coarse_knots(s_arr, fr, fs_off, stride):
                     cz = fr[j, 5] - fr[j + 1, 5]
                     fine = max(fine, h * math.sqrt(cx * cx + cy * cy + cz * cz) / 4.0)
             sag[q] = 1.05 * worst + 2.0 * fine
-    return koff, kidx, sag
+    return koff, kidx, ks, kpos, sag
 
 
 @njit(cache=True, inline="always")
@@ -349,7 +372,7 @@ def _cell_range(lo, cell, dims, a, b, r, d):
 
 
 @njit(cache=True)
-def chord_grid(fr, koff, kidx, sag, radius, cell):
+def chord_grid(kpos, koff, sag, radius, cell):
     """Uniform grid over the coarse chords' capsules (radius[c] + sag): (lo (3,), cell, dims (3,),
     cell_start (cells+1,), run_yarn, run_a, run_b) -- per cell the runs [run_a, run_b) of coarse
     chord indices (global knot numbering), ascending by yarn then chord."""
@@ -358,10 +381,9 @@ def chord_grid(fr, koff, kidx, sag, radius, cell):
     hi = np.full(3, -EMPTY_BOUND)
     for c in range(Y):
         for q in range(koff[c], koff[c + 1]):
-            i = kidx[q]
             for d in range(3):
-                lo[d] = min(lo[d], fr[i, d] - radius[c] - sag[q])
-                hi[d] = max(hi[d], fr[i, d] + radius[c] + sag[q])
+                lo[d] = min(lo[d], kpos[q, d] - radius[c] - sag[q])
+                hi[d] = max(hi[d], kpos[q, d] + radius[c] + sag[q])
     if Y == 0 or koff[Y] == 0:
         lo[:] = 0.0
         hi[:] = 1.0
@@ -390,12 +412,10 @@ def chord_grid(fr, koff, kidx, sag, radius, cell):
             rb = np.empty(start[ncell], np.int32)
         for c in range(Y):
             for q in range(koff[c], koff[c + 1] - 1):
-                a = kidx[q]
-                b = kidx[q + 1]
                 r = radius[c] + sag[q]
-                x0, x1 = _cell_range(lo, cell, dims, fr[a, 0], fr[b, 0], r, 0)
-                y0, y1 = _cell_range(lo, cell, dims, fr[a, 1], fr[b, 1], r, 1)
-                z0, z1 = _cell_range(lo, cell, dims, fr[a, 2], fr[b, 2], r, 2)
+                x0, x1 = _cell_range(lo, cell, dims, kpos[q, 0], kpos[q + 1, 0], r, 0)
+                y0, y1 = _cell_range(lo, cell, dims, kpos[q, 1], kpos[q + 1, 1], r, 1)
+                z0, z1 = _cell_range(lo, cell, dims, kpos[q, 2], kpos[q + 1, 2], r, 2)
                 for iz in range(z0, z1 + 1):
                     for iy in range(y0, y1 + 1):
                         for ix in range(x0, x1 + 1):
@@ -419,13 +439,11 @@ def chord_grid(fr, koff, kidx, sag, radius, cell):
 
 
 @njit(cache=True, inline="always")
-def chord_lower_bound(fr, kidx, sag, q, px, py, pz):
-    """(distance from p to coarse chord q minus its sag: a lower bound of p's distance to the curve
-    between the chord's knots, chord parameter t in [0, 1])."""
-    a = kidx[q]
-    b = kidx[q + 1]
-    ax, ay, az = fr[a, 0], fr[a, 1], fr[a, 2]
-    ux, uy, uz = fr[b, 0] - ax, fr[b, 1] - ay, fr[b, 2] - az
+def chord_lower_bound(kpos, sag, q, px, py, pz):
+    """(distance from p to coarse chord q (knot positions kpos) minus its sag: a lower bound of p's
+    distance to the curve between the chord's knots, chord parameter t in [0, 1])."""
+    ax, ay, az = kpos[q, 0], kpos[q, 1], kpos[q, 2]
+    ux, uy, uz = kpos[q + 1, 0] - ax, kpos[q + 1, 1] - ay, kpos[q + 1, 2] - az
     wx, wy, wz = px - ax, py - ay, pz - az
     uu = ux * ux + uy * uy + uz * uz
     t = (wx * ux + wy * uy + wz * uz) / uu if uu > 0.0 else 0.0

@@ -25,7 +25,9 @@ Steps (Algorithm 1), allocation-free:
    s on the sampled (Hermite) axis (seed 000 §5.2). A closed yarn's fibres run from s = 0 to its
    length L and do not join at the seam: near the seam both end pieces are visited, each as an
    open yarn's end, and the covering fibre first in the order below answers (``yarn_lookup``
-   returns a ``KeyedLookup``: the answer and its place in that order).
+   returns a ``KeyedLookup``: the answer and its place in that order). A candidate whose frame
+   samples are not resident (paged tables, frame_pool.py) is asked for (``fs_want``) and counted
+   (``fs_miss``) and left out: the caller must not use an answer given while ``fs_miss`` rose.
 2. Yarn space (Eq. 8-9) with the sampled frame at s: (x, y) and the tangential residual w. The
    derived fringe occupancy (tables.fringe_occupancy: bits per yarn z-bin, radial shell and
    azimuth sector, one set for loops and one for hairs) and the core radius type_rcore decide
@@ -136,8 +138,8 @@ def yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key):
     order key ``skip_key`` (-1: none) counting as empty."""
     t = tab.yarn_type[c]
     tp = tab.tparams[t]
-    lo = tab.fs_off[c]
-    hi = tab.fs_off[c + 1]
+    lo = tab.fs_at[c]
+    hi = lo + tab.fs_n[c]
     i, f = frame_at(tab.fs_s, tab.fs_frame, lo, hi, i, s)
     eps = tab.yarn_eps[c]
     rx, ry, rz = px - f[0], py - f[1], pz - f[2]
@@ -361,7 +363,6 @@ def lookup_point(cv, tab, px, py, pz, skip=-1):
     g = (int(fz) * dims[1] + int(fy)) * dims[0] + int(fx)
     q = tab.fg_start[g]
     qe = tab.fg_start[g + 1]
-    fr = tab.fs_frame
     while q < qe:
         c = tab.fg_yarn[q]
         best = NO_HIT
@@ -369,7 +370,7 @@ def lookup_point(cv, tab, px, py, pz, skip=-1):
         bt = 0.0
         while q < qe and tab.fg_yarn[q] == c:  # every run of yarn c in the cell
             for ch in range(tab.fg_a[q], tab.fg_b[q]):
-                lb, t = chord_lower_bound(fr, tab.kn_idx, tab.kn_sag, ch, px, py, pz)
+                lb, t = chord_lower_bound(tab.kn_pos, tab.kn_sag, ch, px, py, pz)
                 if lb < best:
                     best = lb
                     bq = ch
@@ -386,21 +387,28 @@ def lookup_point(cv, tab, px, py, pz, skip=-1):
         m = rf + 2.0 * eps
         gated = best > 0.0 and best * best >= gate * gate + m * m
         skip_key = skip - c * FIBRE_ID_STRIDE if skip >= 0 and skip // FIBRE_ID_STRIDE == c else -1
-        if cv.closed[c] and _near_seam(tab, c, bound, rf, eps, px, py, pz):
+        seam = cv.closed[c] and _near_seam(tab, c, bound, rf, eps, px, py, pz)
+        if gated and not seam:
+            continue
+        base = tab.fs_at[c]
+        if base < 0:  # yarn c's frame samples are not resident: ask for them, this answer does not count
+            tab.fs_want[c] = 1
+            tab.fs_miss[0] += 1
+            continue
+        if seam:
             res = _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz, skip_key)
             if res.inside:
                 return _unkeyed(res)
             continue
-        if gated:
-            continue
         # foot point: Newton from the nearest chord, bracketed by its neighbours
         k0 = tab.kn_off[c]
         k1 = tab.kn_off[c + 1] - 1
-        ia = tab.kn_idx[bq]
-        s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
-        fa = tab.kn_idx[max(bq - 1, k0)]
-        fb = tab.kn_idx[min(bq + 2, k1)]
-        s, i, d2 = foot_point(tab.fs_s, fr, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz, FOOT_TOL * rf)
+        ia = base + tab.kn_idx[bq]
+        s0 = tab.kn_s[bq] + bt * (tab.kn_s[bq + 1] - tab.kn_s[bq])
+        fa = base + tab.kn_idx[max(bq - 1, k0)]
+        fb = base + tab.kn_idx[min(bq + 2, k1)]
+        s, i, d2 = foot_point(tab.fs_s, tab.fs_frame, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz,
+                              FOOT_TOL * rf)
         if d2 >= bound * bound:
             continue
         res = yarn_lookup(cv, tab, c, s, i, px, py, pz, skip_key)
@@ -416,8 +424,9 @@ def _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz, skip_key):
     visit spells this out: returning the constant from an inlined call costs it ~20 %.)
     13 parameters: ``yarn_lookup``'s context (curves, tables, yarn, knot range, frame hint, Newton start, distance
     bound, radius factor), the point and the skip key, as the lookup holds them."""
-    fa = tab.kn_idx[ka]
-    fb = tab.kn_idx[kb]
+    base = tab.fs_at[c]
+    fa = base + tab.kn_idx[ka]
+    fb = base + tab.kn_idx[kb]
     s, i, d2 = foot_point(tab.fs_s, tab.fs_frame, fa, fb + 1, ia, s0, tab.fs_s[fa], tab.fs_s[fb], px, py, pz,
                           FOOT_TOL * rf)
     if d2 >= bound * bound:
@@ -435,17 +444,18 @@ def _seam_visits(cv, tab, c, gated, bq, bt, bound, rf, px, py, pz, skip_key):
     ka = max(bq - 1, k0)
     kb = min(bq + 2, k1)
     res = OUTSIDE_KEYED
+    base = tab.fs_at[c]
     if not gated:
-        ia = tab.kn_idx[bq]
-        s0 = tab.fs_s[ia] + bt * (tab.fs_s[tab.kn_idx[bq + 1]] - tab.fs_s[ia])
+        ia = base + tab.kn_idx[bq]
+        s0 = tab.kn_s[bq] + bt * (tab.kn_s[bq + 1] - tab.kn_s[bq])
         res = _visit(cv, tab, c, ka, kb, ia, s0, bound, rf, px, py, pz, skip_key)
     if ka > k0:  # the start of the yarn
-        r2 = _visit(cv, tab, c, k0, min(k0 + 2, k1), tab.kn_idx[k0], 0.0, bound, rf, px, py, pz, skip_key)
+        r2 = _visit(cv, tab, c, k0, min(k0 + 2, k1), base + tab.kn_idx[k0], 0.0, bound, rf, px, py, pz, skip_key)
         if r2.key < res.key:
             res = r2
     if kb < k1:  # its end
-        r2 = _visit(cv, tab, c, max(k1 - 2, k0), k1, tab.kn_idx[k1 - 1], tab.yarn_length[c], bound, rf, px, py, pz,
-                    skip_key)
+        r2 = _visit(cv, tab, c, max(k1 - 2, k0), k1, base + tab.kn_idx[k1 - 1], tab.yarn_length[c], bound, rf, px,
+                    py, pz, skip_key)
         if r2.key < res.key:
             res = r2
     return res
@@ -458,10 +468,10 @@ def _near_seam(tab, c, bound, rf, eps, px, py, pz):
     the axis at z, and the axis within |z - seam| of the seam point)."""
     t = tab.yarn_type[c]
     zw = fringe_window(tab.type_K[t], tab.type_mz[t], rf, eps, tab.yarn_gmin[c])
-    a = tab.kn_idx[tab.kn_off[c]]
-    dx = px - tab.fs_frame[a, 0]
-    dy = py - tab.fs_frame[a, 1]
-    dz = pz - tab.fs_frame[a, 2]
+    a = tab.kn_off[c]
+    dx = px - tab.kn_pos[a, 0]
+    dy = py - tab.kn_pos[a, 1]
+    dz = pz - tab.kn_pos[a, 2]
     r = bound + zw
     return dx * dx + dy * dy + dz * dz < r * r
 

@@ -62,12 +62,19 @@ Tables = namedtuple("Tables", [
     "type_pad",         # (T,) float64 slack (beyond the fibre radius) the azimuth bins' margin allows for
     "yarn_kappa",       # (Y,) float64 curvature bound of each yarn curve (x 1.25 margin)
     # ---- derived when loaded (derive_lookup_accel; never stored): frame samples and chord grid
-    "fs_off",           # (Y+1,) int64: frame samples of yarn c at fs_off[c]:fs_off[c+1] (frame_samples.py)
-    "fs_s",             # float64 arc length of each frame sample
+    "fs_at",            # (Y,) int64: frame samples of yarn c at fs_at[c] .. fs_at[c] + fs_n[c] - 1 (frame_samples.py);
+                        # -1 while they are not resident (frame_pool.py: a render pages them in as its rays reach c)
+    "fs_n",             # (Y,) int64 number of frame samples of yarn c
+    "fs_step",          # (Y,) float64 the step yarn c's frame samples are made at (frame_samples.sample_all)
+    "fs_s",             # float64 arc length of each resident frame sample
     "fs_frame",         # (M, FRAME_COLS) float64 position, tangent, normal, binormal, step derivatives
+    "fs_want",          # (Y,) uint8: set by a lookup that needed yarn c's frame samples while they were not resident
+    "fs_miss",          # (1,) int64: lookups that found a needed yarn's frame samples not resident (frame_pool.py)
     "yarn_eps",         # (Y,) float64 bound of |Eq. 7 with sampled frames - Eq. 7| within the extent
     "kn_off",           # (Y+1,) int64: coarse knots of yarn c at kn_off[c]:kn_off[c+1]
-    "kn_idx",           # int64 frame-sample index of each coarse knot
+    "kn_idx",           # int64 index of each coarse knot among its yarn's frame samples (0 .. fs_n[c] - 1)
+    "kn_s",             # float64 arc length of each coarse knot
+    "kn_pos",           # (K, 3) float64 position of each coarse knot
     "kn_sag",           # float64 sag bound of the coarse chord starting at each knot
     "fg_lo", "fg_cell", "fg_dims",   # (3,), (1,), (3,) chord grid geometry
     "fg_start",         # (cells+1,) int32 CSR into the runs
@@ -83,7 +90,8 @@ Tables = namedtuple("Tables", [
     "fo_bits",          # (fringe z-bins, 2 FO_WORDS) uint64 fringe occupancy of loops, then hairs (fringe_occupancy)
     "kn_rgate",         # (coarse knots,) float64 axis distance beyond which a visit near the chord finds nothing
 ])
-DERIVED_FIELDS = ("fs_off", "fs_s", "fs_frame", "yarn_eps", "kn_off", "kn_idx", "kn_sag", "fg_lo", "fg_cell",
+DERIVED_FIELDS = ("fs_at", "fs_n", "fs_step", "fs_s", "fs_frame", "fs_want", "fs_miss", "yarn_eps", "kn_off",
+                  "kn_idx", "kn_s", "kn_pos", "kn_sag", "fg_lo", "fg_cell",
                   "fg_dims", "fg_start", "fg_yarn", "fg_a", "fg_b", "ply_rr", "fib_v", "hair_box", "lz_rr",
                   "type_rcore", "fo_off", "fo_geom", "fo_bits", "kn_rgate")
 STORED_FIELDS = tuple(f for f in Tables._fields if f not in DERIVED_FIELDS)
@@ -123,7 +131,9 @@ def accel_bytes(tab: Tables) -> int:
 
 def empty_accel(Y):
     z, zi = np.zeros(0), np.zeros(0, np.int64)
-    return (np.zeros(Y + 1, np.int64), z, np.zeros((0, FRAME_COLS)), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
+    return (np.full(Y, -1, np.int64), np.zeros(Y, np.int64), np.zeros(Y), z, np.zeros((0, FRAME_COLS)),
+            np.zeros(Y, np.uint8), np.zeros(1, np.int64), np.zeros(Y), np.zeros(Y + 1, np.int64), zi, z,
+            np.zeros((0, 3)), z,
             np.zeros(3), np.ones(1), np.ones(3, np.int64), np.zeros(2, np.int32), np.zeros(0, np.int32),
             np.zeros(0, np.int32), np.zeros(0, np.int32),
             np.zeros((0, 1, 2)), np.zeros(0), np.zeros((0, 4), np.float32), np.zeros((0, 2)), np.zeros(0),

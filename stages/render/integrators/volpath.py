@@ -63,6 +63,7 @@ from stages.core.shading.sggx import fiber_sggx, phase_eval, phase_sample
 from stages.render.ground import ground_intersect
 from stages.render.integrator import PathSample, radiance
 from stages.render.lights import environment_radiance, light_eval, light_pdf, light_sample_into
+from stages.render.media.medium import PAGED_OUT_YARN
 from stages.render.media.tracking import track
 from stages.render.meshes import (
     area_light_pdf,
@@ -212,6 +213,8 @@ def trace_path(it, o, d, seed, index):
         t = fl.t
         dim = fl.dim
         lookups += fl.lookups
+        if collided and fl.point.yarn == PAGED_OUT_YARN:
+            break  # the medium could not answer yet (medium.PAGED_OUT): this sample's tile is rendered again
         if not collided and tg == np.inf:
             er, eg, eb = _escaped(lt, n, prev_pdf, dx, dy, dz)
             Lr += br * er

@@ -44,6 +44,13 @@ MediumPoint.__doc__ = """A density source's answer at a point: density, unit fib
 the yarn the covering fibre belongs to and a number telling the covering fibres apart (-1 both where
 the source does not know them: voxels, boxes)."""
 NO_MEDIUM = MediumPoint(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, np.int64(-1), np.int64(-1))  # outside every fibre
+# a source that cannot answer yet (paged procedural tables whose yarn's frame samples are not resident:
+# stages.core.yarn.frame_pool) answers PAGED_OUT. Tracking takes it as empty, so the ray's later lookups ask
+# for their yarns in the same round; a delta-tracked ray that met one ends at its next collision or exit with
+# PAGED_OUT as its point, and the integrator ends the path there (yarn PAGED_OUT_YARN): the pixel is rendered
+# again once the yarns are in, so nothing after the first miss counts
+PAGED_OUT_YARN = -2
+PAGED_OUT = MediumPoint(0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, np.int64(PAGED_OUT_YARN), np.int64(-1))
 
 
 def medium_lookup(med, x, y, z, skip):

@@ -49,7 +49,7 @@ from stages.core.yarn.model import (
     transverse_speed_bound,
 )
 from stages.core.yarn.tables import loop_fibre
-from stages.render.media.medium import NO_MEDIUM, MediumPoint, register_medium
+from stages.render.media.medium import NO_MEDIUM, PAGED_OUT, MediumPoint, register_medium
 from stages.render.media.tracking import cell_half_diagonal, raster_capsule
 
 ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
@@ -57,7 +57,10 @@ ProceduralMedium = namedtuple("ProceduralMedium", ["cv", "tab"])
 
 @njit(cache=True, _nrt=False)
 def procedural_lookup(med, x, y, z, skip=-1):
+    missed = med.tab.fs_miss[0]
     r = lookup_point(med.cv, med.tab, x, y, z, np.int64(skip))  # a literal skip would compile it again
+    if med.tab.fs_miss[0] != missed:  # a yarn's frame samples were not resident (paged tables): no answer yet
+        return PAGED_OUT
     if not r.inside:
         return NO_MEDIUM
     rough = med.tab.tparams[med.tab.yarn_type[r.yarn], ROUGHNESS]
@@ -113,8 +116,8 @@ def _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, mode, box,
     eps = tab.yarn_eps[c]
     rf = tp[FIBER_RADIUS]
     gmax = 2.0 - tab.yarn_gmin[c]
-    lo = tab.fs_off[c]
-    hi = tab.fs_off[c + 1]
+    lo = tab.fs_at[c]
+    hi = lo + tab.fs_n[c]
     L = cv.curve_length[c]
     core = _core_radius(tp)
     hair_tube = tab.hair_mode[0] != 0 and tab.hair_count[tab.yarn_ply_off[c]:tab.yarn_ply_off[c + 1]].sum() > 0
@@ -199,59 +202,77 @@ def _tube_boxes(cv, tab, step_frac, boxes, c0, c1):
         _axis_box(cv, tab, c, step_frac, boxes[c])
 
 
-def capsule_box(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0):
-    """(lo (3,), hi (3,)): the box of every fibre-holding capsule (module doc), grown by the largest
-    capsule radius. Walks the capsules without storing them (yarns on threads: ``stages.core.threads``)."""
-    Y = cv.curve_length.shape[0]
-    boxes = np.empty((Y, BOX_SIZE))
+def capsule_box(cv, tab, step_frac, hair_samples=16, loop_step_fibers=2.0, yarns=None, grown=True):
+    """(lo (3,), hi (3,)): the box of every fibre-holding capsule (module doc) of ``yarns`` (default all;
+    their frame samples resident), grown by the largest capsule radius; ``grown`` False: (lo, hi, that
+    radius), the box of the capsules' end points and the radius apart (boxes of several walks meet so).
+    Walks the capsules without storing them (yarns on threads: ``stages.core.threads``)."""
+    yarns = _yarn_list(cv, yarns)
+    boxes = np.empty((len(yarns), BOX_SIZE))
     boxes[:, :3] = np.inf
     boxes[:, 3:] = -np.inf
-    for_chunks(_box_yarns, Y, cv, tab, float(step_frac), int(hair_samples), float(loop_step_fibers), boxes)
+    for_chunks(_box_yarns, len(yarns), cv, tab, float(step_frac), int(hair_samples), float(loop_step_fibers), yarns,
+               boxes)
     rmax = boxes[:, 6].max()
+    if not grown:
+        return boxes[:, :3].min(axis=0), boxes[:, 3:6].max(axis=0), rmax
     return boxes[:, :3].min(axis=0) - rmax, boxes[:, 3:6].max(axis=0) + rmax
 
 
+def _yarn_list(cv, yarns):
+    return np.arange(cv.curve_length.shape[0], dtype=np.int64) if yarns is None else np.asarray(yarns, np.int64)
+
+
 @chunk_kernel
-def _box_yarns(cv, tab, step_frac, hair_samples, loop_step_fibers, boxes, c0, c1):
-    """``capsule_box``'s per-yarn boxes of yarns c0 .. c1 - 1."""
+def _box_yarns(cv, tab, step_frac, hair_samples, loop_step_fibers, yarns, boxes, k0, k1):
+    """``capsule_box``'s boxes of the listed yarns k0 .. k1 - 1."""
     dummy_mu = np.zeros((1, 1, 1))
     dummy3 = np.zeros(3)
     dummy_res = np.ones(3, np.int64)
-    for c in range(c0, c1):
-        # c and mode typed as _raster_workers passes them, so _walk_yarn compiles once
-        _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, np.int64(BOX), boxes[c], dummy_mu,
+    for k in range(k0, k1):
+        # mode typed as _raster_workers passes it, so _walk_yarn compiles once
+        _walk_yarn(cv, tab, yarns[k], step_frac, hair_samples, loop_step_fibers, np.int64(BOX), boxes[k], dummy_mu,
                    dummy3, dummy3, 0.0, dummy_res)
 
 
-def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16, loop_step_fibers=2.0):
+def capsule_majorants(cv, tab, step_frac, lo, hi, res, workers, hair_samples=16, loop_step_fibers=2.0, yarns=None,
+                      into=None):
     """Majorant densities (nz, ny, nx) over the box lo-hi at resolution res: a cell takes the largest
-    density of the fibre-holding capsules that may reach it (tracking.raster_capsule). The capsules
-    are walked, never stored: memory is one grid per worker (pass numba's thread count), whatever the
-    fabric's size. Workers take yarns round robin and their grids meet by maximum, so the result does
-    not depend on their number."""
-    Y = cv.curve_length.shape[0]
-    T = min(max(int(workers), 1), max(Y, 1))
+    density of the fibre-holding capsules that may reach it (tracking.raster_capsule), of ``yarns``
+    (default all; their frame samples resident), and of ``into`` (a grid of earlier yarns, raised in
+    place). The capsules are walked, never stored: memory is one grid per worker (pass numba's thread
+    count), whatever the fabric's size. Workers take yarns round robin and their grids meet by maximum,
+    so the result does not depend on their number."""
+    yarns = _yarn_list(cv, yarns)
+    T = min(max(int(workers), 1), max(len(yarns), 1))
     lo = np.asarray(lo, np.float64)
     hi = np.asarray(hi, np.float64)
     res = np.asarray(res, np.int64)
     grids = np.zeros((T, res[2], res[1], res[0]))
     cs = (hi - lo) / res
     half_diag = cell_half_diagonal(cs)
-    for_chunks(_raster_workers, T, cv, tab, float(step_frac), int(hair_samples), float(loop_step_fibers), lo, cs,
-               half_diag, res, grids, threads=T)
-    return grids.max(axis=0) if T > 1 else grids[0]
+    for_chunks(_raster_workers, T, cv, tab, float(step_frac), int(hair_samples), float(loop_step_fibers), yarns, lo,
+               cs, half_diag, res, grids, threads=T)
+    mu = grids.max(axis=0) if T > 1 else grids[0]
+    if into is None:
+        return mu
+    np.maximum(into, mu, out=into)
+    return into
 
 
 @chunk_kernel
-def _raster_workers(cv, tab, step_frac, hair_samples, loop_step_fibers, lo, cs, half_diag, res, grids, w0, w1):
-    """``capsule_majorants``' workers w0 .. w1 - 1: worker w rasters yarns w, w + T, ... into grids[w]."""
-    Y = cv.curve_length.shape[0]
+def _raster_workers(cv, tab, step_frac, hair_samples, loop_step_fibers, yarns, lo, cs, half_diag, res, grids, w0,
+                    w1):
+    """``capsule_majorants``' workers w0 .. w1 - 1: worker w rasters the listed yarns w, w + T, ... into
+    grids[w].
+    13 parameters: the fabric, the walk's sampling settings, the yarns listed, the grid's geometry and the
+    per-worker grids, and the chunk of workers."""
     T = grids.shape[0]
     box = np.empty(BOX_SIZE)
     for w in range(w0, w1):
-        for c in range(w, Y, T):
-            _walk_yarn(cv, tab, c, step_frac, hair_samples, loop_step_fibers, np.int64(RASTER), box, grids[w], lo, cs,
-                       half_diag, res)
+        for k in range(w, yarns.shape[0], T):
+            _walk_yarn(cv, tab, yarns[k], step_frac, hair_samples, loop_step_fibers, np.int64(RASTER), box, grids[w],
+                       lo, cs, half_diag, res)
 
 
 @njit(cache=True)

@@ -36,7 +36,7 @@ from numba import njit
 
 from stages.core.geometry.capsule import point_segment_dist2
 from stages.core.rng import uniform
-from stages.render.media.medium import NO_MEDIUM, extinction, medium_lookup
+from stages.render.media.medium import NO_MEDIUM, PAGED_OUT, PAGED_OUT_YARN, extinction, medium_lookup
 
 MajorantGrid = namedtuple("MajorantGrid", ["lo", "hi", "res", "mu", "fine", "fine_mu"])
 Flight = namedtuple("Flight", ["collided", "t", "transmittance", "dim", "lookups", "point"])
@@ -235,6 +235,7 @@ def ray_box(lo, hi, ox, oy, oz, dx, dy, dz):
     return t0, t1
 
 
+PAGED_OUT_T = -1.0  # delta tracking's T once a lookup answered medium.PAGED_OUT (delta tracking keeps T = 1)
 _PASSED, _COLLIDED, _ENDED = 0, 1, 2  # _collide: reached t_exit; a real collision; ratio tracking's roulette ended it
 
 
@@ -263,6 +264,10 @@ def _tentative(med, mu, t, ox, oy, oz, dx, dy, dz, T, dim, seed, index, ratio, s
     collision: go on), _COLLIDED (delta tracking accepted it) or _ENDED (ratio tracking's roulette).
     15 parameters: ``_collide``'s state for one collision."""
     m = medium_lookup(med, ox + t * dx, oy + t * dy, oz + t * dz, skip_fibre)
+    if m.yarn == PAGED_OUT_YARN:
+        # no answer yet (medium.PAGED_OUT): a null collision, so the ray's later lookups ask for their yarns too;
+        # delta tracking (whose T is otherwise 1) remembers it in T, and the ray ends as a PAGED_OUT collision
+        return _PASSED, T if ratio else PAGED_OUT_T, dim, NO_MEDIUM
     st = extinction(m.den, m.tx, m.ty, m.tz, m.roughness, dx, dy, dz)
     if ratio:
         T *= 1.0 - st / mu
@@ -319,7 +324,7 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
                 state, t, T, dim, lookups, m = _collide(med, mu, t, t_exit, ox, oy, oz, dx, dy, dz, T, dim, lookups,
                                                         seed, index, ratio, skip_fibre)
                 if state == _COLLIDED:
-                    return Flight(True, t, T, dim, lookups, m)
+                    return Flight(True, t, T, dim, lookups, m if T != PAGED_OUT_T else PAGED_OUT)
                 if state == _ENDED:
                     return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
             else:  # the cell's k^3 sub-cells, by their own DDA from t to t_exit
@@ -346,7 +351,7 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
                                                           ratio, skip_fibre)
                             lookups += 1
                             if state == _COLLIDED:
-                                return Flight(True, t, T, dim, lookups, m)
+                                return Flight(True, t, T, dim, lookups, m if T != PAGED_OUT_T else PAGED_OUT)
                             if state == _ENDED:
                                 return Flight(False, tmax, 0.0, dim, lookups, NO_MEDIUM)
                             tau = -math.log(1.0 - uniform(seed, index, dim))
@@ -365,6 +370,8 @@ def track(med, maj, ox, oy, oz, dx, dy, dz, tmax, seed, index, dim, ratio, skip_
                                                        res[0], res[1], res[2])
         if not inside:
             break
+    if not ratio and T == PAGED_OUT_T:   # a lookup could not answer: the path ends here (medium.PAGED_OUT)
+        return Flight(True, t, T, dim, lookups, PAGED_OUT)
     return Flight(False, tmax, T, dim, lookups, NO_MEDIUM)
 
 

@@ -35,14 +35,16 @@ def swatch(tmp_path_factory):
 
 
 def _axis(tab, c, s):
-    lo, hi = tab.fs_off[c], tab.fs_off[c + 1]
+    lo = tab.fs_at[c]
+    hi = lo + tab.fs_n[c]
     return np.array(frame_at(tab.fs_s, tab.fs_frame, lo, hi, lo, s)[1][:3])
 
 
 def _within_eps(cv, tab):
     rng = np.random.default_rng(1)
     for c in range(len(tab.yarn_type)):
-        lo, hi = tab.fs_off[c], tab.fs_off[c + 1]
+        lo = tab.fs_at[c]
+        hi = lo + tab.fs_n[c]
         L, ext, eps = tab.yarn_length[c], tab.yarn_extent[c], tab.yarn_eps[c]
         worst = 0.0
         for s, r, a in zip(rng.uniform(0, L, 400), ext * np.sqrt(rng.uniform(0, 1, 400)),
@@ -101,7 +103,8 @@ def test_foot_point_matches_brute_force(swatch):
     cv, tab = swatch
     rng = np.random.default_rng(2)
     c = 0
-    lo, hi = tab.fs_off[c], tab.fs_off[c + 1]
+    lo = tab.fs_at[c]
+    hi = lo + tab.fs_n[c]
     L, ext = tab.yarn_length[c], tab.yarn_extent[c]
     grid = np.linspace(0.0, L, 20001)
     P = np.array([_axis(tab, c, s) for s in grid])
