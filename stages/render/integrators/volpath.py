@@ -214,7 +214,7 @@ def trace_path(it, o, d, seed, index):
         dim = fl.dim
         lookups += fl.lookups
         if collided and fl.point.yarn == PAGED_OUT_YARN:
-            break  # the medium could not answer yet (medium.PAGED_OUT): this sample's tile is rendered again
+            break  # the medium could not answer yet (medium.PAGED_OUT): this sample's pixel is rendered again
         if not collided and tg == np.inf:
             er, eg, eb = _escaped(lt, n, prev_pdf, dx, dy, dz)
             Lr += br * er
