@@ -70,7 +70,7 @@ def with_array(obj, old, new):
 class FramePool:
     """The resident frame samples of paged tables (module doc). ``tables``: the tables to render with (the
     same arrays throughout: ``page_in`` writes into them in place). Counters: ``rounds`` (page_in calls),
-    ``yarns_in`` and ``samples_in`` (resident now), ``pixels_again`` (pixels rendered again)."""
+    ``yarns_in`` and ``top`` (yarns and samples resident now), ``pixels_again`` (pixels rendered again)."""
 
     def __init__(self, cv, tab):
         self.cv = cv
@@ -83,7 +83,6 @@ class FramePool:
         self.top = 0
         self.rounds = 0
         self.yarns_in = 0
-        self.samples_in = 0
         self.pixels_again = 0
         self.pilot_rounds = 0        # of rounds and pixels_again, those of a pilot pass (pipeline.renderers.film)
         self.pilot_pixels_again = 0
@@ -110,14 +109,13 @@ class FramePool:
         self.top = int(off[-1])
         self.rounds += 1
         self.yarns_in += len(want)
-        self.samples_in = self.top
         self.page_in_s += time.perf_counter() - t0
         return len(want)
 
     def info(self) -> dict:
         """What the pool did, for the render's record."""
         return {"frame_pool_yarns": int(self.yarns_in), "frame_pool_of_yarns": int(len(self.tables.fs_n)),
-                "frame_pool_samples": int(self.samples_in), "frame_pool_of_samples": int(np.sum(self.tables.fs_n)),
-                "frame_pool_bytes": int(self.samples_in * 8 * (FRAME_COLS + 1)), "frame_pool_rounds": int(self.rounds),
+                "frame_pool_samples": int(self.top), "frame_pool_of_samples": int(np.sum(self.tables.fs_n)),
+                "frame_pool_bytes": int(self.top * 8 * (FRAME_COLS + 1)), "frame_pool_rounds": int(self.rounds),
                 "frame_pool_pixels_again": int(self.pixels_again), "frame_pool_pilot_rounds": int(self.pilot_rounds),
                 "frame_pool_pilot_pixels_again": int(self.pilot_pixels_again), "frame_pool_page_in_s": self.page_in_s}
