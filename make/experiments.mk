@@ -23,7 +23,7 @@ HUGE_BUDGET ?= $(shell awk '/MemAvailable/ {print int($$2 / 1024 * 0.95)}' /proc
 AGREE ?= out/agreement
 AGREE_ARGS ?= --width 128 --height 96 --spp 64
 
-.PHONY: table1 sweep agreement prt-sweep prt-study btf-sweep btf-through btf-azimuth albedo-curves gallery
+.PHONY: table1 room room-volpath sweep agreement prt-sweep prt-study btf-sweep btf-through btf-azimuth albedo-curves gallery
 
 # --- Luan et al. 2017, Table 1 ---
 # woven_large keeps one stored rotation-minimising-frame sample per spline segment (ingest's default is 4):
@@ -52,18 +52,47 @@ $(HUGE_OUT)/close.exr: $(HUGE_OUT)/tables.zarr/zarr.json $(HUGE_SCENE)
 	$(if $(HUGE_BUDGET),LOOMLIGHT_MEMORY_BUDGET=$(HUGE_BUDGET)) $(LL) render $(HUGE_SCENE) --method volpath \
 	    --source procedural --tables $(HUGE_OUT)/tables.zarr $(HUGE_ARGS) -o $@
 
+# make table1's room row and make room: the Sponza-class room (pipeline/room.py: eleven textiles, 36,123 yarns,
+# ~860 GB if realized), written by `loomlight room`; bysdf renders it quickly, procedural volpath far more slowly
+# (its time: docs/methods/volpath.md, "Limits"). ROOM_ROW= leaves the row out of make table1
+ROOM_OUT ?= out/room
+ROOM_ROW ?= 1
+ROOM_SPP ?= 16
+$(ROOM_OUT)/room.toml: pipeline/room.py $(VENV)/.installed
+	$(LL) room -o $(ROOM_OUT)
+
+$(ROOM_OUT)/yarns.zarr/zarr.json: $(ROOM_OUT)/room.toml $(ARTIFACT_FORMAT)
+	$(LL) ingest $(ROOM_OUT)/room.toml -o $(ROOM_OUT)/yarns.zarr
+
+$(ROOM_OUT)/tables.zarr/zarr.json: $(ROOM_OUT)/yarns.zarr/zarr.json $(wildcard stages/procedural/*.py)
+	$(LL) tables $(ROOM_OUT)/yarns.zarr -o $(ROOM_OUT)/tables.zarr
+
+$(ROOM_OUT)/bysdf.exr: $(ROOM_OUT)/yarns.zarr/zarr.json
+	$(LL) render $(ROOM_OUT)/room.toml --method bysdf --set yarns=$(ROOM_OUT)/yarns.zarr --spp $(ROOM_SPP) -o $@
+
+$(ROOM_OUT)/volpath.exr: $(ROOM_OUT)/tables.zarr/zarr.json
+	$(LL) render $(ROOM_OUT)/room.toml --method volpath --source procedural --tables $(ROOM_OUT)/tables.zarr \
+	    --spp $(ROOM_SPP) -o $@
+
+room: $(ROOM_OUT)/bysdf.exr ## the Sponza-class room (11 textiles, 36,123 yarns, ~860 GB if realized) rendered by bysdf at 640x360, 16 spp -> out/room/bysdf.png
+
+room-volpath: $(ROOM_OUT)/volpath.exr ## the room rendered by procedural volpath at 640x360, 16 spp (long: docs/methods/volpath.md, Limits) -> out/room/volpath.png
+
 # HUGE_SCENE= leaves the 10x row out. The procedural and realized rows are make demo-full's evaluation renders
 # (64x48 at 8 spp; made by a make of its settings)
 TABLE1_EVAL = $(FULL_OUT)/eval/volpath-procedural.exr $(FULL_OUT)/eval/volpath-realized.exr
-TABLE1_INPUTS = $(TABLE1_EVAL) $(LARGE_OUT)/close.exr $(if $(HUGE_SCENE),$(HUGE_OUT)/close.exr)
+TABLE1_INPUTS = $(TABLE1_EVAL) $(LARGE_OUT)/close.exr $(if $(HUGE_SCENE),$(HUGE_OUT)/close.exr) \
+    $(if $(ROOM_ROW),$(ROOM_OUT)/volpath.exr)
 ifneq ($(OUT),$(FULL_OUT))
 $(TABLE1_EVAL): FORCE
 	@$(MAKE) --no-print-directory $(FULL_VARS) $@
 endif
-table1: $(TABLE1_INPUTS) ## Table 1 of Luan, Zhao, Bala 2017: data sizes, procedural vs realized volpath, the 1,000- and 3,200-yarn close-ups (about 20 GB) -> out/table1/report.md
+table1: $(TABLE1_INPUTS) ## Table 1 of Luan, Zhao, Bala 2017: data sizes, procedural vs realized volpath, the 1,000- and 3,200-yarn close-ups and the room (hours, about 20 GB) -> out/table1/report.md
 	$(LL) evaluate --table1 --scene $(SCENE) --scene $(LARGE_SCENE) $(if $(HUGE_SCENE),--scene $(HUGE_SCENE)) \
+	    $(if $(ROOM_ROW),--scene $(ROOM_OUT)/room.toml) \
 	    --procedural $(FULL_OUT)/eval/volpath-procedural.exr --realized $(FULL_OUT)/eval/volpath-realized.exr \
-	    --unrealized $(LARGE_OUT)/close.exr $(if $(HUGE_SCENE),--unrealized $(HUGE_OUT)/close.exr) -o out/table1
+	    --unrealized $(LARGE_OUT)/close.exr $(if $(HUGE_SCENE),--unrealized $(HUGE_OUT)/close.exr) \
+	    $(if $(ROOM_ROW),--unrealized $(ROOM_OUT)/volpath.exr) -o out/table1
 	@echo "report: out/table1/report.md"
 
 # --- light sweeps and fiberpath against volpath ---
