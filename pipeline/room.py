@@ -186,13 +186,13 @@ def pile_tufts(width: float, depth: float, pitch: float, height: tuple[float, fl
 # the scene file
 def _toml(v) -> str:
     """A TOML value, inline tables with bare keys (the scene files' own style)."""
-    from .toml_file import _toml_value
+    from .toml_file import toml_value
 
     if isinstance(v, dict):
         return "{ " + ", ".join(f"{k} = {_toml(x)}" for k, x in v.items()) + " }"
     if isinstance(v, (list, tuple)) and any(isinstance(x, dict) for x in v):
         return "[" + ", ".join(_toml(x) for x in v) + "]"
-    return _toml_value(v)
+    return toml_value(v)
 
 
 def _table(lines: list, header: str, tbl: dict) -> None:

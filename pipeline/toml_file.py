@@ -9,7 +9,7 @@ Callers check the document itself (``pipeline.schemas.validate``).
 
 ``dumps_toml(doc)`` writes a document of plain data (tables, arrays, strings, numbers, booleans)
 as top-level ``key = value`` lines, tables inline; ``tomllib.loads`` reads it back unchanged
-(the sweep's derived scene files).
+(the sweep's derived scene files); ``toml_value(v)`` writes one value (the room's scene file, pipeline/room.py).
 """
 from __future__ import annotations
 
@@ -66,7 +66,8 @@ def _line_of(e: tomllib.TOMLDecodeError):
 
 # ------------------------------------------------------------------------------------------------
 # TOML output (the scene files we derive are plain data: tables, arrays, strings, numbers, booleans)
-def _toml_value(v) -> str:
+def toml_value(v) -> str:
+    """One value of plain data as TOML text (tables inline, keys quoted)."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -80,12 +81,12 @@ def _toml_value(v) -> str:
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
     if isinstance(v, dict):
-        return "{ " + ", ".join(f"{json.dumps(str(k))} = {_toml_value(x)}" for k, x in v.items()) + " }" if v else "{}"
+        return "{ " + ", ".join(f"{json.dumps(str(k))} = {toml_value(x)}" for k, x in v.items()) + " }" if v else "{}"
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
 def dumps_toml(doc: dict) -> str:
     """A TOML document of top-level ``key = value`` lines (tables as inline tables)."""
-    return "".join(f"{json.dumps(str(k))} = {_toml_value(v)}\n" for k, v in doc.items())
+    return "".join(f"{json.dumps(str(k))} = {toml_value(v)}\n" for k, v in doc.items())
