@@ -92,6 +92,9 @@ class _Obj:
     def grid(self, P: np.ndarray, UV: np.ndarray | None = None) -> "_Obj":
         """A (n+1) x (m+1) grid of points P[j, i] as quads, with texture coordinates UV[j, i] when given."""
         nj, ni = P.shape[:2]
+        if UV is not None and self.nv:
+            raise ValueError("a grid with texture coordinates must be its OBJ's first geometry (its v and vt "
+                             "lines are numbered alike)")
         b = self.nv + 1
         for p in P.reshape(-1, 3):
             self.lines.append(f"v {p[0]:.5f} {p[1]:.5f} {p[2]:.5f}")
@@ -105,7 +108,7 @@ class _Obj:
                 q = (a, a + 1, a + ni + 1, a + ni)
                 if UV is None:
                     self.lines.append("f " + " ".join(str(k) for k in q))
-                else:   # vertices and texture coordinates are numbered alike (one grid per file)
+                else:   # vertices and texture coordinates are numbered alike (checked above)
                     self.lines.append("f " + " ".join(f"{k}/{k}" for k in q))
         return self
 
