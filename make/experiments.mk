@@ -52,8 +52,8 @@ $(HUGE_OUT)/close.exr: $(HUGE_OUT)/tables.zarr/zarr.json $(HUGE_SCENE)
 	$(if $(HUGE_BUDGET),LOOMLIGHT_MEMORY_BUDGET=$(HUGE_BUDGET)) $(LL) render $(HUGE_SCENE) --method volpath \
 	    --source procedural --tables $(HUGE_OUT)/tables.zarr $(HUGE_ARGS) -o $@
 
-# make table1's room row and make room: the Sponza-class room (pipeline/room.py: eleven textiles, 36,123 yarns,
-# ~860 GB if realized), written by `loomlight room`; bysdf renders it quickly, procedural volpath far more slowly
+# make table1's room row and make room: the Sponza-class room (pipeline/room.py: eleven textiles, 42,752 yarns,
+# ~900 GB if realized), written by `loomlight room`; bysdf renders it quickly, procedural volpath far more slowly
 # (its time: docs/methods/volpath.md, "Limits"). ROOM_ROW= leaves the row out of make table1
 ROOM_OUT ?= out/room
 ROOM_ROW ?= 1
@@ -74,7 +74,7 @@ $(ROOM_OUT)/volpath.exr: $(ROOM_OUT)/tables.zarr/zarr.json
 	$(LL) render $(ROOM_OUT)/room.toml --method volpath --source procedural --tables $(ROOM_OUT)/tables.zarr \
 	    --spp $(ROOM_SPP) -o $@
 
-room: $(ROOM_OUT)/bysdf.exr ## the Sponza-class room (11 textiles, 36,123 yarns, ~860 GB if realized) rendered by bysdf at 640x360, 16 spp -> out/room/bysdf.png
+room: $(ROOM_OUT)/bysdf.exr ## the Sponza-class room (11 textiles, 42,752 yarns, ~900 GB if realized) rendered by bysdf at 640x360, 16 spp -> out/room/bysdf.png
 
 room-volpath: $(ROOM_OUT)/volpath.exr ## the room rendered by procedural volpath at 640x360, 16 spp (long: docs/methods/volpath.md, Limits) -> out/room/volpath.png
 

@@ -22,7 +22,7 @@ module: the scene TOML, the OBJ meshes, the pile's curve file and a copy of the 
 
 The scene's size: ``RoomFiles.yarns`` counts the yarns per textile from the generator tables (ends +
 picks; courses) and the tufts written (a test checks them against ingest); the full realization is
-counted by ``loomlight realize``'s estimate, which refuses it with the number (36,123 yarns, 804 GiB at
+counted by ``loomlight realize``'s estimate, which refuses it with the number (42,752 yarns, 838 GiB at
 ``scale`` 1). ``scale`` (default 1) multiplies the threads per centimetre of the woven fabrics and knits
 and the pile's tufts per square centimetre, the yarns thicker in proportion so the cloth stays closed
 (``scale`` 0.1: about a tenth of the yarns, for tests and previews); the geometry stays.
@@ -45,7 +45,15 @@ WALL = 10.0                                   # wall thickness, cm
 FRONT = -150.0                                # the open front: floor, ceiling and side walls reach to y = FRONT
 PILE_SEED = 11                                # the tufts' random layout
 TUFT_JITTER = 0.3                             # a tuft's centre moves up to this many pitches from its grid cell's
-TUFT_CROWN = 0.18                             # a tuft loop's top rises this many loop widths above its legs
+TUFT_ARC_POINTS = 7                           # control points on a tuft's half circle
+TUFT_LOOP = 1.2                               # a tuft's width, cm
+PILE_RADIUS = 0.06                            # the pile yarn's radius, cm
+# Crimp, pleats and the tufts' loop keep every yarn's bends wider than its fibres' extent (curvature x extent
+# below about 0.4): tighter bends fold the yarn space, and lookups there are inexact and far slower
+WOVEN_CRIMP = 0.1                             # the woven fabrics' crimp, in yarn radii
+HANGING_CRIMP = 0.04                          # the wall hanging's: its draft's threads are 1.7 radii apart
+TABLECLOTH_BEND = 3.0                         # the tablecloth's radius over the table's edges, cm
+PLEAT_DEPTH = 4.0                             # the curtains' pleats, peak to trough, cm
 HANGING_THREADS = 24                          # ends and picks of one repeat of 2229.wif
 CUSHIONS = (("stockinette", "cotton2", (0.80, 0.22, 0.15), 150.0),   # pattern, preset, colour, y of the centre
             ("garter", "silk2", (0.20, 0.35, 0.60), 200.0),
@@ -127,7 +135,7 @@ def cushion_grid(size: float, height: float, n: int = 24) -> tuple[np.ndarray, n
     return P, np.stack([U, V], axis=-1)
 
 
-def tablecloth_profile(top: float, drop: float, bend: float, n_bend: int = 6) -> tuple[np.ndarray, np.ndarray]:
+def tablecloth_profile(top: float, drop: float, bend: float, n_bend: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """The tablecloth's cross-section across x: down-hanging drop, a quarter-circle bend of radius ``bend``
     over the table's edge, the top, the other bend and drop; points (x, z) with z = 0 on the top, and their
     arc length from the first. The top spans x in [-top/2, top/2]."""
@@ -161,7 +169,7 @@ def tablecloth_grid(top: float, depth: float, drop: float, bend: float, n_depth:
 def pile_tufts(width: float, depth: float, pitch: float, height: tuple[float, float], loop: float,
                seed: int = PILE_SEED) -> CurveSet:
     """One U-shaped yarn per tuft on a jittered grid of ``pitch`` over width x depth (centred): up from the
-    backing, over a rounded top ``loop`` wide, back down, leaning a little; heights uniform in ``height``
+    backing, over a half circle ``loop`` wide, back down, leaning a little; leg heights uniform in ``height``
     and a random turn about z per tuft."""
     rng = np.random.default_rng(seed)
     nx, ny = int(width // pitch), int(depth // pitch)
@@ -172,15 +180,21 @@ def pile_tufts(width: float, depth: float, pitch: float, height: tuple[float, fl
     h = rng.uniform(height[0], height[1], n)
     turn = rng.uniform(0.0, 2 * math.pi, n)
     lean = rng.normal(0.0, 0.08, (n, 2)) * h[:, None]
-    # the U in its own plane (s across, z up): seven control points of a Catmull-Rom spline
-    s_ = np.array([-0.5, -0.5, -0.48, 0.0, 0.48, 0.5, 0.5]) * loop
-    zf = np.array([0.0, 0.45, 0.85, 1.0, 0.85, 0.45, 0.0])
-    crown = np.where(zf == 1.0, TUFT_CROWN * loop, 0.0)     # the loop's top above its legs
+    # the U in its own plane (s across, z up): straight legs, a half circle over them of diameter ``loop`` (its
+    # bend, 2 / loop, stays below the yarn-space fold of a PILE_RADIUS yarn's extent), control points about a
+    # chord of the half circle apart all along (uneven steps make a Catmull-Rom spline bend sharply)
+    r = 0.5 * loop
+    arc = np.linspace(math.pi, 0.0, TUFT_ARC_POINTS)
+    chord = r * math.pi / (TUFT_ARC_POINTS - 1)
     pts = []
     for k in range(n):      # turned about z, leaning in proportion to the height
+        up = np.linspace(0.0, 1.0, max(2, math.ceil(h[k] / chord)) + 1)[:-1]     # leg fractions below the arc
+        s_ = np.concatenate([np.full(len(up), -r), r * np.cos(arc), np.full(len(up), r)])
+        leg = np.concatenate([up, np.ones(TUFT_ARC_POINTS), up[::-1]])
+        over = np.concatenate([np.zeros(len(up)), r * np.sin(arc), np.zeros(len(up))])
         c, sn = math.cos(turn[k]), math.sin(turn[k])
-        pts.append(np.stack([cx[k] + s_ * c + zf * lean[k, 0], cy[k] + s_ * sn + zf * lean[k, 1], zf * h[k] + crown],
-                            axis=1))
+        pts.append(np.stack([cx[k] + s_ * c + leg * lean[k, 0], cy[k] + s_ * sn + leg * lean[k, 1],
+                             leg * h[k] + over], axis=1))
     return CurveSet(points=pts, closed=[False] * n, group=["other"] * n, curve_type="catmull-rom",
                     source_format="bcc")
 
@@ -217,7 +231,7 @@ def _woven(pattern: str, width: float, height: float, spacing: float, radius: fl
     """A woven generator table for a width x height (cm) piece at ``spacing / scale`` between threads."""
     sp = spacing / scale
     g = {"kind": "woven", "pattern": pattern, "ends": max(2, round(width / sp)), "picks": max(2, round(height / sp)),
-         "spacing": round(sp, 6), "yarn_radius": round(radius / scale, 6), "crimp": 0.4,
+         "spacing": round(sp, 6), "yarn_radius": round(radius / scale, 6), "crimp": WOVEN_CRIMP,
          "samples_per_cell": 4}
     g.update(extra)
     return g
@@ -251,7 +265,7 @@ def write_room(out_dir, scale: float = 1.0) -> RoomFiles:
         raise LoomError(out, None, "is not a directory")
     out.mkdir(parents=True, exist_ok=True)
     meshes, cloth_width = _write_meshes(out)
-    pile = pile_tufts(196.0, 216.0, 1.15 / math.sqrt(scale), (1.4, 2.2), 0.55)
+    pile = pile_tufts(196.0, 216.0, 1.05 / math.sqrt(scale), (1.8, 2.6), TUFT_LOOP / math.sqrt(scale))
     from .io import bcc
 
     bcc.write(out / "rug_pile.bcc", pile, text="loomlight room: loop pile")
@@ -317,7 +331,7 @@ def _write_meshes(out: Path) -> tuple[list[Path], float]:
     P, UV = cushion_grid(44.0, 9.0)
     meshes.append(_Obj("A cushion's face (z = 9 (1 - x^4)(1 - y^4) over 44 x 44 cm) with uv: the cushions' "
                        "drape surface").grid(P, UV).write(out / "cushion.obj"))
-    P, UV, cloth_w = tablecloth_grid(120.0, 80.0, 28.0, 1.5)
+    P, UV, cloth_w = tablecloth_grid(120.0, 80.0, 28.0, TABLECLOTH_BEND)
     meshes.append(_Obj("The tablecloth's surface: over the table's top (x across, 120 cm) with 28 cm drops, "
                        "uv = arc length").grid(P, UV).write(out / "tablecloth.obj"))
     roll = _Obj("The sofa arm's roll: a half cylinder of radius 9 along x, uv unused")
@@ -353,7 +367,7 @@ def _textiles(scale: float, cloth_w: float, tufts: int) -> tuple[list[tuple[str,
         for side in (0, 1):
             pattern, pw, cw, bw, pf, cf, bf = curtain[w]
             cx = x0 - 18 + side * (x1 - x0 + 36)
-            gen = _woven(pattern, 46.0, 215.0, 0.35, 0.1, scale, pleats={"count": 5, "depth": 9.0})
+            gen = _woven(pattern, 46.0, 215.0, 0.32, 0.09, scale, pleats={"count": 5, "depth": PLEAT_DEPTH})
             add(f"curtain{k + 1}", f"a curtain at window {w + 1}, {'left' if not side else 'right'}: {pattern}, "
                 "pleated and stood upright", gen,
                 {"warp": _yt(pw, cw, bw), "weft": _yt(pf, cf, bf)},
@@ -377,7 +391,7 @@ def _textiles(scale: float, cloth_w: float, tufts: int) -> tuple[list[tuple[str,
         drape={"surface": "cylinder", "radius": 9.0},
         transform={"rotate": {"axis": [0.0, 0.0, 1.0], "degrees": 90.0}, "translate": [52.0, 310.0, 58.0]})
     yarns["throw"] = _count(gen)
-    pile_r = round(0.09 / math.sqrt(scale), 6)
+    pile_r = round(PILE_RADIUS / math.sqrt(scale), 6)
     add("rug", "the loop-pile rug: one U-shaped yarn per tuft (rug_pile.bcc), on its backing", None,
         {"other": _yt("polyester1", (0.55, 0.42, 0.30), "polyester", radius=pile_r)},
         source={"source": "file", "path": "rug_pile.bcc", "radius": pile_r},
@@ -386,7 +400,7 @@ def _textiles(scale: float, cloth_w: float, tufts: int) -> tuple[list[tuple[str,
     reps = max(1, round(8 * scale))
     add("hanging", "a wall hanging between the windows: the WIF draft 2229, tiled", None,
         {"warp": _yt("silk1", (0.75, 0.68, 0.55), "silk"), "weft": _yt("rayon3", (0.30, 0.20, 0.45), "gabardine")},
-        source={"source": "wif", "path": "2229.wif", "scale": round(18.0 / scale, 4), "crimp": 0.5,
+        source={"source": "wif", "path": "2229.wif", "scale": round(18.0 / scale, 4), "crimp": HANGING_CRIMP,
                 "repeat": [reps, round(1.3 * reps)]},
         transform={"rotate": upright, "translate": [250.0, D - 3.0, 150.0]})
     yarns["hanging"] = HANGING_THREADS * (reps + round(1.3 * reps))

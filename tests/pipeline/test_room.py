@@ -52,9 +52,11 @@ def test_the_tablecloth_surface_keeps_lengths():
     chords, and it ends hanging straight down at the drop."""
     top, depth, drop, bend = 120.0, 80.0, 28.0, 1.5
     P, UV, total = tablecloth_grid(top, depth, drop, bend)
-    P2, s = tablecloth_profile(top, drop, bend)
-    chords = 2 * 6 * 2 * bend * math.sin(math.pi / 24)
-    assert total == pytest.approx(2 * (drop - bend) + (top - 0.0) + chords, rel=1e-12)
+    assert total == tablecloth_profile(top, drop, bend)[1][-1]
+    n = 6       # chords per bend
+    P2, s = tablecloth_profile(top, drop, bend, n_bend=n)
+    chords = 2 * n * 2 * bend * math.sin(math.pi / (4 * n))
+    assert s[-1] == pytest.approx(2 * (drop - bend) + top + chords, rel=1e-12)
     du = np.linalg.norm(np.diff(P, axis=1), axis=-1) / np.diff(UV[..., 0], axis=1)
     dv = np.linalg.norm(np.diff(P, axis=0), axis=-1) / np.diff(UV[..., 1], axis=0)
     assert np.allclose(du, total, rtol=1e-9) and np.allclose(dv, depth, rtol=1e-12)
@@ -64,16 +66,16 @@ def test_the_tablecloth_surface_keeps_lengths():
 
 def test_the_pile_is_one_grounded_tuft_per_grid_cell():
     """Tufts on a jittered grid: floor(w / p) x floor(d / p) of them, each starting and ending on the backing
-    (z = 0) within the rug's grid (up to a cell's jitter and half a loop), rising to its height plus the loop's
-    top, and the layout fixed by its seed."""
+    (z = 0) within the rug's grid (up to a cell's jitter and half a loop), rising to its legs' height plus the
+    half circle's radius, and the layout fixed by its seed."""
     cs = pile_tufts(20.0, 12.0, 1.0, (1.4, 2.2), 0.5)
     assert len(cs.points) == 20 * 12
     ends = np.array([[p[0], p[-1]] for p in cs.points])
     assert np.all(ends[..., 2] == 0.0)
     reach = -0.2 * 1.0 + 0.5 * 0.5     # a cell's centre jitters 0.3 pitch from half a pitch in; the loop's half width
     assert np.abs(ends[..., 0]).max() <= 10.0 + reach and np.abs(ends[..., 1]).max() <= 6.0 + reach
-    tops = np.array([p[:, 2].max() for p in cs.points])
-    assert tops.min() >= 1.4 and tops.max() <= 2.2 + 0.18 * 0.5 + 1e-12
+    tops = np.array([p[:, 2].max() for p in cs.points])     # the legs' height and the half circle's radius
+    assert tops.min() >= 1.4 + 0.25 - 1e-12 and tops.max() <= 2.2 + 0.25 + 1e-12
     again = pile_tufts(20.0, 12.0, 1.0, (1.4, 2.2), 0.5)
     assert all(np.array_equal(p, q) for p, q in zip(cs.points, again.points))
 
