@@ -37,6 +37,7 @@ import numpy as np
 
 from .curveset import CurveSet
 from .errors import LoomError
+from .toml_file import toml_value
 
 ROOM_SIZE = (500.0, 400.0, 270.0)      # cm: x (width), y (depth, the back wall at y = 400), z (height)
 WINDOWS = ((80.0, 180.0), (320.0, 420.0))   # x extents of the two windows in the back wall
@@ -54,6 +55,7 @@ WOVEN_CRIMP = 0.1                             # the woven fabrics' crimp, in yar
 HANGING_CRIMP = 0.04                          # the wall hanging's: its draft's threads are 1.7 radii apart
 TABLECLOTH_BEND = 3.0                         # the tablecloth's radius over the table's edges, cm
 PLEAT_DEPTH = 4.0                             # the curtains' pleats, peak to trough, cm
+HANGING_DRAFT = Path(__file__).resolve().parents[1] / "data" / "drafts" / "2229.wif"   # the wall hanging
 HANGING_THREADS = 24                          # ends and picks of one repeat of 2229.wif
 CUSHIONS = (("stockinette", "cotton2", (0.80, 0.22, 0.15), 150.0),   # pattern, preset, colour, y of the centre
             ("garter", "silk2", (0.20, 0.35, 0.60), 200.0),
@@ -201,17 +203,6 @@ def pile_tufts(width: float, depth: float, pitch: float, height: tuple[float, fl
 
 # ------------------------------------------------------------------------------------------------
 # the scene file
-def _toml(v) -> str:
-    """A TOML value, inline tables with bare keys (the scene files' own style)."""
-    from .toml_file import toml_value
-
-    if isinstance(v, dict):
-        return "{ " + ", ".join(f"{k} = {_toml(x)}" for k, x in v.items()) + " }"
-    if isinstance(v, (list, tuple)) and any(isinstance(x, dict) for x in v):
-        return "[" + ", ".join(_toml(x) for x in v) + "]"
-    return toml_value(v)
-
-
 def _table(lines: list, header: str, tbl: dict) -> None:
     """``[header]`` with ``tbl``'s plain keys, then its sub-tables as ``[header.key]``."""
     lines.append(f"[{header}]" if not header.startswith("[") else header)
@@ -221,7 +212,7 @@ def _table(lines: list, header: str, tbl: dict) -> None:
         if k in SUBTABLES and isinstance(v, dict):
             subs.append((k, v))
         else:
-            lines.append(f"{k} = {_toml(v)}")
+            lines.append(f"{k} = {toml_value(v, bare_keys=True)}")
     for k, v in subs:
         lines.append("")
         _table(lines, f"[{name}.{k}]", v)
@@ -270,7 +261,7 @@ def write_room(out_dir, scale: float = 1.0) -> RoomFiles:
 
     bcc.write(out / "rug_pile.bcc", pile, text="loomlight room: loop pile")
     # the wall hanging's draft travels with the scene (a copy of the bundled one)
-    (out / "2229.wif").write_bytes((Path(__file__).resolve().parents[1] / "data" / "drafts" / "2229.wif").read_bytes())
+    (out / "2229.wif").write_bytes(HANGING_DRAFT.read_bytes())
     fabrics, yarns = _textiles(scale, cloth_width, len(pile.points))
     scene = out / "room.toml"
     tmp = out / ".room.toml.tmp"

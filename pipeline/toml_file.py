@@ -9,7 +9,8 @@ Callers check the document itself (``pipeline.schemas.validate``).
 
 ``dumps_toml(doc)`` writes a document of plain data (tables, arrays, strings, numbers, booleans)
 as top-level ``key = value`` lines, tables inline; ``tomllib.loads`` reads it back unchanged
-(the sweep's derived scene files); ``toml_value(v)`` writes one value (the room's scene file, pipeline/room.py).
+(the sweep's derived scene files); ``toml_value(v, bare_keys)`` writes one value (bare keys: the room's
+scene file, pipeline/room.py).
 """
 from __future__ import annotations
 
@@ -66,8 +67,12 @@ def _line_of(e: tomllib.TOMLDecodeError):
 
 # ------------------------------------------------------------------------------------------------
 # TOML output (the scene files we derive are plain data: tables, arrays, strings, numbers, booleans)
-def toml_value(v) -> str:
-    """One value of plain data as TOML text (tables inline, keys quoted)."""
+BARE_KEY = re.compile(r"[A-Za-z0-9_-]+")
+
+
+def toml_value(v, bare_keys: bool = False) -> str:
+    """One value of plain data as TOML text: tables inline, keys quoted, or bare where TOML allows with
+    ``bare_keys`` (the style of the bundled scene files)."""
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, int):
@@ -81,9 +86,12 @@ def toml_value(v) -> str:
     if isinstance(v, str):
         return json.dumps(v)
     if isinstance(v, (list, tuple)):
-        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+        return "[" + ", ".join(toml_value(x, bare_keys) for x in v) + "]"
     if isinstance(v, dict):
-        return "{ " + ", ".join(f"{json.dumps(str(k))} = {toml_value(x)}" for k, x in v.items()) + " }" if v else "{}"
+        def key(k):
+            return str(k) if bare_keys and BARE_KEY.fullmatch(str(k)) else json.dumps(str(k))
+
+        return "{ " + ", ".join(f"{key(k)} = {toml_value(x, bare_keys)}" for k, x in v.items()) + " }" if v else "{}"
     raise TypeError(f"cannot write {type(v).__name__} to TOML")
 
 
